@@ -1,0 +1,13 @@
+# Every dependency comes from Debian 12's packages (see scripts/install_deps.sh).
+find_package(Eigen3 3.3 REQUIRED NO_MODULE)
+find_package(Ceres 2.1 REQUIRED)
+# flann's own config (brings lz4); pkg-config flann would drag HDF5 and MPI flags in.
+find_package(flann CONFIG REQUIRED)
+find_package(OpenCV 4 REQUIRED COMPONENTS core imgproc imgcodecs videoio)
+find_package(Boost 1.71 REQUIRED)
+find_package(Threads REQUIRED)
+if(TACTFUNC_BUILD_APPS)
+  find_package(benchmark REQUIRED)
+  find_package(CLI11 CONFIG REQUIRED)
+  find_package(nlohmann_json 3 REQUIRED)
+endif()
