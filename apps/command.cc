@@ -1,0 +1,47 @@
+// Copyright 2026 The tactfunc Authors.
+#include "apps/command.h"
+
+#include <cstdio>
+#include <iostream>
+
+namespace tactfunc::apps {
+
+void EmitJson(const nlohmann::json& figures) {
+  std::cout << figures.dump() << std::endl;
+}
+
+std::vector<std::string> SplitList(const std::string& text) {
+  std::vector<std::string> items;
+  std::string current;
+  auto flush = [&]() {
+    const auto begin = current.find_first_not_of(" \t");
+    const auto end = current.find_last_not_of(" \t");
+    if (begin != std::string::npos) items.push_back(current.substr(begin, end - begin + 1));
+    current.clear();
+  };
+  for (char ch : text) {
+    if (ch == ',') {
+      flush();
+    } else {
+      current += ch;
+    }
+  }
+  flush();
+  return items;
+}
+
+std::string FormatBytes(std::uint64_t bytes) {
+  char buffer[32];
+  if (bytes >= 1000ull * 1000 * 1000) {
+    std::snprintf(buffer, sizeof(buffer), "%.2f GB", bytes / 1e9);
+  } else if (bytes >= 1000ull * 1000) {
+    std::snprintf(buffer, sizeof(buffer), "%.2f MB", bytes / 1e6);
+  } else if (bytes >= 1000ull) {
+    std::snprintf(buffer, sizeof(buffer), "%.1f kB", bytes / 1e3);
+  } else {
+    std::snprintf(buffer, sizeof(buffer), "%llu B", static_cast<unsigned long long>(bytes));
+  }
+  return buffer;
+}
+
+}  // namespace tactfunc::apps

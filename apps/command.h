@@ -1,0 +1,50 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// Shared plumbing of the tactfunc subcommands: registration, JSON output, lists.
+//
+// Conventions every subcommand follows:
+// - `--help` describes it; errors go to stderr as "tactfunc <cmd>: error: ..." with
+//   exit code 1 (2 for bad flags), and nothing half-written is left behind.
+// - With `--json`, the last line of stdout is one JSON object with the command's figures.
+#ifndef TACTFUNC_APPS_COMMAND_H_
+#define TACTFUNC_APPS_COMMAND_H_
+
+#include <cstdint>
+#include <functional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "CLI/CLI.hpp"
+#include "nlohmann/json.hpp"
+
+namespace tactfunc::apps {
+
+// A subcommand's body, chosen during parsing and run by main() under its error handler.
+using CommandBody = std::function<void()>;
+
+// Each Register* adds one subcommand to `app`; when it is selected on the command line,
+// its body is stored in *selected.
+void RegisterSynth(CLI::App& app, CommandBody* selected);
+void RegisterShow(CLI::App& app, CommandBody* selected);
+void RegisterInfo(CLI::App& app, CommandBody* selected);
+void RegisterBench(CLI::App& app, CommandBody* selected);
+
+// Bad user input that the command detected itself (flag values, lists).
+class UsageError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// Prints `figures` as one line on stdout (the --json contract).
+void EmitJson(const nlohmann::json& figures);
+
+// "a,b,,c" -> {"a", "b", "c"}; surrounding spaces trimmed.
+std::vector<std::string> SplitList(const std::string& text);
+
+// "12.3 MB"-style byte counts for humans.
+std::string FormatBytes(std::uint64_t bytes);
+
+}  // namespace tactfunc::apps
+
+#endif  // TACTFUNC_APPS_COMMAND_H_

@@ -1,0 +1,42 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// tactfunc: the command-line program. `tactfunc --help` lists the subcommands;
+// `tactfunc <subcommand> --help` describes one.
+#include <exception>
+#include <iostream>
+
+#include "CLI/CLI.hpp"
+#include "apps/command.h"
+#include "estimation/dataset.h"
+
+int main(int argc, char** argv) {
+  using namespace tactfunc::apps;
+  CLI::App app{
+      "tactfunc: tactile functasets -- compact neural implicit representations of "
+      "tactile datasets and in-hand pose posteriors.",
+      "tactfunc"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", "tactfunc 0.1.0");
+  CommandBody body;
+  RegisterSynth(app, &body);
+  RegisterShow(app, &body);
+  RegisterInfo(app, &body);
+  RegisterBench(app, &body);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+  std::string name = "tactfunc";
+  for (const CLI::App* sub : app.get_subcommands()) name += " " + sub->get_name();
+  try {
+    if (body) body();
+  } catch (const UsageError& e) {
+    std::cerr << name << ": error: " << e.what() << "\n";
+    return 2;
+  } catch (const std::exception& e) {
+    std::cerr << name << ": error: " << e.what() << "\n";
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,168 @@
+// Copyright 2026 The tactfunc Authors.
+#include "apps/pictures.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "estimation/file_io.h"
+
+namespace tactfunc::apps {
+namespace {
+
+const cv::Vec3b kInvalid(40, 40, 220);  // BGR red for NaN pixels
+
+cv::Mat ColourMapped(const cv::Mat& unit, int colormap) {
+  // unit: CV_32F in [0, 1], NaN allowed.
+  cv::Mat bytes(unit.size(), CV_8U);
+  for (int r = 0; r < unit.rows; ++r) {
+    for (int c = 0; c < unit.cols; ++c) {
+      const float v = unit.at<float>(r, c);
+      bytes.at<uchar>(r, c) =
+          std::isfinite(v) ? cv::saturate_cast<uchar>(255.0f * std::clamp(v, 0.0f, 1.0f))
+                           : 0;
+    }
+  }
+  cv::Mat coloured;
+  cv::applyColorMap(bytes, coloured, colormap);
+  for (int r = 0; r < unit.rows; ++r) {
+    for (int c = 0; c < unit.cols; ++c) {
+      if (!std::isfinite(unit.at<float>(r, c))) coloured.at<cv::Vec3b>(r, c) = kInvalid;
+    }
+  }
+  return coloured;
+}
+
+cv::Mat RgbToBgr8(const Image& image, float offset, float gain) {
+  cv::Mat out(image.rows, image.cols, CV_8UC3);
+  for (int r = 0; r < image.rows; ++r) {
+    for (int c = 0; c < image.cols; ++c) {
+      cv::Vec3b& px = out.at<cv::Vec3b>(r, c);
+      for (int k = 0; k < 3; ++k) {
+        const float v = image.at(r, c, image.channels == 3 ? k : 0);
+        px[2 - k] = std::isfinite(v)
+                        ? cv::saturate_cast<uchar>(255.0f * (offset + gain * v))
+                        : kInvalid[2 - k];
+      }
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+cv::Mat RawTile(const Image& frame, SensorKind sensor, const Image& reference) {
+  if (frame.channels == 1 && sensor == SensorKind::kSoftBubble) {
+    // Map the reference's depth range (slightly widened) so near = bright.
+    float lo = INFINITY, hi = -INFINITY;
+    for (float v : reference.data) {
+      if (std::isfinite(v)) {
+        lo = std::min(lo, v);
+        hi = std::max(hi, v);
+      }
+    }
+    for (float v : frame.data) {
+      if (std::isfinite(v)) lo = std::min(lo, v);
+    }
+    if (!(hi > lo)) hi = lo + 1e-3f;
+    cv::Mat unit(frame.rows, frame.cols, CV_32F);
+    for (int r = 0; r < frame.rows; ++r) {
+      for (int c = 0; c < frame.cols; ++c) {
+        unit.at<float>(r, c) = (hi - frame.at(r, c)) / (hi - lo);
+      }
+    }
+    return ColourMapped(unit, cv::COLORMAP_BONE);
+  }
+  return RgbToBgr8(frame, 0.0f, 1.0f);
+}
+
+cv::Mat DifferenceTile(const Image& difference, double scale) {
+  if (!(scale > 0)) scale = 1.0;
+  if (difference.channels == 3) {
+    return RgbToBgr8(difference, 0.5f, static_cast<float>(0.5 / scale));
+  }
+  cv::Mat unit(difference.rows, difference.cols, CV_32F);
+  for (int r = 0; r < difference.rows; ++r) {
+    for (int c = 0; c < difference.cols; ++c) {
+      unit.at<float>(r, c) = static_cast<float>(0.5 + 0.5 * difference.at(r, c) / scale);
+    }
+  }
+  return ColourMapped(unit, cv::COLORMAP_TWILIGHT_SHIFTED);
+}
+
+cv::Mat FitHeight(const cv::Mat& tile, int height) {
+  const int width = std::max(1, static_cast<int>(std::lround(
+                                     tile.cols * static_cast<double>(height) / tile.rows)));
+  cv::Mat out;
+  cv::resize(tile, out, cv::Size(width, height), 0, 0,
+             height >= tile.rows ? cv::INTER_NEAREST : cv::INTER_AREA);
+  return out;
+}
+
+void DrawPoseArrow(cv::Mat& tile, int rows, int cols, double pitch, double x_m,
+                   double y_m, double yaw_rad, const cv::Scalar& colour) {
+  if (!(pitch > 0)) return;
+  const double sx = static_cast<double>(tile.cols) / cols;
+  const double sy = static_cast<double>(tile.rows) / rows;
+  const double c = (x_m / pitch + cols / 2.0) * sx;
+  const double r = (rows / 2.0 - y_m / pitch) * sy;
+  const double length = 0.22 * std::min(tile.rows, tile.cols);
+  const cv::Point2d tail(c, r);
+  const cv::Point2d head(c + length * std::cos(yaw_rad), r - length * std::sin(yaw_rad));
+  const int shift = 4;  // sub-pixel drawing
+  auto fixed = [&](cv::Point2d p) {
+    return cv::Point(static_cast<int>(std::lround(p.x * (1 << shift))),
+                     static_cast<int>(std::lround(p.y * (1 << shift))));
+  };
+  cv::arrowedLine(tile, fixed(tail), fixed(head), cv::Scalar(0, 0, 0), 4, cv::LINE_AA,
+                  shift, 0.3);
+  cv::arrowedLine(tile, fixed(tail), fixed(head), colour, 2, cv::LINE_AA, shift, 0.3);
+  cv::circle(tile, fixed(tail), 4 << shift, cv::Scalar(0, 0, 0), 3, cv::LINE_AA, shift);
+  cv::circle(tile, fixed(tail), 4 << shift, colour, 2, cv::LINE_AA, shift);
+}
+
+void PutLabel(cv::Mat& canvas, const std::string& text, cv::Point origin, double scale,
+              const cv::Scalar& colour) {
+  cv::putText(canvas, text, origin, cv::FONT_HERSHEY_SIMPLEX, scale, cv::Scalar(0, 0, 0),
+              3, cv::LINE_AA);
+  cv::putText(canvas, text, origin, cv::FONT_HERSHEY_SIMPLEX, scale, colour, 1,
+              cv::LINE_AA);
+}
+
+cv::Mat TileGrid(const std::vector<std::vector<cv::Mat>>& rows, int gap) {
+  int width = 0, height = gap;
+  for (const auto& row : rows) {
+    int row_width = gap, row_height = 0;
+    for (const cv::Mat& tile : row) {
+      row_width += tile.cols + gap;
+      row_height = std::max(row_height, tile.rows);
+    }
+    width = std::max(width, row_width);
+    height += row_height + gap;
+  }
+  cv::Mat canvas(std::max(height, 1), std::max(width, 1), CV_8UC3, cv::Scalar(32, 32, 32));
+  int y = gap;
+  for (const auto& row : rows) {
+    int x = gap, row_height = 0;
+    for (const cv::Mat& tile : row) {
+      tile.copyTo(canvas(cv::Rect(x, y, tile.cols, tile.rows)));
+      x += tile.cols + gap;
+      row_height = std::max(row_height, tile.rows);
+    }
+    y += row_height + gap;
+  }
+  return canvas;
+}
+
+void WritePicture(const std::string& path, const cv::Mat& picture) {
+  std::vector<uchar> bytes;
+  if (!cv::imencode(".png", picture, bytes)) {
+    throw std::runtime_error(path + ": could not encode the picture as PNG");
+  }
+  WriteFileAtomically(path, std::string(bytes.begin(), bytes.end()));
+}
+
+}  // namespace tactfunc::apps

@@ -1,0 +1,43 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// Pictures people look at: tactile frames as colour tiles, pose arrows, tile grids.
+// OpenCV stays in apps/ (STYLE.md): the libraries hand over tactfunc::Image.
+#ifndef TACTFUNC_APPS_PICTURES_H_
+#define TACTFUNC_APPS_PICTURES_H_
+
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "models/image.h"
+#include "models/sensor.h"
+
+namespace tactfunc::apps {
+
+// A raw frame as a BGR 8-bit picture: depth through a perceptual colour map (near =
+// bright, NaN = red), RGB as is.
+cv::Mat RawTile(const Image& frame, SensorKind sensor, const Image& reference);
+// A difference image (already reference-subtracted, physical units) as BGR: one
+// channel through a diverging map in [-scale, scale] (0 = mid grey); three channels as
+// 0.5 + diff / (2 scale) per channel. NaN pixels red.
+cv::Mat DifferenceTile(const Image& difference, double scale);
+// Resizes a tile to `height` pixels tall (keeps aspect, nearest-neighbour upscaling
+// so pixels stay honest, area downscaling).
+cv::Mat FitHeight(const cv::Mat& tile, int height);
+// Draws the pose (x, y, yaw in the sensor frame, models/sensor.h) as an arrow along the
+// tool's x axis on a tile showing a rows x cols frame with `pitch` metres per pixel.
+void DrawPoseArrow(cv::Mat& tile, int rows, int cols, double pitch, double x_m,
+                   double y_m, double yaw_rad, const cv::Scalar& colour);
+// Text with a dark outline so it reads on any background.
+void PutLabel(cv::Mat& canvas, const std::string& text, cv::Point origin,
+              double scale = 0.45, const cv::Scalar& colour = cv::Scalar(255, 255, 255));
+// Stacks rows of tiles (each row left to right) into one canvas with `gap` pixels
+// between tiles, on a dark background.
+cv::Mat TileGrid(const std::vector<std::vector<cv::Mat>>& rows, int gap = 4);
+// Encodes as PNG and writes atomically; throws naming the path.
+void WritePicture(const std::string& path, const cv::Mat& picture);
+
+}  // namespace tactfunc::apps
+
+#endif  // TACTFUNC_APPS_PICTURES_H_

@@ -1,0 +1,20 @@
+# cmake -P script: install the build tree into WORK_DIR/prefix, configure and build the
+# consumer project against it, and run the consumer. Fails on any step.
+file(REMOVE_RECURSE ${WORK_DIR})
+function(run_step name)
+  execute_process(COMMAND ${ARGN} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(NOT rc EQUAL 0)
+    message(FATAL_ERROR "${name} failed (${rc}):\n${out}\n${err}")
+  endif()
+  message(STATUS "${name}: ok")
+  set(LAST_OUTPUT "${out}" PARENT_SCOPE)
+endfunction()
+run_step("install" ${CMAKE_COMMAND} --install ${TACTFUNC_BINARY_DIR} --prefix ${WORK_DIR}/prefix)
+run_step("configure consumer" ${CMAKE_COMMAND} -S ${CONSUMER_SOURCE_DIR} -B ${WORK_DIR}/build
+         -DCMAKE_PREFIX_PATH=${WORK_DIR}/prefix -DCMAKE_BUILD_TYPE=Release)
+run_step("build consumer" ${CMAKE_COMMAND} --build ${WORK_DIR}/build -j2)
+run_step("run consumer" ${WORK_DIR}/build/consumer)
+message(STATUS "consumer said: ${LAST_OUTPUT}")
+if(NOT LAST_OUTPUT MATCHES "consumer: ok")
+  message(FATAL_ERROR "consumer did not report success: ${LAST_OUTPUT}")
+endif()
