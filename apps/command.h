@@ -29,6 +29,9 @@ void RegisterSynth(CLI::App& app, CommandBody* selected);
 void RegisterShow(CLI::App& app, CommandBody* selected);
 void RegisterInfo(CLI::App& app, CommandBody* selected);
 void RegisterBench(CLI::App& app, CommandBody* selected);
+void RegisterTrain(CLI::App& app, CommandBody* selected);   // apps/train_command.cc
+void RegisterEncode(CLI::App& app, CommandBody* selected);  // apps/encode_command.cc
+void RegisterRecon(CLI::App& app, CommandBody* selected);   // apps/recon_command.cc
 
 // Bad user input that the command detected itself (flag values, lists).
 class UsageError : public std::runtime_error {
