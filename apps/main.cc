@@ -21,9 +21,6 @@ int main(int argc, char** argv) {
   RegisterSynth(app, &body);
   RegisterShow(app, &body);
   RegisterInfo(app, &body);
-  RegisterTrain(app, &body);
-  RegisterEncode(app, &body);
-  RegisterRecon(app, &body);
   RegisterBench(app, &body);
   try {
     app.parse(argc, argv);
