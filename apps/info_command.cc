@@ -7,6 +7,7 @@
 #include <map>
 
 #include "apps/command.h"
+#include "apps/dataset_flags.h"
 #include "estimation/dataset.h"
 #include "models/tool.h"
 
@@ -15,6 +16,7 @@ namespace {
 
 struct InfoFlags {
   std::string dir;
+  DatasetFlags data;
   bool tools = false;
   bool json = false;
 };
@@ -39,7 +41,7 @@ void RunInfo(const InfoFlags& flags) {
     return;
   }
   if (flags.dir.empty()) throw UsageError("a dataset folder is required (or --tools)");
-  const Dataset dataset = Dataset::Open(flags.dir);
+  const Dataset dataset = OpenDataset(flags.dir, flags.data);
   nlohmann::json sensors = nlohmann::json::object();
   std::cout << "dataset " << dataset.root() << "\n";
   for (SensorKind sensor : dataset.sensors()) {
@@ -108,6 +110,7 @@ void RegisterInfo(CLI::App& app, CommandBody* selected) {
       "info", "Summarise a dataset: counts, resolutions, tools, bytes on disk.");
   sub->add_option("dir", flags->dir, "Dataset folder (ours or your own, see "
                                      "docs/DATASET_FORMAT.md)");
+  AddDatasetFlags(sub, &flags->data);
   sub->add_flag("--tools", flags->tools, "List the simulator's tools and symmetries");
   sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
   sub->callback([flags, selected]() { *selected = [flags]() { RunInfo(*flags); }; });

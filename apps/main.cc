@@ -21,11 +21,13 @@ int main(int argc, char** argv) {
   RegisterSynth(app, &body);
   RegisterShow(app, &body);
   RegisterInfo(app, &body);
+  RegisterTrain(app, &body);
   RegisterBench(app, &body);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    // CLI11 prints the help (exit 0) or the usage error; every usage error exits 2.
+    return app.exit(e) == 0 ? 0 : 2;
   }
   std::string name = "tactfunc";
   for (const CLI::App* sub : app.get_subcommands()) name += " " + sub->get_name();

@@ -12,6 +12,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "apps/command.h"
+#include "apps/dataset_flags.h"
 #include "apps/pictures.h"
 #include "estimation/dataset.h"
 
@@ -20,6 +21,7 @@ namespace {
 
 struct ShowFlags {
   std::string dir;
+  DatasetFlags data;
   std::string out;
   int contacts = 8;
   std::string ids;
@@ -68,7 +70,7 @@ double DifferenceScale(const SensorInfo& info) {
 }
 
 void RunShow(const ShowFlags& flags) {
-  const Dataset dataset = Dataset::Open(flags.dir);
+  const Dataset dataset = OpenDataset(flags.dir, flags.data);
   std::vector<std::string> ids =
       flags.ids.empty() ? PickIds(dataset, flags.contacts) : SplitList(flags.ids);
   if (ids.empty()) throw UsageError(flags.dir + ": the dataset has no frames to show");
@@ -128,14 +130,14 @@ void RunShow(const ShowFlags& flags) {
         char text[96];
         std::snprintf(text, sizeof(text), "%s d=%.1fmm", ToString(sensor),
                       label.depth_m * 1e3);
-        PutLabel(caption, text, {6, sensor == SensorKind::kSoftBubble ? 88 : 110}, 0.42);
+        PutLabel(caption, text, {6, sensor == SensorKind::kSoftBubble ? 104 : 122}, 0.42);
         if (sensor == sensors.front()) {
           PutLabel(caption, label.tool, {6, 44}, 0.5, cv::Scalar(255, 0, 255));
           std::snprintf(text, sizeof(text), "x=%.1f y=%.1f mm", label.x_m * 1e3,
                         label.y_m * 1e3);
           PutLabel(caption, text, {6, 64}, 0.42);
           std::snprintf(text, sizeof(text), "yaw=%.0f deg", label.yaw_rad * 180 / M_PI);
-          PutLabel(caption, text, {6, 76 + 60}, 0.42);
+          PutLabel(caption, text, {6, 82}, 0.42);
         }
       }
       for (cv::Mat& tile : tiles) row.push_back(tile);
@@ -167,6 +169,7 @@ void RegisterShow(CLI::App& app, CommandBody* selected) {
   sub->add_option("--contacts", flags->contacts,
                   "How many contacts (rows) to show; one per tool first")
       ->check(CLI::Range(1, 200));
+  AddDatasetFlags(sub, &flags->data);
   sub->add_option("--ids", flags->ids, "Comma-separated frame ids to show instead");
   sub->add_option("--tile-height", flags->tile_height, "Tile height in pixels")
       ->check(CLI::Range(40, 1000));

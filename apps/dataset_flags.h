@@ -1,0 +1,32 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// The flags every data-reading subcommand shares, for data without metadata: a user's
+// own folder of PNG/JPG frames, or a video file (docs/DATASET_FORMAT.md).
+#ifndef TACTFUNC_APPS_DATASET_FLAGS_H_
+#define TACTFUNC_APPS_DATASET_FLAGS_H_
+
+#include <string>
+
+#include "CLI/CLI.hpp"
+#include "estimation/dataset.h"
+
+namespace tactfunc::apps {
+
+struct DatasetFlags {
+  std::string sensor;         // "", "bubble" or "gelslim"
+  std::string reference;      // reference image of a folder without reference.<ext>
+  int reference_index = 0;    // video: the frame that is the reference
+  double pixel_pitch_mm = 0;  // pixel pitch for data without metadata, millimetres
+  std::string labels;         // labels.csv to read instead of DIR/labels.csv
+};
+
+// Adds --sensor, --reference, --reference-index, --pixel-pitch-mm, --labels to `sub`.
+void AddDatasetFlags(CLI::App* sub, DatasetFlags* flags);
+
+// Opens `path`: a dataset folder (ours or a user's), or a video file (a regular file
+// with a video extension: .avi .mp4 .mov .mkv .m4v), with the flags' options.
+Dataset OpenDataset(const std::string& path, const DatasetFlags& flags);
+
+}  // namespace tactfunc::apps
+
+#endif  // TACTFUNC_APPS_DATASET_FLAGS_H_

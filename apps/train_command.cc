@@ -1,0 +1,255 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// tactfunc train: meta-learns one SIREN trunk per sensor on a dataset's train split
+// (estimation/trunk_trainer.h, docs/TRAINING.md) and writes one model file.
+#include <algorithm>
+#include <atomic>
+#include <csignal>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <memory>
+#include <sstream>
+#include <thread>
+
+#include "apps/command.h"
+#include "apps/progress_bar.h"
+#include "estimation/dataset.h"
+#include "estimation/trunk_trainer.h"
+#include "models/functa_model.h"
+
+namespace tactfunc::apps {
+namespace {
+
+struct TrainFlags {
+  std::string data;
+  std::string out;
+  std::string preset = "default";
+  std::string sensors;  // empty = every sensor of the dataset
+  int latent_dim = 0, width = 0, layers = 0, steps = 0, batch = 0, pixels = 0;
+  int threads = 0;
+  std::uint64_t seed = 0;
+  int checkpoint_every = 0;
+  bool first_order = false;
+  bool resume = false;
+  bool json = false;
+  // Set after parsing: which overrides were given.
+  CLI::Option *latent_dim_option = nullptr, *width_option = nullptr,
+              *layers_option = nullptr, *steps_option = nullptr, *batch_option = nullptr,
+              *pixels_option = nullptr, *seed_option = nullptr,
+              *checkpoint_every_option = nullptr;
+};
+
+// SIGINT: the current step finishes, a checkpoint is written, the command exits 1.
+std::atomic<bool> g_interrupted{false};
+extern "C" void HandleSigint(int) { g_interrupted.store(true); }
+
+std::string CheckpointPath(const std::string& out, SensorKind sensor) {
+  return out + "." + ToString(sensor) + ".ckpt";
+}
+
+std::string Status(const TrunkTrainer::StepReport& report) {
+  char buffer[160];
+  std::snprintf(buffer, sizeof(buffer), "loss %.3e  PSNR %.2f dB (z=0 %.2f)", report.loss,
+                report.latest.psnr, report.latest.psnr_at_zero);
+  return buffer;
+}
+
+void RunTrain(const TrainFlags& flags) {
+  TrunkTrainer::Options options = TrunkTrainer::Preset(flags.preset);  // throws for a bad name
+  if (flags.latent_dim_option->count()) options.siren.latent_dim = flags.latent_dim;
+  if (flags.width_option->count()) options.siren.width = flags.width;
+  if (flags.layers_option->count()) options.siren.num_hidden_layers = flags.layers;
+  if (flags.steps_option->count()) options.steps = flags.steps;
+  if (flags.batch_option->count()) options.batch_size = flags.batch;
+  if (flags.pixels_option->count()) options.pixels_per_frame = flags.pixels;
+  if (flags.seed_option->count()) options.seed = flags.seed;
+  if (flags.checkpoint_every_option->count()) options.checkpoint_every = flags.checkpoint_every;
+  if (flags.first_order) options.meta_sgd.first_order = true;
+  options.threads = flags.threads > 0
+                        ? flags.threads
+                        : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  options.resume = flags.resume;
+  std::string error;
+  if (!options.IsValid(&error)) throw UsageError(error);
+
+  const std::filesystem::path out_path(flags.out);
+  const std::filesystem::path out_dir =
+      out_path.has_parent_path() ? out_path.parent_path() : std::filesystem::path(".");
+  if (!std::filesystem::is_directory(out_dir)) {
+    throw UsageError("--out: folder '" + out_dir.string() + "' does not exist");
+  }
+
+  const Dataset dataset = Dataset::Open(flags.data);
+  std::vector<SensorKind> sensors;
+  if (flags.sensors.empty()) {
+    sensors = dataset.sensors();
+  } else {
+    for (const std::string& name : SplitList(flags.sensors)) {
+      SensorKind kind;
+      if (!SensorKindFromString(name, &kind)) {
+        throw UsageError("--sensors: unknown sensor '" + name +
+                         "', expected a list of bubble, gelslim");
+      }
+      if (!dataset.has_sensor(kind)) {
+        throw UsageError("--sensors: the dataset " + flags.data + " has no '" + name +
+                         "' frames");
+      }
+      if (std::find(sensors.begin(), sensors.end(), kind) == sensors.end())
+        sensors.push_back(kind);
+    }
+  }
+  if (sensors.empty()) throw UsageError("--sensors: expected at least one sensor");
+  if (flags.resume) {
+    bool any = false;
+    for (SensorKind s : sensors) any = any || std::filesystem::exists(CheckpointPath(flags.out, s));
+    if (!any) {
+      throw UsageError("--resume: no checkpoint found (looked for " +
+                       CheckpointPath(flags.out, sensors[0]) + ")");
+    }
+  }
+
+  g_interrupted.store(false);
+  std::signal(SIGINT, HandleSigint);
+  const bool bar_enabled = ProgressBar::Enabled();
+
+  FunctaModel model;
+  nlohmann::json sensor_figures = nlohmann::json::object();
+  nlohmann::json info_trunks = nlohmann::json::object();
+  for (SensorKind sensor : sensors) {
+    TrunkTrainer::Options sensor_options = options;
+    sensor_options.checkpoint_path = CheckpointPath(flags.out, sensor);
+    const TrunkTrainer trainer(sensor_options);
+    const char* name = ToString(sensor);
+    if (flags.resume) {
+      std::cout << "train " << name << ": "
+                << (std::filesystem::exists(sensor_options.checkpoint_path)
+                        ? "resuming from " + sensor_options.checkpoint_path
+                        : std::string("no checkpoint, starting at step 0"))
+                << "\n";
+    }
+    auto bar = std::make_unique<ProgressBar>(std::string("train ") + name,
+                                             sensor_options.steps, "steps");
+    bool first = true;
+    const auto callback = [&](const TrunkTrainer::StepReport& report) {
+      if (first) {  // a resumed run starts with the bar part-way
+        bar->Tick(report.step - 1);
+        first = false;
+      }
+      bar->Tick(1);
+      bar->SetStatus(Status(report));
+      if (report.monitored && !bar_enabled) {
+        std::cout << "train " << name << ": step " << report.step << "/"
+                  << report.total_steps << "  " << Status(report) << "  "
+                  << static_cast<int>(report.latest.seconds) << " s" << std::endl;
+      }
+      return !g_interrupted.load();
+    };
+    SensorTrunk trunk;
+    const TrunkTrainer::Summary summary = trainer.Train(dataset, sensor, &trunk, callback);
+    bar->Finish();
+    std::cout << summary.BriefReport() << "\n";
+    if (summary.termination_type == TrunkTrainer::TerminationType::kUserStopped) {
+      std::signal(SIGINT, SIG_DFL);
+      throw std::runtime_error(
+          std::string("interrupted while training ") + name + " at step " +
+          std::to_string(summary.steps_done) + "; checkpoint written to " +
+          sensor_options.checkpoint_path + ". Continue with the same command plus --resume.");
+    }
+    if (summary.termination_type == TrunkTrainer::TerminationType::kNonFinite) {
+      std::signal(SIGINT, SIG_DFL);
+      throw std::runtime_error(std::string("training ") + name + " failed: " +
+                               summary.message);
+    }
+    model.SetTrunk(std::move(trunk));
+    sensor_figures[name] = {{"steps", summary.steps_done},
+                            {"seconds", summary.total_train_seconds},
+                            {"seconds_per_step", summary.seconds_per_step},
+                            {"train_psnr", summary.train_psnr},
+                            {"train_psnr_at_zero", summary.train_psnr_at_zero},
+                            {"loss", summary.final_loss},
+                            {"residual_sigma", summary.residual_sigma},
+                            {"train_frames", summary.num_train_frames},
+                            {"parameters", summary.num_parameters}};
+    nlohmann::json history = nlohmann::json::array();
+    for (const TrunkTrainer::HistoryPoint& p : summary.history) {
+      history.push_back({p.step, p.loss, p.psnr, p.psnr_at_zero, p.seconds});
+    }
+    info_trunks[name] = {
+        {"options", nlohmann::json::parse(trainer.TrajectoryOptionsJson(sensor, summary.format))},
+        {"steps", summary.steps_done},
+        {"train_seconds", summary.total_train_seconds},
+        {"seconds_per_step", summary.seconds_per_step},
+        {"threads", sensor_options.threads},
+        {"train_frames", summary.num_train_frames},
+        {"train_psnr", summary.train_psnr},
+        {"train_psnr_at_zero", summary.train_psnr_at_zero},
+        {"final_loss", summary.final_loss},
+        {"history_columns", {"step", "loss", "psnr", "psnr_at_zero", "seconds"}},
+        {"history", history}};
+  }
+  std::signal(SIGINT, SIG_DFL);
+
+  nlohmann::json info = {{"trainer", "tactfunc train"},
+                         {"preset", flags.preset},
+                         {"data", flags.data},
+                         {"trunks", info_trunks}};
+  model.set_info_json(info.dump());
+  model.Save(flags.out);
+  const std::uint64_t model_bytes = std::filesystem::file_size(flags.out);
+  std::cout << "train: wrote " << flags.out << " (" << FormatBytes(model_bytes) << ", "
+            << sensors.size() << " trunk(s), preset " << flags.preset
+            << "); checkpoints " << flags.out << ".<sensor>.ckpt can be deleted\n";
+  if (flags.json) {
+    EmitJson({{"out", flags.out}, {"sensors", sensor_figures}, {"model_bytes", model_bytes}});
+  }
+}
+
+}  // namespace
+
+void RegisterTrain(CLI::App& app, CommandBody* selected) {
+  auto flags = std::make_shared<TrainFlags>();
+  CLI::App* sub = app.add_subcommand(
+      "train",
+      "Meta-learn a latent-modulated SIREN trunk per sensor on a dataset's train split "
+      "and write a model file (docs/TRAINING.md).");
+  sub->add_option("--data", flags->data, "Dataset folder")->required();
+  sub->add_option("--out", flags->out, "Model file to write (.tfm)")->required();
+  std::string presets;
+  for (const std::string& n : TrunkTrainer::PresetNames()) presets += (presets.empty() ? "" : ", ") + n;
+  sub->add_option("--preset", flags->preset, "Starting options: " + presets)
+      ->check(CLI::IsMember(TrunkTrainer::PresetNames()));
+  sub->add_option("--sensors", flags->sensors,
+                  "Comma-separated: bubble,gelslim (default: every sensor of the dataset)");
+  flags->latent_dim_option =
+      sub->add_option("--latent-dim", flags->latent_dim, "Latent dimension d (overrides the preset)")
+          ->check(CLI::Range(1, 100000));
+  flags->width_option = sub->add_option("--width", flags->width, "Units per hidden layer")
+                            ->check(CLI::Range(1, 100000));
+  flags->layers_option = sub->add_option("--layers", flags->layers, "Hidden sine layers")
+                             ->check(CLI::Range(1, 1000));
+  flags->steps_option = sub->add_option("--steps", flags->steps,
+                                        "Outer steps in total (a resumed run counts earlier ones)")
+                            ->check(CLI::Range(0, 100000000));
+  flags->batch_option = sub->add_option("--batch", flags->batch, "Frames per outer step")
+                            ->check(CLI::Range(1, 100000));
+  flags->pixels_option =
+      sub->add_option("--pixels", flags->pixels, "Random pixels per frame per step (0 = all)")
+          ->check(CLI::Range(0, 100000000));
+  sub->add_flag("--first-order", flags->first_order,
+                "First-order meta-gradients (cheaper, biased; default exact)");
+  sub->add_option("--threads", flags->threads, "Worker threads (default: all cores)")
+      ->check(CLI::Range(0, 256));
+  flags->seed_option =
+      sub->add_option("--seed", flags->seed, "Seed; the same seed gives the same model");
+  flags->checkpoint_every_option =
+      sub->add_option("--checkpoint-every", flags->checkpoint_every,
+                      "Write OUT.<sensor>.ckpt every N steps (0 = only at the end or on Ctrl-C)")
+          ->check(CLI::Range(0, 100000000));
+  sub->add_flag("--resume", flags->resume,
+                "Continue from OUT.<sensor>.ckpt (the options must match the checkpoint's)");
+  sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
+  sub->callback([flags, selected]() { *selected = [flags]() { RunTrain(*flags); }; });
+}
+
+}  // namespace tactfunc::apps

@@ -1,0 +1,265 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// TrunkTrainer: meta-learns one sensor's latent-modulated SIREN trunk (Sec. III-B of
+// "Tactile Functasets"; functa, Dupont et al. 2022, Sec. 3; Meta-SGD, Li et al. 2017).
+//
+// The objective. For a training frame T_i (pixel coordinates x_j, targets y_ij, validity
+// weights w_ij) the inner loop fits the frame's latent from zero with K steps of
+// per-dimension gradient descent (models/meta_sgd.h, the paper's Eq. 6 with learned
+// rates alpha):
+//
+//   z_0 = 0,   z_{k+1} = z_k - alpha (*) d/dz [ L(theta, z_k; T_i) + lambda ||z_k||^2 ]
+//
+// and the outer (meta) loss is the trunk's weighted per-pixel MSE after those K steps,
+// averaged over a batch B of frames (the paper's Eq. 5):
+//
+//   J(theta, alpha) = (1/|B|) sum_{i in B} L(theta, z_K(theta, alpha; T_i); T_i).
+//
+// Each outer step draws a batch, computes every frame's exact meta-gradient (second
+// order through the K inner steps; first order with Options::meta_sgd.first_order),
+// averages them and applies one Adam step (Kingma & Ba 2015) to theta and alpha, then
+// clips alpha to [0, 1] (as functa clips its meta-SGD rates). After training, the
+// trunk's residual_sigma is the RMS per-pixel residual of the K-step fits on up to
+// Options::residual_frames training frames.
+//
+// Precision. theta, alpha and the Adam moments are kept in double (master copies);
+// the per-frame meta-gradients are computed in float (LatentModulatedSiren's float
+// mirror, about 2x faster than double) and accumulated in double.
+//
+// Determinism. Every random choice is a pure function of (Options::seed, what it is
+// for, step or index) through DeriveSeed (models/seed.h): the trunk's initial theta and
+// alpha, the order in which frames are visited (one seeded permutation of the training
+// frames per epoch; a step takes the next batch_size positions), each batch slot's
+// random pixel subset, the monitor and residual subsets. The frames of a batch are
+// processed by Options::threads workers, each writing its own slot; the slots are
+// summed in slot order. So a run is bit-identical for any thread count, and a run that
+// is stopped, checkpointed and resumed is bit-identical to one that never stopped.
+//
+// Checkpoints. With Options::checkpoint_path set, a TensorFile (models/tensor_file.h)
+// of kind "checkpoint" is written atomically every checkpoint_every steps, when the
+// callback stops the run, and at the end. It holds theta and alpha (float64), the Adam
+// moments, the step, the loss/PSNR history, the seconds spent, the training set's
+// fingerprint and every option that shapes the trajectory (see TrajectoryOptionsJson).
+// With Options::resume, Train() continues from the checkpoint if one exists (else it
+// starts at step 0); it refuses, naming the field, a checkpoint written with different
+// trajectory options, for another sensor or for other training frames. Options that do
+// not change the result (steps, threads, the checkpoint and monitor settings) may
+// differ: resuming with a larger `steps` extends a finished run.
+//
+// Errors follow the three tiers of docs/STYLE: invalid Options throw
+// std::invalid_argument (from the constructor) naming the field; algorithmic outcomes
+// (a non-finite loss, a stop request) are reported in the Summary; bad input (no
+// training frames, a corrupt or mismatched checkpoint) throws std::runtime_error
+// (TensorFileError for an unreadable checkpoint) quoting what was expected and found.
+#ifndef TACTFUNC_ESTIMATION_TRUNK_TRAINER_H_
+#define TACTFUNC_ESTIMATION_TRUNK_TRAINER_H_
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "estimation/trunk_targets.h"
+#include "models/functa_model.h"
+#include "models/latent_modulated_siren.h"
+#include "models/meta_sgd.h"
+#include "models/sensor.h"
+
+namespace tactfunc {
+
+class Dataset;
+
+class TrunkTrainer {
+ public:
+  struct Options {
+    // ---- Trunk (models/latent_modulated_siren.h) --------------------------------------
+    // width, num_hidden_layers, latent_dim and omega_0 (SIREN's 30) are used as given;
+    // output_channels is ignored and set from the frame format (1 for the bubble or
+    // grayscale, 3 for RGB GelSlim). Defaults: the "default" preset (see Preset()).
+    LatentModulatedSiren::Options siren = DefaultSirenOptions();
+
+    // ---- Frame format (models/functa_model.h FrameFormat) -----------------------------
+    // Working resolution in pixels (area interpolation). 0 x 0 (default) = the sensor's
+    // default: bubble 70 x 88 (half of the 140 x 175 ToF frame), GelSlim 80 x 107 (a
+    // quarter of 320 x 427). Both 0 or both > 0.
+    int rows = 0;
+    int cols = 0;
+    // GelSlim RGB -> luma before fitting (one output channel). Default true: the
+    // contact is in the shading, and one channel costs a third of three.
+    bool grayscale = true;
+    // Fixed-scale normalisation: the physical difference (metres of depth, intensity)
+    // that maps to 1.0. 0 (default) = the dataset's SensorInfo::normalization_scale
+    // (DefaultNormalizationScale if it records none). >= 0.
+    double normalization_scale = 0;
+
+    // ---- Inner loop (models/meta_sgd.h) ---------------------------------------------
+    // K = 3 inner steps (paper Sec. IV-A, functa); latent L2 weight lambda = 1e-5 as in
+    // the paper's released code (measured: no PSNR change at this size, see
+    // docs/TRAINING.md); exact second-order meta-gradients.
+    MetaSgd::Options meta_sgd = DefaultMetaSgdOptions();
+
+    // ---- Outer optimiser: Adam ------------------------------------------------------
+    // Step size of theta, in parameter units per step. > 0. functa uses 3e-6 on a
+    // per-image SUM of squared errors; our loss is a per-pixel MEAN, whose gradient is
+    // N times smaller, so the step must be larger: 1e-4 measured best of
+    // {3e-5, 1e-4, 3e-4, 1e-3} on the small preset (docs/TRAINING.md).
+    double learning_rate = 1e-4;
+    // Step size of the meta-SGD rates alpha, per step. > 0. Default 1e-3: alpha lives
+    // in [0, 1] and needs O(0.1) moves; measured (docs/TRAINING.md).
+    double alpha_learning_rate = 1e-3;
+    // Adam's moment decays, in [0, 1), and epsilon (> 0): Kingma & Ba's defaults.
+    double adam_beta1 = 0.9;
+    double adam_beta2 = 0.999;
+    double adam_epsilon = 1e-8;
+    // Initial meta-SGD rates: each alpha_k ~ U(alpha_init_min, alpha_init_max), with
+    // 0 <= min <= max <= 1. Default both 1.0 (clipped range [0, 1]): with a per-pixel
+    // mean loss the latent gradient is small, so the largest allowed rate learns
+    // fastest (measured; functa's U(0.005, 0.1) is for a sum loss).
+    double alpha_init_min = 1.0;
+    double alpha_init_max = 1.0;
+
+    // ---- Batches --------------------------------------------------------------------
+    // Frames per outer step. >= 1. Cost is linear in it.
+    int batch_size = 8;
+    // Random pixels per frame per step (the inner fit and the outer loss both see only
+    // them; a fresh subset each step). 0 = every pixel. >= 0. Cost is about linear in
+    // it; see docs/TRAINING.md for its effect on PSNR per second.
+    int pixels_per_frame = 0;
+    // Outer steps to run (in total, counting steps done before a resume). >= 0.
+    int steps = 5000;
+    // Seed of every random choice (see Determinism above).
+    std::uint64_t seed = 0;
+    // Worker threads for per-frame gradients, loading and evaluation. In [1, 256].
+    // Does not change the result.
+    int threads = 1;
+
+    // ---- Checkpoints ----------------------------------------------------------------
+    // TensorFile written atomically; "" = none. The folder must exist.
+    std::string checkpoint_path;
+    // Write a checkpoint every N steps (and always at the end or on a stop). >= 0;
+    // 0 = only at the end or on a stop.
+    int checkpoint_every = 500;
+    // Continue from checkpoint_path if it exists (see Checkpoints above).
+    bool resume = false;
+
+    // ---- Monitoring -----------------------------------------------------------------
+    // Evaluate the monitor subset every N steps (and at the start and end): mean PSNR
+    // (estimation/trunk_targets.h) after the K-step fit and at z = 0, over full frames.
+    // >= 1.
+    int monitor_every = 100;
+    // Training frames in the fixed monitor subset (fewer if the split is smaller). >= 1.
+    int monitor_frames = 16;
+    // Training frames used for residual_sigma at the end (fewer if the split is
+    // smaller). >= 1.
+    int residual_frames = 200;
+
+    // True if every field is in range; otherwise false and *error names the field.
+    bool IsValid(std::string* error) const;
+
+    static LatentModulatedSiren::Options DefaultSirenOptions();
+    static MetaSgd::Options DefaultMetaSgdOptions();
+  };
+
+  // Named starting points ("model only what a scene requires": pick the smallest that
+  // meets the accuracy you need; docs/TRAINING.md lists what each reached):
+  //   tiny:    width 32, 2 layers, d = 16, 16 x 20 pixels, batch 4, 300 steps
+  //            -- tests and CI, a few seconds.
+  //   small:   width 64, 3 layers, d = 32, the sensor's working resolution, batch 8,
+  //            1024 pixels per frame, 3000 steps -- minutes on 2 cores.
+  //   default: width 128, 4 layers, d = 64, the sensor's working resolution, batch 16,
+  //            2048 pixels per frame, 20000 steps -- hours on 2 cores.
+  // Throws std::invalid_argument listing the names for an unknown one.
+  static Options Preset(const std::string& name);
+  static std::vector<std::string> PresetNames();
+
+  enum class TerminationType {
+    kCompleted,      // reached Options::steps
+    kUserStopped,    // the step callback asked to stop (checkpoint written)
+    kNonFinite,      // a loss or gradient was NaN/inf; the last finite state is kept
+  };
+
+  // One point of the training curve (at the start, every monitor_every steps, the end).
+  struct HistoryPoint {
+    int step = 0;
+    double loss = 0;              // mean outer loss of the steps since the last point
+                                  // (at step 0: the monitor subset's loss after K steps)
+    double psnr = 0;              // monitor subset, mean PSNR after K steps, dB
+    double psnr_at_zero = 0;      // monitor subset, mean PSNR at z = 0 (the trunk alone)
+    double seconds = 0;           // training seconds so far (all runs)
+  };
+
+  // What the step callback sees after every outer step.
+  struct StepReport {
+    int step = 0;           // steps completed
+    int total_steps = 0;    // Options::steps
+    double loss = 0;        // this step's batch mean outer loss
+    double loss_at_zero = 0;  // this step's batch mean loss at z = 0
+    bool monitored = false;   // `latest` was just appended to the history
+    HistoryPoint latest;      // the newest history point
+  };
+  // Return false to stop after this step (a checkpoint is written if configured).
+  using StepCallback = std::function<bool(const StepReport&)>;
+
+  struct Summary {
+    TerminationType termination_type = TerminationType::kCompleted;
+    std::string message;
+    SensorKind sensor = SensorKind::kSoftBubble;
+    FrameFormat format;            // as resolved (rows, cols, scale)
+    int num_train_frames = 0;
+    int num_parameters = 0;        // theta's size (alpha not counted)
+    int start_step = 0;            // > 0 when resumed from a checkpoint
+    int steps_done = 0;            // total steps completed (all runs)
+    double load_seconds = 0;       // loading and preprocessing the frames
+    double wall_seconds = 0;       // this run's training loop (without loading)
+    double total_train_seconds = 0;  // training loop seconds over all runs
+    double seconds_per_step = 0;   // this run's mean
+    double final_loss = 0;         // mean outer loss of the last history interval
+    double train_psnr = 0;         // final monitor PSNR after K steps, dB
+    double train_psnr_at_zero = 0; // final monitor PSNR at z = 0, dB
+    double residual_sigma = 0;     // as stored in the trunk
+    std::vector<HistoryPoint> history;
+
+    // One line: termination, steps, loss, PSNR, time.
+    std::string BriefReport() const;
+    // Several lines: the setup, the history table and the outcome.
+    std::string FullReport() const;
+  };
+
+  // Throws std::invalid_argument (with IsValid's message) for invalid options.
+  explicit TrunkTrainer(const Options& options);
+  const Options& options() const { return options_; }
+
+  // The frame format this trainer uses for `sensor` given the dataset's scale
+  // (`sensor_scale` > 0; used when Options::normalization_scale is 0).
+  FrameFormat ResolveFormat(SensorKind sensor, double sensor_scale) const;
+
+  // Trains a trunk for `sensor` on the dataset's train split (loading every frame once,
+  // in parallel) and stores it in *trunk (siren, alpha, format, meta_sgd,
+  // residual_sigma). Throws std::runtime_error if the sensor has no train frames, plus
+  // what Dataset::LoadFrame and the checkpoint reader throw.
+  Summary Train(const Dataset& dataset, SensorKind sensor, SensorTrunk* trunk,
+                const StepCallback& callback = nullptr) const;
+
+  // The same on frames already preprocessed with `format` (e.g. by LoadTrunkTargets).
+  // `fingerprint` identifies the training set in checkpoints (e.g. a hash of frame ids;
+  // resuming with a different one is refused). Every frame must have format's size.
+  Summary Train(const std::vector<TrunkTargets>& frames, SensorKind sensor,
+                const FrameFormat& format, std::uint64_t fingerprint, SensorTrunk* trunk,
+                const StepCallback& callback = nullptr) const;
+
+  // The options that shape the trajectory, with the resolved format, as a flat JSON
+  // object {"siren.width": 64, ..., "format.rows": 70, ...}: what a checkpoint must
+  // match and what a model's info records.
+  std::string TrajectoryOptionsJson(SensorKind sensor, const FrameFormat& format) const;
+
+ private:
+  Options options_;
+};
+
+const char* ToString(TrunkTrainer::TerminationType type);
+
+}  // namespace tactfunc
+
+#endif  // TACTFUNC_ESTIMATION_TRUNK_TRAINER_H_

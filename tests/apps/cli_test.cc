@@ -1,0 +1,168 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// The tactfunc program as a user runs it: exit codes, --help, --json last lines,
+// error messages that name the file, and nothing lost on failure.
+#include <sys/wait.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include "estimation/dataset.h"
+#include "estimation/file_io.h"
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "nlohmann/json.hpp"
+
+namespace tactfunc {
+namespace {
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+
+struct Result {
+  int exit_code = -1;
+  std::string out;
+  std::string err;
+  nlohmann::json LastJson() const {
+    std::istringstream lines(out);
+    std::string line, last;
+    while (std::getline(lines, line)) {
+      if (!line.empty()) last = line;
+    }
+    return nlohmann::json::parse(last);
+  }
+};
+
+std::string Slurp(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  return buffer.str();
+}
+
+class CliTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::path(testing::TempDir()) /
+           ("tactfunc_cli_" + std::string(testing::UnitTest::GetInstance()->current_test_info()->name()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  Result Run(const std::string& args) const {
+    const std::string out = (dir_ / "stdout.txt").string();
+    const std::string err = (dir_ / "stderr.txt").string();
+    const std::string command = "CI=true " + std::string(TACTFUNC_BINARY_DIR) +
+                                "/bin/tactfunc " + args + " >" + out + " 2>" + err +
+                                " </dev/null";
+    const int status = std::system(command.c_str());
+    Result result;
+    result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    result.out = Slurp(out);
+    result.err = Slurp(err);
+    return result;
+  }
+  std::string Path(const std::string& name) const { return (dir_ / name).string(); }
+
+  fs::path dir_;
+};
+
+TEST_F(CliTest, EverySubcommandHasHelp) {
+  const Result top = Run("--help");
+  EXPECT_EQ(top.exit_code, 0);
+  for (const char* sub : {"synth", "show", "info", "bench"}) {
+    EXPECT_THAT(top.out, HasSubstr(sub));
+    const Result help = Run(std::string(sub) + " --help");
+    EXPECT_EQ(help.exit_code, 0) << sub;
+    EXPECT_THAT(help.out, HasSubstr("--")) << sub;
+  }
+}
+
+TEST_F(CliTest, SynthWritesThePairedFramesItReports) {
+  const Result r = Run("synth --out " + Path("d") +
+                       " --frames-per-tool 2 --seed 7 --tools rod,square,l_shape --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json j = r.LastJson();
+  EXPECT_EQ(j["frames"], 12);  // 3 tools x 2 contacts x 2 sensors
+  EXPECT_EQ(j["contacts"], 6);
+  EXPECT_EQ(j["tools"], 3);
+  EXPECT_EQ(j["sensors"], nlohmann::json({"bubble", "gelslim"}));
+  EXPECT_EQ(j["out"], Path("d"));
+  const Dataset dataset = Dataset::Open(Path("d"));
+  EXPECT_EQ(dataset.frames().size(), 12u);
+  const Result info = Run("info " + Path("d") + " --json");
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  EXPECT_EQ(info.LastJson()["sensors"]["gelslim"]["frames"], 6);
+  EXPECT_EQ(info.LastJson()["bytes"], dataset.BytesOnDisk());
+}
+
+TEST_F(CliTest, ShowWritesAPictureOfTheDataset) {
+  ASSERT_EQ(Run("synth --out " + Path("d") + " --frames-per-tool 1 --tools rod,lines5").exit_code, 0);
+  const Result r = Run("show " + Path("d") + " --out " + Path("sheet.png") + " --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.LastJson()["contacts"], 2);
+  const Image sheet = ReadImage(Path("sheet.png"), PixelEncoding::kRgb8);
+  EXPECT_EQ(sheet.rows, r.LastJson()["height"].get<int>());
+  EXPECT_GT(sheet.cols, 6 * 100);
+}
+
+TEST_F(CliTest, BadInputFailsWithAMessageNamingIt) {
+  Result r = Run("info " + Path("missing_dataset"));
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.err, HasSubstr("missing_dataset"));
+
+  r = Run("synth --out " + Path("d") + " --tools rod,teapot");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.err, HasSubstr("teapot"));
+  EXPECT_THAT(r.err, HasSubstr("hemisphere"));  // lists the valid names
+
+  r = Run("synth --out " + Path("d") + " --frames-per-tool 0");
+  EXPECT_EQ(r.exit_code, 2);
+  r = Run("synth --out " + Path("d") + " --sensors bubble,digit");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.err, HasSubstr("digit"));
+  r = Run("frobnicate");
+  EXPECT_EQ(r.exit_code, 2);
+}
+
+TEST_F(CliTest, SynthRefusesToOverwriteADatasetAndLosesNothing) {
+  ASSERT_EQ(Run("synth --out " + Path("d") + " --frames-per-tool 1 --tools rod").exit_code, 0);
+  const std::string labels = Slurp(Path("d/labels.csv"));
+  const Result r = Run("synth --out " + Path("d") + " --frames-per-tool 3 --tools square");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.err, HasSubstr("overwrite"));
+  EXPECT_EQ(Slurp(Path("d/labels.csv")), labels);
+  EXPECT_EQ(Dataset::Open(Path("d")).frames().size(), 2u);
+  ASSERT_EQ(Run("synth --out " + Path("d") + " --frames-per-tool 3 --tools square --overwrite")
+                .exit_code,
+            0);
+  EXPECT_EQ(Dataset::Open(Path("d")).frames().size(), 6u);
+}
+
+TEST_F(CliTest, AUsersOwnFolderOfFramesLoadsLikeADataset) {
+  // A flat folder of 8-bit RGB frames with a reference, as a GelSight user has it.
+  fs::create_directories(Path("mine"));
+  Image reference(24, 32, 3, 0.5f);
+  WritePngAtomically(Path("mine/reference.png"), reference, PixelEncoding::kRgb8);
+  for (int i = 0; i < 3; ++i) {
+    Image frame = reference;
+    frame.at(10, 10 + i, 0) = 1.0f;
+    WritePngAtomically(Path("mine/frame_" + std::to_string(i) + ".png"), frame,
+                       PixelEncoding::kRgb8);
+  }
+  const Result r = Run("info " + Path("mine") + " --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.LastJson()["sensors"]["gelslim"]["frames"], 3);
+  const Result sheet = Run("show " + Path("mine") + " --out " + Path("mine_sheet.png"));
+  EXPECT_EQ(sheet.exit_code, 0) << sheet.err;
+  const Result wrong = Run("info " + Path("mine") + " --sensor bubble");
+  EXPECT_NE(wrong.exit_code, 0);
+  EXPECT_THAT(wrong.err, HasSubstr("mine"));
+}
+
+}  // namespace
+}  // namespace tactfunc
