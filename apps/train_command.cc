@@ -34,15 +34,20 @@ struct TrainFlags {
   bool resume = false;
   bool json = false;
   // Set after parsing: which overrides were given.
-  CLI::Option *latent_dim_option = nullptr, *width_option = nullptr,
-              *layers_option = nullptr, *steps_option = nullptr, *batch_option = nullptr,
-              *pixels_option = nullptr, *seed_option = nullptr,
-              *checkpoint_every_option = nullptr;
+  CLI::Option *latent_dim_option = nullptr, *width_option = nullptr, *layers_option = nullptr,
+              *steps_option = nullptr, *batch_option = nullptr, *pixels_option = nullptr,
+              *seed_option = nullptr, *checkpoint_every_option = nullptr;
 };
 
-// SIGINT: the current step finishes, a checkpoint is written, the command exits 1.
+// SIGINT: the current step finishes, a checkpoint is written, the command exits 1. A
+// second SIGINT aborts at once (default action; the last periodic checkpoint remains).
 std::atomic<bool> g_interrupted{false};
-extern "C" void HandleSigint(int) { g_interrupted.store(true); }
+extern "C" void HandleSigint(int) {
+  if (g_interrupted.exchange(true)) {
+    std::signal(SIGINT, SIG_DFL);
+    std::raise(SIGINT);
+  }
+}
 
 std::string CheckpointPath(const std::string& out, SensorKind sensor) {
   return out + "." + ToString(sensor) + ".ckpt";
@@ -69,7 +74,6 @@ void RunTrain(const TrainFlags& flags) {
   options.threads = flags.threads > 0
                         ? flags.threads
                         : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
-  options.resume = flags.resume;
   std::string error;
   if (!options.IsValid(&error)) throw UsageError(error);
 
@@ -92,11 +96,9 @@ void RunTrain(const TrainFlags& flags) {
                          "', expected a list of bubble, gelslim");
       }
       if (!dataset.has_sensor(kind)) {
-        throw UsageError("--sensors: the dataset " + flags.data + " has no '" + name +
-                         "' frames");
+        throw UsageError("--sensors: the dataset " + flags.data + " has no '" + name + "' frames");
       }
-      if (std::find(sensors.begin(), sensors.end(), kind) == sensors.end())
-        sensors.push_back(kind);
+      if (std::find(sensors.begin(), sensors.end(), kind) == sensors.end()) sensors.push_back(kind);
     }
   }
   if (sensors.empty()) throw UsageError("--sensors: expected at least one sensor");
@@ -119,6 +121,7 @@ void RunTrain(const TrainFlags& flags) {
   for (SensorKind sensor : sensors) {
     TrunkTrainer::Options sensor_options = options;
     sensor_options.checkpoint_path = CheckpointPath(flags.out, sensor);
+    sensor_options.resume = flags.resume;
     const TrunkTrainer trainer(sensor_options);
     const char* name = ToString(sensor);
     if (flags.resume) {
@@ -128,8 +131,8 @@ void RunTrain(const TrainFlags& flags) {
                         : std::string("no checkpoint, starting at step 0"))
                 << "\n";
     }
-    auto bar = std::make_unique<ProgressBar>(std::string("train ") + name,
-                                             sensor_options.steps, "steps");
+    auto bar =
+        std::make_unique<ProgressBar>(std::string("train ") + name, sensor_options.steps, "steps");
     bool first = true;
     const auto callback = [&](const TrunkTrainer::StepReport& report) {
       if (first) {  // a resumed run starts with the bar part-way
@@ -139,9 +142,9 @@ void RunTrain(const TrainFlags& flags) {
       bar->Tick(1);
       bar->SetStatus(Status(report));
       if (report.monitored && !bar_enabled) {
-        std::cout << "train " << name << ": step " << report.step << "/"
-                  << report.total_steps << "  " << Status(report) << "  "
-                  << static_cast<int>(report.latest.seconds) << " s" << std::endl;
+        std::cout << "train " << name << ": step " << report.step << "/" << report.total_steps
+                  << "  " << Status(report) << "  " << static_cast<int>(report.latest.seconds)
+                  << " s" << std::endl;
       }
       return !g_interrupted.load();
     };
@@ -151,15 +154,14 @@ void RunTrain(const TrainFlags& flags) {
     std::cout << summary.BriefReport() << "\n";
     if (summary.termination_type == TrunkTrainer::TerminationType::kUserStopped) {
       std::signal(SIGINT, SIG_DFL);
-      throw std::runtime_error(
-          std::string("interrupted while training ") + name + " at step " +
-          std::to_string(summary.steps_done) + "; checkpoint written to " +
-          sensor_options.checkpoint_path + ". Continue with the same command plus --resume.");
+      throw std::runtime_error(std::string("interrupted while training ") + name + " at step " +
+                               std::to_string(summary.steps_done) + "; checkpoint written to " +
+                               sensor_options.checkpoint_path +
+                               ". Continue with the same command plus --resume.");
     }
     if (summary.termination_type == TrunkTrainer::TerminationType::kNonFinite) {
       std::signal(SIGINT, SIG_DFL);
-      throw std::runtime_error(std::string("training ") + name + " failed: " +
-                               summary.message);
+      throw std::runtime_error(std::string("training ") + name + " failed: " + summary.message);
     }
     model.SetTrunk(std::move(trunk));
     sensor_figures[name] = {{"steps", summary.steps_done},
@@ -198,8 +200,8 @@ void RunTrain(const TrainFlags& flags) {
   model.Save(flags.out);
   const std::uint64_t model_bytes = std::filesystem::file_size(flags.out);
   std::cout << "train: wrote " << flags.out << " (" << FormatBytes(model_bytes) << ", "
-            << sensors.size() << " trunk(s), preset " << flags.preset
-            << "); checkpoints " << flags.out << ".<sensor>.ckpt can be deleted\n";
+            << sensors.size() << " trunk(s), preset " << flags.preset << "); checkpoints "
+            << flags.out << ".<sensor>.ckpt can be deleted\n";
   if (flags.json) {
     EmitJson({{"out", flags.out}, {"sensors", sensor_figures}, {"model_bytes", model_bytes}});
   }
@@ -216,18 +218,20 @@ void RegisterTrain(CLI::App& app, CommandBody* selected) {
   sub->add_option("--data", flags->data, "Dataset folder")->required();
   sub->add_option("--out", flags->out, "Model file to write (.tfm)")->required();
   std::string presets;
-  for (const std::string& n : TrunkTrainer::PresetNames()) presets += (presets.empty() ? "" : ", ") + n;
-  sub->add_option("--preset", flags->preset, "Starting options: " + presets)
+  for (const std::string& n : TrunkTrainer::PresetNames())
+    presets += (presets.empty() ? "" : ", ") + n;
+  sub->add_option("--preset", flags->preset,
+                  "Starting options: " + presets + " (default: default; docs/TRAINING.md)")
       ->check(CLI::IsMember(TrunkTrainer::PresetNames()));
   sub->add_option("--sensors", flags->sensors,
                   "Comma-separated: bubble,gelslim (default: every sensor of the dataset)");
-  flags->latent_dim_option =
-      sub->add_option("--latent-dim", flags->latent_dim, "Latent dimension d (overrides the preset)")
-          ->check(CLI::Range(1, 100000));
+  flags->latent_dim_option = sub->add_option("--latent-dim", flags->latent_dim,
+                                             "Latent dimension d (overrides the preset)")
+                                 ->check(CLI::Range(1, 100000));
   flags->width_option = sub->add_option("--width", flags->width, "Units per hidden layer")
                             ->check(CLI::Range(1, 100000));
-  flags->layers_option = sub->add_option("--layers", flags->layers, "Hidden sine layers")
-                             ->check(CLI::Range(1, 1000));
+  flags->layers_option =
+      sub->add_option("--layers", flags->layers, "Hidden sine layers")->check(CLI::Range(1, 1000));
   flags->steps_option = sub->add_option("--steps", flags->steps,
                                         "Outer steps in total (a resumed run counts earlier ones)")
                             ->check(CLI::Range(0, 100000000));

@@ -57,8 +57,8 @@ std::vector<SensorKind> Functaset::sensors() const {
 const Functaset::SensorBlock& Functaset::Block(SensorKind sensor) const {
   auto it = blocks_.find(sensor);
   if (it == blocks_.end()) {
-    throw std::invalid_argument(std::string("the functaset has no sensor '") +
-                                ToString(sensor) + "'");
+    throw std::invalid_argument(std::string("the functaset has no sensor '") + ToString(sensor) +
+                                "'");
   }
   return it->second;
 }
@@ -74,15 +74,14 @@ void Functaset::Add(SensorKind sensor, FunctasetEntry entry) {
   SensorBlock& block = it->second;
   if (entry.id.empty()) throw std::invalid_argument("Functaset::Add: empty frame id");
   if (entry.latent.size() != block.latent_dim) {
-    throw std::invalid_argument("Functaset::Add: frame '" + entry.id + "' (" +
-                                ToString(sensor) + ") has a latent of " +
-                                std::to_string(entry.latent.size()) +
-                                " values, expected latent_dim = " +
-                                std::to_string(block.latent_dim));
+    throw std::invalid_argument(
+        "Functaset::Add: frame '" + entry.id + "' (" + ToString(sensor) + ") has a latent of " +
+        std::to_string(entry.latent.size()) +
+        " values, expected latent_dim = " + std::to_string(block.latent_dim));
   }
   if (!block.index.emplace(entry.id, block.entries.size()).second) {
-    throw std::invalid_argument("Functaset::Add: frame '" + entry.id + "' (" +
-                                ToString(sensor) + ") is already in the functaset");
+    throw std::invalid_argument("Functaset::Add: frame '" + entry.id + "' (" + ToString(sensor) +
+                                ") is already in the functaset");
   }
   block.entries.push_back(std::move(entry));
 }
@@ -123,8 +122,8 @@ void Functaset::CheckModel(const FunctaModel& model, const std::string& model_na
       !functaset_name.empty() ? functaset_name : (!source_.empty() ? source_ : "(in memory)");
   if (model.checksum() != model_checksum_) {
     throw FunctasetModelMismatch("functaset " + name + " was encoded with model checksum " +
-                                 Hex(model_checksum_) + ", but model " + model_name +
-                                 " has " + Hex(model.checksum()) +
+                                 Hex(model_checksum_) + ", but model " + model_name + " has " +
+                                 Hex(model.checksum()) +
                                  ": its latents only mean something under the model they "
                                  "were encoded with (re-encode with `tactfunc encode`)");
   }
@@ -167,8 +166,7 @@ std::string Functaset::Serialize() const {
       splits.push_back(ToString(e.split));
       if (e.label) {
         tools.push_back(e.label->tool);
-        poses.insert(poses.end(), {e.label->x_m, e.label->y_m, e.label->yaw_rad,
-                                   e.label->depth_m});
+        poses.insert(poses.end(), {e.label->x_m, e.label->y_m, e.label->yaw_rad, e.label->depth_m});
       } else {
         tools.push_back(nullptr);
         poses.insert(poses.end(), {kNaN, kNaN, kNaN, kNaN});
@@ -261,8 +259,7 @@ Functaset Functaset::Parse(const std::string& bytes, const std::string& source) 
       const auto& psnr = file.Get(name + "/psnr", {m});
       const auto& poses = file.Get(name + "/poses", {m, 4});
       if (latents.dtype != TensorFile::DType::kFloat32 ||
-          psnr.dtype != TensorFile::DType::kFloat32 ||
-          poses.dtype != TensorFile::DType::kFloat64) {
+          psnr.dtype != TensorFile::DType::kFloat32 || poses.dtype != TensorFile::DType::kFloat64) {
         field = name + "/*";
         throw fail("expected latents and psnr float32, poses float64");
       }

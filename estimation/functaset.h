@@ -64,7 +64,7 @@ class FunctasetModelMismatch : public std::runtime_error {
 };
 
 struct FunctasetEntry {
-  std::string id;                  // frame id in the dataset (file stem)
+  std::string id;  // frame id in the dataset (file stem)
   Split split = Split::kTrain;
   std::optional<PoseLabel> label;  // absent for unlabelled frames
   Eigen::VectorXf latent;          // latent_dim of the sensor's trunk

@@ -100,7 +100,12 @@ class KnnIndex {
   int CheckSearch(const float* queries, std::int64_t n, int k, float* distances,
                   std::int64_t* labels) const;
 
+  // Exact search over data_ (as BruteForceKnnIndex::Search, after CheckSearch).
+  void ExactSearch(const float* queries, std::int64_t n, int k, int available,
+                   float* distances, std::int64_t* labels) const;
+
   std::vector<float> data_;
+  std::vector<float> squared_norms_;  // size(), ||x_i||^2
 
  private:
   int dim_;
@@ -118,11 +123,8 @@ class BruteForceKnnIndex : public KnnIndex {
   std::string Describe() const override;
 
  protected:
-  void OnAdd(std::int64_t first_new_row) override;
+  void OnAdd(std::int64_t /*first_new_row*/) override {}
   std::string ParamsJson() const override { return "{}"; }
-
- private:
-  Eigen::VectorXf squared_norms_;  // size(), ||x_i||^2
 };
 
 // ---- FLANN --------------------------------------------------------------------------
@@ -168,8 +170,9 @@ class FlannKnnIndex : public KnnIndex {
 
   // Per-query parameters (faiss: SearchParameters).
   struct SearchParams {
-    // Leaves (kd-forest) or points (k-means) examined per query; -1 = all (exact, as
-    // slow as linear). >= 1 or -1. BUILD-NOTES: recall@8 0.35 / 0.49 / 0.65 at 64 /
+    // Leaves (kd-forest) or points (k-means) examined per query; -1 = all, which runs
+    // the exact search of BruteForceKnnIndex instead (FLANN's own exact kd-forest
+    // search prints a warning per query). >= 1 or -1. BUILD-NOTES: recall@8 0.35 / 0.49 / 0.65 at 64 /
     // 128 / 256 checks on 512-d latents near a 16-d subspace; re-measured for d = 64
     // in docs/FITTING.md. An autotuned index ignores this and uses the checks it tuned.
     int checks = 256;
@@ -182,9 +185,11 @@ class FlannKnnIndex : public KnnIndex {
     bool IsValid(std::string* error) const;
   };
 
-  // Throws std::invalid_argument for dim < 1 or invalid options.
-  FlannKnnIndex(int dim, const Options& options,
-                const SearchParams& search_params = SearchParams());
+  // Throws std::invalid_argument for dim < 1 or invalid options. (Two constructors, not a
+  // default argument: a nested struct's default member initializers cannot be used in
+  // a default argument inside the enclosing class.)
+  FlannKnnIndex(int dim, const Options& options);
+  FlannKnnIndex(int dim, const Options& options, const SearchParams& search_params);
   ~FlannKnnIndex() override;
 
   const Options& options() const { return options_; }

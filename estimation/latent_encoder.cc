@@ -49,8 +49,8 @@ bool LatentEncoder::Options::IsValid(std::string* error) const {
 
 std::string LatentEncoder::Summary::BriefReport() const {
   std::ostringstream out;
-  out << "encode: " << ToString(termination) << ", " << (frames_encoded + frames_resumed)
-      << "/" << frames_total << " frames (" << frames_encoded << " encoded";
+  out << "encode: " << ToString(termination) << ", " << (frames_encoded + frames_resumed) << "/"
+      << frames_total << " frames (" << frames_encoded << " encoded";
   if (frames_resumed > 0) out << ", " << frames_resumed << " resumed";
   out << ") in " << seconds << " s (" << frames_per_second << " frames/s)";
   for (const auto& [sensor, psnr] : mean_psnr) {
@@ -123,8 +123,8 @@ LatentEncoder::EncodedFrame LatentEncoder::EncodeTargets(SensorKind sensor,
         std::to_string(targets.weights.size()) + " weights");
   }
   EncodedFrame out;
-  out.latent = state.meta_sgd.FitLatent<float>(siren, state.grid, targets.values,
-                                                targets.weights, state.alpha);
+  out.latent = state.meta_sgd.FitLatent<float>(siren, state.grid, targets.values, targets.weights,
+                                               state.alpha);
   out.psnr = Psnr(siren.Forward<float>(state.grid, out.latent), targets);
   return out;
 }
@@ -209,14 +209,34 @@ Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
   if (options_.resume && std::filesystem::exists(options_.checkpoint_path)) {
     const Functaset checkpoint = Functaset::Load(options_.checkpoint_path);
     checkpoint.CheckModel(model_, "in use", options_.checkpoint_path);
+    std::size_t matched = 0;
     for (Job& job : jobs) {
       const auto found = checkpoint.Find(job.sensor, job.entry.id);
       if (!found) continue;
+      ++matched;
       const FunctasetEntry& stored = checkpoint.entries(job.sensor)[*found];
       job.entry.latent = stored.latent;
       job.entry.psnr = stored.psnr;
       job.done = true;
       ++s.frames_resumed;
+    }
+    // Resuming with another selection would drop finished work from the file.
+    if (matched != checkpoint.size()) {
+      std::string example;
+      for (SensorKind sensor : checkpoint.sensors()) {
+        for (const FunctasetEntry& e : checkpoint.entries(sensor)) {
+          const bool selected = std::any_of(jobs.begin(), jobs.end(), [&](const Job& job) {
+            return job.sensor == sensor && job.entry.id == e.id;
+          });
+          if (!selected && example.empty()) example = e.id + " (" + ToString(sensor) + ")";
+        }
+      }
+      throw std::invalid_argument(
+          "LatentEncoder: the checkpoint " + options_.checkpoint_path + " holds " +
+          std::to_string(checkpoint.size() - matched) +
+          " frame(s) that are not among the frames selected from " + dataset.root() + ", e.g. " +
+          example +
+          "; resume with the sensors and split of the interrupted run (or another output)");
     }
   }
 
@@ -297,8 +317,8 @@ Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
     wake.notify_one();
   };
 
-  const int num_threads =
-      static_cast<int>(std::min<std::size_t>(options_.threads, std::max<std::size_t>(pending.size(), 1)));
+  const int num_threads = static_cast<int>(
+      std::min<std::size_t>(options_.threads, std::max<std::size_t>(pending.size(), 1)));
   std::vector<std::thread> workers;
   running = num_threads;
   for (int t = 0; t < num_threads; ++t) workers.emplace_back(work);
@@ -366,8 +386,8 @@ Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
             << " latent(s) are not finite (are the meta-SGD rates alpha too large?)";
   }
   s.message = message.str();
-  if (progress) progress(EncodeProgress{done, s.frames_total,
-                                        psnr_count > 0 ? psnr_sum / psnr_count : 0.0});
+  if (progress)
+    progress(EncodeProgress{done, s.frames_total, psnr_count > 0 ? psnr_sum / psnr_count : 0.0});
   return result;
 }
 

@@ -98,19 +98,19 @@ class LatentEncoder {
 
   struct Summary {
     EncodeTermination termination = EncodeTermination::kComplete;
-    std::string message;                 // one line, for humans
-    std::int64_t frames_total = 0;       // frames selected
-    std::int64_t frames_encoded = 0;     // frames encoded by this run
-    std::int64_t frames_resumed = 0;     // frames taken from the checkpoint
+    std::string message;              // one line, for humans
+    std::int64_t frames_total = 0;    // frames selected
+    std::int64_t frames_encoded = 0;  // frames encoded by this run
+    std::int64_t frames_resumed = 0;  // frames taken from the checkpoint
     std::int64_t checkpoints_written = 0;
     std::int64_t non_finite_latents = 0;  // latents with a NaN or inf (alpha too large?)
-    double seconds = 0;                  // wall time of this run
-    double frames_per_second = 0;        // frames_encoded / seconds
+    double seconds = 0;                   // wall time of this run
+    double frames_per_second = 0;         // frames_encoded / seconds
     // Per sensor, over the functaset's entries (resumed ones included):
     std::map<SensorKind, std::int64_t> frames;  // entries
     std::map<SensorKind, double> mean_psnr;     // mean PSNR (dB) over finite PSNRs
-    std::string BriefReport() const;  // one line
-    std::string FullReport() const;   // several lines
+    std::string BriefReport() const;            // one line
+    std::string FullReport() const;             // several lines
   };
 
   // One frame's fit.

@@ -52,8 +52,7 @@ std::uint64_t RawFrameBytes(const SensorInfo& info) {
   return static_cast<std::uint64_t>(info.rows) * info.cols * info.channels * bytes_per_sample;
 }
 
-RepresentationSize ComputeRepresentationSize(const FunctaModel& model,
-                                             const Functaset& functaset,
+RepresentationSize ComputeRepresentationSize(const FunctaModel& model, const Functaset& functaset,
                                              const std::vector<SensorInfo>& sensors) {
   RepresentationSize size;
   for (SensorKind sensor : functaset.sensors()) {
@@ -84,8 +83,8 @@ Eigen::MatrixXf Reconstruct(const SensorTrunk& trunk, const Eigen::VectorXf& lat
                                 " trunk's latent_dim is " +
                                 std::to_string(trunk.siren.latent_dim()));
   }
-  return trunk.siren.Forward<float>(
-      trunk.siren.Grid<float>(trunk.format.rows, trunk.format.cols), latent);
+  return trunk.siren.Forward<float>(trunk.siren.Grid<float>(trunk.format.rows, trunk.format.cols),
+                                    latent);
 }
 
 bool ReconstructionEvaluator::Options::IsValid(std::string* error) const {
@@ -143,16 +142,14 @@ std::string ReconstructionEvaluator::Summary::FullReport() const {
   std::ostringstream out;
   char line[256];
   std::snprintf(line, sizeof(line), "%-8s %-6s %6s  %-23s %-23s %-23s\n", "sensor", "split",
-                "frames", "PSNR noisy mean/med/p5", "PSNR clean mean/med/p5",
-                "z=0 mean/med/p5");
+                "frames", "PSNR noisy mean/med/p5", "PSNR clean mean/med/p5", "z=0 mean/med/p5");
   out << line;
   auto triple = [](const PsnrStats& s) {
     return Db(s.mean) + " / " + Db(s.median) + " / " + Db(s.p5);
   };
   for (const GroupSummary& g : groups) {
-    std::snprintf(line, sizeof(line), "%-8s %-6s %6lld  %-23s %-23s %-23s\n",
-                  ToString(g.sensor), ToString(g.split),
-                  static_cast<long long>(g.noisy.count + g.noisy.excluded),
+    std::snprintf(line, sizeof(line), "%-8s %-6s %6lld  %-23s %-23s %-23s\n", ToString(g.sensor),
+                  ToString(g.split), static_cast<long long>(g.noisy.count + g.noisy.excluded),
                   triple(g.noisy).c_str(), has_clean ? triple(g.clean).c_str() : "-",
                   triple(g.zero).c_str());
     out << line;
@@ -168,8 +165,9 @@ std::string ReconstructionEvaluator::Summary::FullReport() const {
   return out.str();
 }
 
-ReconstructionEvaluator::Summary ReconstructionEvaluator::Evaluate(
-    const FunctaModel& model, const Functaset& functaset, const Dataset& dataset) const {
+ReconstructionEvaluator::Summary ReconstructionEvaluator::Evaluate(const FunctaModel& model,
+                                                                   const Functaset& functaset,
+                                                                   const Dataset& dataset) const {
   const auto start = std::chrono::steady_clock::now();
   functaset.CheckModel(model);
   Summary summary;
@@ -241,8 +239,7 @@ ReconstructionEvaluator::Summary ReconstructionEvaluator::Evaluate(
         r.psnr = Psnr(prediction, targets);
         r.psnr_zero = Psnr(state.zero_prediction, targets);
         if (summary.has_clean && !dataset.frames()[r.dataset_index].clean_path.empty()) {
-          r.psnr_clean =
-              Psnr(prediction, LoadTrunkTargets(dataset, r.dataset_index, format, true));
+          r.psnr_clean = Psnr(prediction, LoadTrunkTargets(dataset, r.dataset_index, format, true));
         }
       } catch (...) {
         std::lock_guard<std::mutex> lock(mutex);
@@ -279,8 +276,7 @@ ReconstructionEvaluator::Summary ReconstructionEvaluator::Evaluate(
     }
   }
   summary.size = ComputeRepresentationSize(model, functaset, infos);
-  summary.seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return summary;
 }
 

@@ -53,12 +53,12 @@ struct PsnrStats {
 PsnrStats ComputePsnrStats(const std::vector<double>& values);
 
 struct RepresentationSize {
-  std::int64_t frames = 0;                // functaset entries counted
-  std::uint64_t model_bytes = 0;          // trunks of the functaset's sensors, float32
-  std::uint64_t latent_bytes = 0;         // sum_s M_s d_s 4
+  std::int64_t frames = 0;                 // functaset entries counted
+  std::uint64_t model_bytes = 0;           // trunks of the functaset's sensors, float32
+  std::uint64_t latent_bytes = 0;          // sum_s M_s d_s 4
   std::uint64_t representation_bytes = 0;  // model_bytes + latent_bytes
-  std::uint64_t raw_bytes = 0;            // the entries' frames, uncompressed, native size
-  double compression_ratio = 0;           // raw_bytes / representation_bytes (0 if empty)
+  std::uint64_t raw_bytes = 0;             // the entries' frames, uncompressed, native size
+  double compression_ratio = 0;            // raw_bytes / representation_bytes (0 if empty)
 };
 
 // Bytes of one uncompressed frame of a sensor: rows x cols x channels x (2 for
@@ -66,8 +66,7 @@ struct RepresentationSize {
 std::uint64_t RawFrameBytes(const SensorInfo& info);
 // The sizes above. `sensors` must describe every sensor of the functaset (else
 // std::invalid_argument); the model must have a trunk for each.
-RepresentationSize ComputeRepresentationSize(const FunctaModel& model,
-                                             const Functaset& functaset,
+RepresentationSize ComputeRepresentationSize(const FunctaModel& model, const Functaset& functaset,
                                              const std::vector<SensorInfo>& sensors);
 
 // f(grid; latent) of a trunk on its working-resolution grid, N x C (float): the
@@ -89,7 +88,7 @@ class ReconstructionEvaluator {
     std::string id;
     SensorKind sensor = SensorKind::kSoftBubble;
     Split split = Split::kTrain;
-    std::size_t dataset_index = 0;  // index into Dataset::frames()
+    std::size_t dataset_index = 0;                                 // index into Dataset::frames()
     double psnr = std::numeric_limits<double>::quiet_NaN();        // vs the noisy frame
     double psnr_clean = std::numeric_limits<double>::quiet_NaN();  // vs clean; NaN if none
     double psnr_zero = std::numeric_limits<double>::quiet_NaN();   // z = 0 vs noisy

@@ -41,9 +41,7 @@ enum Stream : std::uint64_t {
   kMonitorStream = 5,
   kResidualStream = 6,
 };
-std::uint64_t StreamSeed(std::uint64_t seed, Stream stream) {
-  return DeriveSeed(seed, stream);
-}
+std::uint64_t StreamSeed(std::uint64_t seed, Stream stream) { return DeriveSeed(seed, stream); }
 
 // A seeded permutation of [0, n) (Fisher-Yates with Boost's portable distributions).
 std::vector<int> Permutation(int n, std::uint64_t seed) {
@@ -113,14 +111,12 @@ constexpr int kHistoryColumns = 5;
 
 std::string FingerprintHex(std::uint64_t fingerprint) {
   char buffer[17];
-  std::snprintf(buffer, sizeof(buffer), "%016llx",
-                static_cast<unsigned long long>(fingerprint));
+  std::snprintf(buffer, sizeof(buffer), "%016llx", static_cast<unsigned long long>(fingerprint));
   return buffer;
 }
 
 void WriteCheckpoint(const std::string& path, const TrainingState& state, SensorKind sensor,
-                     const std::string& options_json, std::uint64_t fingerprint,
-                     int num_frames) {
+                     const std::string& options_json, std::uint64_t fingerprint, int num_frames) {
   TensorFile file("checkpoint");
   Json meta;
   meta["format"] = kCheckpointFormat;
@@ -142,12 +138,11 @@ void WriteCheckpoint(const std::string& path, const TrainingState& state, Sensor
   file.Add("adam/alpha_v", D::kFloat64, {d}, ToStd(state.v_alpha));
   std::vector<double> history;
   for (const TrunkTrainer::HistoryPoint& p : state.history) {
-    history.insert(history.end(), {static_cast<double>(p.step), p.loss, p.psnr,
-                                   p.psnr_at_zero, p.seconds});
+    history.insert(history.end(),
+                   {static_cast<double>(p.step), p.loss, p.psnr, p.psnr_at_zero, p.seconds});
   }
   file.Add("history", D::kFloat64,
-           {static_cast<std::int64_t>(state.history.size()), kHistoryColumns},
-           std::move(history));
+           {static_cast<std::int64_t>(state.history.size()), kHistoryColumns}, std::move(history));
   file.Add("loss_accumulator", D::kFloat64, {2},
            {state.loss_sum, static_cast<double>(state.loss_count)});
   file.Write(path);
@@ -158,9 +153,8 @@ std::string JsonValueText(const Json* value) {
 }
 
 // Reads a checkpoint into *state after checking that it belongs to this run.
-void ReadCheckpoint(const std::string& path, SensorKind sensor,
-                    const std::string& options_json, std::uint64_t fingerprint,
-                    int num_frames, int num_parameters, int latent_dim,
+void ReadCheckpoint(const std::string& path, SensorKind sensor, const std::string& options_json,
+                    std::uint64_t fingerprint, int num_frames, int num_parameters, int latent_dim,
                     TrainingState* state) {
   TensorFile file;
   try {
@@ -174,31 +168,29 @@ void ReadCheckpoint(const std::string& path, SensorKind sensor,
   try {
     meta = Json::parse(file.meta_json());
     if (meta.at("format").get<std::string>() != kCheckpointFormat) {
-      throw TensorFileError(where + "meta.format: expected '" + kCheckpointFormat +
-                            "', found '" + meta.at("format").get<std::string>() + "'");
+      throw TensorFileError(where + "meta.format: expected '" + kCheckpointFormat + "', found '" +
+                            meta.at("format").get<std::string>() + "'");
     }
     if (meta.at("version").get<int>() != kCheckpointVersion) {
-      throw TensorFileError(where + "meta.version: expected " +
-                            std::to_string(kCheckpointVersion) + ", found " +
-                            meta.at("version").dump());
+      throw TensorFileError(where + "meta.version: expected " + std::to_string(kCheckpointVersion) +
+                            ", found " + meta.at("version").dump());
     }
   } catch (const Json::exception& e) {
     throw TensorFileError(where + "malformed meta: " + e.what());
   }
   const std::string checkpoint_sensor = meta.value("sensor", std::string());
   if (checkpoint_sensor != ToString(sensor)) {
-    throw std::runtime_error(where + "was written for sensor '" + checkpoint_sensor +
-                             "', not '" + ToString(sensor) + "'");
+    throw std::runtime_error(where + "was written for sensor '" + checkpoint_sensor + "', not '" +
+                             ToString(sensor) + "'");
   }
   const Json current = Json::parse(options_json);
   const Json& saved = meta.at("options");
   for (auto it = current.begin(); it != current.end(); ++it) {
     const Json* old = saved.contains(it.key()) ? &saved.at(it.key()) : nullptr;
     if (old == nullptr || *old != it.value()) {
-      throw std::runtime_error(
-          where + "option '" + it.key() + "' differs: " + JsonValueText(old) +
-          " in the checkpoint, " + it.value().dump() +
-          " now. Resume with the same options, or start anew without resume.");
+      throw std::runtime_error(where + "option '" + it.key() + "' differs: " + JsonValueText(old) +
+                               " in the checkpoint, " + it.value().dump() +
+                               " now. Resume with the same options, or start anew without resume.");
     }
   }
   for (auto it = saved.begin(); it != saved.end(); ++it) {
@@ -289,8 +281,8 @@ bool TrunkTrainer::Options::IsValid(std::string* error) const {
   if (!siren_check.IsValid(&inner)) {
     message << "siren: " << inner;
   } else if (rows < 0 || cols < 0 || (rows == 0) != (cols == 0)) {
-    message << "rows and cols must both be 0 (the sensor's default) or both > 0, found "
-            << rows << " x " << cols;
+    message << "rows and cols must both be 0 (the sensor's default) or both > 0, found " << rows
+            << " x " << cols;
   } else if (!(normalization_scale >= 0) || !std::isfinite(normalization_scale)) {
     message << "normalization_scale must be finite and >= 0, found " << normalization_scale;
   } else if (!meta_sgd.IsValid(&inner)) {
@@ -305,8 +297,7 @@ bool TrunkTrainer::Options::IsValid(std::string* error) const {
     message << "adam_beta2 must be in [0, 1), found " << adam_beta2;
   } else if (!finite_positive(adam_epsilon)) {
     message << "adam_epsilon must be finite and > 0, found " << adam_epsilon;
-  } else if (!(alpha_init_min >= 0 && alpha_init_min <= alpha_init_max &&
-               alpha_init_max <= 1)) {
+  } else if (!(alpha_init_min >= 0 && alpha_init_min <= alpha_init_max && alpha_init_max <= 1)) {
     message << "alpha_init_min and alpha_init_max must satisfy 0 <= min <= max <= 1, found "
             << alpha_init_min << " and " << alpha_init_max;
   } else if (batch_size < 1) {
@@ -318,8 +309,7 @@ bool TrunkTrainer::Options::IsValid(std::string* error) const {
   } else if (threads < 1 || threads > 256) {
     message << "threads must be in [1, 256], found " << threads;
   } else if (checkpoint_every < 0) {
-    message << "checkpoint_every must be >= 0 (0 = only at the end), found "
-            << checkpoint_every;
+    message << "checkpoint_every must be >= 0 (0 = only at the end), found " << checkpoint_every;
   } else if (resume && checkpoint_path.empty()) {
     message << "resume requires a checkpoint_path";
   } else if (monitor_every < 1) {
@@ -357,20 +347,17 @@ TrunkTrainer::Options TrunkTrainer::Preset(const std::string& name) {
     options.siren.width = 64;
     options.siren.num_hidden_layers = 3;
     options.siren.latent_dim = 32;
-    options.batch_size = 8;
-    options.pixels_per_frame = 1024;
+    options.batch_size = 32;
+    options.pixels_per_frame = 256;
     options.steps = 3000;
     options.monitor_every = 100;
   } else if (name == "default") {
-    options.batch_size = 16;
-    options.pixels_per_frame = 2048;
-    options.steps = 20000;
-    options.monitor_every = 250;
+    // Options() as constructed.
   } else {
     std::string names;
     for (const std::string& n : PresetNames()) names += (names.empty() ? "" : ", ") + n;
-    throw std::invalid_argument("TrunkTrainer: unknown preset '" + name +
-                                "', expected one of " + names);
+    throw std::invalid_argument("TrunkTrainer: unknown preset '" + name + "', expected one of " +
+                                names);
   }
   return options;
 }
@@ -391,8 +378,8 @@ const char* ToString(TrunkTrainer::TerminationType type) {
 
 std::string TrunkTrainer::Summary::BriefReport() const {
   std::ostringstream out;
-  out << "TrunkTrainer (" << ToString(sensor) << "): " << ToString(termination_type)
-      << ", step " << steps_done << ", loss " << FormatDouble(final_loss) << ", train PSNR "
+  out << "TrunkTrainer (" << ToString(sensor) << "): " << ToString(termination_type) << ", step "
+      << steps_done << ", loss " << FormatDouble(final_loss) << ", train PSNR "
       << FormatDouble(train_psnr_at_zero, 3) << " -> " << FormatDouble(train_psnr, 3)
       << " dB (z = 0 -> K steps), " << FormatDouble(wall_seconds, 3) << " s ("
       << FormatDouble(seconds_per_step * 1e3, 3) << " ms/step)";
@@ -414,8 +401,8 @@ std::string TrunkTrainer::Summary::FullReport() const {
       << "  history          step      loss   PSNR(K)  PSNR(z=0)  seconds\n";
   for (const HistoryPoint& p : history) {
     char line[160];
-    std::snprintf(line, sizeof(line), "                   %6d %9.3e %8.2f %10.2f %8.1f\n",
-                  p.step, p.loss, p.psnr, p.psnr_at_zero, p.seconds);
+    std::snprintf(line, sizeof(line), "                   %6d %9.3e %8.2f %10.2f %8.1f\n", p.step,
+                  p.loss, p.psnr, p.psnr_at_zero, p.seconds);
     out << line;
   }
   out << "  residual sigma   " << FormatDouble(residual_sigma) << "\n"
@@ -476,24 +463,20 @@ std::string TrunkTrainer::TrajectoryOptionsJson(SensorKind sensor,
 }
 
 TrunkTrainer::Summary TrunkTrainer::Train(const Dataset& dataset, SensorKind sensor,
-                                          SensorTrunk* trunk,
-                                          const StepCallback& callback) const {
+                                          SensorTrunk* trunk, const StepCallback& callback) const {
   const Clock::time_point start = Clock::now();
   const SensorInfo& info = dataset.sensor_info(sensor);
-  const double sensor_scale = info.normalization_scale > 0
-                                  ? info.normalization_scale
-                                  : DefaultNormalizationScale(sensor);
+  const double sensor_scale =
+      info.normalization_scale > 0 ? info.normalization_scale : DefaultNormalizationScale(sensor);
   const FrameFormat format = ResolveFormat(sensor, sensor_scale);
   const std::vector<std::size_t> indices = dataset.FrameIndices(sensor, Split::kTrain);
   if (indices.empty()) {
     throw std::runtime_error("TrunkTrainer: dataset " + dataset.root() +
-                             " has no train-split frames of sensor '" + ToString(sensor) +
-                             "'");
+                             " has no train-split frames of sensor '" + ToString(sensor) + "'");
   }
   std::vector<TrunkTargets> frames(indices.size());
-  internal::ParallelFor(static_cast<int>(indices.size()), options_.threads, [&](int i) {
-    frames[i] = LoadTrunkTargets(dataset, indices[i], format);
-  });
+  internal::ParallelFor(static_cast<int>(indices.size()), options_.threads,
+                        [&](int i) { frames[i] = LoadTrunkTargets(dataset, indices[i], format); });
   // FNV-1a over the frame ids: resuming on another training set is refused.
   std::uint64_t fingerprint = 1469598103934665603ull;
   for (std::size_t index : indices) {
@@ -520,12 +503,12 @@ TrunkTrainer::Summary TrunkTrainer::Train(const std::vector<TrunkTargets>& frame
   for (std::size_t i = 0; i < frames.size(); ++i) {
     if (frames[i].values.rows() != num_pixels || frames[i].values.cols() != channels ||
         frames[i].weights.size() != num_pixels) {
-      throw std::invalid_argument(
-          "TrunkTrainer: training frame " + std::to_string(i) + " is " +
-          std::to_string(frames[i].values.rows()) + " x " +
-          std::to_string(frames[i].values.cols()) + " values, expected " +
-          std::to_string(num_pixels) + " x " + std::to_string(channels) + " (" +
-          std::to_string(format.rows) + " x " + std::to_string(format.cols) + " pixels)");
+      throw std::invalid_argument("TrunkTrainer: training frame " + std::to_string(i) + " is " +
+                                  std::to_string(frames[i].values.rows()) + " x " +
+                                  std::to_string(frames[i].values.cols()) + " values, expected " +
+                                  std::to_string(num_pixels) + " x " + std::to_string(channels) +
+                                  " (" + std::to_string(format.rows) + " x " +
+                                  std::to_string(format.cols) + " pixels)");
     }
   }
   const int num_frames = static_cast<int>(frames.size());
@@ -545,8 +528,7 @@ TrunkTrainer::Summary TrunkTrainer::Train(const std::vector<TrunkTargets>& frame
   state.alpha.resize(d);
   {
     boost::random::mt19937_64 rng(StreamSeed(o.seed, kAlphaStream));
-    boost::random::uniform_real_distribution<double> uniform(o.alpha_init_min,
-                                                             o.alpha_init_max);
+    boost::random::uniform_real_distribution<double> uniform(o.alpha_init_min, o.alpha_init_max);
     for (int k = 0; k < d; ++k) {
       state.alpha[k] = o.alpha_init_min == o.alpha_init_max ? o.alpha_init_min : uniform(rng);
     }
@@ -554,8 +536,8 @@ TrunkTrainer::Summary TrunkTrainer::Train(const std::vector<TrunkTargets>& frame
   state.m_theta = state.v_theta = Eigen::VectorXd::Zero(num_parameters);
   state.m_alpha = state.v_alpha = Eigen::VectorXd::Zero(d);
   if (o.resume && std::filesystem::exists(o.checkpoint_path)) {
-    ReadCheckpoint(o.checkpoint_path, sensor, options_json, fingerprint, num_frames,
-                   num_parameters, d, &state);
+    ReadCheckpoint(o.checkpoint_path, sensor, options_json, fingerprint, num_frames, num_parameters,
+                   d, &state);
     siren.SetParameters(state.theta);
   }
 
@@ -660,8 +642,7 @@ TrunkTrainer::Summary TrunkTrainer::Train(const std::vector<TrunkTargets>& frame
     bool finite = true;
     for (int b = 0; b < batch; ++b) {
       const MetaSgd::Result<float>& r = results[b];
-      finite = finite && std::isfinite(r.loss) && AllFinite(r.dL_dtheta) &&
-               AllFinite(r.dL_dalpha);
+      finite = finite && std::isfinite(r.loss) && AllFinite(r.dL_dtheta) && AllFinite(r.dL_dalpha);
       loss += r.loss;
       loss_at_zero += r.loss_at_zero;
       g_theta += r.dL_dtheta.cast<double>();
@@ -690,8 +671,7 @@ TrunkTrainer::Summary TrunkTrainer::Train(const std::vector<TrunkTargets>& frame
       *v = b2 * *v + (1.0 - b2) * g.cwiseAbs2();
       const double step_size = rate / correction1;
       const double sqrt_c2 = std::sqrt(correction2);
-      x->array() -=
-          step_size * m->array() / (v->array().sqrt() / sqrt_c2 + o.adam_epsilon);
+      x->array() -= step_size * m->array() / (v->array().sqrt() / sqrt_c2 + o.adam_epsilon);
     };
     adam(&state.theta, &state.m_theta, &state.v_theta, g_theta, o.learning_rate);
     adam(&state.alpha, &state.m_alpha, &state.v_alpha, g_alpha, o.alpha_learning_rate);
@@ -725,8 +705,7 @@ TrunkTrainer::Summary TrunkTrainer::Train(const std::vector<TrunkTargets>& frame
       message = "stopped by the step callback after step " + std::to_string(state.step);
       break;
     }
-    if (o.checkpoint_every > 0 && state.step % o.checkpoint_every == 0 &&
-        state.step < o.steps) {
+    if (o.checkpoint_every > 0 && state.step % o.checkpoint_every == 0 && state.step < o.steps) {
       const double run_seconds = SecondsSince(run_start);
       state.train_seconds += run_seconds;
       checkpoint();

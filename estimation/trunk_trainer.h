@@ -24,7 +24,9 @@
 //
 // Precision. theta, alpha and the Adam moments are kept in double (master copies);
 // the per-frame meta-gradients are computed in float (LatentModulatedSiren's float
-// mirror, about 2x faster than double) and accumulated in double.
+// mirror) and accumulated in double. Measured on the small trunk: float is 2.0x (256
+// px) to 3.6x (6160 px) faster than double per frame, and its meta-gradient differs
+// from double's by at most 7e-6 relative (2-norm), so float is used throughout.
 //
 // Determinism. Every random choice is a pure function of (Options::seed, what it is
 // for, step or index) through DeriveSeed (models/seed.h): the trunk's initial theta and
@@ -96,39 +98,46 @@ class TrunkTrainer {
 
     // ---- Inner loop (models/meta_sgd.h) ---------------------------------------------
     // K = 3 inner steps (paper Sec. IV-A, functa); latent L2 weight lambda = 1e-5 as in
-    // the paper's released code (measured: no PSNR change at this size, see
-    // docs/TRAINING.md); exact second-order meta-gradients.
+    // the paper's released code (measured: 30.49 dB with and without it, so it does not
+    // hurt); exact second-order meta-gradients (first order is ~2.2x cheaper per step
+    // and reached about the same PSNR per second; docs/TRAINING.md).
     MetaSgd::Options meta_sgd = DefaultMetaSgdOptions();
 
     // ---- Outer optimiser: Adam ------------------------------------------------------
     // Step size of theta, in parameter units per step. > 0. functa uses 3e-6 on a
     // per-image SUM of squared errors; our loss is a per-pixel MEAN, whose gradient is
-    // N times smaller, so the step must be larger: 1e-4 measured best of
-    // {3e-5, 1e-4, 3e-4, 1e-3} on the small preset (docs/TRAINING.md).
-    double learning_rate = 1e-4;
-    // Step size of the meta-SGD rates alpha, per step. > 0. Default 1e-3: alpha lives
-    // in [0, 1] and needs O(0.1) moves; measured (docs/TRAINING.md).
+    // N times smaller, so the step must be larger: 3e-4 measured best of
+    // {3e-5, 1e-4, 3e-4, 1e-3} after 600 steps of the small preset on synthetic bubble
+    // data (27.1, 30.5, 32.3, 31.7 dB; docs/TRAINING.md).
+    double learning_rate = 3e-4;
+    // Step size of the meta-SGD rates alpha, per step. > 0. Measured: 1e-3 and 1e-2 give
+    // the same PSNR (30.47 vs 30.49 dB), since alpha stays at its upper clip bound 1.
     double alpha_learning_rate = 1e-3;
     // Adam's moment decays, in [0, 1), and epsilon (> 0): Kingma & Ba's defaults.
     double adam_beta1 = 0.9;
     double adam_beta2 = 0.999;
     double adam_epsilon = 1e-8;
     // Initial meta-SGD rates: each alpha_k ~ U(alpha_init_min, alpha_init_max), with
-    // 0 <= min <= max <= 1. Default both 1.0 (clipped range [0, 1]): with a per-pixel
-    // mean loss the latent gradient is small, so the largest allowed rate learns
-    // fastest (measured; functa's U(0.005, 0.1) is for a sum loss).
+    // 0 <= min <= max <= 1. Default both 1.0, the top of the clip range: with a
+    // per-pixel mean loss the latent gradient is small and the learned rates stay at 1
+    // anyway; functa's U(0.005, 0.1) (for a sum loss) gave 28.1 dB where 1.0 gave
+    // 30.5 dB after 600 steps (docs/TRAINING.md).
     double alpha_init_min = 1.0;
     double alpha_init_max = 1.0;
 
     // ---- Batches --------------------------------------------------------------------
-    // Frames per outer step. >= 1. Cost is linear in it.
-    int batch_size = 8;
+    // Frames per outer step. >= 1. Cost is linear in it. Default: the default preset's.
+    int batch_size = 16;
     // Random pixels per frame per step (the inner fit and the outer loss both see only
-    // them; a fresh subset each step). 0 = every pixel. >= 0. Cost is about linear in
-    // it; see docs/TRAINING.md for its effect on PSNR per second.
-    int pixels_per_frame = 0;
+    // them; a fresh subset each step). 0 = every pixel. >= 0. Cost is linear in it
+    // (small trunk, float: 1.4 ms per frame at 256 px, 5.9 at 1024, 38.7 at all 6160,
+    // one core), while PSNR per step drops only a little, so at equal compute fewer
+    // pixels and more steps won: 256 px x 2400 steps 33.6 dB, 1024 x 600 32.3 dB, all
+    // 6160 x 100 25.9 dB (small trunk, bubble; docs/TRAINING.md).
+    int pixels_per_frame = 2048;
     // Outer steps to run (in total, counting steps done before a resume). >= 0.
-    int steps = 5000;
+    // Default: the default preset's (hours on 2 cores; docs/TRAINING.md).
+    int steps = 20000;
     // Seed of every random choice (see Determinism above).
     std::uint64_t seed = 0;
     // Worker threads for per-frame gradients, loading and evaluation. In [1, 256].
@@ -148,7 +157,7 @@ class TrunkTrainer {
     // Evaluate the monitor subset every N steps (and at the start and end): mean PSNR
     // (estimation/trunk_targets.h) after the K-step fit and at z = 0, over full frames.
     // >= 1.
-    int monitor_every = 100;
+    int monitor_every = 250;
     // Training frames in the fixed monitor subset (fewer if the split is smaller). >= 1.
     int monitor_frames = 16;
     // Training frames used for residual_sigma at the end (fewer if the split is
@@ -163,11 +172,12 @@ class TrunkTrainer {
   };
 
   // Named starting points ("model only what a scene requires": pick the smallest that
-  // meets the accuracy you need; docs/TRAINING.md lists what each reached):
+  // meets the accuracy you need; docs/TRAINING.md lists what each reached). "default"
+  // is Options() as constructed:
   //   tiny:    width 32, 2 layers, d = 16, 16 x 20 pixels, batch 4, 300 steps
   //            -- tests and CI, a few seconds.
-  //   small:   width 64, 3 layers, d = 32, the sensor's working resolution, batch 8,
-  //            1024 pixels per frame, 3000 steps -- minutes on 2 cores.
+  //   small:   width 64, 3 layers, d = 32, the sensor's working resolution, batch 32,
+  //            256 pixels per frame, 3000 steps -- a few minutes on 2 cores.
   //   default: width 128, 4 layers, d = 64, the sensor's working resolution, batch 16,
   //            2048 pixels per frame, 20000 steps -- hours on 2 cores.
   // Throws std::invalid_argument listing the names for an unknown one.

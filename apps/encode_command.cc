@@ -1,0 +1,241 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// tactfunc encode: a dataset -> its functaset under a trained model (one latent per
+// frame, estimation/latent_encoder.h; file format in docs/FUNCTASET.md).
+//
+// The --out file doubles as the checkpoint: every --checkpoint-every frames a partial
+// functaset ("complete": false) is written there atomically. Ctrl-C (SIGINT) lets the
+// workers finish the frames in hand, writes the partial file and says how to resume;
+// a second Ctrl-C kills the program at once (the last checkpoint stays intact).
+
+#include <algorithm>
+#include <atomic>
+#include <csignal>
+#include <cstdlib>
+#include <filesystem>
+#include <iomanip>
+#include <iostream>
+#include <sstream>
+#include <thread>
+
+#include "apps/command.h"
+#include "apps/dataset_flags.h"
+#include "apps/progress_bar.h"
+#include "estimation/dataset.h"
+#include "estimation/functaset.h"
+#include "estimation/latent_encoder.h"
+#include "models/functa_model.h"
+#include "models/tensor_file.h"
+
+namespace tactfunc::apps {
+namespace {
+
+struct EncodeFlags {
+  std::string model;
+  std::string data;
+  std::string out;
+  int threads = 0;
+  int checkpoint_every = 500;
+  bool resume = false;
+  std::string sensors;
+  std::string split;
+  bool json = false;
+  DatasetFlags dataset;
+};
+
+// Set by SIGINT; lock-free, so safe to store from a signal handler.
+std::atomic<bool> g_interrupt{false};
+static_assert(std::atomic<bool>::is_always_lock_free);
+
+extern "C" void OnInterrupt(int) {
+  g_interrupt.store(true);
+  std::signal(SIGINT, SIG_DFL);  // a second Ctrl-C ends the program at once
+}
+
+// Installs OnInterrupt for its lifetime.
+class InterruptScope {
+ public:
+  InterruptScope() {
+    g_interrupt.store(false);
+    previous_ = std::signal(SIGINT, OnInterrupt);
+  }
+  ~InterruptScope() { std::signal(SIGINT, previous_); }
+  InterruptScope(const InterruptScope&) = delete;
+  InterruptScope& operator=(const InterruptScope&) = delete;
+
+ private:
+  void (*previous_)(int) = SIG_DFL;
+};
+
+std::string Fixed(double value, int digits) {
+  std::ostringstream out;
+  out << std::fixed << std::setprecision(digits) << value;
+  return out.str();
+}
+
+// The command line that continues an interrupted run: the flags that select frames and
+// shape the run, plus --resume.
+std::string ResumeCommand(const EncodeFlags& flags) {
+  std::string command =
+      "tactfunc encode --model " + flags.model + " --data " + flags.data + " --out " + flags.out;
+  if (!flags.sensors.empty()) command += " --sensors " + flags.sensors;
+  if (!flags.split.empty()) command += " --split " + flags.split;
+  if (flags.threads > 0) command += " --threads " + std::to_string(flags.threads);
+  if (!flags.dataset.sensor.empty()) command += " --sensor " + flags.dataset.sensor;
+  if (!flags.dataset.reference.empty()) command += " --reference " + flags.dataset.reference;
+  if (!flags.dataset.labels.empty()) command += " --labels " + flags.dataset.labels;
+  if (flags.dataset.reference_index != 0) {
+    command += " --reference-index " + std::to_string(flags.dataset.reference_index);
+  }
+  if (flags.dataset.pixel_pitch_mm != 0) {
+    std::ostringstream pitch;
+    pitch << flags.dataset.pixel_pitch_mm;
+    command += " --pixel-pitch-mm " + pitch.str();
+  }
+  return command + " --resume";
+}
+
+void RunEncode(const EncodeFlags& flags) {
+  const FunctaModel model = FunctaModel::Load(flags.model);
+  const Dataset dataset = OpenDataset(flags.data, flags.dataset);
+
+  LatentEncoder::Options options;
+  options.threads = flags.threads > 0
+                        ? flags.threads
+                        : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  options.checkpoint_path = flags.out;
+  options.checkpoint_every = flags.checkpoint_every;
+  options.resume = flags.resume;
+  for (const std::string& name : SplitList(flags.sensors)) {
+    SensorKind kind;
+    if (!SensorKindFromString(name, &kind)) {
+      throw UsageError("--sensors: unknown sensor '" + name + "', expected bubble or gelslim");
+    }
+    if (std::find(options.sensors.begin(), options.sensors.end(), kind) == options.sensors.end()) {
+      options.sensors.push_back(kind);
+    }
+  }
+  if (!flags.split.empty()) {
+    Split split;
+    if (!SplitFromString(flags.split, &split)) {
+      throw UsageError("--split: expected train or test, got '" + flags.split + "'");
+    }
+    options.split = split;
+  }
+
+  // Never silently throw away a partial run.
+  const bool out_exists = std::filesystem::exists(flags.out);
+  if (out_exists && !flags.resume) {
+    bool partial = false;
+    std::size_t frames = 0;
+    try {
+      const Functaset existing = Functaset::Load(flags.out);
+      partial = !existing.complete();
+      frames = existing.size();
+    } catch (const std::exception&) {
+      // Not a readable functaset: it is replaced like any other output file.
+    }
+    if (partial) {
+      throw UsageError(flags.out + " holds a partial functaset (" + std::to_string(frames) +
+                       " frames): pass --resume to continue it, or delete it to start over");
+    }
+  }
+  if (flags.resume && !out_exists) {
+    std::cerr << "encode: " << flags.out << " does not exist yet; starting from the first frame\n";
+  }
+  const std::filesystem::path parent = std::filesystem::path(flags.out).parent_path();
+  if (!parent.empty()) std::filesystem::create_directories(parent);
+
+  const LatentEncoder encoder(model, options);
+  std::int64_t total = 0;
+  for (SensorKind sensor : options.sensors.empty() ? dataset.sensors() : options.sensors) {
+    if (model.HasSensor(sensor) && dataset.has_sensor(sensor)) {
+      total += static_cast<std::int64_t>(dataset.FrameIndices(sensor, options.split).size());
+    }
+  }
+  ProgressBar bar("encode", total, "frames");
+  std::int64_t shown = 0;
+  auto progress = [&](const EncodeProgress& p) {
+    if (p.done > shown) {
+      bar.Tick(p.done - shown);
+      shown = p.done;
+    }
+    if (p.done > 0) bar.SetStatus("psnr " + Fixed(p.mean_psnr, 2) + " dB");
+  };
+
+  LatentEncoder::Summary summary;
+  Functaset functaset;
+  {
+    InterruptScope scope;
+    functaset = encoder.Encode(dataset, &summary, progress, &g_interrupt);
+  }
+  bar.Finish();
+
+  std::cout << "encode: " << (functaset.complete() ? "wrote " : "wrote a PARTIAL functaset of ")
+            << functaset.size() << " frames to " << flags.out << " (" << summary.frames_encoded
+            << " encoded in " << Fixed(summary.seconds, 2) << " s, "
+            << Fixed(summary.frames_per_second, 1) << " frames/s on " << options.threads
+            << " thread(s)";
+  if (summary.frames_resumed > 0) std::cout << ", " << summary.frames_resumed << " resumed";
+  std::cout << ")\n";
+  for (const auto& [sensor, psnr] : summary.mean_psnr) {
+    std::cout << "  " << ToString(sensor) << ": " << summary.frames.at(sensor)
+              << " frames, mean PSNR " << Fixed(psnr, 2) << " dB (against the noisy frames)\n";
+  }
+  if (summary.non_finite_latents > 0) std::cout << "  warning: " << summary.message << "\n";
+
+  if (flags.json) {
+    nlohmann::json psnr = nlohmann::json::object();
+    for (const auto& [sensor, value] : summary.mean_psnr) psnr[ToString(sensor)] = value;
+    EmitJson({{"frames", functaset.size()},
+              {"frames_encoded", summary.frames_encoded},
+              {"frames_resumed", summary.frames_resumed},
+              {"complete", functaset.complete()},
+              {"seconds", summary.seconds},
+              {"frames_per_s", summary.frames_per_second},
+              {"threads", options.threads},
+              {"psnr_mean", psnr},
+              {"model_checksum", model.checksum()},
+              {"out", flags.out}});
+  }
+  if (summary.termination == EncodeTermination::kInterrupted) {
+    std::cerr << "encode: interrupted after " << functaset.size() << " of " << summary.frames_total
+              << " frames; the partial functaset is in " << flags.out
+              << ".\nencode: to continue, run the same command with --resume:\n  "
+              << ResumeCommand(flags) << "\n";
+    std::cout.flush();
+    std::exit(130);  // 128 + SIGINT, as shells report an interrupted program
+  }
+}
+
+}  // namespace
+
+void RegisterEncode(CLI::App& app, CommandBody* selected) {
+  auto flags = std::make_shared<EncodeFlags>();
+  CLI::App* sub = app.add_subcommand(
+      "encode",
+      "Encode every frame of a dataset as one latent under a trained model: the "
+      "functaset (docs/FUNCTASET.md). Ctrl-C stops cleanly; --resume continues.");
+  sub->add_option("--model", flags->model, "Model file (.tfm) from `tactfunc train`")->required();
+  sub->add_option("--data", flags->data, "Dataset folder or video")->required();
+  sub->add_option("--out", flags->out,
+                  "Functaset file to write (.tfs); also the checkpoint of a partial run")
+      ->required();
+  sub->add_option("--threads", flags->threads, "Worker threads (default: all cores)")
+      ->check(CLI::Range(0, 256));
+  sub->add_option("--checkpoint-every", flags->checkpoint_every,
+                  "Write the partial functaset to --out every N frames (0 = only at the end "
+                  "or on Ctrl-C)")
+      ->check(CLI::Range(0, 100000000));
+  sub->add_flag("--resume", flags->resume,
+                "Continue the partial functaset in --out (same model required)");
+  sub->add_option("--sensors", flags->sensors,
+                  "Comma-separated sensors to encode (default: every sensor of the dataset "
+                  "that the model has a trunk for)");
+  sub->add_option("--split", flags->split, "Only frames of this split: train or test");
+  sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
+  AddDatasetFlags(sub, &flags->dataset);
+  sub->callback([flags, selected]() { *selected = [flags]() { RunEncode(*flags); }; });
+}
+
+}  // namespace tactfunc::apps

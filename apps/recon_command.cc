@@ -1,0 +1,287 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// tactfunc recon: how well a functaset reproduces its dataset (PSNR per sensor and
+// split against the noisy and, for simulated data, the clean frames; the z = 0
+// "initial image"), its size against the raw frames, and a picture per sensor of
+// examples: target | z = 0 | reconstruction | error (estimation/reconstruction.h).
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <limits>
+#include <thread>
+
+#include <opencv2/imgproc.hpp>
+
+#include "apps/command.h"
+#include "apps/dataset_flags.h"
+#include "apps/pictures.h"
+#include "estimation/dataset.h"
+#include "estimation/functaset.h"
+#include "estimation/reconstruction.h"
+#include "estimation/trunk_targets.h"
+#include "models/functa_model.h"
+
+namespace tactfunc::apps {
+namespace {
+
+struct ReconFlags {
+  std::string model;
+  std::string functaset;
+  std::string data;
+  std::string out;
+  int examples = 6;
+  int threads = 0;
+  int tile_height = 140;
+  bool json = false;
+  DatasetFlags dataset;
+};
+
+const cv::Scalar kBackground(32, 32, 32);
+
+// Normalised values (N x C of a rows x cols frame) as a BGR tile: one channel through
+// viridis over [lo, hi], three channels as RGB over [lo, hi]; invalid pixels dark grey.
+cv::Mat ValueTile(const Eigen::MatrixXf& values, const Eigen::VectorXf& weights, int rows, int cols,
+                  double lo, double hi) {
+  const double span = hi > lo ? hi - lo : 1.0;
+  auto unit = [&](float v) {
+    return static_cast<uchar>(std::lround(255.0 * std::clamp((v - lo) / span, 0.0, 1.0)));
+  };
+  cv::Mat tile;
+  if (values.cols() == 1) {
+    cv::Mat grey(rows, cols, CV_8U);
+    for (int j = 0; j < rows * cols; ++j) grey.at<uchar>(j / cols, j % cols) = unit(values(j, 0));
+    cv::applyColorMap(grey, tile, cv::COLORMAP_VIRIDIS);
+  } else {
+    tile = cv::Mat(rows, cols, CV_8UC3);
+    for (int j = 0; j < rows * cols; ++j) {
+      cv::Vec3b& p = tile.at<cv::Vec3b>(j / cols, j % cols);
+      for (int c = 0; c < 3; ++c) p[2 - c] = unit(values(j, std::min<int>(c, values.cols() - 1)));
+    }
+  }
+  for (int j = 0; j < rows * cols; ++j) {
+    if (!(weights[j] > 0)) tile.at<cv::Vec3b>(j / cols, j % cols) = cv::Vec3b(60, 60, 60);
+  }
+  return tile;
+}
+
+// prediction - target (mean over channels) through a diverging map in [-scale, scale]
+// (DifferenceTile: 0 is the map's centre); invalid pixels red.
+cv::Mat ErrorTile(const Eigen::MatrixXf& prediction, const TrunkTargets& target, double scale) {
+  Image error(target.rows, target.cols, 1);
+  for (int j = 0; j < target.rows * target.cols; ++j) {
+    error.data[j] = target.weights[j] > 0 ? (prediction.row(j) - target.values.row(j)).mean()
+                                          : std::numeric_limits<float>::quiet_NaN();
+  }
+  return DifferenceTile(error, scale);
+}
+
+cv::Mat TextCell(int height, int width, const std::vector<std::string>& lines) {
+  cv::Mat cell(height, width, CV_8UC3, kBackground);
+  int y = 18;
+  for (const std::string& line : lines) {
+    PutLabel(cell, line, {6, y}, 0.42);
+    y += 17;
+  }
+  return cell;
+}
+
+std::string Db(double value) {
+  if (!std::isfinite(value)) return "n/a";
+  char buffer[32];
+  std::snprintf(buffer, sizeof(buffer), "%.2f", value);
+  return buffer;
+}
+
+nlohmann::json JsonOrNull(double value) {
+  return std::isfinite(value) ? nlohmann::json(value) : nlohmann::json(nullptr);
+}
+
+// Up to n entries of one sensor, test split first, each split evenly spread.
+std::vector<const ReconstructionEvaluator::FrameResult*> PickExamples(
+    const ReconstructionEvaluator::Summary& summary, SensorKind sensor, int n) {
+  std::vector<const ReconstructionEvaluator::FrameResult*> picked;
+  for (Split split : {Split::kTest, Split::kTrain}) {
+    std::vector<const ReconstructionEvaluator::FrameResult*> pool;
+    for (const auto& r : summary.frames) {
+      if (r.sensor == sensor && r.split == split) pool.push_back(&r);
+    }
+    const int want = std::min<int>(n - static_cast<int>(picked.size()), pool.size());
+    for (int k = 0; k < want; ++k) picked.push_back(pool[k * pool.size() / want]);
+  }
+  return picked;
+}
+
+void WriteExamples(const ReconFlags& flags, const FunctaModel& model, const Dataset& dataset,
+                   const ReconstructionEvaluator::Summary& summary, const Functaset& functaset,
+                   SensorKind sensor, const std::string& path) {
+  const SensorTrunk& trunk = model.Trunk(sensor);
+  const int rows = trunk.format.rows, cols = trunk.format.cols, h = flags.tile_height;
+  const int w = std::max(1, static_cast<int>(std::lround(cols * double(h) / rows)));
+  const Eigen::MatrixXf zero = Reconstruct(trunk, Eigen::VectorXf::Zero(trunk.siren.latent_dim()));
+  struct Example {
+    const ReconstructionEvaluator::FrameResult* result;
+    TrunkTargets target;
+    Eigen::MatrixXf recon;
+  };
+  std::vector<Example> examples;
+  double error_scale = 0;
+  for (const auto* r : PickExamples(summary, sensor, flags.examples)) {
+    Example e{r, LoadTrunkTargets(dataset, r->dataset_index, trunk.format),
+              Reconstruct(trunk, functaset.entries(sensor)[*functaset.Find(sensor, r->id)].latent)};
+    for (int j = 0; j < rows * cols; ++j) {
+      if (e.target.weights[j] > 0) {
+        error_scale = std::max<double>(error_scale,
+                                       std::abs((e.recon.row(j) - e.target.values.row(j)).mean()));
+      }
+    }
+    examples.push_back(std::move(e));
+  }
+  if (examples.empty()) return;
+  if (!(error_scale > 0)) error_scale = 1.0;
+
+  std::vector<std::vector<cv::Mat>> grid;
+  char error_title[64];
+  std::snprintf(error_title, sizeof(error_title), "error (+-%.3g)", error_scale);
+  grid.push_back({TextCell(
+      26, 170,
+      {std::string(ToString(sensor)) + " " + std::to_string(rows) + "x" + std::to_string(cols)})});
+  for (const char* title : {"target", "z = 0", "reconstruction"}) {
+    grid.back().push_back(TextCell(26, w, {title}));
+  }
+  grid.back().push_back(TextCell(26, w, {error_title}));
+  for (const Example& e : examples) {
+    // Target, z = 0 and reconstruction share the target's range.
+    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+    for (int j = 0; j < rows * cols; ++j) {
+      if (!(e.target.weights[j] > 0)) continue;
+      lo = std::min<double>(lo, e.target.values.row(j).minCoeff());
+      hi = std::max<double>(hi, e.target.values.row(j).maxCoeff());
+    }
+    if (!(hi > lo)) {
+      lo = std::isfinite(lo) ? lo - 0.5 : -0.5;
+      hi = lo + 1.0;
+    }
+    const auto& r = *e.result;
+    std::vector<cv::Mat> row;
+    row.push_back(TextCell(
+        h, 170,
+        {r.id + " (" + ToString(r.split) + ")", "recon " + Db(r.psnr) + " dB",
+         "z=0 " + Db(r.psnr_zero) + " dB",
+         std::isfinite(r.psnr_clean) ? "clean " + Db(r.psnr_clean) + " dB" : std::string()}));
+    row.push_back(FitHeight(ValueTile(e.target.values, e.target.weights, rows, cols, lo, hi), h));
+    row.push_back(FitHeight(ValueTile(zero, e.target.weights, rows, cols, lo, hi), h));
+    row.push_back(FitHeight(ValueTile(e.recon, e.target.weights, rows, cols, lo, hi), h));
+    row.push_back(FitHeight(ErrorTile(e.recon, e.target, error_scale), h));
+    grid.push_back(std::move(row));
+  }
+  WritePicture(path, TileGrid(grid));
+}
+
+void RunRecon(const ReconFlags& flags) {
+  const FunctaModel model = FunctaModel::Load(flags.model);
+  const Functaset functaset = Functaset::Load(flags.functaset);
+  functaset.CheckModel(model, flags.model, flags.functaset);
+  if (!functaset.complete()) {
+    std::cerr << "recon: note: " << flags.functaset << " is a partial functaset; evaluating the "
+              << functaset.size() << " frames it holds\n";
+  }
+  const Dataset dataset = OpenDataset(flags.data, flags.dataset);
+  ReconstructionEvaluator::Options options;
+  options.threads = flags.threads > 0
+                        ? flags.threads
+                        : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  const ReconstructionEvaluator::Summary summary =
+      ReconstructionEvaluator(options).Evaluate(model, functaset, dataset);
+
+  std::filesystem::create_directories(flags.out);
+  std::vector<std::string> pictures;
+  for (SensorKind sensor : functaset.sensors()) {
+    if (functaset.entries(sensor).empty() || flags.examples <= 0) continue;
+    const std::string path =
+        (std::filesystem::path(flags.out) / ("recon_" + std::string(ToString(sensor)) + ".png"))
+            .string();
+    WriteExamples(flags, model, dataset, summary, functaset, sensor, path);
+    pictures.push_back(path);
+  }
+
+  std::cout << "recon: " << summary.frames.size() << " frames of " << flags.functaset << " against "
+            << flags.data << " (PSNR in dB, Psnr() of estimation/trunk_targets.h)\n"
+            << summary.FullReport();
+  for (const std::string& p : pictures) std::cout << "recon: wrote " << p << "\n";
+
+  if (flags.json) {
+    nlohmann::json figures;
+    auto per_sensor = [&](Split split, bool clean) {
+      nlohmann::json out = nlohmann::json::object();
+      for (SensorKind sensor : functaset.sensors()) {
+        const auto* g = summary.Find(sensor, split);
+        const double mean = g == nullptr ? std::numeric_limits<double>::quiet_NaN()
+                                         : (clean ? g->clean.mean : g->noisy.mean);
+        out[ToString(sensor)] = JsonOrNull(mean);
+      }
+      return out;
+    };
+    figures["psnr_test"] = per_sensor(Split::kTest, false);
+    figures["psnr_train"] = per_sensor(Split::kTrain, false);
+    figures["psnr_test_clean"] =
+        summary.has_clean ? per_sensor(Split::kTest, true) : nlohmann::json(nullptr);
+    figures["psnr_train_clean"] =
+        summary.has_clean ? per_sensor(Split::kTrain, true) : nlohmann::json(nullptr);
+    nlohmann::json groups = nlohmann::json::array();
+    for (const auto& g : summary.groups) {
+      auto stats = [](const PsnrStats& s) {
+        return nlohmann::json{{"count", s.count},
+                              {"mean", JsonOrNull(s.mean)},
+                              {"median", JsonOrNull(s.median)},
+                              {"p5", JsonOrNull(s.p5)}};
+      };
+      groups.push_back({{"sensor", ToString(g.sensor)},
+                        {"split", ToString(g.split)},
+                        {"noisy", stats(g.noisy)},
+                        {"clean", summary.has_clean ? stats(g.clean) : nlohmann::json(nullptr)},
+                        {"zero", stats(g.zero)}});
+    }
+    figures["groups"] = groups;
+    figures["compression_ratio"] = summary.size.compression_ratio;
+    figures["representation_bytes"] = summary.size.representation_bytes;
+    figures["model_bytes"] = summary.size.model_bytes;
+    figures["latent_bytes"] = summary.size.latent_bytes;
+    figures["raw_bytes"] = summary.size.raw_bytes;
+    figures["frames"] = summary.frames.size();
+    figures["seconds"] = summary.seconds;
+    figures["pictures"] = pictures;
+    EmitJson(figures);
+  }
+}
+
+}  // namespace
+
+void RegisterRecon(CLI::App& app, CommandBody* selected) {
+  auto flags = std::make_shared<ReconFlags>();
+  CLI::App* sub = app.add_subcommand(
+      "recon",
+      "Reconstruction quality (PSNR per sensor and split, z = 0 baseline) and size of a "
+      "functaset, with example pictures per sensor.");
+  sub->add_option("--model", flags->model, "Model file (.tfm) the functaset was encoded with")
+      ->required();
+  sub->add_option("--functaset", flags->functaset, "Functaset file (.tfs) from `tactfunc encode`")
+      ->required();
+  sub->add_option("--data", flags->data, "The dataset folder or video it was encoded from")
+      ->required();
+  sub->add_option("--out", flags->out, "Folder for recon_<sensor>.png (created)")->required();
+  sub->add_option("--examples", flags->examples,
+                  "Example rows per picture, test split first (0 = no pictures)")
+      ->check(CLI::Range(0, 1000));
+  sub->add_option("--threads", flags->threads, "Worker threads (default: all cores)")
+      ->check(CLI::Range(0, 256));
+  sub->add_option("--tile-height", flags->tile_height, "Tile height in pixels")
+      ->check(CLI::Range(16, 2000));
+  sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
+  AddDatasetFlags(sub, &flags->dataset);
+  sub->callback([flags, selected]() { *selected = [flags]() { RunRecon(*flags); }; });
+}
+
+}  // namespace tactfunc::apps
