@@ -13,6 +13,7 @@
 #include <thread>
 
 #include "apps/command.h"
+#include "apps/dataset_flags.h"
 #include "apps/progress_bar.h"
 #include "estimation/dataset.h"
 #include "estimation/trunk_trainer.h"
@@ -23,6 +24,7 @@ namespace {
 
 struct TrainFlags {
   std::string data;
+  DatasetFlags data_flags;
   std::string out;
   std::string preset = "default";
   std::string sensors;  // empty = every sensor of the dataset
@@ -84,7 +86,7 @@ void RunTrain(const TrainFlags& flags) {
     throw UsageError("--out: folder '" + out_dir.string() + "' does not exist");
   }
 
-  const Dataset dataset = Dataset::Open(flags.data);
+  const Dataset dataset = OpenDataset(flags.data, flags.data_flags);
   std::vector<SensorKind> sensors;
   if (flags.sensors.empty()) {
     sensors = dataset.sensors();
@@ -215,7 +217,8 @@ void RegisterTrain(CLI::App& app, CommandBody* selected) {
       "train",
       "Meta-learn a latent-modulated SIREN trunk per sensor on a dataset's train split "
       "and write a model file (docs/TRAINING.md).");
-  sub->add_option("--data", flags->data, "Dataset folder")->required();
+  sub->add_option("--data", flags->data, "Dataset folder (ours or your own) or video")->required();
+  AddDatasetFlags(sub, &flags->data_flags);
   sub->add_option("--out", flags->out, "Model file to write (.tfm)")->required();
   std::string presets;
   for (const std::string& n : TrunkTrainer::PresetNames())

@@ -201,18 +201,9 @@ Functaset Functaset::Parse(const std::string& bytes, const std::string& source) 
   auto fail = [&](const std::string& what) {
     return TensorFileError(source + ": field '" + field + "': " + what);
   };
+  file.CheckFormat(kFormat, kFunctasetVersion);
   try {
     const nlohmann::json meta = nlohmann::json::parse(file.meta_json());
-    field = "format";
-    if (meta.at("format").get<std::string>() != kFormat) {
-      throw fail(std::string("expected \"") + kFormat + "\", got " + meta.at("format").dump());
-    }
-    field = "version";
-    const int version = meta.at("version").get<int>();
-    if (version != kFunctasetVersion) {
-      throw TensorFileError(source + ": functaset format version " + std::to_string(version) +
-                            ", this build reads version " + std::to_string(kFunctasetVersion));
-    }
     field = "complete";
     out.complete_ = meta.at("complete").get<bool>();
     field = "model_checksum";

@@ -129,20 +129,10 @@ void KnnIndex::Save(const std::string& path) const {
 
 std::unique_ptr<KnnIndex> KnnIndex::Load(const std::string& path) {
   const TensorFile file = TensorFile::Read(path, "knn_index");
+  file.CheckFormat(kFormat, kVersion);
   std::string field = "meta";
   try {
     const nlohmann::json meta = nlohmann::json::parse(file.meta_json());
-    field = "format";
-    if (meta.at("format").get<std::string>() != kFormat) {
-      throw TensorFileError(path + ": field 'format': expected \"" + kFormat + "\", got " +
-                            meta.at("format").dump());
-    }
-    field = "version";
-    const int version = meta.at("version").get<int>();
-    if (version != kVersion) {
-      throw TensorFileError(path + ": knn index format version " + std::to_string(version) +
-                            ", this build reads version " + std::to_string(kVersion));
-    }
     field = "dim";
     const int dim = meta.at("dim").get<int>();
     if (dim < 1) throw TensorFileError(path + ": field 'dim' must be >= 1, got " + std::to_string(dim));

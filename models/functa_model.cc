@@ -133,20 +133,10 @@ FunctaModel FunctaModel::Parse(const std::string& bytes, const std::string& sour
 
 FunctaModel FunctaModel::FromTensorFile(const TensorFile& file, const std::string& source) {
   FunctaModel model;
+  file.CheckFormat(kFormat, kVersion);
   std::string field = "meta";
   try {
     const nlohmann::json meta = nlohmann::json::parse(file.meta_json());
-    field = "format";
-    if (meta.at("format").get<std::string>() != kFormat) {
-      throw TensorFileError(source + ": field 'format': expected \"" + kFormat + "\", got " +
-                            meta.at("format").dump());
-    }
-    field = "version";
-    const int version = meta.at("version").get<int>();
-    if (version != kVersion) {
-      throw TensorFileError(source + ": model format version " + std::to_string(version) +
-                            ", this build reads version " + std::to_string(kVersion));
-    }
     for (const auto& entry : meta.at("trunks")) {
       SensorTrunk trunk;
       field = "trunks[].sensor";

@@ -419,21 +419,10 @@ void PoseMlp::Save(const std::string& path) const { WriteFileAtomically(path, Se
 namespace {
 
 PoseMlp FromTensorFile(const TensorFile& file, const std::string& source) {
+  file.CheckFormat(kFormat, kVersion);
   std::string field = "meta";
   try {
     const nlohmann::json meta = nlohmann::json::parse(file.meta_json());
-    field = "format";
-    if (meta.at("format").get<std::string>() != kFormat) {
-      throw TensorFileError(source + ": field 'format': expected \"" + kFormat + "\", got " +
-                            meta.at("format").dump());
-    }
-    field = "version";
-    const int version = meta.at("version").get<int>();
-    if (version != kVersion) {
-      throw TensorFileError(source + ": field 'version': pose model format version " +
-                            std::to_string(version) + ", this build reads version " +
-                            std::to_string(kVersion));
-    }
     PoseMlp::Options options;
     field = "input_dim";
     options.input_dim = meta.at("input_dim").get<int>();

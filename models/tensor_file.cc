@@ -269,6 +269,28 @@ TensorFile TensorFile::Parse(const std::string& bytes, const std::string& source
   return file;
 }
 
+void TensorFile::CheckFormat(const std::string& format, int version) const {
+  const std::string where = source_.empty() ? std::string("tensor file") : source_;
+  const nlohmann::json meta = nlohmann::json::parse(meta_json_);
+  if (!meta.contains("format") || !meta["format"].is_string()) {
+    throw TensorFileError(where + ": field 'format' is missing; expected "" + format + """);
+  }
+  if (meta["format"].get<std::string>() != format) {
+    throw TensorFileError(where + ": field 'format': expected "" + format + "", got " +
+                          meta["format"].dump());
+  }
+  if (!meta.contains("version") || !meta["version"].is_number_integer()) {
+    throw TensorFileError(where + ": field 'version' is missing; expected " +
+                          std::to_string(version));
+  }
+  const int found = meta["version"].get<int>();
+  if (found != version) {
+    throw TensorFileError(where + ": field 'version': " + format + " version " +
+                          std::to_string(found) + ", this build reads version " +
+                          std::to_string(version));
+  }
+}
+
 void TensorFile::Write(const std::string& path) const {
   WriteFileAtomically(path, Serialize());
   source_ = path;

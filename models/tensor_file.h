@@ -86,6 +86,11 @@ class TensorFile {
   void Write(const std::string& path) const;  // atomically
   static TensorFile Read(const std::string& path, const std::string& expected_kind = "");
 
+  // Checks the "format" and "version" fields of the meta object, which every tactfunc
+  // file kind carries (e.g. "tactfunc-model", 1). Throws TensorFileError naming the
+  // source and the field: a missing field, another format, another version.
+  void CheckFormat(const std::string& format, int version) const;
+
   // CRC-32 of the file as last written or read (0 before either): the identity by which
   // a functaset names the model it belongs to.
   std::uint32_t checksum() const { return checksum_; }

@@ -1,15 +1,22 @@
 #!/usr/bin/env bash
-# The demo: a small paired Soft Bubble + GelSlim dataset from the simulator, its summary,
-# and a contact sheet with the tools' poses drawn on the frames.
+# The demo (README command 1 ends here): a small paired Soft Bubble + GelSlim dataset
+# from the simulator and its contact sheet; then, with the committed pretrained trunk
+# (models/pretrained/default.tfm, reproducible with scripts/train_pretrained.sh), the
+# functaset of the dataset and its reconstructions. Everything lands in demo/.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 TF=build/bin/tactfunc
 OUT=demo
+MODEL=models/pretrained/default.tfm
 mkdir -p "$OUT"
-echo "== synthesize 12 tools x 10 paired frames"
-"$TF" synth --out "$OUT/data" --frames-per-tool 10 --seed 7 --overwrite
-echo "== dataset summary"
+echo "== 1. synthesize 12 tools x 10 paired contacts (Soft Bubble + GelSlim, known SE(2) poses)"
+"$TF" synth --out "$OUT/data" --frames-per-tool 10 --seed 7 --clean --overwrite
 "$TF" info "$OUT/data"
-echo "== contact sheet"
+echo "== 2. contact sheet: raw | reference | difference, pose arrows"
 "$TF" show "$OUT/data" --out "$OUT/contact_sheet.png"
-echo "demo: done. Look at $OUT/contact_sheet.png"
+echo "== 3. encode every frame as one latent under the pretrained trunk (the functaset)"
+"$TF" encode --model "$MODEL" --data "$OUT/data" --out "$OUT/functaset.tfs"
+echo "== 4. reconstruct from the latents: PSNR, size, pictures"
+"$TF" recon --model "$MODEL" --functaset "$OUT/functaset.tfs" --data "$OUT/data" \
+  --out "$OUT/recon" --examples 6
+echo "demo: done. Look at $OUT/contact_sheet.png and $OUT/recon/recon_*.png"
