@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "apps/command.h"
 #include "nlohmann/json.hpp"
 
 namespace tactfunc::apps {
@@ -31,6 +32,9 @@ nlohmann::json MachineDescription();
 
 // Suites.
 void RegisterSynthBenchmarks();
+// `bench fit`, `bench kernels` and `bench knn` (apps/bench_fit.cc): adds the three
+// subcommands to `bench`.
+void RegisterFitBenchmarks(CLI::App* bench, CommandBody* selected);
 
 }  // namespace tactfunc::apps
 

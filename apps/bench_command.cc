@@ -132,6 +132,7 @@ void RegisterBench(CLI::App& app, CommandBody* selected) {
     flags->extra = synth->remaining();
     *selected = [flags]() { RunSynthBench(*flags); };
   });
+  RegisterFitBenchmarks(bench, selected);
 }
 
 }  // namespace tactfunc::apps

@@ -32,6 +32,7 @@ void RegisterBench(CLI::App& app, CommandBody* selected);
 void RegisterTrain(CLI::App& app, CommandBody* selected);   // apps/train_command.cc
 void RegisterEncode(CLI::App& app, CommandBody* selected);  // apps/encode_command.cc
 void RegisterRecon(CLI::App& app, CommandBody* selected);   // apps/recon_command.cc
+void RegisterFit(CLI::App& app, CommandBody* selected);     // apps/fit_command.cc
 
 // Bad user input that the command detected itself (flag values, lists).
 class UsageError : public std::runtime_error {

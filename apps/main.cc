@@ -33,6 +33,7 @@ int main(int argc, char** argv) {
   RegisterTrain(app, &body);
   RegisterEncode(app, &body);
   RegisterRecon(app, &body);
+  RegisterFit(app, &body);
   RegisterBench(app, &body);
   try {
     app.parse(argc, argv);

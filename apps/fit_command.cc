@@ -1,0 +1,464 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// tactfunc fit: the latent of ONE new frame under a trained model (Sec. III-C of
+// "Tactile Functasets"), with any LatentFitter strategy (estimation/latent_fitter.h):
+//
+//   tactfunc fit --model M.tfm --frame F.png --reference R.png --strategy ceres:10
+//   tactfunc fit --model M.tfm --functaset S.tfs --frame F.png --reference R.png
+//       --strategy knn+ceres:5 --out DIR --json
+//
+// The frame and its sensor's reference are read in the sensor's on-disk encoding
+// (estimation/file_io.h); the sensor is --sensor, else inferred from the frame as
+// Dataset::Open infers a user folder's (16-bit one-channel = bubble, 8-bit = gelslim).
+// They become trunk targets with the model's FrameFormat (estimation/trunk_targets.h).
+//
+// The knn strategies search the functaset's latents of that sensor (all splits) with a
+// k-NN index kept beside the functaset as "<functaset>.<sensor>.knn"
+// (KnnIndex::Save/Load). The file is reused when it holds exactly the functaset's latents
+// (same size, dim and CRC-32 of the vectors) and was built with the requested index type
+// and parameters; otherwise (missing, stale, corrupt or other parameters) it is rebuilt
+// and saved atomically, so a crash never leaves a half-written index.
+//
+// With --out DIR it writes DIR/latent.json ({sensor, latent, strategy, psnr, ms,
+// termination, ...}) and DIR/fit.png (target | reconstruction | error, labelled with the
+// PSNR and time).
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <limits>
+#include <memory>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "apps/command.h"
+#include "apps/pictures.h"
+#include "estimation/dataset.h"
+#include "estimation/file_io.h"
+#include "estimation/functaset.h"
+#include "estimation/knn_index.h"
+#include "estimation/latent_fitter.h"
+#include "estimation/reconstruction.h"
+#include "estimation/trunk_targets.h"
+#include "models/file_util.h"
+#include "models/functa_model.h"
+#include "models/tensor_file.h"
+
+namespace tactfunc::apps {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct FitFlags {
+  std::string model;
+  std::string functaset;
+  std::string frame;
+  std::string reference;
+  std::string sensor;
+  std::string strategy = "ceres:10";
+  std::string out;
+  std::string precision = "float";
+  std::string jacobian = "analytic";
+  std::string knn_index = "brute_force";
+  int knn_k = 8;
+  int knn_checks = 256;
+  double sigma = 0;
+  double sigma_z = 1.0;
+  int max_pixels = 0;
+  int tile_height = 180;
+  bool full_report = false;
+  bool json = false;
+};
+
+// ---- Inputs ----------------------------------------------------------------------------
+
+// The sensor of an image file, as Dataset::Open infers a user folder's.
+SensorKind InferSensor(const std::string& path, const std::string& flag) {
+  if (!fs::is_regular_file(path)) {
+    throw DatasetError(flag + " '" + path + "': no such file");
+  }
+  const cv::Mat image = cv::imread(path, cv::IMREAD_UNCHANGED);
+  if (image.empty()) throw DatasetError(flag + " '" + path + "': not an image OpenCV can read");
+  if (image.depth() == CV_16U && image.channels() == 1) return SensorKind::kSoftBubble;
+  if (image.depth() == CV_8U) return SensorKind::kGelSlim;
+  throw DatasetError(flag + " '" + path +
+                     "': cannot infer the sensor: expected a 16-bit 1-channel image (bubble "
+                     "depth) or an 8-bit one (gelslim rgb), got " +
+                     std::to_string(image.elemSize1() * 8) + "-bit with " +
+                     std::to_string(image.channels()) + " channel(s); give --sensor");
+}
+
+Image ReadInput(const std::string& path, SensorKind sensor, const std::string& flag) {
+  if (!fs::is_regular_file(path)) throw DatasetError(flag + " '" + path + "': no such file");
+  try {
+    return ReadImage(path, SensorEncoding(sensor));
+  } catch (const DatasetError& e) {
+    throw DatasetError(flag + " (" + ToString(sensor) + "): " + e.what());
+  }
+}
+
+std::string Shape(const Image& image) {
+  return std::to_string(image.rows) + "x" + std::to_string(image.cols) + "x" +
+         std::to_string(image.channels);
+}
+
+// ---- The k-NN index beside the functaset -------------------------------------------------
+
+std::unique_ptr<KnnIndex> NewIndex(const std::string& type, int dim, int checks) {
+  if (type == "brute_force") return std::make_unique<BruteForceKnnIndex>(dim);
+  FlannKnnIndex::Options options;
+  if (!FlannAlgorithmFromString(type, &options.algorithm) ||
+      options.algorithm == FlannKnnIndex::Algorithm::kAutotuned) {
+    // Autotuning takes minutes and tunes recall@1 (docs/FITTING.md): not offered here.
+    throw UsageError("--knn-index: expected brute_force, kd_forest, kmeans or linear, got '" +
+                     type + "'");
+  }
+  FlannKnnIndex::SearchParams search;
+  search.checks = checks;
+  return std::make_unique<FlannKnnIndex>(dim, options, search);
+}
+
+// Why an index loaded from a file cannot serve these latents with these parameters, or
+// "" if it can.
+std::string WhyStale(const KnnIndex& index, const Functaset::LatentMatrix& latents,
+                     const std::string& type) {
+  if (index.dim() != latents.cols() || index.size() != latents.rows()) {
+    return "it holds " + std::to_string(index.size()) + " x " + std::to_string(index.dim()) +
+           " vectors, the functaset " + std::to_string(latents.rows()) + " x " +
+           std::to_string(latents.cols());
+  }
+  const std::size_t bytes = static_cast<std::size_t>(latents.size()) * sizeof(float);
+  if (Crc32(index.data(), bytes) != Crc32(latents.data(), bytes)) {
+    return "its vectors differ from the functaset's latents (CRC-32)";
+  }
+  const auto* flann = dynamic_cast<const FlannKnnIndex*>(&index);
+  const std::string found = flann != nullptr ? ToString(flann->options().algorithm) : "brute_force";
+  if (found != type) return "it is a " + found + " index, " + type + " was asked for";
+  if (flann != nullptr) {
+    const FlannKnnIndex::Options defaults;
+    const FlannKnnIndex::Options& o = flann->options();
+    if (o.trees != defaults.trees || o.branching != defaults.branching ||
+        o.kmeans_iterations != defaults.kmeans_iterations || o.cb_index != defaults.cb_index ||
+        o.seed != defaults.seed) {
+      return "it was built with other parameters (" + index.Describe() + ")";
+    }
+  }
+  return "";
+}
+
+// Loads "<functaset>.<sensor>.knn" if it is current, else builds the index and saves it
+// there atomically. Prints what it did to stderr.
+std::unique_ptr<KnnIndex> LoadOrBuildIndex(const std::string& functaset_path, SensorKind sensor,
+                                           const Functaset::LatentMatrix& latents,
+                                           const FitFlags& flags, std::string* index_path,
+                                           bool* rebuilt) {
+  *index_path = functaset_path + "." + ToString(sensor) + ".knn";
+  std::string why = "it does not exist";
+  if (fs::exists(*index_path)) {
+    try {
+      std::unique_ptr<KnnIndex> index = KnnIndex::Load(*index_path);
+      why = WhyStale(*index, latents, flags.knn_index);
+      if (why.empty()) {
+        if (auto* flann = dynamic_cast<FlannKnnIndex*>(index.get())) {
+          FlannKnnIndex::SearchParams search = flann->search_params();
+          search.checks = flags.knn_checks;
+          flann->set_search_params(search);
+        }
+        *rebuilt = false;
+        return index;
+      }
+    } catch (const std::exception& e) {
+      why = std::string("it cannot be read (") + e.what() + ")";
+    }
+  }
+  std::unique_ptr<KnnIndex> index =
+      NewIndex(flags.knn_index, static_cast<int>(latents.cols()), flags.knn_checks);
+  index->Add(latents.data(), latents.rows());
+  try {
+    index->Save(*index_path);  // atomic (models/file_util.h)
+    std::cerr << "fit: note: built the k-NN index " << *index_path << " (" << why << ")\n";
+  } catch (const std::exception& e) {
+    // A read-only functaset folder must not stop the fit: the index is then used unsaved.
+    std::cerr << "fit: warning: could not save the k-NN index " << *index_path << ": " << e.what()
+              << "\n";
+  }
+  *rebuilt = true;
+  return index;
+}
+
+// ---- The picture -------------------------------------------------------------------------
+
+const cv::Scalar kBackground(32, 32, 32);
+
+// Normalised values (N x C of a rows x cols frame) as BGR: one channel through viridis over
+// [lo, hi], three as RGB over [lo, hi]; invalid pixels dark grey. (As recon's tiles.)
+cv::Mat ValueTile(const Eigen::MatrixXf& values, const Eigen::VectorXf& weights, int rows, int cols,
+                  double lo, double hi) {
+  const double span = hi > lo ? hi - lo : 1.0;
+  auto unit = [&](float v) {
+    return static_cast<uchar>(std::lround(255.0 * std::clamp((v - lo) / span, 0.0, 1.0)));
+  };
+  cv::Mat tile;
+  if (values.cols() == 1) {
+    cv::Mat grey(rows, cols, CV_8U);
+    for (int j = 0; j < rows * cols; ++j) grey.at<uchar>(j / cols, j % cols) = unit(values(j, 0));
+    cv::applyColorMap(grey, tile, cv::COLORMAP_VIRIDIS);
+  } else {
+    tile = cv::Mat(rows, cols, CV_8UC3);
+    for (int j = 0; j < rows * cols; ++j) {
+      cv::Vec3b& p = tile.at<cv::Vec3b>(j / cols, j % cols);
+      for (int c = 0; c < 3; ++c) p[2 - c] = unit(values(j, std::min<int>(c, values.cols() - 1)));
+    }
+  }
+  for (int j = 0; j < rows * cols; ++j) {
+    if (!(weights[j] > 0)) tile.at<cv::Vec3b>(j / cols, j % cols) = cv::Vec3b(60, 60, 60);
+  }
+  return tile;
+}
+
+cv::Mat Caption(int width, const std::string& text) {
+  cv::Mat cell(24, width, CV_8UC3, kBackground);
+  PutLabel(cell, text, {6, 17}, 0.45);
+  return cell;
+}
+
+std::string Fixed(double value, int digits) {
+  if (!std::isfinite(value)) return value > 0 ? "inf" : "n/a";
+  char buffer[48];
+  std::snprintf(buffer, sizeof(buffer), "%.*f", digits, value);
+  return buffer;
+}
+
+void WriteFitPicture(const std::string& path, const TrunkTargets& target,
+                     const Eigen::MatrixXf& recon, const LatentFitter::Summary& summary,
+                     SensorKind sensor, int height) {
+  const int rows = target.rows, cols = target.cols, n = rows * cols;
+  double lo = std::numeric_limits<double>::infinity(), hi = -lo, error_scale = 0;
+  Image error(rows, cols, 1);
+  for (int j = 0; j < n; ++j) {
+    if (!(target.weights[j] > 0)) {
+      error.data[j] = std::numeric_limits<float>::quiet_NaN();
+      continue;
+    }
+    lo = std::min<double>(lo, target.values.row(j).minCoeff());
+    hi = std::max<double>(hi, target.values.row(j).maxCoeff());
+    error.data[j] = (recon.row(j) - target.values.row(j)).mean();
+    error_scale = std::max<double>(error_scale, std::abs(error.data[j]));
+  }
+  if (!(hi > lo)) {
+    lo = std::isfinite(lo) ? lo - 0.5 : -0.5;
+    hi = lo + 1.0;
+  }
+  if (!(error_scale > 0)) error_scale = 1.0;
+  const cv::Mat target_tile =
+      FitHeight(ValueTile(target.values, target.weights, rows, cols, lo, hi), height);
+  const cv::Mat recon_tile =
+      FitHeight(ValueTile(recon, target.weights, rows, cols, lo, hi), height);
+  const cv::Mat error_tile = FitHeight(DifferenceTile(error, error_scale), height);
+  const int w = target_tile.cols;
+  char error_title[64];
+  std::snprintf(error_title, sizeof(error_title), "error (+-%.3g)", error_scale);
+  const std::string headline =
+      std::string(ToString(sensor)) + " " + std::to_string(rows) + "x" + std::to_string(cols) +
+      "  " + summary.strategy.ToString() + ": PSNR " + Fixed(summary.psnr, 2) + " dB, " +
+      Fixed(summary.total_time_ms, 1) + " ms, " + ToString(summary.termination_type);
+  cv::Mat title(26, 3 * w + 8, CV_8UC3, kBackground);
+  PutLabel(title, headline, {6, 18}, 0.45);
+  WritePicture(
+      path, TileGrid({{title},
+                      {Caption(w, "target"), Caption(w, "reconstruction"), Caption(w, error_title)},
+                      {target_tile, recon_tile, error_tile}}));
+}
+
+nlohmann::json FiniteOrNull(double value) {
+  return std::isfinite(value) ? nlohmann::json(value) : nlohmann::json(nullptr);
+}
+
+// ---- The command -------------------------------------------------------------------------
+
+void RunFit(const FitFlags& flags) {
+  FitStrategy strategy;
+  std::string error;
+  if (!FitStrategy::Parse(flags.strategy, &strategy, &error))
+    throw UsageError("--strategy: " + error);
+  if (strategy.knn && flags.functaset.empty()) {
+    throw UsageError("--strategy " + flags.strategy +
+                     " needs --functaset (the k-NN search runs over its latents)");
+  }
+  LatentFitter::Options options;
+  options.strategy = strategy;
+  options.sigma = flags.sigma;
+  options.sigma_z = flags.sigma_z;
+  options.max_pixels = flags.max_pixels;
+  options.knn_k = flags.knn_k;
+  if (flags.precision == "double") {
+    options.precision = LatentFitter::Precision::kDouble;
+  } else if (flags.precision != "float") {
+    throw UsageError("--precision: expected float or double, got '" + flags.precision + "'");
+  }
+  if (flags.jacobian == "autodiff") {
+    options.jacobian = LatentFitter::JacobianMode::kAutoDiff;
+  } else if (flags.jacobian != "analytic") {
+    throw UsageError("--jacobian: expected analytic or autodiff, got '" + flags.jacobian + "'");
+  }
+  if (!options.IsValid(&error)) throw UsageError(error);
+
+  SensorKind sensor;
+  if (!flags.sensor.empty()) {
+    if (!SensorKindFromString(flags.sensor, &sensor)) {
+      throw UsageError("--sensor: expected bubble or gelslim, got '" + flags.sensor + "'");
+    }
+  } else {
+    sensor = InferSensor(flags.frame, "--frame");
+  }
+  const Image frame = ReadInput(flags.frame, sensor, "--frame");
+  const Image reference = ReadInput(flags.reference, sensor, "--reference");
+  if (!frame.SameShape(reference)) {
+    throw DatasetError("--reference '" + flags.reference + "' is " + Shape(reference) +
+                       " (rows x cols x channels) but --frame '" + flags.frame + "' is " +
+                       Shape(frame) + "; they must be of the same sensor and size");
+  }
+
+  const FunctaModel model = FunctaModel::Load(flags.model);
+  if (!model.HasSensor(sensor)) {
+    std::string have;
+    for (SensorKind s : model.sensors())
+      have += (have.empty() ? "" : ", ") + std::string(ToString(s));
+    throw DatasetError("--model '" + flags.model + "' has no trunk for sensor " + ToString(sensor) +
+                       " (it has: " + have + "); the frame '" + flags.frame + "' was read as " +
+                       ToString(sensor) + (flags.sensor.empty() ? " (inferred)" : ""));
+  }
+  const SensorTrunk& trunk = model.Trunk(sensor);
+  const TrunkTargets targets = MakeTrunkTargets(frame, reference, sensor, trunk.format);
+
+  // k-NN: the functaset's latents of this sensor and the index beside the functaset.
+  Functaset functaset;
+  Eigen::MatrixXf latents;
+  std::unique_ptr<KnnIndex> index;
+  std::string index_path;
+  bool index_rebuilt = false;
+  if (strategy.knn) {
+    functaset = Functaset::Load(flags.functaset);
+    functaset.CheckModel(model, flags.model, flags.functaset);
+    if (!functaset.has_sensor(sensor) || functaset.entries(sensor).empty()) {
+      throw DatasetError("--functaset '" + flags.functaset + "' has no " + ToString(sensor) +
+                         " latents to search");
+    }
+    const Functaset::LatentMatrix rows = functaset.Latents(sensor);
+    index = LoadOrBuildIndex(flags.functaset, sensor, rows, flags, &index_path, &index_rebuilt);
+    latents = rows;  // LatentFitter takes the column-major M x d matrix
+  }
+
+  const LatentFitter fitter = strategy.knn ? LatentFitter(trunk, options, index.get(), &latents)
+                                           : LatentFitter(trunk, options);
+  Eigen::VectorXd latent;
+  const LatentFitter::Summary summary = fitter.Fit(targets, &latent);
+
+  std::cout << (flags.full_report ? summary.FullReport() : summary.BriefReport() + "\n");
+  std::cout << "fit: " << ToString(sensor) << " " << targets.rows << "x" << targets.cols
+            << ", PSNR " << Fixed(summary.psnr, 2) << " dB in " << Fixed(summary.total_time_ms, 1)
+            << " ms (" << summary.strategy.ToString() << ", " << ToString(options.precision) << ", "
+            << ToString(options.jacobian) << ")\n";
+  if (strategy.knn && !summary.neighbor_labels.empty()) {
+    const auto& entries = functaset.entries(sensor);
+    std::cout << "fit: nearest functaset frame " << entries[summary.neighbor_labels[0]].id
+              << " (weight " << Fixed(summary.neighbor_weights[0], 3) << ") via " << index_path
+              << (index_rebuilt ? " (rebuilt)" : "") << "\n";
+  }
+
+  if (!flags.out.empty()) {
+    fs::create_directories(flags.out);
+    nlohmann::json neighbours = nlohmann::json::array();
+    for (std::size_t i = 0; i < summary.neighbor_labels.size(); ++i) {
+      neighbours.push_back({{"id", functaset.entries(sensor)[summary.neighbor_labels[i]].id},
+                            {"weight", summary.neighbor_weights[i]},
+                            {"squared_distance", summary.neighbor_squared_distances[i]}});
+    }
+    const nlohmann::json record = {
+        {"sensor", ToString(sensor)},
+        {"latent", std::vector<double>(latent.data(), latent.data() + latent.size())},
+        {"strategy", summary.strategy.ToString()},
+        {"psnr", FiniteOrNull(summary.psnr)},
+        {"ms", summary.total_time_ms},
+        {"termination", ToString(summary.termination_type)},
+        {"message", summary.message},
+        {"iterations", summary.iterations},
+        {"initial_cost", summary.initial_cost},
+        {"final_cost", summary.final_cost},
+        {"precision", ToString(options.precision)},
+        {"jacobian", ToString(options.jacobian)},
+        {"frame", flags.frame},
+        {"reference", flags.reference},
+        {"model", flags.model},
+        {"model_checksum", model.checksum()},
+        {"neighbours", neighbours}};
+    const std::string json_path = (fs::path(flags.out) / "latent.json").string();
+    const std::string png_path = (fs::path(flags.out) / "fit.png").string();
+    WriteFileAtomically(json_path, record.dump(2) + "\n");
+    WriteFitPicture(png_path, targets, Reconstruct(trunk, latent.cast<float>()), summary, sensor,
+                    flags.tile_height);
+    std::cout << "fit: wrote " << json_path << " and " << png_path << "\n";
+  }
+
+  if (flags.json) {
+    EmitJson({{"psnr", FiniteOrNull(summary.psnr)},
+              {"ms", summary.total_time_ms},
+              {"strategy", summary.strategy.ToString()},
+              {"termination", ToString(summary.termination_type)},
+              {"iterations", summary.iterations},
+              {"latent_dim", static_cast<int>(latent.size())},
+              {"sensor", ToString(sensor)}});
+  }
+}
+
+}  // namespace
+
+void RegisterFit(CLI::App& app, CommandBody* selected) {
+  auto flags = std::make_shared<FitFlags>();
+  CLI::App* sub = app.add_subcommand(
+      "fit",
+      "Fit the latent of one new frame with a trained model (meta-SGD, Ceres LM, k-NN over a "
+      "functaset, or k-NN refined); prints PSNR and time, optionally writes latent.json and "
+      "fit.png.");
+  sub->add_option("--model", flags->model, "Model file (.tfm) from `tactfunc train`")->required();
+  sub->add_option("--functaset", flags->functaset,
+                  "Functaset (.tfs) of the model, for the knn strategies; its k-NN index is "
+                  "kept beside it as <functaset>.<sensor>.knn");
+  sub->add_option("--frame", flags->frame, "The frame to fit (PNG/JPG in the sensor's encoding)")
+      ->required();
+  sub->add_option("--reference", flags->reference,
+                  "The sensor's no-contact reference image (same size as the frame)")
+      ->required();
+  sub->add_option("--sensor", flags->sensor,
+                  "bubble or gelslim; default: inferred from the frame (16-bit one-channel = "
+                  "bubble, 8-bit = gelslim)");
+  sub->add_option("--strategy", flags->strategy,
+                  "knn, meta_sgd:K, ceres:N, knn+meta_sgd:K or knn+ceres:N (default ceres:10)");
+  sub->add_option("--out", flags->out, "Folder for latent.json and fit.png (created)");
+  sub->add_option("--precision", flags->precision, "float (default) or double trunk evaluations");
+  sub->add_option("--jacobian", flags->jacobian,
+                  "analytic (default) or autodiff (the slow ceres::Jet reference)");
+  sub->add_option("--sigma", flags->sigma,
+                  "Pixel noise sigma in normalised units (0 = the model's residual sigma)")
+      ->check(CLI::NonNegativeNumber);
+  sub->add_option("--sigma-z", flags->sigma_z, "Latent prior standard deviation")
+      ->check(CLI::PositiveNumber);
+  sub->add_option("--max-pixels", flags->max_pixels, "Fit at most this many pixels (0 = all)")
+      ->check(CLI::NonNegativeNumber);
+  sub->add_option("--knn-k", flags->knn_k, "Neighbours of the knn strategies (default 8)")
+      ->check(CLI::Range(1, 1000));
+  sub->add_option("--knn-index", flags->knn_index,
+                  "brute_force (default: exact, and under 1 ms per query up to ~1e5 latents), "
+                  "kd_forest, kmeans or linear");
+  sub->add_option("--knn-checks", flags->knn_checks, "FLANN checks per query (default 256)")
+      ->check(CLI::Range(1, 1 << 20));
+  sub->add_option("--tile-height", flags->tile_height, "fit.png tile height in pixels")
+      ->check(CLI::Range(16, 2000));
+  sub->add_flag("--full-report", flags->full_report, "Print the Summary's FullReport");
+  sub->add_flag("--json", flags->json,
+                "Print {psnr, ms, strategy, termination, iterations, latent_dim} as one JSON line");
+  sub->callback([flags, selected]() { *selected = [flags]() { RunFit(*flags); }; });
+}
+
+}  // namespace tactfunc::apps

@@ -1,0 +1,244 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// `tactfunc fit` and `tactfunc bench fit` as a user runs them: a tiny hand-built model
+// (tests/estimation/functa_test_util.h), a tiny dataset, its functaset from `tactfunc
+// encode`; exit codes, the --json last line, the files written, the k-NN index kept
+// beside the functaset, and bad input that fails with a message naming the file or flag.
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <sstream>
+#include <string>
+
+#include "estimation/file_io.h"
+#include "estimation/knn_index.h"
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "nlohmann/json.hpp"
+#include "tests/estimation/functa_test_util.h"
+
+namespace tactfunc {
+namespace {
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+
+struct Result {
+  int exit_code = -1;
+  std::string out;
+  std::string err;
+  nlohmann::json LastJson() const {
+    std::istringstream lines(out);
+    std::string line, last;
+    while (std::getline(lines, line)) {
+      if (!line.empty()) last = line;
+    }
+    return nlohmann::json::parse(last);
+  }
+};
+
+std::string Slurp(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  return buffer.str();
+}
+
+// One model, dataset and functaset for all tests of the suite (encoding is the slow part).
+class FitCliTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    // One folder per process: ctest -j runs the suite's tests in parallel processes.
+    root_ = new fs::path(fs::path(testing::TempDir()) /
+                         ("tactfunc_fit_cli_" + std::to_string(::getpid())));
+    fs::remove_all(*root_);
+    fs::create_directories(*root_);
+    testing_util::MakeModel().Save(Root("m.tfm"));
+    testing_util::WriteTinyDataset(Root("d"), 12, /*clean=*/true);
+    const Result encode = RunIn(*root_, "encode --model " + Root("m.tfm") + " --data " + Root("d") +
+                                            " --out " + Root("f.tfs") + " --threads 1 --json");
+    ASSERT_EQ(encode.exit_code, 0) << encode.err;
+  }
+  static void TearDownTestSuite() {
+    fs::remove_all(*root_);
+    delete root_;
+  }
+  static std::string Root(const std::string& name) { return (*root_ / name).string(); }
+
+  static Result RunIn(const fs::path& dir, const std::string& args) {
+    static int counter = 0;
+    const std::string out = (dir / ("stdout" + std::to_string(counter) + ".txt")).string();
+    const std::string err = (dir / ("stderr" + std::to_string(counter++) + ".txt")).string();
+    const std::string command = "CI=true " + std::string(TACTFUNC_BINARY_DIR) + "/bin/tactfunc " +
+                                args + " >" + out + " 2>" + err + " </dev/null";
+    const int status = std::system(command.c_str());
+    Result result;
+    result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    result.out = Slurp(out);
+    result.err = Slurp(err);
+    return result;
+  }
+  Result Run(const std::string& args) const { return RunIn(*root_, args); }
+
+  // A fit of bubble test frame 3 against the dataset's reference.
+  std::string FitArgs(const std::string& strategy) const {
+    return "fit --model " + Root("m.tfm") + " --frame " + Root("d/bubble/000003.png") +
+           " --reference " + Root("d/bubble/reference.png") + " --strategy " + strategy;
+  }
+
+  static fs::path* root_;
+};
+
+fs::path* FitCliTest::root_ = nullptr;
+
+TEST_F(FitCliTest, FitPrintsTheJsonLineAndWritesLatentAndPicture) {
+  const std::string out = Root("fit_ceres");
+  const Result r = Run(FitArgs("ceres:10") + " --out " + out + " --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("LatentFitter ceres:10"));  // the Summary's BriefReport
+  const nlohmann::json j = r.LastJson();
+  for (const char* key : {"psnr", "ms", "strategy", "termination", "iterations", "latent_dim"}) {
+    EXPECT_TRUE(j.contains(key)) << key;
+  }
+  EXPECT_EQ(j["strategy"], "ceres:10");
+  EXPECT_EQ(j["latent_dim"], 8);  // the bubble trunk of MakeModel
+  EXPECT_GT(j["psnr"].get<double>(), 0.0);
+  EXPECT_GE(j["ms"].get<double>(), 0.0);
+  ASSERT_TRUE(fs::exists(out + "/fit.png"));
+  ASSERT_TRUE(fs::exists(out + "/latent.json"));
+  const nlohmann::json latent = nlohmann::json::parse(Slurp(out + "/latent.json"));
+  EXPECT_EQ(latent["sensor"], "bubble");  // inferred from the 16-bit frame
+  EXPECT_EQ(latent["latent"].size(), 8u);
+  EXPECT_EQ(latent["strategy"], "ceres:10");
+  EXPECT_EQ(latent["termination"], j["termination"]);
+  EXPECT_DOUBLE_EQ(latent["psnr"].get<double>(), j["psnr"].get<double>());
+  const Image picture = ReadImage(out + "/fit.png", PixelEncoding::kRgb8);
+  EXPECT_GT(picture.cols, 3 * 100);  // three labelled tiles side by side
+}
+
+TEST_F(FitCliTest, GelSlimFramesAreInferredFromTheirEncoding) {
+  const Result r =
+      Run("fit --model " + Root("m.tfm") + " --frame " + Root("d/gelslim/000003.png") +
+          " --reference " + Root("d/gelslim/reference.png") + " --strategy meta_sgd:3 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.LastJson()["sensor"], "gelslim");
+  EXPECT_EQ(r.LastJson()["latent_dim"], 6);
+  EXPECT_EQ(r.LastJson()["termination"], "COMPLETED");
+}
+
+TEST_F(FitCliTest, KnnBuildsTheIndexBesideTheFunctasetOnceAndRebuildsItWhenStale) {
+  const std::string index = Root("f.tfs.bubble.knn");
+  fs::remove(index);
+  Result r = Run(FitArgs("knn+ceres:5") + " --functaset " + Root("f.tfs") + " --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.LastJson()["strategy"], "knn+ceres:5");
+  ASSERT_TRUE(fs::exists(index));
+  EXPECT_THAT(r.err, HasSubstr("built the k-NN index"));
+  EXPECT_EQ(KnnIndex::Load(index)->size(), 12);  // every bubble latent of the functaset
+
+  // Current: reused, not rebuilt.
+  r = Run(FitArgs("knn") + " --functaset " + Root("f.tfs") + " --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.err, ::testing::Not(HasSubstr("built the k-NN index")));
+  EXPECT_EQ(r.LastJson()["termination"], "COMPLETED");
+
+  // Stale (other vectors) and corrupt files are rebuilt.
+  BruteForceKnnIndex other(8);
+  const std::vector<float> zeros(8 * 3, 0.0f);
+  other.Add(zeros.data(), 3);
+  other.Save(index);
+  r = Run(FitArgs("knn") + " --functaset " + Root("f.tfs"));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.err, HasSubstr("built the k-NN index"));
+  EXPECT_EQ(KnnIndex::Load(index)->size(), 12);
+  std::ofstream(index, std::ios::trunc) << "not an index";
+  r = Run(FitArgs("knn") + " --functaset " + Root("f.tfs"));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.err, HasSubstr("cannot be read"));
+  EXPECT_EQ(KnnIndex::Load(index)->size(), 12);
+}
+
+TEST_F(FitCliTest, BadInputFailsWithAMessageNamingTheFileOrFlag) {
+  Result r = Run("fit --model " + Root("m.tfm") + " --frame " + Root("d/bubble/missing.png") +
+                 " --reference " + Root("d/bubble/reference.png"));
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.err, HasSubstr("missing.png"));
+
+  // A reference of another size than the frame.
+  Image small(5, 6, 1, 0.05f);
+  WritePngAtomically(Root("small_reference.png"), small, PixelEncoding::kDepthU16Micrometres);
+  r = Run("fit --model " + Root("m.tfm") + " --frame " + Root("d/bubble/000003.png") +
+          " --reference " + Root("small_reference.png"));
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.err, HasSubstr("small_reference.png"));
+  EXPECT_THAT(r.err, HasSubstr("5x6x1"));
+
+  r = Run(FitArgs("lbfgs:3"));
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("--strategy"));
+  EXPECT_THAT(r.err, HasSubstr("lbfgs"));
+
+  r = Run(FitArgs("knn+ceres:5"));
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("--functaset"));
+
+  r = Run("fit --model " + Root("no_model.tfm") + " --frame " + Root("d/bubble/000003.png") +
+          " --reference " + Root("d/bubble/reference.png"));
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.err, HasSubstr("no_model.tfm"));
+
+  r = Run(FitArgs("ceres:5") + " --sensor digit");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("digit"));
+}
+
+TEST_F(FitCliTest, BenchFitRunsOnTinyDataAndReportsEveryStrategy) {
+  const Result r =
+      Run("bench fit --model " + Root("m.tfm") + " --functaset " + Root("f.tfs") + " --data " +
+          Root("d") + " --frames 2 --autodiff-frames 1 --threads 2 --plot " + Root("pareto.png") +
+          " --table " + Root("table.md") + " --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json j = r.LastJson();
+  for (const char* key : {"strategies", "converged_psnr", "autodiff_over_analytic", "machine"}) {
+    EXPECT_TRUE(j.contains(key)) << key;
+  }
+  ASSERT_FALSE(j["strategies"].empty());
+  std::set<std::string> names;
+  for (const nlohmann::json& s : j["strategies"]) {
+    for (const char* key : {"name", "sensor", "ms_median", "ms_p90", "psnr_mean"}) {
+      EXPECT_TRUE(s.contains(key)) << key;
+    }
+    names.insert(s["name"].get<std::string>());
+  }
+  for (const char* name :
+       {"meta_sgd:1", "meta_sgd:3", "meta_sgd:10", "ceres:2", "ceres:5", "ceres:10", "ceres:20",
+        "knn", "knn+meta_sgd:3", "knn+ceres:2", "knn+ceres:5"}) {
+    EXPECT_EQ(names.count(name), 1u) << name;
+  }
+  EXPECT_TRUE(j["converged_psnr"].contains("bubble"));
+  EXPECT_TRUE(j["converged_psnr"].contains("gelslim"));
+  EXPECT_GT(j["autodiff_over_analytic"].get<double>(), 0.0);
+  EXPECT_TRUE(fs::exists(Root("pareto.png")));
+  EXPECT_THAT(Slurp(Root("table.md")), HasSubstr("| bubble | `knn+ceres:5` |"));
+}
+
+TEST_F(FitCliTest, BenchKnnReportsRecallAgainstBruteForce) {
+  const Result r = Run("bench knn --synthetic 400 --queries 20 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json j = r.LastJson();
+  ASSERT_FALSE(j["rows"].empty());
+  EXPECT_EQ(j["rows"][0]["index"], "brute_force");
+  EXPECT_EQ(j["rows"][0]["recall_at_8"], 1.0);
+  for (const nlohmann::json& row : j["rows"]) {
+    EXPECT_GE(row["recall_at_8"].get<double>(), 0.0);
+    EXPECT_LE(row["recall_at_8"].get<double>(), 1.0);
+  }
+  EXPECT_TRUE(j.contains("target_met"));
+}
+
+}  // namespace
+}  // namespace tactfunc
