@@ -1,4 +1,6 @@
 // Copyright 2026 The tactfunc Authors.
+#include <unistd.h>
+
 #include <algorithm>
 #include <fstream>
 #include <iostream>
@@ -14,7 +16,10 @@ namespace {
 // Keeps the console output and collects the medians.
 class CollectingReporter : public benchmark::ConsoleReporter {
  public:
-  explicit CollectingReporter(std::vector<BenchResult>* results) : results_(results) {}
+  // Colour only on a terminal: redirected output (docs, CI logs) stays plain text.
+  explicit CollectingReporter(std::vector<BenchResult>* results)
+      : benchmark::ConsoleReporter(isatty(fileno(stdout)) ? OO_Defaults : OO_Tabular),
+        results_(results) {}
   void ReportRuns(const std::vector<Run>& runs) override {
     for (const Run& run : runs) {
       const bool is_median = run.run_type == Run::RT_Aggregate && run.aggregate_name == "median";

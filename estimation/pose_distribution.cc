@@ -213,7 +213,8 @@ Eigen::Matrix3d PoseDistribution::CovarianceAbout(const SE2d& reference_T_mean) 
     const Eigen::Vector3d r = (mean_inv * samples_[i]).Log();
     sigma.noalias() += weights_[i] * r * r.transpose();
   }
-  return sigma / denominator;
+  // Exactly symmetric (not only to rounding), as EKF consumers assume.
+  return (0.5 / denominator) * (sigma + sigma.transpose());
 }
 
 Eigen::Matrix3d PoseDistribution::Covariance(const MeanOptions& options) const {
