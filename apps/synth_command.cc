@@ -64,8 +64,8 @@ void RunSynth(const SynthFlags& flags) {
                                             [&bar](int n) { bar.Tick(n); });
   bar.Finish();
 
-  std::cout << "synth: wrote " << report.contacts << " contacts (" << report.frames
-            << " frames, " << plan.tools.size() << " tools, " << plan.sensors.size()
+  std::cout << "synth: wrote " << report.contacts << " paired frames (" << report.frames
+            << " images, " << plan.tools.size() << " tools, " << plan.sensors.size()
             << " sensor(s)) to " << plan.out << " in " << report.seconds << " s ("
             << report.contacts / std::max(report.seconds, 1e-9)
             << " contacts/s on " << plan.threads << " threads, "
@@ -73,7 +73,10 @@ void RunSynth(const SynthFlags& flags) {
   if (flags.json) {
     nlohmann::json sensors = nlohmann::json::array();
     for (SensorKind kind : plan.sensors) sensors.push_back(ToString(kind));
-    EmitJson({{"frames", report.frames},
+    // "frames" counts paired frames (one per contact, every sensor rendered);
+    // "images" counts the files, frames x sensors.
+    EmitJson({{"frames", report.contacts},
+              {"images", report.frames},
               {"contacts", report.contacts},
               {"tools", plan.tools.size()},
               {"sensors", sensors},

@@ -87,7 +87,8 @@ TEST_F(CliTest, SynthWritesThePairedFramesItReports) {
                        " --frames-per-tool 2 --seed 7 --tools rod,square,l_shape --json");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const nlohmann::json j = r.LastJson();
-  EXPECT_EQ(j["frames"], 12);  // 3 tools x 2 contacts x 2 sensors
+  EXPECT_EQ(j["frames"], 6);   // 3 tools x 2 paired frames
+  EXPECT_EQ(j["images"], 12);  // x 2 sensors
   EXPECT_EQ(j["contacts"], 6);
   EXPECT_EQ(j["tools"], 3);
   EXPECT_EQ(j["sensors"], nlohmann::json({"bubble", "gelslim"}));
