@@ -46,6 +46,7 @@ void RunSynth(const SynthFlags& flags) {
                      : std::max(1u, std::thread::hardware_concurrency());
   plan.tools = flags.tools.empty() ? ToolNames() : SplitList(flags.tools);
   for (const std::string& tool : plan.tools) GetTool(tool);  // throws with the valid names
+  plan.sensors.clear();  // the plan's default is both sensors; --sensors replaces it
   for (const std::string& name : SplitList(flags.sensors)) {
     SensorKind kind;
     if (!SensorKindFromString(name, &kind)) {

@@ -101,6 +101,15 @@ TEST_F(CliTest, SynthWritesThePairedFramesItReports) {
   EXPECT_EQ(info.LastJson()["bytes"], dataset.BytesOnDisk());
 }
 
+TEST_F(CliTest, SynthRendersOnlyTheSensorsAskedFor) {
+  const Result r = Run("synth --out " + Path("d") +
+                       " --frames-per-tool 1 --tools rod --sensors gelslim --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.LastJson()["sensors"], nlohmann::json({"gelslim"}));
+  EXPECT_EQ(r.LastJson()["images"], 1);
+  EXPECT_EQ(Dataset::Open(Path("d")).sensors(), std::vector<SensorKind>{SensorKind::kGelSlim});
+}
+
 TEST_F(CliTest, ShowWritesAPictureOfTheDataset) {
   ASSERT_EQ(Run("synth --out " + Path("d") + " --frames-per-tool 1 --tools rod,lines5").exit_code, 0);
   const Result r = Run("show " + Path("d") + " --out " + Path("sheet.png") + " --json");
