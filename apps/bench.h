@@ -35,6 +35,8 @@ void RegisterSynthBenchmarks();
 // `bench fit`, `bench kernels` and `bench knn` (apps/bench_fit.cc): adds the three
 // subcommands to `bench`.
 void RegisterFitBenchmarks(CLI::App* bench, CommandBody* selected);
+// `bench posterior` (apps/bench_posterior.cc): calibration and speed of the pose posteriors.
+void RegisterPosteriorBenchmark(CLI::App* bench, CommandBody* selected);
 
 }  // namespace tactfunc::apps
 

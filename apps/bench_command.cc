@@ -138,6 +138,7 @@ void RegisterBench(CLI::App& app, CommandBody* selected) {
     *selected = [flags]() { RunSynthBench(*flags); };
   });
   RegisterFitBenchmarks(bench, selected);
+  RegisterPosteriorBenchmark(bench, selected);
 }
 
 }  // namespace tactfunc::apps

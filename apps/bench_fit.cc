@@ -914,14 +914,14 @@ void RegisterKernelBenchmarks(const std::shared_ptr<KernelSetup>& s) {
     const Eigen::MatrixXf coords = s->data.coords_float;
     const Eigen::VectorXf z = s->z.cast<float>();
     for (auto _ : state)
-      benchmark::DoNotOptimize(internal::ChunkedForward<float>(s->trunk.siren, coords, z));
+      benchmark::DoNotOptimize(s->trunk.siren.Forward<float>(coords, z));
     pixels(state);
   })->Unit(benchmark::kMillisecond);
   benchmark::RegisterBenchmark((p + "forward/double").c_str(), [s,
                                                                 pixels](benchmark::State& state) {
     for (auto _ : state) {
       benchmark::DoNotOptimize(
-          internal::ChunkedForward<double>(s->trunk.siren, s->data.coords, s->z));
+          s->trunk.siren.Forward<double>(s->data.coords, s->z));
     }
     pixels(state);
   })->Unit(benchmark::kMillisecond);
@@ -996,7 +996,7 @@ void RegisterKernelBenchmarks(const std::shared_ptr<KernelSetup>& s) {
     Eigen::VectorXf z = Eigen::VectorXf::Zero(d), g;
     const float two_lambda = static_cast<float>(2.0 * s->trunk.meta_sgd.latent_l2_weight);
     for (auto _ : state) {
-      internal::ChunkedLossAndGradient<float>(s->trunk.siren, s->data, z, &g);
+      internal::DataLossAndGradient<float>(s->trunk.siren, s->data, z, &g);
       g += two_lambda * z;
       z -= alpha.cwiseProduct(g);
       benchmark::DoNotOptimize(z.data());

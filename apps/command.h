@@ -33,6 +33,8 @@ void RegisterTrain(CLI::App& app, CommandBody* selected);   // apps/train_comman
 void RegisterEncode(CLI::App& app, CommandBody* selected);  // apps/encode_command.cc
 void RegisterRecon(CLI::App& app, CommandBody* selected);   // apps/recon_command.cc
 void RegisterFit(CLI::App& app, CommandBody* selected);     // apps/fit_command.cc
+void RegisterTrainPose(CLI::App& app, CommandBody* selected);  // apps/train_pose_command.cc
+void RegisterPose(CLI::App& app, CommandBody* selected);         // apps/pose_command.cc
 
 // Bad user input that the command detected itself (flag values, lists).
 class UsageError : public std::runtime_error {

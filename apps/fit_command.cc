@@ -33,6 +33,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "apps/command.h"
+#include "apps/model_inputs.h"
 #include "apps/pictures.h"
 #include "estimation/dataset.h"
 #include "estimation/file_io.h"
@@ -70,38 +71,6 @@ struct FitFlags {
   bool full_report = false;
   bool json = false;
 };
-
-// ---- Inputs ----------------------------------------------------------------------------
-
-// The sensor of an image file, as Dataset::Open infers a user folder's.
-SensorKind InferSensor(const std::string& path, const std::string& flag) {
-  if (!fs::is_regular_file(path)) {
-    throw DatasetError(flag + " '" + path + "': no such file");
-  }
-  const cv::Mat image = cv::imread(path, cv::IMREAD_UNCHANGED);
-  if (image.empty()) throw DatasetError(flag + " '" + path + "': not an image OpenCV can read");
-  if (image.depth() == CV_16U && image.channels() == 1) return SensorKind::kSoftBubble;
-  if (image.depth() == CV_8U) return SensorKind::kGelSlim;
-  throw DatasetError(flag + " '" + path +
-                     "': cannot infer the sensor: expected a 16-bit 1-channel image (bubble "
-                     "depth) or an 8-bit one (gelslim rgb), got " +
-                     std::to_string(image.elemSize1() * 8) + "-bit with " +
-                     std::to_string(image.channels()) + " channel(s); give --sensor");
-}
-
-Image ReadInput(const std::string& path, SensorKind sensor, const std::string& flag) {
-  if (!fs::is_regular_file(path)) throw DatasetError(flag + " '" + path + "': no such file");
-  try {
-    return ReadImage(path, SensorEncoding(sensor));
-  } catch (const DatasetError& e) {
-    throw DatasetError(flag + " (" + ToString(sensor) + "): " + e.what());
-  }
-}
-
-std::string Shape(const Image& image) {
-  return std::to_string(image.rows) + "x" + std::to_string(image.cols) + "x" +
-         std::to_string(image.channels);
-}
 
 // ---- The k-NN index beside the functaset -------------------------------------------------
 
@@ -305,13 +274,7 @@ void RunFit(const FitFlags& flags) {
   if (!options.IsValid(&error)) throw UsageError(error);
 
   SensorKind sensor;
-  if (!flags.sensor.empty()) {
-    if (!SensorKindFromString(flags.sensor, &sensor)) {
-      throw UsageError("--sensor: expected bubble or gelslim, got '" + flags.sensor + "'");
-    }
-  } else {
-    sensor = InferSensor(flags.frame, "--frame");
-  }
+  if (!ParseSensorFlag(flags.sensor, &sensor)) sensor = InferSensor(flags.frame, "--frame");
   const Image frame = ReadInput(flags.frame, sensor, "--frame");
   const Image reference = ReadInput(flags.reference, sensor, "--reference");
   if (!frame.SameShape(reference)) {

@@ -34,6 +34,8 @@ int main(int argc, char** argv) {
   RegisterEncode(app, &body);
   RegisterRecon(app, &body);
   RegisterFit(app, &body);
+  RegisterTrainPose(app, &body);
+  RegisterPose(app, &body);
   RegisterBench(app, &body);
   try {
     app.parse(argc, argv);

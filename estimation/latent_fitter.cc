@@ -307,7 +307,7 @@ Eigen::VectorXd MetaSgdSteps(const SensorTrunk& trunk, const internal::LatentRes
   VectorX z = start.cast<Scalar>();
   VectorX g;
   for (int k = 0; k < steps; ++k) {
-    internal::ChunkedLossAndGradient<Scalar>(trunk.siren, data, z, &g);
+    internal::DataLossAndGradient<Scalar>(trunk.siren, data, z, &g);
     g += two_lambda * z;
     z -= alpha.cwiseProduct(g);
   }
@@ -508,10 +508,8 @@ LatentFitter::Summary LatentFitter::FitImpl(const TrunkTargets& targets,
   // PSNR over every valid pixel of the frame, not only the subsample.
   const Eigen::MatrixXf prediction =
       options_.precision == Precision::kFloat
-          ? internal::ChunkedForward<float>(siren, siren.Grid<float>(targets.rows, targets.cols),
-                                            z.cast<float>())
-          : internal::ChunkedForward<double>(siren,
-                                             siren.Grid<double>(targets.rows, targets.cols), z)
+          ? siren.Forward<float>(siren.Grid<float>(targets.rows, targets.cols), z.cast<float>())
+          : siren.Forward<double>(siren.Grid<double>(targets.rows, targets.cols), z)
                 .cast<float>();
   summary.psnr = Psnr(prediction, targets);  // +inf for an exact fit
   if (std::isnan(summary.psnr)) summary.psnr = 0;

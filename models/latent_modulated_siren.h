@@ -53,6 +53,13 @@
 // >= 0; an empty vector means all ones), latent z of size d, flat theta of size
 // NumParameters(). Every batched method exists in float and double (Scalar).
 //
+// Blocking. Every batched pass runs over the N pixels in blocks of a few hundred (the
+// .cc's kPixelBlock) so that one layer's activations (width x block) stay in L2; the
+// buffers are allocated once per call at block size and reused by every block. Sums
+// over pixels (gradients, Hessian-vector products) are accumulated across blocks and
+// the loss is normalised once over all pixels, so the results are the unblocked ones up
+// to float summation order. Callers pass whole frames; they need not block themselves.
+//
 // Loss. Loss() and friends use the weighted mean squared error over valid pixels
 //   L(theta, z) = sum_j w_j sum_c (y_jc - t_jc)^2 / (C * sum_j w_j)
 // (0 when sum_j w_j = 0). A pixel with w_j = 0 contributes nothing, even if its
@@ -199,7 +206,7 @@ class LatentModulatedSiren {
 
   // Exact reverse pass: given dL/dY (N x C) returns dL/dz (size d) and dL/dtheta
   // (size NumParameters(), flat layout; use View() for W_l, b_l, A, c, W_out, b_out).
-  // Either output may be null. Batched with one GEMM per layer and gradient.
+  // Either output may be null. One GEMM per layer and gradient per block of pixels.
   template <typename Scalar>
   void Backward(const MatrixX<Scalar>& coords, const VectorX<Scalar>& z,
                 const MatrixX<Scalar>& dL_dY, VectorX<Scalar>* dL_dz,

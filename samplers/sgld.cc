@@ -22,9 +22,6 @@
 namespace tactfunc {
 namespace {
 
-// Pixels per trunk pass (see TrunkPotential::EvaluateRows).
-constexpr long kPixelBlock = 1024;
-
 double MsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
       .count();
@@ -170,35 +167,28 @@ double TrunkPotential::EvaluateRows(const Eigen::VectorXd& z, const std::vector<
   const Vector& all_weights = *all_weights_ptr;
   const long n = rows == nullptr ? num_valid_ : static_cast<long>(rows->size());
   if (n == 0) return prior;
-  // Blocks of kPixelBlock pixels: the trunk's activations for a block stay in cache
-  // (measured at 70x88, width 64, 3 layers: one 6160-pixel pass costs ~12 ms, four
-  // 1540-pixel passes ~2.6 ms). The sum over pixels is exact either way.
+  // One trunk pass over the pixels (the trunk blocks its passes internally to stay in
+  // cache). LossAndGradient's loss is sum_j w_j ||r_j||^2 / (C sum_j w_j).
   const Vector zs = z.cast<Scalar>();
   const double unit = scale * trunk_->siren.output_channels() / (2.0 * sigma_ * sigma_);
-  double data = 0;
-  Matrix coords, targets;
-  Vector weights, dL_dz;
-  std::vector<int> block_rows;
-  for (long begin = 0; begin < n; begin += kPixelBlock) {
-    const long size = std::min<long>(kPixelBlock, n - begin);
-    if (rows == nullptr) {
-      coords = all_coords.middleRows(begin, size);
-      targets = all_targets.middleRows(begin, size);
-      weights = all_weights.segment(begin, size);
-    } else {
-      block_rows.assign(rows->begin() + begin, rows->begin() + begin + size);
-      coords = all_coords(block_rows, Eigen::all);
-      targets = all_targets(block_rows, Eigen::all);
-      weights = all_weights(block_rows);
-    }
-    const double sum_w = weights.template cast<double>().sum();
-    if (!(sum_w > 0)) continue;
-    const double loss = static_cast<double>(trunk_->siren.template LossAndGradient<Scalar>(
+  Vector dL_dz;
+  double sum_w, loss;
+  auto evaluate = [&](const Matrix& coords, const Matrix& targets, const Vector& weights) {
+    sum_w = weights.template cast<double>().sum();
+    if (!(sum_w > 0)) return;
+    loss = static_cast<double>(trunk_->siren.template LossAndGradient<Scalar>(
         coords, zs, targets, weights, gradient != nullptr ? &dL_dz : nullptr, nullptr));
-    // LossAndGradient's loss is sum_j w_j ||r_j||^2 / (C sum_j w_j) over the block.
-    data += unit * sum_w * loss;
-    if (gradient != nullptr) *gradient += (unit * sum_w) * dL_dz.template cast<double>();
+  };
+  sum_w = 0;
+  if (rows == nullptr) {
+    evaluate(all_coords, all_targets, all_weights);
+  } else {
+    evaluate(all_coords(*rows, Eigen::all), all_targets(*rows, Eigen::all),
+             all_weights(*rows));
   }
+  if (!(sum_w > 0)) return prior;
+  const double data = unit * sum_w * loss;
+  if (gradient != nullptr) *gradient += (unit * sum_w) * dL_dz.template cast<double>();
   return prior + data;
 }
 
@@ -236,29 +226,24 @@ bool TrunkPotential::GaussNewtonHessian(const Eigen::VectorXd& z,
   hessian->setIdentity(d, d);
   *hessian /= options_.sigma_z * options_.sigma_z;
   if (num_valid_ == 0) return true;
-  // Per block of pixels (see EvaluateRows): rows j*C + c of J scaled by sqrt(w_j) /
-  // sigma, then J^T J accumulated by SYRK.
+  // Rows j*C + c of J scaled by sqrt(w_j) / sigma, then J^T J by SYRK.
   auto accumulate = [&](auto tag) {
     using Scalar = decltype(tag);
     using Matrix = Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic>;
-    const Matrix* all_coords;
+    const Matrix* coords;
     if constexpr (std::is_same<Scalar, float>::value) {
-      all_coords = &coords_f_;
+      coords = &coords_f_;
     } else {
-      all_coords = &coords_;
+      coords = &coords_;
     }
     const Eigen::Matrix<Scalar, Eigen::Dynamic, 1> zs = z.cast<Scalar>();
-    Matrix jtj = Matrix::Zero(d, d), J, coords;
-    for (long begin = 0; begin < num_valid_; begin += kPixelBlock) {
-      const long size = std::min<long>(kPixelBlock, num_valid_ - begin);
-      coords = all_coords->middleRows(begin, size);
-      trunk_->siren.template ForwardAndLatentJacobian<Scalar>(coords, zs, nullptr, &J);
-      for (long j = 0; j < size; ++j) {
-        J.middleRows(j * channels, channels) *=
-            static_cast<Scalar>(std::sqrt(weights_[begin + j]) / sigma_);
-      }
-      jtj.template selfadjointView<Eigen::Lower>().rankUpdate(J.transpose());
+    Matrix jtj = Matrix::Zero(d, d), J;
+    trunk_->siren.template ForwardAndLatentJacobian<Scalar>(*coords, zs, nullptr, &J);
+    for (long j = 0; j < num_valid_; ++j) {
+      J.middleRows(j * channels, channels) *=
+          static_cast<Scalar>(std::sqrt(weights_[j]) / sigma_);
     }
+    jtj.template selfadjointView<Eigen::Lower>().rankUpdate(J.transpose());
     *hessian += jtj.template selfadjointView<Eigen::Lower>().toDenseMatrix().template cast<double>();
   };
   if (options_.precision == Precision::kFloat) {

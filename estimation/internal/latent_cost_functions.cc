@@ -133,14 +133,10 @@ LatentResidualData SelectPixels(const LatentModulatedSiren& siren, const TrunkTa
 
 template <typename Scalar>
 AnalyticLatentCost<Scalar>::AnalyticLatentCost(const LatentModulatedSiren* siren,
-                                               const LatentResidualData* data, int chunk_pixels)
-    : siren_(siren), data_(data), chunk_pixels_(std::max(1, chunk_pixels)) {
+                                               const LatentResidualData* data)
+    : siren_(siren), data_(data), coords_(data->coords.cast<Scalar>()) {
   mutable_parameter_block_sizes()->push_back(siren->latent_dim());
   set_num_residuals(data->num_residuals());
-  for (int first = 0; first < data->num_pixels(); first += chunk_pixels_) {
-    const int rows = std::min(chunk_pixels_, data->num_pixels() - first);
-    coord_chunks_.push_back(data->coords.middleRows(first, rows).template cast<Scalar>());
-  }
 }
 
 template <typename Scalar>
@@ -148,32 +144,27 @@ bool AnalyticLatentCost<Scalar>::Evaluate(double const* const* parameters, doubl
                                           double** jacobians) const {
   const int d = siren_->latent_dim();
   const int channels = data_->channels;
+  const long n = coords_.rows();
   const LatentModulatedSiren::VectorX<Scalar> z =
       Eigen::Map<const Eigen::VectorXd>(parameters[0], d).cast<Scalar>();
   const bool want_jacobian = jacobians != nullptr && jacobians[0] != nullptr;
   LatentModulatedSiren::MatrixX<Scalar> outputs, J;
+  siren_->ForwardAndLatentJacobian<Scalar>(coords_, z, &outputs, want_jacobian ? &J : nullptr);
   bool finite = true;
-  long first = 0;  // first pixel of the chunk
-  for (const auto& coords : coord_chunks_) {
-    const long n = coords.rows();
-    siren_->ForwardAndLatentJacobian<Scalar>(coords, z, &outputs, want_jacobian ? &J : nullptr);
-    for (long j = 0; j < n; ++j) {
-      for (int c = 0; c < channels; ++c) {
-        const long i = (first + j) * channels + c;
-        residuals[i] = data_->residual_scale[i] *
-                       (static_cast<double>(outputs(j, c)) - data_->targets(first + j, c));
-        finite = finite && std::isfinite(residuals[i]);
-      }
+  for (long j = 0; j < n; ++j) {
+    for (int c = 0; c < channels; ++c) {
+      const long i = j * channels + c;
+      residuals[i] = data_->residual_scale[i] *
+                     (static_cast<double>(outputs(j, c)) - data_->targets(j, c));
+      finite = finite && std::isfinite(residuals[i]);
     }
-    if (want_jacobian) {
-      // Ceres wants the (n*C) x d Jacobian row-major; ours is column-major.
-      Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> out(
-          jacobians[0] + first * channels * d, n * channels, d);
-      out = data_->residual_scale.segment(first * channels, n * channels).asDiagonal() *
-            J.template cast<double>();
-      finite = finite && out.allFinite();
-    }
-    first += n;
+  }
+  if (want_jacobian) {
+    // Ceres wants the (n*C) x d Jacobian row-major; ours is column-major.
+    Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> out(
+        jacobians[0], n * channels, d);
+    out = data_->residual_scale.asDiagonal() * J.template cast<double>();
+    finite = finite && out.allFinite();
   }
   return finite;
 }
@@ -267,58 +258,21 @@ bool RobustifiedCost::Evaluate(double const* const* parameters, double* residual
   return true;
 }
 
-template <typename Scalar>
-Scalar ChunkedLossAndGradient(const LatentModulatedSiren& siren, const LatentResidualData& data,
-                              const LatentModulatedSiren::VectorX<Scalar>& z,
-                              LatentModulatedSiren::VectorX<Scalar>* dL_dz, int chunk_pixels) {
-  using VectorX = LatentModulatedSiren::VectorX<Scalar>;
-  chunk_pixels = std::max(1, chunk_pixels);
-  const int n = data.num_pixels();
-  const double total_weight = data.weights_float.template cast<double>().sum();
-  dL_dz->setZero(z.size());
-  double loss = 0;
-  if (!(total_weight > 0)) return Scalar(0);
-  VectorX g;
-  for (int first = 0; first < n; first += chunk_pixels) {
-    const int rows = std::min(chunk_pixels, n - first);
-    const VectorX w = data.weights_float.segment(first, rows).template cast<Scalar>();
-    const double share = w.template cast<double>().sum() / total_weight;
-    if (share == 0) continue;
-    const Scalar chunk_loss = siren.LossAndGradient<Scalar>(
-        data.coords.middleRows(first, rows).template cast<Scalar>(),
-        z, data.targets.middleRows(first, rows).template cast<Scalar>(), w, &g, nullptr);
-    loss += share * static_cast<double>(chunk_loss);
-    *dL_dz += static_cast<Scalar>(share) * g;
-  }
-  return static_cast<Scalar>(loss);
+template <>
+float DataLossAndGradient<float>(const LatentModulatedSiren& siren,
+                                 const LatentResidualData& data, const Eigen::VectorXf& z,
+                                 Eigen::VectorXf* dL_dz) {
+  return siren.LossAndGradient<float>(data.coords_float, z, data.targets_float,
+                                      data.weights_float, dL_dz, nullptr);
 }
 
-template <typename Scalar>
-LatentModulatedSiren::MatrixX<Scalar> ChunkedForward(
-    const LatentModulatedSiren& siren, const LatentModulatedSiren::MatrixX<Scalar>& coords,
-    const LatentModulatedSiren::VectorX<Scalar>& z, int chunk_pixels) {
-  chunk_pixels = std::max(1, chunk_pixels);
-  const long n = coords.rows();
-  LatentModulatedSiren::MatrixX<Scalar> out(n, siren.output_channels());
-  for (long first = 0; first < n; first += chunk_pixels) {
-    const long rows = std::min<long>(chunk_pixels, n - first);
-    out.middleRows(first, rows) =
-        siren.Forward<Scalar>(coords.middleRows(first, rows), z);
-  }
-  return out;
+template <>
+double DataLossAndGradient<double>(const LatentModulatedSiren& siren,
+                                   const LatentResidualData& data, const Eigen::VectorXd& z,
+                                   Eigen::VectorXd* dL_dz) {
+  return siren.LossAndGradient<double>(data.coords, z, data.targets,
+                                       data.weights_float.cast<double>(), dL_dz, nullptr);
 }
-
-template float ChunkedLossAndGradient<float>(const LatentModulatedSiren&,
-                                             const LatentResidualData&, const Eigen::VectorXf&,
-                                             Eigen::VectorXf*, int);
-template double ChunkedLossAndGradient<double>(const LatentModulatedSiren&,
-                                               const LatentResidualData&, const Eigen::VectorXd&,
-                                               Eigen::VectorXd*, int);
-template Eigen::MatrixXf ChunkedForward<float>(const LatentModulatedSiren&, const Eigen::MatrixXf&,
-                                               const Eigen::VectorXf&, int);
-template Eigen::MatrixXd ChunkedForward<double>(const LatentModulatedSiren&,
-                                                const Eigen::MatrixXd&, const Eigen::VectorXd&,
-                                                int);
 
 double HalfSquaredNorm(const ceres::CostFunction& cost, const double* z) {
   std::vector<double> residuals(cost.num_residuals());

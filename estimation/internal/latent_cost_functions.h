@@ -60,15 +60,8 @@ LatentResidualData SelectPixels(const LatentModulatedSiren& siren, const TrunkTa
 template <typename Scalar>
 class AnalyticLatentCost : public ceres::CostFunction {
  public:
-  // Pixels per batched pass. The trunk's batched passes allocate their activations
-  // (width x pixels per layer) afresh on every call; above glibc's mmap/trim thresholds
-  // (128 KB) that memory goes back to the OS after each call and the next call page-faults
-  // it in again, which doubled the Jacobian's cost (4.8 vs 2.3 ms at 32x32, 31 vs 14 ms at
-  // 70x88, width 128). Chunks of 256 pixels (128 KB per layer in float) avoid it and keep
-  // the activations in L2 (docs/FITTING.md).
-  static constexpr int kDefaultChunkPixels = 256;
-  AnalyticLatentCost(const LatentModulatedSiren* siren, const LatentResidualData* data,
-                     int chunk_pixels = kDefaultChunkPixels);
+  // One batched trunk pass per evaluation (the trunk blocks its passes internally).
+  AnalyticLatentCost(const LatentModulatedSiren* siren, const LatentResidualData* data);
   // Returns false (Ceres then rejects the step) if a residual or Jacobian entry is not finite.
   bool Evaluate(double const* const* parameters, double* residuals,
                 double** jacobians) const override;
@@ -76,9 +69,8 @@ class AnalyticLatentCost : public ceres::CostFunction {
  private:
   const LatentModulatedSiren* siren_;
   const LatentResidualData* data_;
-  // The data's coords in Scalar, in chunks of at most chunk_pixels rows.
-  std::vector<LatentModulatedSiren::MatrixX<Scalar>> coord_chunks_;
-  int chunk_pixels_;
+  // The data's coords in Scalar, num_pixels x 2.
+  LatentModulatedSiren::MatrixX<Scalar> coords_;
 };
 
 // (a) The autodiff reference. `stride` is the Jet width of DynamicAutoDiffCostFunction
@@ -117,21 +109,11 @@ class RobustifiedCost : public ceres::CostFunction {
 };
 
 // The trunk's weighted MSE over the data's pixels (LatentModulatedSiren::Loss: sum w r^2 /
-// (C sum w)) and its gradient w.r.t. z, evaluated in chunks of `chunk_pixels` pixels
-// (see AnalyticLatentCost) and combined with the chunks' weight sums, so the result is
-// the unchunked one up to rounding. For the meta-SGD steps.
+// (C sum w)) and its gradient w.r.t. z, in Scalar. For the meta-SGD steps.
 template <typename Scalar>
-Scalar ChunkedLossAndGradient(const LatentModulatedSiren& siren, const LatentResidualData& data,
-                              const LatentModulatedSiren::VectorX<Scalar>& z,
-                              LatentModulatedSiren::VectorX<Scalar>* dL_dz,
-                              int chunk_pixels = AnalyticLatentCost<float>::kDefaultChunkPixels);
-
-// LatentModulatedSiren::Forward over coords (N x 2) in chunks; N x C outputs.
-template <typename Scalar>
-LatentModulatedSiren::MatrixX<Scalar> ChunkedForward(
-    const LatentModulatedSiren& siren, const LatentModulatedSiren::MatrixX<Scalar>& coords,
-    const LatentModulatedSiren::VectorX<Scalar>& z,
-    int chunk_pixels = AnalyticLatentCost<float>::kDefaultChunkPixels);
+Scalar DataLossAndGradient(const LatentModulatedSiren& siren, const LatentResidualData& data,
+                           const LatentModulatedSiren::VectorX<Scalar>& z,
+                           LatentModulatedSiren::VectorX<Scalar>* dL_dz);
 
 // 1/2 sum of squared residuals of `cost` at z (one parameter block); NaN if the
 // evaluation fails.

@@ -1,0 +1,322 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// tactfunc bench posterior: are the pose posteriors calibrated, how accurate are their
+// means, and how long does one take (issue 5, section 4)?
+//
+//   tactfunc bench posterior --model M.tfm --pose-model P.tpm --functaset F.tfs --data D
+//       [--sensor bubble] [--frames 60] [--samplers sgld,laplace,knn] [--json]
+//
+// Over the first N labelled test-split frames of the dataset (one sensor), for each
+// sampler: the fraction of frames whose true pose lies in the posterior's nominal 50%
+// and 90% credible regions (PoseDistribution::Region, sample-quantile method; the true
+// yaw taken modulo 2 pi / n to the representative nearest the posterior mean, since the
+// posterior is folded by the tool's symmetry; n = 0: yaw set to 0, the yaw direction of
+// the region is degenerate and ignored), the RMSE of the posterior mean (position mm,
+// yaw deg modulo symmetry, hemisphere left out of yaw), and the median / p90 wall time
+// of one posterior (fit + sampling + pose MLP, what PosePosterior::Summary::total_time_ms
+// measures). The pose MLP's point estimate g_phi(z*) at the latent fit z* (ceres:10, the
+// posterior's own fit settings) is reported beside, as the baseline the posterior mean
+// should not be worse than.
+//
+// Coverage bounds (decision): "coverage_bounds_99" is the central 99% interval of the
+// coverage a CALIBRATED sampler would show on N frames, [q_0.005, q_0.995] of
+// Binomial(N, p) / N. An observed coverage outside it rejects calibration at the 1%
+// level (frames are independent contacts). With N = 60 the 90% band is about
+// [0.78, 0.98]: wide, so say "not rejected" rather than "calibrated".
+//
+// The knn sampler searches the functaset's TRAIN-split latents only (the test frames'
+// own entries would otherwise be found at distance ~0 and make the coverage trivial).
+// Timing is serial on one thread, one measurement per frame (as bench fit).
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <iostream>
+#include <limits>
+#include <memory>
+#include <optional>
+
+#include "apps/bench.h"
+#include "apps/command.h"
+#include "apps/model_inputs.h"
+#include "apps/progress_bar.h"
+#include "estimation/dataset.h"
+#include "estimation/functaset.h"
+#include "estimation/latent_fitter.h"
+#include "estimation/trunk_targets.h"
+#include "models/functa_model.h"
+#include "models/tool.h"
+#include "samplers/pose_posterior.h"
+
+namespace tactfunc::apps {
+namespace {
+
+constexpr double kDeg = 180.0 / M_PI;
+
+struct PosteriorBenchFlags {
+  std::string model;
+  std::string pose_model;
+  std::string functaset;
+  std::string data;
+  std::string sensor;
+  int frames = 60;
+  std::string samplers = "sgld,laplace,knn";
+  int samples = 100;
+  std::uint64_t seed = 0;
+  int knn_k = 8;
+  bool json = false;
+};
+
+double Median(std::vector<double> v) {
+  if (v.empty()) return std::numeric_limits<double>::quiet_NaN();
+  std::sort(v.begin(), v.end());
+  const std::size_t n = v.size();
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+double Quantile(std::vector<double> v, double q) {
+  if (v.empty()) return std::numeric_limits<double>::quiet_NaN();
+  std::sort(v.begin(), v.end());
+  const double rank = std::ceil(q * v.size());
+  return v[static_cast<std::size_t>(std::clamp(rank - 1.0, 0.0, v.size() - 1.0))];
+}
+
+// The central 99% interval of Binomial(n, p) / n (header comment).
+std::pair<double, double> BinomialBand99(int n, double p) {
+  if (n <= 0) return {0.0, 1.0};
+  double cdf = 0;
+  int lo = -1, hi = n;
+  for (int k = 0; k <= n; ++k) {
+    const double log_pmf = std::lgamma(n + 1.0) - std::lgamma(k + 1.0) - std::lgamma(n - k + 1.0) +
+                           k * std::log(p) + (n - k) * std::log1p(-p);
+    cdf += std::exp(log_pmf);
+    if (lo < 0 && cdf >= 0.005) lo = k;
+    if (cdf >= 0.995) {
+      hi = k;
+      break;
+    }
+  }
+  return {static_cast<double>(std::max(lo, 0)) / n, static_cast<double>(hi) / n};
+}
+
+struct Tally {
+  PosteriorSampler sampler;
+  int frames = 0, failures = 0, covered_50 = 0, covered_90 = 0;
+  double position_sq = 0, yaw_sq = 0;
+  int yaw_count = 0;
+  std::vector<double> ms;
+};
+
+nlohmann::json NumberOrNull(double v) {
+  return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
+}
+
+void RunPosteriorBench(const PosteriorBenchFlags& flags) {
+  std::vector<Tally> tallies;
+  for (const std::string& name : SplitList(flags.samplers)) {
+    Tally t;
+    if (!PosteriorSamplerFromString(name, &t.sampler)) {
+      throw UsageError("--samplers: expected a list of sgld, laplace, knn, got '" + name + "'");
+    }
+    tallies.push_back(t);
+  }
+  if (tallies.empty()) throw UsageError("--samplers: empty list");
+
+  const FunctaModel model = FunctaModel::Load(flags.model);
+  const Functaset functaset = Functaset::Load(flags.functaset);
+  functaset.CheckModel(model, flags.model, flags.functaset);
+  const Dataset dataset = Dataset::Open(flags.data);
+  SensorKind sensor;
+  if (!ParseSensorFlag(flags.sensor, &sensor)) {
+    sensor = dataset.has_sensor(SensorKind::kSoftBubble) ? SensorKind::kSoftBubble
+                                                         : dataset.sensors().at(0);
+  }
+  if (!dataset.has_sensor(sensor)) {
+    throw DatasetError("--data '" + flags.data + "' has no " + ToString(sensor) + " frames");
+  }
+  if (!model.HasSensor(sensor)) {
+    throw DatasetError("--model '" + flags.model + "' has no trunk for sensor " + ToString(sensor));
+  }
+  const SensorTrunk& trunk = model.Trunk(sensor);
+  const PoseMlp pose_model = LoadPoseModelFor(flags.pose_model, model, sensor, flags.model);
+
+  std::vector<std::size_t> frames;
+  for (std::size_t index : dataset.FrameIndices(sensor, Split::kTest)) {
+    if (dataset.frames()[index].label.has_value()) frames.push_back(index);
+    if (static_cast<int>(frames.size()) == flags.frames) break;
+  }
+  if (frames.empty()) {
+    throw DatasetError("--data '" + flags.data + "' has no labelled test-split " +
+                       ToString(sensor) + " frames");
+  }
+  const int num_frames = static_cast<int>(frames.size());
+
+  PosePosterior::Options options;
+  options.num_samples = flags.samples;
+  options.seed = flags.seed;
+  options.knn.k = flags.knn_k;
+  std::string error;
+  if (!options.IsValid(&error)) throw UsageError(error);
+  FunctasetKnn knn;
+  bool need_knn = false;
+  for (const Tally& t : tallies) need_knn |= t.sampler == PosteriorSampler::kKnn;
+  if (need_knn) {
+    knn = MakeFunctasetKnn(functaset, sensor, /*train_only=*/true, options.knn, flags.functaset);
+  }
+  std::vector<std::unique_ptr<PosePosterior>> posteriors;
+  for (const Tally& t : tallies) {
+    PosePosterior::Options o = options;
+    o.sampler = t.sampler;
+    posteriors.push_back(std::make_unique<PosePosterior>(trunk, pose_model, o, knn.posterior.get()));
+  }
+  // The point estimate's fit: the posterior's own fit settings (header comment).
+  LatentFitter::Options fit_options = options.fit;
+  fit_options.sigma = options.potential.sigma;
+  fit_options.sigma_z = options.potential.sigma_z;
+  const LatentFitter fitter(trunk, fit_options);
+  // ... and at the functaset's own latent map, K meta-SGD steps from 0 (what `encode`
+  // stores and train-pose trains on): the gap between the two is the pose MLP's
+  // sensitivity to which latent estimate it is given.
+  LatentFitter::Options meta_options = fit_options;
+  meta_options.strategy =
+      FitStrategy::FromString("meta_sgd:" + std::to_string(trunk.meta_sgd.inner_steps));
+  const LatentFitter meta_fitter(trunk, meta_options);
+
+  std::cout << "bench posterior: " << num_frames << " labelled " << ToString(sensor)
+            << " test frames of " << flags.data << ", " << flags.samples << " samples, samplers "
+            << flags.samplers << (need_knn ? ", knn over " + std::to_string(knn.size) +
+                                                 " train latents"
+                                           : "")
+            << "\n";
+  double point_position_sq = 0, point_yaw_sq = 0, meta_position_sq = 0, meta_yaw_sq = 0;
+  int point_yaw_count = 0;
+  ProgressBar bar("posterior", static_cast<std::int64_t>(num_frames) * tallies.size(), "posteriors");
+  for (std::size_t index : frames) {
+    const PoseLabel& label = *dataset.frames()[index].label;
+    const int n = SymmetryOrderOfTool(label.tool);
+    const TrunkTargets targets = LoadTrunkTargets(dataset, index, trunk.format);
+    Eigen::VectorXd latent;
+    fitter.Fit(targets, &latent);
+    const Eigen::Vector3d point = pose_model.Predict(latent, n);
+    point_position_sq += std::pow(point.x() - label.x_m, 2) + std::pow(point.y() - label.y_m, 2);
+    Eigen::VectorXd meta_latent;
+    meta_fitter.Fit(targets, &meta_latent);
+    const Eigen::Vector3d meta_point = pose_model.Predict(meta_latent, n);
+    meta_position_sq +=
+        std::pow(meta_point.x() - label.x_m, 2) + std::pow(meta_point.y() - label.y_m, 2);
+    if (n != 0) {
+      point_yaw_sq += std::pow(YawErrorModuloSymmetry(point.z(), label.yaw_rad, n), 2);
+      meta_yaw_sq += std::pow(YawErrorModuloSymmetry(meta_point.z(), label.yaw_rad, n), 2);
+      ++point_yaw_count;
+    }
+    for (std::size_t s = 0; s < tallies.size(); ++s) {
+      Tally& t = tallies[s];
+      ++t.frames;
+      std::optional<PoseDistribution> distribution;
+      const PosePosterior::Summary summary = posteriors[s]->Estimate(targets, n, &distribution);
+      t.ms.push_back(summary.total_time_ms);
+      bar.Tick();
+      if (!summary.IsSolutionUsable() || !distribution) {
+        ++t.failures;
+        std::cerr << "bench posterior: " << ToString(t.sampler) << " failed on frame "
+                  << dataset.frames()[index].id << ": " << summary.message << "\n";
+        continue;
+      }
+      const SE2d& mean = summary.mean;
+      const SE2d truth =
+          SE2d::FromXYYaw(label.x_m, label.y_m, FoldYawNear(label.yaw_rad, mean.yaw(), n));
+      t.covered_50 += distribution->Region(0.5).Contains(truth);
+      t.covered_90 += distribution->Region(0.9).Contains(truth);
+      t.position_sq += std::pow(mean.x() - label.x_m, 2) + std::pow(mean.y() - label.y_m, 2);
+      if (n != 0) {
+        t.yaw_sq += std::pow(YawErrorModuloSymmetry(mean.yaw(), label.yaw_rad, n), 2);
+        ++t.yaw_count;
+      }
+    }
+  }
+  bar.Finish();
+
+  const double point_mm = 1e3 * std::sqrt(point_position_sq / num_frames);
+  const double point_deg =
+      point_yaw_count ? kDeg * std::sqrt(point_yaw_sq / point_yaw_count) : NAN;
+  const double meta_mm = 1e3 * std::sqrt(meta_position_sq / num_frames);
+  const double meta_deg = point_yaw_count ? kDeg * std::sqrt(meta_yaw_sq / point_yaw_count) : NAN;
+  const auto band50 = BinomialBand99(num_frames, 0.5), band90 = BinomialBand99(num_frames, 0.9);
+  std::printf("%-8s %6s %4s | %-18s | %-18s | %8s %8s | %8s %8s\n", "sampler", "frames", "fail",
+              "cover 50% [99% band]", "cover 90% [99% band]", "mean mm", "mean deg", "ms med",
+              "ms p90");
+  nlohmann::json list = nlohmann::json::array();
+  for (const Tally& t : tallies) {
+    const double c50 = static_cast<double>(t.covered_50) / t.frames;
+    const double c90 = static_cast<double>(t.covered_90) / t.frames;
+    const int ok = t.frames - t.failures;
+    const double mm = ok ? 1e3 * std::sqrt(t.position_sq / ok) : NAN;
+    const double deg = t.yaw_count ? kDeg * std::sqrt(t.yaw_sq / t.yaw_count) : NAN;
+    std::printf("%-8s %6d %4d | %5.3f [%4.2f, %4.2f]%s | %5.3f [%4.2f, %4.2f]%s | %8.3f %8.2f | "
+                "%8.1f %8.1f\n",
+                ToString(t.sampler), t.frames, t.failures, c50, band50.first, band50.second,
+                (c50 < band50.first || c50 > band50.second) ? "!" : " ", c90, band90.first,
+                band90.second, (c90 < band90.first || c90 > band90.second) ? "!" : " ", mm, deg,
+                Median(t.ms), Quantile(t.ms, 0.9));
+    list.push_back({{"name", ToString(t.sampler)},
+                    {"coverage", {{"0.5", c50}, {"0.9", c90}}},
+                    {"coverage_bounds_99",
+                     {{"0.5", {band50.first, band50.second}}, {"0.9", {band90.first, band90.second}}}},
+                    {"rmse_mm", NumberOrNull(mm)},
+                    {"rmse_deg", NumberOrNull(deg)},
+                    {"ms_median", NumberOrNull(Median(t.ms))},
+                    {"ms_p90", NumberOrNull(Quantile(t.ms, 0.9))},
+                    {"failures", t.failures},
+                    {"point_rmse_mm", NumberOrNull(point_mm)},
+                    {"point_rmse_deg", NumberOrNull(point_deg)}});
+  }
+  std::printf("pose MLP point estimate g(z*), z* = the posterior's fit: %.3f mm, %.2f deg\n",
+              point_mm, point_deg);
+  std::printf("pose MLP point estimate g(z_K), z_K = %d meta-SGD steps (the functaset's latent "
+              "map): %.3f mm, %.2f deg\n",
+              trunk.meta_sgd.inner_steps, meta_mm, meta_deg);
+  std::printf("(coverage: fraction of frames whose true pose lies in the nominal region; "
+              "[band] = central 99%% range for a calibrated sampler on %d frames, '!' = outside; "
+              "RMSE of the posterior mean, yaw modulo symmetry)\n",
+              num_frames);
+  if (flags.json) {
+    EmitJson({{"bench", "posterior"},
+              {"sensor", ToString(sensor)},
+              {"samplers", list},
+              {"frames", num_frames},
+              {"point_meta_sgd_rmse_mm", NumberOrNull(meta_mm)},
+              {"point_meta_sgd_rmse_deg", NumberOrNull(meta_deg)},
+              {"samples", flags.samples},
+              {"machine", MachineDescription()}});
+  }
+}
+
+}  // namespace
+
+void RegisterPosteriorBenchmark(CLI::App* bench, CommandBody* selected) {
+  auto flags = std::make_shared<PosteriorBenchFlags>();
+  CLI::App* sub = bench->add_subcommand(
+      "posterior",
+      "Pose posteriors on a dataset's test frames: 50%/90% region coverage with 99% binomial "
+      "bands, RMSE of the mean and of the MLP point estimate, median ms per posterior.");
+  sub->add_option("--model", flags->model, "Model file (.tfm)")->required();
+  sub->add_option("--pose-model", flags->pose_model, "Pose model from `tactfunc train-pose`")
+      ->required();
+  sub->add_option("--functaset", flags->functaset,
+                  "Functaset (.tfs) of the model (knn sampler: its train latents)")
+      ->required();
+  sub->add_option("--data", flags->data, "Dataset folder with labelled test frames")->required();
+  sub->add_option("--sensor", flags->sensor, "bubble or gelslim (default bubble if present)");
+  sub->add_option("--frames", flags->frames, "First N labelled test frames (default 60)")
+      ->check(CLI::Range(1, 1000000));
+  sub->add_option("--samplers", flags->samplers, "Comma-separated (default sgld,laplace,knn)");
+  sub->add_option("--samples", flags->samples, "Pose samples per posterior (default 100)")
+      ->check(CLI::Range(1, 1000000));
+  sub->add_option("--seed", flags->seed, "Sampler seed (default 0)");
+  sub->add_option("--knn-k", flags->knn_k, "Neighbours of the knn sampler (default 8)")
+      ->check(CLI::Range(1, 100000));
+  sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
+  sub->callback([flags, selected]() { *selected = [flags]() { RunPosteriorBench(*flags); }; });
+}
+
+}  // namespace tactfunc::apps

@@ -1,0 +1,149 @@
+// Copyright 2026 The tactfunc Authors.
+#include "apps/model_inputs.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <opencv2/imgcodecs.hpp>
+#include <stdexcept>
+
+#include "apps/command.h"
+#include "estimation/file_io.h"
+#include "models/tool.h"
+#include "nlohmann/json.hpp"
+
+namespace tactfunc::apps {
+
+namespace fs = std::filesystem;
+
+SensorKind InferSensor(const std::string& path, const std::string& flag) {
+  if (!fs::is_regular_file(path)) {
+    throw DatasetError(flag + " '" + path + "': no such file");
+  }
+  const cv::Mat image = cv::imread(path, cv::IMREAD_UNCHANGED);
+  if (image.empty()) throw DatasetError(flag + " '" + path + "': not an image OpenCV can read");
+  if (image.depth() == CV_16U && image.channels() == 1) return SensorKind::kSoftBubble;
+  if (image.depth() == CV_8U) return SensorKind::kGelSlim;
+  throw DatasetError(flag + " '" + path +
+                     "': cannot infer the sensor: expected a 16-bit 1-channel image (bubble "
+                     "depth) or an 8-bit one (gelslim rgb), got " +
+                     std::to_string(image.elemSize1() * 8) + "-bit with " +
+                     std::to_string(image.channels()) + " channel(s); give --sensor");
+}
+
+Image ReadInput(const std::string& path, SensorKind sensor, const std::string& flag) {
+  if (!fs::is_regular_file(path)) throw DatasetError(flag + " '" + path + "': no such file");
+  try {
+    return ReadImage(path, SensorEncoding(sensor));
+  } catch (const DatasetError& e) {
+    throw DatasetError(flag + " (" + ToString(sensor) + "): " + e.what());
+  }
+}
+
+std::string Shape(const Image& image) {
+  return std::to_string(image.rows) + "x" + std::to_string(image.cols) + "x" +
+         std::to_string(image.channels);
+}
+
+bool ParseSensorFlag(const std::string& text, SensorKind* sensor) {
+  if (text.empty()) return false;
+  if (!SensorKindFromString(text, sensor)) {
+    throw UsageError("--sensor: expected bubble or gelslim, got '" + text + "'");
+  }
+  return true;
+}
+
+int SymmetryOrderOfTool(const std::string& name, bool* known) {
+  if (known != nullptr) *known = false;
+  if (name.empty()) return 1;
+  try {
+    const int n = GetTool(name).symmetry_order();
+    if (known != nullptr) *known = true;
+    return n;
+  } catch (const std::invalid_argument&) {
+    return 1;
+  }
+}
+
+double DatasetPixelPitch(const std::string& frame_path, SensorKind sensor) {
+  std::error_code ec;
+  const fs::path root = fs::absolute(frame_path, ec).parent_path().parent_path();
+  if (ec || !fs::is_regular_file(root / "dataset.json")) return 0;
+  try {
+    const Dataset dataset = Dataset::Open(root.string());
+    return dataset.has_sensor(sensor) ? dataset.sensor_info(sensor).pixel_pitch_m : 0;
+  } catch (const std::exception&) {
+    return 0;  // not a dataset we can read: the pitch stays unknown
+  }
+}
+
+FunctasetKnn MakeFunctasetKnn(const Functaset& functaset, SensorKind sensor, bool train_only,
+                              const KnnPosterior::Options& options,
+                              const std::string& functaset_name) {
+  if (!functaset.has_sensor(sensor)) {
+    throw DatasetError("--functaset '" + functaset_name + "' has no " + ToString(sensor) +
+                       " latents (the knn sampler searches them)");
+  }
+  const std::optional<Split> split =
+      train_only ? std::optional<Split>(Split::kTrain) : std::nullopt;
+  const Functaset::LatentMatrix latents = functaset.Latents(sensor, split);
+  std::vector<std::optional<SE2d>> poses = KnnPosterior::PosesOf(functaset, sensor, split);
+  int labelled = 0;
+  for (const auto& pose : poses) labelled += pose.has_value();
+  if (labelled == 0) {
+    throw DatasetError("--functaset '" + functaset_name + "' has no labelled " +
+                       std::string(train_only ? "train-split " : "") + ToString(sensor) +
+                       " entries: the knn sampler needs labelled poses");
+  }
+  // Unlabelled neighbours are skipped, not replaced (samplers/knn_posterior.h): ask the
+  // index for k plus the number of unlabelled entries, so k labelled ones always come back.
+  KnnPosterior::Options knn_options = options;
+  const int unlabelled = static_cast<int>(poses.size()) - labelled;
+  knn_options.search_k =
+      std::min<int>(static_cast<int>(poses.size()), std::max(options.k, options.search_k) + unlabelled);
+  knn_options.search_k = std::max(knn_options.search_k, knn_options.k);
+  FunctasetKnn knn;
+  knn.index = std::make_unique<BruteForceKnnIndex>(static_cast<int>(latents.cols()));
+  knn.index->Add(latents.data(), latents.rows());
+  knn.posterior = std::make_unique<KnnPosterior>(*knn.index, std::move(poses), knn_options);
+  knn.size = static_cast<int>(latents.rows());
+  return knn;
+}
+
+PoseMlp LoadPoseModelFor(const std::string& path, const FunctaModel& model, SensorKind sensor,
+                         const std::string& model_path) {
+  if (!fs::is_regular_file(path)) throw DatasetError("--pose-model '" + path + "': no such file");
+  PoseMlp pose = PoseMlp::Load(path);
+  const int latent_dim = model.Trunk(sensor).siren.latent_dim();
+  if (pose.input_dim() != latent_dim) {
+    throw DatasetError("--pose-model '" + path + "' takes " + std::to_string(pose.input_dim()) +
+                       "-dimensional latents but the " + ToString(sensor) + " trunk of --model '" +
+                       model_path + "' has latent dimension " + std::to_string(latent_dim));
+  }
+  const nlohmann::json info = nlohmann::json::parse(pose.info_json(), nullptr, false);
+  if (info.is_object() && info.contains("sensor") && info["sensor"].is_string() &&
+      info["sensor"].get<std::string>() != ToString(sensor)) {
+    throw DatasetError("--pose-model '" + path + "' was trained on " +
+                       info["sensor"].get<std::string>() + " latents, but the frame is " +
+                       ToString(sensor) + " (give --sensor or the matching pose model)");
+  }
+  if (info.is_object() && info.contains("model_checksum") &&
+      info["model_checksum"].is_number_unsigned() &&
+      info["model_checksum"].get<std::uint32_t>() != model.checksum()) {
+    char buffer[128];
+    std::snprintf(buffer, sizeof(buffer), "0x%08x, but --model has 0x%08x",
+                  info["model_checksum"].get<std::uint32_t>(), model.checksum());
+    throw DatasetError("--pose-model '" + path + "' was trained on latents of model checksum " +
+                       buffer + " ('" + model_path + "'): its latent space is another");
+  }
+  return pose;
+}
+
+double FoldYawNear(double yaw, double reference_yaw, int symmetry_order) {
+  if (symmetry_order == 0) return 0;
+  const double period = 2 * M_PI / symmetry_order;
+  return reference_yaw + std::remainder(yaw - reference_yaw, period);
+}
+
+}  // namespace tactfunc::apps

@@ -1,0 +1,69 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// Inputs the model-using subcommands share (fit, pose, bench posterior): reading one
+// frame and its reference from the command line (sensor inferred from the file as
+// Dataset::Open infers a user folder's), the symmetry order of a tool by name, and the
+// k-NN pose posterior over a functaset's labelled training latents.
+#ifndef TACTFUNC_APPS_MODEL_INPUTS_H_
+#define TACTFUNC_APPS_MODEL_INPUTS_H_
+
+#include <memory>
+#include <string>
+
+#include "estimation/dataset.h"
+#include "estimation/functaset.h"
+#include "estimation/knn_index.h"
+#include "models/functa_model.h"
+#include "models/image.h"
+#include "models/pose_mlp.h"
+#include "models/sensor.h"
+#include "samplers/knn_posterior.h"
+
+namespace tactfunc::apps {
+
+// The sensor of an image file: 16-bit one-channel = bubble, 8-bit = gelslim. Throws
+// DatasetError naming `flag` and the path if the file is missing, unreadable or neither.
+SensorKind InferSensor(const std::string& path, const std::string& flag);
+// The image at `path` in `sensor`'s on-disk encoding; throws DatasetError naming `flag`.
+Image ReadInput(const std::string& path, SensorKind sensor, const std::string& flag);
+// "rows x cols x channels" of an image.
+std::string Shape(const Image& image);
+// Parses --sensor (empty = not given: returns false); throws UsageError for a bad name.
+bool ParseSensorFlag(const std::string& text, SensorKind* sensor);
+
+// The symmetry order n of tool `name` (models/tool.h); 1 for an unknown or empty name
+// (nothing is folded). *known (optional) says whether the name was a known tool.
+int SymmetryOrderOfTool(const std::string& name, bool* known = nullptr);
+
+// Pixel pitch (m) of `sensor` in the tactfunc dataset a frame file lies in
+// (<dataset>/<sensor>/<id>.png with <dataset>/dataset.json), or 0 if it is not in one.
+double DatasetPixelPitch(const std::string& frame_path, SensorKind sensor);
+
+// A k-NN pose posterior over the labelled latents of one sensor of a functaset, with
+// the brute-force index it searches (exact; copying the latents is the whole build, so
+// it is built in memory rather than cached beside the functaset as fit's FLANN indexes
+// are). Only the TRAIN split by default: a test frame must not find its own labelled
+// entry (that would make bench posterior's k-NN coverage meaningless).
+struct FunctasetKnn {
+  std::unique_ptr<BruteForceKnnIndex> index;
+  std::unique_ptr<KnnPosterior> posterior;
+  int size = 0;  // latents in the index
+};
+FunctasetKnn MakeFunctasetKnn(const Functaset& functaset, SensorKind sensor, bool train_only,
+                              const KnnPosterior::Options& options,
+                              const std::string& functaset_name);
+
+// Loads a pose model (--pose-model) for the trunk of `sensor` in `model`: throws
+// DatasetError naming the file when its input dimension is not the trunk's latent
+// dimension, or when its info (written by train-pose) names another sensor or a
+// functaset of another model checksum (a latent space it was not trained on).
+PoseMlp LoadPoseModelFor(const std::string& path, const FunctaModel& model, SensorKind sensor,
+                         const std::string& model_path);
+
+// The truth's yaw as the representative modulo 2 pi / n nearest `reference_yaw` (what a
+// folded posterior is compared with); 0 for n = 0.
+double FoldYawNear(double yaw, double reference_yaw, int symmetry_order);
+
+}  // namespace tactfunc::apps
+
+#endif  // TACTFUNC_APPS_MODEL_INPUTS_H_

@@ -1,0 +1,579 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// tactfunc pose: the in-hand pose posterior of ONE tactile frame (Sec. III-C/D, IV-C of
+// "Tactile Functasets"; samplers/pose_posterior.h):
+//
+//   tactfunc pose --model M.tfm --pose-model P.tpm --frame F.png --reference R.png
+//       --sampler sgld --samples 100 --out DIR [--tool NAME] [--json]
+//   tactfunc pose --model M.tfm --pose-model P.tpm --data D --id 000010 --tool rod ...
+//   tactfunc pose ... --sampler knn --functaset F.tfs
+//
+// Prints the posterior mean (x mm, y mm, yaw deg), the 3x3 covariance in the tangent
+// space at the mean (right perturbations, order x [m], y [m], yaw [rad]) and the nine
+// non-zero entries of ROS's 6x6 PoseWithCovariance covariance (parent frame). Writes
+// DIR/posterior.json and DIR/posterior.png: the samples (dots with heading ticks) over
+// the contact (difference) image in the sensor frame, a zoom on the samples with the
+// 90% Gaussian x-y ellipse, and a yaw histogram; the mean, the modes, and the truth
+// when it is known (--data/--id with a labelled frame).
+//
+// Frames: --frame/--reference (sensor inferred as `tactfunc fit` does) or --data D
+// --id ID (a dataset frame: the pixel pitch, label and tool come from the dataset).
+// The pixel pitch places the samples on the image: --pixel-pitch-mm, else the
+// dataset.json of the dataset the frame file lies in; unknown -> no image panel.
+// The tool (--tool, else the label's) gives the symmetry order by which the samples
+// are folded; an unknown or absent tool gets n = 1 (nothing folded).
+//
+// The knn sampler searches the functaset's labelled TRAIN-split latents (a brute-force
+// index built in memory, apps/model_inputs.h), so that a test frame cannot find itself.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <memory>
+#include <opencv2/imgproc.hpp>
+#include <optional>
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
+
+#include "apps/command.h"
+#include "apps/model_inputs.h"
+#include "apps/pictures.h"
+#include "estimation/dataset.h"
+#include "estimation/functaset.h"
+#include "estimation/trunk_targets.h"
+#include "models/file_util.h"
+#include "models/functa_model.h"
+#include "models/tool.h"
+#include "samplers/pose_posterior.h"
+
+namespace tactfunc::apps {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct PoseFlags {
+  std::string model;
+  std::string pose_model;
+  std::string functaset;
+  std::string frame;
+  std::string reference;
+  std::string data;
+  std::string id;
+  std::string sensor;
+  std::string tool;
+  std::string sampler = "sgld";
+  int samples = 100;
+  std::uint64_t seed = 0;
+  int knn_k = 8;
+  double pixel_pitch_mm = 0;
+  std::string out;
+  int height = 420;
+  bool json = false;
+};
+
+constexpr double kDeg = 180.0 / M_PI;
+const cv::Scalar kBackground(32, 32, 32);
+const cv::Scalar kSampleColour(0, 165, 255);  // orange (BGR)
+const cv::Scalar kMeanColour(255, 255, 0);    // cyan
+const cv::Scalar kTruthColour(80, 255, 80);   // green
+const cv::Scalar kModeColour(255, 80, 255);   // magenta
+
+std::string Fixed(double value, int digits) {
+  if (!std::isfinite(value)) return "n/a";
+  char buffer[48];
+  std::snprintf(buffer, sizeof(buffer), "%.*f", digits, value);
+  return buffer;
+}
+
+// A frame to estimate: its trunk targets, its contact image and what is known about it.
+struct Input {
+  SensorKind sensor = SensorKind::kSoftBubble;
+  Image difference;     // frame - reference, physical units
+  double pitch_m = 0;   // 0 = unknown
+  std::optional<PoseLabel> label;
+  std::string name;     // for titles
+};
+
+Image Difference(const Image& frame, const Image& reference) {
+  Image d = frame;
+  for (std::size_t i = 0; i < d.data.size(); ++i) d.data[i] -= reference.data[i];
+  return d;
+}
+
+// ---- The picture -------------------------------------------------------------------------
+
+// Maps sensor-frame metres to pixels of a panel.
+struct View {
+  double x0 = 0, y0 = 0;    // metres at the panel's centre
+  double px_per_m = 1;
+  int width = 0, height = 0;
+  cv::Point2d operator()(double x, double y) const {
+    return {width / 2.0 + (x - x0) * px_per_m, height / 2.0 - (y - y0) * px_per_m};
+  }
+};
+
+cv::Point Fix(cv::Point2d p) {
+  return cv::Point(static_cast<int>(std::lround(p.x * 16)), static_cast<int>(std::lround(p.y * 16)));
+}
+
+void DrawSamples(cv::Mat& panel, const View& view, const PoseDistribution& d, double tick_px) {
+  const double max_weight = *std::max_element(d.weights().begin(), d.weights().end());
+  for (int i = 0; i < d.size(); ++i) {
+    const SE2d& s = d.samples()[i];
+    const cv::Point2d p = view(s.x(), s.y());
+    const cv::Point2d q(p.x + tick_px * std::cos(s.yaw()), p.y - tick_px * std::sin(s.yaw()));
+    // Weighted (knn) samples: the dot's area follows the weight.
+    const double radius = 1.5 + 2.5 * std::sqrt(d.weights()[i] / max_weight);
+    cv::line(panel, Fix(p), Fix(q), kSampleColour, 1, cv::LINE_AA, 4);
+    cv::circle(panel, Fix(p), static_cast<int>(radius * 16), kSampleColour, cv::FILLED,
+               cv::LINE_AA, 4);
+  }
+}
+
+void DrawArrow(cv::Mat& panel, cv::Point2d p, double yaw, double length, const cv::Scalar& colour) {
+  const cv::Point2d q(p.x + length * std::cos(yaw), p.y - length * std::sin(yaw));
+  cv::arrowedLine(panel, Fix(p), Fix(q), cv::Scalar(0, 0, 0), 4, cv::LINE_AA, 4, 0.25);
+  cv::arrowedLine(panel, Fix(p), Fix(q), colour, 2, cv::LINE_AA, 4, 0.25);
+  cv::circle(panel, Fix(p), 5 * 16, cv::Scalar(0, 0, 0), 3, cv::LINE_AA, 4);
+  cv::circle(panel, Fix(p), 5 * 16, colour, 2, cv::LINE_AA, 4);
+}
+
+void DrawModes(cv::Mat& panel, const View& view, const std::vector<PoseMode>& modes) {
+  for (std::size_t k = 0; k < modes.size() && k < 5; ++k) {
+    const cv::Point p(view(modes[k].mean.x(), modes[k].mean.y()));
+    cv::drawMarker(panel, p, cv::Scalar(0, 0, 0), cv::MARKER_TILTED_CROSS, 16, 4, cv::LINE_AA);
+    cv::drawMarker(panel, p, kModeColour, cv::MARKER_TILTED_CROSS, 16, 2, cv::LINE_AA);
+    PutLabel(panel, Fixed(100 * modes[k].weight, 0) + "%", p + cv::Point(8, -8), 0.4, kModeColour);
+  }
+}
+
+// The 90% ellipse of the Gaussian x-y marginal, in the sensor frame: the tangent
+// (body-frame) x-y block rotated by the mean's yaw.
+void DrawEllipse(cv::Mat& panel, const View& view, const SE2d& mean, const Eigen::Matrix3d& cov) {
+  const Eigen::Matrix2d r = Eigen::Rotation2Dd(mean.yaw()).toRotationMatrix();
+  const Eigen::Matrix2d c = r * cov.topLeftCorner<2, 2>() * r.transpose();
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(c);
+  const double chi2_90 = 4.605170185988091;  // chi-square, 2 dof, p = 0.9
+  std::vector<cv::Point> points;
+  for (int k = 0; k <= 72; ++k) {
+    const double t = 2 * M_PI * k / 72;
+    const Eigen::Vector2d u(std::cos(t), std::sin(t));
+    const Eigen::Vector2d v = eig.eigenvectors() *
+                              (eig.eigenvalues().cwiseMax(0).cwiseSqrt() * std::sqrt(chi2_90))
+                                  .cwiseProduct(u);
+    points.push_back(Fix(view(mean.x() + v.x(), mean.y() + v.y())));
+  }
+  cv::polylines(panel, points, false, kMeanColour, 1, cv::LINE_AA, 4);
+}
+
+double NiceStep(double span) {
+  const double raw = span / 5;
+  const double p = std::pow(10.0, std::floor(std::log10(raw)));
+  for (double m : {1.0, 2.0, 5.0, 10.0}) {
+    if (m * p >= raw) return m * p;
+  }
+  return 10 * p;
+}
+
+void DrawGrid(cv::Mat& panel, const View& view, double half_m) {
+  const double step = NiceStep(2 * half_m);
+  const double lo_x = view.x0 - half_m * 1.2, hi_x = view.x0 + half_m * 1.2;
+  const double lo_y = view.y0 - half_m * 1.2, hi_y = view.y0 + half_m * 1.2;
+  const int digits = step * 1e3 >= 1 ? 0 : (step * 1e3 >= 0.1 ? 1 : 2);
+  for (double x = std::ceil(lo_x / step) * step; x <= hi_x; x += step) {
+    const int c = static_cast<int>(std::lround(view(x, 0).x));
+    cv::line(panel, {c, 0}, {c, panel.rows}, cv::Scalar(70, 70, 70), 1);
+    PutLabel(panel, Fixed(x * 1e3, digits), {c + 2, panel.rows - 6}, 0.35,
+             cv::Scalar(200, 200, 200));
+  }
+  for (double y = std::ceil(lo_y / step) * step; y <= hi_y; y += step) {
+    const int r = static_cast<int>(std::lround(view(0, y).y));
+    cv::line(panel, {0, r}, {panel.cols, r}, cv::Scalar(70, 70, 70), 1);
+    PutLabel(panel, Fixed(y * 1e3, digits), {3, r - 3}, 0.35, cv::Scalar(200, 200, 200));
+  }
+}
+
+cv::Mat Caption(int width, const std::string& text) {
+  cv::Mat cell(24, width, CV_8UC3, kBackground);
+  PutLabel(cell, text, {6, 17}, 0.45);
+  return cell;
+}
+
+cv::Mat YawHistogram(int width, int height, const PoseDistribution& d, const SE2d& mean,
+                     const std::optional<double>& truth_yaw, int n) {
+  cv::Mat panel(height, width, CV_8UC3, cv::Scalar(24, 24, 24));
+  if (n == 0) {
+    PutLabel(panel, "yaw unobservable (continuous symmetry, n = 0)", {10, height / 2}, 0.5);
+    return panel;
+  }
+  // Folded yaws lie within pi/n of the mean (FoldedBySymmetry): show [mean - pi/n, mean + pi/n].
+  const double half = M_PI / n, lo = mean.yaw() - half;
+  const int bins = 48, left = 40, right = 10, top = 10, bottom = 28;
+  std::vector<double> mass(bins, 0);
+  for (int i = 0; i < d.size(); ++i) {
+    const double yaw = FoldYawNear(d.samples()[i].yaw(), mean.yaw(), n);
+    const int b = std::clamp(static_cast<int>((yaw - lo) / (2 * half) * bins), 0, bins - 1);
+    mass[b] += d.weights()[i];
+  }
+  const double peak = std::max(1e-12, *std::max_element(mass.begin(), mass.end()));
+  const double plot_w = width - left - right, plot_h = height - top - bottom;
+  auto x_of = [&](double yaw) { return left + (yaw - lo) / (2 * half) * plot_w; };
+  for (int b = 0; b < bins; ++b) {
+    const int x0 = static_cast<int>(left + plot_w * b / bins);
+    const int x1 = static_cast<int>(left + plot_w * (b + 1) / bins) - 1;
+    const int y0 = static_cast<int>(top + plot_h * (1 - mass[b] / peak));
+    if (mass[b] > 0) {
+      cv::rectangle(panel, {x0, y0}, {x1, top + static_cast<int>(plot_h)}, kSampleColour, cv::FILLED);
+    }
+  }
+  cv::line(panel, {left, top + static_cast<int>(plot_h)}, {width - right, top + static_cast<int>(plot_h)},
+           cv::Scalar(200, 200, 200), 1);
+  for (int k = 0; k <= 4; ++k) {
+    const double yaw = lo + 2 * half * k / 4;
+    const int x = static_cast<int>(x_of(yaw));
+    cv::line(panel, {x, top + static_cast<int>(plot_h)}, {x, top + static_cast<int>(plot_h) + 4},
+             cv::Scalar(200, 200, 200), 1);
+    PutLabel(panel, Fixed(yaw * kDeg, 1), {std::min(x - 14, width - 46), height - 8}, 0.38,
+             cv::Scalar(200, 200, 200));
+  }
+  auto vline = [&](double yaw, const cv::Scalar& colour) {
+    const int x = static_cast<int>(x_of(yaw));
+    cv::line(panel, {x, top}, {x, top + static_cast<int>(plot_h)}, colour, 2, cv::LINE_AA);
+  };
+  vline(mean.yaw(), kMeanColour);
+  if (truth_yaw) vline(FoldYawNear(*truth_yaw, mean.yaw(), n), kTruthColour);
+  PutLabel(panel, "yaw (deg)", {4, top + 12}, 0.4);
+  return panel;
+}
+
+void WritePosteriorPicture(const std::string& path, const Input& input, const PoseDistribution& d,
+                           const PosePosterior::Summary& s, const std::vector<PoseMode>& modes,
+                           int height, const std::string& sampler) {
+  const int n = s.symmetry_order;
+  std::optional<SE2d> truth;
+  if (input.label) {
+    truth = SE2d::FromXYYaw(input.label->x_m, input.label->y_m,
+                            FoldYawNear(input.label->yaw_rad, s.mean.yaw(), n));
+  }
+  // Sample spread for the zoom and the tick length.
+  double spread = 0;
+  for (const SE2d& p : d.samples()) {
+    spread = std::max({spread, std::abs(p.x() - s.mean.x()), std::abs(p.y() - s.mean.y())});
+  }
+  std::vector<cv::Mat> panels, captions;
+
+  // Panel 1: the contact image in the sensor frame.
+  if (input.pitch_m > 0) {
+    double scale = 0;
+    for (float v : input.difference.data) {
+      if (std::isfinite(v)) scale = std::max<double>(scale, std::abs(v));
+    }
+    cv::Mat image = FitHeight(DifferenceTile(input.difference, scale), height);
+    View view;
+    view.width = image.cols;
+    view.height = image.rows;
+    view.px_per_m = image.rows / (input.difference.rows * input.pitch_m);
+    DrawSamples(image, view, d, 8);
+    DrawModes(image, view, modes);
+    if (truth) DrawArrow(image, view(truth->x(), truth->y()), truth->yaw(), 0.18 * height, kTruthColour);
+    DrawArrow(image, view(s.mean.x(), s.mean.y()), s.mean.yaw(), 0.18 * height, kMeanColour);
+    // A 5 mm scale bar.
+    const int bar = static_cast<int>(std::lround(5e-3 * view.px_per_m));
+    cv::rectangle(image, {4, image.rows - 26}, {bar + 60, image.rows - 2}, cv::Scalar(24, 24, 24),
+                  cv::FILLED);
+    cv::line(image, {10, image.rows - 12}, {10 + bar, image.rows - 12}, cv::Scalar(255, 255, 255), 3);
+    PutLabel(image, "5 mm", {14 + bar, image.rows - 8}, 0.4);
+    captions.push_back(Caption(image.cols, "contact image, sensor frame (x right, y up)"));
+    panels.push_back(image);
+  }
+
+  // Panel 2: zoom on the samples, with a millimetre grid.
+  {
+    double half = std::max({3 * std::sqrt(std::max(s.covariance(0, 0), s.covariance(1, 1))),
+                            1.1 * spread, 2e-4});
+    if (truth) {
+      half = std::max({half, 1.2 * std::abs(truth->x() - s.mean.x()),
+                       1.2 * std::abs(truth->y() - s.mean.y())});
+    }
+    cv::Mat zoom(height, height, CV_8UC3, cv::Scalar(24, 24, 24));
+    View view;
+    view.x0 = s.mean.x();
+    view.y0 = s.mean.y();
+    view.width = view.height = height;
+    view.px_per_m = height / (2.2 * half);
+    DrawGrid(zoom, view, half);
+    DrawEllipse(zoom, view, s.mean, s.covariance);
+    DrawSamples(zoom, view, d, 14);
+    DrawModes(zoom, view, modes);
+    if (truth) DrawArrow(zoom, view(truth->x(), truth->y()), truth->yaw(), 0.12 * height, kTruthColour);
+    DrawArrow(zoom, view(s.mean.x(), s.mean.y()), s.mean.yaw(), 0.12 * height, kMeanColour);
+    captions.push_back(Caption(zoom.cols, "zoom: x, y in mm; ellipse = 90% (Gaussian x-y)"));
+    panels.push_back(zoom);
+  }
+  int total_width = 4;
+  for (const cv::Mat& p : panels) total_width += p.cols + 4;
+  total_width -= 8;
+  const std::optional<double> truth_yaw =
+      input.label ? std::optional<double>(input.label->yaw_rad) : std::nullopt;
+  const cv::Mat histogram = YawHistogram(total_width, 150, d, s.mean, truth_yaw, n);
+
+  const std::string headline =
+      std::string(ToString(input.sensor)) + "  " + input.name + "  " + sampler + ": " +
+      std::to_string(d.size()) + " samples, " + Fixed(s.total_time_ms, 1) + " ms, n = " +
+      std::to_string(n) + "  mean x " + Fixed(s.mean.x() * 1e3, 2) + " mm, y " +
+      Fixed(s.mean.y() * 1e3, 2) + " mm, yaw " + Fixed(s.mean.yaw() * kDeg, 1) + " deg";
+  std::string legend = "orange: samples (tick = heading)   cyan: mean   magenta: modes";
+  if (truth) {
+    legend += "   green: truth (" + Fixed(truth->x() * 1e3, 2) + ", " + Fixed(truth->y() * 1e3, 2) +
+              " mm, " + Fixed(truth->yaw() * kDeg, 1) + " deg)";
+  }
+  const int title_width = std::max(total_width, 760);
+  cv::Mat title(46, title_width, CV_8UC3, kBackground);
+  PutLabel(title, headline, {6, 18}, 0.45);
+  PutLabel(title, legend, {6, 39}, 0.42);
+  WritePicture(path, TileGrid({{title}, captions, panels,
+                               {Caption(total_width, "yaw histogram (deg, folded by the symmetry)")},
+                               {histogram}}));
+}
+
+// ---- The command ---------------------------------------------------------------------------
+
+nlohmann::json PoseJson(const SE2d& pose) {
+  return {{"x_m", pose.x()}, {"y_m", pose.y()}, {"yaw_rad", pose.yaw()}};
+}
+
+nlohmann::json MatrixJson(const Eigen::Matrix3d& m) {
+  nlohmann::json rows = nlohmann::json::array();
+  for (int r = 0; r < 3; ++r) rows.push_back({m(r, 0), m(r, 1), m(r, 2)});
+  return rows;
+}
+
+void RunPose(const PoseFlags& flags) {
+  PosteriorSampler sampler;
+  if (!PosteriorSamplerFromString(flags.sampler, &sampler)) {
+    throw UsageError("--sampler: expected sgld, laplace or knn, got '" + flags.sampler + "'");
+  }
+  const bool from_data = !flags.data.empty() || !flags.id.empty();
+  const bool from_files = !flags.frame.empty() || !flags.reference.empty();
+  if (from_data == from_files) {
+    throw UsageError("give either --frame and --reference, or --data and --id");
+  }
+  if (from_data && (flags.data.empty() || flags.id.empty())) {
+    throw UsageError("--data and --id go together (the frame <id> of dataset <data>)");
+  }
+  if (from_files && (flags.frame.empty() || flags.reference.empty())) {
+    throw UsageError("--frame and --reference go together");
+  }
+  if (sampler == PosteriorSampler::kKnn && flags.functaset.empty()) {
+    throw UsageError("--sampler knn needs --functaset (its labelled latents are the samples)");
+  }
+
+  const FunctaModel model = FunctaModel::Load(flags.model);
+  Input input;
+  TrunkTargets targets;
+  SensorKind sensor;
+  const bool sensor_given = ParseSensorFlag(flags.sensor, &sensor);
+  if (from_data) {
+    const Dataset dataset = Dataset::Open(flags.data);
+    if (!sensor_given) {
+      sensor = dataset.has_sensor(SensorKind::kSoftBubble) ? SensorKind::kSoftBubble
+                                                           : dataset.sensors().at(0);
+    }
+    const std::optional<std::size_t> index = dataset.FindFrame(flags.id, sensor);
+    if (!index) {
+      throw DatasetError("--id '" + flags.id + "': dataset '" + flags.data + "' has no " +
+                         ToString(sensor) + " frame of that id");
+    }
+    if (!model.HasSensor(sensor)) {
+      throw DatasetError("--model '" + flags.model + "' has no trunk for sensor " +
+                         ToString(sensor));
+    }
+    targets = LoadTrunkTargets(dataset, *index, model.Trunk(sensor).format);
+    input.difference = Difference(dataset.LoadFrame(*index), dataset.Reference(sensor));
+    input.pitch_m = dataset.sensor_info(sensor).pixel_pitch_m;
+    input.label = dataset.frames()[*index].label;
+    input.name = "frame " + flags.id;
+  } else {
+    if (!sensor_given) sensor = InferSensor(flags.frame, "--frame");
+    const Image frame = ReadInput(flags.frame, sensor, "--frame");
+    const Image reference = ReadInput(flags.reference, sensor, "--reference");
+    if (!frame.SameShape(reference)) {
+      throw DatasetError("--reference '" + flags.reference + "' is " + Shape(reference) +
+                         " (rows x cols x channels) but --frame '" + flags.frame + "' is " +
+                         Shape(frame) + "; they must be of the same sensor and size");
+    }
+    if (!model.HasSensor(sensor)) {
+      throw DatasetError("--model '" + flags.model + "' has no trunk for sensor " +
+                         ToString(sensor) + "; the frame '" + flags.frame + "' was read as " +
+                         ToString(sensor));
+    }
+    targets = MakeTrunkTargets(frame, reference, sensor, model.Trunk(sensor).format);
+    input.difference = Difference(frame, reference);
+    input.pitch_m = DatasetPixelPitch(flags.frame, sensor);
+    input.name = fs::path(flags.frame).filename().string();
+  }
+  if (flags.pixel_pitch_mm > 0) input.pitch_m = flags.pixel_pitch_mm * 1e-3;
+  input.sensor = sensor;
+  const PoseMlp pose_model = LoadPoseModelFor(flags.pose_model, model, sensor, flags.model);
+
+  std::string tool = flags.tool;
+  if (tool.empty() && input.label) tool = input.label->tool;
+  bool known = false;
+  const int n = SymmetryOrderOfTool(tool, &known);
+  if (!tool.empty() && !known) {
+    std::cerr << "pose: warning: unknown tool '" << tool
+              << "': symmetry order 1 assumed (nothing folded)\n";
+  }
+
+  PosePosterior::Options options;
+  options.sampler = sampler;
+  options.num_samples = flags.samples;
+  options.seed = flags.seed;
+  options.knn.k = flags.knn_k;
+  std::string error;
+  if (!options.IsValid(&error)) throw UsageError(error);
+  FunctasetKnn knn;
+  if (sampler == PosteriorSampler::kKnn) {
+    const Functaset functaset = Functaset::Load(flags.functaset);
+    functaset.CheckModel(model, flags.model, flags.functaset);
+    knn = MakeFunctasetKnn(functaset, sensor, /*train_only=*/true, options.knn, flags.functaset);
+  }
+  const PosePosterior posterior(model.Trunk(sensor), pose_model, options, knn.posterior.get());
+  std::optional<PoseDistribution> distribution;
+  const PosePosterior::Summary summary = posterior.Estimate(targets, n, &distribution);
+  std::cout << summary.BriefReport() << "\n";
+  if (!summary.IsSolutionUsable() || !distribution) {
+    throw std::runtime_error("the " + flags.sampler + " posterior failed: " + summary.message);
+  }
+
+  const SE2d& mean = summary.mean;
+  const Eigen::Matrix3d& cov = summary.covariance;
+  std::printf("pose: %s %s, tool %s (n = %d), %d samples in %.1f ms\n", ToString(sensor),
+              input.name.c_str(), tool.empty() ? "unknown" : tool.c_str(), n, summary.num_samples,
+              summary.total_time_ms);
+  std::printf("pose: mean x = %.3f mm, y = %.3f mm, yaw = %.2f deg (sensor_T_object)\n",
+              mean.x() * 1e3, mean.y() * 1e3, mean.yaw() * kDeg);
+  std::printf("pose: sd   x = %.3f mm, y = %.3f mm, yaw = %.2f deg\n",
+              std::sqrt(cov(0, 0)) * 1e3, std::sqrt(cov(1, 1)) * 1e3, std::sqrt(cov(2, 2)) * kDeg);
+  if (input.label) {
+    const double e_mm = 1e3 * std::hypot(mean.x() - input.label->x_m, mean.y() - input.label->y_m);
+    std::printf("pose: truth x = %.3f mm, y = %.3f mm, yaw = %.2f deg; error %.3f mm, %.2f deg\n",
+                input.label->x_m * 1e3, input.label->y_m * 1e3, input.label->yaw_rad * kDeg, e_mm,
+                YawErrorModuloSymmetry(mean.yaw(), input.label->yaw_rad, n) * kDeg);
+  }
+  std::printf("pose: covariance, tangent space at the mean (right perturbations), "
+              "order x [m], y [m], yaw [rad]:\n");
+  for (int r = 0; r < 3; ++r) {
+    std::printf("  [% .4e  % .4e  % .4e]\n", cov(r, 0), cov(r, 1), cov(r, 2));
+  }
+  const std::array<double, 36> ros = ToRosPoseCovariance(mean, cov);
+  std::printf("pose: ROS PoseWithCovariance.covariance (6x6 row-major over x, y, z, roll, pitch, "
+              "yaw; parent frame, x-y rotated by the mean yaw; others 0):\n ");
+  for (int i : {0, 1, 5, 6, 7, 11, 30, 31, 35}) std::printf(" [%d] %.4e", i, ros[i]);
+  std::printf("\n");
+
+  const std::vector<PoseMode> modes = distribution->Modes();
+  if (!flags.out.empty()) {
+    fs::create_directories(flags.out);
+    nlohmann::json samples = nlohmann::json::array();
+    for (int i = 0; i < distribution->size(); ++i) {
+      const SE2d& p = distribution->samples()[i];
+      samples.push_back({p.x(), p.y(), p.yaw(), distribution->weights()[i]});
+    }
+    nlohmann::json mode_list = nlohmann::json::array();
+    for (const PoseMode& m : modes) {
+      mode_list.push_back({{"weight", m.weight}, {"mean", PoseJson(m.mean)},
+                           {"covariance", MatrixJson(m.covariance)}, {"num_samples", m.num_samples}});
+    }
+    nlohmann::json record = {
+        {"sensor", ToString(sensor)},
+        {"sampler", ToString(sampler)},
+        {"tool", tool},
+        {"symmetry_order", n},
+        {"mean", PoseJson(mean)},
+        {"covariance", MatrixJson(cov)},
+        {"covariance_convention",
+         "tangent space at the mean, right perturbations, order x (m), y (m), yaw (rad)"},
+        {"ros_covariance", ros},
+        {"samples_columns", {"x_m", "y_m", "yaw_rad", "weight"}},
+        {"samples", samples},
+        {"modes", mode_list},
+        {"ms", summary.total_time_ms},
+        {"termination", ToString(summary.termination_type)},
+        {"message", summary.message},
+        {"model", flags.model},
+        {"pose_model", flags.pose_model}};
+    if (input.label) {
+      record["truth"] = {{"x_m", input.label->x_m}, {"y_m", input.label->y_m},
+                         {"yaw_rad", input.label->yaw_rad}, {"tool", input.label->tool}};
+    }
+    const std::string json_path = (fs::path(flags.out) / "posterior.json").string();
+    const std::string png_path = (fs::path(flags.out) / "posterior.png").string();
+    WriteFileAtomically(json_path, record.dump(1) + "\n");
+    WritePosteriorPicture(png_path, input, *distribution, summary, modes, flags.height,
+                          ToString(sampler));
+    std::cout << "pose: wrote " << json_path << " and " << png_path
+              << (input.pitch_m > 0 ? "" : " (pixel pitch unknown: no image panel; give "
+                                           "--pixel-pitch-mm)")
+              << "\n";
+  }
+  if (flags.json) {
+    nlohmann::json j = {{"mean", PoseJson(mean)},
+                        {"covariance", MatrixJson(cov)},
+                        {"ms", summary.total_time_ms},
+                        {"sampler", ToString(sampler)},
+                        {"samples", summary.num_samples},
+                        {"symmetry_order", n},
+                        {"sensor", ToString(sensor)},
+                        {"termination", ToString(summary.termination_type)}};
+    if (input.label) {
+      j["truth"] = {{"x_m", input.label->x_m}, {"y_m", input.label->y_m},
+                    {"yaw_rad", input.label->yaw_rad}};
+    }
+    EmitJson(j);
+  }
+}
+
+}  // namespace
+
+void RegisterPose(CLI::App& app, CommandBody* selected) {
+  auto flags = std::make_shared<PoseFlags>();
+  CLI::App* sub = app.add_subcommand(
+      "pose",
+      "In-hand pose posterior of one frame (sgld, laplace or knn): mean, tangent covariance, ROS "
+      "covariance; optionally posterior.json and posterior.png.");
+  sub->add_option("--model", flags->model, "Model file (.tfm) from `tactfunc train`")->required();
+  sub->add_option("--pose-model", flags->pose_model, "Pose model from `tactfunc train-pose`")
+      ->required();
+  sub->add_option("--functaset", flags->functaset,
+                  "Functaset (.tfs) of the model: the knn sampler's labelled train latents");
+  sub->add_option("--frame", flags->frame, "The frame (PNG/JPG in the sensor's encoding)");
+  sub->add_option("--reference", flags->reference, "The sensor's no-contact reference image");
+  sub->add_option("--data", flags->data, "A dataset folder (instead of --frame/--reference)");
+  sub->add_option("--id", flags->id, "Frame id in --data (its label is the truth)");
+  sub->add_option("--sensor", flags->sensor,
+                  "bubble or gelslim; default: inferred from --frame, or bubble for --data");
+  sub->add_option("--tool", flags->tool,
+                  "Tool name (sets the symmetry order; default: the frame's label, else none)");
+  sub->add_option("--sampler", flags->sampler, "sgld (default, the paper's), laplace or knn");
+  sub->add_option("--samples", flags->samples,
+                  "Pose samples (default 100; knn gives at most --knn-k)")
+      ->check(CLI::Range(1, 1000000));
+  sub->add_option("--seed", flags->seed, "Sampler seed (default 0)");
+  sub->add_option("--knn-k", flags->knn_k, "Neighbours of the knn sampler (default 8)")
+      ->check(CLI::Range(1, 100000));
+  sub->add_option("--pixel-pitch-mm", flags->pixel_pitch_mm,
+                  "Pixel pitch for posterior.png (default: the frame's dataset.json)")
+      ->check(CLI::NonNegativeNumber);
+  sub->add_option("--out", flags->out, "Folder for posterior.json and posterior.png (created)");
+  sub->add_option("--height", flags->height, "posterior.png panel height in pixels")
+      ->check(CLI::Range(120, 2000));
+  sub->add_flag("--json", flags->json,
+                "Print {mean, covariance, ms, sampler, samples} as one JSON line");
+  sub->callback([flags, selected]() { *selected = [flags]() { RunPose(*flags); }; });
+}
+
+}  // namespace tactfunc::apps

@@ -1,0 +1,376 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// tactfunc train-pose: the downstream pose regressor g_phi of "Tactile Functasets"
+// (Sec. III-D, IV-C; models/pose_mlp.h) trained on a functaset's latents:
+//
+//   tactfunc train-pose --functaset F.tfs --out P.tpm [--sensor bubble] [--hidden 512,512,512]
+//       [--epochs 100] [--batch 256] [--lr 1e-3] [--seed 0] [--json]
+//
+// Inputs: the labelled TRAIN-split entries of one sensor (latent -> x, y, yaw); each
+// sample's symmetry order n is its tool's (models/tool.h; an unknown tool name gets
+// n = 1, i.e. its yaw is taken as is, with a warning). Reports position RMSE (mm, the
+// root of the mean squared Euclidean error) and yaw RMSE (deg, modulo the tool's
+// symmetry, YawErrorModuloSymmetry; hemisphere samples, n = 0, have no observable yaw and
+// are left out of the yaw figures) on the train and test splits, overall and per tool,
+// as a table. Writes P atomically (PoseMlp::Save) with a JSON info block naming the
+// sensor, the functaset, its model checksum and the figures, so that `tactfunc pose`
+// can check it is given a matching model.
+//
+// --refit STRATEGY --model M --data D (decision): the functaset stores meta-SGD latents
+// z_K, but the sgld / laplace posteriors are centred on the MAP fit z* (ceres:10); a
+// g_phi trained on z_K is ~6 mm off at z* on the 12-tool bubble data (docs/CLI_POSE.md,
+// "Latent maps"). --refit re-fits every labelled latent (train and test) with the
+// posteriors' fit settings and trains and evaluates on those.
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <iostream>
+#include <map>
+#include <memory>
+#include <set>
+
+#include "apps/command.h"
+#include "apps/model_inputs.h"
+#include "estimation/dataset.h"
+#include "estimation/functaset.h"
+#include "estimation/latent_fitter.h"
+#include "estimation/trunk_targets.h"
+#include "models/functa_model.h"
+#include "samplers/pose_posterior.h"
+#include "models/pose_mlp.h"
+#include "models/tool.h"
+
+namespace tactfunc::apps {
+namespace {
+
+struct TrainPoseFlags {
+  std::string functaset;
+  std::string out;
+  std::string sensor;
+  std::string hidden = "512,512,512";
+  int epochs = 100;
+  int batch = 256;
+  double lr = 1e-3;
+  double weight_decay = 0;
+  std::uint64_t seed = 0;
+  std::string refit;  // "" or a LatentFitter strategy: re-fit every latent from --data
+  std::string model;
+  std::string data;
+  bool json = false;
+};
+
+// Labelled entries of one split as training data.
+struct Samples {
+  Eigen::MatrixXf inputs;  // M x d
+  PoseTargets targets;
+  std::vector<std::string> tools;
+};
+
+Samples Collect(const Functaset& functaset, SensorKind sensor, Split split,
+                std::set<std::string>* unknown_tools) {
+  std::vector<const FunctasetEntry*> chosen;
+  for (const FunctasetEntry& e : functaset.entries(sensor)) {
+    if (e.split == split && e.label.has_value()) chosen.push_back(&e);
+  }
+  Samples s;
+  const int m = static_cast<int>(chosen.size());
+  s.inputs.resize(m, functaset.latent_dim(sensor));
+  s.targets.poses.resize(m, 3);
+  s.targets.symmetry_orders.resize(m);
+  for (int i = 0; i < m; ++i) {
+    const FunctasetEntry& e = *chosen[i];
+    s.inputs.row(i) = e.latent.transpose();
+    s.targets.poses.row(i) << e.label->x_m, e.label->y_m, e.label->yaw_rad;
+    bool known = false;
+    s.targets.symmetry_orders[i] = SymmetryOrderOfTool(e.label->tool, &known);
+    if (!known) unknown_tools->insert(e.label->tool);
+    s.tools.push_back(e.label->tool);
+  }
+  return s;
+}
+
+// Squared-error sums of one group of samples.
+struct ErrorSums {
+  int count = 0;
+  double position_sq = 0;  // m^2
+  int yaw_count = 0;       // samples with an observable yaw (n != 0)
+  double yaw_sq = 0;       // rad^2
+  double RmseMm() const { return count ? 1e3 * std::sqrt(position_sq / count) : NAN; }
+  double RmseDeg() const {
+    return yaw_count ? std::sqrt(yaw_sq / yaw_count) * 180.0 / M_PI : NAN;
+  }
+};
+
+// Per tool ("" = all) errors of the model on `samples`.
+std::map<std::string, ErrorSums> Evaluate(const PoseMlp& model, const Samples& samples) {
+  std::map<std::string, ErrorSums> sums;
+  if (samples.inputs.rows() == 0) return sums;
+  // Predict per symmetry order (PredictBatch takes one n for the whole batch).
+  std::map<int, std::vector<int>> by_order;
+  for (int i = 0; i < samples.inputs.rows(); ++i) {
+    by_order[samples.targets.symmetry_orders[i]].push_back(i);
+  }
+  for (const auto& [n, rows] : by_order) {
+    Eigen::MatrixXf batch(static_cast<int>(rows.size()), samples.inputs.cols());
+    for (std::size_t k = 0; k < rows.size(); ++k) batch.row(k) = samples.inputs.row(rows[k]);
+    const Eigen::MatrixXd predicted = model.PredictBatch(batch, n);
+    for (std::size_t k = 0; k < rows.size(); ++k) {
+      const Eigen::Vector3d truth = samples.targets.poses.row(rows[k]).transpose();
+      const double position_sq = (predicted.row(k).head<2>().transpose() - truth.head<2>()).squaredNorm();
+      for (const std::string& key : {std::string(), samples.tools[rows[k]]}) {
+        ErrorSums& s = sums[key];
+        ++s.count;
+        s.position_sq += position_sq;
+        if (n != 0) {
+          const double e = YawErrorModuloSymmetry(predicted(k, 2), truth[2], n);
+          ++s.yaw_count;
+          s.yaw_sq += e * e;
+        }
+      }
+    }
+  }
+  return sums;
+}
+
+nlohmann::json NumberOrNull(double v) {
+  return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
+}
+
+std::string Cell(double v, int width, int digits) {
+  char buffer[32];
+  if (std::isfinite(v)) {
+    std::snprintf(buffer, sizeof(buffer), "%*.*f", width, digits, v);
+  } else {
+    std::snprintf(buffer, sizeof(buffer), "%*s", width, "-");
+  }
+  return buffer;
+}
+
+void RunTrainPose(const TrainPoseFlags& flags) {
+  std::vector<int> hidden;
+  for (const std::string& width : SplitList(flags.hidden)) {
+    std::size_t used = 0;
+    int value = 0;
+    try {
+      value = std::stoi(width, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used != width.size() || value < 1) {
+      throw UsageError("--hidden: expected comma-separated layer widths >= 1, got '" +
+                       flags.hidden + "'");
+    }
+    hidden.push_back(value);
+  }
+  PoseMlpTrainingOptions training;
+  training.epochs = flags.epochs;
+  training.batch_size = flags.batch;
+  training.learning_rate = flags.lr;
+  training.weight_decay = flags.weight_decay;
+  training.seed = flags.seed;
+  std::string error;
+  if (!training.IsValid(&error)) throw UsageError(error);
+
+  const Functaset functaset = Functaset::Load(flags.functaset);
+  SensorKind sensor;
+  if (!ParseSensorFlag(flags.sensor, &sensor)) {
+    const std::vector<SensorKind> sensors = functaset.sensors();
+    if (sensors.empty()) throw DatasetError("--functaset '" + flags.functaset + "' has no sensors");
+    // The bubble if present (the paper's headline sensor), else the only one.
+    sensor = functaset.has_sensor(SensorKind::kSoftBubble) ? SensorKind::kSoftBubble : sensors[0];
+    if (sensors.size() > 1) {
+      std::cerr << "train-pose: note: the functaset has several sensors; training on "
+                << ToString(sensor) << " (give --sensor to choose)\n";
+    }
+  } else if (!functaset.has_sensor(sensor)) {
+    throw DatasetError("--functaset '" + flags.functaset + "' has no " + ToString(sensor) +
+                       " latents (--sensor " + flags.sensor + ")");
+  }
+  Functaset refitted;
+  const Functaset* source = &functaset;
+  if (!flags.refit.empty()) {
+    // Latents re-fitted with the posterior's fit settings (PosePosterior::Options::fit
+    // with the potential's sigma, sigma_z), so that g_phi is trained on the latent map
+    // the sgld / laplace posteriors are centred on (docs/CLI_POSE.md, "Latent maps").
+    if (flags.model.empty() || flags.data.empty()) {
+      throw UsageError("--refit needs --model and --data (the frames to re-fit)");
+    }
+    const FunctaModel model = FunctaModel::Load(flags.model);
+    functaset.CheckModel(model, flags.model, flags.functaset);
+    const Dataset dataset = Dataset::Open(flags.data);
+    const PosePosterior::Options posterior_options;
+    LatentFitter::Options fit = posterior_options.fit;
+    fit.sigma = posterior_options.potential.sigma;
+    fit.sigma_z = posterior_options.potential.sigma_z;
+    if (!FitStrategy::Parse(flags.refit, &fit.strategy, &error) || fit.strategy.knn) {
+      throw UsageError("--refit: expected meta_sgd:K or ceres:N, got '" + flags.refit + "'");
+    }
+    const SensorTrunk& trunk = model.Trunk(sensor);
+    const LatentFitter fitter(trunk, fit);
+    refitted = Functaset(functaset.model_checksum(), functaset.dataset());
+    refitted.AddSensor(sensor, functaset.latent_dim(sensor));
+    const auto& entries = functaset.entries(sensor);
+    const auto start = std::chrono::steady_clock::now();
+    for (std::size_t i = 0; i < entries.size(); ++i) {
+      FunctasetEntry entry = entries[i];
+      if (entry.label.has_value()) {
+        const std::optional<std::size_t> index = dataset.FindFrame(entry.id, sensor);
+        if (!index) {
+          throw DatasetError("--data '" + flags.data + "' has no " + ToString(sensor) +
+                             " frame '" + entry.id + "' of the functaset");
+        }
+        Eigen::VectorXd latent;
+        fitter.Fit(LoadTrunkTargets(dataset, *index, trunk.format), &latent);
+        entry.latent = latent.cast<float>();
+      }
+      refitted.Add(sensor, std::move(entry));
+      if ((i + 1) % 200 == 0) {
+        std::cerr << "train-pose: re-fitted " << i + 1 << "/" << entries.size() << " latents\n";
+      }
+    }
+    std::cout << "train-pose: re-fitted " << entries.size() << " latents with " << flags.refit
+              << " in "
+              << std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count()
+              << " s\n";
+    source = &refitted;
+  }
+  std::set<std::string> unknown_tools;
+  const Samples train = Collect(*source, sensor, Split::kTrain, &unknown_tools);
+  const Samples test = Collect(*source, sensor, Split::kTest, &unknown_tools);
+  if (train.inputs.rows() == 0) {
+    throw DatasetError("--functaset '" + flags.functaset + "' has no labelled train-split " +
+                       ToString(sensor) + " entries to train on");
+  }
+  for (const std::string& tool : unknown_tools) {
+    std::cerr << "train-pose: warning: unknown tool '" << tool
+              << "': symmetry order 1 assumed (yaw regressed as is)\n";
+  }
+
+  PoseMlp::Options options;
+  options.input_dim = functaset.latent_dim(sensor);
+  options.hidden_sizes = hidden;
+  if (!options.IsValid(&error)) throw UsageError(error);
+  PoseMlp model(options, flags.seed);
+  std::cout << "train-pose: " << ToString(sensor) << ", " << train.inputs.rows() << " train / "
+            << test.inputs.rows() << " test latents of dimension " << options.input_dim
+            << ", hidden " << flags.hidden << ", " << model.NumParameters() << " parameters\n";
+  const int report_every = std::max(1, flags.epochs / 10);
+  const PoseMlpTrainingSummary summary = TrainPoseMlp(
+      &model, train.inputs, train.targets, training, [&](int epoch, double loss) {
+        if ((epoch + 1) % report_every == 0 || epoch + 1 == flags.epochs) {
+          std::cerr << "train-pose: epoch " << epoch + 1 << "/" << flags.epochs << " loss " << loss
+                    << "\n";
+        }
+        return true;
+      });
+  std::cout << summary.BriefReport() << "\n";
+  if (summary.termination == PoseMlpTrainingTermination::kNonFinite) {
+    throw std::runtime_error("training diverged (" + summary.message +
+                             "); try a smaller --lr. Nothing was written.");
+  }
+
+  const std::map<std::string, ErrorSums> train_errors = Evaluate(model, train);
+  const std::map<std::string, ErrorSums> test_errors = Evaluate(model, test);
+  std::set<std::string> tools;
+  for (const auto& [tool, sums] : train_errors) tools.insert(tool);
+  for (const auto& [tool, sums] : test_errors) tools.insert(tool);
+  tools.erase("");
+  const ErrorSums none;
+  auto get = [&](const std::map<std::string, ErrorSums>& m, const std::string& key) {
+    const auto it = m.find(key);
+    return it == m.end() ? none : it->second;
+  };
+
+  std::printf("%-16s %2s | %6s %8s %8s | %6s %8s %8s\n", "tool", "n", "train", "mm", "deg", "test",
+              "mm", "deg");
+  nlohmann::json per_tool = nlohmann::json::object();
+  auto row = [&](const std::string& name, const std::string& key, const std::string& n) {
+    const ErrorSums a = get(train_errors, key), b = get(test_errors, key);
+    std::printf("%-16s %2s | %6d %s %s | %6d %s %s\n", name.c_str(), n.c_str(), a.count,
+                Cell(a.RmseMm(), 8, 3).c_str(), Cell(a.RmseDeg(), 8, 2).c_str(), b.count,
+                Cell(b.RmseMm(), 8, 3).c_str(), Cell(b.RmseDeg(), 8, 2).c_str());
+  };
+  for (const std::string& tool : tools) {
+    bool known = false;
+    const int n = SymmetryOrderOfTool(tool, &known);
+    row(tool, tool, known ? std::to_string(n) : "?");
+    const ErrorSums a = get(train_errors, tool), b = get(test_errors, tool);
+    per_tool[tool] = {{"symmetry_order", n},
+                      {"count", {{"train", a.count}, {"test", b.count}}},
+                      {"rmse_mm", {{"train", NumberOrNull(a.RmseMm())}, {"test", NumberOrNull(b.RmseMm())}}},
+                      {"rmse_deg",
+                       {{"train", NumberOrNull(a.RmseDeg())}, {"test", NumberOrNull(b.RmseDeg())}}}};
+  }
+  row(std::string("all (") + ToString(sensor) + ")", "", "");
+  std::cout << "(position RMSE in mm; yaw RMSE in degrees modulo each tool's symmetry order n, "
+               "n = 0 (no observable yaw) left out)\n";
+  const ErrorSums all_train = get(train_errors, ""), all_test = get(test_errors, "");
+
+  const nlohmann::json figures = {
+      {"rmse_mm", {{"train", NumberOrNull(all_train.RmseMm())}, {"test", NumberOrNull(all_test.RmseMm())}}},
+      {"rmse_deg",
+       {{"train", NumberOrNull(all_train.RmseDeg())}, {"test", NumberOrNull(all_test.RmseDeg())}}}};
+  nlohmann::json info = {{"sensor", ToString(sensor)},
+                         {"functaset", flags.functaset},
+                         {"model_checksum", functaset.model_checksum()},
+                         {"train_samples", train.inputs.rows()},
+                         {"latents", flags.refit.empty() ? "functaset" : "refit " + flags.refit},
+                         {"epochs", summary.epochs_completed},
+                         {"batch", flags.batch},
+                         {"learning_rate", flags.lr},
+                         {"seed", flags.seed},
+                         {"final_loss", summary.final_loss},
+                         {"termination", ToString(summary.termination)}};
+  info.update(figures);
+  model.set_info_json(info.dump());
+  model.Save(flags.out);  // atomic
+  std::cout << "train-pose: wrote " << flags.out << " in "
+            << summary.total_time_in_seconds << " s of training\n";
+
+  if (flags.json) {
+    nlohmann::json j = {{"sensor", ToString(sensor)}};
+    j.update(figures);
+    j["per_tool"] = per_tool;
+    j["out"] = flags.out;
+    j["epochs"] = summary.epochs_completed;
+    j["final_loss"] = NumberOrNull(summary.final_loss);
+    j["seconds"] = summary.total_time_in_seconds;
+    EmitJson(j);
+  }
+}
+
+}  // namespace
+
+void RegisterTrainPose(CLI::App& app, CommandBody* selected) {
+  auto flags = std::make_shared<TrainPoseFlags>();
+  CLI::App* sub = app.add_subcommand(
+      "train-pose",
+      "Train the pose MLP (latent -> x, y, yaw) on a functaset's labelled train-split latents "
+      "of one sensor; prints train/test RMSE per tool and writes the pose model.");
+  sub->add_option("--functaset", flags->functaset, "Functaset (.tfs) from `tactfunc encode`")
+      ->required();
+  sub->add_option("--out", flags->out, "Pose model file to write (atomically)")->required();
+  sub->add_option("--sensor", flags->sensor,
+                  "bubble or gelslim; default: bubble if the functaset has it, else its sensor");
+  sub->add_option("--hidden", flags->hidden,
+                  "Hidden ReLU layer widths, comma-separated (default 512,512,512, the paper's)");
+  sub->add_option("--epochs", flags->epochs, "Passes over the training set (default 100)")
+      ->check(CLI::Range(1, 1000000));
+  sub->add_option("--batch", flags->batch, "Samples per Adam step (default 256)")
+      ->check(CLI::Range(1, 1 << 24));
+  sub->add_option("--lr", flags->lr, "Adam step size (default 1e-3)")->check(CLI::PositiveNumber);
+  sub->add_option("--weight-decay", flags->weight_decay,
+                  "Decoupled (AdamW) weight decay per step (default 0)")
+      ->check(CLI::NonNegativeNumber);
+  sub->add_option("--seed", flags->seed, "Seed of the initialisation and shuffles (default 0)");
+  sub->add_option("--refit", flags->refit,
+                  "Train on latents re-fitted from --data with this strategy (e.g. ceres:10, the "
+                  "pose posteriors' fit) instead of the functaset's meta-SGD latents");
+  sub->add_option("--model", flags->model, "Model (.tfm) of the functaset, for --refit");
+  sub->add_option("--data", flags->data, "Dataset of the functaset, for --refit");
+  sub->add_flag("--json", flags->json,
+                "Print {sensor, rmse_mm, rmse_deg, per_tool, out} as one JSON line");
+  sub->callback([flags, selected]() { *selected = [flags]() { RunTrainPose(*flags); }; });
+}
+
+}  // namespace tactfunc::apps

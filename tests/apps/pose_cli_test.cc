@@ -1,0 +1,267 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// `tactfunc train-pose`, `tactfunc pose` and `tactfunc bench posterior` as a user runs
+// them: a tiny hand-built model (tests/estimation/functa_test_util.h), a tiny dataset, its
+// functaset from `tactfunc encode`, and a tiny pose model from `train-pose`; exit codes,
+// the --json last line, the files written, and bad input that fails with a message
+// naming the file or flag.
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include "estimation/file_io.h"
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "models/pose_mlp.h"
+#include "nlohmann/json.hpp"
+#include "tests/estimation/functa_test_util.h"
+
+namespace tactfunc {
+namespace {
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+
+struct Result {
+  int exit_code = -1;
+  std::string out;
+  std::string err;
+  nlohmann::json LastJson() const {
+    std::istringstream lines(out);
+    std::string line, last;
+    while (std::getline(lines, line)) {
+      if (!line.empty()) last = line;
+    }
+    return nlohmann::json::parse(last);
+  }
+};
+
+std::string Slurp(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  return buffer.str();
+}
+
+// One model, dataset, functaset and pose model for the suite.
+class PoseCliTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    // One folder per process: ctest -j runs the suite's tests in parallel processes.
+    root_ = new fs::path(fs::path(testing::TempDir()) /
+                         ("tactfunc_pose_cli_" + std::to_string(::getpid())));
+    fs::remove_all(*root_);
+    fs::create_directories(*root_);
+    testing_util::MakeModel().Save(Root("m.tfm"));
+    testing_util::WriteTinyDataset(Root("d"), 12, /*clean=*/true);
+    const Result encode = Run("encode --model " + Root("m.tfm") + " --data " + Root("d") +
+                              " --out " + Root("f.tfs") + " --threads 1 --json");
+    ASSERT_EQ(encode.exit_code, 0) << encode.err;
+    train_pose_ = new Result(Run("train-pose --functaset " + Root("f.tfs") + " --out " +
+                                 Root("p.tpm") + " --hidden 16,16 --epochs 20 --batch 4 --json"));
+  }
+  static void TearDownTestSuite() {
+    fs::remove_all(*root_);
+    delete root_;
+    delete train_pose_;
+  }
+  static std::string Root(const std::string& name) { return (*root_ / name).string(); }
+
+  static Result Run(const std::string& args) {
+    static int counter = 0;
+    const std::string out = (*root_ / ("stdout" + std::to_string(counter) + ".txt")).string();
+    const std::string err = (*root_ / ("stderr" + std::to_string(counter++) + ".txt")).string();
+    const std::string command = "CI=true " + std::string(TACTFUNC_BINARY_DIR) + "/bin/tactfunc " +
+                                args + " >" + out + " 2>" + err + " </dev/null";
+    const int status = std::system(command.c_str());
+    Result result;
+    result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    result.out = Slurp(out);
+    result.err = Slurp(err);
+    return result;
+  }
+
+  // `pose` on labelled bubble test frame 3 of the dataset.
+  static std::string PoseArgs(const std::string& sampler) {
+    return "pose --model " + Root("m.tfm") + " --pose-model " + Root("p.tpm") + " --functaset " +
+           Root("f.tfs") + " --data " + Root("d") + " --id 000003 --samples 20 --sampler " +
+           sampler;
+  }
+
+  static fs::path* root_;
+  static Result* train_pose_;
+};
+
+fs::path* PoseCliTest::root_ = nullptr;
+Result* PoseCliTest::train_pose_ = nullptr;
+
+TEST_F(PoseCliTest, TrainPoseReportsRmsePerToolAndWritesTheModel) {
+  const Result& r = *train_pose_;
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("all (bubble)"));  // the table's total row
+  EXPECT_THAT(r.err, HasSubstr("unknown tool 'pen'"));  // tiny data's tools are not ToolSet()'s
+  const nlohmann::json j = r.LastJson();
+  EXPECT_EQ(j["sensor"], "bubble");  // the default when the functaset has both
+  for (const char* key : {"rmse_mm", "rmse_deg"}) {
+    ASSERT_TRUE(j.contains(key)) << key;
+    EXPECT_TRUE(j[key].contains("train")) << key;
+    EXPECT_TRUE(j[key].contains("test")) << key;
+  }
+  EXPECT_GT(j["rmse_mm"]["train"].get<double>(), 0.0);
+  ASSERT_TRUE(j.contains("per_tool"));
+  EXPECT_TRUE(j["per_tool"].contains("pen"));
+  EXPECT_TRUE(j["per_tool"].contains("hex_key"));
+  EXPECT_EQ(j["per_tool"]["pen"]["symmetry_order"], 1);  // unknown tool -> 1
+  EXPECT_EQ(j["out"], Root("p.tpm"));
+  const PoseMlp model = PoseMlp::Load(Root("p.tpm"));
+  EXPECT_EQ(model.input_dim(), 8);  // the bubble trunk's latent_dim
+  EXPECT_EQ(nlohmann::json::parse(model.info_json())["sensor"], "bubble");
+}
+
+TEST_F(PoseCliTest, TrainPoseCanRefitTheLatentsWithThePosteriorsFit) {
+  const Result r = Run("train-pose --functaset " + Root("f.tfs") + " --model " + Root("m.tfm") +
+                       " --data " + Root("d") + " --refit ceres:3 --out " + Root("p_refit.tpm") +
+                       " --hidden 8 --epochs 5 --batch 4 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("re-fitted 12 latents with ceres:3"));
+  EXPECT_EQ(nlohmann::json::parse(PoseMlp::Load(Root("p_refit.tpm")).info_json())["latents"],
+            "refit ceres:3");
+
+  const Result bad = Run("train-pose --functaset " + Root("f.tfs") + " --refit ceres:3 --out " +
+                         Root("p_bad.tpm"));
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_THAT(bad.err, HasSubstr("--refit needs --model and --data"));
+  EXPECT_FALSE(fs::exists(Root("p_bad.tpm")));
+}
+
+TEST_F(PoseCliTest, PoseWithEachSamplerPrintsMeanCovarianceAndWritesFiles) {
+  ASSERT_EQ(train_pose_->exit_code, 0) << train_pose_->err;
+  for (const std::string sampler : {"sgld", "laplace", "knn"}) {
+    SCOPED_TRACE(sampler);
+    const std::string out = Root("pose_" + sampler);
+    const Result r = Run(PoseArgs(sampler) + " --out " + out + " --json");
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_THAT(r.out, HasSubstr("tangent space at the mean"));
+    EXPECT_THAT(r.out, HasSubstr("[35]"));  // the ROS yaw-yaw index
+    const nlohmann::json j = r.LastJson();
+    for (const char* key : {"mean", "covariance", "ms", "sampler", "samples", "truth"}) {
+      EXPECT_TRUE(j.contains(key)) << key;
+    }
+    for (const char* key : {"x_m", "y_m", "yaw_rad"}) EXPECT_TRUE(j["mean"].contains(key)) << key;
+    EXPECT_EQ(j["sampler"], sampler);
+    ASSERT_EQ(j["covariance"].size(), 3u);
+    EXPECT_EQ(j["covariance"][0].size(), 3u);
+    EXPECT_GE(j["covariance"][2][2].get<double>(), 0.0);
+    // knn returns --knn-k (8) labelled neighbours (the unlabelled frame 2 is searched
+    // past); the latent samplers what was asked.
+    EXPECT_EQ(j["samples"].get<int>(), sampler == "knn" ? 8 : 20);
+    ASSERT_TRUE(fs::exists(out + "/posterior.png"));
+    ASSERT_TRUE(fs::exists(out + "/posterior.json"));
+    const nlohmann::json record = nlohmann::json::parse(Slurp(out + "/posterior.json"));
+    EXPECT_EQ(record["samples"].size(), j["samples"].get<std::size_t>());
+    EXPECT_EQ(record["samples"][0].size(), 4u);  // x, y, yaw, weight
+    EXPECT_DOUBLE_EQ(record["mean"]["x_m"].get<double>(), j["mean"]["x_m"].get<double>());
+    const Image picture = ReadImage(out + "/posterior.png", PixelEncoding::kRgb8);
+    EXPECT_GT(picture.cols, 400);  // image panel + zoom panel side by side
+  }
+}
+
+TEST_F(PoseCliTest, PoseReadsAFrameAndReferenceFromFiles) {
+  ASSERT_EQ(train_pose_->exit_code, 0) << train_pose_->err;
+  const Result r = Run("pose --model " + Root("m.tfm") + " --pose-model " + Root("p.tpm") +
+                       " --frame " + Root("d/bubble/000007.png") + " --reference " +
+                       Root("d/bubble/reference.png") + " --sampler laplace --samples 10 --tool rod"
+                       " --out " + Root("pose_files") + " --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json j = r.LastJson();
+  EXPECT_EQ(j["sensor"], "bubble");  // inferred from the 16-bit frame
+  EXPECT_EQ(j["symmetry_order"], 2);  // the rod
+  EXPECT_FALSE(j.contains("truth"));
+  EXPECT_TRUE(fs::exists(Root("pose_files/posterior.png")));
+}
+
+TEST_F(PoseCliTest, BenchPosteriorReportsCoverageErrorsAndTimes) {
+  ASSERT_EQ(train_pose_->exit_code, 0) << train_pose_->err;
+  const Result r = Run("bench posterior --model " + Root("m.tfm") + " --pose-model " +
+                       Root("p.tpm") + " --functaset " + Root("f.tfs") + " --data " + Root("d") +
+                       " --frames 2 --samples 10 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json j = r.LastJson();
+  EXPECT_EQ(j["frames"], 2);
+  ASSERT_TRUE(j.contains("machine"));
+  ASSERT_EQ(j["samplers"].size(), 3u);
+  for (const nlohmann::json& s : j["samplers"]) {
+    SCOPED_TRACE(s.dump());
+    for (const char* key : {"name", "coverage", "coverage_bounds_99", "rmse_mm", "rmse_deg",
+                            "ms_median", "point_rmse_mm", "point_rmse_deg"}) {
+      EXPECT_TRUE(s.contains(key)) << key;
+    }
+    for (const char* p : {"0.5", "0.9"}) {
+      const double c = s["coverage"][p].get<double>();
+      EXPECT_GE(c, 0.0);
+      EXPECT_LE(c, 1.0);
+      ASSERT_EQ(s["coverage_bounds_99"][p].size(), 2u);
+      EXPECT_LE(s["coverage_bounds_99"][p][0].get<double>(), p == std::string("0.5") ? 0.5 : 0.9);
+      EXPECT_GE(s["coverage_bounds_99"][p][1].get<double>(), p == std::string("0.5") ? 0.5 : 0.9);
+    }
+    EXPECT_GT(s["ms_median"].get<double>(), 0.0);
+  }
+  EXPECT_EQ(j["samplers"][0]["name"], "sgld");
+  EXPECT_EQ(j["samplers"][2]["name"], "knn");
+}
+
+TEST_F(PoseCliTest, BadInputFailsWithAMessageNamingTheFileOrFlag) {
+  ASSERT_EQ(train_pose_->exit_code, 0) << train_pose_->err;
+  Result r = Run("train-pose --functaset " + Root("none.tfs") + " --out " + Root("x.tpm"));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.err, HasSubstr("none.tfs"));
+  EXPECT_FALSE(fs::exists(Root("x.tpm")));
+
+  r = Run("train-pose --functaset " + Root("f.tfs") + " --out " + Root("x.tpm") + " --hidden 8,x");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("--hidden"));
+
+  r = Run(PoseArgs("mcmc"));
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("--sampler"));
+  EXPECT_THAT(r.err, HasSubstr("mcmc"));
+
+  r = Run("pose --model " + Root("m.tfm") + " --pose-model " + Root("p.tpm") + " --data " +
+          Root("d") + " --id 000003 --sampler knn");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("--functaset"));
+
+  r = Run(PoseArgs("laplace") + " --frame " + Root("d/bubble/000003.png"));
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("--frame"));
+
+  r = Run("pose --model " + Root("m.tfm") + " --pose-model " + Root("nope.tpm") + " --data " +
+          Root("d") + " --id 000003");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.err, HasSubstr("--pose-model"));
+  EXPECT_THAT(r.err, HasSubstr("nope.tpm"));
+
+  r = Run(PoseArgs("laplace") + " --id 999999");
+  EXPECT_THAT(r.err, HasSubstr("--id"));  // (PoseArgs' --id 000003 is overridden or rejected)
+  EXPECT_NE(r.exit_code, 0);
+
+  // A bubble pose model used on gelslim frames: the latent dimensions differ (8 vs 6).
+  r = Run("pose --model " + Root("m.tfm") + " --pose-model " + Root("p.tpm") + " --data " +
+          Root("d") + " --id 000003 --sensor gelslim --sampler laplace");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.err, HasSubstr("p.tpm"));
+  EXPECT_THAT(r.err, HasSubstr("latent dimension"));
+
+  r = Run("bench posterior --model " + Root("m.tfm") + " --pose-model " + Root("p.tpm") +
+          " --functaset " + Root("f.tfs") + " --data " + Root("d") + " --samplers sgld,hmc");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("--samplers"));
+}
+
+}  // namespace
+}  // namespace tactfunc
