@@ -93,6 +93,36 @@ cv::Mat DifferenceTile(const Image& difference, double scale) {
   return ColourMapped(unit, cv::COLORMAP_TWILIGHT_SHIFTED);
 }
 
+cv::Mat ValueTile(const Eigen::MatrixXf& values, const Eigen::VectorXf& weights, int rows,
+                  int cols, double lo, double hi) {
+  const double span = hi > lo ? hi - lo : 1.0;
+  auto unit = [&](float v) {
+    return static_cast<uchar>(std::lround(255.0 * std::clamp((v - lo) / span, 0.0, 1.0)));
+  };
+  cv::Mat tile;
+  if (values.cols() == 1) {
+    cv::Mat grey(rows, cols, CV_8U);
+    for (int j = 0; j < rows * cols; ++j) grey.at<uchar>(j / cols, j % cols) = unit(values(j, 0));
+    cv::applyColorMap(grey, tile, cv::COLORMAP_VIRIDIS);
+  } else {
+    tile = cv::Mat(rows, cols, CV_8UC3);
+    for (int j = 0; j < rows * cols; ++j) {
+      cv::Vec3b& p = tile.at<cv::Vec3b>(j / cols, j % cols);
+      for (int c = 0; c < 3; ++c) p[2 - c] = unit(values(j, std::min<int>(c, values.cols() - 1)));
+    }
+  }
+  for (int j = 0; j < rows * cols; ++j) {
+    if (!(weights[j] > 0)) tile.at<cv::Vec3b>(j / cols, j % cols) = cv::Vec3b(60, 60, 60);
+  }
+  return tile;
+}
+
+cv::Mat Caption(int width, const std::string& text) {
+  cv::Mat cell(24, width, CV_8UC3, cv::Scalar(32, 32, 32));
+  PutLabel(cell, text, {6, 17}, 0.45);
+  return cell;
+}
+
 cv::Mat FitHeight(const cv::Mat& tile, int height) {
   const int width = std::max(1, static_cast<int>(std::lround(
                                      tile.cols * static_cast<double>(height) / tile.rows)));

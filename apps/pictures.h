@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/Core>
 #include <opencv2/core.hpp>
 
 #include "models/image.h"
@@ -22,6 +23,13 @@ cv::Mat RawTile(const Image& frame, SensorKind sensor, const Image& reference);
 // channel through a diverging map in [-scale, scale] (0 = mid grey); three channels as
 // 0.5 + diff / (2 scale) per channel. NaN pixels red.
 cv::Mat DifferenceTile(const Image& difference, double scale);
+// Normalised trunk values (N x C of a rows x cols frame, pixel j = row * cols + col) as a
+// BGR tile: one channel through viridis over [lo, hi], three channels as RGB over
+// [lo, hi]; pixels with weight <= 0 dark grey.
+cv::Mat ValueTile(const Eigen::MatrixXf& values, const Eigen::VectorXf& weights, int rows,
+                  int cols, double lo, double hi);
+// A 24-pixel-tall caption cell of `width` with `text` on the dark background.
+cv::Mat Caption(int width, const std::string& text);
 // Resizes a tile to `height` pixels tall (keeps aspect, nearest-neighbour upscaling
 // so pixels stay honest, area downscaling).
 cv::Mat FitHeight(const cv::Mat& tile, int height);

@@ -196,12 +196,6 @@ void DrawGrid(cv::Mat& panel, const View& view, double half_m) {
   }
 }
 
-cv::Mat Caption(int width, const std::string& text) {
-  cv::Mat cell(24, width, CV_8UC3, kBackground);
-  PutLabel(cell, text, {6, 17}, 0.45);
-  return cell;
-}
-
 cv::Mat YawHistogram(int width, int height, const PoseDistribution& d, const SE2d& mean,
                      const std::optional<double>& truth_yaw, int n) {
   cv::Mat panel(height, width, CV_8UC3, cv::Scalar(24, 24, 24));

@@ -14,6 +14,7 @@
 #include "estimation/file_io.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "tests/apps/cli_test_util.h"
 #include "nlohmann/json.hpp"
 
 namespace tactfunc {
@@ -22,26 +23,8 @@ namespace {
 namespace fs = std::filesystem;
 using ::testing::HasSubstr;
 
-struct Result {
-  int exit_code = -1;
-  std::string out;
-  std::string err;
-  nlohmann::json LastJson() const {
-    std::istringstream lines(out);
-    std::string line, last;
-    while (std::getline(lines, line)) {
-      if (!line.empty()) last = line;
-    }
-    return nlohmann::json::parse(last);
-  }
-};
-
-std::string Slurp(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream buffer;
-  buffer << in.rdbuf();
-  return buffer.str();
-}
+using Result = testing_util::CliResult;
+using testing_util::Slurp;
 
 class CliTest : public ::testing::Test {
  protected:
@@ -54,17 +37,7 @@ class CliTest : public ::testing::Test {
   void TearDown() override { fs::remove_all(dir_); }
 
   Result Run(const std::string& args) const {
-    const std::string out = (dir_ / "stdout.txt").string();
-    const std::string err = (dir_ / "stderr.txt").string();
-    const std::string command = "CI=true " + std::string(TACTFUNC_BINARY_DIR) +
-                                "/bin/tactfunc " + args + " >" + out + " 2>" + err +
-                                " </dev/null";
-    const int status = std::system(command.c_str());
-    Result result;
-    result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    result.out = Slurp(out);
-    result.err = Slurp(err);
-    return result;
+    return testing_util::RunTactfunc(dir_, args);
   }
   std::string Path(const std::string& name) const { return (dir_ / name).string(); }
 

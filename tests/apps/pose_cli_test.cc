@@ -17,6 +17,7 @@
 #include "estimation/file_io.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "tests/apps/cli_test_util.h"
 #include "models/pose_mlp.h"
 #include "nlohmann/json.hpp"
 #include "tests/estimation/functa_test_util.h"
@@ -27,26 +28,8 @@ namespace {
 namespace fs = std::filesystem;
 using ::testing::HasSubstr;
 
-struct Result {
-  int exit_code = -1;
-  std::string out;
-  std::string err;
-  nlohmann::json LastJson() const {
-    std::istringstream lines(out);
-    std::string line, last;
-    while (std::getline(lines, line)) {
-      if (!line.empty()) last = line;
-    }
-    return nlohmann::json::parse(last);
-  }
-};
-
-std::string Slurp(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream buffer;
-  buffer << in.rdbuf();
-  return buffer.str();
-}
+using Result = testing_util::CliResult;
+using testing_util::Slurp;
 
 // One model, dataset, functaset and pose model for the suite.
 class PoseCliTest : public ::testing::Test {
@@ -73,17 +56,7 @@ class PoseCliTest : public ::testing::Test {
   static std::string Root(const std::string& name) { return (*root_ / name).string(); }
 
   static Result Run(const std::string& args) {
-    static int counter = 0;
-    const std::string out = (*root_ / ("stdout" + std::to_string(counter) + ".txt")).string();
-    const std::string err = (*root_ / ("stderr" + std::to_string(counter++) + ".txt")).string();
-    const std::string command = "CI=true " + std::string(TACTFUNC_BINARY_DIR) + "/bin/tactfunc " +
-                                args + " >" + out + " 2>" + err + " </dev/null";
-    const int status = std::system(command.c_str());
-    Result result;
-    result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    result.out = Slurp(out);
-    result.err = Slurp(err);
-    return result;
+    return testing_util::RunTactfunc(*root_, args);
   }
 
   // `pose` on labelled bubble test frame 3 of the dataset.
