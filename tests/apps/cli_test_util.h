@@ -14,7 +14,10 @@
 #include <sstream>
 #include <string>
 
+#include <unistd.h>
+
 #include "nlohmann/json.hpp"
+#include "tests/estimation/functa_test_util.h"
 
 namespace tactfunc::testing_util {
 
@@ -55,6 +58,23 @@ inline CliResult RunTactfunc(const std::filesystem::path& dir, const std::string
   result.out = Slurp(out);
   result.err = Slurp(err);
   return result;
+}
+
+// A suite's shared inputs in a fresh per-process folder (ctest -j runs a suite's tests in
+// parallel processes): a hand-built model `m.tfm`, a tiny paired dataset `d/` with
+// clean frames, and its functaset `f.tfs` made by `tactfunc encode`. Returns the
+// folder; *encode gets the encode run (check its exit code).
+inline std::filesystem::path MakeEncodedFixture(const std::string& prefix, CliResult* encode) {
+  const std::filesystem::path root = std::filesystem::path(::testing::TempDir()) /
+                                     (prefix + "_" + std::to_string(::getpid()));
+  std::filesystem::remove_all(root);
+  std::filesystem::create_directories(root);
+  MakeModel().Save((root / "m.tfm").string());
+  WriteTinyDataset((root / "d").string(), 12, /*clean=*/true);
+  *encode = RunTactfunc(root, "encode --model " + (root / "m.tfm").string() + " --data " +
+                                  (root / "d").string() + " --out " +
+                                  (root / "f.tfs").string() + " --threads 1 --json");
+  return root;
 }
 
 }  // namespace tactfunc::testing_util

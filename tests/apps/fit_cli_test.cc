@@ -35,15 +35,8 @@ using testing_util::Slurp;
 class FitCliTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    // One folder per process: ctest -j runs the suite's tests in parallel processes.
-    root_ = new fs::path(fs::path(testing::TempDir()) /
-                         ("tactfunc_fit_cli_" + std::to_string(::getpid())));
-    fs::remove_all(*root_);
-    fs::create_directories(*root_);
-    testing_util::MakeModel().Save(Root("m.tfm"));
-    testing_util::WriteTinyDataset(Root("d"), 12, /*clean=*/true);
-    const Result encode = RunIn(*root_, "encode --model " + Root("m.tfm") + " --data " + Root("d") +
-                                            " --out " + Root("f.tfs") + " --threads 1 --json");
+    Result encode;
+    root_ = new fs::path(testing_util::MakeEncodedFixture("tactfunc_fit_cli", &encode));
     ASSERT_EQ(encode.exit_code, 0) << encode.err;
   }
   static void TearDownTestSuite() {

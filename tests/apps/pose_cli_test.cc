@@ -35,15 +35,8 @@ using testing_util::Slurp;
 class PoseCliTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    // One folder per process: ctest -j runs the suite's tests in parallel processes.
-    root_ = new fs::path(fs::path(testing::TempDir()) /
-                         ("tactfunc_pose_cli_" + std::to_string(::getpid())));
-    fs::remove_all(*root_);
-    fs::create_directories(*root_);
-    testing_util::MakeModel().Save(Root("m.tfm"));
-    testing_util::WriteTinyDataset(Root("d"), 12, /*clean=*/true);
-    const Result encode = Run("encode --model " + Root("m.tfm") + " --data " + Root("d") +
-                              " --out " + Root("f.tfs") + " --threads 1 --json");
+    Result encode;
+    root_ = new fs::path(testing_util::MakeEncodedFixture("tactfunc_pose_cli", &encode));
     ASSERT_EQ(encode.exit_code, 0) << encode.err;
     train_pose_ = new Result(Run("train-pose --functaset " + Root("f.tfs") + " --out " +
                                  Root("p.tpm") + " --hidden 16,16 --epochs 20 --batch 4 --json"));
