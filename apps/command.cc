@@ -2,7 +2,9 @@
 #include "apps/command.h"
 
 #include <cstdio>
+#include <algorithm>
 #include <iostream>
+#include <thread>
 
 namespace tactfunc::apps {
 
@@ -28,6 +30,11 @@ std::vector<std::string> SplitList(const std::string& text) {
   }
   flush();
   return items;
+}
+
+int ResolveThreads(int requested) {
+  if (requested > 0) return requested;
+  return static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
 }
 
 std::string FormatBytes(std::uint64_t bytes) {

@@ -48,6 +48,9 @@ void EmitJson(const nlohmann::json& figures);
 // "a,b,,c" -> {"a", "b", "c"}; surrounding spaces trimmed.
 std::vector<std::string> SplitList(const std::string& text);
 
+// The worker count for a --threads flag: `requested` if > 0, else every core (>= 1).
+int ResolveThreads(int requested);
+
 // "12.3 MB"-style byte counts for humans.
 std::string FormatBytes(std::uint64_t bytes);
 

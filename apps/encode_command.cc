@@ -100,9 +100,7 @@ void RunEncode(const EncodeFlags& flags) {
   const Dataset dataset = OpenDataset(flags.data, flags.dataset);
 
   LatentEncoder::Options options;
-  options.threads = flags.threads > 0
-                        ? flags.threads
-                        : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  options.threads = ResolveThreads(flags.threads);
   options.checkpoint_path = flags.out;
   options.checkpoint_every = flags.checkpoint_every;
   options.resume = flags.resume;

@@ -164,9 +164,7 @@ void RunRecon(const ReconFlags& flags) {
   }
   const Dataset dataset = OpenDataset(flags.data, flags.dataset);
   ReconstructionEvaluator::Options options;
-  options.threads = flags.threads > 0
-                        ? flags.threads
-                        : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  options.threads = ResolveThreads(flags.threads);
   const ReconstructionEvaluator::Summary summary =
       ReconstructionEvaluator(options).Evaluate(model, functaset, dataset);
 

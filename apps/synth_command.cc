@@ -41,9 +41,7 @@ void RunSynth(const SynthFlags& flags) {
   plan.test_fraction = flags.test_fraction;
   plan.overwrite = flags.overwrite;
   plan.write_clean = flags.clean;
-  plan.threads = flags.threads > 0
-                     ? flags.threads
-                     : std::max(1u, std::thread::hardware_concurrency());
+  plan.threads = ResolveThreads(flags.threads);
   plan.tools = flags.tools.empty() ? ToolNames() : SplitList(flags.tools);
   for (const std::string& tool : plan.tools) GetTool(tool);  // throws with the valid names
   plan.sensors.clear();  // the plan's default is both sensors; --sensors replaces it

@@ -73,9 +73,7 @@ void RunTrain(const TrainFlags& flags) {
   if (flags.seed_option->count()) options.seed = flags.seed;
   if (flags.checkpoint_every_option->count()) options.checkpoint_every = flags.checkpoint_every;
   if (flags.first_order) options.meta_sgd.first_order = true;
-  options.threads = flags.threads > 0
-                        ? flags.threads
-                        : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  options.threads = ResolveThreads(flags.threads);
   std::string error;
   if (!options.IsValid(&error)) throw UsageError(error);
 

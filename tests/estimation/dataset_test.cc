@@ -34,19 +34,7 @@ constexpr int kGelRows = 10;
 constexpr int kGelCols = 14;
 constexpr int kNumIds = 5;
 
-::testing::AssertionResult BitIdentical(const Image& a, const Image& b) {
-  if (!a.SameShape(b)) {
-    return ::testing::AssertionFailure() << a.ShapeString() << " vs " << b.ShapeString();
-  }
-  for (std::size_t i = 0; i < a.size(); ++i) {
-    const bool same = std::isnan(a.data[i]) ? std::isnan(b.data[i]) : a.data[i] == b.data[i];
-    if (!same) {
-      return ::testing::AssertionFailure()
-             << "value " << i << ": " << a.data[i] << " vs " << b.data[i];
-    }
-  }
-  return ::testing::AssertionSuccess();
-}
+using testing_util::BitIdentical;
 
 // Runs `body` and checks it raises DatasetError whose message holds every piece.
 void ExpectDatasetError(const std::function<void()>& body,

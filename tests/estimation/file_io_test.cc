@@ -24,20 +24,7 @@ using testing_util::WriteText;
 
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 
-// True if both images have the same shape and identical values, NaN matching NaN.
-::testing::AssertionResult BitIdentical(const Image& a, const Image& b) {
-  if (!a.SameShape(b)) {
-    return ::testing::AssertionFailure() << a.ShapeString() << " vs " << b.ShapeString();
-  }
-  for (std::size_t i = 0; i < a.size(); ++i) {
-    const bool same = std::isnan(a.data[i]) ? std::isnan(b.data[i]) : a.data[i] == b.data[i];
-    if (!same) {
-      return ::testing::AssertionFailure()
-             << "value " << i << ": " << a.data[i] << " vs " << b.data[i];
-    }
-  }
-  return ::testing::AssertionSuccess();
-}
+using testing_util::BitIdentical;
 
 // A depth image on the micrometre grid with some invalid pixels.
 Image GridDepth(int rows, int cols, unsigned seed) {

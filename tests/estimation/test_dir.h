@@ -8,11 +8,13 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <string>
 
 #include "gtest/gtest.h"
+#include "models/image.h"
 
 namespace tactfunc::testing_util {
 
@@ -45,6 +47,21 @@ class TestDir {
 inline void WriteText(const std::string& path, const std::string& text) {
   std::ofstream out(path, std::ios::binary);
   out << text;
+}
+
+// True if both images have the same shape and identical values, NaN matching NaN.
+inline ::testing::AssertionResult BitIdentical(const Image& a, const Image& b) {
+  if (!a.SameShape(b)) {
+    return ::testing::AssertionFailure() << a.ShapeString() << " vs " << b.ShapeString();
+  }
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    const bool same = std::isnan(a.data[i]) ? std::isnan(b.data[i]) : a.data[i] == b.data[i];
+    if (!same) {
+      return ::testing::AssertionFailure()
+             << "value " << i << ": " << a.data[i] << " vs " << b.data[i];
+    }
+  }
+  return ::testing::AssertionSuccess();
 }
 
 }  // namespace tactfunc::testing_util
