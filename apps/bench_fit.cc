@@ -287,27 +287,11 @@ cv::Scalar SensorColour(SensorKind sensor) {
                                            : cv::Scalar(230, 160, 40);  // blue
 }
 
-void DrawDashedLine(cv::Mat& canvas, cv::Point a, cv::Point b, const cv::Scalar& colour) {
-  const double length = std::hypot(b.x - a.x, b.y - a.y);
-  const int dashes = std::max(1, static_cast<int>(length / 10));
-  for (int i = 0; i < dashes; i += 2) {
-    const double t0 = static_cast<double>(i) / dashes, t1 = std::min(1.0, (i + 1.0) / dashes);
-    cv::line(canvas, a + (b - a) * t0, a + (b - a) * t1, colour, 1, cv::LINE_AA);
-  }
-}
-
-void PlainText(cv::Mat& canvas, const std::string& text, cv::Point origin, double scale,
-               const cv::Scalar& colour = cv::Scalar(30, 30, 30), int thickness = 1) {
-  cv::putText(canvas, text, origin, cv::FONT_HERSHEY_SIMPLEX, scale, colour, thickness,
-              cv::LINE_AA);
-}
-
 cv::Mat ParetoPlot(const std::vector<VariantResult>& results,
                    const std::vector<SensorFitData>& sensors, int threads,
                    const std::string& machine) {
-  const int width = 1400, height = 760;
-  const int left = 90, right = 270, top = 60, bottom = 80;
-  cv::Mat canvas(height, width, CV_8UC3, cv::Scalar(255, 255, 255));
+  const LogXPlot::Layout layout;  // 1400 x 760, legend in the right margin
+  const int width = layout.width;
   // A variant run on fewer frames than the converged reference (autodiff) is plotted at
   // the sensor's converged PSNR plus its own difference to converged on ITS frames, so
   // that every point compares the same thing; it is left out of the Pareto front.
@@ -340,57 +324,19 @@ cv::Mat ParetoPlot(const std::vector<VariantResult>& results,
   if (!std::isfinite(x_lo)) x_lo = 1, x_hi = 10, y_lo = 0, y_hi = 1;
   x_lo = std::min(x_lo, 33.0 / 1.5);
   x_hi = std::max(x_hi, 33.0 * 1.5);
-  const double lx_lo = std::floor(std::log10(x_lo) * 4) / 4,
-               lx_hi = std::ceil(std::log10(x_hi) * 4) / 4;
-  const double pad = std::max(0.5, 0.06 * (y_hi - y_lo));
-  y_lo = std::floor(y_lo - pad);
-  y_hi = std::ceil(y_hi + pad);
-  const int pw = width - left - right, ph = height - top - bottom;
-  auto X = [&](double ms) {
-    return left + static_cast<int>(std::lround((std::log10(ms) - lx_lo) / (lx_hi - lx_lo) * pw));
-  };
-  auto Y = [&](double db) {
-    return top + static_cast<int>(std::lround((y_hi - db) / (y_hi - y_lo) * ph));
-  };
-  const cv::Scalar grid(225, 225, 225), axis(60, 60, 60);
-  // Grid and ticks: x at 1, 2, 5 x 10^k (log), y at round dB steps.
-  for (int e = static_cast<int>(std::floor(lx_lo)); e <= static_cast<int>(std::ceil(lx_hi)); ++e) {
-    for (int m : {1, 2, 5}) {
-      const double v = m * std::pow(10.0, e);
-      if (std::log10(v) < lx_lo - 1e-9 || std::log10(v) > lx_hi + 1e-9) continue;
-      const int x = X(v);
-      cv::line(canvas, {x, top}, {x, top + ph}, grid, 1);
-      cv::line(canvas, {x, top + ph}, {x, top + ph + 6}, axis, 1);
-      std::ostringstream label;
-      label << v;
-      int base = 0;
-      const cv::Size size = cv::getTextSize(label.str(), cv::FONT_HERSHEY_SIMPLEX, 0.45, 1, &base);
-      PlainText(canvas, label.str(), {x - size.width / 2, top + ph + 22}, 0.45, axis);
-    }
-  }
-  const double span = y_hi - y_lo;
-  const double step = span > 20 ? 5 : (span > 8 ? 2 : (span > 4 ? 1 : 0.5));
-  for (double v = std::ceil(y_lo / step) * step; v <= y_hi + 1e-9; v += step) {
-    const int y = Y(v);
-    cv::line(canvas, {left, y}, {left + pw, y}, grid, 1);
-    cv::line(canvas, {left - 6, y}, {left, y}, axis, 1);
-    PlainText(canvas, Fixed(v, step < 1 ? 1 : 0), {left - 50, y + 5}, 0.45, axis);
-  }
-  cv::rectangle(canvas, {left, top}, {left + pw, top + ph}, axis, 1);
-  PlainText(canvas, "time per frame, ms (median, log scale)", {left + pw / 2 - 160, height - 30},
-            0.55, axis);
-  cv::Mat ylabel(30, 300, CV_8UC3, cv::Scalar(255, 255, 255));
-  PlainText(ylabel, "mean PSNR vs noisy frame, dB", {4, 21}, 0.55, axis);
-  cv::rotate(ylabel, ylabel, cv::ROTATE_90_COUNTERCLOCKWISE);
-  ylabel.copyTo(canvas(cv::Rect(8, top + ph / 2 - 150, 30, 300)));
-  PlainText(canvas,
-            "LatentFitter strategies: time vs quality (test frames, " + std::to_string(threads) +
-                (threads == 1 ? " thread)" : " threads)"),
-            {left, 24}, 0.65, axis, 2);
-  PlainText(canvas, machine, {left, 46}, 0.42, cv::Scalar(110, 110, 110));
+  LogXPlot plot(layout, x_lo, x_hi, y_lo, y_hi);
+  cv::Mat& canvas = plot.canvas();
+  const int left = plot.area().x, top = plot.area().y, pw = plot.area().width,
+            ph = plot.area().height;
+  auto X = [&](double ms) { return plot.X(ms); };
+  auto Y = [&](double db) { return plot.Y(db); };
+  plot.DrawFrame("time per frame, ms (median, log scale)", "mean PSNR vs noisy frame, dB",
+                 "LatentFitter strategies: time vs quality (test frames, " +
+                     std::to_string(threads) + (threads == 1 ? " thread)" : " threads)"),
+                 machine);
 
   // The 33 ms line (30 frames/s) and each sensor's converged PSNR.
-  if (std::log10(33.0) > lx_lo && std::log10(33.0) < lx_hi) {
+  if (X(33) > left && X(33) < left + pw) {
     DrawDashedLine(canvas, {X(33), top}, {X(33), top + ph}, cv::Scalar(90, 90, 200));
     PlainText(canvas, "33 ms", {X(33) + 4, top + 16}, 0.45, cv::Scalar(90, 90, 200));
   }

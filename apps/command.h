@@ -35,6 +35,7 @@ void RegisterRecon(CLI::App& app, CommandBody* selected);   // apps/recon_comman
 void RegisterFit(CLI::App& app, CommandBody* selected);     // apps/fit_command.cc
 void RegisterTrainPose(CLI::App& app, CommandBody* selected);  // apps/train_pose_command.cc
 void RegisterPose(CLI::App& app, CommandBody* selected);         // apps/pose_command.cc
+void RegisterEval(CLI::App& app, CommandBody* selected);         // apps/eval_command.cc
 
 // Bad user input that the command detected itself (flag values, lists).
 class UsageError : public std::runtime_error {

@@ -36,6 +36,7 @@ int main(int argc, char** argv) {
   RegisterFit(app, &body);
   RegisterTrainPose(app, &body);
   RegisterPose(app, &body);
+  RegisterEval(app, &body);
   RegisterBench(app, &body);
   try {
     app.parse(argc, argv);

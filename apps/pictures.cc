@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <stdexcept>
 
 #include <opencv2/imgcodecs.hpp>
@@ -193,6 +194,89 @@ void WritePicture(const std::string& path, const cv::Mat& picture) {
     throw std::runtime_error(path + ": could not encode the picture as PNG");
   }
   WriteFileAtomically(path, std::string(bytes.begin(), bytes.end()));
+}
+
+// ---- Plots -------------------------------------------------------------------------------
+
+void PlainText(cv::Mat& canvas, const std::string& text, cv::Point origin, double scale,
+               const cv::Scalar& colour, int thickness) {
+  cv::putText(canvas, text, origin, cv::FONT_HERSHEY_SIMPLEX, scale, colour, thickness,
+              cv::LINE_AA);
+}
+
+void DrawDashedLine(cv::Mat& canvas, cv::Point a, cv::Point b, const cv::Scalar& colour) {
+  const double length = std::hypot(b.x - a.x, b.y - a.y);
+  const int dashes = std::max(1, static_cast<int>(length / 10));
+  for (int i = 0; i < dashes; i += 2) {
+    const double t0 = static_cast<double>(i) / dashes, t1 = std::min(1.0, (i + 1.0) / dashes);
+    cv::line(canvas, a + (b - a) * t0, a + (b - a) * t1, colour, 1, cv::LINE_AA);
+  }
+}
+
+LogXPlot::LogXPlot(const Layout& layout, double x_lo, double x_hi, double y_lo, double y_hi)
+    : layout_(layout),
+      canvas_(layout.height, layout.width, CV_8UC3, cv::Scalar(255, 255, 255)),
+      area_(layout.left, layout.top, layout.width - layout.left - layout.right,
+            layout.height - layout.top - layout.bottom) {
+  if (!(x_lo > 0) || !std::isfinite(x_hi) || !std::isfinite(y_lo) || !std::isfinite(y_hi)) {
+    x_lo = 1, x_hi = 10, y_lo = 0, y_hi = 1;
+  }
+  lx_lo_ = std::floor(std::log10(x_lo) * 4) / 4;
+  lx_hi_ = std::ceil(std::log10(std::max(x_hi, x_lo)) * 4) / 4;
+  if (lx_hi_ <= lx_lo_) lx_hi_ = lx_lo_ + 0.25;
+  const double pad = std::max(0.5, 0.06 * (y_hi - y_lo));
+  y_lo_ = std::floor(y_lo - pad);
+  y_hi_ = std::ceil(y_hi + pad);
+}
+
+int LogXPlot::X(double x) const {
+  return area_.x +
+         static_cast<int>(std::lround((std::log10(x) - lx_lo_) / (lx_hi_ - lx_lo_) * area_.width));
+}
+
+int LogXPlot::Y(double y) const {
+  return area_.y + static_cast<int>(std::lround((y_hi_ - y) / (y_hi_ - y_lo_) * area_.height));
+}
+
+void LogXPlot::DrawFrame(const std::string& x_label, const std::string& y_label,
+                         const std::string& title, const std::string& subtitle) {
+  const cv::Scalar grid(225, 225, 225), axis(60, 60, 60);
+  const int left = area_.x, top = area_.y, pw = area_.width, ph = area_.height;
+  for (int e = static_cast<int>(std::floor(lx_lo_)); e <= static_cast<int>(std::ceil(lx_hi_)); ++e) {
+    for (int m : {1, 2, 5}) {
+      const double v = m * std::pow(10.0, e);
+      if (std::log10(v) < lx_lo_ - 1e-9 || std::log10(v) > lx_hi_ + 1e-9) continue;
+      const int x = X(v);
+      cv::line(canvas_, {x, top}, {x, top + ph}, grid, 1);
+      cv::line(canvas_, {x, top + ph}, {x, top + ph + 6}, axis, 1);
+      char label[32];
+      std::snprintf(label, sizeof(label), "%g", v);
+      int base = 0;
+      const cv::Size size = cv::getTextSize(label, cv::FONT_HERSHEY_SIMPLEX, 0.45, 1, &base);
+      PlainText(canvas_, label, {x - size.width / 2, top + ph + 22}, 0.45, axis);
+    }
+  }
+  const double span = y_hi_ - y_lo_;
+  const double step = span > 20 ? 5 : (span > 8 ? 2 : (span > 4 ? 1 : 0.5));
+  for (double v = std::ceil(y_lo_ / step) * step; v <= y_hi_ + 1e-9; v += step) {
+    const int y = Y(v);
+    cv::line(canvas_, {left, y}, {left + pw, y}, grid, 1);
+    cv::line(canvas_, {left - 6, y}, {left, y}, axis, 1);
+    char label[32];
+    std::snprintf(label, sizeof(label), "%.*f", step < 1 ? 1 : 0, v);
+    PlainText(canvas_, label, {left - 50, y + 5}, 0.45, axis);
+  }
+  cv::rectangle(canvas_, {left, top}, {left + pw, top + ph}, axis, 1);
+  int base = 0;
+  const cv::Size x_size = cv::getTextSize(x_label, cv::FONT_HERSHEY_SIMPLEX, 0.55, 1, &base);
+  PlainText(canvas_, x_label, {left + pw / 2 - x_size.width / 2, layout_.height - 30}, 0.55, axis);
+  const int label_width = std::min(ph, 360);
+  cv::Mat ylabel(30, label_width, CV_8UC3, cv::Scalar(255, 255, 255));
+  PlainText(ylabel, y_label, {4, 21}, 0.55, axis);
+  cv::rotate(ylabel, ylabel, cv::ROTATE_90_COUNTERCLOCKWISE);
+  ylabel.copyTo(canvas_(cv::Rect(8, top + ph / 2 - label_width / 2, 30, label_width)));
+  PlainText(canvas_, title, {left, 24}, 0.65, axis, 2);
+  PlainText(canvas_, subtitle, {left, 46}, 0.42, cv::Scalar(110, 110, 110));
 }
 
 }  // namespace tactfunc::apps

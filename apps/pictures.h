@@ -46,6 +46,42 @@ cv::Mat TileGrid(const std::vector<std::vector<cv::Mat>>& rows, int gap = 4);
 // Encodes as PNG and writes atomically; throws naming the path.
 void WritePicture(const std::string& path, const cv::Mat& picture);
 
+// ---- Plots: log-scale x, linear y (bench fit's Pareto plot, eval's rate-distortion plot)
+
+// Dark text (default) on a light plot, anti-aliased.
+void PlainText(cv::Mat& canvas, const std::string& text, cv::Point origin, double scale,
+               const cv::Scalar& colour = cv::Scalar(30, 30, 30), int thickness = 1);
+// A dashed line from a to b (10-pixel dashes).
+void DrawDashedLine(cv::Mat& canvas, cv::Point a, cv::Point b, const cv::Scalar& colour);
+
+// The frame of a plot with a log-scale x axis and a linear y axis on a white canvas:
+// the data range [x_lo, x_hi] (x > 0) is widened to whole quarter decades, [y_lo, y_hi]
+// padded by max(0.5, 6% of its span) and rounded out to whole units. The plot area is
+// the canvas less the margins; a legend goes in the right margin.
+class LogXPlot {
+ public:
+  struct Layout {
+    int width = 1400, height = 760;                     // canvas, pixels
+    int left = 90, right = 270, top = 60, bottom = 80;  // margins around the plot area
+  };
+  LogXPlot(const Layout& layout, double x_lo, double x_hi, double y_lo, double y_hi);
+  cv::Mat& canvas() { return canvas_; }
+  // Pixel column of x (> 0) and row of y.
+  int X(double x) const;
+  int Y(double y) const;
+  const cv::Rect& area() const { return area_; }
+  // Grid and ticks (x at 1, 2, 5 x 10^k; y at round steps), the frame, axis titles,
+  // a bold title and a grey subtitle above the plot.
+  void DrawFrame(const std::string& x_label, const std::string& y_label,
+                 const std::string& title, const std::string& subtitle);
+
+ private:
+  Layout layout_;
+  cv::Mat canvas_;
+  cv::Rect area_;
+  double lx_lo_ = 0, lx_hi_ = 1, y_lo_ = 0, y_hi_ = 1;
+};
+
 }  // namespace tactfunc::apps
 
 #endif  // TACTFUNC_APPS_PICTURES_H_

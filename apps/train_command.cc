@@ -30,6 +30,7 @@ struct TrainFlags {
   std::string sensors;  // empty = every sensor of the dataset
   int latent_dim = 0, width = 0, layers = 0, steps = 0, batch = 0, pixels = 0;
   int threads = 0;
+  double learning_rate = 0;
   std::uint64_t seed = 0;
   int checkpoint_every = 0;
   bool first_order = false;
@@ -38,7 +39,8 @@ struct TrainFlags {
   // Set after parsing: which overrides were given.
   CLI::Option *latent_dim_option = nullptr, *width_option = nullptr, *layers_option = nullptr,
               *steps_option = nullptr, *batch_option = nullptr, *pixels_option = nullptr,
-              *seed_option = nullptr, *checkpoint_every_option = nullptr;
+              *seed_option = nullptr, *checkpoint_every_option = nullptr,
+              *learning_rate_option = nullptr;
 };
 
 // SIGINT: the current step finishes, a checkpoint is written, the command exits 1. A
@@ -73,6 +75,7 @@ void RunTrain(const TrainFlags& flags) {
   if (flags.seed_option->count()) options.seed = flags.seed;
   if (flags.checkpoint_every_option->count()) options.checkpoint_every = flags.checkpoint_every;
   if (flags.first_order) options.meta_sgd.first_order = true;
+  if (flags.learning_rate_option->count()) options.learning_rate = flags.learning_rate;
   options.threads = ResolveThreads(flags.threads);
   std::string error;
   if (!options.IsValid(&error)) throw UsageError(error);
@@ -241,6 +244,10 @@ void RegisterTrain(CLI::App& app, CommandBody* selected) {
   flags->pixels_option =
       sub->add_option("--pixels", flags->pixels, "Random pixels per frame per step (0 = all)")
           ->check(CLI::Range(0, 100000000));
+  flags->learning_rate_option =
+      sub->add_option("--learning-rate", flags->learning_rate,
+                      "Adam step size of the trunk (default: the preset's, 3e-4)")
+          ->check(CLI::PositiveNumber);
   sub->add_flag("--first-order", flags->first_order,
                 "First-order meta-gradients (cheaper, biased; default exact)");
   sub->add_option("--threads", flags->threads, "Worker threads (default: all cores)")

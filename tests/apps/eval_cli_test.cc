@@ -1,0 +1,154 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// `tactfunc eval` as a user runs it: a tiny hand-built model and dataset, its functaset
+// from `tactfunc encode` and a tiny pose model from `train-pose`
+// (tests/apps/cli_test_util.h); the --json shape, the files written, and bad input that
+// fails with a message naming the file.
+#include <filesystem>
+#include <set>
+#include <string>
+
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "nlohmann/json.hpp"
+#include "tests/apps/cli_test_util.h"
+
+namespace tactfunc {
+namespace {
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+using Result = testing_util::CliResult;
+
+class EvalCliTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    Result encode;
+    root_ = new fs::path(testing_util::MakeEncodedFixture("tactfunc_eval_cli", &encode));
+    ASSERT_EQ(encode.exit_code, 0) << encode.err;
+    train_pose_ = new Result(Run("train-pose --functaset " + Root("f.tfs") + " --out " +
+                                 Root("p.tpm") + " --hidden 16,16 --epochs 20 --batch 4 --json"));
+    // The same functaset again as an "extra" point: two TactFunc points in the picture.
+    eval_ = new Result(Run(EvalArgs() + " --out " + Root("table") + " --threads 1 --json" +
+                           " --extra-functaset " + Root("f.tfs") + " --extra-model " +
+                           Root("m.tfm")));
+  }
+  static void TearDownTestSuite() {
+    fs::remove_all(*root_);
+    delete root_;
+    delete train_pose_;
+    delete eval_;
+  }
+  static std::string Root(const std::string& name) { return (*root_ / name).string(); }
+  static Result Run(const std::string& args) { return testing_util::RunTactfunc(*root_, args); }
+  static std::string EvalArgs() {
+    return "eval --data " + Root("d") + " --model " + Root("m.tfm") + " --functaset " +
+           Root("f.tfs") + " --pose-model " + Root("p.tpm");
+  }
+
+  static fs::path* root_;
+  static Result* train_pose_;
+  static Result* eval_;
+};
+
+fs::path* EvalCliTest::root_ = nullptr;
+Result* EvalCliTest::train_pose_ = nullptr;
+Result* EvalCliTest::eval_ = nullptr;
+
+TEST_F(EvalCliTest, JsonHasARowPerApproachSensorAndSplitWithTheTableColumns) {
+  ASSERT_EQ(train_pose_->exit_code, 0) << train_pose_->err;
+  const Result& r = *eval_;
+  ASSERT_EQ(r.exit_code, 0) << r.err << r.out;
+  EXPECT_THAT(r.out, HasSubstr("| approach |"));  // the markdown table on stdout
+  const nlohmann::json j = r.LastJson();
+  ASSERT_TRUE(j["rows"].is_array());
+  std::set<std::string> seen;
+  for (const nlohmann::json& row : j["rows"]) {
+    for (const char* key : {"approach", "sensor", "split", "rep_size_mb", "bytes_per_frame", "psnr",
+                            "pose_mse", "rmse_mm", "rmse_deg"}) {
+      EXPECT_TRUE(row.contains(key)) << key << " in " << row.dump();
+    }
+    seen.insert(row["approach"].get<std::string>() + "/" + row["sensor"].get<std::string>() + "/" +
+                row["split"].get<std::string>());
+    EXPECT_GT(row["rep_size_mb"].get<double>(), 0) << row.dump();
+    if (row["approach"] == "Raw frames") {
+      EXPECT_TRUE(row["psnr"].is_null()) << row.dump();  // lossless: not applicable
+    } else {
+      EXPECT_TRUE(row["psnr"].is_number()) << row.dump();
+    }
+    // Poses on the pose model's sensor (bubble) except for JPEG; none on gelslim.
+    const bool posed = row["sensor"] == "bubble" && row["approach"] != "JPEG";
+    EXPECT_EQ(row["pose_mse"].is_number(), posed) << row.dump();
+    EXPECT_EQ(row["rmse_mm"].is_number(), posed) << row.dump();
+  }
+  for (const char* approach : {"TactFunc", "PCA", "JPEG", "Raw frames"}) {
+    for (const char* sensor : {"bubble", "gelslim"}) {
+      for (const char* split : {"train", "test"}) {
+        EXPECT_TRUE(seen.count(std::string(approach) + "/" + sensor + "/" + split))
+            << approach << " " << sensor << " " << split;
+      }
+    }
+  }
+  // TactFunc's bytes per frame are the latent's floats (bubble d = 8, gelslim d = 6).
+  for (const nlohmann::json& row : j["rows"]) {
+    if (row["approach"] == "TactFunc" || row["approach"] == "PCA") {
+      EXPECT_EQ(row["bytes_per_frame"].get<double>(), row["sensor"] == "bubble" ? 32 : 24);
+    }
+  }
+}
+
+TEST_F(EvalCliTest, TargetsSayPlainlyWhetherEachIsMetWithTheNumbers) {
+  const Result& r = *eval_;
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json j = r.LastJson();
+  const nlohmann::json& t = j["targets"];
+  ASSERT_TRUE(t.contains("bubble"));
+  for (const char* key : {"psnr_3db_above_pca", "psnr_above_jpeg", "pose_beats_pca_codes",
+                          "pose_not_worse_than_raw"}) {
+    ASSERT_TRUE(t["bubble"].contains(key)) << key;
+    EXPECT_TRUE(t["bubble"][key]["met"].is_boolean()) << key;
+  }
+  EXPECT_TRUE(t["bubble"]["psnr_3db_above_pca"]["pca_db"].is_number());
+  EXPECT_FALSE(t["gelslim"].contains("pose_beats_pca_codes"));  // no pose model for gelslim
+  EXPECT_TRUE(j["all_targets_met"].is_boolean());
+  EXPECT_THAT(r.out, HasSubstr("Targets:"));
+}
+
+TEST_F(EvalCliTest, WritesTheTableJsonAndTheRateDistortionPicture) {
+  const Result& r = *eval_;
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  for (const char* name : {"table.md", "table.json", "rate_distortion.png"}) {
+    EXPECT_TRUE(fs::is_regular_file(*root_ / "table" / name)) << name;
+  }
+  const std::string md = testing_util::Slurp(Root("table/table.md"));
+  EXPECT_THAT(md, HasSubstr("Command: `tactfunc eval"));
+  EXPECT_THAT(md, HasSubstr("| TactFunc |"));
+  const nlohmann::json file = nlohmann::json::parse(testing_util::Slurp(Root("table/table.json")));
+  EXPECT_EQ(file["rows"], r.LastJson()["rows"]);
+  const nlohmann::json& rd = file["rate_distortion"]["bubble"];
+  EXPECT_EQ(rd["tactfunc"].size(), 2u);  // the main functaset and the extra one
+  EXPECT_GE(rd["pca"].size(), 2u);
+  EXPECT_GE(rd["jpeg"].size(), 5u);
+  const std::string png = testing_util::Slurp(Root("table/rate_distortion.png"));
+  EXPECT_EQ(png.substr(1, 3), "PNG");
+}
+
+TEST_F(EvalCliTest, MissingOrMismatchedFilesFailWithAMessageNamingThem) {
+  Result r = Run("eval --data " + Root("d") + " --model " + Root("m.tfm") + " --functaset " +
+                 Root("none.tfs") + " --pose-model " + Root("p.tpm") + " --out " + Root("x"));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.err, HasSubstr("none.tfs"));
+  EXPECT_THAT(r.err, HasSubstr("no such file"));
+  // A pose model given as the functaset: the file is named.
+  r = Run("eval --data " + Root("d") + " --model " + Root("m.tfm") + " --functaset " +
+          Root("p.tpm") + " --pose-model " + Root("p.tpm") + " --out " + Root("x"));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.err, HasSubstr("p.tpm"));
+  // Unpaired extras are a usage error.
+  r = Run(EvalArgs() + " --out " + Root("x") + " --extra-functaset " + Root("f.tfs"));
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("--extra-model"));
+}
+
+}  // namespace
+}  // namespace tactfunc
