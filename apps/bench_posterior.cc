@@ -65,6 +65,9 @@ struct PosteriorBenchFlags {
   std::uint64_t seed = 0;
   int knn_k = 8;
   bool json = false;
+  bool no_model_error = false;
+  double sigma_z = 0;
+  double sigma = 0;
 };
 
 double Median(std::vector<double> v) {
@@ -79,24 +82,6 @@ double Quantile(std::vector<double> v, double q) {
   std::sort(v.begin(), v.end());
   const double rank = std::ceil(q * v.size());
   return v[static_cast<std::size_t>(std::clamp(rank - 1.0, 0.0, v.size() - 1.0))];
-}
-
-// The central 99% interval of Binomial(n, p) / n (header comment).
-std::pair<double, double> BinomialBand99(int n, double p) {
-  if (n <= 0) return {0.0, 1.0};
-  double cdf = 0;
-  int lo = -1, hi = n;
-  for (int k = 0; k <= n; ++k) {
-    const double log_pmf = std::lgamma(n + 1.0) - std::lgamma(k + 1.0) - std::lgamma(n - k + 1.0) +
-                           k * std::log(p) + (n - k) * std::log1p(-p);
-    cdf += std::exp(log_pmf);
-    if (lo < 0 && cdf >= 0.005) lo = k;
-    if (cdf >= 0.995) {
-      hi = k;
-      break;
-    }
-  }
-  return {static_cast<double>(std::max(lo, 0)) / n, static_cast<double>(hi) / n};
 }
 
 struct Tally {
@@ -140,11 +125,15 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
   const SensorTrunk& trunk = model.Trunk(sensor);
   const PoseMlp pose_model = LoadPoseModelFor(flags.pose_model, model, sensor, flags.model);
 
-  std::vector<std::size_t> frames;
+  // --frames labelled test frames spread evenly over the split (datasets list frames
+  // tool by tool, so the first N would cover only the first tools).
+  std::vector<std::size_t> labelled;
   for (std::size_t index : dataset.FrameIndices(sensor, Split::kTest)) {
-    if (dataset.frames()[index].label.has_value()) frames.push_back(index);
-    if (static_cast<int>(frames.size()) == flags.frames) break;
+    if (dataset.frames()[index].label.has_value()) labelled.push_back(index);
   }
+  std::vector<std::size_t> frames;
+  const std::size_t wanted = std::min<std::size_t>(flags.frames, labelled.size());
+  for (std::size_t k = 0; k < wanted; ++k) frames.push_back(labelled[k * labelled.size() / wanted]);
   if (frames.empty()) {
     throw DatasetError("--data '" + flags.data + "' has no labelled test-split " +
                        ToString(sensor) + " frames");
@@ -155,6 +144,11 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
   options.num_samples = flags.samples;
   options.seed = flags.seed;
   options.knn.k = flags.knn_k;
+  // Centre on the latent map the pose MLP was trained on (samplers/pose_posterior.h).
+  options.fit.strategy = LatentMapOfPoseModel(pose_model, trunk);
+  options.model_error = !flags.no_model_error;
+  if (flags.sigma_z > 0) options.potential.sigma_z = flags.sigma_z;
+  if (flags.sigma > 0) options.potential.sigma = flags.sigma;
   std::string error;
   if (!options.IsValid(&error)) throw UsageError(error);
   FunctasetKnn knn;
@@ -241,7 +235,7 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
       point_yaw_count ? kDeg * std::sqrt(point_yaw_sq / point_yaw_count) : NAN;
   const double meta_mm = 1e3 * std::sqrt(meta_position_sq / num_frames);
   const double meta_deg = point_yaw_count ? kDeg * std::sqrt(meta_yaw_sq / point_yaw_count) : NAN;
-  const auto band50 = BinomialBand99(num_frames, 0.5), band90 = BinomialBand99(num_frames, 0.9);
+  const auto band50 = BinomialInterval99(num_frames, 0.5), band90 = BinomialInterval99(num_frames, 0.9);
   std::printf("%-8s %6s %4s | %-18s | %-18s | %8s %8s | %8s %8s\n", "sampler", "frames", "fail",
               "cover 50% [99% band]", "cover 90% [99% band]", "mean mm", "mean deg", "ms med",
               "ms p90");
@@ -315,6 +309,15 @@ void RegisterPosteriorBenchmark(CLI::App* bench, CommandBody* selected) {
   sub->add_option("--seed", flags->seed, "Sampler seed (default 0)");
   sub->add_option("--knn-k", flags->knn_k, "Neighbours of the knn sampler (default 8)")
       ->check(CLI::Range(1, 100000));
+  sub->add_option("--sigma-z", flags->sigma_z,
+                  "Latent prior standard deviation sigma_z (default: PosePosterior's)")
+      ->check(CLI::PositiveNumber);
+  sub->add_option("--sigma", flags->sigma,
+                  "Pixel noise sigma, normalised units (default: the trunk's residual_sigma)")
+      ->check(CLI::PositiveNumber);
+  sub->add_flag("--no-model-error", flags->no_model_error,
+                "Leave the pose MLP's calibrated error out of the sgld/laplace samples (the "
+                "latent posterior alone; docs/POSES.md, Calibration)");
   sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
   sub->callback([flags, selected]() { *selected = [flags]() { RunPosteriorBench(*flags); }; });
 }

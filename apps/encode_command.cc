@@ -39,6 +39,7 @@ struct EncodeFlags {
   bool resume = false;
   std::string sensors;
   std::string split;
+  std::string latent_precision = "float32";
   bool json = false;
   DatasetFlags dataset;
 };
@@ -120,6 +121,9 @@ void RunEncode(const EncodeFlags& flags) {
     }
     options.split = split;
   }
+  options.latent_precision = flags.latent_precision == "float16"
+                                 ? Functaset::LatentPrecision::kFloat16
+                                 : Functaset::LatentPrecision::kFloat32;
 
   // Never silently throw away a partial run.
   const bool out_exists = std::filesystem::exists(flags.out);
@@ -231,6 +235,10 @@ void RegisterEncode(CLI::App& app, CommandBody* selected) {
                   "Comma-separated sensors to encode (default: every sensor of the dataset "
                   "that the model has a trunk for)");
   sub->add_option("--split", flags->split, "Only frames of this split: train or test");
+  sub->add_option("--latent-precision", flags->latent_precision,
+                  "Storage of the latents: float32 (default) or float16 (half the bytes; "
+                  "docs/FUNCTASET.md)")
+      ->check(CLI::IsMember({"float32", "float16"}));
   sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
   AddDatasetFlags(sub, &flags->dataset);
   sub->callback([flags, selected]() { *selected = [flags]() { RunEncode(*flags); }; });

@@ -444,9 +444,11 @@ void RunEval(const EvalFlags& flags) {
     const std::vector<double> tf_psnr = LatentPsnrs(
         trunk, s.entries, frame_targets, threads, std::string("eval: TactFunc ") + ToString(sensor));
     const std::uint64_t trunk_bytes = 4ull * (trunk.siren.NumParameters() + trunk.alpha.size());
-    const std::uint64_t tf_rep = trunk_bytes + m * 4ull * d;
+    // Bytes per frame as stored (4 or 2 per latent float: encode --latent-precision).
+    const double tf_frame_bytes = static_cast<double>(functaset.BytesPerLatentFloat()) * d;
+    const std::uint64_t tf_rep = trunk_bytes + m * static_cast<std::uint64_t>(tf_frame_bytes);
     curves[sensor].tactfunc.push_back(
-        {4.0 * d, MeanPsnr(Pick(tf_psnr, s.test)), "d=" + std::to_string(d)});
+        {tf_frame_bytes, MeanPsnr(Pick(tf_psnr, s.test)), "d=" + std::to_string(d)});
 
     // -- PCA -----------------------------------------------------------------------------
     const Eigen::MatrixXf train_matrix = StackFrames(s.Targets(s.train));
@@ -489,7 +491,7 @@ void RunEval(const EvalFlags& flags) {
     JpegCodec::Options jpeg_options;
     JpegRangeOfFrames(s.Targets(s.train), &jpeg_options.lo, &jpeg_options.hi);
     const JpegQualitySearchSummary search =
-        FindJpegQuality(s.Targets(s.train), jpeg_options, 4.0 * d);
+        FindJpegQuality(s.Targets(s.train), jpeg_options, tf_frame_bytes);
     std::cout << search.BriefReport() << "\n";
     jpeg_options.quality = search.quality;
     auto jpeg_eval = [&](const JpegCodec::Options& o, std::vector<double>* psnr,
@@ -559,7 +561,7 @@ void RunEval(const EvalFlags& flags) {
       const std::vector<double> psnr =
           LatentPsnrs(t2, test_entries, t_targets, threads,
                       "eval: TactFunc d=" + std::to_string(d2) + " " + ToString(sensor));
-      curves[sensor].tactfunc.push_back({4.0 * d2, MeanPsnr(psnr), "d=" + std::to_string(d2)});
+      curves[sensor].tactfunc.push_back({e.functaset.BytesPerLatentFloat() * 1.0 * d2, MeanPsnr(psnr), "d=" + std::to_string(d2)});
     }
 
     // -- Poses ---------------------------------------------------------------------------
@@ -665,7 +667,7 @@ void RunEval(const EvalFlags& flags) {
         return it == pose.end() ? PoseErrors() : it->second;
       };
       const bool posed = sensor == pose_sensor;
-      Row tf{"TactFunc", posed ? "pose MLP on latents" : "", sensor, split, tf_rep, 4.0 * d,
+      Row tf{"TactFunc", posed ? "pose MLP on latents" : "", sensor, split, tf_rep, tf_frame_bytes,
              MeanPsnr(Pick(tf_psnr, idx)), true, static_cast<int>(idx.size()),
              find_pose("tactfunc"), ""};
       Row pc{"PCA", posed ? "pose MLP on PCA codes" : "", sensor, split,

@@ -72,6 +72,7 @@ struct PoseFlags {
   std::string out;
   int height = 420;
   bool json = false;
+  bool no_model_error = false;
 };
 
 constexpr double kDeg = 180.0 / M_PI;
@@ -427,6 +428,9 @@ void RunPose(const PoseFlags& flags) {
   options.num_samples = flags.samples;
   options.seed = flags.seed;
   options.knn.k = flags.knn_k;
+  // Centre on the latent map the pose MLP was trained on (samplers/pose_posterior.h).
+  options.fit.strategy = LatentMapOfPoseModel(pose_model, model.Trunk(sensor));
+  options.model_error = !flags.no_model_error;
   std::string error;
   if (!options.IsValid(&error)) throw UsageError(error);
   FunctasetKnn knn;
@@ -565,6 +569,9 @@ void RegisterPose(CLI::App& app, CommandBody* selected) {
   sub->add_option("--out", flags->out, "Folder for posterior.json and posterior.png (created)");
   sub->add_option("--height", flags->height, "posterior.png panel height in pixels")
       ->check(CLI::Range(120, 2000));
+  sub->add_flag("--no-model-error", flags->no_model_error,
+                "Leave the pose MLP's calibrated error out of the sgld/laplace samples (the "
+                "latent posterior alone; docs/POSES.md, Calibration)");
   sub->add_flag("--json", flags->json,
                 "Print {mean, covariance, ms, sampler, samples} as one JSON line");
   sub->callback([flags, selected]() { *selected = [flags]() { RunPose(*flags); }; });

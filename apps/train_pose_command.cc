@@ -27,7 +27,10 @@
 #include <iostream>
 #include <map>
 #include <memory>
+#include <numeric>
+#include <random>
 #include <set>
+#include <thread>
 
 #include "apps/command.h"
 #include "apps/model_inputs.h"
@@ -56,6 +59,11 @@ struct TrainPoseFlags {
   std::string refit;  // "" or a LatentFitter strategy: re-fit every latent from --data
   std::string model;
   std::string data;
+  double calibration_fraction = 0.1;
+  std::string exclude_tools;      // left out of training and calibration (held-out tools)
+  std::string calibration_tools;  // calibrate on these tools instead of a random fraction
+  int threads = 0;
+  double posterior_sigma = 0;
   bool json = false;
 };
 
@@ -130,6 +138,15 @@ std::map<std::string, ErrorSums> Evaluate(const PoseMlp& model, const Samples& s
     }
   }
   return sums;
+}
+
+void CheckToolName(const std::string& tool, const char* flag) {
+  bool known = false;
+  SymmetryOrderOfTool(tool, &known);
+  if (!known) {
+    throw UsageError(std::string(flag) + ": unknown tool '" + tool +
+                     "' (tactfunc info --tools lists them)");
+  }
 }
 
 nlohmann::json NumberOrNull(double v) {
@@ -211,22 +228,43 @@ void RunTrainPose(const TrainPoseFlags& flags) {
     refitted.AddSensor(sensor, functaset.latent_dim(sensor));
     const auto& entries = functaset.entries(sensor);
     const auto start = std::chrono::steady_clock::now();
+    std::vector<std::size_t> frame_of(entries.size(), 0);
+    for (std::size_t i = 0; i < entries.size(); ++i) {
+      if (!entries[i].label.has_value()) continue;
+      const std::optional<std::size_t> index = dataset.FindFrame(entries[i].id, sensor);
+      if (!index) {
+        throw DatasetError("--data '" + flags.data + "' has no " + ToString(sensor) + " frame '" +
+                           entries[i].id + "' of the functaset");
+      }
+      frame_of[i] = *index;
+    }
+    // Fits are independent and LatentFitter::Fit is const: one strided share per thread.
+    std::vector<Eigen::VectorXf> latents(entries.size());
+    const int threads = ResolveThreads(flags.threads);
+    std::vector<std::thread> workers;
+    std::vector<std::exception_ptr> failures(threads);
+    for (int w = 0; w < threads; ++w) {
+      workers.emplace_back([&, w]() {
+        try {
+          for (std::size_t i = w; i < entries.size(); i += threads) {
+            if (!entries[i].label.has_value()) continue;
+            Eigen::VectorXd latent;
+            fitter.Fit(LoadTrunkTargets(dataset, frame_of[i], trunk.format), &latent);
+            latents[i] = latent.cast<float>();
+          }
+        } catch (...) {
+          failures[w] = std::current_exception();
+        }
+      });
+    }
+    for (std::thread& worker : workers) worker.join();
+    for (const std::exception_ptr& failure : failures) {
+      if (failure) std::rethrow_exception(failure);
+    }
     for (std::size_t i = 0; i < entries.size(); ++i) {
       FunctasetEntry entry = entries[i];
-      if (entry.label.has_value()) {
-        const std::optional<std::size_t> index = dataset.FindFrame(entry.id, sensor);
-        if (!index) {
-          throw DatasetError("--data '" + flags.data + "' has no " + ToString(sensor) +
-                             " frame '" + entry.id + "' of the functaset");
-        }
-        Eigen::VectorXd latent;
-        fitter.Fit(LoadTrunkTargets(dataset, *index, trunk.format), &latent);
-        entry.latent = latent.cast<float>();
-      }
+      if (entry.label.has_value()) entry.latent = latents[i];
       refitted.Add(sensor, std::move(entry));
-      if ((i + 1) % 200 == 0) {
-        std::cerr << "train-pose: re-fitted " << i + 1 << "/" << entries.size() << " latents\n";
-      }
     }
     std::cout << "train-pose: re-fitted " << entries.size() << " latents with " << flags.refit
               << " in "
@@ -235,8 +273,60 @@ void RunTrainPose(const TrainPoseFlags& flags) {
     source = &refitted;
   }
   std::set<std::string> unknown_tools;
-  const Samples train = Collect(*source, sensor, Split::kTrain, &unknown_tools);
+  Samples train = Collect(*source, sensor, Split::kTrain, &unknown_tools);
   const Samples test = Collect(*source, sensor, Split::kTest, &unknown_tools);
+  // Calibration contacts (decision, docs/POSES.md "Calibration"): a seeded random
+  // fraction of the train split (or the train contacts of --calibration-tools) is held
+  // out of the MLP's training; its residuals, stored in the pose model, are the
+  // regressor error the posteriors add to their samples. --exclude-tools drop tools
+  // from training and calibration (they stay in the test figures).
+  Samples calibration;
+  {
+    const std::vector<std::string> excluded = SplitList(flags.exclude_tools);
+    const std::vector<std::string> calibration_tools = SplitList(flags.calibration_tools);
+    for (const std::string& tool : excluded) CheckToolName(tool, "--exclude-tools");
+    for (const std::string& tool : calibration_tools) CheckToolName(tool, "--calibration-tools");
+    auto in = [](const std::vector<std::string>& list, const std::string& tool) {
+      return std::find(list.begin(), list.end(), tool) != list.end();
+    };
+    auto take = [&](const Samples& from, const std::vector<int>& rows) {
+      Samples s;
+      const int k = static_cast<int>(rows.size());
+      s.inputs.resize(k, from.inputs.cols());
+      s.targets.poses.resize(k, 3);
+      s.targets.symmetry_orders.resize(k);
+      for (int i = 0; i < k; ++i) {
+        s.inputs.row(i) = from.inputs.row(rows[i]);
+        s.targets.poses.row(i) = from.targets.poses.row(rows[i]);
+        s.targets.symmetry_orders[i] = from.targets.symmetry_orders[rows[i]];
+        s.tools.push_back(from.tools[rows[i]]);
+      }
+      return s;
+    };
+    std::vector<int> fit_rows, calibration_rows;
+    for (int i = 0; i < static_cast<int>(train.tools.size()); ++i) {
+      if (in(excluded, train.tools[i])) continue;
+      (in(calibration_tools, train.tools[i]) ? calibration_rows : fit_rows).push_back(i);
+    }
+    if (calibration_tools.empty()) {
+      // A seeded random fraction of the training contacts.
+      std::mt19937_64 engine(flags.seed ^ 0x63616c6962ull);  // "calib"
+      std::shuffle(fit_rows.begin(), fit_rows.end(), engine);
+      const std::size_t held =
+          static_cast<std::size_t>(std::floor(flags.calibration_fraction * fit_rows.size()));
+      if (held < fit_rows.size()) {
+        calibration_rows.assign(fit_rows.end() - held, fit_rows.end());
+        fit_rows.resize(fit_rows.size() - held);
+        std::sort(fit_rows.begin(), fit_rows.end());
+      }
+    }
+    calibration = take(train, calibration_rows);
+    train = take(train, fit_rows);
+    if (!excluded.empty()) {
+      std::cout << "train-pose: tools held out of training and calibration: "
+                << flags.exclude_tools << "\n";
+    }
+  }
   if (train.inputs.rows() == 0) {
     throw DatasetError("--functaset '" + flags.functaset + "' has no labelled train-split " +
                        ToString(sensor) + " entries to train on");
@@ -269,6 +359,11 @@ void RunTrainPose(const TrainPoseFlags& flags) {
                              "); try a smaller --lr. Nothing was written.");
   }
 
+  if (calibration.inputs.rows() > 0) {
+    model.SetCalibrationResiduals(
+        CalibrationResiduals(model, calibration.inputs, calibration.targets));
+  }
+  const std::map<std::string, ErrorSums> calibration_errors = Evaluate(model, calibration);
   const std::map<std::string, ErrorSums> train_errors = Evaluate(model, train);
   const std::map<std::string, ErrorSums> test_errors = Evaluate(model, test);
   std::set<std::string> tools;
@@ -302,6 +397,12 @@ void RunTrainPose(const TrainPoseFlags& flags) {
                        {{"train", NumberOrNull(a.RmseDeg())}, {"test", NumberOrNull(b.RmseDeg())}}}};
   }
   row(std::string("all (") + ToString(sensor) + ")", "", "");
+  if (calibration.inputs.rows() > 0) {
+    const ErrorSums c = get(calibration_errors, "");
+    std::printf("%-19s | %6d %s %s   (held out of training; their residuals are stored)\n",
+                "calibration", c.count, Cell(c.RmseMm(), 8, 3).c_str(),
+                Cell(c.RmseDeg(), 8, 2).c_str());
+  }
   std::cout << "(position RMSE in mm; yaw RMSE in degrees modulo each tool's symmetry order n, "
                "n = 0 (no observable yaw) left out)\n";
   const ErrorSums all_train = get(train_errors, ""), all_test = get(test_errors, "");
@@ -310,11 +411,20 @@ void RunTrainPose(const TrainPoseFlags& flags) {
       {"rmse_mm", {{"train", NumberOrNull(all_train.RmseMm())}, {"test", NumberOrNull(all_test.RmseMm())}}},
       {"rmse_deg",
        {{"train", NumberOrNull(all_train.RmseDeg())}, {"test", NumberOrNull(all_test.RmseDeg())}}}};
+  // The latent map the MLP was trained on: what the posteriors must centre on
+  // (LatentMapOfPoseModel, samplers/pose_posterior.h).
+  // "functaset" = encode's K meta-SGD steps of the trunk.
+  const std::string latent_map = flags.refit.empty() ? "functaset" : flags.refit;
   nlohmann::json info = {{"sensor", ToString(sensor)},
                          {"functaset", flags.functaset},
                          {"model_checksum", functaset.model_checksum()},
                          {"train_samples", train.inputs.rows()},
                          {"latents", flags.refit.empty() ? "functaset" : "refit " + flags.refit},
+                         {"latent_map", latent_map},
+                         {"calibration_samples", calibration.inputs.rows()},
+                         {"posterior_sigma", flags.posterior_sigma},
+                         {"calibration_tools", flags.calibration_tools},
+                         {"excluded_tools", flags.exclude_tools},
                          {"epochs", summary.epochs_completed},
                          {"batch", flags.batch},
                          {"learning_rate", flags.lr},
@@ -368,6 +478,23 @@ void RegisterTrainPose(CLI::App& app, CommandBody* selected) {
                   "pose posteriors' fit) instead of the functaset's meta-SGD latents");
   sub->add_option("--model", flags->model, "Model (.tfm) of the functaset, for --refit");
   sub->add_option("--data", flags->data, "Dataset of the functaset, for --refit");
+  sub->add_option("--calibration-fraction", flags->calibration_fraction,
+                  "Fraction of the train split held out of training whose residuals are stored "
+                  "as the model's own error for the posteriors (default 0.1; 0 = none)")
+      ->check(CLI::Range(0.0, 0.9));
+  sub->add_option("--exclude-tools", flags->exclude_tools,
+                  "Comma-separated tools left out of training and calibration (held-out tools; "
+                  "their test figures measure generalisation to unseen shapes)");
+  sub->add_option("--calibration-tools", flags->calibration_tools,
+                  "Calibrate on these tools' train contacts (held out of training) instead of a "
+                  "random --calibration-fraction: residuals of shapes the MLP has not seen");
+  sub->add_option("--posterior-sigma", flags->posterior_sigma,
+                  "Pixel sigma of the sgld/laplace latent posterior to store with the model "
+                  "(calibrated: docs/POSES.md, Calibration; default 0 = the trunk's "
+                  "residual_sigma)")
+      ->check(CLI::NonNegativeNumber);
+  sub->add_option("--threads", flags->threads, "Threads of --refit (default: all cores)")
+      ->check(CLI::Range(0, 256));
   sub->add_flag("--json", flags->json,
                 "Print {sensor, rmse_mm, rmse_deg, per_tool, out} as one JSON line");
   sub->callback([flags, selected]() { *selected = [flags]() { RunTrainPose(*flags); }; });

@@ -180,7 +180,10 @@ std::string Functaset::Serialize() const {
                                {"ids", std::move(ids)},
                                {"splits", std::move(splits)},
                                {"tools", std::move(tools)}});
-    file.Add(name + "/latents", TensorFile::DType::kFloat32, {m, d}, std::move(latents));
+    file.Add(name + "/latents",
+             latent_precision_ == LatentPrecision::kFloat16 ? TensorFile::DType::kFloat16
+                                                            : TensorFile::DType::kFloat32,
+             {m, d}, std::move(latents));
     file.Add(name + "/psnr", TensorFile::DType::kFloat32, {m}, std::move(psnr));
     file.Add(name + "/poses", TensorFile::DType::kFloat64, {m, 4}, std::move(poses));
   }
@@ -249,10 +252,13 @@ Functaset Functaset::Parse(const std::string& bytes, const std::string& source) 
       const auto& latents = file.Get(name + "/latents", {m, d});
       const auto& psnr = file.Get(name + "/psnr", {m});
       const auto& poses = file.Get(name + "/poses", {m, 4});
-      if (latents.dtype != TensorFile::DType::kFloat32 ||
+      if (latents.dtype == TensorFile::DType::kFloat64 ||
           psnr.dtype != TensorFile::DType::kFloat32 || poses.dtype != TensorFile::DType::kFloat64) {
         field = name + "/*";
-        throw fail("expected latents and psnr float32, poses float64");
+        throw fail("expected latents float32 or float16, psnr float32, poses float64");
+      }
+      if (latents.dtype == TensorFile::DType::kFloat16) {
+        out.latent_precision_ = LatentPrecision::kFloat16;
       }
       out.AddSensor(sensor, d);
       for (std::int64_t i = 0; i < m; ++i) {

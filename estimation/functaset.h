@@ -88,6 +88,17 @@ class Functaset {
   // The dataset the frames came from (as given to the encoder; informational).
   const std::string& dataset() const { return dataset_; }
   void set_dataset(const std::string& dataset) { dataset_ = dataset; }
+  // Storage precision of the latents in the file: float32 (default) or float16 (half the
+  // bytes; IEEE binary16, relative rounding error <= 2^-11 -- its PSNR cost is measured
+  // in docs/RESULTS_RECONSTRUCTION.md). In memory latents stay float; Save rounds,
+  // Load reads either and reports which. Bytes per latent float: 4 or 2.
+  enum class LatentPrecision { kFloat32, kFloat16 };
+  LatentPrecision latent_precision() const { return latent_precision_; }
+  void set_latent_precision(LatentPrecision precision) { latent_precision_ = precision; }
+  int BytesPerLatentFloat() const {
+    return latent_precision_ == LatentPrecision::kFloat16 ? 2 : 4;
+  }
+
   // False for a partial functaset (an interrupted or running encoder's checkpoint).
   bool complete() const { return complete_; }
   void set_complete(bool complete) { complete_ = complete; }
@@ -144,6 +155,7 @@ class Functaset {
   std::uint32_t model_checksum_ = 0;
   std::string dataset_;
   bool complete_ = true;
+  LatentPrecision latent_precision_ = LatentPrecision::kFloat32;
   std::map<SensorKind, SensorBlock> blocks_;
   std::string source_;
 };

@@ -251,6 +251,7 @@ Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
   auto collect = [&](bool complete) {
     Functaset out(model_.checksum(), dataset.root());
     out.set_complete(complete);
+    out.set_latent_precision(options_.latent_precision);
     for (SensorKind sensor : sensors) {
       out.AddSensor(sensor, model_.Trunk(sensor).siren.latent_dim());
     }

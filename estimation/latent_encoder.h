@@ -90,6 +90,9 @@ class LatentEncoder {
     std::vector<SensorKind> sensors;
     // Only frames of this split (nullopt = all frames).
     std::optional<Split> split;
+    // Storage precision of the latents in the written functaset (Functaset::
+    // LatentPrecision). The per-frame PSNR is that of the unrounded fit.
+    Functaset::LatentPrecision latent_precision = Functaset::LatentPrecision::kFloat32;
 
     // True if every field is in range; otherwise false and *error (if not null) names
     // the bad field and its value.

@@ -477,4 +477,21 @@ std::array<double, 36> ToRosPoseCovariance(const SE2d& reference_T_mean,
   return ros;
 }
 
+std::pair<double, double> BinomialInterval99(int n, double p) {
+  if (n <= 0) return {0.0, 1.0};
+  double cdf = 0;
+  int lo = -1, hi = n;
+  for (int k = 0; k <= n; ++k) {
+    const double log_pmf = std::lgamma(n + 1.0) - std::lgamma(k + 1.0) - std::lgamma(n - k + 1.0) +
+                           k * std::log(p) + (n - k) * std::log1p(-p);
+    cdf += std::exp(log_pmf);
+    if (lo < 0 && cdf >= 0.005) lo = k;
+    if (cdf >= 0.995) {
+      hi = k;
+      break;
+    }
+  }
+  return {static_cast<double>(std::max(lo, 0)) / n, static_cast<double>(hi) / n};
+}
+
 }  // namespace tactfunc

@@ -81,6 +81,7 @@
 
 #include <array>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "Eigen/Core"
@@ -272,6 +273,13 @@ std::array<double, 36> ToRosPoseCovariance(const SE2d& reference_T_mean,
                                            const Eigen::Matrix3d& covariance,
                                            RosCovarianceFrame frame = RosCovarianceFrame::kParent,
                                            double unobserved_variance = 0);
+
+// Calibration checks. The central 99% interval [lo, hi] of Binomial(n, p) / n (each
+// tail holds at most 0.5%): the coverage of n independent truths by nominal p-credible
+// regions falls outside it with probability <= 1% if the regions are calibrated. The
+// tolerance of every coverage check in tactfunc follows from n this way and is never
+// widened by hand. n <= 0 gives [0, 1].
+std::pair<double, double> BinomialInterval99(int n, double p);
 
 }  // namespace tactfunc
 

@@ -396,6 +396,14 @@ void PoseMlp::set_info_json(const std::string& json) {
   info_json_ = parsed.dump();
 }
 
+void PoseMlp::SetCalibrationResiduals(const Eigen::MatrixXd& residuals) {
+  Check(residuals.cols() == 3 && residuals.allFinite(),
+        "PoseMlp::SetCalibrationResiduals: expected R x 3 finite residuals (x m, y m, yaw "
+        "rad), got " + std::to_string(residuals.rows()) + " x " +
+            std::to_string(residuals.cols()) + (residuals.allFinite() ? "" : " with non-finite values"));
+  calibration_residuals_ = residuals;
+}
+
 std::string PoseMlp::Serialize() const {
   TensorFile file(kKind);
   nlohmann::json meta;
@@ -411,6 +419,11 @@ std::string PoseMlp::Serialize() const {
   file.Add("input_mean", TensorFile::DType::kFloat32, {input_mean_.size()}, ToVector(input_mean_));
   file.Add("input_stddev", TensorFile::DType::kFloat32, {input_stddev_.size()},
            ToVector(input_stddev_));
+  if (calibration_residuals_.rows() > 0) {
+    const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> rows = calibration_residuals_;
+    file.Add("calibration_residuals", TensorFile::DType::kFloat64,
+             {rows.rows(), 3}, std::vector<double>(rows.data(), rows.data() + rows.size()));
+  }
   return file.Serialize();
 }
 
@@ -454,6 +467,20 @@ PoseMlp FromTensorFile(const TensorFile& file, const std::string& source) {
       throw TensorFileError(source + ": tensor 'input_stddev' must be > 0 everywhere");
     }
     model.SetInputStandardization(mean, stddev);
+    if (file.Has("calibration_residuals")) {
+      const TensorFile::Tensor& t = file.Get("calibration_residuals");
+      if (t.shape.size() != 2 || t.shape[1] != 3) {
+        throw TensorFileError(source + ": tensor 'calibration_residuals': expected shape R x 3");
+      }
+      Eigen::MatrixXd residuals(t.shape[0], 3);
+      for (Eigen::Index r = 0; r < residuals.rows(); ++r) {
+        for (int c = 0; c < 3; ++c) residuals(r, c) = t.values[r * 3 + c];
+      }
+      if (!residuals.allFinite()) {
+        throw TensorFileError(source + ": tensor 'calibration_residuals' holds non-finite values");
+      }
+      model.SetCalibrationResiduals(residuals);
+    }
     return model;
   } catch (const nlohmann::json::exception& e) {
     throw TensorFileError(source + ": field '" + field + "' is missing or has the wrong type (" +

@@ -158,6 +158,21 @@ class PoseMlp {
   double Loss(const MatrixX<Scalar>& outputs, const PoseTargets& targets,
               double yaw_loss_weight = 1.0, MatrixX<Scalar>* d_outputs = nullptr) const;
 
+  // ---- Calibration: the regressor's own error ------------------------------------------
+  // Residuals of the trained model on calibration contacts held out of its training
+  // (`tactfunc train-pose --calibration-fraction`): r_j = Log(T_pred(z_j)^-1 T_true_j),
+  // (x m, y m, yaw rad), a right (body-frame) perturbation as estimation/se2.h uses, with
+  // the true yaw taken modulo the tool's symmetry (the copy nearest the prediction; the
+  // prediction's yaw for n = 0). Computed by CalibrationResiduals (samplers/
+  // pose_posterior.h). The pose posteriors compose every pose sample with a residual
+  // drawn from these (PosePosterior::Options::model_error), so that the distribution
+  // covers the regressor's error and not only the latent's (docs/POSES.md,
+  // "Calibration"). R x 3; empty (the default, and files written before it existed) =
+  // none. Stored in the pose model file as the float64 tensor "calibration_residuals".
+  const Eigen::MatrixXd& calibration_residuals() const { return calibration_residuals_; }
+  // Throws std::invalid_argument unless residuals is R x 3 (R >= 0) and finite.
+  void SetCalibrationResiduals(const Eigen::MatrixXd& residuals);
+
   // ---- Files -------------------------------------------------------------------------
   // Free-form JSON object stored with the model (training summary, data provenance).
   const std::string& info_json() const { return info_json_; }
@@ -191,6 +206,7 @@ class PoseMlp {
   Eigen::VectorXf input_mean_;
   Eigen::VectorXf input_stddev_;
   std::string info_json_ = "{}";
+  Eigen::MatrixXd calibration_residuals_ = Eigen::MatrixXd::Zero(0, 3);
 
   friend struct PoseMlpTrainerAccess;
 };

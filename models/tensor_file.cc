@@ -10,6 +10,7 @@
 #include <fstream>
 #include <sstream>
 
+#include <Eigen/Core>
 #include <boost/crc.hpp>
 
 #include "nlohmann/json.hpp"
@@ -39,7 +40,23 @@ T GetLittle(const std::string& bytes, std::size_t offset) {
 }
 
 std::size_t ElementBytes(TensorFile::DType dtype) {
-  return dtype == TensorFile::DType::kFloat32 ? 4 : 8;
+  switch (dtype) {
+    case TensorFile::DType::kFloat16:
+      return 2;
+    case TensorFile::DType::kFloat32:
+      return 4;
+    case TensorFile::DType::kFloat64:
+      return 8;
+  }
+  return 8;
+}
+
+std::uint16_t HalfBits(double v) {
+  return Eigen::numext::bit_cast<std::uint16_t>(Eigen::half(static_cast<float>(v)));
+}
+
+double FromHalfBits(std::uint16_t bits) {
+  return static_cast<float>(Eigen::numext::bit_cast<Eigen::half>(bits));
 }
 
 std::string ShapeString(const std::vector<std::int64_t>& shape) {
@@ -65,7 +82,15 @@ std::int64_t TensorFile::Tensor::numel() const {
 }
 
 const char* ToString(TensorFile::DType dtype) {
-  return dtype == TensorFile::DType::kFloat32 ? "float32" : "float64";
+  switch (dtype) {
+    case TensorFile::DType::kFloat16:
+      return "float16";
+    case TensorFile::DType::kFloat32:
+      return "float32";
+    case TensorFile::DType::kFloat64:
+      return "float64";
+  }
+  return "unknown";
 }
 
 void TensorFile::set_meta_json(const std::string& json) {
@@ -96,6 +121,8 @@ void TensorFile::Add(const std::string& name, DType dtype,
   }
   if (dtype == DType::kFloat32) {
     for (double& v : values) v = static_cast<float>(v);
+  } else if (dtype == DType::kFloat16) {
+    for (double& v : values) v = FromHalfBits(HalfBits(v));
   }
   tensor.values = std::move(values);
   tensors_.push_back(std::move(tensor));
@@ -153,7 +180,13 @@ std::string TensorFile::Serialize() const {
   std::uint64_t at = 0;
   for (const Tensor& t : tensors_) {
     char* dst = out.data() + payload + at;
-    if (t.dtype == DType::kFloat32) {
+    if (t.dtype == DType::kFloat16) {
+      for (double v : t.values) {
+        const std::uint16_t bits = HalfBits(v);
+        *dst++ = static_cast<char>(bits & 0xff);
+        *dst++ = static_cast<char>(bits >> 8);
+      }
+    } else if (t.dtype == DType::kFloat32) {
       for (double v : t.values) {
         const float f = static_cast<float>(v);
         std::uint32_t bits;
@@ -229,9 +262,11 @@ TensorFile TensorFile::Parse(const std::string& bytes, const std::string& source
         t.dtype = DType::kFloat32;
       } else if (dtype == "float64") {
         t.dtype = DType::kFloat64;
+      } else if (dtype == "float16") {
+        t.dtype = DType::kFloat16;
       } else {
         throw fail("tensor '" + t.name + "': dtype '" + dtype +
-                   "', expected float32 or float64");
+                   "', expected float16, float32 or float64");
       }
       t.shape = entry.at("shape").get<std::vector<std::int64_t>>();
       const auto offset = entry.at("offset").get<std::uint64_t>();
@@ -247,7 +282,11 @@ TensorFile TensorFile::Parse(const std::string& bytes, const std::string& source
       t.values.resize(t.numel());
       const char* src = bytes.data() + payload + offset;
       for (auto& v : t.values) {
-        if (t.dtype == DType::kFloat32) {
+        if (t.dtype == DType::kFloat16) {
+          std::uint16_t bits = static_cast<unsigned char>(*src++);
+          bits |= static_cast<std::uint16_t>(static_cast<unsigned char>(*src++)) << 8;
+          v = FromHalfBits(bits);
+        } else if (t.dtype == DType::kFloat32) {
           std::uint32_t bits = 0;
           for (int i = 0; i < 4; ++i) bits |= static_cast<std::uint32_t>(static_cast<unsigned char>(*src++)) << (8 * i);
           float f;

@@ -47,7 +47,9 @@ class TensorFileError : public std::runtime_error {
 
 class TensorFile {
  public:
-  enum class DType { kFloat32, kFloat64 };
+  // float16: IEEE binary16 (numpy's float16), e.g. a functaset's latents at half the
+  // bytes; values are rounded to nearest-even when added.
+  enum class DType { kFloat32, kFloat64, kFloat16 };
   struct Tensor {
     std::string name;
     DType dtype = DType::kFloat32;

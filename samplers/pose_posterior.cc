@@ -9,8 +9,19 @@
 #include <utility>
 #include <vector>
 
+#include <boost/random/mersenne_twister.hpp>
+#include <boost/random/uniform_int_distribution.hpp>
+
+#include <nlohmann/json.hpp>
+
+#include "models/seed.h"
+
 namespace tactfunc {
 namespace {
+
+// DeriveSeed stream of the model-error draws (distinct from the samplers' own streams,
+// which are seeded with options.seed directly).
+constexpr std::uint64_t kModelErrorStream = 0x6d6f64656c457272ull;  // "modelErr"
 
 double MsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
@@ -37,7 +48,28 @@ LatentFitter::Options QueryOptions(const PosePosterior::Options& options,
   return fit;
 }
 
+// potential.sigma = 0 (automatic) takes the pose model's calibrated posterior sigma if
+// it has one (header comment); otherwise TrunkPotential's own rule applies.
+PosePosterior::Options WithPoseModelSigma(PosePosterior::Options options,
+                                          const PoseMlp& pose_mlp) {
+  if (options.potential.sigma == 0) {
+    const double sigma = PosteriorSigmaOfPoseModel(pose_mlp);
+    if (sigma > 0) options.potential.sigma = sigma;
+  }
+  return options;
+}
+
 }  // namespace
+
+double PosteriorSigmaOfPoseModel(const PoseMlp& pose_model) {
+  const nlohmann::json info = nlohmann::json::parse(pose_model.info_json(), nullptr, false);
+  if (info.is_object() && info.contains("posterior_sigma") &&
+      info["posterior_sigma"].is_number()) {
+    const double sigma = info["posterior_sigma"].get<double>();
+    if (std::isfinite(sigma) && sigma > 0) return sigma;
+  }
+  return 0;
+}
 
 const char* ToString(PosteriorSampler sampler) {
   switch (sampler) {
@@ -130,10 +162,10 @@ PosePosterior::PosePosterior(const SensorTrunk& trunk, const PoseMlp& pose_mlp,
                              const Options& options, const KnnPosterior* knn)
     : trunk_(&trunk),
       pose_mlp_(&pose_mlp),
-      options_(options),
+      options_(WithPoseModelSigma(options, pose_mlp)),
       knn_(knn),
-      fitter_(trunk, FitOptions(options)),
-      query_fitter_(trunk, QueryOptions(options, trunk)) {
+      fitter_(trunk, FitOptions(options_)),
+      query_fitter_(trunk, QueryOptions(options_, trunk)) {
   if (pose_mlp.input_dim() != trunk.siren.latent_dim()) {
     throw std::invalid_argument("PosePosterior: the pose MLP takes latents of size " +
                                 std::to_string(pose_mlp.input_dim()) + ", the trunk makes " +
@@ -255,6 +287,15 @@ PosePosterior::Summary PosePosterior::EstimateImpl(const TrunkTargets& targets,
       }
       poses.push_back(SE2d::FromXYYaw(xyyaw(i, 0), xyyaw(i, 1), xyyaw(i, 2)));
     }
+    const Eigen::MatrixXd& residuals = pose_mlp_->calibration_residuals();
+    if (options_.model_error && residuals.rows() > 0) {
+      boost::random::mt19937_64 engine(DeriveSeed(options_.seed, kModelErrorStream));
+      boost::random::uniform_int_distribution<Eigen::Index> pick(0, residuals.rows() - 1);
+      for (SE2d& pose : poses) {
+        const Eigen::Vector3d r = residuals.row(pick(engine)).transpose();
+        pose = pose * SE2d::Exp(r);
+      }
+    }
   }
 
   // The distribution, folded, and its moments.
@@ -275,6 +316,52 @@ PosePosterior::Summary PosePosterior::EstimateImpl(const TrunkTargets& targets,
   summary.total_time_ms = MsSince(start);
   summary.pose_time_ms = summary.total_time_ms - summary.fit_time_ms - summary.sample_time_ms;
   return summary;
+}
+
+Eigen::MatrixXd CalibrationResiduals(const PoseMlp& model, const Eigen::MatrixXf& inputs,
+                                     const PoseTargets& targets) {
+  const Eigen::Index m = inputs.rows();
+  if (targets.poses.rows() != m || targets.poses.cols() != 3 ||
+      (targets.symmetry_orders.size() != 0 && targets.symmetry_orders.size() != m)) {
+    throw std::invalid_argument(
+        "CalibrationResiduals: expected " + std::to_string(m) + " x 3 poses and " +
+        std::to_string(m) + " symmetry orders, got " + std::to_string(targets.poses.rows()) +
+        " x " + std::to_string(targets.poses.cols()) + " and " +
+        std::to_string(targets.symmetry_orders.size()));
+  }
+  Eigen::MatrixXd residuals(m, 3);
+  for (Eigen::Index i = 0; i < m; ++i) {
+    const int n = targets.symmetry_orders.size() ? targets.symmetry_orders[i] : 1;
+    const Eigen::Vector3d p = model.Predict(inputs.row(i).transpose().cast<double>(), n);
+    const Eigen::Vector3d t = targets.poses.row(i).transpose();
+    double true_yaw = p[2];  // n = 0: no observable yaw
+    if (n > 0) {
+      const double period = 2 * M_PI / n;
+      true_yaw = t[2] + period * std::round((p[2] - t[2]) / period);
+    }
+    const SE2d predicted = SE2d::FromXYYaw(p[0], p[1], p[2]);
+    residuals.row(i) = (predicted.Inverse() * SE2d::FromXYYaw(t[0], t[1], true_yaw)).Log().transpose();
+  }
+  return residuals;
+}
+
+FitStrategy LatentMapOfPoseModel(const PoseMlp& pose_model, const SensorTrunk& trunk) {
+  const nlohmann::json info = nlohmann::json::parse(pose_model.info_json(), nullptr, false);
+  std::string map = "functaset";
+  if (info.is_object() && info.contains("latent_map") && info["latent_map"].is_string()) {
+    map = info["latent_map"].get<std::string>();
+  } else if (info.is_object() && info.contains("latents") && info["latents"].is_string()) {
+    const std::string latents = info["latents"].get<std::string>();
+    if (latents.rfind("refit ", 0) == 0) map = latents.substr(6);
+  }
+  if (map == "functaset") map = "meta_sgd:" + std::to_string(trunk.meta_sgd.inner_steps);
+  FitStrategy strategy;
+  std::string error;
+  if (!FitStrategy::Parse(map, &strategy, &error)) {
+    throw std::invalid_argument("pose model: latent map '" + map + "' is not a fit strategy: " +
+                                error);
+  }
+  return strategy;
 }
 
 PosePosterior::Summary EstimatePosePosterior(const SensorTrunk& trunk, const PoseMlp& pose_mlp,

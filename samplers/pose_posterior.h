@@ -15,6 +15,12 @@
 //   sgld     fit (LatentFitter, Options::fit, default ceres:10) -> z*; Sgld chains from
 //            z* (+ jitter) on TrunkPotential -> num_samples latents -> PoseMlp.
 //   laplace  fit -> z*; N(z*, H^-1) -> num_samples latents -> PoseMlp.
+//   model error (sgld, laplace; Options::model_error): each MLP pose x_i is composed
+//            with a residual r_j of the MLP drawn (uniformly, seeded) from its
+//            calibration residuals, x_i <- x_i Exp(r_j) (PoseMlp::calibration_residuals,
+//            measured by train-pose on held-out contacts). The latent posterior alone
+//            leaves out the regressor's own error, which dominates (docs/POSES.md,
+//            "Calibration"): without it the 90% regions covered 55-62% of the truths.
 //   knn      a cheap query latent (knn_query_meta_sgd_steps meta-SGD steps, the map the
 //            trunk was trained for) -> KnnPosterior -> the neighbours' labelled poses.
 // With Estimate(targets, latent, ...) the given latent replaces the fit (the mode for
@@ -74,7 +80,9 @@ class PosePosterior {
     int num_samples = 100;
     // Seed of the sampler (overrides sgld.seed and laplace.seed).
     std::uint64_t seed = 0;
-    // The posterior over the latent (sigma, sigma_z, precision).
+    // The posterior over the latent (sigma, sigma_z, precision). sigma = 0 (automatic):
+    // the pose model's calibrated PosteriorSigmaOfPoseModel if it has one, else the
+    // trunk's residual_sigma (TrunkPotential's rule).
     TrunkPotential::Options potential;
     // The latent fit (mode / start). Default: LatentFitter's (ceres:10). sigma and
     // sigma_z are overwritten by the potential's.
@@ -86,6 +94,9 @@ class PosePosterior {
     Sgld::Options sgld;
     LaplaceSampler::Options laplace;
     KnnPosterior::Options knn;
+    // Add the pose MLP's own error to each sgld / laplace pose sample (header comment).
+    // No effect for a pose model without calibration residuals or for knn.
+    bool model_error = true;
     // Fold the yaws by the tool's symmetry order before the mean and covariance.
     bool fold_by_symmetry = true;
     // For the Summary's mean.
@@ -152,6 +163,30 @@ class PosePosterior {
   LatentFitter fitter_;
   LatentFitter query_fitter_;  // meta-SGD query of the knn sampler
 };
+
+// The calibration residuals of `model` (PoseMlp::calibration_residuals: R x 3,
+// r_j = Log(T_pred^-1 T_true) with the true yaw taken modulo the tool's symmetry) on
+// held-out latents inputs (R x d) with their true poses and symmetry orders. Throws
+// std::invalid_argument for mismatched shapes.
+Eigen::MatrixXd CalibrationResiduals(const PoseMlp& model, const Eigen::MatrixXf& inputs,
+                                     const PoseTargets& targets);
+
+// The latent map a pose model was trained on, as a fit strategy: its info's
+// "latent_map" (written by train-pose: "functaset" = the trunk's K meta-SGD steps, what
+// `encode` stores; else a strategy such as "ceres:10" from --refit), or the older
+// "latents" field ("functaset" / "refit <strategy>"). Posteriors centre on this map so
+// that the MLP sees the kind of latent it was trained on (docs/POSES.md, "Latent maps").
+// A model without either field gives the trunk's meta_sgd:K.
+FitStrategy LatentMapOfPoseModel(const PoseMlp& pose_model, const SensorTrunk& trunk);
+
+// The pixel sigma the pose model was calibrated with (its info's "posterior_sigma",
+// `train-pose --posterior-sigma`), or 0 if it has none. PosePosterior uses it when
+// Options::potential.sigma is 0 (automatic) -- see "Calibration" in docs/POSES.md: the
+// calibration residuals already hold the pose error that the latent's noise causes at
+// the fit, so the latent posterior is tempered (a smaller sigma) to avoid counting that
+// error twice; the value is chosen on calibration data and checked on fresh contacts
+// (tests/samplers/coverage_test.cc).
+double PosteriorSigmaOfPoseModel(const PoseMlp& pose_model);
 
 // One call: PosePosterior(trunk, pose_mlp, options, knn).Estimate(targets, n, posterior).
 PosePosterior::Summary EstimatePosePosterior(const SensorTrunk& trunk, const PoseMlp& pose_mlp,

@@ -60,7 +60,7 @@ cat "$WORK"/runs/*/result.json > "$WORK/sweep.jsonl"
 {
   echo "| sensor | width x layers | d | parameters | test PSNR noisy / clean (dB) | train PSNR (dB) | encode frames/s | ms per frame | train s | compression |"
   echo "|---|---|---|---|---|---|---|---|---|---|"
-  jq -r '"| \(.sensor) | \(.width) x \(.layers) | \(.latent_dim) | \(.parameters) | \(.psnr_test*100|round/100) / \((.psnr_test_clean // 0)*100|round/100) | \(.psnr_train*100|round/100) | \(.encode_frames_per_s*10|round/10) | \(1000*.threads/.encode_frames_per_s*100|round/100) | \(.train_seconds|round) | \(.compression_ratio|round)x |"' \
+  jq -s -r 'sort_by(.sensor, .width, .layers, .latent_dim)[] | "| \(.sensor) | \(.width) x \(.layers) | \(.latent_dim) | \(.parameters) | \(.psnr_test*100|round/100) / \((.psnr_test_clean // 0)*100|round/100) | \(.psnr_train*100|round/100) | \(.encode_frames_per_s*10|round/10) | \(1000*.threads/.encode_frames_per_s*100|round/100) | \(.train_seconds|round) | \(.compression_ratio|round)x |"' \
     "$WORK/sweep.jsonl"
 } > "$WORK/sweep.md"
 cat "$WORK/sweep.md"

@@ -521,6 +521,19 @@ TEST(PoseMlp, FileRoundTripIsExact) {
   std::filesystem::remove(path);
 }
 
+TEST(PoseMlp, CalibrationResidualsSurviveTheFileRoundTripAndBadOnesAreRejected) {
+  PoseMlp mlp = GenericMlp(103);
+  EXPECT_EQ(mlp.calibration_residuals().rows(), 0);  // none by default
+  Eigen::MatrixXd residuals(2, 3);
+  residuals << 1e-3, -2e-4, 0.1, 0.0, 5e-4, -3.0;
+  mlp.SetCalibrationResiduals(residuals);
+  const PoseMlp loaded = PoseMlp::Parse(mlp.Serialize(), "calibrated.tpm");
+  EXPECT_EQ(loaded.calibration_residuals(), residuals);  // stored as float64: exact
+  EXPECT_THROW(mlp.SetCalibrationResiduals(Eigen::MatrixXd::Zero(2, 2)), std::invalid_argument);
+  residuals(1, 2) = NAN;
+  EXPECT_THROW(mlp.SetCalibrationResiduals(residuals), std::invalid_argument);
+}
+
 TEST(PoseMlp, CorruptOrTruncatedFilesAreRejectedNamingTheFile) {
   const PoseMlp mlp = GenericMlp(103);
   const std::string bytes = mlp.Serialize();

@@ -50,6 +50,31 @@ TEST(TensorFile, Float32TensorsAreRoundedOnAdd) {
   EXPECT_EQ(file.Get("x").values[0], static_cast<double>(0.1f));
 }
 
+TEST(TensorFile, Float16TensorsAreRoundedToHalfAndReadBackExactly) {
+  TensorFile file("functaset");
+  // 1 + 2^-11 is halfway between two halves (ties to even: 1); 65504 is the largest half.
+  file.Add("z", TensorFile::DType::kFloat16, {5}, {0.1, -2.5, 1.0 + std::ldexp(1.0, -11), 65504.0, 0.0});
+  const std::vector<double>& v = file.Get("z").values;
+  EXPECT_NEAR(v[0], 0.1, 0.1 * std::ldexp(1.0, -11));
+  EXPECT_NE(v[0], 0.1);
+  EXPECT_EQ(v[1], -2.5);
+  EXPECT_EQ(v[2], 1.0);
+  EXPECT_EQ(v[3], 65504.0);
+  EXPECT_EQ(v[4], 0.0);
+  const TensorFile read = TensorFile::Parse(file.Serialize(), "half.tfs", "functaset");
+  EXPECT_EQ(read.Get("z").dtype, TensorFile::DType::kFloat16);
+  EXPECT_EQ(read.Get("z").values, v);
+  // Two bytes per value instead of four: the payload shrinks by 800 bytes (the JSON
+  // header only by a digit or so of its byte counts).
+  TensorFile wide("functaset");
+  wide.Add("z", TensorFile::DType::kFloat32, {400}, std::vector<double>(400, 0.5));
+  TensorFile half("functaset");
+  half.Add("z", TensorFile::DType::kFloat16, {400}, std::vector<double>(400, 0.5));
+  const std::size_t saved = wide.Serialize().size() - half.Serialize().size();
+  EXPECT_GE(saved, 800u);
+  EXPECT_LE(saved, 808u);
+}
+
 TEST(TensorFile, ChecksumMatchesZlibCrc32) {
   // zlib.crc32(b"123456789") == 0xCBF43926, the standard CRC-32 check value.
   EXPECT_EQ(Crc32("123456789", 9), 0xCBF43926u);

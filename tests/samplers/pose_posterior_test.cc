@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <string>
+#include <optional>
 
 #include <gtest/gtest.h>
 
@@ -129,6 +130,74 @@ TEST(PosePosterior, KnnReturnsTheNeighboursPoses) {
     EXPECT_EQ(posterior->samples()[i].x(), poses[summary.knn_summary.labels[i]]->x());
   }
   EXPECT_TRUE(summary.covariance.allFinite());
+}
+
+TEST(PosePosterior, CalibrationResidualsOfTheModelsOwnPredictionsAreZeroModuloSymmetry) {
+  Fixture f;
+  Eigen::MatrixXf inputs = Eigen::MatrixXf::Random(6, kDim);
+  PoseTargets targets;
+  targets.poses.resize(6, 3);
+  targets.symmetry_orders.resize(6);
+  for (int i = 0; i < 6; ++i) {
+    const int n = i % 3 + 1;  // 1, 2, 3
+    targets.symmetry_orders[i] = n;
+    const Eigen::Vector3d p = f.mlp.Predict(inputs.row(i).transpose().cast<double>(), n);
+    // The truth is the prediction turned by a whole number of symmetry periods.
+    targets.poses.row(i) << p[0], p[1], p[2] + (i % 2) * 2 * M_PI / n;
+  }
+  const Eigen::MatrixXd r = CalibrationResiduals(f.mlp, inputs, targets);
+  ASSERT_EQ(r.rows(), 6);
+  EXPECT_LT(r.cwiseAbs().maxCoeff(), 1e-9) << r;
+  // A known offset in the body frame comes back as the residual.
+  const Eigen::Vector3d p = f.mlp.Predict(inputs.row(0).transpose().cast<double>(), 1);
+  const Eigen::Vector3d offset(1e-3, -2e-3, 0.2);
+  const SE2d truth = SE2d::FromXYYaw(p[0], p[1], p[2]) * SE2d::Exp(offset);
+  targets.poses.row(0) << truth.x(), truth.y(), truth.yaw();
+  EXPECT_LT((CalibrationResiduals(f.mlp, inputs, targets).row(0).transpose() - offset).norm(), 1e-9);
+}
+
+TEST(PosePosterior, ModelErrorComposesEverySampleWithAStoredResidual) {
+  Fixture f;
+  PosePosterior::Options options;
+  options.sampler = PosteriorSampler::kLaplace;
+  options.num_samples = 50;
+  std::optional<PoseDistribution> plain, shifted;
+  ASSERT_TRUE(PosePosterior(f.trunk, f.mlp, options).Estimate(f.targets, 1, &plain)
+                  .IsSolutionUsable());
+  // One residual: every sample moves by exactly Exp(r) in its own frame.
+  const Eigen::Vector3d r(2e-3, 1e-3, 0.3);
+  PoseMlp calibrated = f.mlp;
+  calibrated.SetCalibrationResiduals(r.transpose());
+  ASSERT_TRUE(PosePosterior(f.trunk, calibrated, options).Estimate(f.targets, 1, &shifted)
+                  .IsSolutionUsable());
+  ASSERT_EQ(plain->size(), shifted->size());
+  for (std::size_t i = 0; i < plain->size(); ++i) {
+    const SE2d expected = plain->samples()[i] * SE2d::Exp(r);
+    EXPECT_NEAR(shifted->samples()[i].x(), expected.x(), 1e-12);
+    EXPECT_NEAR(shifted->samples()[i].y(), expected.y(), 1e-12);
+    EXPECT_NEAR(shifted->samples()[i].yaw(), expected.yaw(), 1e-12);
+  }
+  // Switched off, the calibrated model gives the plain posterior.
+  options.model_error = false;
+  std::optional<PoseDistribution> off;
+  PosePosterior(f.trunk, calibrated, options).Estimate(f.targets, 1, &off);
+  EXPECT_EQ(off->samples()[0].x(), plain->samples()[0].x());
+}
+
+TEST(PosePosterior, PoseModelsCarryTheirLatentMapAndPosteriorSigma) {
+  Fixture f;
+  PoseMlp mlp = f.mlp;
+  // No info: the functaset's map, K meta-SGD steps of the trunk.
+  EXPECT_EQ(LatentMapOfPoseModel(mlp, f.trunk).ToString(),
+            "meta_sgd:" + std::to_string(f.trunk.meta_sgd.inner_steps));
+  EXPECT_EQ(PosteriorSigmaOfPoseModel(mlp), 0);
+  mlp.set_info_json(R"({"latents": "refit ceres:7"})");  // older files
+  EXPECT_EQ(LatentMapOfPoseModel(mlp, f.trunk).ToString(), "ceres:7");
+  mlp.set_info_json(R"({"latent_map": "ceres:10", "posterior_sigma": 0.002})");
+  EXPECT_EQ(LatentMapOfPoseModel(mlp, f.trunk).ToString(), "ceres:10");
+  EXPECT_EQ(PosteriorSigmaOfPoseModel(mlp), 0.002);
+  mlp.set_info_json(R"({"latent_map": "newton:3"})");
+  EXPECT_THROW(LatentMapOfPoseModel(mlp, f.trunk), std::invalid_argument);
 }
 
 }  // namespace
