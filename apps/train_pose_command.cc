@@ -34,6 +34,7 @@
 
 #include "apps/command.h"
 #include "apps/model_inputs.h"
+#include "estimation/baselines.h"
 #include "estimation/dataset.h"
 #include "estimation/functaset.h"
 #include "estimation/latent_fitter.h"
@@ -97,45 +98,30 @@ Samples Collect(const Functaset& functaset, SensorKind sensor, Split split,
   return s;
 }
 
-// Squared-error sums of one group of samples.
-struct ErrorSums {
-  int count = 0;
-  double position_sq = 0;  // m^2
-  int yaw_count = 0;       // samples with an observable yaw (n != 0)
-  double yaw_sq = 0;       // rad^2
-  double RmseMm() const { return count ? 1e3 * std::sqrt(position_sq / count) : NAN; }
-  double RmseDeg() const {
-    return yaw_count ? std::sqrt(yaw_sq / yaw_count) * 180.0 / M_PI : NAN;
-  }
-};
+using ErrorSums = PoseErrors;  // estimation/baselines.h: the one pose scoring of tactfunc
 
-// Per tool ("" = all) errors of the model on `samples`.
+// Per tool ("" = all) errors of the model on `samples` (ScorePoses, as `eval` scores).
 std::map<std::string, ErrorSums> Evaluate(const PoseMlp& model, const Samples& samples) {
   std::map<std::string, ErrorSums> sums;
-  if (samples.inputs.rows() == 0) return sums;
-  // Predict per symmetry order (PredictBatch takes one n for the whole batch).
-  std::map<int, std::vector<int>> by_order;
-  for (int i = 0; i < samples.inputs.rows(); ++i) {
-    by_order[samples.targets.symmetry_orders[i]].push_back(i);
+  const Eigen::Index m = samples.inputs.rows();
+  if (m == 0) return sums;
+  const Eigen::MatrixXd predicted =
+      PredictPoses(model, samples.inputs, samples.targets.symmetry_orders);
+  std::map<std::string, std::vector<Eigen::Index>> groups;
+  for (Eigen::Index i = 0; i < m; ++i) {
+    groups[""].push_back(i);
+    groups[samples.tools[i]].push_back(i);
   }
-  for (const auto& [n, rows] : by_order) {
-    Eigen::MatrixXf batch(static_cast<int>(rows.size()), samples.inputs.cols());
-    for (std::size_t k = 0; k < rows.size(); ++k) batch.row(k) = samples.inputs.row(rows[k]);
-    const Eigen::MatrixXd predicted = model.PredictBatch(batch, n);
-    for (std::size_t k = 0; k < rows.size(); ++k) {
-      const Eigen::Vector3d truth = samples.targets.poses.row(rows[k]).transpose();
-      const double position_sq = (predicted.row(k).head<2>().transpose() - truth.head<2>()).squaredNorm();
-      for (const std::string& key : {std::string(), samples.tools[rows[k]]}) {
-        ErrorSums& s = sums[key];
-        ++s.count;
-        s.position_sq += position_sq;
-        if (n != 0) {
-          const double e = YawErrorModuloSymmetry(predicted(k, 2), truth[2], n);
-          ++s.yaw_count;
-          s.yaw_sq += e * e;
-        }
-      }
+  for (const auto& [key, rows] : groups) {
+    const Eigen::Index k = static_cast<Eigen::Index>(rows.size());
+    Eigen::MatrixXd p(k, 3), t(k, 3);
+    Eigen::VectorXi n(k);
+    for (Eigen::Index j = 0; j < k; ++j) {
+      p.row(j) = predicted.row(rows[j]);
+      t.row(j) = samples.targets.poses.row(rows[j]);
+      n[j] = samples.targets.symmetry_orders[rows[j]];
     }
+    sums[key] = ScorePoses(p, t, n);
   }
   return sums;
 }
