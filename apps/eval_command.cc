@@ -19,7 +19,6 @@
 // Every PSNR is THE PSNR of estimation/trunk_targets.h on the model's working-resolution
 // frames; pose errors are scored as train-pose scores them (baselines.h, ScorePoses).
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -30,7 +29,6 @@
 #include <memory>
 #include <set>
 #include <sstream>
-#include <thread>
 
 #include <opencv2/imgproc.hpp>
 
@@ -43,6 +41,7 @@
 #include "estimation/dataset.h"
 #include "estimation/file_io.h"
 #include "estimation/functaset.h"
+#include "estimation/internal/parallel_for.h"
 #include "estimation/reconstruction.h"
 #include "estimation/trunk_targets.h"
 #include "models/file_util.h"
@@ -87,33 +86,13 @@ std::string Sci(double v) {
 // Mean of the finite values (ComputePsnrStats' rule: NaN and +inf left out).
 double MeanPsnr(const std::vector<double>& values) { return ComputePsnrStats(values).mean; }
 
-// Runs fn(i) for i in [0, n) on `threads` workers, ticking `bar`. The first exception
-// is rethrown after every worker stopped.
+// internal::ParallelFor over [0, n) that ticks `bar` (thread-safe) after each item.
 template <typename Fn>
 void ParallelFor(std::size_t n, int threads, ProgressBar* bar, const Fn& fn) {
-  std::atomic<std::size_t> next{0};
-  std::exception_ptr failure;
-  std::mutex failure_mutex;
-  auto worker = [&]() {
-    for (;;) {
-      const std::size_t i = next++;
-      if (i >= n) return;
-      try {
-        fn(i);
-      } catch (...) {
-        std::lock_guard<std::mutex> lock(failure_mutex);
-        if (!failure) failure = std::current_exception();
-        next = n;
-        return;
-      }
-      if (bar) bar->Tick();
-    }
-  };
-  std::vector<std::thread> pool;
-  for (int t = 1; t < std::min<int>(threads, static_cast<int>(n)); ++t) pool.emplace_back(worker);
-  worker();
-  for (std::thread& t : pool) t.join();
-  if (failure) std::rethrow_exception(failure);
+  internal::ParallelFor(static_cast<int>(n), threads, [&](int i) {
+    fn(static_cast<std::size_t>(i));
+    if (bar) bar->Tick();
+  });
 }
 
 // One sensor's frames as every approach sees them.

@@ -140,10 +140,5 @@ PoseMlp LoadPoseModelFor(const std::string& path, const FunctaModel& model, Sens
   return pose;
 }
 
-double FoldYawNear(double yaw, double reference_yaw, int symmetry_order) {
-  if (symmetry_order == 0) return 0;
-  const double period = 2 * M_PI / symmetry_order;
-  return reference_yaw + std::remainder(yaw - reference_yaw, period);
-}
 
 }  // namespace tactfunc::apps

@@ -60,10 +60,6 @@ FunctasetKnn MakeFunctasetKnn(const Functaset& functaset, SensorKind sensor, boo
 PoseMlp LoadPoseModelFor(const std::string& path, const FunctaModel& model, SensorKind sensor,
                          const std::string& model_path);
 
-// The truth's yaw as the representative modulo 2 pi / n nearest `reference_yaw` (what a
-// folded posterior is compared with); 0 for n = 0.
-double FoldYawNear(double yaw, double reference_yaw, int symmetry_order);
-
 }  // namespace tactfunc::apps
 
 #endif  // TACTFUNC_APPS_MODEL_INPUTS_H_

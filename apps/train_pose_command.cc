@@ -30,13 +30,13 @@
 #include <numeric>
 #include <random>
 #include <set>
-#include <thread>
 
 #include "apps/command.h"
 #include "apps/model_inputs.h"
 #include "estimation/baselines.h"
 #include "estimation/dataset.h"
 #include "estimation/functaset.h"
+#include "estimation/internal/parallel_for.h"
 #include "estimation/latent_fitter.h"
 #include "estimation/trunk_targets.h"
 #include "models/functa_model.h"
@@ -224,29 +224,16 @@ void RunTrainPose(const TrainPoseFlags& flags) {
       }
       frame_of[i] = *index;
     }
-    // Fits are independent and LatentFitter::Fit is const: one strided share per thread.
+    // Fits are independent and LatentFitter::Fit is const.
     std::vector<Eigen::VectorXf> latents(entries.size());
-    const int threads = ResolveThreads(flags.threads);
-    std::vector<std::thread> workers;
-    std::vector<std::exception_ptr> failures(threads);
-    for (int w = 0; w < threads; ++w) {
-      workers.emplace_back([&, w]() {
-        try {
-          for (std::size_t i = w; i < entries.size(); i += threads) {
-            if (!entries[i].label.has_value()) continue;
-            Eigen::VectorXd latent;
-            fitter.Fit(LoadTrunkTargets(dataset, frame_of[i], trunk.format), &latent);
-            latents[i] = latent.cast<float>();
-          }
-        } catch (...) {
-          failures[w] = std::current_exception();
-        }
-      });
-    }
-    for (std::thread& worker : workers) worker.join();
-    for (const std::exception_ptr& failure : failures) {
-      if (failure) std::rethrow_exception(failure);
-    }
+    internal::ParallelFor(static_cast<int>(entries.size()), ResolveThreads(flags.threads),
+                          [&](int i) {
+                            if (!entries[i].label.has_value()) return;
+                            Eigen::VectorXd latent;
+                            fitter.Fit(LoadTrunkTargets(dataset, frame_of[i], trunk.format),
+                                       &latent);
+                            latents[i] = latent.cast<float>();
+                          });
     for (std::size_t i = 0; i < entries.size(); ++i) {
       FunctasetEntry entry = entries[i];
       if (entry.label.has_value()) entry.latent = latents[i];

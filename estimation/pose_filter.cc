@@ -11,6 +11,7 @@
 #include <utility>
 
 #include "Eigen/Cholesky"
+#include "models/tool.h"
 #include "Eigen/Eigenvalues"
 #include "models/seed.h"
 
@@ -81,9 +82,7 @@ double LogSumExp(const std::vector<double>& a) {
 SE2d Representative(const SE2d& particle, const SE2d& sample, int n) {
   if (n == 1) return particle;
   if (n == 0) return SE2d(sample.yaw(), particle.translation());
-  const double period = 2 * kPi / n;
-  const double k = std::round(SE2d::NormalizeAngle(particle.yaw() - sample.yaw()) / period);
-  return SE2d(particle.yaw() - k * period, particle.translation());
+  return SE2d(FoldYawNear(particle.yaw(), sample.yaw(), n), particle.translation());
 }
 
 using Clock = std::chrono::steady_clock;

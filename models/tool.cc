@@ -271,4 +271,10 @@ double YawErrorModuloSymmetry(double yaw_a, double yaw_b, int symmetry_order) {
   return std::min(d, period - d);
 }
 
+double FoldYawNear(double yaw, double reference_yaw, int symmetry_order) {
+  if (symmetry_order == 0) return 0;
+  const double period = 2 * kPi / symmetry_order;
+  return reference_yaw + std::remainder(yaw - reference_yaw, period);
+}
+
 }  // namespace tactfunc

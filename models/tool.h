@@ -82,6 +82,10 @@ std::vector<std::string> ToolNames();
 // std::invalid_argument for n < 0.
 double YawErrorModuloSymmetry(double yaw_a, double yaw_b, int symmetry_order);
 
+// `yaw` as the representative modulo 2 pi / n nearest `reference_yaw` (a truth compared
+// with a folded posterior, or with a prediction); 0 for n = 0 (no observable yaw).
+double FoldYawNear(double yaw, double reference_yaw, int symmetry_order);
+
 }  // namespace tactfunc
 
 #endif  // TACTFUNC_MODELS_TOOL_H_

@@ -15,6 +15,7 @@
 #include <nlohmann/json.hpp>
 
 #include "models/seed.h"
+#include "models/tool.h"
 
 namespace tactfunc {
 namespace {
@@ -334,11 +335,8 @@ Eigen::MatrixXd CalibrationResiduals(const PoseMlp& model, const Eigen::MatrixXf
     const int n = targets.symmetry_orders.size() ? targets.symmetry_orders[i] : 1;
     const Eigen::Vector3d p = model.Predict(inputs.row(i).transpose().cast<double>(), n);
     const Eigen::Vector3d t = targets.poses.row(i).transpose();
-    double true_yaw = p[2];  // n = 0: no observable yaw
-    if (n > 0) {
-      const double period = 2 * M_PI / n;
-      true_yaw = t[2] + period * std::round((p[2] - t[2]) / period);
-    }
+    // n = 0: FoldYawNear gives 0, the yaw Predict returns: no yaw residual.
+    const double true_yaw = FoldYawNear(t[2], p[2], n);
     const SE2d predicted = SE2d::FromXYYaw(p[0], p[1], p[2]);
     residuals.row(i) = (predicted.Inverse() * SE2d::FromXYYaw(t[0], t[1], true_yaw)).Log().transpose();
   }

@@ -12,12 +12,12 @@
 #include <filesystem>
 #include <optional>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include <gtest/gtest.h>
 
 #include "estimation/file_io.h"
+#include "estimation/internal/parallel_for.h"
 #include "estimation/pose_distribution.h"
 #include "estimation/trunk_targets.h"
 #include "models/contact_simulator.h"
@@ -47,7 +47,7 @@ struct Coverage {
   double position_sq = 0;
 };
 
-// Posteriors of `contacts_per_tool` fresh contacts of each tool, split over two threads.
+// Posteriors of `contacts_per_tool` fresh contacts of each tool, on two threads.
 Coverage Measure(const SensorTrunk& trunk, const PoseMlp& pose_mlp, PosteriorSampler sampler,
                  const std::vector<std::string>& tools, int contacts_per_tool) {
   const ContactSimulator simulator;
@@ -57,47 +57,38 @@ Coverage Measure(const SensorTrunk& trunk, const PoseMlp& pose_mlp, PosteriorSam
   options.num_samples = 100;
   options.fit.strategy = LatentMapOfPoseModel(pose_mlp, trunk);
   const int total = static_cast<int>(tools.size()) * contacts_per_tool;
-  std::vector<Coverage> shares(2);
-  auto work = [&](int share) {
-    Coverage& c = shares[share];
-    for (int k = share; k < total; k += 2) {
-      const std::string& tool = tools[k / contacts_per_tool];
-      const int n = GetTool(tool).symmetry_order();
-      // Seed 0x5eed0000 + k: no dataset of the training scripts uses these.
-      const std::uint64_t seed = DeriveSeed(0x5eed0000u, k);
-      const Contact contact = simulator.SamplePairedContact(tool, seed).bubble;
-      const Image frame =
-          AsStored(simulator.Render(SensorKind::kSoftBubble, contact, seed).frame);
-      const TrunkTargets targets =
-          MakeTrunkTargets(frame, reference, SensorKind::kSoftBubble, trunk.format);
-      PosePosterior::Options o = options;
-      o.seed = seed;
-      std::optional<PoseDistribution> posterior;
-      const PosePosterior::Summary summary =
-          PosePosterior(trunk, pose_mlp, o).Estimate(targets, n, &posterior);
-      ++c.contacts;
-      if (!summary.IsSolutionUsable()) {
-        ++c.failures;
-        continue;
-      }
-      // The truth's yaw modulo the symmetry, the copy nearest the posterior mean.
-      double yaw = summary.mean.yaw();
-      if (n > 0) {
-        const double period = 2 * M_PI / n;
-        yaw += std::remainder(contact.yaw_rad - yaw, period);
-      }
-      const SE2d truth = SE2d::FromXYYaw(contact.x_m, contact.y_m, yaw);
-      c.covered_50 += posterior->Region(0.5).Contains(truth);
-      c.covered_90 += posterior->Region(0.9).Contains(truth);
-      c.position_sq += std::pow(summary.mean.x() - contact.x_m, 2) +
-                       std::pow(summary.mean.y() - contact.y_m, 2);
+  std::vector<Coverage> per_contact(total);  // summed in contact order below
+  internal::ParallelFor(total, 2, [&](int k) {
+    Coverage& c = per_contact[k];
+    const std::string& tool = tools[k / contacts_per_tool];
+    const int n = GetTool(tool).symmetry_order();
+    // Seed 0x5eed0000 + k: no dataset of the training scripts uses these.
+    const std::uint64_t seed = DeriveSeed(0x5eed0000u, k);
+    const Contact contact = simulator.SamplePairedContact(tool, seed).bubble;
+    const Image frame =
+        AsStored(simulator.Render(SensorKind::kSoftBubble, contact, seed).frame);
+    const TrunkTargets targets =
+        MakeTrunkTargets(frame, reference, SensorKind::kSoftBubble, trunk.format);
+    PosePosterior::Options o = options;
+    o.seed = seed;
+    std::optional<PoseDistribution> posterior;
+    const PosePosterior::Summary summary =
+        PosePosterior(trunk, pose_mlp, o).Estimate(targets, n, &posterior);
+    ++c.contacts;
+    if (!summary.IsSolutionUsable()) {
+      ++c.failures;
+      return;
     }
-  };
-  std::thread other(work, 1);
-  work(0);
-  other.join();
+    // The truth's yaw modulo the symmetry, the copy nearest the posterior mean.
+    const SE2d truth = SE2d::FromXYYaw(contact.x_m, contact.y_m,
+                                       FoldYawNear(contact.yaw_rad, summary.mean.yaw(), n));
+    c.covered_50 += posterior->Region(0.5).Contains(truth);
+    c.covered_90 += posterior->Region(0.9).Contains(truth);
+    c.position_sq += std::pow(summary.mean.x() - contact.x_m, 2) +
+                     std::pow(summary.mean.y() - contact.y_m, 2);
+  });
   Coverage all;
-  for (const Coverage& c : shares) {
+  for (const Coverage& c : per_contact) {
     all.contacts += c.contacts;
     all.failures += c.failures;
     all.covered_50 += c.covered_50;
