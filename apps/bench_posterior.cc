@@ -165,10 +165,12 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
     o.sampler = t.sampler;
     posteriors.push_back(std::make_unique<PosePosterior>(trunk, pose_model, o, knn.posterior.get()));
   }
-  // The point estimate's fit: the posterior's own fit settings (header comment).
-  LatentFitter::Options fit_options = options.fit;
-  fit_options.sigma = options.potential.sigma;
-  fit_options.sigma_z = options.potential.sigma_z;
+  // The point estimate's fit: the posterior's own fit settings (header comment), as the
+  // posterior resolved them (its sigma may come from the pose model's calibration).
+  const PosePosterior::Options& resolved = posteriors.front()->options();
+  LatentFitter::Options fit_options = resolved.fit;
+  fit_options.sigma = resolved.potential.sigma;
+  fit_options.sigma_z = resolved.potential.sigma_z;
   const LatentFitter fitter(trunk, fit_options);
   // ... and at the functaset's own latent map, K meta-SGD steps from 0 (what `encode`
   // stores and train-pose trains on): the gap between the two is the pose MLP's
