@@ -186,22 +186,26 @@ void RunRecon(const ReconFlags& flags) {
 
   if (flags.json) {
     nlohmann::json figures;
-    auto per_sensor = [&](Split split, bool clean) {
+    auto per_sensor = [&](Split split, PsnrStats ReconstructionEvaluator::GroupSummary::*stats) {
       nlohmann::json out = nlohmann::json::object();
       for (SensorKind sensor : functaset.sensors()) {
         const auto* g = summary.Find(sensor, split);
-        const double mean = g == nullptr ? std::numeric_limits<double>::quiet_NaN()
-                                         : (clean ? g->clean.mean : g->noisy.mean);
+        const double mean =
+            g == nullptr ? std::numeric_limits<double>::quiet_NaN() : (g->*stats).mean;
         out[ToString(sensor)] = JsonOrNull(mean);
       }
       return out;
     };
-    figures["psnr_test"] = per_sensor(Split::kTest, false);
-    figures["psnr_train"] = per_sensor(Split::kTrain, false);
+    using Group = ReconstructionEvaluator::GroupSummary;
+    figures["psnr_test"] = per_sensor(Split::kTest, &Group::noisy);
+    figures["psnr_train"] = per_sensor(Split::kTrain, &Group::noisy);
     figures["psnr_test_clean"] =
-        summary.has_clean ? per_sensor(Split::kTest, true) : nlohmann::json(nullptr);
+        summary.has_clean ? per_sensor(Split::kTest, &Group::clean) : nlohmann::json(nullptr);
     figures["psnr_train_clean"] =
-        summary.has_clean ? per_sensor(Split::kTrain, true) : nlohmann::json(nullptr);
+        summary.has_clean ? per_sensor(Split::kTrain, &Group::clean) : nlohmann::json(nullptr);
+    // The paper release's PSNR convention (peak = the source-resolution range).
+    figures["psnr_test_source_peak"] = per_sensor(Split::kTest, &Group::source_peak);
+    figures["psnr_train_source_peak"] = per_sensor(Split::kTrain, &Group::source_peak);
     nlohmann::json groups = nlohmann::json::array();
     for (const auto& g : summary.groups) {
       auto stats = [](const PsnrStats& s) {
@@ -214,7 +218,8 @@ void RunRecon(const ReconFlags& flags) {
                         {"split", ToString(g.split)},
                         {"noisy", stats(g.noisy)},
                         {"clean", summary.has_clean ? stats(g.clean) : nlohmann::json(nullptr)},
-                        {"zero", stats(g.zero)}});
+                        {"zero", stats(g.zero)},
+                        {"source_peak", stats(g.source_peak)}});
     }
     figures["groups"] = groups;
     figures["compression_ratio"] = summary.size.compression_ratio;

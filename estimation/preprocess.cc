@@ -133,8 +133,21 @@ PreprocessedFrame Preprocess(const Image& frame, const Image& reference, SensorK
     difference = std::move(gray);
   }
 
-  // 3. Mask-aware area resize.
+  // 3. Mask-aware area resize, after noting the source-resolution range.
   PreprocessedFrame out;
+  {
+    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+    const int source_channels = difference.channels;
+    for (std::size_t p = 0; p < pixels; ++p) {
+      if (!(mask[p] > 0)) continue;
+      for (int k = 0; k < source_channels; ++k) {
+        const double v = difference.data[p * source_channels + k];
+        lo = std::min(lo, v);
+        hi = std::max(hi, v);
+      }
+    }
+    out.source_range = lo <= hi ? hi - lo : 0.0;
+  }
   const int rows = options.rows > 0 ? options.rows : frame.rows;
   const int cols = options.cols > 0 ? options.cols : frame.cols;
   const int out_channels = difference.channels;

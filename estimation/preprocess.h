@@ -73,6 +73,11 @@ struct PreprocessedFrame {
   // values = (difference - offset) / scale, so difference = values * scale + offset.
   double scale = 1;
   double offset = 0;
+  // Range (max - min over valid pixels and channels) of the difference after step 2
+  // and BEFORE the resize, in physical units (0 without valid pixels). The paper's
+  // release min-max normalises each frame at this source resolution and then resizes,
+  // so its PSNR peak is this range (PsnrSourcePeak in estimation/trunk_targets.h).
+  double source_range = 0;
   std::size_t num_valid() const;
 };
 

@@ -142,17 +142,19 @@ std::string ReconstructionEvaluator::Summary::BriefReport() const {
 std::string ReconstructionEvaluator::Summary::FullReport() const {
   std::ostringstream out;
   char line[256];
-  std::snprintf(line, sizeof(line), "%-8s %-6s %6s  %-23s %-23s %-23s\n", "sensor", "split",
-                "frames", "PSNR noisy mean/med/p5", "PSNR clean mean/med/p5", "z=0 mean/med/p5");
+  std::snprintf(line, sizeof(line), "%-8s %-6s %6s  %-23s %-23s %-23s %-23s\n", "sensor",
+                "split", "frames", "PSNR noisy mean/med/p5", "PSNR clean mean/med/p5",
+                "z=0 mean/med/p5", "source peak mean/med/p5");
   out << line;
   auto triple = [](const PsnrStats& s) {
     return Db(s.mean) + " / " + Db(s.median) + " / " + Db(s.p5);
   };
   for (const GroupSummary& g : groups) {
-    std::snprintf(line, sizeof(line), "%-8s %-6s %6lld  %-23s %-23s %-23s\n", ToString(g.sensor),
-                  ToString(g.split), static_cast<long long>(g.noisy.count + g.noisy.excluded),
+    std::snprintf(line, sizeof(line), "%-8s %-6s %6lld  %-23s %-23s %-23s %-23s\n",
+                  ToString(g.sensor), ToString(g.split),
+                  static_cast<long long>(g.noisy.count + g.noisy.excluded),
                   triple(g.noisy).c_str(), has_clean ? triple(g.clean).c_str() : "-",
-                  triple(g.zero).c_str());
+                  triple(g.zero).c_str(), triple(g.source_peak).c_str());
     out << line;
   }
   std::snprintf(line, sizeof(line),
@@ -238,6 +240,7 @@ ReconstructionEvaluator::Summary ReconstructionEvaluator::Evaluate(const FunctaM
             state.trunk->siren.Forward<float>(state.grid, entries[i]->latent);
         const TrunkTargets targets = LoadTrunkTargets(dataset, r.dataset_index, format);
         r.psnr = Psnr(prediction, targets);
+        r.psnr_source_peak = PsnrSourcePeak(prediction, targets);
         r.psnr_zero = Psnr(state.zero_prediction, targets);
         if (summary.has_clean && !dataset.frames()[r.dataset_index].clean_path.empty()) {
           r.psnr_clean = Psnr(prediction, LoadTrunkTargets(dataset, r.dataset_index, format, true));
@@ -259,10 +262,11 @@ ReconstructionEvaluator::Summary ReconstructionEvaluator::Evaluate(const FunctaM
 
   for (const auto& [sensor, state] : states) {
     for (Split split : {Split::kTrain, Split::kTest}) {
-      std::vector<double> noisy, clean, zero;
+      std::vector<double> noisy, clean, zero, source_peak;
       for (const FrameResult& r : summary.frames) {
         if (r.sensor != sensor || r.split != split) continue;
         noisy.push_back(r.psnr);
+        source_peak.push_back(r.psnr_source_peak);
         zero.push_back(r.psnr_zero);
         if (summary.has_clean) clean.push_back(r.psnr_clean);
       }
@@ -273,6 +277,7 @@ ReconstructionEvaluator::Summary ReconstructionEvaluator::Evaluate(const FunctaM
       g.noisy = ComputePsnrStats(noisy);
       g.clean = ComputePsnrStats(clean);
       g.zero = ComputePsnrStats(zero);
+      g.source_peak = ComputePsnrStats(source_peak);
       summary.groups.push_back(g);
     }
   }

@@ -11,6 +11,8 @@
 //                 only: Dataset::has_clean; NaN otherwise)
 //   psnr_zero   = Psnr(f(grid; 0),   targets of the noisy frame)       (the "initial
 //                 image" of the paper's Fig. 3: what the trunk knows before any fit)
+//   psnr_source_peak = PsnrSourcePeak(f(grid; z_i), noisy targets)     (the paper
+//                 release's convention: peak = the frame's range at source resolution)
 // with Psnr the one definition of estimation/trunk_targets.h. Per sensor and split the
 // evaluator reports mean, median and 5th percentile of each (PsnrStats).
 //
@@ -92,6 +94,8 @@ class ReconstructionEvaluator {
     double psnr = std::numeric_limits<double>::quiet_NaN();        // vs the noisy frame
     double psnr_clean = std::numeric_limits<double>::quiet_NaN();  // vs clean; NaN if none
     double psnr_zero = std::numeric_limits<double>::quiet_NaN();   // z = 0 vs noisy
+    // vs noisy, peak = the source-resolution range (PsnrSourcePeak)
+    double psnr_source_peak = std::numeric_limits<double>::quiet_NaN();
   };
 
   struct GroupSummary {
@@ -100,6 +104,7 @@ class ReconstructionEvaluator {
     PsnrStats noisy;  // psnr
     PsnrStats clean;  // psnr_clean (count 0 without clean frames)
     PsnrStats zero;   // psnr_zero
+    PsnrStats source_peak;  // psnr_source_peak
   };
 
   // Evaluation has no algorithmic outcome to report (no iteration, nothing to

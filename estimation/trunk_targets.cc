@@ -1,9 +1,12 @@
 // Copyright 2026 The tactfunc Authors.
 #include "estimation/trunk_targets.h"
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <stdexcept>
+#include <string>
 
 #include "estimation/dataset.h"
 
@@ -37,6 +40,7 @@ TrunkTargets MakeTrunkTargets(const Image& frame, const Image& reference, Sensor
   out.flat = pre.flat;
   out.scale = pre.scale;
   out.offset = pre.offset;
+  out.source_range = pre.source_range / pre.scale;
   return out;
 }
 
@@ -47,15 +51,24 @@ TrunkTargets LoadTrunkTargets(const Dataset& dataset, std::size_t index,
   return MakeTrunkTargets(frame, dataset.Reference(record.sensor), record.sensor, format);
 }
 
-double Psnr(const Eigen::MatrixXf& prediction, const TrunkTargets& target) {
+namespace {
+
+// Sum of squared errors over the valid pixels, their count and the target's range.
+struct ErrorAndRange {
+  double sse = 0;
+  std::int64_t count = 0;
+  double range = 0;
+};
+
+ErrorAndRange MeasureError(const Eigen::MatrixXf& prediction, const TrunkTargets& target) {
   if (prediction.rows() != target.values.rows() || prediction.cols() != target.values.cols()) {
     throw std::invalid_argument("Psnr: prediction is " + std::to_string(prediction.rows()) +
                                 "x" + std::to_string(prediction.cols()) + ", target " +
                                 std::to_string(target.values.rows()) + "x" +
                                 std::to_string(target.values.cols()));
   }
-  double lo = std::numeric_limits<double>::infinity(), hi = -lo, sse = 0;
-  std::int64_t count = 0;
+  double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+  ErrorAndRange out;
   for (Eigen::Index j = 0; j < target.values.rows(); ++j) {
     if (!(target.weights[j] > 0)) continue;
     for (Eigen::Index c = 0; c < target.values.cols(); ++c) {
@@ -63,16 +76,31 @@ double Psnr(const Eigen::MatrixXf& prediction, const TrunkTargets& target) {
       const double d = static_cast<double>(prediction(j, c)) - t;
       lo = std::min(lo, t);
       hi = std::max(hi, t);
-      sse += d * d;
-      ++count;
+      out.sse += d * d;
+      ++out.count;
     }
   }
-  if (count == 0) return std::numeric_limits<double>::quiet_NaN();
-  double range = hi - lo;
+  out.range = out.count > 0 ? hi - lo : 0.0;
+  return out;
+}
+
+double PsnrAtPeak(const ErrorAndRange& e, double range) {
+  if (e.count == 0) return std::numeric_limits<double>::quiet_NaN();
   if (!(range >= 1e-9)) range = 1.0;
-  const double mse = sse / count;
+  const double mse = e.sse / e.count;
   if (mse == 0) return std::numeric_limits<double>::infinity();
   return 10.0 * std::log10(range * range / mse);
+}
+
+}  // namespace
+
+double Psnr(const Eigen::MatrixXf& prediction, const TrunkTargets& target) {
+  const ErrorAndRange e = MeasureError(prediction, target);
+  return PsnrAtPeak(e, e.range);
+}
+
+double PsnrSourcePeak(const Eigen::MatrixXf& prediction, const TrunkTargets& target) {
+  return PsnrAtPeak(MeasureError(prediction, target), target.source_range);
 }
 
 Image TargetsToImage(const Eigen::MatrixXf& values, int rows, int cols) {

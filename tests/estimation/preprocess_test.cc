@@ -1,6 +1,7 @@
 // Copyright 2026 The tactfunc Authors.
 #include "estimation/preprocess.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <random>
@@ -170,6 +171,30 @@ TEST(Preprocess, ResizeOfAMaskedFrameKeepsNanOutAndMarksMostlyInvalidPixelsInval
   EXPECT_NEAR(out.values.at(0, 1), 0.3, 1e-5);  // mean of 2 mm and 4 mm over 1 cm
   EXPECT_NEAR(out.values.at(3, 3), 0.2, 1e-5);
   EXPECT_EQ(out.num_valid(), 15u);
+}
+
+TEST(Preprocess, SourceRangeIsTheRangeOfTheValidDifferenceBeforeTheResize) {
+  // One 4 mm pixel in an 8x8 frame of 2 mm (and a NaN that must not count): at source
+  // resolution the range is 2 mm; averaged into a 4x4 frame the spike shrinks to a
+  // quarter of its excess, a range of 0.5 mm.
+  const Image reference = FlatDepth(8, 8, 0.04f);
+  Image frame = FlatDepth(8, 8, 0.038f);
+  frame.at(5, 5) = 0.036f;
+  frame.at(0, 0) = kNaN;
+  PreprocessOptions options;
+  options.rows = options.cols = 4;
+  const PreprocessedFrame out = Preprocess(frame, reference, options, 0.01);
+  EXPECT_NEAR(out.source_range, 0.002, 1e-7);
+  float lo = 1e9f, hi = -1e9f;
+  for (std::size_t p = 0; p < out.valid.size(); ++p) {
+    if (!out.valid[p]) continue;
+    lo = std::min(lo, out.values.data[p]);
+    hi = std::max(hi, out.values.data[p]);
+  }
+  EXPECT_NEAR((hi - lo) * out.scale, 0.0005, 1e-7);
+  // Without a resize both ranges agree; a blank frame has none.
+  EXPECT_NEAR(Preprocess(frame, reference, PreprocessOptions(), 0.01).source_range, 0.002, 1e-7);
+  EXPECT_EQ(Preprocess(reference, reference, options, 0.01).source_range, 0.0);
 }
 
 TEST(Preprocess, UpsamplingAMaskedFrameStaysFinite) {

@@ -136,6 +136,24 @@ TEST(RepresentationSize, CompressionRatioArithmetic) {
                std::invalid_argument);
 }
 
+TEST(PsnrSourcePeak, DiffersFromPsnrOnlyByThePeak) {
+  // A 2-pixel target of range 0.5 whose source frame had range 2: the same MSE, a
+  // peak four times larger, so 20 log10(4) = 12.04 dB more.
+  TrunkTargets t;
+  t.values = Eigen::MatrixXf(2, 1);
+  t.values << 0.0f, 0.5f;
+  t.weights = Eigen::VectorXf::Ones(2);
+  t.source_range = 2.0;
+  Eigen::MatrixXf p(2, 1);
+  p << 0.05f, 0.45f;
+  EXPECT_NEAR(Psnr(p, t), 10 * std::log10(0.25 / 0.0025), 1e-5);
+  EXPECT_NEAR(PsnrSourcePeak(p, t) - Psnr(p, t), 20 * std::log10(4.0), 1e-9);
+  // No recorded source range (hand-made targets) falls back to a peak of 1.
+  t.source_range = 0;
+  EXPECT_NEAR(PsnrSourcePeak(p, t), 10 * std::log10(1 / 0.0025), 1e-5);
+  EXPECT_TRUE(std::isinf(PsnrSourcePeak(t.values, t)));
+}
+
 // ---- Evaluation on a dataset ------------------------------------------------------------
 
 struct Encoded {
@@ -169,6 +187,9 @@ TEST(ReconstructionEvaluator, PerFramePsnrsFollowTheOneDefinition) {
     const TrunkTargets clean = LoadTrunkTargets(dataset, r.dataset_index, trunk.format, true);
     EXPECT_DOUBLE_EQ(r.psnr, Psnr(prediction, noisy));
     EXPECT_DOUBLE_EQ(r.psnr_clean, Psnr(prediction, clean));
+    EXPECT_DOUBLE_EQ(r.psnr_source_peak, PsnrSourcePeak(prediction, noisy));
+    // The source frame's range is at least the resized one's: never a lower PSNR.
+    EXPECT_GE(r.psnr_source_peak, r.psnr - 1e-4);  // (float rounding of the values)
     EXPECT_DOUBLE_EQ(r.psnr_zero,
                      Psnr(Reconstruct(trunk, Eigen::VectorXf::Zero(entry.latent.size())), noisy));
     // The encoder's stored PSNR is the same figure (stored as float32).
@@ -186,10 +207,11 @@ TEST(ReconstructionEvaluator, GroupsSummariseTheirFrames) {
       ReconstructionEvaluator().Evaluate(e.model, e.functaset, dataset);
   ASSERT_EQ(s.groups.size(), 4u);  // 2 sensors x 2 splits
   for (const ReconstructionEvaluator::GroupSummary& g : s.groups) {
-    std::vector<double> noisy, clean, zero;
+    std::vector<double> noisy, clean, zero, source_peak;
     for (const auto& r : s.frames) {
       if (r.sensor != g.sensor || r.split != g.split) continue;
       noisy.push_back(r.psnr);
+      source_peak.push_back(r.psnr_source_peak);
       clean.push_back(r.psnr_clean);
       zero.push_back(r.psnr_zero);
     }
@@ -198,6 +220,7 @@ TEST(ReconstructionEvaluator, GroupsSummariseTheirFrames) {
     EXPECT_DOUBLE_EQ(g.noisy.p5, ComputePsnrStats(noisy).p5);
     EXPECT_DOUBLE_EQ(g.clean.median, ComputePsnrStats(clean).median);
     EXPECT_DOUBLE_EQ(g.zero.mean, ComputePsnrStats(zero).mean);
+    EXPECT_DOUBLE_EQ(g.source_peak.mean, ComputePsnrStats(source_peak).mean);
   }
   const auto* test = s.Find(SensorKind::kGelSlim, Split::kTest);
   ASSERT_NE(test, nullptr);
