@@ -28,6 +28,7 @@ struct SynthFlags {
   std::string sensors = "bubble,gelslim";
   int threads = 0;
   double test_fraction = 0.1;
+  double marker_darkness = GelSlimOptions().marker_darkness;
   bool overwrite = false;
   bool clean = false;
   bool json = false;
@@ -59,7 +60,9 @@ void RunSynth(const SynthFlags& flags) {
   ProgressBar bar("synth", static_cast<std::int64_t>(plan.tools.size()) *
                                plan.frames_per_tool,
                   "contacts");
-  const SynthesisReport report = Synthesize(plan, ContactSimulator::Options(),
+  ContactSimulator::Options simulator_options;
+  simulator_options.gelslim.marker_darkness = flags.marker_darkness;
+  const SynthesisReport report = Synthesize(plan, simulator_options,
                                             [&bar](int n) { bar.Tick(n); });
   bar.Finish();
 
@@ -108,6 +111,10 @@ void RegisterSynth(CLI::App& app, CommandBody* selected) {
       ->check(CLI::Range(0, 256));
   sub->add_option("--test-fraction", flags->test_fraction,
                   "Fraction of each tool's contacts in the test split")
+      ->check(CLI::Range(0.0, 1.0));
+  sub->add_option("--gelslim-marker-darkness", flags->marker_darkness,
+                  "Darkness of the GelSlim's printed marker dots, 0 (a sensor without "
+                  "markers) to 1 (default 0.7; docs/SIMULATOR.md)")
       ->check(CLI::Range(0.0, 1.0));
   sub->add_flag("--overwrite", flags->overwrite, "Replace an existing dataset at --out");
   sub->add_flag("--clean", flags->clean,

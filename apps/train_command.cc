@@ -31,6 +31,7 @@ struct TrainFlags {
   int latent_dim = 0, width = 0, layers = 0, steps = 0, batch = 0, pixels = 0;
   int threads = 0;
   double learning_rate = 0;
+  double omega_0 = 0;
   std::uint64_t seed = 0;
   int checkpoint_every = 0;
   bool first_order = false;
@@ -40,7 +41,7 @@ struct TrainFlags {
   CLI::Option *latent_dim_option = nullptr, *width_option = nullptr, *layers_option = nullptr,
               *steps_option = nullptr, *batch_option = nullptr, *pixels_option = nullptr,
               *seed_option = nullptr, *checkpoint_every_option = nullptr,
-              *learning_rate_option = nullptr;
+              *learning_rate_option = nullptr, *omega_0_option = nullptr;
 };
 
 // SIGINT: the current step finishes, a checkpoint is written, the command exits 1. A
@@ -76,6 +77,7 @@ void RunTrain(const TrainFlags& flags) {
   if (flags.checkpoint_every_option->count()) options.checkpoint_every = flags.checkpoint_every;
   if (flags.first_order) options.meta_sgd.first_order = true;
   if (flags.learning_rate_option->count()) options.learning_rate = flags.learning_rate;
+  if (flags.omega_0_option->count()) options.siren.omega_0 = flags.omega_0;
   options.threads = ResolveThreads(flags.threads);
   std::string error;
   if (!options.IsValid(&error)) throw UsageError(error);
@@ -247,6 +249,11 @@ void RegisterTrain(CLI::App& app, CommandBody* selected) {
   flags->learning_rate_option =
       sub->add_option("--learning-rate", flags->learning_rate,
                       "Adam step size of the trunk (default: the preset's, 3e-4)")
+          ->check(CLI::PositiveNumber);
+  flags->omega_0_option =
+      sub->add_option("--omega-0", flags->omega_0,
+                      "SIREN frequency omega_0 in rad per unit of coordinate (default 30, "
+                      "SIREN's and the paper's; coordinates span [-1, 1])")
           ->check(CLI::PositiveNumber);
   sub->add_flag("--first-order", flags->first_order,
                 "First-order meta-gradients (cheaper, biased; default exact)");

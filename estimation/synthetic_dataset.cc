@@ -12,6 +12,7 @@
 #include <thread>
 
 #include "estimation/dataset.h"
+#include "estimation/internal/file_util.h"
 #include "estimation/file_io.h"
 #include "models/seed.h"
 #include "models/tool.h"
@@ -92,7 +93,13 @@ SynthesisReport Synthesize(const SynthesisPlan& plan,
   writer_options.overwrite = plan.overwrite;
   writer_options.meta_json = "{\"seed\": " + std::to_string(plan.seed) +
                              ", \"frames_per_tool\": " +
-                             std::to_string(plan.frames_per_tool) + "}";
+                             std::to_string(plan.frames_per_tool);
+  // Simulator settings a user can change from the CLI are recorded when not default.
+  if (simulator_options.gelslim.marker_darkness != GelSlimOptions().marker_darkness) {
+    writer_options.meta_json += ", \"gelslim_marker_darkness\": " +
+                                internal::FormatDoubleShort(simulator_options.gelslim.marker_darkness);
+  }
+  writer_options.meta_json += "}";
   DatasetWriter writer(plan.out, writer_options);
   for (SensorKind sensor : plan.sensors) {
     SensorInfo info;

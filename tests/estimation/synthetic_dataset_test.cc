@@ -98,6 +98,32 @@ TEST(Synthesize, WritesPairedLabelledFramesWithEveryTenthContactInTest) {
   EXPECT_EQ(report.bytes, dataset.BytesOnDisk());
 }
 
+TEST(Synthesize, AGelSlimWithoutMarkersHasAnEvenReferenceAndSaysSoInTheMeta) {
+  SynthesisPlan plan = SmallPlan(TempDir("no_markers"));
+  plan.sensors = {SensorKind::kGelSlim};
+  plan.frames_per_tool = 1;
+  ContactSimulator::Options options;
+  options.gelslim.marker_darkness = 0;
+  Synthesize(plan, options);
+  const Dataset dataset = Dataset::Open(plan.out);
+  // Without dots the reference is the vignetted grey only: along the centre row it
+  // falls monotonically from the centre (a dot would dip and recover).
+  const Image& reference = dataset.Reference(SensorKind::kGelSlim);
+  const int r = reference.rows / 2;
+  for (int c = reference.cols / 2 + 1; c < reference.cols; ++c) {
+    ASSERT_LE(reference.at(r, c, 1), reference.at(r, c - 1, 1) + 1.0f / 255) << c;
+  }
+  EXPECT_THAT(Slurp(plan.out + "/dataset.json"),
+              ::testing::HasSubstr("\"gelslim_marker_darkness\": 0"));
+  // The default simulator records nothing extra.
+  SynthesisPlan with_markers = SmallPlan(TempDir("markers"));
+  with_markers.sensors = {SensorKind::kGelSlim};
+  with_markers.frames_per_tool = 1;
+  Synthesize(with_markers, ContactSimulator::Options());
+  EXPECT_THAT(Slurp(with_markers.out + "/dataset.json"),
+              ::testing::Not(::testing::HasSubstr("marker")));
+}
+
 TEST(Synthesize, RejectsUnknownToolsBeforeWritingAnything) {
   SynthesisPlan plan = SmallPlan(TempDir("bad_tool"));
   plan.tools = {"rod", "teapot"};
