@@ -65,8 +65,10 @@ std::string Status(const TrunkTrainer::StepReport& report) {
   return buffer;
 }
 
-void RunTrain(const TrainFlags& flags) {
-  TrunkTrainer::Options options = TrunkTrainer::Preset(flags.preset);  // throws for a bad name
+// The preset for `sensor` (presets may size the trunk per sensor), then the flags'
+// overrides. Throws UsageError for invalid options.
+TrunkTrainer::Options OptionsFor(const TrainFlags& flags, SensorKind sensor) {
+  TrunkTrainer::Options options = TrunkTrainer::Preset(flags.preset, sensor);
   if (flags.latent_dim_option->count()) options.siren.latent_dim = flags.latent_dim;
   if (flags.width_option->count()) options.siren.width = flags.width;
   if (flags.layers_option->count()) options.siren.num_hidden_layers = flags.layers;
@@ -81,6 +83,13 @@ void RunTrain(const TrainFlags& flags) {
   options.threads = ResolveThreads(flags.threads);
   std::string error;
   if (!options.IsValid(&error)) throw UsageError(error);
+  return options;
+}
+
+void RunTrain(const TrainFlags& flags) {
+  for (SensorKind sensor : {SensorKind::kSoftBubble, SensorKind::kGelSlim}) {
+    OptionsFor(flags, sensor);  // bad flags fail before the dataset is read
+  }
 
   const std::filesystem::path out_path(flags.out);
   const std::filesystem::path out_dir =
@@ -124,7 +133,7 @@ void RunTrain(const TrainFlags& flags) {
   nlohmann::json sensor_figures = nlohmann::json::object();
   nlohmann::json info_trunks = nlohmann::json::object();
   for (SensorKind sensor : sensors) {
-    TrunkTrainer::Options sensor_options = options;
+    TrunkTrainer::Options sensor_options = OptionsFor(flags, sensor);
     sensor_options.checkpoint_path = CheckpointPath(flags.out, sensor);
     sensor_options.resume = flags.resume;
     const TrunkTrainer trainer(sensor_options);

@@ -257,9 +257,9 @@ void DefaultResolution(SensorKind sensor, int* rows, int* cols) {
 
 LatentModulatedSiren::Options TrunkTrainer::Options::DefaultSirenOptions() {
   LatentModulatedSiren::Options siren;
-  siren.width = 128;
-  siren.num_hidden_layers = 4;
-  siren.latent_dim = 64;
+  siren.width = 64;
+  siren.num_hidden_layers = 3;
+  siren.latent_dim = 128;
   siren.omega_0 = 30.0;
   return siren;
 }
@@ -327,7 +327,7 @@ bool TrunkTrainer::Options::IsValid(std::string* error) const {
 
 std::vector<std::string> TrunkTrainer::PresetNames() { return {"tiny", "small", "default"}; }
 
-TrunkTrainer::Options TrunkTrainer::Preset(const std::string& name) {
+TrunkTrainer::Options TrunkTrainer::Preset(const std::string& name, SensorKind sensor) {
   Options options;
   if (name == "tiny") {
     options.siren.width = 32;
@@ -346,13 +346,14 @@ TrunkTrainer::Options TrunkTrainer::Preset(const std::string& name) {
   } else if (name == "small") {
     options.siren.width = 64;
     options.siren.num_hidden_layers = 3;
-    options.siren.latent_dim = 32;
+    options.siren.latent_dim = 64;
     options.batch_size = 32;
-    options.pixels_per_frame = 256;
-    options.steps = 3000;
+    options.pixels_per_frame = 512;
+    options.steps = 4000;
     options.monitor_every = 100;
   } else if (name == "default") {
-    // Options() as constructed.
+    // Options() as constructed, with the GelSlim's shorter latent.
+    if (sensor == SensorKind::kGelSlim) options.siren.latent_dim = 32;
   } else {
     std::string names;
     for (const std::string& n : PresetNames()) names += (names.empty() ? "" : ", ") + n;

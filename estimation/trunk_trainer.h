@@ -127,17 +127,17 @@ class TrunkTrainer {
 
     // ---- Batches --------------------------------------------------------------------
     // Frames per outer step. >= 1. Cost is linear in it. Default: the default preset's.
-    int batch_size = 16;
+    int batch_size = 32;
     // Random pixels per frame per step (the inner fit and the outer loss both see only
     // them; a fresh subset each step). 0 = every pixel. >= 0. Cost is linear in it
     // (small trunk, float: 1.4 ms per frame at 256 px, 5.9 at 1024, 38.7 at all 6160,
     // one core), while PSNR per step drops only a little, so at equal compute fewer
     // pixels and more steps won: 256 px x 2400 steps 33.6 dB, 1024 x 600 32.3 dB, all
     // 6160 x 100 25.9 dB (small trunk, bubble; docs/TRAINING.md).
-    int pixels_per_frame = 2048;
+    int pixels_per_frame = 512;
     // Outer steps to run (in total, counting steps done before a resume). >= 0.
-    // Default: the default preset's (hours on 2 cores; docs/TRAINING.md).
-    int steps = 20000;
+    // Default: the default preset's (16 minutes for a Bubble trunk on 2 cores).
+    int steps = 8000;
     // Seed of every random choice (see Determinism above).
     std::uint64_t seed = 0;
     // Worker threads for per-frame gradients, loading and evaluation. In [1, 256].
@@ -171,17 +171,27 @@ class TrunkTrainer {
     static MetaSgd::Options DefaultMetaSgdOptions();
   };
 
-  // Named starting points ("model only what a scene requires": pick the smallest that
-  // meets the accuracy you need; docs/TRAINING.md lists what each reached). "default"
-  // is Options() as constructed:
+  // Named starting points, sized by measurement ("model only what a scene requires";
+  // the sweep and the figures are in docs/RESULTS_RECONSTRUCTION.md). Each preset may
+  // size the trunk per sensor, since the scenes differ: a Bubble dent is smooth, a
+  // GelSlim frame is thin shading ridges and markers that a wider trunk barely helps.
   //   tiny:    width 32, 2 layers, d = 16, 16 x 20 pixels, batch 4, 300 steps
   //            -- tests and CI, a few seconds.
-  //   small:   width 64, 3 layers, d = 32, the sensor's working resolution, batch 32,
-  //            256 pixels per frame, 3000 steps -- a few minutes on 2 cores.
-  //   default: width 128, 4 layers, d = 64, the sensor's working resolution, batch 16,
-  //            2048 pixels per frame, 20000 steps -- hours on 2 cores.
-  // Throws std::invalid_argument listing the names for an unknown one.
-  static Options Preset(const std::string& name);
+  //   small:   width 64, 3 layers, d = 64, the sensor's working resolution, batch 32,
+  //            512 pixels per frame, 4000 steps -- the committed pretrained trunk
+  //            (models/pretrained/default.tfm, scripts/train_pretrained.sh): fast
+  //            enough for the pose posteriors' latency targets; 10 minutes for both
+  //            sensors on 2 cores.
+  //   default: as small but 8000 steps, d = 128 for the Bubble and d = 32 for the
+  //            GelSlim -- the smallest measured trunks that reach the paper's Bubble
+  //            PSNR (38 dB in the paper's convention) while trunks + float16 latents
+  //            stay 1000x smaller than the raw frames. The Bubble's dents gain from a
+  //            longer latent (a wider trunk gained nothing); the GelSlim's frames
+  //            barely do, so its latent is cut to pay for the Bubble's. About 10
+  //            minutes for both on 2 cores.
+  // Options() as constructed is the default preset for the Bubble. Throws
+  // std::invalid_argument listing the names for an unknown one.
+  static Options Preset(const std::string& name, SensorKind sensor = SensorKind::kSoftBubble);
   static std::vector<std::string> PresetNames();
 
   enum class TerminationType {

@@ -10,7 +10,8 @@
 #   CONFIGS="bubble:64:3:32 gelslim:128:3:64" bash scripts/sweep_trunk.sh
 #
 # Output: $WORK/sweep.jsonl (one line per run) and $WORK/sweep.md (a markdown table).
-# Needs jq for the table. Reruns skip finished configurations (delete $WORK/runs/<cfg>).
+# Needs jq for the table. Reruns skip finished configurations (delete $WORK/runs/<cfg>),
+# and reuse a run's trained model and functaset when only its result.json is deleted.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 WORK=${WORK:-/tmp/tactfunc_sweep}
@@ -34,13 +35,17 @@ for cfg in $CONFIGS; do
   run="$WORK/runs/${sensor}_w${width}_l${layers}_d${dim}"
   if [ -f "$run/result.json" ]; then echo "sweep: $cfg done earlier"; continue; fi
   mkdir -p "$run"
-  echo "+ train $cfg ($STEPS steps)"
-  "$TF" train --data "$DATA" --out "$run/m.tfm" --sensors "$sensor" --preset small \
-    --width "$width" --layers "$layers" --latent-dim "$dim" --pixels 512 --batch 32 \
-    --steps "$STEPS" --seed 1 --threads "$THREADS" --checkpoint-every 0 --json \
-    > "$run/train.log" 2>&1
-  "$TF" encode --model "$run/m.tfm" --data "$DATA" --out "$run/f.tfs" --sensors "$sensor" \
-    --threads "$THREADS" --json > "$run/encode.log" 2>&1
+  if [ ! -f "$run/m.tfm" ]; then
+    echo "+ train $cfg ($STEPS steps)"
+    "$TF" train --data "$DATA" --out "$run/m.tfm" --sensors "$sensor" --preset small \
+      --width "$width" --layers "$layers" --latent-dim "$dim" --pixels 512 --batch 32 \
+      --steps "$STEPS" --seed 1 --threads "$THREADS" --checkpoint-every 0 --json \
+      > "$run/train.log" 2>&1
+  fi
+  if [ ! -f "$run/f.tfs" ]; then
+    "$TF" encode --model "$run/m.tfm" --data "$DATA" --out "$run/f.tfs" --sensors "$sensor" \
+      --threads "$THREADS" --json > "$run/encode.log" 2>&1
+  fi
   "$TF" recon --model "$run/m.tfm" --functaset "$run/f.tfs" --data "$DATA" --out "$run/recon" \
     --examples 4 --json > "$run/recon.log" 2>&1
   rm -f "$run"/m.tfm.*.ckpt
@@ -50,6 +55,7 @@ for cfg in $CONFIGS; do
     '{sensor: $s, width: $w, layers: $l, latent_dim: $d, steps: $steps,
       parameters: $t[0].sensors[$s].parameters, train_seconds: $t[0].sensors[$s].seconds,
       psnr_test: .psnr_test[$s], psnr_test_clean: (.psnr_test_clean // {})[$s],
+      psnr_test_source_peak: .psnr_test_source_peak[$s],
       psnr_train: .psnr_train[$s], encode_frames_per_s: $e[0].frames_per_s,
       threads: $e[0].threads, model_bytes: .model_bytes, latent_bytes: .latent_bytes,
       compression_ratio: .compression_ratio}' <(tail -n 1 "$run/recon.log") > "$run/result.json"
@@ -58,9 +64,9 @@ done
 
 cat "$WORK"/runs/*/result.json > "$WORK/sweep.jsonl"
 {
-  echo "| sensor | width x layers | d | parameters | test PSNR noisy / clean (dB) | train PSNR (dB) | encode frames/s | ms per frame | train s | compression |"
-  echo "|---|---|---|---|---|---|---|---|---|---|"
-  jq -s -r 'sort_by(.sensor, .width, .layers, .latent_dim)[] | "| \(.sensor) | \(.width) x \(.layers) | \(.latent_dim) | \(.parameters) | \(.psnr_test*100|round/100) / \((.psnr_test_clean // 0)*100|round/100) | \(.psnr_train*100|round/100) | \(.encode_frames_per_s*10|round/10) | \(1000*.threads/.encode_frames_per_s*100|round/100) | \(.train_seconds|round) | \(.compression_ratio|round)x |"' \
+  echo "| sensor | width x layers | d | parameters | test PSNR noisy / clean (dB) | paper convention (dB) | train PSNR (dB) | encode frames/s | ms per frame | train s | compression |"
+  echo "|---|---|---|---|---|---|---|---|---|---|---|"
+  jq -s -r 'sort_by(.sensor, .width, .layers, .latent_dim)[] | "| \(.sensor) | \(.width) x \(.layers) | \(.latent_dim) | \(.parameters) | \(.psnr_test*100|round/100) / \((.psnr_test_clean // 0)*100|round/100) | \((.psnr_test_source_peak // 0)*100|round/100) | \(.psnr_train*100|round/100) | \(.encode_frames_per_s*10|round/10) | \(1000*.threads/.encode_frames_per_s*100|round/100) | \(.train_seconds|round) | \(.compression_ratio|round)x |"' \
     "$WORK/sweep.jsonl"
 } > "$WORK/sweep.md"
 cat "$WORK/sweep.md"

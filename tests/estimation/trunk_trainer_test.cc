@@ -103,6 +103,25 @@ TEST(TrunkTrainerOptions, DefaultPresetIsTheDefaultOptions) {
   EXPECT_EQ(TrunkTrainer::Preset("default").steps, TrunkTrainer::Options().steps);
 }
 
+TEST(TrunkTrainerOptions, TheDefaultPresetGivesTheGelSlimAShorterLatentThanTheBubble) {
+  const TrunkTrainer::Options bubble = TrunkTrainer::Preset("default", SensorKind::kSoftBubble);
+  const TrunkTrainer::Options gel = TrunkTrainer::Preset("default", SensorKind::kGelSlim);
+  EXPECT_EQ(bubble.siren.latent_dim, 128);
+  EXPECT_EQ(gel.siren.latent_dim, 32);
+  // Everything else is shared.
+  EXPECT_EQ(gel.siren.width, bubble.siren.width);
+  EXPECT_EQ(gel.siren.num_hidden_layers, bubble.siren.num_hidden_layers);
+  EXPECT_EQ(gel.steps, bubble.steps);
+  EXPECT_EQ(gel.batch_size, bubble.batch_size);
+  EXPECT_EQ(gel.pixels_per_frame, bubble.pixels_per_frame);
+  // The other presets are the same for both sensors.
+  for (const std::string& name : {"tiny", "small"}) {
+    EXPECT_EQ(TrunkTrainer::Preset(name, SensorKind::kGelSlim).siren.latent_dim,
+              TrunkTrainer::Preset(name, SensorKind::kSoftBubble).siren.latent_dim)
+        << name;
+  }
+}
+
 TEST(TrunkTrainerOptions, UnknownPresetIsRejectedListingTheNames) {
   try {
     TrunkTrainer::Preset("huge");
