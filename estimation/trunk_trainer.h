@@ -183,8 +183,9 @@ class TrunkTrainer {
   //            enough for the pose posteriors' latency targets; 10 minutes for both
   //            sensors on 2 cores.
   //   default: as small but 8000 steps, d = 128 for the Bubble and d = 32 for the
-  //            GelSlim -- the smallest measured trunks that reach the paper's Bubble
-  //            PSNR (38 dB in the paper's convention) while trunks + float16 latents
+  //            GelSlim -- the smallest measured trunks that reached the paper's Bubble
+  //            PSNR (38 dB in the paper's convention, with seed 1; 37.2-37.9 dB with
+  //            seeds 2 and 3) while trunks + float16 latents
   //            stay 1000x smaller than the raw frames. The Bubble's dents gain from a
   //            longer latent (a wider trunk gained nothing); the GelSlim's frames
   //            barely do, so its latent is cut to pay for the Bubble's. About 10
