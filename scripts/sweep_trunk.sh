@@ -19,7 +19,7 @@ STEPS=${STEPS:-1000}
 THREADS=${THREADS:-0}
 FRAMES_PER_TOOL=${FRAMES_PER_TOOL:-150}
 DATA=${DATA:-$WORK/data}
-CONFIGS=${CONFIGS:-"bubble:32:3:32 bubble:64:3:16 bubble:64:3:32 bubble:64:3:64 bubble:64:3:128 bubble:128:3:64 gelslim:32:3:64 gelslim:64:3:64 gelslim:64:3:128 gelslim:128:3:64"}
+CONFIGS=${CONFIGS:-"bubble:32:3:32 bubble:64:3:16 bubble:64:3:32 bubble:64:3:64 bubble:64:3:128 bubble:128:3:64 gelslim:32:3:64 gelslim:64:3:64 gelslim:64:3:128 gelslim:128:3:64 gelslim:64:6:64"}
 TF=build/bin/tactfunc
 test -x "$TF" || bash scripts/build.sh
 command -v jq >/dev/null || apt-get install -y -qq jq
