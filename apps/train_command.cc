@@ -32,6 +32,7 @@ struct TrainFlags {
   int threads = 0;
   double learning_rate = 0;
   double omega_0 = 0;
+  double lr_final_fraction = 1;
   std::uint64_t seed = 0;
   int checkpoint_every = 0;
   bool first_order = false;
@@ -41,7 +42,8 @@ struct TrainFlags {
   CLI::Option *latent_dim_option = nullptr, *width_option = nullptr, *layers_option = nullptr,
               *steps_option = nullptr, *batch_option = nullptr, *pixels_option = nullptr,
               *seed_option = nullptr, *checkpoint_every_option = nullptr,
-              *learning_rate_option = nullptr, *omega_0_option = nullptr;
+              *learning_rate_option = nullptr, *omega_0_option = nullptr,
+              *lr_final_fraction_option = nullptr;
 };
 
 // SIGINT: the current step finishes, a checkpoint is written, the command exits 1. A
@@ -80,6 +82,9 @@ TrunkTrainer::Options OptionsFor(const TrainFlags& flags, SensorKind sensor) {
   if (flags.first_order) options.meta_sgd.first_order = true;
   if (flags.learning_rate_option->count()) options.learning_rate = flags.learning_rate;
   if (flags.omega_0_option->count()) options.siren.omega_0 = flags.omega_0;
+  if (flags.lr_final_fraction_option->count()) {
+    options.learning_rate_final_fraction = flags.lr_final_fraction;
+  }
   options.threads = ResolveThreads(flags.threads);
   std::string error;
   if (!options.IsValid(&error)) throw UsageError(error);
@@ -259,6 +264,11 @@ void RegisterTrain(CLI::App& app, CommandBody* selected) {
       sub->add_option("--learning-rate", flags->learning_rate,
                       "Adam step size of the trunk (default: the preset's, 3e-4)")
           ->check(CLI::PositiveNumber);
+  flags->lr_final_fraction_option =
+      sub->add_option("--lr-final-fraction", flags->lr_final_fraction,
+                      "Cosine decay of the learning rate to this fraction of it by the last "
+                      "step, in (0, 1] (default: the preset's; 1 = constant)")
+          ->check(CLI::Range(1e-9, 1.0));
   flags->omega_0_option =
       sub->add_option("--omega-0", flags->omega_0,
                       "SIREN frequency omega_0 in rad per unit of coordinate (default 30, "

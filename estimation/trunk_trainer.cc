@@ -289,6 +289,9 @@ bool TrunkTrainer::Options::IsValid(std::string* error) const {
     message << "meta_sgd: " << inner;
   } else if (!finite_positive(learning_rate)) {
     message << "learning_rate must be finite and > 0, found " << learning_rate;
+  } else if (!(learning_rate_final_fraction > 0 && learning_rate_final_fraction <= 1)) {
+    message << "learning_rate_final_fraction must be in (0, 1], found "
+            << learning_rate_final_fraction;
   } else if (!finite_positive(alpha_learning_rate)) {
     message << "alpha_learning_rate must be finite and > 0, found " << alpha_learning_rate;
   } else if (!(adam_beta1 >= 0 && adam_beta1 < 1)) {
@@ -340,6 +343,7 @@ TrunkTrainer::Options TrunkTrainer::Preset(const std::string& name, SensorKind s
     options.learning_rate = 1e-3;
     options.alpha_learning_rate = 1e-2;
     options.steps = 300;
+    options.learning_rate_final_fraction = 1.0;
     options.monitor_every = 50;
     options.monitor_frames = 8;
     options.checkpoint_every = 100;
@@ -350,6 +354,7 @@ TrunkTrainer::Options TrunkTrainer::Preset(const std::string& name, SensorKind s
     options.batch_size = 32;
     options.pixels_per_frame = 512;
     options.steps = 4000;
+    options.learning_rate_final_fraction = 1.0;  // the committed trunk's constant rate
     options.monitor_every = 100;
   } else if (name == "default") {
     // Options() as constructed, with the GelSlim's shorter latent.
@@ -451,6 +456,10 @@ std::string TrunkTrainer::TrajectoryOptionsJson(SensorKind sensor,
   json["meta_sgd.first_order"] = o.meta_sgd.first_order;
   json["learning_rate"] = o.learning_rate;
   json["alpha_learning_rate"] = o.alpha_learning_rate;
+  if (o.learning_rate_final_fraction != 1.0) {  // absent = constant (older files)
+    json["learning_rate_final_fraction"] = o.learning_rate_final_fraction;
+    json["learning_rate_schedule_steps"] = o.steps;
+  }
   json["adam_beta1"] = o.adam_beta1;
   json["adam_beta2"] = o.adam_beta2;
   json["adam_epsilon"] = o.adam_epsilon;
@@ -461,6 +470,14 @@ std::string TrunkTrainer::TrajectoryOptionsJson(SensorKind sensor,
   json["seed"] = o.seed;
   json["precision"] = "float32 gradients, float64 master";
   return json.dump();
+}
+
+double TrunkTrainer::LearningRateAt(const Options& options, int step) {
+  const double f = options.learning_rate_final_fraction;
+  if (f == 1.0 || options.steps <= 0) return options.learning_rate;
+  const double progress =
+      std::min(1.0, std::max(0.0, static_cast<double>(step - 1) / options.steps));
+  return options.learning_rate * (f + (1.0 - f) * 0.5 * (1.0 + std::cos(M_PI * progress)));
 }
 
 TrunkTrainer::Summary TrunkTrainer::Train(const Dataset& dataset, SensorKind sensor,
@@ -674,7 +691,8 @@ TrunkTrainer::Summary TrunkTrainer::Train(const std::vector<TrunkTargets>& frame
       const double sqrt_c2 = std::sqrt(correction2);
       x->array() -= step_size * m->array() / (v->array().sqrt() / sqrt_c2 + o.adam_epsilon);
     };
-    adam(&state.theta, &state.m_theta, &state.v_theta, g_theta, o.learning_rate);
+    adam(&state.theta, &state.m_theta, &state.v_theta, g_theta,
+         LearningRateAt(o, t));
     adam(&state.alpha, &state.m_alpha, &state.v_alpha, g_alpha, o.alpha_learning_rate);
     state.alpha = state.alpha.cwiseMax(0.0).cwiseMin(1.0);
     siren.SetParameters(state.theta);

@@ -114,12 +114,49 @@ TEST(TrunkTrainerOptions, TheDefaultPresetGivesTheGelSlimAShorterLatentThanTheBu
   EXPECT_EQ(gel.steps, bubble.steps);
   EXPECT_EQ(gel.batch_size, bubble.batch_size);
   EXPECT_EQ(gel.pixels_per_frame, bubble.pixels_per_frame);
-  // The other presets are the same for both sensors.
+  EXPECT_EQ(gel.learning_rate_final_fraction, 0.1);
+  EXPECT_EQ(bubble.learning_rate_final_fraction, 0.1);
+  // The other presets keep the paper's constant rate and are the same for both sensors.
+  EXPECT_EQ(TrunkTrainer::Preset("small").learning_rate_final_fraction, 1.0);
+  EXPECT_EQ(TrunkTrainer::Preset("tiny").learning_rate_final_fraction, 1.0);
   for (const std::string& name : {"tiny", "small"}) {
     EXPECT_EQ(TrunkTrainer::Preset(name, SensorKind::kGelSlim).siren.latent_dim,
               TrunkTrainer::Preset(name, SensorKind::kSoftBubble).siren.latent_dim)
         << name;
   }
+}
+
+TEST(TrunkTrainerOptions, TheLearningRateIsConstantUnlessACosineDecayIsAsked) {
+  TrunkTrainer::Options o = TrunkTrainer::Preset("tiny");
+  o.steps = 100;
+  for (int t : {1, 50, 100}) EXPECT_EQ(TrunkTrainer::LearningRateAt(o, t), o.learning_rate);
+  o.learning_rate_final_fraction = 0.1;
+  EXPECT_DOUBLE_EQ(TrunkTrainer::LearningRateAt(o, 1), o.learning_rate);
+  EXPECT_NEAR(TrunkTrainer::LearningRateAt(o, 51), 0.55 * o.learning_rate, 1e-15);
+  EXPECT_NEAR(TrunkTrainer::LearningRateAt(o, 101), 0.1 * o.learning_rate, 1e-15);
+  for (int t = 2; t <= 100; ++t) {
+    EXPECT_LT(TrunkTrainer::LearningRateAt(o, t), TrunkTrainer::LearningRateAt(o, t - 1)) << t;
+  }
+  std::string error;
+  o.learning_rate_final_fraction = 0;
+  EXPECT_FALSE(o.IsValid(&error));
+  EXPECT_THAT(error, HasSubstr("learning_rate_final_fraction"));
+  o.learning_rate_final_fraction = 1.5;
+  EXPECT_FALSE(o.IsValid(&error));
+}
+
+TEST(TrunkTrainerOptions, WithADecayTheStepCountBelongsToTheTrajectory) {
+  const FrameFormat format{16, 20, false, false, 0.01};
+  TrunkTrainer::Options a = TrunkTrainer::Preset("tiny");
+  TrunkTrainer::Options b = a;
+  b.steps = a.steps + 100;
+  // Constant rate: running longer continues the same trajectory.
+  EXPECT_EQ(TrunkTrainer(a).TrajectoryOptionsJson(SensorKind::kSoftBubble, format),
+            TrunkTrainer(b).TrajectoryOptionsJson(SensorKind::kSoftBubble, format));
+  // Decay: the schedule depends on the step count, so a resume must keep it.
+  a.learning_rate_final_fraction = b.learning_rate_final_fraction = 0.1;
+  EXPECT_NE(TrunkTrainer(a).TrajectoryOptionsJson(SensorKind::kSoftBubble, format),
+            TrunkTrainer(b).TrajectoryOptionsJson(SensorKind::kSoftBubble, format));
 }
 
 TEST(TrunkTrainerOptions, UnknownPresetIsRejectedListingTheNames) {
@@ -246,6 +283,25 @@ TEST_F(TrunkTrainerTest, StoppingAndResumingIsBitIdenticalToAnUninterruptedRun) 
   EXPECT_EQ(second.steps_done, options.steps);
   EXPECT_TRUE(SameParameters(resumed, uninterrupted));
   EXPECT_EQ(resumed.residual_sigma, uninterrupted.residual_sigma);
+}
+
+TEST_F(TrunkTrainerTest, WithACosineDecayResumingIsStillBitIdenticalAndTheDecayChangesTheModel) {
+  TrunkTrainer::Options options = ShortOptions();
+  SensorTrunk constant;
+  Train(options, &constant);
+  options.learning_rate_final_fraction = 0.1;
+  SensorTrunk uninterrupted;
+  Train(options, &uninterrupted);
+  EXPECT_FALSE(SameParameters(uninterrupted, constant));
+
+  options.checkpoint_path = dir_ / "decay.ckpt";
+  SensorTrunk stopped;
+  Train(options, &stopped, [](const TrunkTrainer::StepReport& report) { return report.step < 11; });
+  options.resume = true;
+  SensorTrunk resumed;
+  const TrunkTrainer::Summary second = Train(options, &resumed);
+  EXPECT_EQ(second.start_step, 11);
+  EXPECT_TRUE(SameParameters(resumed, uninterrupted));
 }
 
 TEST_F(TrunkTrainerTest, ExtendingAFinishedRunEqualsTrainingLongerAtOnce) {
