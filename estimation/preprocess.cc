@@ -24,6 +24,29 @@ constexpr float kLumaR = 0.299f;
 constexpr float kLumaG = 0.587f;
 constexpr float kLumaB = 0.114f;
 
+// Smallest and largest value over every channel of the pixels p with valid(p); with no
+// such pixel, lo = +inf > hi = -inf.
+struct ValueRange {
+  double lo = std::numeric_limits<double>::infinity();
+  double hi = -std::numeric_limits<double>::infinity();
+  bool empty() const { return !(lo <= hi); }
+};
+
+template <typename Valid>
+ValueRange RangeOfValidPixels(const Image& image, const Valid& valid) {
+  ValueRange range;
+  const std::size_t pixels = image.pixels();
+  for (std::size_t p = 0; p < pixels; ++p) {
+    if (!valid(p)) continue;
+    for (int k = 0; k < image.channels; ++k) {
+      const double v = image.data[p * image.channels + k];
+      range.lo = std::min(range.lo, v);
+      range.hi = std::max(range.hi, v);
+    }
+  }
+  return range;
+}
+
 }  // namespace
 
 bool PreprocessOptions::IsValid(std::string* error) const {
@@ -135,19 +158,9 @@ PreprocessedFrame Preprocess(const Image& frame, const Image& reference, SensorK
 
   // 3. Mask-aware area resize, after noting the source-resolution range.
   PreprocessedFrame out;
-  {
-    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
-    const int source_channels = difference.channels;
-    for (std::size_t p = 0; p < pixels; ++p) {
-      if (!(mask[p] > 0)) continue;
-      for (int k = 0; k < source_channels; ++k) {
-        const double v = difference.data[p * source_channels + k];
-        lo = std::min(lo, v);
-        hi = std::max(hi, v);
-      }
-    }
-    out.source_range = lo <= hi ? hi - lo : 0.0;
-  }
+  const ValueRange source =
+      RangeOfValidPixels(difference, [&](std::size_t p) { return mask[p] > 0; });
+  out.source_range = source.empty() ? 0.0 : source.hi - source.lo;
   const int rows = options.rows > 0 ? options.rows : frame.rows;
   const int cols = options.cols > 0 ? options.cols : frame.cols;
   const int out_channels = difference.channels;
@@ -182,17 +195,10 @@ PreprocessedFrame Preprocess(const Image& frame, const Image& reference, SensorK
     out.scale = fixed_scale;
     out.offset = 0;
   } else {
-    double lo = std::numeric_limits<double>::infinity();
-    double hi = -lo;
-    for (std::size_t p = 0; p < out.valid.size(); ++p) {
-      if (!out.valid[p]) continue;
-      for (int k = 0; k < out_channels; ++k) {
-        const double v = out.values.data[p * out_channels + k];
-        lo = std::min(lo, v);
-        hi = std::max(hi, v);
-      }
-    }
-    const bool any_valid = lo <= hi;
+    const ValueRange range =
+        RangeOfValidPixels(out.values, [&](std::size_t p) { return out.valid[p] != 0; });
+    const double lo = range.lo, hi = range.hi;
+    const bool any_valid = !range.empty();
     if (!any_valid || !(hi - lo >= options.min_range_epsilon)) {
       out.flat = true;
       out.scale = 1;

@@ -2,17 +2,14 @@
 #include "estimation/reconstruction.h"
 
 #include <algorithm>
-#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <exception>
 #include <map>
-#include <mutex>
 #include <sstream>
 #include <stdexcept>
-#include <thread>
 
+#include "estimation/internal/parallel_for.h"
 #include "estimation/trunk_targets.h"
 
 namespace tactfunc {
@@ -223,42 +220,20 @@ ReconstructionEvaluator::Summary ReconstructionEvaluator::Evaluate(const FunctaM
     }
   }
 
-  std::atomic<std::size_t> next{0};
-  std::atomic<bool> stop{false};
-  std::exception_ptr failure;
-  std::mutex mutex;
-  auto work = [&]() {
-    for (;;) {
-      if (stop.load()) return;
-      const std::size_t i = next.fetch_add(1);
-      if (i >= entries.size()) return;
-      FrameResult& r = summary.frames[i];
-      try {
-        const SensorState& state = states.at(r.sensor);
-        const FrameFormat& format = state.trunk->format;
-        const Eigen::MatrixXf prediction =
-            state.trunk->siren.Forward<float>(state.grid, entries[i]->latent);
-        const TrunkTargets targets = LoadTrunkTargets(dataset, r.dataset_index, format);
-        r.psnr = Psnr(prediction, targets);
-        r.psnr_source_peak = PsnrSourcePeak(prediction, targets);
-        r.psnr_zero = Psnr(state.zero_prediction, targets);
-        if (summary.has_clean && !dataset.frames()[r.dataset_index].clean_path.empty()) {
-          r.psnr_clean = Psnr(prediction, LoadTrunkTargets(dataset, r.dataset_index, format, true));
-        }
-      } catch (...) {
-        std::lock_guard<std::mutex> lock(mutex);
-        if (!failure) failure = std::current_exception();
-        stop = true;
-        return;
-      }
+  internal::ParallelFor(static_cast<int>(entries.size()), options_.threads, [&](int i) {
+    FrameResult& r = summary.frames[i];
+    const SensorState& state = states.at(r.sensor);
+    const FrameFormat& format = state.trunk->format;
+    const Eigen::MatrixXf prediction =
+        state.trunk->siren.Forward<float>(state.grid, entries[i]->latent);
+    const TrunkTargets targets = LoadTrunkTargets(dataset, r.dataset_index, format);
+    r.psnr = Psnr(prediction, targets);
+    r.psnr_source_peak = PsnrSourcePeak(prediction, targets);
+    r.psnr_zero = Psnr(state.zero_prediction, targets);
+    if (summary.has_clean && !dataset.frames()[r.dataset_index].clean_path.empty()) {
+      r.psnr_clean = Psnr(prediction, LoadTrunkTargets(dataset, r.dataset_index, format, true));
     }
-  };
-  const int num_threads = static_cast<int>(
-      std::min<std::size_t>(options_.threads, std::max<std::size_t>(entries.size(), 1)));
-  std::vector<std::thread> workers;
-  for (int t = 0; t < num_threads; ++t) workers.emplace_back(work);
-  for (std::thread& w : workers) w.join();
-  if (failure) std::rethrow_exception(failure);
+  });
 
   for (const auto& [sensor, state] : states) {
     for (Split split : {Split::kTrain, Split::kTest}) {

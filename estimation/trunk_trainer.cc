@@ -691,8 +691,7 @@ TrunkTrainer::Summary TrunkTrainer::Train(const std::vector<TrunkTargets>& frame
       const double sqrt_c2 = std::sqrt(correction2);
       x->array() -= step_size * m->array() / (v->array().sqrt() / sqrt_c2 + o.adam_epsilon);
     };
-    adam(&state.theta, &state.m_theta, &state.v_theta, g_theta,
-         LearningRateAt(o, t));
+    adam(&state.theta, &state.m_theta, &state.v_theta, g_theta, LearningRateAt(o, t));
     adam(&state.alpha, &state.m_alpha, &state.v_alpha, g_alpha, o.alpha_learning_rate);
     state.alpha = state.alpha.cwiseMax(0.0).cwiseMin(1.0);
     siren.SetParameters(state.theta);

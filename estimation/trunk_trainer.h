@@ -145,7 +145,7 @@ class TrunkTrainer {
     // 6160 x 100 25.9 dB (small trunk, bubble; docs/TRAINING.md).
     int pixels_per_frame = 512;
     // Outer steps to run (in total, counting steps done before a resume). >= 0.
-    // Default: the default preset's (16 minutes for a Bubble trunk on 2 cores).
+    // Default: the default preset's (about 5 minutes for a Bubble trunk on 2 cores).
     int steps = 8000;
     // Seed of every random choice (see Determinism above).
     std::uint64_t seed = 0;
@@ -195,11 +195,10 @@ class TrunkTrainer {
   //            tenth, d = 128 for the Bubble and d = 32 for the GelSlim -- the smallest
   //            measured trunks that reach the paper's Bubble PSNR (38 dB in the paper's
   //            convention: 37.99 dB on average over three seeds, 37.84-38.15) while
-  //            trunks + float16 latents
-  //            stay 1000x smaller than the raw frames. The Bubble's dents gain from a
-  //            longer latent (a wider trunk gained nothing); the GelSlim's frames
-  //            barely do, so its latent is cut to pay for the Bubble's. About 10
-  //            minutes for both on 2 cores.
+  //            trunks + float16 latents stay 1000x smaller than the raw frames. The
+  //            Bubble's dents gain from a longer latent (a wider trunk gained nothing);
+  //            the GelSlim's frames barely do, so its latent is cut to pay for the
+  //            Bubble's. About 10 minutes for both on 2 cores.
   // Options() as constructed is the default preset for the Bubble. Throws
   // std::invalid_argument listing the names for an unknown one.
   static Options Preset(const std::string& name, SensorKind sensor = SensorKind::kSoftBubble);

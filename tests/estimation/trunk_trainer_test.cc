@@ -119,7 +119,7 @@ TEST(TrunkTrainerOptions, TheDefaultPresetGivesTheGelSlimAShorterLatentThanTheBu
   // The other presets keep the paper's constant rate and are the same for both sensors.
   EXPECT_EQ(TrunkTrainer::Preset("small").learning_rate_final_fraction, 1.0);
   EXPECT_EQ(TrunkTrainer::Preset("tiny").learning_rate_final_fraction, 1.0);
-  for (const std::string& name : {"tiny", "small"}) {
+  for (const char* name : {"tiny", "small"}) {
     EXPECT_EQ(TrunkTrainer::Preset(name, SensorKind::kGelSlim).siren.latent_dim,
               TrunkTrainer::Preset(name, SensorKind::kSoftBubble).siren.latent_dim)
         << name;
