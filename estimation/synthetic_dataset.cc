@@ -1,18 +1,15 @@
 // Copyright 2026 The tactfunc Authors.
 #include "estimation/synthetic_dataset.h"
 
-#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <exception>
 #include <filesystem>
-#include <mutex>
 #include <stdexcept>
-#include <thread>
 
 #include "estimation/dataset.h"
 #include "estimation/internal/file_util.h"
+#include "estimation/internal/parallel_for.h"
 #include "estimation/file_io.h"
 #include "models/seed.h"
 #include "models/tool.h"
@@ -118,50 +115,30 @@ SynthesisReport Synthesize(const SynthesisPlan& plan,
 
   const std::int64_t contacts =
       static_cast<std::int64_t>(plan.tools.size()) * plan.frames_per_tool;
-  std::atomic<std::int64_t> next{0};
-  std::exception_ptr failure;
-  std::mutex failure_mutex;
-  auto worker = [&]() {
-    try {
-      for (std::int64_t i = next++; i < contacts; i = next++) {
-        {
-          std::lock_guard<std::mutex> lock(failure_mutex);
-          if (failure) return;
-        }
-        const std::string& tool = plan.tools[i / plan.frames_per_tool];
-        const int k = static_cast<int>(i % plan.frames_per_tool);
-        const std::uint64_t contact_seed = DeriveSeed(plan.seed, 3 * i);
-        const PairedContact paired = simulator.SamplePairedContact(tool, contact_seed);
-        const Split split =
-            IsTestContact(k, plan.test_fraction) ? Split::kTest : Split::kTrain;
-        for (SensorKind sensor : plan.sensors) {
-          const Contact& contact =
-              sensor == SensorKind::kSoftBubble ? paired.bubble : paired.gelslim;
-          const std::uint64_t noise_seed =
-              DeriveSeed(plan.seed, 3 * i + (sensor == SensorKind::kSoftBubble ? 1 : 2));
-          const ContactSimulator::Rendering rendering =
-              simulator.Render(sensor, contact, noise_seed);
-          PoseLabel label;
-          label.tool = contact.tool;
-          label.x_m = contact.x_m;
-          label.y_m = contact.y_m;
-          label.yaw_rad = contact.yaw_rad;
-          label.depth_m = contact.depth_m;
-          writer.AddFrame(FrameId(i), sensor, rendering.frame,
-                          plan.write_clean ? &rendering.clean : nullptr, label, split);
-        }
-        if (progress) progress(1);
-      }
-    } catch (...) {
-      std::lock_guard<std::mutex> lock(failure_mutex);
-      if (!failure) failure = std::current_exception();
+  internal::ParallelFor(contacts, plan.threads, [&](std::int64_t i) {
+    const std::string& tool = plan.tools[i / plan.frames_per_tool];
+    const int k = static_cast<int>(i % plan.frames_per_tool);
+    const std::uint64_t contact_seed = DeriveSeed(plan.seed, 3 * i);
+    const PairedContact paired = simulator.SamplePairedContact(tool, contact_seed);
+    const Split split = IsTestContact(k, plan.test_fraction) ? Split::kTest : Split::kTrain;
+    for (SensorKind sensor : plan.sensors) {
+      const Contact& contact =
+          sensor == SensorKind::kSoftBubble ? paired.bubble : paired.gelslim;
+      const std::uint64_t noise_seed =
+          DeriveSeed(plan.seed, 3 * i + (sensor == SensorKind::kSoftBubble ? 1 : 2));
+      const ContactSimulator::Rendering rendering =
+          simulator.Render(sensor, contact, noise_seed);
+      PoseLabel label;
+      label.tool = contact.tool;
+      label.x_m = contact.x_m;
+      label.y_m = contact.y_m;
+      label.yaw_rad = contact.yaw_rad;
+      label.depth_m = contact.depth_m;
+      writer.AddFrame(FrameId(i), sensor, rendering.frame,
+                      plan.write_clean ? &rendering.clean : nullptr, label, split);
     }
-  };
-  std::vector<std::thread> pool;
-  for (int t = 1; t < plan.threads; ++t) pool.emplace_back(worker);
-  worker();
-  for (std::thread& thread : pool) thread.join();
-  if (failure) std::rethrow_exception(failure);
+    if (progress) progress(1);
+  });
   writer.Finish();
 
   SynthesisReport report;

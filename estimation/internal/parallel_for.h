@@ -1,7 +1,8 @@
 // Copyright 2026 The tactfunc Authors.
 //
 // ParallelFor: runs fn(i) for i in [0, count) on `threads` workers (the calling thread
-// is one of them), handing out indices through an atomic counter. Callers that need
+// is one of them), handing out indices through an atomic counter. The index has the
+// integer type of `count` (int, or std::int64_t for counts that may exceed 2^31). Callers that need
 // results independent of the thread count write item i's result to slot i and reduce
 // the slots in index order afterwards. The first exception thrown by any fn is
 // rethrown in the caller once every worker has stopped.
@@ -13,24 +14,27 @@
 #include <exception>
 #include <mutex>
 #include <thread>
+#include <type_traits>
 #include <vector>
 
 namespace tactfunc::internal {
 
-template <typename Fn>
-void ParallelFor(int count, int threads, const Fn& fn) {
+template <typename Index, typename Fn>
+void ParallelFor(Index count, int threads, const Fn& fn) {
+  static_assert(std::is_integral_v<Index>, "ParallelFor: count must be an integer");
   if (count <= 0) return;
-  const int workers = std::max(1, std::min(threads, count));
+  const int workers =
+      static_cast<int>(std::max<Index>(1, std::min<Index>(static_cast<Index>(threads), count)));
   if (workers == 1) {
-    for (int i = 0; i < count; ++i) fn(i);
+    for (Index i = 0; i < count; ++i) fn(i);
     return;
   }
-  std::atomic<int> next{0};
+  std::atomic<Index> next{0};
   std::atomic<bool> failed{false};
   std::exception_ptr error;
   std::mutex error_mutex;
   auto work = [&]() {
-    for (int i = next++; i < count && !failed.load(); i = next++) {
+    for (Index i = next++; i < count && !failed.load(); i = next++) {
       try {
         fn(i);
       } catch (...) {
