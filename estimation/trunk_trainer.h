@@ -104,11 +104,13 @@ class TrunkTrainer {
     MetaSgd::Options meta_sgd = DefaultMetaSgdOptions();
 
     // ---- Outer optimiser: Adam ------------------------------------------------------
-    // Step size of theta, in parameter units per step. > 0. functa uses 3e-6 on a
-    // per-image SUM of squared errors; our loss is a per-pixel MEAN, whose gradient is
-    // N times smaller, so the step must be larger: 3e-4 measured best of
-    // {3e-5, 1e-4, 3e-4, 1e-3} after 600 steps of the small preset on synthetic bubble
-    // data (27.1, 30.5, 32.3, 31.7 dB; docs/TRAINING.md).
+    // Step size of theta, in parameter units per step. > 0. functa uses 3e-6 (with a
+    // per-pixel mean loss, as ours) for a 15-layer, 512-wide trunk trained 500k steps;
+    // Adam's step does not depend on the gradient's scale, so the rate follows the
+    // parameters' scale (SIREN's init shrinks as 1 / sqrt(width)) and the run length,
+    // and was measured here: 3e-4 best of {3e-5, 1e-4, 3e-4, 1e-3} after 600 steps of
+    // the small preset on synthetic bubble data (27.1, 30.5, 32.3, 31.7 dB;
+    // docs/TRAINING.md).
     double learning_rate = 3e-4;
     // Cosine decay of the trunk's step size over the run: at step t (1-based) of
     // `steps`, rate = learning_rate (f + (1 - f) (1 + cos(pi (t - 1) / steps)) / 2),
@@ -127,10 +129,10 @@ class TrunkTrainer {
     double adam_beta2 = 0.999;
     double adam_epsilon = 1e-8;
     // Initial meta-SGD rates: each alpha_k ~ U(alpha_init_min, alpha_init_max), with
-    // 0 <= min <= max <= 1. Default both 1.0, the top of the clip range: with a
-    // per-pixel mean loss the latent gradient is small and the learned rates stay at 1
-    // anyway; functa's U(0.005, 0.1) (for a sum loss) gave 28.1 dB where 1.0 gave
-    // 30.5 dB after 600 steps (docs/TRAINING.md).
+    // 0 <= min <= max <= 1. Default both 1.0, the top of the clip range: with our
+    // small trunk the latent gradient is small and the learned rates stay at 1 anyway;
+    // functa's U(0.005, 0.1) (chosen for its 15 x 512 trunk) gave 28.1 dB where 1.0
+    // gave 30.5 dB after 600 steps (docs/TRAINING.md).
     double alpha_init_min = 1.0;
     double alpha_init_max = 1.0;
 
