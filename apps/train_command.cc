@@ -33,6 +33,8 @@ struct TrainFlags {
   double learning_rate = 0;
   double omega_0 = 0;
   double lr_final_fraction = 1;
+  int inner_steps = 0;
+  double alpha_init = 0, alpha_max = 0;
   std::uint64_t seed = 0;
   int checkpoint_every = 0;
   bool first_order = false;
@@ -43,7 +45,8 @@ struct TrainFlags {
               *steps_option = nullptr, *batch_option = nullptr, *pixels_option = nullptr,
               *seed_option = nullptr, *checkpoint_every_option = nullptr,
               *learning_rate_option = nullptr, *omega_0_option = nullptr,
-              *lr_final_fraction_option = nullptr;
+              *lr_final_fraction_option = nullptr, *inner_steps_option = nullptr,
+              *alpha_init_option = nullptr, *alpha_max_option = nullptr;
 };
 
 // SIGINT: the current step finishes, a checkpoint is written, the command exits 1. A
@@ -84,6 +87,11 @@ TrunkTrainer::Options OptionsFor(const TrainFlags& flags, SensorKind sensor) {
   if (flags.omega_0_option->count()) options.siren.omega_0 = flags.omega_0;
   if (flags.lr_final_fraction_option->count()) {
     options.learning_rate_final_fraction = flags.lr_final_fraction;
+  }
+  if (flags.inner_steps_option->count()) options.meta_sgd.inner_steps = flags.inner_steps;
+  if (flags.alpha_max_option->count()) options.alpha_max = flags.alpha_max;
+  if (flags.alpha_init_option->count()) {
+    options.alpha_init_min = options.alpha_init_max = flags.alpha_init;
   }
   options.threads = ResolveThreads(flags.threads);
   std::string error;
@@ -273,6 +281,21 @@ void RegisterTrain(CLI::App& app, CommandBody* selected) {
       sub->add_option("--omega-0", flags->omega_0,
                       "SIREN frequency omega_0 in rad per unit of coordinate (default 30, "
                       "SIREN's and the paper's; coordinates span [-1, 1])")
+          ->check(CLI::PositiveNumber);
+  flags->inner_steps_option =
+      sub->add_option("--inner-steps", flags->inner_steps,
+                      "Meta-SGD steps K from z = 0, in training and in every later encode "
+                      "(default 3, the paper's; cost grows linearly in K)")
+          ->check(CLI::Range(1, 1000));
+  flags->alpha_init_option =
+      sub->add_option("--alpha-init", flags->alpha_init,
+                      "Initial meta-SGD rate of every latent dimension, in [0, alpha-max] "
+                      "(default 1)")
+          ->check(CLI::NonNegativeNumber);
+  flags->alpha_max_option =
+      sub->add_option("--alpha-max", flags->alpha_max,
+                      "Upper clip bound of the learned meta-SGD rates (default 1, the "
+                      "issue's and functa's [0, 1]; docs/TRAINING.md)")
           ->check(CLI::PositiveNumber);
   sub->add_flag("--first-order", flags->first_order,
                 "First-order meta-gradients (cheaper, biased; default exact)");

@@ -300,9 +300,12 @@ bool TrunkTrainer::Options::IsValid(std::string* error) const {
     message << "adam_beta2 must be in [0, 1), found " << adam_beta2;
   } else if (!finite_positive(adam_epsilon)) {
     message << "adam_epsilon must be finite and > 0, found " << adam_epsilon;
-  } else if (!(alpha_init_min >= 0 && alpha_init_min <= alpha_init_max && alpha_init_max <= 1)) {
-    message << "alpha_init_min and alpha_init_max must satisfy 0 <= min <= max <= 1, found "
-            << alpha_init_min << " and " << alpha_init_max;
+  } else if (!finite_positive(alpha_max)) {
+    message << "alpha_max must be finite and > 0, found " << alpha_max;
+  } else if (!(alpha_init_min >= 0 && alpha_init_min <= alpha_init_max &&
+               alpha_init_max <= alpha_max)) {
+    message << "alpha_init_min and alpha_init_max must satisfy 0 <= min <= max <= alpha_max ("
+            << alpha_max << "), found " << alpha_init_min << " and " << alpha_init_max;
   } else if (batch_size < 1) {
     message << "batch_size must be >= 1, found " << batch_size;
   } else if (pixels_per_frame < 0) {
@@ -465,6 +468,7 @@ std::string TrunkTrainer::TrajectoryOptionsJson(SensorKind sensor,
   json["adam_epsilon"] = o.adam_epsilon;
   json["alpha_init_min"] = o.alpha_init_min;
   json["alpha_init_max"] = o.alpha_init_max;
+  if (o.alpha_max != 1.0) json["alpha_max"] = o.alpha_max;  // absent = 1 (older files)
   json["batch_size"] = o.batch_size;
   json["pixels_per_frame"] = o.pixels_per_frame;
   json["seed"] = o.seed;
@@ -679,7 +683,8 @@ TrunkTrainer::Summary TrunkTrainer::Train(const std::vector<TrunkTargets>& frame
     g_theta *= inv;
     g_alpha *= inv;
 
-    // Adam (Kingma & Ba 2015, Algorithm 1) on theta and alpha, then alpha clipped.
+    // Adam (Kingma & Ba 2015, Algorithm 1) on theta and alpha, then alpha clipped to
+    // [0, alpha_max].
     const int t = state.step + 1;
     const double b1 = o.adam_beta1, b2 = o.adam_beta2;
     const double correction1 = 1.0 - std::pow(b1, t), correction2 = 1.0 - std::pow(b2, t);
@@ -693,7 +698,7 @@ TrunkTrainer::Summary TrunkTrainer::Train(const std::vector<TrunkTargets>& frame
     };
     adam(&state.theta, &state.m_theta, &state.v_theta, g_theta, LearningRateAt(o, t));
     adam(&state.alpha, &state.m_alpha, &state.v_alpha, g_alpha, o.alpha_learning_rate);
-    state.alpha = state.alpha.cwiseMax(0.0).cwiseMin(1.0);
+    state.alpha = state.alpha.cwiseMax(0.0).cwiseMin(o.alpha_max);
     siren.SetParameters(state.theta);
     state.step = t;
     state.loss_sum += loss;

@@ -185,6 +185,8 @@ TEST(TrunkTrainerOptions, BadOptionsNameTheField) {
       {"adam_beta2", [](TrunkTrainer::Options* o) { o->adam_beta2 = -0.1; }},
       {"adam_epsilon", [](TrunkTrainer::Options* o) { o->adam_epsilon = 0; }},
       {"alpha_init_min", [](TrunkTrainer::Options* o) { o->alpha_init_max = 1.5; }},
+      {"alpha_max", [](TrunkTrainer::Options* o) { o->alpha_max = 0; }},
+      {"alpha_init_min", [](TrunkTrainer::Options* o) { o->alpha_max = 0.5; }},  // init 1 > 0.5
       {"batch_size", [](TrunkTrainer::Options* o) { o->batch_size = 0; }},
       {"pixels_per_frame", [](TrunkTrainer::Options* o) { o->pixels_per_frame = -1; }},
       {"steps", [](TrunkTrainer::Options* o) { o->steps = -1; }},
@@ -241,6 +243,30 @@ TEST_F(TrunkTrainerTest, TinyRunLowersTheOuterLossAndRaisesPsnrAfterKSteps) {
   EXPECT_EQ(trunk.residual_sigma, summary.residual_sigma);
   EXPECT_THAT(summary.BriefReport(), HasSubstr("completed"));
   EXPECT_THAT(summary.FullReport(), HasSubstr("residual sigma"));
+}
+
+TEST_F(TrunkTrainerTest, TheRatesStayWithinTheirClipBoundAndALargerBoundLetsThemPassOne) {
+  TrunkTrainer::Options options = ShortOptions();
+  options.checkpoint_every = 0;
+  options.alpha_learning_rate = 0.5;  // large, so that 24 steps reach the bounds
+  SensorTrunk clipped;
+  ASSERT_EQ(Train(options, &clipped).termination_type, TrunkTrainer::TerminationType::kCompleted);
+  EXPECT_GE(clipped.alpha.minCoeff(), 0.0);
+  EXPECT_LE(clipped.alpha.maxCoeff(), 1.0);
+
+  options.alpha_max = 4.0;
+  options.alpha_init_min = options.alpha_init_max = 3.0;
+  SensorTrunk lifted;
+  ASSERT_EQ(Train(options, &lifted).termination_type, TrunkTrainer::TerminationType::kCompleted);
+  EXPECT_GE(lifted.alpha.minCoeff(), 0.0);
+  EXPECT_LE(lifted.alpha.maxCoeff(), 4.0);
+  EXPECT_GT(lifted.alpha.maxCoeff(), 1.0);
+  // The bound belongs to the trajectory: a resume must not change it.
+  EXPECT_THAT(TrunkTrainer(options).TrajectoryOptionsJson(SensorKind::kSoftBubble, lifted.format),
+              HasSubstr("\"alpha_max\":4"));
+  EXPECT_THAT(TrunkTrainer(ShortOptions()).TrajectoryOptionsJson(SensorKind::kSoftBubble,
+                                                                  lifted.format),
+              ::testing::Not(HasSubstr("alpha_max")));
 }
 
 TEST_F(TrunkTrainerTest, SameSeedGivesTheSameModelWhateverTheThreadCount) {
