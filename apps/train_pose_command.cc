@@ -18,7 +18,7 @@
 //
 // --refit STRATEGY --model M --data D (decision): the functaset stores meta-SGD latents
 // z_K, but the sgld / laplace posteriors are centred on the MAP fit z* (ceres:10); a
-// g_phi trained on z_K is ~6 mm off at z* on the 12-tool bubble data (docs/CLI_POSE.md,
+// g_phi trained on z_K is ~6 mm off at z* on the 12-tool bubble data (docs/CLI.md,
 // "Latent maps"). --refit re-fits every labelled latent (train and test) with the
 // posteriors' fit settings and trains and evaluates on those.
 #include <chrono>
@@ -194,7 +194,13 @@ void RunTrainPose(const TrainPoseFlags& flags) {
   if (!flags.refit.empty()) {
     // Latents re-fitted with the posterior's fit settings (PosePosterior::Options::fit
     // with the potential's sigma, sigma_z), so that g_phi is trained on the latent map
-    // the sgld / laplace posteriors are centred on (docs/CLI_POSE.md, "Latent maps").
+    // the sgld / laplace posteriors are centred on (docs/CLI.md, "Latent maps").
+    // The fit's sigma is the trunk's residual_sigma even when --posterior-sigma gives
+    // the posteriors a smaller one: sigma only weighs the pixels against the
+    // N(0, sigma_z^2) prior, which thousands of pixels outweigh at either value. Refitting
+    // at the posterior sigma (0.002 instead of 0.0088) was measured and not kept: the
+    // coverage moved by noise-level amounts and the held-out tools' fell just below its
+    // band (docs/POSES.md, "Calibration").
     if (flags.model.empty() || flags.data.empty()) {
       throw UsageError("--refit needs --model and --data (the frames to re-fit)");
     }
