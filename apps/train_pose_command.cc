@@ -65,6 +65,7 @@ struct TrainPoseFlags {
   std::string calibration_tools;  // calibrate on these tools instead of a random fraction
   int threads = 0;
   double posterior_sigma = 0;
+  double refit_sigma = 0;  // 0 = the trunk's residual_sigma
   bool json = false;
 };
 
@@ -195,8 +196,8 @@ void RunTrainPose(const TrainPoseFlags& flags) {
     // Latents re-fitted with the posterior's fit settings (PosePosterior::Options::fit
     // with the potential's sigma, sigma_z), so that g_phi is trained on the latent map
     // the sgld / laplace posteriors are centred on (docs/CLI.md, "Latent maps").
-    // The fit's sigma is the trunk's residual_sigma even when --posterior-sigma gives
-    // the posteriors a smaller one: sigma only weighs the pixels against the
+    // The fit's sigma is the trunk's residual_sigma (unless --refit-sigma) even when
+    // --posterior-sigma gives the posteriors a smaller one: sigma only weighs the pixels against the
     // N(0, sigma_z^2) prior, which thousands of pixels outweigh at either value. Refitting
     // at the posterior sigma (0.002 instead of 0.0088) was measured and not kept: the
     // coverage moved by noise-level amounts and the held-out tools' fell just below its
@@ -209,7 +210,7 @@ void RunTrainPose(const TrainPoseFlags& flags) {
     const Dataset dataset = Dataset::Open(flags.data);
     const PosePosterior::Options posterior_options;
     LatentFitter::Options fit = posterior_options.fit;
-    fit.sigma = posterior_options.potential.sigma;
+    fit.sigma = flags.refit_sigma > 0 ? flags.refit_sigma : posterior_options.potential.sigma;
     fit.sigma_z = posterior_options.potential.sigma_z;
     if (!FitStrategy::Parse(flags.refit, &fit.strategy, &error) || fit.strategy.knn) {
       throw UsageError("--refit: expected meta_sgd:K or ceres:N, got '" + flags.refit + "'");
@@ -410,6 +411,7 @@ void RunTrainPose(const TrainPoseFlags& flags) {
                          {"seed", flags.seed},
                          {"final_loss", summary.final_loss},
                          {"termination", ToString(summary.termination)}};
+  if (flags.refit_sigma > 0) info["refit_sigma"] = flags.refit_sigma;
   info.update(figures);
   model.set_info_json(info.dump());
   model.Save(flags.out);  // atomic
@@ -455,6 +457,10 @@ void RegisterTrainPose(CLI::App& app, CommandBody* selected) {
   sub->add_option("--refit", flags->refit,
                   "Train on latents re-fitted from --data with this strategy (e.g. ceres:10, the "
                   "pose posteriors' fit) instead of the functaset's meta-SGD latents");
+  sub->add_option("--refit-sigma", flags->refit_sigma,
+                  "Pixel sigma of the --refit fits (default: the trunk's residual_sigma; it "
+                  "weighs the pixels against the latent prior; docs/POSES.md, Calibration)")
+      ->check(CLI::PositiveNumber);
   sub->add_option("--model", flags->model, "Model (.tfm) of the functaset, for --refit");
   sub->add_option("--data", flags->data, "Dataset of the functaset, for --refit");
   sub->add_option("--calibration-fraction", flags->calibration_fraction,

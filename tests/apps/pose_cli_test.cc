@@ -98,6 +98,20 @@ TEST_F(PoseCliTest, TrainPoseCanRefitTheLatentsWithThePosteriorsFit) {
   EXPECT_EQ(nlohmann::json::parse(PoseMlp::Load(Root("p_refit.tpm")).info_json())["latents"],
             "refit ceres:3");
 
+  // A larger pixel sigma gives the latent prior more weight: other latents, another fit
+  // of the MLP, and the sigma recorded with the model.
+  const Result wide = Run("train-pose --functaset " + Root("f.tfs") + " --model " +
+                          Root("m.tfm") + " --data " + Root("d") + " --refit ceres:3" +
+                          " --refit-sigma 0.5 --out " + Root("p_refit_wide.tpm") +
+                          " --hidden 8 --epochs 5 --batch 4 --json");
+  ASSERT_EQ(wide.exit_code, 0) << wide.err;
+  const auto info = nlohmann::json::parse(PoseMlp::Load(Root("p_refit.tpm")).info_json());
+  const auto wide_info =
+      nlohmann::json::parse(PoseMlp::Load(Root("p_refit_wide.tpm")).info_json());
+  EXPECT_FALSE(info.contains("refit_sigma"));
+  EXPECT_EQ(wide_info["refit_sigma"].get<double>(), 0.5);
+  EXPECT_NE(wide_info["final_loss"].get<double>(), info["final_loss"].get<double>());
+
   const Result bad = Run("train-pose --functaset " + Root("f.tfs") + " --refit ceres:3 --out " +
                          Root("p_bad.tpm"));
   EXPECT_EQ(bad.exit_code, 2);
