@@ -153,8 +153,8 @@ class TrunkTrainer {
     // 6160 x 100 25.9 dB (small trunk, bubble; docs/TRAINING.md).
     int pixels_per_frame = 512;
     // Outer steps to run (in total, counting steps done before a resume). >= 0.
-    // Default: the default preset's (about 5 minutes for a Bubble trunk on 2 cores).
-    int steps = 8000;
+    // Default: the default preset's (about 10 minutes for a Bubble trunk on 2 cores).
+    int steps = 16000;
     // Seed of every random choice (see Determinism above).
     std::uint64_t seed = 0;
     // Worker threads for per-frame gradients, loading and evaluation. In [1, 256].
@@ -199,14 +199,14 @@ class TrunkTrainer {
   //            (models/pretrained/default.tfm, scripts/train_pretrained.sh): fast
   //            enough for the pose posteriors' latency targets; 10 minutes for both
   //            sensors on 2 cores.
-  //   default: as small but 8000 steps with a cosine decay of the learning rate to a
-  //            tenth, d = 128 for the Bubble and d = 32 for the GelSlim -- the smallest
+  //   default: as small but 16000 steps with a cosine decay of the learning rate to
+  //            a tenth, d = 128 for the Bubble and d = 32 for the GelSlim -- the smallest
   //            measured trunks that reach the paper's Bubble PSNR (38 dB in the paper's
-  //            convention: 37.99 dB on average over three seeds, 37.84-38.15) while
-  //            trunks + float16 latents stay 1000x smaller than the raw frames. The
-  //            Bubble's dents gain from a longer latent (a wider trunk gained nothing);
-  //            the GelSlim's frames barely do, so its latent is cut to pay for the
-  //            Bubble's. About 10 minutes for both on 2 cores.
+  //            convention: 38.69 dB on average over three seeds, 38.49-38.83; 8000
+  //            steps gave 37.99) while trunks + float16 latents stay 1000x smaller than
+  //            the raw frames. The Bubble's dents gain from a longer latent (a wider
+  //            trunk gained nothing); the GelSlim's frames barely do, so its latent is
+  //            cut to pay for the Bubble's. About 20 minutes for both on 2 cores.
   // Options() as constructed is the default preset for the Bubble. Throws
   // std::invalid_argument listing the names for an unknown one.
   static Options Preset(const std::string& name, SensorKind sensor = SensorKind::kSoftBubble);
