@@ -197,11 +197,11 @@ void RunTrainPose(const TrainPoseFlags& flags) {
     // with the potential's sigma, sigma_z), so that g_phi is trained on the latent map
     // the sgld / laplace posteriors are centred on (docs/CLI.md, "Latent maps").
     // The fit's sigma is the trunk's residual_sigma (unless --refit-sigma) even when
-    // --posterior-sigma gives the posteriors a smaller one: sigma only weighs the pixels against the
-    // N(0, sigma_z^2) prior, which thousands of pixels outweigh at either value. Refitting
-    // at the posterior sigma (0.002 instead of 0.0088) was measured and not kept: the
-    // coverage moved by noise-level amounts and the held-out tools' fell just below its
-    // band (docs/POSES.md, "Calibration").
+    // --posterior-sigma gives the posteriors a smaller one: sigma only weighs the pixels
+    // against the N(0, sigma_z^2) prior, which thousands of pixels outweigh at either
+    // value. Refitting at the posterior sigma (0.002 instead of 0.0088) was measured and
+    // not kept: the coverage moved by noise-level amounts and the held-out tools' fell
+    // just below its band (docs/POSES.md, "Calibration").
     if (flags.model.empty() || flags.data.empty()) {
       throw UsageError("--refit needs --model and --data (the frames to re-fit)");
     }
@@ -210,7 +210,8 @@ void RunTrainPose(const TrainPoseFlags& flags) {
     const Dataset dataset = Dataset::Open(flags.data);
     const PosePosterior::Options posterior_options;
     LatentFitter::Options fit = posterior_options.fit;
-    fit.sigma = flags.refit_sigma > 0 ? flags.refit_sigma : posterior_options.potential.sigma;
+    fit.sigma =
+        flags.refit_sigma > 0 ? flags.refit_sigma : posterior_options.potential.sigma;
     fit.sigma_z = posterior_options.potential.sigma_z;
     if (!FitStrategy::Parse(flags.refit, &fit.strategy, &error) || fit.strategy.knn) {
       throw UsageError("--refit: expected meta_sgd:K or ceres:N, got '" + flags.refit + "'");
