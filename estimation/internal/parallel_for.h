@@ -4,8 +4,8 @@
 // is one of them), handing out indices through an atomic counter. The index has the
 // integer type of `count` (int, or std::int64_t for counts that may exceed 2^31).
 // Callers that need results independent of the thread count write item i's result to
-// slot i and reduce the slots in index order afterwards. The first exception thrown by any fn is
-// rethrown in the caller once every worker has stopped.
+// slot i and reduce the slots in index order afterwards. The first exception thrown by
+// any fn is rethrown in the caller once every worker has stopped.
 #ifndef TACTFUNC_ESTIMATION_INTERNAL_PARALLEL_FOR_H_
 #define TACTFUNC_ESTIMATION_INTERNAL_PARALLEL_FOR_H_
 
