@@ -22,6 +22,7 @@
 #include "estimation/functaset.h"
 #include "estimation/reconstruction.h"
 #include "estimation/trunk_targets.h"
+#include "models/file_util.h"
 #include "models/functa_model.h"
 
 namespace tactfunc::apps {
@@ -154,6 +155,42 @@ void WriteExamples(const ReconFlags& flags, const FunctaModel& model, const Data
   WritePicture(path, TileGrid(grid));
 }
 
+// A CSV field: as is, or in double quotes (quotes doubled) if it holds a comma, a
+// quote or a line break.
+std::string CsvField(const std::string& text) {
+  if (text.find_first_of(",\"\r\n") == std::string::npos) return text;
+  std::string quoted = "\"";
+  for (char c : text) quoted += c == '"' ? std::string("\"\"") : std::string(1, c);
+  return quoted + "\"";
+}
+
+std::string CsvNumber(double value) {
+  if (std::isnan(value)) return "";
+  if (std::isinf(value)) return value > 0 ? "inf" : "-inf";
+  char buffer[32];
+  std::snprintf(buffer, sizeof(buffer), "%.9g", value);
+  return buffer;
+}
+
+// One row per functaset entry, in functaset order (docs/CLI.md, "recon"). Empty fields:
+// no label, no clean frame, no valid pixel.
+void WritePerFrameCsv(const std::string& path, const ReconstructionEvaluator::Summary& summary,
+                      const Dataset& dataset) {
+  std::string text =
+      "frame,sensor,split,tool,depth_m,target_range,source_range,rmse,psnr,psnr_clean,"
+      "psnr_zero,psnr_source_peak\n";
+  for (const auto& r : summary.frames) {
+    const auto& label = dataset.frames()[r.dataset_index].label;
+    text += CsvField(r.id) + "," + ToString(r.sensor) + "," + ToString(r.split) + "," +
+            (label ? CsvField(label->tool) : std::string()) + "," +
+            (label ? CsvNumber(label->depth_m) : std::string()) + "," +
+            CsvNumber(r.target_range) + "," + CsvNumber(r.source_range) + "," +
+            CsvNumber(r.rmse) + "," + CsvNumber(r.psnr) + "," + CsvNumber(r.psnr_clean) + "," +
+            CsvNumber(r.psnr_zero) + "," + CsvNumber(r.psnr_source_peak) + "\n";
+  }
+  WriteFileAtomically(path, text);
+}
+
 void RunRecon(const ReconFlags& flags) {
   const FunctaModel model = FunctaModel::Load(flags.model);
   const Functaset functaset = Functaset::Load(flags.functaset);
@@ -183,6 +220,9 @@ void RunRecon(const ReconFlags& flags) {
             << flags.data << " (PSNR in dB, Psnr() of estimation/trunk_targets.h)\n"
             << summary.FullReport();
   for (const std::string& p : pictures) std::cout << "recon: wrote " << p << "\n";
+  const std::string per_frame = (std::filesystem::path(flags.out) / "frames.csv").string();
+  WritePerFrameCsv(per_frame, summary, dataset);
+  std::cout << "recon: wrote " << per_frame << " (one row per frame)\n";
 
   if (flags.json) {
     nlohmann::json figures;
@@ -230,6 +270,7 @@ void RunRecon(const ReconFlags& flags) {
     figures["frames"] = summary.frames.size();
     figures["seconds"] = summary.seconds;
     figures["pictures"] = pictures;
+    figures["per_frame"] = per_frame;
     EmitJson(figures);
   }
 }
@@ -248,7 +289,9 @@ void RegisterRecon(CLI::App& app, CommandBody* selected) {
       ->required();
   sub->add_option("--data", flags->data, "The dataset folder or video it was encoded from")
       ->required();
-  sub->add_option("--out", flags->out, "Folder for recon_<sensor>.png (created)")->required();
+  sub->add_option("--out", flags->out,
+                  "Folder for recon_<sensor>.png and frames.csv (one row per frame; created)")
+      ->required();
   sub->add_option("--examples", flags->examples,
                   "Example rows per picture, test split first (0 = no pictures)")
       ->check(CLI::Range(0, 1000));

@@ -229,6 +229,9 @@ ReconstructionEvaluator::Summary ReconstructionEvaluator::Evaluate(const FunctaM
     const TrunkTargets targets = LoadTrunkTargets(dataset, r.dataset_index, format);
     r.psnr = Psnr(prediction, targets);
     r.psnr_source_peak = PsnrSourcePeak(prediction, targets);
+    r.target_range = TargetRange(targets);
+    r.source_range = targets.source_range;
+    r.rmse = Rmse(prediction, targets);
     r.psnr_zero = Psnr(state.zero_prediction, targets);
     if (summary.has_clean && !dataset.frames()[r.dataset_index].clean_path.empty()) {
       r.psnr_clean = Psnr(prediction, LoadTrunkTargets(dataset, r.dataset_index, format, true));

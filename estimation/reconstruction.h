@@ -96,6 +96,12 @@ class ReconstructionEvaluator {
     double psnr_zero = std::numeric_limits<double>::quiet_NaN();   // z = 0 vs noisy
     // vs noisy, peak = the source-resolution range (PsnrSourcePeak)
     double psnr_source_peak = std::numeric_limits<double>::quiet_NaN();
+    // Of the noisy target, normalised units: its range R over the valid pixels (the
+    // peak of psnr; 0 without valid pixels), its source-resolution range (the peak of
+    // psnr_source_peak) and the reconstruction's RMSE (NaN without valid pixels).
+    double target_range = 0;
+    double source_range = 0;
+    double rmse = std::numeric_limits<double>::quiet_NaN();
   };
 
   struct GroupSummary {

@@ -103,6 +103,16 @@ double PsnrSourcePeak(const Eigen::MatrixXf& prediction, const TrunkTargets& tar
   return PsnrAtPeak(MeasureError(prediction, target), target.source_range);
 }
 
+double TargetRange(const TrunkTargets& target) {
+  return MeasureError(target.values, target).range;
+}
+
+double Rmse(const Eigen::MatrixXf& prediction, const TrunkTargets& target) {
+  const ErrorAndRange e = MeasureError(prediction, target);
+  if (e.count == 0) return std::numeric_limits<double>::quiet_NaN();
+  return std::sqrt(e.sse / e.count);
+}
+
 Image TargetsToImage(const Eigen::MatrixXf& values, int rows, int cols) {
   if (values.rows() != static_cast<Eigen::Index>(rows) * cols) {
     throw std::invalid_argument("TargetsToImage: " + std::to_string(values.rows()) +

@@ -3,9 +3,14 @@
 // `tactfunc train` as a user runs it: a short tiny-preset run on simulated contacts
 // writes a model whose trunk carries the inner-loop knobs given on the command line
 // (K, the rates' clip bound and start), `encode` uses that model, and bad knobs fail
-// before any data is read with a message naming the flag or field.
+// before any data is read with a message naming the flag or field; `recon` on the
+// result writes a per-frame CSV that agrees with its own summary.
+#include <cmath>
 #include <filesystem>
+#include <fstream>
+#include <sstream>
 #include <string>
+#include <vector>
 
 #include <unistd.h>
 
@@ -61,6 +66,50 @@ TEST_F(TrainCliTest, TheInnerLoopKnobsReachTheModelAndEncodeUsesIt) {
   const Result encode = Run("encode --model " + Root("m.tfm") + " --data " + Root("d") +
                             " --out " + Root("f.tfs") + " --threads 1 --json");
   EXPECT_EQ(encode.exit_code, 0) << encode.err;
+}
+
+TEST_F(TrainCliTest, ReconWritesOneCsvRowPerFrameThatAgreesWithItsSummary) {
+  ASSERT_EQ(Run("train --data " + Root("d") + " --out " + Root("r.tfm") +
+                " --preset tiny --steps 3 --seed 2")
+                .exit_code,
+            0);
+  ASSERT_EQ(Run("encode --model " + Root("r.tfm") + " --data " + Root("d") + " --out " +
+                Root("r.tfs") + " --threads 1")
+                .exit_code,
+            0);
+  const Result recon = Run("recon --model " + Root("r.tfm") + " --functaset " + Root("r.tfs") +
+                           " --data " + Root("d") + " --out " + Root("recon") + " --json");
+  ASSERT_EQ(recon.exit_code, 0) << recon.err;
+  EXPECT_EQ(recon.LastJson()["per_frame"].get<std::string>(), Root("recon") + "/frames.csv");
+
+  std::ifstream csv(Root("recon") + "/frames.csv");
+  std::string line;
+  ASSERT_TRUE(std::getline(csv, line));
+  EXPECT_EQ(line,
+            "frame,sensor,split,tool,depth_m,target_range,source_range,rmse,psnr,psnr_clean,"
+            "psnr_zero,psnr_source_peak");
+  int rows = 0, train_rows = 0;
+  double train_psnr_sum = 0;
+  while (std::getline(csv, line)) {
+    std::vector<std::string> f;
+    std::stringstream fields(line);
+    for (std::string x; std::getline(fields, x, ',');) f.push_back(x);
+    ASSERT_EQ(f.size(), 12u) << line;
+    ++rows;
+    EXPECT_EQ(f[1], "bubble");
+    EXPECT_THAT(f[3], ::testing::AnyOf("rod", "square"));
+    // PSNR = 20 log10(range / RMSE), each column as printed (9 significant digits).
+    EXPECT_NEAR(std::stod(f[8]), 20 * std::log10(std::stod(f[5]) / std::stod(f[7])), 1e-5);
+    EXPECT_GE(std::stod(f[6]), std::stod(f[5]) * (1 - 1e-6));  // source range >= resized
+    if (f[2] == "train") {
+      ++train_rows;
+      train_psnr_sum += std::stod(f[8]);
+    }
+  }
+  EXPECT_EQ(rows, 8);  // 2 tools x 4 contacts
+  ASSERT_GT(train_rows, 0);
+  EXPECT_NEAR(train_psnr_sum / train_rows,
+              recon.LastJson()["psnr_train"]["bubble"].get<double>(), 1e-6);
 }
 
 TEST_F(TrainCliTest, BadInnerLoopKnobsFailNamingThemAndWriteNothing) {

@@ -154,6 +154,23 @@ TEST(PsnrSourcePeak, DiffersFromPsnrOnlyByThePeak) {
   EXPECT_TRUE(std::isinf(PsnrSourcePeak(t.values, t)));
 }
 
+TEST(Rmse, IsTheRootMeanSquareOverValidPixelsAndPsnrFollowsFromItAndTheRange) {
+  // Three pixels, the middle one invalid (its huge error must not count).
+  TrunkTargets t;
+  t.values = Eigen::MatrixXf(3, 1);
+  t.values << -0.2f, 9.0f, 0.6f;
+  t.weights = Eigen::Vector3f(1, 0, 1);
+  Eigen::MatrixXf p(3, 1);
+  p << -0.1f, -50.0f, 0.4f;
+  EXPECT_NEAR(TargetRange(t), 0.8, 1e-6);
+  EXPECT_NEAR(Rmse(p, t), std::sqrt((0.01 + 0.04) / 2), 1e-6);
+  EXPECT_NEAR(Psnr(p, t), 20 * std::log10(TargetRange(t) / Rmse(p, t)), 1e-5);
+  // No valid pixel: no range, no error.
+  t.weights.setZero();
+  EXPECT_EQ(TargetRange(t), 0.0);
+  EXPECT_TRUE(std::isnan(Rmse(p, t)));
+}
+
 // ---- Evaluation on a dataset ------------------------------------------------------------
 
 struct Encoded {
@@ -188,6 +205,9 @@ TEST(ReconstructionEvaluator, PerFramePsnrsFollowTheOneDefinition) {
     EXPECT_DOUBLE_EQ(r.psnr, Psnr(prediction, noisy));
     EXPECT_DOUBLE_EQ(r.psnr_clean, Psnr(prediction, clean));
     EXPECT_DOUBLE_EQ(r.psnr_source_peak, PsnrSourcePeak(prediction, noisy));
+    EXPECT_DOUBLE_EQ(r.target_range, TargetRange(noisy));
+    EXPECT_DOUBLE_EQ(r.source_range, noisy.source_range);
+    EXPECT_DOUBLE_EQ(r.rmse, Rmse(prediction, noisy));
     // The source frame's range is at least the resized one's: never a lower PSNR.
     EXPECT_GE(r.psnr_source_peak, r.psnr - 1e-4);  // (float rounding of the values)
     EXPECT_DOUBLE_EQ(r.psnr_zero,

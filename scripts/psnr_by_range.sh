@@ -1,0 +1,39 @@
+#!/usr/bin/env bash
+# PSNR against the size of the contact: reads the frames.csv that `tactfunc recon`
+# writes and prints, per sensor and split (test by default), the frames in five equal
+# groups by the target's range (the difference's peak-to-peak, normalised units), with
+# each group's mean range, RMSE, PSNR (against the noisy frames, and the noise-free
+# ones when recorded) and press depth.
+#   usage: scripts/psnr_by_range.sh RECON_DIR/frames.csv [split]
+set -euo pipefail
+csv=${1:?usage: $0 frames.csv [train|test]}
+split=${2:-test}
+test -r "$csv" || { echo "$0: cannot read $csv" >&2; exit 1; }
+head -1 "$csv" | grep -q '^frame,sensor,split,tool,depth_m,target_range,source_range,rmse,psnr,' ||
+  { echo "$0: $csv: header is not that of tactfunc recon's frames.csv" >&2; exit 1; }
+for sensor in $(awk -F, 'NR > 1 { print $2 }' "$csv" | sort -u); do
+  echo "$sensor ($split split): quintiles of the target's range"
+  printf '%-9s %6s %10s %9s %9s %11s %10s\n' quintile frames range rmse "psnr dB" "clean dB" "depth mm"
+  awk -F, -v s="$sensor" -v sp="$split" \
+      'NR > 1 && $2 == s && $3 == sp && $8 != "" { print $6, $8, $9, ($5 == "" ? "nan" : $5), ($10 == "" ? "nan" : $10) }' "$csv" |
+    sort -g |
+    awk '{ r[NR] = $1; e[NR] = $2; p[NR] = $3; d[NR] = $4; c[NR] = $5 }
+         END {
+           for (q = 0; q < 5; ++q) {
+             lo = int(q * NR / 5) + 1; hi = int((q + 1) * NR / 5); n = hi - lo + 1
+             if (n <= 0) continue
+             sr = se = sp = sd = sc = 0; nd = nc = 0
+             for (i = lo; i <= hi; ++i) {
+               sr += r[i]; se += e[i]; sp += p[i]
+               if (d[i] != "nan") { sd += d[i]; ++nd }
+               if (c[i] != "nan" && c[i] != "inf") { sc += c[i]; ++nc }
+             }
+             depth = "-"
+             if (nd > 0) depth = sprintf("%.2f", 1000 * sd / nd)
+             clean = "-"
+             if (nc > 0) clean = sprintf("%.2f", sc / nc)
+             printf "%-9d %6d %10.3f %9.4f %9.2f %11s %10s\n", q + 1, n, sr / n, se / n, sp / n,
+                    clean, depth
+           }
+         }'
+done
