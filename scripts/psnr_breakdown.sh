@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
-# PSNR against the size of the contact: reads the frames.csv that `tactfunc recon`
-# writes and prints, per sensor and split (test by default), the frames in five equal
-# groups by the target's range (the difference's peak-to-peak, normalised units), with
-# each group's mean range, RMSE, PSNR (against the noisy frames, and the noise-free
-# ones when recorded) and press depth.
-#   usage: scripts/psnr_by_range.sh RECON_DIR/frames.csv [split]
+# Which frames reconstruct worst: reads the frames.csv that `tactfunc recon` writes and
+# prints, per sensor and split (test by default),
+#   1. the frames in five equal groups by the target's range (the difference's
+#      peak-to-peak, normalised units), with each group's mean range, RMSE, PSNR
+#      (against the noisy frames, and the noise-free ones when recorded) and depth;
+#   2. the mean PSNR per tool (labelled frames only), worst first.
+#   usage: scripts/psnr_breakdown.sh RECON_DIR/frames.csv [split]
 set -euo pipefail
 csv=${1:?usage: $0 frames.csv [train|test]}
 split=${2:-test}
@@ -36,4 +37,11 @@ for sensor in $(awk -F, 'NR > 1 { print $2 }' "$csv" | sort -u); do
                     clean, depth
            }
          }'
+  echo "$sensor ($split split): mean PSNR per tool, worst first"
+  awk -F, -v s="$sensor" -v sp="$split" \
+      'NR > 1 && $2 == s && $3 == sp && $4 != "" && $9 != "" && $9 != "inf" {
+         sum[$4] += $9; n[$4]++
+       }
+       END { for (t in sum) printf "%-14s %6d %9.2f\n", t, n[t], sum[t] / n[t] }' "$csv" |
+    sort -k3 -g
 done
