@@ -35,6 +35,7 @@ struct TrainFlags {
   double lr_final_fraction = 1;
   int inner_steps = 0;
   double alpha_init = 0, alpha_max = 0;
+  double divergence_drop_db = 0;
   std::uint64_t seed = 0;
   int checkpoint_every = 0;
   bool first_order = false;
@@ -46,7 +47,8 @@ struct TrainFlags {
               *seed_option = nullptr, *checkpoint_every_option = nullptr,
               *learning_rate_option = nullptr, *omega_0_option = nullptr,
               *lr_final_fraction_option = nullptr, *inner_steps_option = nullptr,
-              *alpha_init_option = nullptr, *alpha_max_option = nullptr;
+              *alpha_init_option = nullptr, *alpha_max_option = nullptr,
+              *divergence_drop_db_option = nullptr;
 };
 
 // SIGINT: the current step finishes, a checkpoint is written, the command exits 1. A
@@ -92,6 +94,9 @@ TrunkTrainer::Options OptionsFor(const TrainFlags& flags, SensorKind sensor) {
   if (flags.alpha_max_option->count()) options.alpha_max = flags.alpha_max;
   if (flags.alpha_init_option->count()) {
     options.alpha_init_min = options.alpha_init_max = flags.alpha_init;
+  }
+  if (flags.divergence_drop_db_option->count()) {
+    options.divergence_drop_db = flags.divergence_drop_db;
   }
   options.threads = ResolveThreads(flags.threads);
   std::string error;
@@ -186,9 +191,17 @@ void RunTrain(const TrainFlags& flags) {
                                sensor_options.checkpoint_path +
                                ". Continue with the same command plus --resume.");
     }
-    if (summary.termination_type == TrunkTrainer::TerminationType::kNonFinite) {
+    if (summary.termination_type == TrunkTrainer::TerminationType::kNonFinite ||
+        summary.termination_type == TrunkTrainer::TerminationType::kDiverged) {
       std::signal(SIGINT, SIG_DFL);
-      throw std::runtime_error(std::string("training ") + name + " failed: " + summary.message);
+      std::ostringstream hint;
+      hint << ". No model was written; lower --learning-rate (this run: "
+           << sensor_options.learning_rate << ")";
+      if (summary.termination_type == TrunkTrainer::TerminationType::kDiverged) {
+        hint << " or raise --divergence-drop-db (0 = never stop)";
+      }
+      throw std::runtime_error(std::string("training ") + name + " failed: " + summary.message +
+                               hint.str());
     }
     model.SetTrunk(std::move(trunk));
     sensor_figures[name] = {{"steps", summary.steps_done},
@@ -297,6 +310,11 @@ void RegisterTrain(CLI::App& app, CommandBody* selected) {
                       "Upper clip bound of the learned meta-SGD rates (default 1, the "
                       "issue's and functa's [0, 1]; docs/TRAINING.md)")
           ->check(CLI::PositiveNumber);
+  flags->divergence_drop_db_option =
+      sub->add_option("--divergence-drop-db", flags->divergence_drop_db,
+                      "Stop with an error when the monitor PSNR falls this many dB below its "
+                      "best (default 6; 0 = never; docs/TRAINING.md)")
+          ->check(CLI::NonNegativeNumber);
   sub->add_flag("--first-order", flags->first_order,
                 "First-order meta-gradients (cheaper, biased; default exact)");
   sub->add_option("--threads", flags->threads, "Worker threads (default: all cores)")

@@ -324,6 +324,9 @@ bool TrunkTrainer::Options::IsValid(std::string* error) const {
     message << "monitor_frames must be >= 1, found " << monitor_frames;
   } else if (residual_frames < 1) {
     message << "residual_frames must be >= 1, found " << residual_frames;
+  } else if (!(std::isfinite(divergence_drop_db) && divergence_drop_db >= 0)) {
+    message << "divergence_drop_db must be finite and >= 0 (0 = never), found "
+            << divergence_drop_db;
   } else {
     return true;
   }
@@ -379,6 +382,8 @@ const char* ToString(TrunkTrainer::TerminationType type) {
       return "user_stopped";
     case TrunkTrainer::TerminationType::kNonFinite:
       return "non_finite";
+    case TrunkTrainer::TerminationType::kDiverged:
+      return "diverged";
   }
   return "unknown";
 }
@@ -723,6 +728,24 @@ TrunkTrainer::Summary TrunkTrainer::Train(const std::vector<TrunkTargets>& frame
       report.latest = state.history.back();
     }
     const bool keep_going = callback ? callback(report) : true;
+    if (report.monitored && o.divergence_drop_db > 0) {
+      // The best point of the whole history (earlier runs included, so a resume sees
+      // the same best as an uninterrupted run).
+      const HistoryPoint* best = &state.history.front();
+      for (const HistoryPoint& p : state.history) {
+        if (p.psnr > best->psnr) best = &p;
+      }
+      if (best->psnr - report.latest.psnr > o.divergence_drop_db) {
+        termination = TerminationType::kDiverged;
+        message = "diverged: the monitor PSNR fell from " + FormatDouble(best->psnr, 4) +
+                  " dB at step " + std::to_string(best->step) + " to " +
+                  FormatDouble(report.latest.psnr, 4) + " dB at step " +
+                  std::to_string(state.step) + ", more than divergence_drop_db = " +
+                  FormatDouble(o.divergence_drop_db, 3) +
+                  "; start again (without resume) with a smaller learning_rate";
+        break;
+      }
+    }
     if (!keep_going) {
       termination = TerminationType::kUserStopped;
       message = "stopped by the step callback after step " + std::to_string(state.step);
@@ -739,7 +762,7 @@ TrunkTrainer::Summary TrunkTrainer::Train(const std::vector<TrunkTargets>& frame
 
   const double run_seconds = SecondsSince(run_start);
   state.train_seconds += run_seconds;
-  if (termination != TerminationType::kNonFinite) {
+  if (termination != TerminationType::kNonFinite && termination != TerminationType::kDiverged) {
     // The final point, unless the last step already made one. Its loss accumulator is
     // not reset, so a later resume continues the regular history unchanged.
     if (state.history.back().step != state.step) {

@@ -180,6 +180,14 @@ class TrunkTrainer {
     // Training frames used for residual_sigma at the end (fewer if the split is
     // smaller). >= 1.
     int residual_frames = 200;
+    // Stop as diverged (TerminationType::kDiverged) when a monitor point's PSNR after
+    // K steps falls this many dB below the best point of the history so far; 0 =
+    // never. A SIREN trunk whose learning rate is too high for its size does not come
+    // back: width 256 at the presets' 3e-4 went 24.7 -> 12.1 -> 9.3 dB over 700 steps,
+    // 6 layers 23.4 -> 14.5 dB (docs/TRAINING.md), while a healthy run's monitor PSNR
+    // wavers by tenths of a dB. Finite and >= 0; like the monitor settings it does
+    // not change a run that does not diverge.
+    double divergence_drop_db = 6.0;
 
     // True if every field is in range; otherwise false and *error names the field.
     bool IsValid(std::string* error) const;
@@ -220,6 +228,8 @@ class TrunkTrainer {
     kCompleted,      // reached Options::steps
     kUserStopped,    // the step callback asked to stop (checkpoint written)
     kNonFinite,      // a loss or gradient was NaN/inf; the last finite state is kept
+    kDiverged,       // the monitor PSNR fell Options::divergence_drop_db below its best;
+                     // the parameters of the step that showed it are kept
   };
 
   // One point of the training curve (at the start, every monitor_every steps, the end).

@@ -112,6 +112,16 @@ TEST_F(TrainCliTest, ReconWritesOneCsvRowPerFrameThatAgreesWithItsSummary) {
               recon.LastJson()["psnr_train"]["bubble"].get<double>(), 1e-6);
 }
 
+TEST_F(TrainCliTest, ADivergingRunFailsNamingTheLearningRateAndWritesNoModel) {
+  const Result r = Run("train --data " + Root("d") + " --out " + Root("div.tfm") +
+                       " --preset tiny --learning-rate 0.03 --seed 1");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.err, HasSubstr("diverged"));
+  EXPECT_THAT(r.err, HasSubstr("--learning-rate (this run: 0.03)"));
+  EXPECT_THAT(r.err, HasSubstr("--divergence-drop-db"));
+  EXPECT_FALSE(fs::exists(Root("div.tfm")));
+}
+
 TEST_F(TrainCliTest, BadInnerLoopKnobsFailNamingThemAndWriteNothing) {
   const std::string base = "train --data " + Root("d") + " --out " + Root("bad.tfm") +
                            " --preset tiny --steps 2";

@@ -7,6 +7,9 @@
 // or corrupt checkpoints are refused with messages naming the field or the file.
 #include "estimation/trunk_trainer.h"
 
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <iterator>
 #include <memory>
@@ -196,6 +199,8 @@ TEST(TrunkTrainerOptions, BadOptionsNameTheField) {
       {"monitor_every", [](TrunkTrainer::Options* o) { o->monitor_every = 0; }},
       {"monitor_frames", [](TrunkTrainer::Options* o) { o->monitor_frames = 0; }},
       {"residual_frames", [](TrunkTrainer::Options* o) { o->residual_frames = 0; }},
+      {"divergence_drop_db", [](TrunkTrainer::Options* o) { o->divergence_drop_db = -1; }},
+      {"divergence_drop_db", [](TrunkTrainer::Options* o) { o->divergence_drop_db = NAN; }},
   };
   for (const Case& c : cases) {
     TrunkTrainer::Options options;
@@ -211,6 +216,44 @@ TEST(TrunkTrainerOptions, TerminationTypesHaveNames) {
   EXPECT_STREQ(ToString(TrunkTrainer::TerminationType::kCompleted), "completed");
   EXPECT_STREQ(ToString(TrunkTrainer::TerminationType::kUserStopped), "user_stopped");
   EXPECT_STREQ(ToString(TrunkTrainer::TerminationType::kNonFinite), "non_finite");
+  EXPECT_STREQ(ToString(TrunkTrainer::TerminationType::kDiverged), "diverged");
+}
+
+TEST_F(TrunkTrainerTest, AFarTooLargeLearningRateStopsAsDivergedAtTheFirstMonitorPointThatShowsIt) {
+  TrunkTrainer::Options options = TrunkTrainer::Preset("tiny");
+  options.learning_rate = 0.03;  // 100x the preset's: the trunk blows up within 50 steps
+  options.steps = 100;
+  options.monitor_every = 10;
+  options.monitor_frames = 4;
+  options.checkpoint_path = dir_ / "diverged.ckpt";
+  options.checkpoint_every = 0;
+  options.threads = 2;
+  SensorTrunk trunk;
+  const TrunkTrainer::Summary summary = Train(options, &trunk);
+  ASSERT_EQ(summary.termination_type, TrunkTrainer::TerminationType::kDiverged)
+      << summary.FullReport();
+  EXPECT_LT(summary.steps_done, options.steps);
+  EXPECT_EQ(summary.steps_done % options.monitor_every, 0);
+  // The last point is the first one more than 6 dB below the best before it.
+  double best = summary.history.front().psnr;
+  for (std::size_t i = 0; i + 1 < summary.history.size(); ++i) {
+    best = std::max(best, summary.history[i].psnr);
+    EXPECT_LE(best - summary.history[i].psnr, options.divergence_drop_db) << i;
+  }
+  EXPECT_GT(best - summary.history.back().psnr, options.divergence_drop_db);
+  EXPECT_EQ(summary.history.back().step, summary.steps_done);
+  EXPECT_THAT(summary.message, HasSubstr("diverged"));
+  EXPECT_THAT(summary.message, HasSubstr("learning_rate"));
+  // Nothing to resume from: a diverged state is not checkpointed.
+  EXPECT_FALSE(std::filesystem::exists(options.checkpoint_path));
+
+  // With the check off the same run goes on to the end, far below where it started.
+  options.divergence_drop_db = 0;
+  const TrunkTrainer::Summary unchecked = Train(options, &trunk);
+  ASSERT_EQ(unchecked.termination_type, TrunkTrainer::TerminationType::kCompleted)
+      << unchecked.message;
+  EXPECT_EQ(unchecked.steps_done, options.steps);
+  EXPECT_LT(unchecked.train_psnr, summary.history.front().psnr - options.divergence_drop_db);
 }
 
 TEST_F(TrunkTrainerTest, TinyRunLowersTheOuterLossAndRaisesPsnrAfterKSteps) {
