@@ -312,6 +312,20 @@ TEST_F(TrunkTrainerTest, TheRatesStayWithinTheirClipBoundAndALargerBoundLetsThem
               ::testing::Not(HasSubstr("alpha_max")));
 }
 
+TEST_F(TrunkTrainerTest, TheDivergenceCheckDoesNotTouchARunThatDoesNotDiverge) {
+  TrunkTrainer::Options options = ShortOptions();
+  SensorTrunk checked, unchecked;
+  ASSERT_EQ(Train(options, &checked).termination_type, TrunkTrainer::TerminationType::kCompleted);
+  options.divergence_drop_db = 0;
+  ASSERT_EQ(Train(options, &unchecked).termination_type,
+            TrunkTrainer::TerminationType::kCompleted);
+  EXPECT_TRUE(SameParameters(checked, unchecked));
+  // Nor is it part of the trajectory a resume must match.
+  EXPECT_EQ(TrunkTrainer(options).TrajectoryOptionsJson(SensorKind::kSoftBubble, checked.format),
+            TrunkTrainer(ShortOptions())
+                .TrajectoryOptionsJson(SensorKind::kSoftBubble, checked.format));
+}
+
 TEST_F(TrunkTrainerTest, SameSeedGivesTheSameModelWhateverTheThreadCount) {
   TrunkTrainer::Options options = ShortOptions();
   SensorTrunk one, two, three, other_seed;
