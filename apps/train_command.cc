@@ -195,10 +195,10 @@ void RunTrain(const TrainFlags& flags) {
         summary.termination_type == TrunkTrainer::TerminationType::kDiverged) {
       std::signal(SIGINT, SIG_DFL);
       std::ostringstream hint;
-      hint << ". No model was written; lower --learning-rate (this run: "
-           << sensor_options.learning_rate << ")";
+      hint << ". No model was written. This run's --learning-rate was "
+           << sensor_options.learning_rate;
       if (summary.termination_type == TrunkTrainer::TerminationType::kDiverged) {
-        hint << " or raise --divergence-drop-db (0 = never stop)";
+        hint << "; --divergence-drop-db 0 turns the check off";
       }
       throw std::runtime_error(std::string("training ") + name + " failed: " + summary.message +
                                hint.str());

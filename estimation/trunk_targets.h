@@ -64,11 +64,12 @@ double Psnr(const Eigen::MatrixXf& prediction, const TrunkTargets& target);
 // 1e-9), same MSE. >= Psnr for targets made by MakeTrunkTargets.
 double PsnrSourcePeak(const Eigen::MatrixXf& prediction, const TrunkTargets& target);
 
-// The target's range R over its valid pixels and channels (the peak of Psnr), in
-// normalised units; 0 without valid pixels.
+// The target's range R over its valid pixels and channels, in normalised units; 0
+// without valid pixels. Psnr's peak is R, or 1 when R < 1e-9 (a blank target).
 double TargetRange(const TrunkTargets& target);
 // Root-mean-square error of `prediction` over the target's valid pixels and channels,
-// in normalised units (Psnr = 20 log10(R / Rmse)); NaN without valid pixels.
+// in normalised units (Psnr = 20 log10(R / Rmse) for R >= 1e-9); NaN without valid
+// pixels.
 double Rmse(const Eigen::MatrixXf& prediction, const TrunkTargets& target);
 
 // The prediction back as a normalised Image (rows x cols x C), for pictures.

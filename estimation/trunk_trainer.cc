@@ -251,6 +251,25 @@ void DefaultResolution(SensorKind sensor, int* rows, int* cols) {
   }
 }
 
+// "" if the newest point of `history` is within `drop_db` of the best finite point
+// before it (or the check is off, drop_db = 0); else the divergence message. A newest
+// point whose PSNR is NaN counts as diverged once an earlier point was finite. The best is taken over the whole history,
+// earlier runs included: a resumed run sees the points of the runs before it.
+std::string DivergenceMessage(const std::vector<TrunkTrainer::HistoryPoint>& history,
+                              double drop_db) {
+  if (!(drop_db > 0) || history.size() < 2) return "";
+  const TrunkTrainer::HistoryPoint& latest = history.back();
+  const TrunkTrainer::HistoryPoint* best = nullptr;
+  for (const TrunkTrainer::HistoryPoint& p : history) {
+    if (std::isfinite(p.psnr) && (best == nullptr || p.psnr > best->psnr)) best = &p;
+  }
+  if (best == nullptr || latest.psnr >= best->psnr - drop_db) return "";
+  return "diverged: the monitor PSNR fell from " + FormatDouble(best->psnr, 4) + " dB at step " +
+         std::to_string(best->step) + " to " + FormatDouble(latest.psnr, 4) + " dB at step " +
+         std::to_string(latest.step) + ", more than divergence_drop_db = " +
+         FormatDouble(drop_db, 3) + "; start again (without resume) with a smaller learning_rate";
+}
+
 }  // namespace
 
 // ---- Options ---------------------------------------------------------------------
@@ -728,21 +747,10 @@ TrunkTrainer::Summary TrunkTrainer::Train(const std::vector<TrunkTargets>& frame
       report.latest = state.history.back();
     }
     const bool keep_going = callback ? callback(report) : true;
-    if (report.monitored && o.divergence_drop_db > 0) {
-      // The best point of the whole history (earlier runs included, so a resume sees
-      // the same best as an uninterrupted run).
-      const HistoryPoint* best = &state.history.front();
-      for (const HistoryPoint& p : state.history) {
-        if (p.psnr > best->psnr) best = &p;
-      }
-      if (best->psnr - report.latest.psnr > o.divergence_drop_db) {
+    if (report.monitored) {
+      message = DivergenceMessage(state.history, o.divergence_drop_db);
+      if (!message.empty()) {
         termination = TerminationType::kDiverged;
-        message = "diverged: the monitor PSNR fell from " + FormatDouble(best->psnr, 4) +
-                  " dB at step " + std::to_string(best->step) + " to " +
-                  FormatDouble(report.latest.psnr, 4) + " dB at step " +
-                  std::to_string(state.step) + ", more than divergence_drop_db = " +
-                  FormatDouble(o.divergence_drop_db, 3) +
-                  "; start again (without resume) with a smaller learning_rate";
         break;
       }
     }
@@ -771,8 +779,13 @@ TrunkTrainer::Summary TrunkTrainer::Train(const std::vector<TrunkTargets>& frame
       add_history_point(state.train_seconds);
       state.loss_sum = sum;
       state.loss_count = count;
+      // A run that falls apart after its last regular monitor point is diverged too.
+      if (termination == TerminationType::kCompleted) {
+        message = DivergenceMessage(state.history, o.divergence_drop_db);
+        if (!message.empty()) termination = TerminationType::kDiverged;
+      }
     }
-    checkpoint();
+    if (termination != TerminationType::kDiverged) checkpoint();
   }
   if (termination == TerminationType::kCompleted) {
     message = "reached " + std::to_string(o.steps) + " steps";

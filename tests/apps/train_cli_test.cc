@@ -8,7 +8,6 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
-#include <sstream>
 #include <string>
 #include <vector>
 
@@ -91,9 +90,14 @@ TEST_F(TrainCliTest, ReconWritesOneCsvRowPerFrameThatAgreesWithItsSummary) {
   int rows = 0, train_rows = 0;
   double train_psnr_sum = 0;
   while (std::getline(csv, line)) {
-    std::vector<std::string> f;
-    std::stringstream fields(line);
-    for (std::string x; std::getline(fields, x, ',');) f.push_back(x);
+    std::vector<std::string> f(1);
+    for (char c : line) {  // (keeps empty trailing fields, unlike getline)
+      if (c == ',') {
+        f.emplace_back();
+      } else {
+        f.back().push_back(c);
+      }
+    }
     ASSERT_EQ(f.size(), 12u) << line;
     ++rows;
     EXPECT_EQ(f[1], "bubble");
@@ -117,7 +121,7 @@ TEST_F(TrainCliTest, ADivergingRunFailsNamingTheLearningRateAndWritesNoModel) {
                        " --preset tiny --learning-rate 0.03 --seed 1");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_THAT(r.err, HasSubstr("diverged"));
-  EXPECT_THAT(r.err, HasSubstr("--learning-rate (this run: 0.03)"));
+  EXPECT_THAT(r.err, HasSubstr("--learning-rate was 0.03"));
   EXPECT_THAT(r.err, HasSubstr("--divergence-drop-db"));
   EXPECT_FALSE(fs::exists(Root("div.tfm")));
 }

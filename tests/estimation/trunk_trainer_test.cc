@@ -221,7 +221,7 @@ TEST(TrunkTrainerOptions, TerminationTypesHaveNames) {
 
 TEST_F(TrunkTrainerTest, AFarTooLargeLearningRateStopsAsDivergedAtTheFirstMonitorPointThatShowsIt) {
   TrunkTrainer::Options options = TrunkTrainer::Preset("tiny");
-  options.learning_rate = 0.03;  // 100x the preset's: the trunk blows up within 50 steps
+  options.learning_rate = 0.03;  // 30x the preset's: the trunk blows up within 50 steps
   options.steps = 100;
   options.monitor_every = 10;
   options.monitor_frames = 4;
@@ -247,13 +247,24 @@ TEST_F(TrunkTrainerTest, AFarTooLargeLearningRateStopsAsDivergedAtTheFirstMonito
   // Nothing to resume from: a diverged state is not checkpointed.
   EXPECT_FALSE(std::filesystem::exists(options.checkpoint_path));
 
+  // A fall after the last regular monitor point is caught at the final point.
+  TrunkTrainer::Options late = options;
+  late.monitor_every = 1000;  // only step 0 and the final point
+  late.steps = 60;
+  const TrunkTrainer::Summary at_end = Train(late, &trunk);
+  EXPECT_EQ(at_end.termination_type, TrunkTrainer::TerminationType::kDiverged)
+      << at_end.FullReport();
+  EXPECT_EQ(at_end.steps_done, 60);
+  ASSERT_EQ(at_end.history.size(), 2u);
+
   // With the check off the same run goes on to the end, far below where it started.
+  const double drop = options.divergence_drop_db;
   options.divergence_drop_db = 0;
   const TrunkTrainer::Summary unchecked = Train(options, &trunk);
   ASSERT_EQ(unchecked.termination_type, TrunkTrainer::TerminationType::kCompleted)
       << unchecked.message;
   EXPECT_EQ(unchecked.steps_done, options.steps);
-  EXPECT_LT(unchecked.train_psnr, summary.history.front().psnr - options.divergence_drop_db);
+  EXPECT_LT(unchecked.train_psnr, summary.history.front().psnr - drop);
 }
 
 TEST_F(TrunkTrainerTest, TinyRunLowersTheOuterLossAndRaisesPsnrAfterKSteps) {
