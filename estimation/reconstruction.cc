@@ -63,8 +63,8 @@ RepresentationSize ComputeRepresentationSize(const FunctaModel& model, const Fun
     const std::uint64_t m = functaset.entries(sensor).size();
     size.frames += static_cast<std::int64_t>(m);
     size.model_bytes += 4ull * (trunk.siren.NumParameters() + trunk.alpha.size());
-    size.latent_bytes +=
-        static_cast<std::uint64_t>(functaset.BytesPerLatentFloat()) * m * functaset.latent_dim(sensor);
+    size.latent_bytes += static_cast<std::uint64_t>(functaset.BytesPerLatentFloat()) * m *
+                         functaset.latent_dim(sensor);
     size.raw_bytes += m * RawFrameBytes(*info);
   }
   size.representation_bytes = size.model_bytes + size.latent_bytes;

@@ -253,8 +253,9 @@ void DefaultResolution(SensorKind sensor, int* rows, int* cols) {
 
 // "" if the newest point of `history` is within `drop_db` of the best finite point
 // before it (or the check is off, drop_db = 0); else the divergence message. A newest
-// point whose PSNR is NaN counts as diverged once an earlier point was finite. The best is taken over the whole history,
-// earlier runs included: a resumed run sees the points of the runs before it.
+// point whose PSNR is NaN counts as diverged once an earlier point was finite. The best
+// is taken over the whole history, earlier runs included: a resumed run sees the
+// points of the runs before it.
 std::string DivergenceMessage(const std::vector<TrunkTrainer::HistoryPoint>& history,
                               double drop_db) {
   if (!(drop_db > 0) || history.size() < 2) return "";
