@@ -36,6 +36,7 @@ struct ReconFlags {
   int examples = 6;
   int threads = 0;
   int tile_height = 140;
+  bool worst = false;
   bool json = false;
   DatasetFlags dataset;
 };
@@ -74,9 +75,10 @@ nlohmann::json JsonOrNull(double value) {
   return std::isfinite(value) ? nlohmann::json(value) : nlohmann::json(nullptr);
 }
 
-// Up to n entries of one sensor, test split first, each split evenly spread.
+// Up to n entries of one sensor, test split first: each split evenly spread, or, with
+// `worst`, its lowest-PSNR frames first (frames without a finite PSNR last).
 std::vector<const ReconstructionEvaluator::FrameResult*> PickExamples(
-    const ReconstructionEvaluator::Summary& summary, SensorKind sensor, int n) {
+    const ReconstructionEvaluator::Summary& summary, SensorKind sensor, int n, bool worst) {
   std::vector<const ReconstructionEvaluator::FrameResult*> picked;
   for (Split split : {Split::kTest, Split::kTrain}) {
     std::vector<const ReconstructionEvaluator::FrameResult*> pool;
@@ -84,14 +86,27 @@ std::vector<const ReconstructionEvaluator::FrameResult*> PickExamples(
       if (r.sensor == sensor && r.split == split) pool.push_back(&r);
     }
     const int want = std::min<int>(n - static_cast<int>(picked.size()), pool.size());
-    for (int k = 0; k < want; ++k) picked.push_back(pool[k * pool.size() / want]);
+    if (worst) {
+      auto key = [](const ReconstructionEvaluator::FrameResult* r) {
+        return std::isfinite(r->psnr) ? r->psnr : std::numeric_limits<double>::infinity();
+      };
+      std::stable_sort(pool.begin(), pool.end(),
+                       [&](const auto* a, const auto* b) { return key(a) < key(b); });
+      picked.insert(picked.end(), pool.begin(), pool.begin() + want);
+    } else {
+      for (int k = 0; k < want; ++k) picked.push_back(pool[k * pool.size() / want]);
+    }
   }
   return picked;
 }
 
-void WriteExamples(const ReconFlags& flags, const FunctaModel& model, const Dataset& dataset,
-                   const ReconstructionEvaluator::Summary& summary, const Functaset& functaset,
-                   SensorKind sensor, const std::string& path) {
+// Writes the picture of one sensor's examples to `path`; returns the frame ids shown,
+// top to bottom.
+std::vector<std::string> WriteExamples(const ReconFlags& flags, const FunctaModel& model,
+                                       const Dataset& dataset,
+                                       const ReconstructionEvaluator::Summary& summary,
+                                       const Functaset& functaset, SensorKind sensor,
+                                       const std::string& path) {
   const SensorTrunk& trunk = model.Trunk(sensor);
   const int rows = trunk.format.rows, cols = trunk.format.cols, h = flags.tile_height;
   const int w = std::max(1, static_cast<int>(std::lround(cols * double(h) / rows)));
@@ -103,7 +118,7 @@ void WriteExamples(const ReconFlags& flags, const FunctaModel& model, const Data
   };
   std::vector<Example> examples;
   double error_scale = 0;
-  for (const auto* r : PickExamples(summary, sensor, flags.examples)) {
+  for (const auto* r : PickExamples(summary, sensor, flags.examples, flags.worst)) {
     Example e{r, LoadTrunkTargets(dataset, r->dataset_index, trunk.format),
               Reconstruct(trunk, functaset.entries(sensor)[*functaset.Find(sensor, r->id)].latent)};
     for (int j = 0; j < rows * cols; ++j) {
@@ -114,7 +129,7 @@ void WriteExamples(const ReconFlags& flags, const FunctaModel& model, const Data
     }
     examples.push_back(std::move(e));
   }
-  if (examples.empty()) return;
+  if (examples.empty()) return {};
   if (!(error_scale > 0)) error_scale = 1.0;
 
   std::vector<std::vector<cv::Mat>> grid;
@@ -122,7 +137,8 @@ void WriteExamples(const ReconFlags& flags, const FunctaModel& model, const Data
   std::snprintf(error_title, sizeof(error_title), "error (+-%.3g)", error_scale);
   grid.push_back({TextCell(
       26, 170,
-      {std::string(ToString(sensor)) + " " + std::to_string(rows) + "x" + std::to_string(cols)})});
+      {std::string(ToString(sensor)) + " " + std::to_string(rows) + "x" + std::to_string(cols) +
+       (flags.worst ? " worst" : "")})});
   for (const char* title : {"target", "z = 0", "reconstruction"}) {
     grid.back().push_back(TextCell(26, w, {title}));
   }
@@ -153,6 +169,9 @@ void WriteExamples(const ReconFlags& flags, const FunctaModel& model, const Data
     grid.push_back(std::move(row));
   }
   WritePicture(path, TileGrid(grid));
+  std::vector<std::string> ids;
+  for (const Example& e : examples) ids.push_back(e.result->id);
+  return ids;
 }
 
 // A CSV field: as is, or in double quotes (quotes doubled) if it holds a comma, a
@@ -207,12 +226,16 @@ void RunRecon(const ReconFlags& flags) {
 
   std::filesystem::create_directories(flags.out);
   std::vector<std::string> pictures;
+  nlohmann::json pictured = nlohmann::json::object();
   for (SensorKind sensor : functaset.sensors()) {
     if (functaset.entries(sensor).empty() || flags.examples <= 0) continue;
     const std::string path =
         (std::filesystem::path(flags.out) / ("recon_" + std::string(ToString(sensor)) + ".png"))
             .string();
-    WriteExamples(flags, model, dataset, summary, functaset, sensor, path);
+    std::vector<std::string> ids =
+        WriteExamples(flags, model, dataset, summary, functaset, sensor, path);
+    if (ids.empty()) continue;  // nothing to show, no picture written
+    pictured[ToString(sensor)] = std::move(ids);
     pictures.push_back(path);
   }
 
@@ -270,6 +293,7 @@ void RunRecon(const ReconFlags& flags) {
     figures["frames"] = summary.frames.size();
     figures["seconds"] = summary.seconds;
     figures["pictures"] = pictures;
+    figures["pictured"] = pictured;
     figures["per_frame"] = per_frame;
     EmitJson(figures);
   }
@@ -295,6 +319,8 @@ void RegisterRecon(CLI::App& app, CommandBody* selected) {
   sub->add_option("--examples", flags->examples,
                   "Example rows per picture, test split first (0 = no pictures)")
       ->check(CLI::Range(0, 1000));
+  sub->add_flag("--worst", flags->worst,
+                "Picture the lowest-PSNR frames (test split first) instead of an even spread");
   sub->add_option("--threads", flags->threads, "Worker threads (default: all cores)")
       ->check(CLI::Range(0, 256));
   sub->add_option("--tile-height", flags->tile_height, "Tile height in pixels")

@@ -5,10 +5,12 @@
 // (K, the rates' clip bound and start), `encode` uses that model, and bad knobs fail
 // before any data is read with a message naming the flag or field; `recon` on the
 // result writes a per-frame CSV that agrees with its own summary.
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <unistd.h>
@@ -42,6 +44,15 @@ class TrainCliTest : public ::testing::Test {
   }
   static std::string Root(const std::string& name) { return (*root_ / name).string(); }
   static Result Run(const std::string& args) { return testing_util::RunTactfunc(*root_, args); }
+  // A 3-step tiny model NAME.tfm of the fixture's data and its functaset NAME.tfs.
+  static void TrainAndEncode(const std::string& name) {
+    const Result train = Run("train --data " + Root("d") + " --out " + Root(name + ".tfm") +
+                             " --preset tiny --steps 3 --seed 2");
+    ASSERT_EQ(train.exit_code, 0) << train.err;
+    const Result encode = Run("encode --model " + Root(name + ".tfm") + " --data " + Root("d") +
+                              " --out " + Root(name + ".tfs") + " --threads 1");
+    ASSERT_EQ(encode.exit_code, 0) << encode.err;
+  }
 
   static fs::path* root_;
 };
@@ -67,15 +78,21 @@ TEST_F(TrainCliTest, TheInnerLoopKnobsReachTheModelAndEncodeUsesIt) {
   EXPECT_EQ(encode.exit_code, 0) << encode.err;
 }
 
+// Parses one line of recon's frames.csv (no quoted fields), keeping empty fields.
+std::vector<std::string> CsvFields(const std::string& line) {
+  std::vector<std::string> f(1);
+  for (char c : line) {
+    if (c == ',') {
+      f.emplace_back();
+    } else {
+      f.back().push_back(c);
+    }
+  }
+  return f;
+}
+
 TEST_F(TrainCliTest, ReconWritesOneCsvRowPerFrameThatAgreesWithItsSummary) {
-  ASSERT_EQ(Run("train --data " + Root("d") + " --out " + Root("r.tfm") +
-                " --preset tiny --steps 3 --seed 2")
-                .exit_code,
-            0);
-  ASSERT_EQ(Run("encode --model " + Root("r.tfm") + " --data " + Root("d") + " --out " +
-                Root("r.tfs") + " --threads 1")
-                .exit_code,
-            0);
+  ASSERT_NO_FATAL_FAILURE(TrainAndEncode("r"));
   const Result recon = Run("recon --model " + Root("r.tfm") + " --functaset " + Root("r.tfs") +
                            " --data " + Root("d") + " --out " + Root("recon") + " --json");
   ASSERT_EQ(recon.exit_code, 0) << recon.err;
@@ -90,14 +107,7 @@ TEST_F(TrainCliTest, ReconWritesOneCsvRowPerFrameThatAgreesWithItsSummary) {
   int rows = 0, train_rows = 0;
   double train_psnr_sum = 0;
   while (std::getline(csv, line)) {
-    std::vector<std::string> f(1);
-    for (char c : line) {  // (keeps empty trailing fields, unlike getline)
-      if (c == ',') {
-        f.emplace_back();
-      } else {
-        f.back().push_back(c);
-      }
-    }
+    const std::vector<std::string> f = CsvFields(line);
     ASSERT_EQ(f.size(), 12u) << line;
     ++rows;
     EXPECT_EQ(f[1], "bubble");
@@ -114,6 +124,39 @@ TEST_F(TrainCliTest, ReconWritesOneCsvRowPerFrameThatAgreesWithItsSummary) {
   ASSERT_GT(train_rows, 0);
   EXPECT_NEAR(train_psnr_sum / train_rows,
               recon.LastJson()["psnr_train"]["bubble"].get<double>(), 1e-6);
+}
+
+TEST_F(TrainCliTest, ReconWorstPicturesTheLowestPsnrFrames) {
+  ASSERT_NO_FATAL_FAILURE(TrainAndEncode("w"));
+  const Result recon = Run("recon --model " + Root("w.tfm") + " --functaset " + Root("w.tfs") +
+                           " --data " + Root("d") + " --out " + Root("worst") +
+                           " --examples 3 --worst --json");
+  ASSERT_EQ(recon.exit_code, 0) << recon.err;
+  const auto shown = recon.LastJson()["pictured"]["bubble"].get<std::vector<std::string>>();
+  ASSERT_EQ(shown.size(), 3u);
+  EXPECT_TRUE(fs::exists(Root("worst") + "/recon_bubble.png"));
+
+  // The three lowest PSNRs of frames.csv (every frame is in the train split here), in
+  // order.
+  std::ifstream csv(Root("worst") + "/frames.csv");
+  std::string line;
+  std::getline(csv, line);
+  std::vector<std::pair<double, std::string>> by_psnr;
+  while (std::getline(csv, line)) {
+    const std::vector<std::string> f = CsvFields(line);
+    ASSERT_EQ(f[2], "train");
+    by_psnr.emplace_back(std::stod(f[8]), f[0]);
+  }
+  std::sort(by_psnr.begin(), by_psnr.end());
+  ASSERT_GE(by_psnr.size(), 3u);
+  for (int k = 0; k < 3; ++k) EXPECT_EQ(shown[k], by_psnr[k].second) << k;
+
+  // Without --worst the picture spreads over the frames instead.
+  const Result spread = Run("recon --model " + Root("w.tfm") + " --functaset " + Root("w.tfs") +
+                            " --data " + Root("d") + " --out " + Root("spread") +
+                            " --examples 3 --json");
+  ASSERT_EQ(spread.exit_code, 0) << spread.err;
+  EXPECT_NE(spread.LastJson()["pictured"]["bubble"].get<std::vector<std::string>>(), shown);
 }
 
 TEST_F(TrainCliTest, ADivergingRunFailsNamingTheLearningRateAndWritesNoModel) {
