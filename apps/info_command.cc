@@ -1,14 +1,25 @@
 // Copyright 2026 The tactfunc Authors.
 //
 // tactfunc info: what a dataset holds -- counts per sensor and split, resolutions,
-// tools, bytes on disk; or, with --tools, the simulator's twelve tools.
+// tools, bytes on disk; what a tactfunc file holds (model, functaset, pose model,
+// checkpoint, k-NN index: its kind, version, size and the figures of its kind); or,
+// with --tools, the simulator's twelve tools.
+#include <cmath>
 #include <cstdio>
+#include <filesystem>
+#include <fstream>
 #include <iostream>
 #include <map>
+#include <vector>
 
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
 #include "estimation/dataset.h"
+#include "estimation/functaset.h"
+#include "estimation/reconstruction.h"
+#include "models/functa_model.h"
+#include "models/pose_mlp.h"
+#include "models/tensor_file.h"
 #include "models/tool.h"
 
 namespace tactfunc::apps {
@@ -35,12 +46,185 @@ void PrintTools(bool json) {
   if (json) EmitJson({{"tools", list}});
 }
 
+// True if `path` is a regular file that starts with the TensorFile magic.
+bool IsTensorFile(const std::string& path) {
+  if (!std::filesystem::is_regular_file(path)) return false;
+  std::ifstream in(path, std::ios::binary);
+  char magic[8] = {};
+  in.read(magic, sizeof(magic));
+  return in.gcount() == 8 && std::string(magic, 8) == "TACTFUNC";
+}
+
+nlohmann::json NumberOrNull(double value) {
+  return std::isfinite(value) ? nlohmann::json(value) : nlohmann::json(nullptr);
+}
+
+std::string Fixed(double value, int digits) {
+  if (!std::isfinite(value)) return "n/a";
+  char buffer[32];
+  std::snprintf(buffer, sizeof(buffer), "%.*f", digits, value);
+  return buffer;
+}
+
+// A trunk model: per sensor the trunk's shape, working format, inner loop and, from the
+// model's info, the training run.
+nlohmann::json DescribeModel(const std::string& path) {
+  const FunctaModel model = FunctaModel::Load(path);
+  const nlohmann::json info = nlohmann::json::parse(model.info_json());
+  const nlohmann::json trunks_info = info.value("trunks", nlohmann::json::object());
+  if (info.contains("preset")) std::cout << "  preset " << info["preset"].dump() << "\n";
+  nlohmann::json trunks = nlohmann::json::object();
+  for (SensorKind sensor : model.sensors()) {
+    const SensorTrunk& t = model.Trunk(sensor);
+    const LatentModulatedSiren::Options& o = t.siren.options();
+    std::printf("  %-8s SIREN %d x %d (omega_0 %g), d = %d, %d parameters; %dx%d%s, scale %g; "
+                "K = %d%s, alpha in [%.3g, %.3g]; residual sigma %.4g\n",
+                ToString(sensor), o.width, o.num_hidden_layers, o.omega_0, o.latent_dim,
+                t.siren.NumParameters(), t.format.rows, t.format.cols,
+                t.format.grayscale ? " grayscale" : "", t.format.scale, t.meta_sgd.inner_steps,
+                t.meta_sgd.first_order ? " (first-order)" : "", t.alpha.minCoeff(),
+                t.alpha.maxCoeff(), t.residual_sigma);
+    nlohmann::json trunk = {{"width", o.width},
+                            {"layers", o.num_hidden_layers},
+                            {"omega_0", o.omega_0},
+                            {"latent_dim", o.latent_dim},
+                            {"output_channels", o.output_channels},
+                            {"parameters", t.siren.NumParameters()},
+                            {"rows", t.format.rows},
+                            {"cols", t.format.cols},
+                            {"grayscale", t.format.grayscale},
+                            {"scale", t.format.scale},
+                            {"inner_steps", t.meta_sgd.inner_steps},
+                            {"first_order", t.meta_sgd.first_order},
+                            {"alpha_min", t.alpha.minCoeff()},
+                            {"alpha_max", t.alpha.maxCoeff()},
+                            {"residual_sigma", t.residual_sigma}};
+    const nlohmann::json run = trunks_info.value(ToString(sensor), nlohmann::json::object());
+    if (run.contains("steps") && run.contains("train_psnr")) {
+      std::cout << "           trained " << run["steps"].dump() << " steps";
+      if (run.contains("train_seconds")) {
+        std::cout << " in " << Fixed(run["train_seconds"].get<double>(), 0) << " s";
+      }
+      std::cout << ", monitor PSNR after K steps " << Fixed(run["train_psnr"].get<double>(), 2)
+                << " dB\n";
+      trunk["steps"] = run["steps"];
+      trunk["train_psnr"] = run["train_psnr"];
+      if (run.contains("train_seconds")) trunk["train_seconds"] = run["train_seconds"];
+    }
+    trunks[ToString(sensor)] = trunk;
+  }
+  return {{"trunks", trunks},
+          {"parameter_bytes", model.ParameterBytes()},
+          {"preset", info.value("preset", nlohmann::json(nullptr))}};
+}
+
+// A functaset: per sensor the latent size, the entries per split and their mean PSNR.
+nlohmann::json DescribeFunctaset(const std::string& path) {
+  const Functaset functaset = Functaset::Load(path);
+  std::printf("  model checksum %u, dataset %s, latents %s%s\n", functaset.model_checksum(),
+              functaset.dataset().c_str(),
+              functaset.BytesPerLatentFloat() == 2 ? "float16" : "float32",
+              functaset.complete() ? "" : ", PARTIAL (encode --resume continues it)");
+  nlohmann::json sensors = nlohmann::json::object();
+  for (SensorKind sensor : functaset.sensors()) {
+    std::map<Split, std::vector<double>> psnrs;
+    int labelled = 0;
+    for (const FunctasetEntry& e : functaset.entries(sensor)) {
+      psnrs[e.split].push_back(e.psnr);
+      if (e.label) ++labelled;
+    }
+    std::printf("  %-8s %zu latents of %d floats (%d labelled)", ToString(sensor),
+                functaset.entries(sensor).size(), functaset.latent_dim(sensor), labelled);
+    nlohmann::json splits = nlohmann::json::object();
+    for (const auto& [split, values] : psnrs) {
+      const PsnrStats stats = ComputePsnrStats(values);
+      std::printf(", %s %zu at %s dB", ToString(split), values.size(),
+                  Fixed(stats.mean, 2).c_str());
+      splits[ToString(split)] = {{"count", values.size()}, {"psnr_mean", NumberOrNull(stats.mean)}};
+    }
+    std::printf("\n");
+    sensors[ToString(sensor)] = {{"latent_dim", functaset.latent_dim(sensor)},
+                                 {"count", functaset.entries(sensor).size()},
+                                 {"labelled", labelled},
+                                 {"splits", splits}};
+  }
+  return {{"model_checksum", functaset.model_checksum()},
+          {"dataset", functaset.dataset()},
+          {"latent_precision", functaset.BytesPerLatentFloat() == 2 ? "float16" : "float32"},
+          {"complete", functaset.complete()},
+          {"sensors", sensors}};
+}
+
+// A pose model: the MLP's shape and its calibration set.
+nlohmann::json DescribePoseModel(const std::string& path) {
+  const PoseMlp pose = PoseMlp::Load(path);
+  std::printf("  pose MLP: %d inputs (latent floats), %d layers, %d parameters, %lld calibration "
+              "residuals\n",
+              pose.input_dim(), pose.num_layers(), pose.NumParameters(),
+              static_cast<long long>(pose.calibration_residuals().rows()));
+  return {{"input_dim", pose.input_dim()},
+          {"layers", pose.num_layers()},
+          {"parameters", pose.NumParameters()},
+          {"calibration_residuals", pose.calibration_residuals().rows()}};
+}
+
+// Any tactfunc file: the container's facts, then those of its kind. The file is fully
+// read and its checksum checked first, so a damaged file fails here with the reason.
+void DescribeFile(const std::string& path, bool json) {
+  const TensorFile file = TensorFile::Read(path);
+  const nlohmann::json meta = nlohmann::json::parse(file.meta_json());
+  std::uint64_t tensor_bytes = 0;
+  for (const TensorFile::Tensor& t : file.tensors()) {
+    const int width = t.dtype == TensorFile::DType::kFloat64   ? 8
+                      : t.dtype == TensorFile::DType::kFloat16 ? 2
+                                                               : 4;
+    tensor_bytes += static_cast<std::uint64_t>(t.numel()) * width;
+  }
+  const std::uint64_t bytes = std::filesystem::file_size(path);
+  std::cout << path << ": " << file.kind() << " file, format " << meta.value("format", "?")
+            << " version " << meta.value("version", 0) << ", " << FormatBytes(bytes) << " ("
+            << file.tensors().size() << " tensors, " << FormatBytes(tensor_bytes)
+            << "), checksum " << file.checksum() << " (verified)\n";
+  nlohmann::json out = {{"file", path},
+                        {"kind", file.kind()},
+                        {"format", meta.value("format", "")},
+                        {"version", meta.value("version", 0)},
+                        {"bytes", bytes},
+                        {"tensors", file.tensors().size()},
+                        {"checksum", file.checksum()}};
+  if (file.kind() == "model") {
+    out["model"] = DescribeModel(path);
+  } else if (file.kind() == "functaset") {
+    out["functaset"] = DescribeFunctaset(path);
+  } else if (file.kind() == "pose_model") {
+    out["pose_model"] = DescribePoseModel(path);
+  } else if (file.kind() == "checkpoint") {
+    // A trunk training checkpoint (estimation/trunk_trainer.cc writes these fields).
+    const std::string sensor = meta.value("sensor", "?");
+    const int step = meta.value("step", 0);
+    const double seconds = meta.value("train_seconds", 0.0);
+    const nlohmann::json options = meta.value("options", nlohmann::json::object());
+    std::cout << "  " << sensor << " trunk at step " << step << " after " << Fixed(seconds, 0)
+              << " s of training";
+    if (options.contains("steps")) std::cout << " (of " << options["steps"].dump() << ")";
+    std::cout << "; continue with the same train command plus --resume\n";
+    out["checkpoint"] = {{"sensor", sensor}, {"step", step}, {"train_seconds", seconds}};
+  }
+  if (json) EmitJson(out);
+}
+
 void RunInfo(const InfoFlags& flags) {
   if (flags.tools) {
     PrintTools(flags.json);
     return;
   }
-  if (flags.dir.empty()) throw UsageError("a dataset folder is required (or --tools)");
+  if (flags.dir.empty()) {
+    throw UsageError("a dataset folder or a tactfunc file is required (or --tools)");
+  }
+  if (IsTensorFile(flags.dir)) {
+    DescribeFile(flags.dir, flags.json);
+    return;
+  }
   const Dataset dataset = OpenDataset(flags.dir, flags.data);
   nlohmann::json sensors = nlohmann::json::object();
   std::cout << "dataset " << dataset.root() << "\n";
@@ -107,9 +291,12 @@ void RunInfo(const InfoFlags& flags) {
 void RegisterInfo(CLI::App& app, CommandBody* selected) {
   auto flags = std::make_shared<InfoFlags>();
   CLI::App* sub = app.add_subcommand(
-      "info", "Summarise a dataset: counts, resolutions, tools, bytes on disk.");
-  sub->add_option("dir", flags->dir, "Dataset folder (ours or your own, see "
-                                     "docs/DATASET_FORMAT.md)");
+      "info",
+      "Summarise a dataset (counts, resolutions, tools, bytes on disk) or a tactfunc file "
+      "(model, functaset, pose model, checkpoint: kind, version, size, what it holds).");
+  sub->add_option("dir", flags->dir,
+                  "Dataset folder (ours or your own, see docs/DATASET_FORMAT.md), or a .tfm, "
+                  ".tfs, .tpm or checkpoint file");
   AddDatasetFlags(sub, &flags->data);
   sub->add_flag("--tools", flags->tools, "List the simulator's tools and symmetries");
   sub->add_flag("--json", flags->json, "Print the figures as one JSON line");

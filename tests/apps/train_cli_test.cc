@@ -7,8 +7,10 @@
 // result writes a per-frame CSV that agrees with its own summary.
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <string>
 #include <utility>
 #include <vector>
@@ -157,6 +159,45 @@ TEST_F(TrainCliTest, ReconWorstPicturesTheLowestPsnrFrames) {
                             " --examples 3 --json");
   ASSERT_EQ(spread.exit_code, 0) << spread.err;
   EXPECT_NE(spread.LastJson()["pictured"]["bubble"].get<std::vector<std::string>>(), shown);
+}
+
+TEST_F(TrainCliTest, InfoDescribesTheModelTheFunctasetAndTheCheckpointItIsGiven) {
+  ASSERT_NO_FATAL_FAILURE(TrainAndEncode("i"));
+  const Result model = Run("info " + Root("i.tfm") + " --json");
+  ASSERT_EQ(model.exit_code, 0) << model.err;
+  const auto m = model.LastJson();
+  EXPECT_EQ(m["kind"], "model");
+  const auto& trunk = m["model"]["trunks"]["bubble"];
+  EXPECT_EQ(trunk["width"], 32);  // the tiny preset
+  EXPECT_EQ(trunk["layers"], 2);
+  EXPECT_EQ(trunk["latent_dim"], 16);
+  EXPECT_EQ(trunk["steps"], 3);
+  EXPECT_EQ(m["checksum"].get<std::uint32_t>(), FunctaModel::Load(Root("i.tfm")).checksum());
+
+  const Result functaset = Run("info " + Root("i.tfs") + " --json");
+  ASSERT_EQ(functaset.exit_code, 0) << functaset.err;
+  const auto f = functaset.LastJson();
+  EXPECT_EQ(f["kind"], "functaset");
+  EXPECT_EQ(f["functaset"]["model_checksum"], m["checksum"]);
+  EXPECT_EQ(f["functaset"]["sensors"]["bubble"]["count"], 8);
+  EXPECT_EQ(f["functaset"]["sensors"]["bubble"]["latent_dim"], 16);
+  EXPECT_TRUE(f["functaset"]["complete"].get<bool>());
+
+  const Result checkpoint = Run("info " + Root("i.tfm") + ".bubble.ckpt --json");
+  ASSERT_EQ(checkpoint.exit_code, 0) << checkpoint.err;
+  EXPECT_EQ(checkpoint.LastJson()["checkpoint"]["step"], 3);
+  EXPECT_THAT(checkpoint.out, HasSubstr("--resume"));
+
+  // A damaged file is refused with the reason, naming it.
+  {
+    std::ifstream in(Root("i.tfm"), std::ios::binary);
+    std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    std::ofstream(Root("cut.tfm"), std::ios::binary) << bytes.substr(0, bytes.size() / 2);
+  }
+  const Result cut = Run("info " + Root("cut.tfm"));
+  EXPECT_EQ(cut.exit_code, 1);
+  EXPECT_THAT(cut.err, HasSubstr(Root("cut.tfm")));
+  EXPECT_THAT(cut.err, HasSubstr("truncated"));
 }
 
 TEST_F(TrainCliTest, ADivergingRunFailsNamingTheLearningRateAndWritesNoModel) {
