@@ -4,16 +4,23 @@
 // (estimation/trunk_trainer.h, docs/TRAINING.md) and writes one model file.
 #include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <limits>
 #include <memory>
 #include <sstream>
 #include <thread>
+#include <utility>
+#include <vector>
+
+#include <opencv2/imgproc.hpp>
 
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
+#include "apps/pictures.h"
 #include "apps/progress_bar.h"
 #include "estimation/dataset.h"
 #include "estimation/trunk_trainer.h"
@@ -65,6 +72,11 @@ std::string CheckpointPath(const std::string& out, SensorKind sensor) {
   return out + "." + ToString(sensor) + ".ckpt";
 }
 
+// M.tfm -> M.training.png (the model's name without its extension).
+std::string TrainingCurvesPath(const std::string& out) {
+  return std::filesystem::path(out).replace_extension(".training.png").string();
+}
+
 std::string Status(const TrunkTrainer::StepReport& report) {
   char buffer[160];
   std::snprintf(buffer, sizeof(buffer), "loss %.3e  PSNR %.2f dB (z=0 %.2f)", report.loss,
@@ -102,6 +114,56 @@ TrunkTrainer::Options OptionsFor(const TrainFlags& flags, SensorKind sensor) {
   std::string error;
   if (!options.IsValid(&error)) throw UsageError(error);
   return options;
+}
+
+// The training curves of every sensor trained: the monitor PSNR after K steps (thick)
+// and at z = 0 (thin) against the step, log scale (points after step 0).
+cv::Mat TrainingCurvesPlot(
+    const std::vector<std::pair<SensorKind, std::vector<TrunkTrainer::HistoryPoint>>>& runs,
+    const std::string& subtitle) {
+  double x_lo = std::numeric_limits<double>::infinity(), x_hi = 0, y_lo = x_lo, y_hi = -x_lo;
+  for (const auto& [sensor, history] : runs) {
+    for (const TrunkTrainer::HistoryPoint& p : history) {
+      if (p.step <= 0) continue;
+      x_lo = std::min<double>(x_lo, p.step);
+      x_hi = std::max<double>(x_hi, p.step);
+      for (double y : {p.psnr, p.psnr_at_zero}) {
+        if (!std::isfinite(y)) continue;
+        y_lo = std::min(y_lo, y);
+        y_hi = std::max(y_hi, y);
+      }
+    }
+  }
+  if (!(x_hi > 0) || !(y_hi >= y_lo)) return cv::Mat();  // nothing past step 0
+  if (!(x_hi > x_lo)) x_hi = x_lo * 2;
+  if (!(y_hi > y_lo)) y_hi = y_lo + 1;
+  LogXPlot::Layout layout;
+  layout.height = 620;
+  LogXPlot plot(layout, x_lo, x_hi, y_lo, y_hi);
+  plot.DrawFrame("outer step (log scale)", "monitor PSNR, dB", "Training curves", subtitle);
+  cv::Mat& canvas = plot.canvas();
+  const cv::Scalar colours[] = {cv::Scalar(40, 140, 255), cv::Scalar(230, 120, 40)};
+  std::vector<std::pair<std::string, cv::Scalar>> legend;
+  for (std::size_t k = 0; k < runs.size(); ++k) {
+    const cv::Scalar colour = colours[k % 2];
+    std::vector<cv::Point> fitted, zero;
+    for (const TrunkTrainer::HistoryPoint& p : runs[k].second) {
+      if (p.step <= 0) continue;
+      if (std::isfinite(p.psnr)) fitted.push_back({plot.X(p.step), plot.Y(p.psnr)});
+      if (std::isfinite(p.psnr_at_zero)) zero.push_back({plot.X(p.step), plot.Y(p.psnr_at_zero)});
+    }
+    if (fitted.size() > 1) cv::polylines(canvas, fitted, false, colour, 3, cv::LINE_AA);
+    if (zero.size() > 1) cv::polylines(canvas, zero, false, colour * 0.8, 1, cv::LINE_AA);
+    legend.push_back({std::string(ToString(runs[k].first)) + ": after K steps", colour});
+    legend.push_back({std::string(ToString(runs[k].first)) + ": z = 0", colour * 0.8});
+  }
+  const int lx = plot.area().x + plot.area().width + 22, ly = plot.area().y + 14;
+  for (std::size_t k = 0; k < legend.size(); ++k) {
+    const int y = ly + 20 * static_cast<int>(k);
+    cv::line(canvas, {lx, y}, {lx + 16, y}, legend[k].second, k % 2 == 0 ? 3 : 1, cv::LINE_AA);
+    PlainText(canvas, legend[k].first, {lx + 22, y + 5}, 0.42);
+  }
+  return canvas;
 }
 
 void RunTrain(const TrainFlags& flags) {
@@ -148,6 +210,7 @@ void RunTrain(const TrainFlags& flags) {
   const bool bar_enabled = ProgressBar::Enabled();
 
   FunctaModel model;
+  std::vector<std::pair<SensorKind, std::vector<TrunkTrainer::HistoryPoint>>> curves;
   nlohmann::json sensor_figures = nlohmann::json::object();
   nlohmann::json info_trunks = nlohmann::json::object();
   for (SensorKind sensor : sensors) {
@@ -217,6 +280,7 @@ void RunTrain(const TrainFlags& flags) {
     for (const TrunkTrainer::HistoryPoint& p : summary.history) {
       history.push_back({p.step, p.loss, p.psnr, p.psnr_at_zero, p.seconds});
     }
+    curves.push_back({sensor, summary.history});
     info_trunks[name] = {
         {"options", nlohmann::json::parse(trainer.TrajectoryOptionsJson(sensor, summary.format))},
         {"steps", summary.steps_done},
@@ -242,8 +306,19 @@ void RunTrain(const TrainFlags& flags) {
   std::cout << "train: wrote " << flags.out << " (" << FormatBytes(model_bytes) << ", "
             << sensors.size() << " trunk(s), preset " << flags.preset << "); checkpoints "
             << flags.out << ".<sensor>.ckpt can be deleted\n";
+  const std::string curves_path = TrainingCurvesPath(flags.out);
+  const cv::Mat picture = TrainingCurvesPlot(
+      curves, "preset " + flags.preset + ", data " + flags.data + ", seed " +
+                  std::to_string(OptionsFor(flags, sensors.front()).seed));
+  if (!picture.empty()) {
+    WritePicture(curves_path, picture);
+    std::cout << "train: wrote the training curves to " << curves_path << "\n";
+  }
   if (flags.json) {
-    EmitJson({{"out", flags.out}, {"sensors", sensor_figures}, {"model_bytes", model_bytes}});
+    EmitJson({{"out", flags.out},
+              {"sensors", sensor_figures},
+              {"model_bytes", model_bytes},
+              {"curves", picture.empty() ? nlohmann::json(nullptr) : nlohmann::json(curves_path)}});
   }
 }
 

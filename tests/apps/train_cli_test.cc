@@ -2,9 +2,11 @@
 //
 // `tactfunc train` as a user runs it: a short tiny-preset run on simulated contacts
 // writes a model whose trunk carries the inner-loop knobs given on the command line
-// (K, the rates' clip bound and start), `encode` uses that model, and bad knobs fail
-// before any data is read with a message naming the flag or field; `recon` on the
-// result writes a per-frame CSV that agrees with its own summary.
+// (K, the rates' clip bound and start) and its training curves; `encode` uses that
+// model; bad knobs fail before any data is read with a message naming the flag or
+// field, and a diverging run fails naming the learning rate. On the result, `recon`
+// writes a per-frame CSV that agrees with its own summary and pictures the worst
+// frames, and `info` describes the model, functaset and checkpoint files.
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -67,6 +69,14 @@ TEST_F(TrainCliTest, TheInnerLoopKnobsReachTheModelAndEncodeUsesIt) {
                            " --alpha-init 1.5 --seed 1 --json");
   ASSERT_EQ(train.exit_code, 0) << train.err;
   EXPECT_EQ(train.LastJson()["sensors"]["bubble"]["steps"].get<int>(), 4);
+  // The training curves are drawn beside the model.
+  EXPECT_EQ(train.LastJson()["curves"].get<std::string>(), Root("m.training.png"));
+  {
+    std::ifstream png(Root("m.training.png"), std::ios::binary);
+    char magic[4] = {};
+    png.read(magic, 4);
+    EXPECT_EQ(std::string(magic + 1, 3), "PNG");
+  }
 
   const FunctaModel model = FunctaModel::Load(Root("m.tfm"));
   const SensorTrunk& trunk = model.Trunk(SensorKind::kSoftBubble);
