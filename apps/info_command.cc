@@ -1,14 +1,16 @@
 // Copyright 2026 The tactfunc Authors.
 //
 // tactfunc info: what a dataset holds -- counts per sensor and split, resolutions,
-// tools, bytes on disk; what a tactfunc file holds (model, functaset, pose model,
-// checkpoint, k-NN index: its kind, version, size and the figures of its kind); or,
-// with --tools, the simulator's twelve tools.
+// tools, bytes on disk; what a tactfunc file holds (any kind: its kind, version, size
+// and checksum; for a model, functaset, pose model or checkpoint also the figures of
+// its kind); or, with --tools, the simulator's twelve tools.
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <limits>
 #include <map>
 #include <vector>
 
@@ -46,13 +48,45 @@ void PrintTools(bool json) {
   if (json) EmitJson({{"tools", list}});
 }
 
-// True if `path` is a regular file that starts with the TensorFile magic.
+// True if `path` is a regular file with a tactfunc extension (.tfm, .tfs, .tpm, .ckpt,
+// .knn: TensorFile::Read then says what is wrong with a damaged one) or that starts
+// with the TensorFile magic.
 bool IsTensorFile(const std::string& path) {
   if (!std::filesystem::is_regular_file(path)) return false;
+  const std::string ext = std::filesystem::path(path).extension().string();
+  for (const char* known : {".tfm", ".tfs", ".tpm", ".ckpt", ".knn"}) {
+    if (ext == known) return true;
+  }
   std::ifstream in(path, std::ios::binary);
   char magic[8] = {};
   in.read(magic, sizeof(magic));
   return in.gcount() == 8 && std::string(magic, 8) == "TACTFUNC";
+}
+
+// j[key] if j is an object holding a number there, else NaN (files from other versions
+// or hand-edited info may lack a field or hold null, e.g. for a NaN PSNR).
+double NumberAt(const nlohmann::json& j, const char* key) {
+  if (!j.is_object() || !j.contains(key) || !j[key].is_number()) {
+    return std::numeric_limits<double>::quiet_NaN();
+  }
+  return j[key].get<double>();
+}
+
+// j[key] if j is an object holding an object there, else {}.
+nlohmann::json ObjectAt(const nlohmann::json& j, const char* key) {
+  if (!j.is_object() || !j.contains(key) || !j[key].is_object()) return nlohmann::json::object();
+  return j[key];
+}
+
+std::string StringAt(const nlohmann::json& j, const char* key) {
+  if (!j.is_object() || !j.contains(key) || !j[key].is_string()) return "?";
+  return j[key].get<std::string>();
+}
+
+// An integral count (a step, a version) as a JSON integer; null if not finite.
+nlohmann::json CountOrNull(double value) {
+  if (!std::isfinite(value)) return nullptr;
+  return static_cast<std::int64_t>(std::llround(value));
 }
 
 nlohmann::json NumberOrNull(double value) {
@@ -71,8 +105,9 @@ std::string Fixed(double value, int digits) {
 nlohmann::json DescribeModel(const std::string& path) {
   const FunctaModel model = FunctaModel::Load(path);
   const nlohmann::json info = nlohmann::json::parse(model.info_json());
-  const nlohmann::json trunks_info = info.value("trunks", nlohmann::json::object());
-  if (info.contains("preset")) std::cout << "  preset " << info["preset"].dump() << "\n";
+  const nlohmann::json trunks_info = ObjectAt(info, "trunks");
+  const std::string preset = StringAt(info, "preset");
+  std::cout << "  preset " << preset << "\n";
   nlohmann::json trunks = nlohmann::json::object();
   for (SensorKind sensor : model.sensors()) {
     const SensorTrunk& t = model.Trunk(sensor);
@@ -99,23 +134,19 @@ nlohmann::json DescribeModel(const std::string& path) {
                             {"alpha_min", t.alpha.minCoeff()},
                             {"alpha_max", t.alpha.maxCoeff()},
                             {"residual_sigma", t.residual_sigma}};
-    const nlohmann::json run = trunks_info.value(ToString(sensor), nlohmann::json::object());
-    if (run.contains("steps") && run.contains("train_psnr")) {
-      std::cout << "           trained " << run["steps"].dump() << " steps";
-      if (run.contains("train_seconds")) {
-        std::cout << " in " << Fixed(run["train_seconds"].get<double>(), 0) << " s";
-      }
-      std::cout << ", monitor PSNR after K steps " << Fixed(run["train_psnr"].get<double>(), 2)
-                << " dB\n";
-      trunk["steps"] = run["steps"];
-      trunk["train_psnr"] = run["train_psnr"];
-      if (run.contains("train_seconds")) trunk["train_seconds"] = run["train_seconds"];
+    const nlohmann::json run = ObjectAt(trunks_info, ToString(sensor));
+    const double steps = NumberAt(run, "steps"), seconds = NumberAt(run, "train_seconds");
+    const double psnr = NumberAt(run, "train_psnr");
+    if (std::isfinite(steps)) {
+      std::cout << "           trained " << Fixed(steps, 0) << " steps in " << Fixed(seconds, 0)
+                << " s, monitor PSNR after K steps " << Fixed(psnr, 2) << " dB\n";
     }
+    trunk["steps"] = CountOrNull(steps);
+    trunk["train_seconds"] = NumberOrNull(seconds);
+    trunk["train_psnr"] = NumberOrNull(psnr);
     trunks[ToString(sensor)] = trunk;
   }
-  return {{"trunks", trunks},
-          {"parameter_bytes", model.ParameterBytes()},
-          {"preset", info.value("preset", nlohmann::json(nullptr))}};
+  return {{"trunks", trunks}, {"parameter_bytes", model.ParameterBytes()}, {"preset", preset}};
 }
 
 // A functaset: per sensor the latent size, the entries per split and their mean PSNR.
@@ -175,20 +206,30 @@ void DescribeFile(const std::string& path, bool json) {
   const nlohmann::json meta = nlohmann::json::parse(file.meta_json());
   std::uint64_t tensor_bytes = 0;
   for (const TensorFile::Tensor& t : file.tensors()) {
-    const int width = t.dtype == TensorFile::DType::kFloat64   ? 8
-                      : t.dtype == TensorFile::DType::kFloat16 ? 2
-                                                               : 4;
+    std::uint64_t width = 0;
+    switch (t.dtype) {  // no default: a new dtype must be counted here
+      case TensorFile::DType::kFloat64:
+        width = 8;
+        break;
+      case TensorFile::DType::kFloat32:
+        width = 4;
+        break;
+      case TensorFile::DType::kFloat16:
+        width = 2;
+        break;
+    }
     tensor_bytes += static_cast<std::uint64_t>(t.numel()) * width;
   }
   const std::uint64_t bytes = std::filesystem::file_size(path);
-  std::cout << path << ": " << file.kind() << " file, format " << meta.value("format", "?")
-            << " version " << meta.value("version", 0) << ", " << FormatBytes(bytes) << " ("
+  const double version = NumberAt(meta, "version");
+  std::cout << path << ": " << file.kind() << " file, format " << StringAt(meta, "format")
+            << " version " << Fixed(version, 0) << ", " << FormatBytes(bytes) << " ("
             << file.tensors().size() << " tensors, " << FormatBytes(tensor_bytes)
             << "), checksum " << file.checksum() << " (verified)\n";
   nlohmann::json out = {{"file", path},
                         {"kind", file.kind()},
-                        {"format", meta.value("format", "")},
-                        {"version", meta.value("version", 0)},
+                        {"format", StringAt(meta, "format")},
+                        {"version", CountOrNull(version)},
                         {"bytes", bytes},
                         {"tensors", file.tensors().size()},
                         {"checksum", file.checksum()}};
@@ -200,15 +241,13 @@ void DescribeFile(const std::string& path, bool json) {
     out["pose_model"] = DescribePoseModel(path);
   } else if (file.kind() == "checkpoint") {
     // A trunk training checkpoint (estimation/trunk_trainer.cc writes these fields).
-    const std::string sensor = meta.value("sensor", "?");
-    const int step = meta.value("step", 0);
-    const double seconds = meta.value("train_seconds", 0.0);
-    const nlohmann::json options = meta.value("options", nlohmann::json::object());
-    std::cout << "  " << sensor << " trunk at step " << step << " after " << Fixed(seconds, 0)
-              << " s of training";
-    if (options.contains("steps")) std::cout << " (of " << options["steps"].dump() << ")";
-    std::cout << "; continue with the same train command plus --resume\n";
-    out["checkpoint"] = {{"sensor", sensor}, {"step", step}, {"train_seconds", seconds}};
+    const std::string sensor = StringAt(meta, "sensor");
+    const double step = NumberAt(meta, "step"), seconds = NumberAt(meta, "train_seconds");
+    std::cout << "  " << sensor << " trunk at step " << Fixed(step, 0) << " after "
+              << Fixed(seconds, 0) << " s of training; the same train command plus --resume "
+              << "continues it (with a larger --steps to extend a finished run)\n";
+    out["checkpoint"] = {
+        {"sensor", sensor}, {"step", CountOrNull(step)}, {"train_seconds", NumberOrNull(seconds)}};
   }
   if (json) EmitJson(out);
 }
@@ -295,8 +334,8 @@ void RegisterInfo(CLI::App& app, CommandBody* selected) {
       "Summarise a dataset (counts, resolutions, tools, bytes on disk) or a tactfunc file "
       "(model, functaset, pose model, checkpoint: kind, version, size, what it holds).");
   sub->add_option("dir", flags->dir,
-                  "Dataset folder (ours or your own, see docs/DATASET_FORMAT.md), or a .tfm, "
-                  ".tfs, .tpm or checkpoint file");
+                  "Dataset folder (ours or your own, see docs/DATASET_FORMAT.md), or a tactfunc "
+                  "file (.tfm, .tfs, .tpm, .ckpt, .knn)");
   AddDatasetFlags(sub, &flags->data);
   sub->add_flag("--tools", flags->tools, "List the simulator's tools and symmetries");
   sub->add_flag("--json", flags->json, "Print the figures as one JSON line");

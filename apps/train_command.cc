@@ -72,10 +72,8 @@ std::string CheckpointPath(const std::string& out, SensorKind sensor) {
   return out + "." + ToString(sensor) + ".ckpt";
 }
 
-// M.tfm -> M.training.png (the model's name without its extension).
-std::string TrainingCurvesPath(const std::string& out) {
-  return std::filesystem::path(out).replace_extension(".training.png").string();
-}
+// M -> M.training.png, beside the checkpoints M.<sensor>.ckpt.
+std::string TrainingCurvesPath(const std::string& out) { return out + ".training.png"; }
 
 std::string Status(const TrunkTrainer::StepReport& report) {
   char buffer[160];
@@ -117,30 +115,30 @@ TrunkTrainer::Options OptionsFor(const TrainFlags& flags, SensorKind sensor) {
 }
 
 // The training curves of every sensor trained: the monitor PSNR after K steps (thick)
-// and at z = 0 (thin) against the step, log scale (points after step 0).
+// and at z = 0 (thin) at every history point, against step + 1 on a log scale (so the
+// start, step 0, is drawn too). Empty if no history point has a finite PSNR.
 cv::Mat TrainingCurvesPlot(
     const std::vector<std::pair<SensorKind, std::vector<TrunkTrainer::HistoryPoint>>>& runs,
     const std::string& subtitle) {
   double x_lo = std::numeric_limits<double>::infinity(), x_hi = 0, y_lo = x_lo, y_hi = -x_lo;
   for (const auto& [sensor, history] : runs) {
     for (const TrunkTrainer::HistoryPoint& p : history) {
-      if (p.step <= 0) continue;
-      x_lo = std::min<double>(x_lo, p.step);
-      x_hi = std::max<double>(x_hi, p.step);
       for (double y : {p.psnr, p.psnr_at_zero}) {
         if (!std::isfinite(y)) continue;
+        x_lo = std::min<double>(x_lo, p.step + 1);
+        x_hi = std::max<double>(x_hi, p.step + 1);
         y_lo = std::min(y_lo, y);
         y_hi = std::max(y_hi, y);
       }
     }
   }
-  if (!(x_hi > 0) || !(y_hi >= y_lo)) return cv::Mat();  // nothing past step 0
+  if (!(x_hi > 0)) return cv::Mat();
   if (!(x_hi > x_lo)) x_hi = x_lo * 2;
   if (!(y_hi > y_lo)) y_hi = y_lo + 1;
   LogXPlot::Layout layout;
   layout.height = 620;
   LogXPlot plot(layout, x_lo, x_hi, y_lo, y_hi);
-  plot.DrawFrame("outer step (log scale)", "monitor PSNR, dB", "Training curves", subtitle);
+  plot.DrawFrame("outer step + 1 (log scale)", "monitor PSNR, dB", "Training curves", subtitle);
   cv::Mat& canvas = plot.canvas();
   const cv::Scalar colours[] = {cv::Scalar(40, 140, 255), cv::Scalar(230, 120, 40)};
   std::vector<std::pair<std::string, cv::Scalar>> legend;
@@ -148,12 +146,14 @@ cv::Mat TrainingCurvesPlot(
     const cv::Scalar colour = colours[k % 2];
     std::vector<cv::Point> fitted, zero;
     for (const TrunkTrainer::HistoryPoint& p : runs[k].second) {
-      if (p.step <= 0) continue;
-      if (std::isfinite(p.psnr)) fitted.push_back({plot.X(p.step), plot.Y(p.psnr)});
-      if (std::isfinite(p.psnr_at_zero)) zero.push_back({plot.X(p.step), plot.Y(p.psnr_at_zero)});
+      const int x = plot.X(p.step + 1);
+      if (std::isfinite(p.psnr)) fitted.push_back({x, plot.Y(p.psnr)});
+      if (std::isfinite(p.psnr_at_zero)) zero.push_back({x, plot.Y(p.psnr_at_zero)});
     }
-    if (fitted.size() > 1) cv::polylines(canvas, fitted, false, colour, 3, cv::LINE_AA);
-    if (zero.size() > 1) cv::polylines(canvas, zero, false, colour * 0.8, 1, cv::LINE_AA);
+    cv::polylines(canvas, fitted, false, colour, 3, cv::LINE_AA);
+    cv::polylines(canvas, zero, false, colour * 0.8, 1, cv::LINE_AA);
+    for (const cv::Point& q : fitted) cv::circle(canvas, q, 4, colour, cv::FILLED, cv::LINE_AA);
+    for (const cv::Point& q : zero) cv::circle(canvas, q, 2, colour * 0.8, cv::FILLED, cv::LINE_AA);
     legend.push_back({std::string(ToString(runs[k].first)) + ": after K steps", colour});
     legend.push_back({std::string(ToString(runs[k].first)) + ": z = 0", colour * 0.8});
   }
@@ -310,15 +310,21 @@ void RunTrain(const TrainFlags& flags) {
   const cv::Mat picture = TrainingCurvesPlot(
       curves, "preset " + flags.preset + ", data " + flags.data + ", seed " +
                   std::to_string(OptionsFor(flags, sensors.front()).seed));
+  bool wrote_curves = false;
   if (!picture.empty()) {
-    WritePicture(curves_path, picture);
-    std::cout << "train: wrote the training curves to " << curves_path << "\n";
+    try {  // the model is written: a picture that cannot be is a warning, not a failure
+      WritePicture(curves_path, picture);
+      wrote_curves = true;
+      std::cout << "train: wrote the training curves to " << curves_path << "\n";
+    } catch (const std::exception& e) {
+      std::cerr << "train: warning: no training curves: " << e.what() << "\n";
+    }
   }
   if (flags.json) {
     EmitJson({{"out", flags.out},
               {"sensors", sensor_figures},
               {"model_bytes", model_bytes},
-              {"curves", picture.empty() ? nlohmann::json(nullptr) : nlohmann::json(curves_path)}});
+              {"curves", wrote_curves ? nlohmann::json(curves_path) : nlohmann::json(nullptr)}});
   }
 }
 

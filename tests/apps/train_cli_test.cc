@@ -19,6 +19,9 @@
 
 #include <unistd.h>
 
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "models/functa_model.h"
@@ -69,14 +72,14 @@ TEST_F(TrainCliTest, TheInnerLoopKnobsReachTheModelAndEncodeUsesIt) {
                            " --alpha-init 1.5 --seed 1 --json");
   ASSERT_EQ(train.exit_code, 0) << train.err;
   EXPECT_EQ(train.LastJson()["sensors"]["bubble"]["steps"].get<int>(), 4);
-  // The training curves are drawn beside the model.
-  EXPECT_EQ(train.LastJson()["curves"].get<std::string>(), Root("m.training.png"));
-  {
-    std::ifstream png(Root("m.training.png"), std::ios::binary);
-    char magic[4] = {};
-    png.read(magic, 4);
-    EXPECT_EQ(std::string(magic + 1, 3), "PNG");
-  }
+  // The training curves are drawn beside the model, in the bubble's colour (BGR 40, 140,
+  // 255): its thick line and point marks cover well over a hundred pixels.
+  EXPECT_EQ(train.LastJson()["curves"].get<std::string>(), Root("m.tfm.training.png"));
+  const cv::Mat curves = cv::imread(Root("m.tfm.training.png"), cv::IMREAD_COLOR);
+  ASSERT_FALSE(curves.empty());
+  cv::Mat bubble_colour;
+  cv::inRange(curves, cv::Scalar(40, 140, 255), cv::Scalar(40, 140, 255), bubble_colour);
+  EXPECT_GT(cv::countNonZero(bubble_colour), 100);
 
   const FunctaModel model = FunctaModel::Load(Root("m.tfm"));
   const SensorTrunk& trunk = model.Trunk(SensorKind::kSoftBubble);
