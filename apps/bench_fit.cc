@@ -91,14 +91,6 @@ double Mean(const std::vector<double>& values) {
   return n ? sum / n : std::numeric_limits<double>::quiet_NaN();
 }
 
-std::string Fixed(double value, int digits) {
-  if (std::isnan(value)) return "n/a";
-  if (std::isinf(value)) return value > 0 ? "inf" : "-inf";
-  char buffer[48];
-  std::snprintf(buffer, sizeof(buffer), "%.*f", digits, value);
-  return buffer;
-}
-
 // Three significant digits for times that span 0.01 .. 10,000 ms.
 std::string Ms(double value) {
   if (!std::isfinite(value)) return "n/a";
@@ -346,7 +338,7 @@ cv::Mat ParetoPlot(const std::vector<VariantResult>& results,
     const int y = Y(s.converged_mean);
     DrawDashedLine(canvas, {left, y}, {left + pw, y}, SensorColour(s.sensor));
     const std::string text = std::string("converged ") + ToString(s.sensor) + " " +
-                             Fixed(s.converged_mean, 2) + " dB (ceres:100 double)";
+                             FormatFixed(s.converged_mean, 2) + " dB (ceres:100 double)";
     int base = 0;
     const cv::Size size = cv::getTextSize(text, cv::FONT_HERSHEY_SIMPLEX, 0.42, 1, &base);
     PlainText(canvas, text, {left + 8, y - 5}, 0.42, SensorColour(s.sensor));
@@ -511,16 +503,16 @@ std::string FitTable(const std::vector<VariantResult>& results,
       md << "| " << ToString(r.sensor) << " | `" << r.variant.strategy << "` | "
          << ToString(r.variant.precision) << " | " << ToString(r.variant.jacobian) << " | "
          << r.ms.size() << " | " << Ms(r.ms_median) << " | " << Ms(r.ms_p90) << " | "
-         << Fixed(r.psnr_mean, 2) << " | " << (r.delta_db >= 0 ? "+" : "") << Fixed(r.delta_db, 2)
-         << " |";
-      if (clean) md << " " << Fixed(r.psnr_clean_mean, 2) << " |";
-      md << " " << Fixed(r.iterations_mean, 1) << " |\n";
+         << FormatFixed(r.psnr_mean, 2) << " | " << (r.delta_db >= 0 ? "+" : "")
+         << FormatFixed(r.delta_db, 2) << " |";
+      if (clean) md << " " << FormatFixed(r.psnr_clean_mean, 2) << " |";
+      md << " " << FormatFixed(r.iterations_mean, 1) << " |\n";
     }
     md << "| " << ToString(s.sensor) << " | **converged** `ceres:100` | double | analytic | "
        << s.converged_psnr.size() << " | " << Ms(s.converged_ms_median) << " | | "
-       << Fixed(s.converged_mean, 2) << " | 0 |";
-    if (clean) md << " " << Fixed(s.converged_clean_mean, 2) << " |";
-    md << " " << Fixed(s.converged_iterations_mean, 1) << " |\n";
+       << FormatFixed(s.converged_mean, 2) << " | 0 |";
+    if (clean) md << " " << FormatFixed(s.converged_clean_mean, 2) << " |";
+    md << " " << FormatFixed(s.converged_iterations_mean, 1) << " |\n";
   }
   md << "\nJacobian of all residuals at the first test frame (one `Evaluate`, median; autodiff "
         "of 3, analytic of 21):\n\n";
@@ -531,8 +523,8 @@ std::string FitTable(const std::vector<VariantResult>& results,
     md << "| " << ToString(s.sensor) << " | " << s.trunk->format.rows << "x" << s.trunk->format.cols
        << " | " << Ms(s.residuals_float_ms) << " ms | " << Ms(s.jacobian_float_ms) << " ms | "
        << Ms(s.jacobian_double_ms) << " ms | " << Ms(s.jacobian_autodiff_ms) << " ms | "
-       << Fixed(s.jacobian_autodiff_ms / s.jacobian_float_ms, 0) << "x | "
-       << Fixed(s.jacobian_autodiff_ms / s.jacobian_double_ms, 0) << "x |\n";
+       << FormatFixed(s.jacobian_autodiff_ms / s.jacobian_float_ms, 0) << "x | "
+       << FormatFixed(s.jacobian_autodiff_ms / s.jacobian_double_ms, 0) << "x |\n";
   }
   md << "\nTargets:\n\n";
   for (const auto& [name, t] : targets.items()) {
@@ -623,13 +615,13 @@ void RunFitBench(const FitBenchFlags& flags) {
       s.converged_clean_mean = Mean(s.converged_psnr_clean);
       s.converged_ms_median = Median(ms);
       s.converged_iterations_mean = Mean(iterations);
-      std::cout << "  converged ceres:100 double: PSNR " << Fixed(s.converged_mean, 2) << " dB, "
-                << Fixed(s.converged_iterations_mean, 1) << " iterations, "
+      std::cout << "  converged ceres:100 double: PSNR " << FormatFixed(s.converged_mean, 2)
+                << " dB, " << FormatFixed(s.converged_iterations_mean, 1) << " iterations, "
                 << Ms(s.converged_ms_median) << " ms median\n";
       MeasureJacobians(&s, latents[0]);
       std::cout << "  Jacobian: analytic float " << Ms(s.jacobian_float_ms) << " ms, double "
                 << Ms(s.jacobian_double_ms) << " ms, autodiff " << Ms(s.jacobian_autodiff_ms)
-                << " ms (" << Fixed(s.jacobian_autodiff_ms / s.jacobian_float_ms, 0)
+                << " ms (" << FormatFixed(s.jacobian_autodiff_ms / s.jacobian_float_ms, 0)
                 << "x float)\n";
     }
     for (const Variant& v : variants) {
@@ -668,8 +660,9 @@ void RunFitBench(const FitBenchFlags& flags) {
       r.converged_of_frames.assign(s.converged_psnr.begin(), s.converged_psnr.begin() + m);
       r.delta_db = r.psnr_mean - Mean(r.converged_of_frames);
       std::cout << "  " << v.Label() << ": " << Ms(r.ms_median) << " ms median, " << Ms(r.ms_p90)
-                << " p90, PSNR " << Fixed(r.psnr_mean, 2) << " dB (" << (r.delta_db >= 0 ? "+" : "")
-                << Fixed(r.delta_db, 2) << " vs converged), " << m << " frames\n";
+                << " p90, PSNR " << FormatFixed(r.psnr_mean, 2) << " dB ("
+                << (r.delta_db >= 0 ? "+" : "") << FormatFixed(r.delta_db, 2) << " vs converged), "
+                << m << " frames\n";
       results.push_back(std::move(r));
     }
   }
@@ -690,8 +683,9 @@ void RunFitBench(const FitBenchFlags& flags) {
     for (const SensorFitData& s : sensors) {
       ratio_double = std::min(ratio_double, s.jacobian_autodiff_ms / s.jacobian_double_ms);
     }
-    detail << "autodiff / analytic Jacobian time, min over sensors: " << Fixed(ratio, 0)
-           << "x against the float analytic Jacobian (the default), " << Fixed(ratio_double, 0)
+    detail << "autodiff / analytic Jacobian time, min over sensors: " << FormatFixed(ratio, 0)
+           << "x against the float analytic Jacobian (the default), "
+           << FormatFixed(ratio_double, 0)
            << "x against the double one (target >= 100x, checked against float)";
     targets["analytic_100x_faster_than_autodiff"] = {{"met", ratio >= 100},
                                                      {"detail", detail.str()}};
@@ -711,7 +705,7 @@ void RunFitBench(const FitBenchFlags& flags) {
       met = met && ok;
       if (worst != nullptr) {
         detail << ToString(s.sensor) << ": worst knn+ceres variant " << worst->variant.Label()
-               << " " << Fixed(worst->delta_db, 2) << " dB; ";
+               << " " << FormatFixed(worst->delta_db, 2) << " dB; ";
       }
     }
     detail << "(target: every knn+ceres variant within 0.5 dB of converged)";
@@ -735,7 +729,7 @@ void RunFitBench(const FitBenchFlags& flags) {
         detail << "no strategy within 1 dB; ";
       } else {
         detail << "fastest within 1 dB is " << best->variant.Label() << ", " << Ms(best->ms_median)
-               << " ms median, " << Fixed(best->delta_db, 2) << " dB; ";
+               << " ms median, " << FormatFixed(best->delta_db, 2) << " dB; ";
       }
     }
     detail << "(target: median <= 33 ms on one thread within 1 dB of converged"
@@ -1015,11 +1009,11 @@ void RunKernelBench(const KernelFlags& flags) {
               << (t.contains("lm_iteration_ms") ? Ms(t["lm_iteration_ms"].get<double>()) : "n/a")
               << " ms; autodiff / analytic Jacobian "
               << (t.contains("autodiff_over_analytic_float")
-                      ? Fixed(t["autodiff_over_analytic_float"].get<double>(), 0)
+                      ? FormatFixed(t["autodiff_over_analytic_float"].get<double>(), 0)
                       : "n/a")
               << "x (float), "
               << (t.contains("autodiff_over_analytic_double")
-                      ? Fixed(t["autodiff_over_analytic_double"].get<double>(), 0)
+                      ? FormatFixed(t["autodiff_over_analytic_double"].get<double>(), 0)
                       : "n/a")
               << "x (double)\n";
     per_trunk[s->label] = t;
@@ -1029,7 +1023,7 @@ void RunKernelBench(const KernelFlags& flags) {
     gflops = g->counters.count("GFLOPS") ? g->counters.at("GFLOPS") : 0;
   }
   const nlohmann::json machine = MachineDescription();
-  std::cout << "bench kernels: Eigen float GEMM 4096x256x256: " << Fixed(gflops, 1)
+  std::cout << "bench kernels: Eigen float GEMM 4096x256x256: " << FormatFixed(gflops, 1)
             << " GFLOP/s (one thread; -march=native "
             << (machine.value("avx512_compiled", false) ? "with" : "without")
             << " AVX-512 compiled in)\n";
@@ -1198,14 +1192,15 @@ void RunKnnBench(const KnnFlags& flags) {
   md << "|---|---|---|---|---|---|---|\n";
   for (const KnnRow& r : rows) {
     md << "| " << r.index << " | " << Ms(r.build_ms) << " | "
-       << (r.checks ? std::to_string(r.checks) : "exact") << " | " << Fixed(r.recall, 3) << " | "
-       << Ms(r.ms_median) << " | " << Ms(r.ms_p90) << " | " << Fixed(r.speedup, 1) << "x |\n";
+       << (r.checks ? std::to_string(r.checks) : "exact") << " | " << FormatFixed(r.recall, 3)
+       << " | " << Ms(r.ms_median) << " | " << Ms(r.ms_p90) << " | " << FormatFixed(r.speedup, 1)
+       << "x |\n";
   }
   std::cout << md.str();
   const std::string verdict =
       best != nullptr
           ? "met: " + best->index + " at " + std::to_string(best->checks) + " checks, recall@8 " +
-                Fixed(best->recall, 3) + ", " + Fixed(best->speedup, 1) +
+                FormatFixed(best->recall, 3) + ", " + FormatFixed(best->speedup, 1) +
                 "x faster than brute force"
           : "NOT met: no FLANN setting reaches recall@8 >= 0.95 at >= 10x the brute-force speed on "
             "this set";

@@ -93,10 +93,6 @@ struct Tally {
   std::vector<double> ms_after_fit;  // sampler + pose MLP + moments, given the latent fit
 };
 
-nlohmann::json NumberOrNull(double v) {
-  return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
-}
-
 void RunPosteriorBench(const PosteriorBenchFlags& flags) {
   std::vector<Tally> tallies;
   for (const std::string& name : SplitList(flags.samplers)) {

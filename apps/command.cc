@@ -1,8 +1,9 @@
 // Copyright 2026 The tactfunc Authors.
 #include "apps/command.h"
 
-#include <cstdio>
 #include <algorithm>
+#include <cmath>
+#include <cstdio>
 #include <iostream>
 #include <thread>
 
@@ -48,6 +49,18 @@ std::string FormatBytes(std::uint64_t bytes) {
   } else {
     std::snprintf(buffer, sizeof(buffer), "%llu B", static_cast<unsigned long long>(bytes));
   }
+  return buffer;
+}
+
+nlohmann::json NumberOrNull(double value) {
+  return std::isfinite(value) ? nlohmann::json(value) : nlohmann::json(nullptr);
+}
+
+std::string FormatFixed(double value, int digits, const char* missing) {
+  if (std::isnan(value)) return missing;
+  if (std::isinf(value)) return value > 0 ? "inf" : "-inf";
+  char buffer[64];
+  std::snprintf(buffer, sizeof(buffer), "%.*f", digits, value);
   return buffer;
 }
 

@@ -55,6 +55,13 @@ int ResolveThreads(int requested);
 // "12.3 MB"-style byte counts for humans.
 std::string FormatBytes(std::uint64_t bytes);
 
+// A finite number as JSON, null otherwise (JSON has no NaN or infinity).
+nlohmann::json NumberOrNull(double value);
+
+// `value` with `digits` decimals for tables and reports; "inf" / "-inf" for infinities
+// and `missing` for NaN.
+std::string FormatFixed(double value, int digits, const char* missing = "n/a");
+
 }  // namespace tactfunc::apps
 
 #endif  // TACTFUNC_APPS_COMMAND_H_

@@ -68,12 +68,6 @@ class InterruptScope {
   void (*previous_)(int) = SIG_DFL;
 };
 
-std::string Fixed(double value, int digits) {
-  std::ostringstream out;
-  out << std::fixed << std::setprecision(digits) << value;
-  return out.str();
-}
-
 // The command line that continues an interrupted run: the flags that select frames and
 // shape the run, plus --resume.
 std::string ResumeCommand(const EncodeFlags& flags) {
@@ -162,7 +156,7 @@ void RunEncode(const EncodeFlags& flags) {
       bar.Tick(p.done - shown);
       shown = p.done;
     }
-    if (p.done > 0) bar.SetStatus("psnr " + Fixed(p.mean_psnr, 2) + " dB");
+    if (p.done > 0) bar.SetStatus("psnr " + FormatFixed(p.mean_psnr, 2) + " dB");
   };
 
   LatentEncoder::Summary summary;
@@ -175,14 +169,15 @@ void RunEncode(const EncodeFlags& flags) {
 
   std::cout << "encode: " << (functaset.complete() ? "wrote " : "wrote a PARTIAL functaset of ")
             << functaset.size() << " frames to " << flags.out << " (" << summary.frames_encoded
-            << " encoded in " << Fixed(summary.seconds, 2) << " s, "
-            << Fixed(summary.frames_per_second, 1) << " frames/s on " << options.threads
+            << " encoded in " << FormatFixed(summary.seconds, 2) << " s, "
+            << FormatFixed(summary.frames_per_second, 1) << " frames/s on " << options.threads
             << " thread(s)";
   if (summary.frames_resumed > 0) std::cout << ", " << summary.frames_resumed << " resumed";
   std::cout << ")\n";
   for (const auto& [sensor, psnr] : summary.mean_psnr) {
     std::cout << "  " << ToString(sensor) << ": " << summary.frames.at(sensor)
-              << " frames, mean PSNR " << Fixed(psnr, 2) << " dB (against the noisy frames)\n";
+              << " frames, mean PSNR " << FormatFixed(psnr, 2)
+              << " dB (against the noisy frames)\n";
   }
   if (summary.non_finite_latents > 0) std::cout << "  warning: " << summary.message << "\n";
 

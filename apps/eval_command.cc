@@ -65,17 +65,6 @@ struct EvalFlags {
 
 constexpr double kNan = std::numeric_limits<double>::quiet_NaN();
 
-nlohmann::json NumberOrNull(double v) {
-  return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
-}
-
-std::string Fixed(double v, int digits) {
-  if (!std::isfinite(v)) return "-";
-  char buffer[48];
-  std::snprintf(buffer, sizeof(buffer), "%.*f", digits, v);
-  return buffer;
-}
-
 std::string Sci(double v) {
   if (!std::isfinite(v)) return "-";
   char buffer[48];
@@ -754,18 +743,18 @@ void RunEval(const EvalFlags& flags) {
     const bool has_pose = r.pose.count > 0;
     md << "| " << r.approach << (r.note.empty() ? "" : " (" + r.note + ")") << " | "
        << (r.pose_from.empty() ? "-" : r.pose_from) << " | " << ToString(r.sensor) << " | "
-       << ToString(r.split) << " | " << Fixed(r.rep_bytes / 1e6, 3) << " | "
-       << Fixed(r.bytes_per_frame, 0) << " | "
-       << (r.psnr_applicable ? Fixed(r.psnr, 2) : std::string("n/a (lossless)")) << " | "
+       << ToString(r.split) << " | " << FormatFixed(r.rep_bytes / 1e6, 3, "-") << " | "
+       << FormatFixed(r.bytes_per_frame, 0, "-") << " | "
+       << (r.psnr_applicable ? FormatFixed(r.psnr, 2, "-") : std::string("n/a (lossless)")) << " | "
        << (has_pose ? Sci(r.pose.PoseMse()) : "-") << " | "
-       << (has_pose ? Fixed(r.pose.RmseMm(), 3) : "-") << " | "
-       << (has_pose ? Fixed(r.pose.RmseDeg(), 2) : "-") << " |\n";
+       << (has_pose ? FormatFixed(r.pose.RmseMm(), 3, "-") : "-") << " | "
+       << (has_pose ? FormatFixed(r.pose.RmseDeg(), 2, "-") : "-") << " |\n";
   }
   std::ostringstream targets_md;
   for (const auto& [sensor, t] : targets.items()) {
     auto yes = [](const nlohmann::json& j) { return j["met"].get<bool>() ? "**met**" : "**NOT met**"; };
     auto num = [](const nlohmann::json& j, int digits) {
-      return j.is_number() ? Fixed(j.get<double>(), digits) : std::string("-");
+      return j.is_number() ? FormatFixed(j.get<double>(), digits, "-") : std::string("-");
     };
     auto sci = [](const nlohmann::json& j) {
       return j.is_number() ? Sci(j.get<double>()) : std::string("-");

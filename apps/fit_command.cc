@@ -160,13 +160,6 @@ std::unique_ptr<KnnIndex> LoadOrBuildIndex(const std::string& functaset_path, Se
 
 const cv::Scalar kBackground(32, 32, 32);
 
-std::string Fixed(double value, int digits) {
-  if (!std::isfinite(value)) return value > 0 ? "inf" : "n/a";
-  char buffer[48];
-  std::snprintf(buffer, sizeof(buffer), "%.*f", digits, value);
-  return buffer;
-}
-
 void WriteFitPicture(const std::string& path, const TrunkTargets& target,
                      const Eigen::MatrixXf& recon, const LatentFitter::Summary& summary,
                      SensorKind sensor, int height) {
@@ -198,8 +191,8 @@ void WriteFitPicture(const std::string& path, const TrunkTargets& target,
   std::snprintf(error_title, sizeof(error_title), "error (+-%.3g)", error_scale);
   const std::string headline =
       std::string(ToString(sensor)) + " " + std::to_string(rows) + "x" + std::to_string(cols) +
-      "  " + summary.strategy.ToString() + ": PSNR " + Fixed(summary.psnr, 2) + " dB, " +
-      Fixed(summary.total_time_ms, 1) + " ms, " + ToString(summary.termination_type);
+      "  " + summary.strategy.ToString() + ": PSNR " + FormatFixed(summary.psnr, 2) + " dB, " +
+      FormatFixed(summary.total_time_ms, 1) + " ms, " + ToString(summary.termination_type);
   cv::Mat title(26, 3 * w + 8, CV_8UC3, kBackground);
   PutLabel(title, headline, {6, 18}, 0.45);
   WritePicture(
@@ -288,14 +281,14 @@ void RunFit(const FitFlags& flags) {
 
   std::cout << (flags.full_report ? summary.FullReport() : summary.BriefReport() + "\n");
   std::cout << "fit: " << ToString(sensor) << " " << targets.rows << "x" << targets.cols
-            << ", PSNR " << Fixed(summary.psnr, 2) << " dB in " << Fixed(summary.total_time_ms, 1)
-            << " ms (" << summary.strategy.ToString() << ", " << ToString(options.precision) << ", "
-            << ToString(options.jacobian) << ")\n";
+            << ", PSNR " << FormatFixed(summary.psnr, 2) << " dB in "
+            << FormatFixed(summary.total_time_ms, 1) << " ms (" << summary.strategy.ToString()
+            << ", " << ToString(options.precision) << ", " << ToString(options.jacobian) << ")\n";
   if (strategy.knn && !summary.neighbor_labels.empty()) {
     const auto& entries = functaset.entries(sensor);
     std::cout << "fit: nearest functaset frame " << entries[summary.neighbor_labels[0]].id
-              << " (weight " << Fixed(summary.neighbor_weights[0], 3) << ") via " << index_path
-              << (index_rebuilt ? " (rebuilt)" : "") << "\n";
+              << " (weight " << FormatFixed(summary.neighbor_weights[0], 3) << ") via "
+              << index_path << (index_rebuilt ? " (rebuilt)" : "") << "\n";
   }
 
   if (!flags.out.empty()) {

@@ -89,17 +89,6 @@ nlohmann::json CountOrNull(double value) {
   return static_cast<std::int64_t>(std::llround(value));
 }
 
-nlohmann::json NumberOrNull(double value) {
-  return std::isfinite(value) ? nlohmann::json(value) : nlohmann::json(nullptr);
-}
-
-std::string Fixed(double value, int digits) {
-  if (!std::isfinite(value)) return "n/a";
-  char buffer[32];
-  std::snprintf(buffer, sizeof(buffer), "%.*f", digits, value);
-  return buffer;
-}
-
 // A trunk model: per sensor the trunk's shape, working format, inner loop and, from the
 // model's info, the training run.
 nlohmann::json DescribeModel(const std::string& path) {
@@ -138,8 +127,9 @@ nlohmann::json DescribeModel(const std::string& path) {
     const double steps = NumberAt(run, "steps"), seconds = NumberAt(run, "train_seconds");
     const double psnr = NumberAt(run, "train_psnr");
     if (std::isfinite(steps)) {
-      std::cout << "           trained " << Fixed(steps, 0) << " steps in " << Fixed(seconds, 0)
-                << " s, monitor PSNR after K steps " << Fixed(psnr, 2) << " dB\n";
+      std::cout << "           trained " << FormatFixed(steps, 0) << " steps in "
+                << FormatFixed(seconds, 0) << " s, monitor PSNR after K steps "
+                << FormatFixed(psnr, 2) << " dB\n";
     }
     trunk["steps"] = CountOrNull(steps);
     trunk["train_seconds"] = NumberOrNull(seconds);
@@ -170,7 +160,7 @@ nlohmann::json DescribeFunctaset(const std::string& path) {
     for (const auto& [split, values] : psnrs) {
       const PsnrStats stats = ComputePsnrStats(values);
       std::printf(", %s %zu at %s dB", ToString(split), values.size(),
-                  Fixed(stats.mean, 2).c_str());
+                  FormatFixed(stats.mean, 2).c_str());
       splits[ToString(split)] = {{"count", values.size()}, {"psnr_mean", NumberOrNull(stats.mean)}};
     }
     std::printf("\n");
@@ -223,7 +213,7 @@ void DescribeFile(const std::string& path, bool json) {
   const std::uint64_t bytes = std::filesystem::file_size(path);
   const double version = NumberAt(meta, "version");
   std::cout << path << ": " << file.kind() << " file, format " << StringAt(meta, "format")
-            << " version " << Fixed(version, 0) << ", " << FormatBytes(bytes) << " ("
+            << " version " << FormatFixed(version, 0) << ", " << FormatBytes(bytes) << " ("
             << file.tensors().size() << " tensors, " << FormatBytes(tensor_bytes)
             << "), checksum " << file.checksum() << " (verified)\n";
   nlohmann::json out = {{"file", path},
@@ -243,8 +233,8 @@ void DescribeFile(const std::string& path, bool json) {
     // A trunk training checkpoint (estimation/trunk_trainer.cc writes these fields).
     const std::string sensor = StringAt(meta, "sensor");
     const double step = NumberAt(meta, "step"), seconds = NumberAt(meta, "train_seconds");
-    std::cout << "  " << sensor << " trunk at step " << Fixed(step, 0) << " after "
-              << Fixed(seconds, 0) << " s of training; the same train command plus --resume "
+    std::cout << "  " << sensor << " trunk at step " << FormatFixed(step, 0) << " after "
+              << FormatFixed(seconds, 0) << " s of training; the same train command plus --resume "
               << "continues it (with a larger --steps to extend a finished run)\n";
     out["checkpoint"] = {
         {"sensor", sensor}, {"step", CountOrNull(step)}, {"train_seconds", NumberOrNull(seconds)}};

@@ -82,13 +82,6 @@ const cv::Scalar kMeanColour(255, 255, 0);    // cyan
 const cv::Scalar kTruthColour(80, 255, 80);   // green
 const cv::Scalar kModeColour(255, 80, 255);   // magenta
 
-std::string Fixed(double value, int digits) {
-  if (!std::isfinite(value)) return "n/a";
-  char buffer[48];
-  std::snprintf(buffer, sizeof(buffer), "%.*f", digits, value);
-  return buffer;
-}
-
 // A frame to estimate: its trunk targets, its contact image and what is known about it.
 struct Input {
   SensorKind sensor = SensorKind::kSoftBubble;
@@ -147,7 +140,8 @@ void DrawModes(cv::Mat& panel, const View& view, const std::vector<PoseMode>& mo
     const cv::Point p(view(modes[k].mean.x(), modes[k].mean.y()));
     cv::drawMarker(panel, p, cv::Scalar(0, 0, 0), cv::MARKER_TILTED_CROSS, 16, 4, cv::LINE_AA);
     cv::drawMarker(panel, p, kModeColour, cv::MARKER_TILTED_CROSS, 16, 2, cv::LINE_AA);
-    PutLabel(panel, Fixed(100 * modes[k].weight, 0) + "%", p + cv::Point(8, -8), 0.4, kModeColour);
+    PutLabel(panel, FormatFixed(100 * modes[k].weight, 0) + "%", p + cv::Point(8, -8), 0.4,
+             kModeColour);
   }
 }
 
@@ -187,13 +181,13 @@ void DrawGrid(cv::Mat& panel, const View& view, double half_m) {
   for (double x = std::ceil(lo_x / step) * step; x <= hi_x; x += step) {
     const int c = static_cast<int>(std::lround(view(x, 0).x));
     cv::line(panel, {c, 0}, {c, panel.rows}, cv::Scalar(70, 70, 70), 1);
-    PutLabel(panel, Fixed(x * 1e3, digits), {c + 2, panel.rows - 6}, 0.35,
+    PutLabel(panel, FormatFixed(x * 1e3, digits), {c + 2, panel.rows - 6}, 0.35,
              cv::Scalar(200, 200, 200));
   }
   for (double y = std::ceil(lo_y / step) * step; y <= hi_y; y += step) {
     const int r = static_cast<int>(std::lround(view(0, y).y));
     cv::line(panel, {0, r}, {panel.cols, r}, cv::Scalar(70, 70, 70), 1);
-    PutLabel(panel, Fixed(y * 1e3, digits), {3, r - 3}, 0.35, cv::Scalar(200, 200, 200));
+    PutLabel(panel, FormatFixed(y * 1e3, digits), {3, r - 3}, 0.35, cv::Scalar(200, 200, 200));
   }
 }
 
@@ -231,7 +225,7 @@ cv::Mat YawHistogram(int width, int height, const PoseDistribution& d, const SE2
     const int x = static_cast<int>(x_of(yaw));
     cv::line(panel, {x, top + static_cast<int>(plot_h)}, {x, top + static_cast<int>(plot_h) + 4},
              cv::Scalar(200, 200, 200), 1);
-    PutLabel(panel, Fixed(yaw * kDeg, 1), {std::min(x - 14, width - 46), height - 8}, 0.38,
+    PutLabel(panel, FormatFixed(yaw * kDeg, 1), {std::min(x - 14, width - 46), height - 8}, 0.38,
              cv::Scalar(200, 200, 200));
   }
   auto vline = [&](double yaw, const cv::Scalar& colour) {
@@ -317,13 +311,14 @@ void WritePosteriorPicture(const std::string& path, const Input& input, const Po
 
   const std::string headline =
       std::string(ToString(input.sensor)) + "  " + input.name + "  " + sampler + ": " +
-      std::to_string(d.size()) + " samples, " + Fixed(s.total_time_ms, 1) + " ms, n = " +
-      std::to_string(n) + "  mean x " + Fixed(s.mean.x() * 1e3, 2) + " mm, y " +
-      Fixed(s.mean.y() * 1e3, 2) + " mm, yaw " + Fixed(s.mean.yaw() * kDeg, 1) + " deg";
+      std::to_string(d.size()) + " samples, " + FormatFixed(s.total_time_ms, 1) + " ms, n = " +
+      std::to_string(n) + "  mean x " + FormatFixed(s.mean.x() * 1e3, 2) + " mm, y " +
+      FormatFixed(s.mean.y() * 1e3, 2) + " mm, yaw " + FormatFixed(s.mean.yaw() * kDeg, 1) + " deg";
   std::string legend = "orange: samples (tick = heading)   cyan: mean   magenta: modes";
   if (truth) {
-    legend += "   green: truth (" + Fixed(truth->x() * 1e3, 2) + ", " + Fixed(truth->y() * 1e3, 2) +
-              " mm, " + Fixed(truth->yaw() * kDeg, 1) + " deg)";
+    legend += "   green: truth (" + FormatFixed(truth->x() * 1e3, 2) + ", " +
+              FormatFixed(truth->y() * 1e3, 2) + " mm, " + FormatFixed(truth->yaw() * kDeg, 1) +
+              " deg)";
   }
   const int title_width = std::max(total_width, 760);
   cv::Mat title(46, title_width, CV_8UC3, kBackground);

@@ -71,10 +71,6 @@ std::string Db(double value) {
   return buffer;
 }
 
-nlohmann::json JsonOrNull(double value) {
-  return std::isfinite(value) ? nlohmann::json(value) : nlohmann::json(nullptr);
-}
-
 // Up to n entries of one sensor, test split first: each split evenly spread, or, with
 // `worst`, its lowest-PSNR frames first (frames without a finite PSNR last).
 std::vector<const ReconstructionEvaluator::FrameResult*> PickExamples(
@@ -255,7 +251,7 @@ void RunRecon(const ReconFlags& flags) {
         const auto* g = summary.Find(sensor, split);
         const double mean =
             g == nullptr ? std::numeric_limits<double>::quiet_NaN() : (g->*stats).mean;
-        out[ToString(sensor)] = JsonOrNull(mean);
+        out[ToString(sensor)] = NumberOrNull(mean);
       }
       return out;
     };
@@ -273,9 +269,9 @@ void RunRecon(const ReconFlags& flags) {
     for (const auto& g : summary.groups) {
       auto stats = [](const PsnrStats& s) {
         return nlohmann::json{{"count", s.count},
-                              {"mean", JsonOrNull(s.mean)},
-                              {"median", JsonOrNull(s.median)},
-                              {"p5", JsonOrNull(s.p5)}};
+                              {"mean", NumberOrNull(s.mean)},
+                              {"median", NumberOrNull(s.median)},
+                              {"p5", NumberOrNull(s.p5)}};
       };
       groups.push_back({{"sensor", ToString(g.sensor)},
                         {"split", ToString(g.split)},

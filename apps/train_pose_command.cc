@@ -136,10 +136,6 @@ void CheckToolName(const std::string& tool, const char* flag) {
   }
 }
 
-nlohmann::json NumberOrNull(double v) {
-  return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
-}
-
 std::string Cell(double v, int width, int digits) {
   char buffer[32];
   if (std::isfinite(v)) {
@@ -371,11 +367,11 @@ void RunTrainPose(const TrainPoseFlags& flags) {
     const int n = SymmetryOrderOfTool(tool, &known);
     row(tool, tool, known ? std::to_string(n) : "?");
     const ErrorSums a = get(train_errors, tool), b = get(test_errors, tool);
-    per_tool[tool] = {{"symmetry_order", n},
-                      {"count", {{"train", a.count}, {"test", b.count}}},
-                      {"rmse_mm", {{"train", NumberOrNull(a.RmseMm())}, {"test", NumberOrNull(b.RmseMm())}}},
-                      {"rmse_deg",
-                       {{"train", NumberOrNull(a.RmseDeg())}, {"test", NumberOrNull(b.RmseDeg())}}}};
+    per_tool[tool] = {
+        {"symmetry_order", n},
+        {"count", {{"train", a.count}, {"test", b.count}}},
+        {"rmse_mm", {{"train", NumberOrNull(a.RmseMm())}, {"test", NumberOrNull(b.RmseMm())}}},
+        {"rmse_deg", {{"train", NumberOrNull(a.RmseDeg())}, {"test", NumberOrNull(b.RmseDeg())}}}};
   }
   row(std::string("all (") + ToString(sensor) + ")", "", "");
   if (calibration.inputs.rows() > 0) {
@@ -389,7 +385,8 @@ void RunTrainPose(const TrainPoseFlags& flags) {
   const ErrorSums all_train = get(train_errors, ""), all_test = get(test_errors, "");
 
   const nlohmann::json figures = {
-      {"rmse_mm", {{"train", NumberOrNull(all_train.RmseMm())}, {"test", NumberOrNull(all_test.RmseMm())}}},
+      {"rmse_mm",
+       {{"train", NumberOrNull(all_train.RmseMm())}, {"test", NumberOrNull(all_test.RmseMm())}}},
       {"rmse_deg",
        {{"train", NumberOrNull(all_train.RmseDeg())}, {"test", NumberOrNull(all_test.RmseDeg())}}}};
   // The latent map the MLP was trained on: what the posteriors must centre on
