@@ -17,6 +17,7 @@
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
 #include "estimation/dataset.h"
+#include "estimation/file_io.h"
 #include "estimation/functaset.h"
 #include "estimation/reconstruction.h"
 #include "models/functa_model.h"
@@ -91,8 +92,8 @@ nlohmann::json CountOrNull(double value) {
 
 // A trunk model: per sensor the trunk's shape, working format, inner loop and, from the
 // model's info, the training run.
-nlohmann::json DescribeModel(const std::string& path) {
-  const FunctaModel model = FunctaModel::Load(path);
+nlohmann::json DescribeModel(const std::string& bytes, const std::string& path) {
+  const FunctaModel model = FunctaModel::Parse(bytes, path);
   const nlohmann::json info = nlohmann::json::parse(model.info_json());
   const nlohmann::json trunks_info = ObjectAt(info, "trunks");
   const std::string preset = StringAt(info, "preset");
@@ -140,8 +141,8 @@ nlohmann::json DescribeModel(const std::string& path) {
 }
 
 // A functaset: per sensor the latent size, the entries per split and their mean PSNR.
-nlohmann::json DescribeFunctaset(const std::string& path) {
-  const Functaset functaset = Functaset::Load(path);
+nlohmann::json DescribeFunctaset(const std::string& bytes, const std::string& path) {
+  const Functaset functaset = Functaset::Parse(bytes, path);
   std::printf("  model checksum %u, dataset %s, latents %s%s\n", functaset.model_checksum(),
               functaset.dataset().c_str(),
               functaset.BytesPerLatentFloat() == 2 ? "float16" : "float32",
@@ -177,8 +178,8 @@ nlohmann::json DescribeFunctaset(const std::string& path) {
 }
 
 // A pose model: the MLP's shape and its calibration set.
-nlohmann::json DescribePoseModel(const std::string& path) {
-  const PoseMlp pose = PoseMlp::Load(path);
+nlohmann::json DescribePoseModel(const std::string& bytes, const std::string& path) {
+  const PoseMlp pose = PoseMlp::Parse(bytes, path);
   std::printf("  pose MLP: %d inputs (latent floats), %d layers, %d parameters, %lld calibration "
               "residuals\n",
               pose.input_dim(), pose.num_layers(), pose.NumParameters(),
@@ -189,28 +190,18 @@ nlohmann::json DescribePoseModel(const std::string& path) {
           {"calibration_residuals", pose.calibration_residuals().rows()}};
 }
 
-// Any tactfunc file: the container's facts, then those of its kind. The file is fully
-// read and its checksum checked first, so a damaged file fails here with the reason.
+// Any tactfunc file: the container's facts, then those of its kind (parsed from the same
+// bytes, read once). The checksum is checked first, so a damaged file fails here with
+// the reason.
 void DescribeFile(const std::string& path, bool json) {
-  const TensorFile file = TensorFile::Read(path);
+  const std::string content = ReadFile(path);
+  const TensorFile file = TensorFile::Parse(content, path);
   const nlohmann::json meta = nlohmann::json::parse(file.meta_json());
   std::uint64_t tensor_bytes = 0;
   for (const TensorFile::Tensor& t : file.tensors()) {
-    std::uint64_t width = 0;
-    switch (t.dtype) {  // no default: a new dtype must be counted here
-      case TensorFile::DType::kFloat64:
-        width = 8;
-        break;
-      case TensorFile::DType::kFloat32:
-        width = 4;
-        break;
-      case TensorFile::DType::kFloat16:
-        width = 2;
-        break;
-    }
-    tensor_bytes += static_cast<std::uint64_t>(t.numel()) * width;
+    tensor_bytes += static_cast<std::uint64_t>(t.numel()) * ElementBytes(t.dtype);
   }
-  const std::uint64_t bytes = std::filesystem::file_size(path);
+  const std::uint64_t bytes = content.size();
   const double version = NumberAt(meta, "version");
   std::cout << path << ": " << file.kind() << " file, format " << StringAt(meta, "format")
             << " version " << FormatFixed(version, 0) << ", " << FormatBytes(bytes) << " ("
@@ -224,11 +215,11 @@ void DescribeFile(const std::string& path, bool json) {
                         {"tensors", file.tensors().size()},
                         {"checksum", file.checksum()}};
   if (file.kind() == "model") {
-    out["model"] = DescribeModel(path);
+    out["model"] = DescribeModel(content, path);
   } else if (file.kind() == "functaset") {
-    out["functaset"] = DescribeFunctaset(path);
+    out["functaset"] = DescribeFunctaset(content, path);
   } else if (file.kind() == "pose_model") {
-    out["pose_model"] = DescribePoseModel(path);
+    out["pose_model"] = DescribePoseModel(content, path);
   } else if (file.kind() == "checkpoint") {
     // A trunk training checkpoint (estimation/trunk_trainer.cc writes these fields).
     const std::string sensor = StringAt(meta, "sensor");

@@ -39,18 +39,6 @@ T GetLittle(const std::string& bytes, std::size_t offset) {
   return static_cast<T>(value);
 }
 
-std::size_t ElementBytes(TensorFile::DType dtype) {
-  switch (dtype) {
-    case TensorFile::DType::kFloat16:
-      return 2;
-    case TensorFile::DType::kFloat32:
-      return 4;
-    case TensorFile::DType::kFloat64:
-      return 8;
-  }
-  return 8;
-}
-
 std::uint16_t HalfBits(double v) {
   return Eigen::numext::bit_cast<std::uint16_t>(Eigen::half(static_cast<float>(v)));
 }
@@ -79,6 +67,18 @@ std::int64_t TensorFile::Tensor::numel() const {
   std::int64_t n = 1;
   for (std::int64_t d : shape) n *= d;
   return n;
+}
+
+std::size_t ElementBytes(TensorFile::DType dtype) {
+  switch (dtype) {
+    case TensorFile::DType::kFloat16:
+      return 2;
+    case TensorFile::DType::kFloat32:
+      return 4;
+    case TensorFile::DType::kFloat64:
+      return 8;
+  }
+  return 8;
 }
 
 const char* ToString(TensorFile::DType dtype) {

@@ -31,6 +31,7 @@
 #ifndef TACTFUNC_MODELS_TENSOR_FILE_H_
 #define TACTFUNC_MODELS_TENSOR_FILE_H_
 
+#include <cstddef>
 #include <cstdint>
 #include <stdexcept>
 #include <string>
@@ -107,6 +108,8 @@ class TensorFile {
 };
 
 const char* ToString(TensorFile::DType dtype);
+// Bytes one element of `dtype` takes in the file: 2, 4 or 8.
+std::size_t ElementBytes(TensorFile::DType dtype);
 
 // CRC-32 (zlib's polynomial 0xEDB88320), as Python's zlib.crc32.
 std::uint32_t Crc32(const void* data, std::size_t size);
