@@ -1,6 +1,6 @@
 // Copyright 2026 The tactfunc Authors.
 //
-// Benchmarks of latent fitting (issue 4; estimation/latent_fitter.h, knn_index.h):
+// Benchmarks of latent fitting (issue 4; estimation/fitting/latent_fitter.h, knn_index.h):
 //
 //   tactfunc bench fit      every LatentFitter strategy on the test frames of a dataset:
 //                           per-frame time (median, p90) and mean PSNR, against the
@@ -44,14 +44,14 @@
 #include "benchmark/benchmark.h"
 #include "ceres/problem.h"
 #include "ceres/solver.h"
-#include "estimation/dataset.h"
-#include "estimation/functaset.h"
-#include "estimation/internal/latent_cost_functions.h"
-#include "estimation/knn_index.h"
-#include "estimation/latent_fitter.h"
-#include "estimation/reconstruction.h"
-#include "estimation/trunk_targets.h"
-#include "models/functa_model.h"
+#include "estimation/data/dataset.h"
+#include "estimation/functaset/functaset.h"
+#include "estimation/fitting/internal/latent_cost_functions.h"
+#include "estimation/knn/knn_index.h"
+#include "estimation/fitting/latent_fitter.h"
+#include "estimation/evaluation/reconstruction.h"
+#include "estimation/data/trunk_targets.h"
+#include "models/trunk/functa_model.h"
 
 namespace tactfunc::apps {
 namespace {
@@ -488,7 +488,7 @@ std::string FitTable(const std::vector<VariantResult>& results,
      << ". Time per frame is wall time of `LatentFitter::Fit` (std::chrono, one measurement per "
         "frame; reading and preprocessing excluded), median and p90 over the frames: a per-frame "
         "distribution, not a Google Benchmark steady state. PSNR is THE PSNR of "
-        "estimation/trunk_targets.h against the noisy test frame"
+        "estimation/data/trunk_targets.h against the noisy test frame"
      << (clean ? " (and against its clean copy)" : "")
      << "; \"vs conv.\" is the mean PSNR minus the converged PSNR (ceres:100, double, tolerances "
         "1e-12/1e-14/1e-12) of the same frames. k-NN searches the functaset's TRAIN latents "

@@ -40,13 +40,13 @@
 #include "apps/command.h"
 #include "apps/model_inputs.h"
 #include "apps/progress_bar.h"
-#include "estimation/dataset.h"
-#include "estimation/functaset.h"
-#include "estimation/latent_fitter.h"
-#include "estimation/trunk_targets.h"
-#include "models/functa_model.h"
-#include "models/tool.h"
-#include "samplers/pose_posterior.h"
+#include "estimation/data/dataset.h"
+#include "estimation/functaset/functaset.h"
+#include "estimation/fitting/latent_fitter.h"
+#include "estimation/data/trunk_targets.h"
+#include "models/trunk/functa_model.h"
+#include "models/simulator/tool.h"
+#include "estimation/posterior/pose_posterior.h"
 
 namespace tactfunc::apps {
 namespace {
@@ -141,7 +141,7 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
   options.num_samples = flags.samples;
   options.seed = flags.seed;
   options.knn.k = flags.knn_k;
-  // Centre on the latent map the pose MLP was trained on (samplers/pose_posterior.h).
+  // Centre on the latent map the pose MLP was trained on (estimation/posterior/pose_posterior.h).
   options.fit.strategy = LatentMapOfPoseModel(pose_model, trunk);
   options.model_error = !flags.no_model_error;
   options.sgld.num_threads = 1;  // one core, as the header says (chains run serially)

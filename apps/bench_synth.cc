@@ -8,10 +8,10 @@
 
 #include "apps/bench.h"
 #include "benchmark/benchmark.h"
-#include "estimation/file_io.h"
-#include "models/contact_simulator.h"
-#include "models/seed.h"
-#include "models/tool.h"
+#include "estimation/data/image_io.h"
+#include "models/simulator/contact_simulator.h"
+#include "models/core/seed.h"
+#include "models/simulator/tool.h"
 
 namespace tactfunc::apps {
 namespace {

@@ -8,7 +8,7 @@
 #include <string>
 
 #include "CLI/CLI.hpp"
-#include "estimation/dataset.h"
+#include "estimation/data/dataset.h"
 
 namespace tactfunc::apps {
 

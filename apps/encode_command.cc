@@ -1,7 +1,7 @@
 // Copyright 2026 The tactfunc Authors.
 //
 // tactfunc encode: a dataset -> its functaset under a trained model (one latent per
-// frame, estimation/latent_encoder.h; file format in docs/FUNCTASET.md).
+// frame, estimation/functaset/latent_encoder.h; file format in docs/FUNCTASET.md).
 //
 // The --out file doubles as the checkpoint: every --checkpoint-every frames a partial
 // functaset ("complete": false) is written there atomically. Ctrl-C (SIGINT) lets the
@@ -20,11 +20,11 @@
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
 #include "apps/progress_bar.h"
-#include "estimation/dataset.h"
-#include "estimation/functaset.h"
-#include "estimation/latent_encoder.h"
-#include "models/functa_model.h"
-#include "models/tensor_file.h"
+#include "estimation/data/dataset.h"
+#include "estimation/functaset/functaset.h"
+#include "estimation/functaset/latent_encoder.h"
+#include "models/trunk/functa_model.h"
+#include "models/core/tensor_file.h"
 
 namespace tactfunc::apps {
 namespace {

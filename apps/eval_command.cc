@@ -1,7 +1,7 @@
 // Copyright 2026 The tactfunc Authors.
 //
 // tactfunc eval: the paper's Table I on a dataset -- representation size, reconstruction
-// PSNR and pose error of TactFunc against baselines (estimation/baselines.h), on train
+// PSNR and pose error of TactFunc against baselines (estimation/evaluation/baselines.h), on train
 // and test, plus a rate-distortion picture:
 //
 //   tactfunc eval --data D --model M --functaset F --pose-model P --out DIR [--json]
@@ -16,7 +16,7 @@
 //               frame match the latent's bytes; no pose row
 //   Raw frames  the frames uncompressed; PSNR not applicable; pose: ridge and k-NN on
 //               downsampled pixels (stand-ins for the paper's ResNet-18)
-// Every PSNR is THE PSNR of estimation/trunk_targets.h on the model's working-resolution
+// Every PSNR is THE PSNR of estimation/data/trunk_targets.h on the model's working-resolution
 // frames; pose errors are scored as train-pose scores them (baselines.h, ScorePoses).
 #include <algorithm>
 #include <cmath>
@@ -37,16 +37,16 @@
 #include "apps/model_inputs.h"
 #include "apps/pictures.h"
 #include "apps/progress_bar.h"
-#include "estimation/baselines.h"
-#include "estimation/dataset.h"
-#include "estimation/file_io.h"
-#include "estimation/functaset.h"
-#include "estimation/internal/parallel_for.h"
-#include "estimation/reconstruction.h"
-#include "estimation/trunk_targets.h"
-#include "models/file_util.h"
-#include "models/functa_model.h"
-#include "models/pose_mlp.h"
+#include "estimation/evaluation/baselines.h"
+#include "estimation/data/dataset.h"
+#include "estimation/data/image_io.h"
+#include "estimation/functaset/functaset.h"
+#include "models/core/parallel_for.h"
+#include "estimation/evaluation/reconstruction.h"
+#include "estimation/data/trunk_targets.h"
+#include "models/core/atomic_file.h"
+#include "models/trunk/functa_model.h"
+#include "models/pose/pose_mlp.h"
 
 namespace tactfunc::apps {
 namespace {
@@ -794,7 +794,7 @@ void RunEval(const EvalFlags& flags) {
           "bytes/frame: codes as stored (TactFunc latents float16 by default, PCA float32); JPEG without its shared tables "
           "(counted once in rep. size); raw: rows x cols x channels x bytes per sample at the "
           "native resolution. PSNR: mean over the split's frames of THE PSNR of "
-          "estimation/trunk_targets.h at the model's working resolution (n/a for raw frames: "
+          "estimation/data/trunk_targets.h at the model's working resolution (n/a for raw frames: "
           "lossless). pose MSE: mean over frames of (dx^2 + dy^2 + dyaw^2) / 3 in m and rad, "
           "yaw modulo the tool's symmetry.\n\nTargets:\n\n"
        << targets_md.str();
@@ -807,7 +807,7 @@ void RunEval(const EvalFlags& flags) {
     const RdCurves& c = curves[sensor];
     panels.push_back(RateDistortionPlot(
         sensor, c,
-        std::string("test split; PSNR of estimation/trunk_targets.h at the working resolution; ") +
+        std::string("test split; PSNR of estimation/data/trunk_targets.h at the working resolution; ") +
             machine.value("cpu", std::string("?"))));
     rd[ToString(sensor)] = {{"tactfunc", RdJson(c.tactfunc)},
                             {"pca", RdJson(c.pca)},

@@ -1,16 +1,16 @@
 // Copyright 2026 The tactfunc Authors.
 //
 // tactfunc fit: the latent of ONE new frame under a trained model (Sec. III-C of
-// "Tactile Functasets"), with any LatentFitter strategy (estimation/latent_fitter.h):
+// "Tactile Functasets"), with any LatentFitter strategy (estimation/fitting/latent_fitter.h):
 //
 //   tactfunc fit --model M.tfm --frame F.png --reference R.png --strategy ceres:10
 //   tactfunc fit --model M.tfm --functaset S.tfs --frame F.png --reference R.png
 //       --strategy knn+ceres:5 --out DIR --json
 //
 // The frame and its sensor's reference are read in the sensor's on-disk encoding
-// (estimation/file_io.h); the sensor is --sensor, else inferred from the frame as
+// (estimation/data/image_io.h); the sensor is --sensor, else inferred from the frame as
 // Dataset::Open infers a user folder's (16-bit one-channel = bubble, 8-bit = gelslim).
-// They become trunk targets with the model's FrameFormat (estimation/trunk_targets.h).
+// They become trunk targets with the model's FrameFormat (estimation/data/trunk_targets.h).
 //
 // The knn strategies search the functaset's latents of that sensor (all splits) with a
 // k-NN index kept beside the functaset as "<functaset>.<sensor>.knn"
@@ -35,16 +35,16 @@
 #include "apps/command.h"
 #include "apps/model_inputs.h"
 #include "apps/pictures.h"
-#include "estimation/dataset.h"
-#include "estimation/file_io.h"
-#include "estimation/functaset.h"
-#include "estimation/knn_index.h"
-#include "estimation/latent_fitter.h"
-#include "estimation/reconstruction.h"
-#include "estimation/trunk_targets.h"
-#include "models/file_util.h"
-#include "models/functa_model.h"
-#include "models/tensor_file.h"
+#include "estimation/data/dataset.h"
+#include "estimation/data/image_io.h"
+#include "estimation/functaset/functaset.h"
+#include "estimation/knn/knn_index.h"
+#include "estimation/fitting/latent_fitter.h"
+#include "estimation/evaluation/reconstruction.h"
+#include "estimation/data/trunk_targets.h"
+#include "models/core/atomic_file.h"
+#include "models/trunk/functa_model.h"
+#include "models/core/tensor_file.h"
 
 namespace tactfunc::apps {
 namespace {
@@ -145,7 +145,7 @@ std::unique_ptr<KnnIndex> LoadOrBuildIndex(const std::string& functaset_path, Se
       NewIndex(flags.knn_index, static_cast<int>(latents.cols()), flags.knn_checks);
   index->Add(latents.data(), latents.rows());
   try {
-    index->Save(*index_path);  // atomic (models/file_util.h)
+    index->Save(*index_path);  // atomic (models/core/atomic_file.h)
     std::cerr << "fit: note: built the k-NN index " << *index_path << " (" << why << ")\n";
   } catch (const std::exception& e) {
     // A read-only functaset folder must not stop the fit: the index is then used unsaved.

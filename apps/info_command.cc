@@ -16,14 +16,14 @@
 
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
-#include "estimation/dataset.h"
-#include "estimation/file_io.h"
-#include "estimation/functaset.h"
-#include "estimation/reconstruction.h"
-#include "models/functa_model.h"
-#include "models/pose_mlp.h"
-#include "models/tensor_file.h"
-#include "models/tool.h"
+#include "estimation/data/dataset.h"
+#include "estimation/data/image_io.h"
+#include "estimation/functaset/functaset.h"
+#include "estimation/evaluation/reconstruction.h"
+#include "models/trunk/functa_model.h"
+#include "models/pose/pose_mlp.h"
+#include "models/core/tensor_file.h"
+#include "models/simulator/tool.h"
 
 namespace tactfunc::apps {
 namespace {
@@ -221,7 +221,7 @@ void DescribeFile(const std::string& path, bool json) {
   } else if (file.kind() == "pose_model") {
     out["pose_model"] = DescribePoseModel(content, path);
   } else if (file.kind() == "checkpoint") {
-    // A trunk training checkpoint (estimation/trunk_trainer.cc writes these fields).
+    // A trunk training checkpoint (estimation/training/trunk_trainer.cc writes these fields).
     const std::string sensor = StringAt(meta, "sensor");
     const double step = NumberAt(meta, "step"), seconds = NumberAt(meta, "train_seconds");
     std::cout << "  " << sensor << " trunk at step " << FormatFixed(step, 0) << " after "

@@ -9,7 +9,7 @@
 
 #include "CLI/CLI.hpp"
 #include "apps/command.h"
-#include "estimation/dataset.h"
+#include "estimation/data/dataset.h"
 
 int main(int argc, char** argv) {
   using namespace tactfunc::apps;

@@ -9,8 +9,8 @@
 #include <stdexcept>
 
 #include "apps/command.h"
-#include "estimation/file_io.h"
-#include "models/tool.h"
+#include "estimation/data/image_io.h"
+#include "models/simulator/tool.h"
 #include "nlohmann/json.hpp"
 
 namespace tactfunc::apps {
@@ -96,7 +96,7 @@ FunctasetKnn MakeFunctasetKnn(const Functaset& functaset, SensorKind sensor, boo
                        std::string(train_only ? "train-split " : "") + ToString(sensor) +
                        " entries: the knn sampler needs labelled poses");
   }
-  // Unlabelled neighbours are skipped, not replaced (samplers/knn_posterior.h): ask the
+  // Unlabelled neighbours are skipped, not replaced (estimation/posterior/knn_posterior.h): ask the
   // index for k plus the number of unlabelled entries, so k labelled ones always come back.
   KnnPosterior::Options knn_options = options;
   const int unlabelled = static_cast<int>(poses.size()) - labelled;

@@ -10,14 +10,14 @@
 #include <memory>
 #include <string>
 
-#include "estimation/dataset.h"
-#include "estimation/functaset.h"
-#include "estimation/knn_index.h"
-#include "models/functa_model.h"
-#include "models/image.h"
-#include "models/pose_mlp.h"
-#include "models/sensor.h"
-#include "samplers/knn_posterior.h"
+#include "estimation/data/dataset.h"
+#include "estimation/functaset/functaset.h"
+#include "estimation/knn/knn_index.h"
+#include "models/trunk/functa_model.h"
+#include "models/core/image.h"
+#include "models/pose/pose_mlp.h"
+#include "models/core/sensor.h"
+#include "estimation/posterior/knn_posterior.h"
 
 namespace tactfunc::apps {
 
@@ -31,7 +31,7 @@ std::string Shape(const Image& image);
 // Parses --sensor (empty = not given: returns false); throws UsageError for a bad name.
 bool ParseSensorFlag(const std::string& text, SensorKind* sensor);
 
-// The symmetry order n of tool `name` (models/tool.h); 1 for an unknown or empty name
+// The symmetry order n of tool `name` (models/simulator/tool.h); 1 for an unknown or empty name
 // (nothing is folded). *known (optional) says whether the name was a known tool.
 int SymmetryOrderOfTool(const std::string& name, bool* known = nullptr);
 

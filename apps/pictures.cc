@@ -9,7 +9,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "estimation/file_io.h"
+#include "estimation/data/image_io.h"
 
 namespace tactfunc::apps {
 namespace {

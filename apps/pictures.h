@@ -11,8 +11,8 @@
 #include <Eigen/Core>
 #include <opencv2/core.hpp>
 
-#include "models/image.h"
-#include "models/sensor.h"
+#include "models/core/image.h"
+#include "models/core/sensor.h"
 
 namespace tactfunc::apps {
 
@@ -33,7 +33,7 @@ cv::Mat Caption(int width, const std::string& text);
 // Resizes a tile to `height` pixels tall (keeps aspect, nearest-neighbour upscaling
 // so pixels stay honest, area downscaling).
 cv::Mat FitHeight(const cv::Mat& tile, int height);
-// Draws the pose (x, y, yaw in the sensor frame, models/sensor.h) as an arrow along the
+// Draws the pose (x, y, yaw in the sensor frame, models/core/sensor.h) as an arrow along the
 // tool's x axis on a tile showing a rows x cols frame with `pitch` metres per pixel.
 void DrawPoseArrow(cv::Mat& tile, int rows, int cols, double pitch, double x_m,
                    double y_m, double yaw_rad, const cv::Scalar& colour);

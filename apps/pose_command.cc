@@ -1,7 +1,7 @@
 // Copyright 2026 The tactfunc Authors.
 //
 // tactfunc pose: the in-hand pose posterior of ONE tactile frame (Sec. III-C/D, IV-C of
-// "Tactile Functasets"; samplers/pose_posterior.h):
+// "Tactile Functasets"; estimation/posterior/pose_posterior.h):
 //
 //   tactfunc pose --model M.tfm --pose-model P.tpm --frame F.png --reference R.png
 //       --sampler sgld --samples 100 --out DIR [--tool NAME] [--json]
@@ -41,13 +41,13 @@
 #include "apps/command.h"
 #include "apps/model_inputs.h"
 #include "apps/pictures.h"
-#include "estimation/dataset.h"
-#include "estimation/functaset.h"
-#include "estimation/trunk_targets.h"
-#include "models/file_util.h"
-#include "models/functa_model.h"
-#include "models/tool.h"
-#include "samplers/pose_posterior.h"
+#include "estimation/data/dataset.h"
+#include "estimation/functaset/functaset.h"
+#include "estimation/data/trunk_targets.h"
+#include "models/core/atomic_file.h"
+#include "models/trunk/functa_model.h"
+#include "models/simulator/tool.h"
+#include "estimation/posterior/pose_posterior.h"
 
 namespace tactfunc::apps {
 namespace {
@@ -423,7 +423,7 @@ void RunPose(const PoseFlags& flags) {
   options.num_samples = flags.samples;
   options.seed = flags.seed;
   options.knn.k = flags.knn_k;
-  // Centre on the latent map the pose MLP was trained on (samplers/pose_posterior.h).
+  // Centre on the latent map the pose MLP was trained on (estimation/posterior/pose_posterior.h).
   options.fit.strategy = LatentMapOfPoseModel(pose_model, model.Trunk(sensor));
   options.model_error = !flags.no_model_error;
   std::string error;

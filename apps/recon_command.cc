@@ -3,7 +3,7 @@
 // tactfunc recon: how well a functaset reproduces its dataset (PSNR per sensor and
 // split against the noisy and, for simulated data, the clean frames; the z = 0
 // "initial image"), its size against the raw frames, and a picture per sensor of
-// examples: target | z = 0 | reconstruction | error (estimation/reconstruction.h).
+// examples: target | z = 0 | reconstruction | error (estimation/evaluation/reconstruction.h).
 
 #include <algorithm>
 #include <cmath>
@@ -18,12 +18,12 @@
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
 #include "apps/pictures.h"
-#include "estimation/dataset.h"
-#include "estimation/functaset.h"
-#include "estimation/reconstruction.h"
-#include "estimation/trunk_targets.h"
-#include "models/file_util.h"
-#include "models/functa_model.h"
+#include "estimation/data/dataset.h"
+#include "estimation/functaset/functaset.h"
+#include "estimation/evaluation/reconstruction.h"
+#include "estimation/data/trunk_targets.h"
+#include "models/core/atomic_file.h"
+#include "models/trunk/functa_model.h"
 
 namespace tactfunc::apps {
 namespace {
@@ -236,7 +236,7 @@ void RunRecon(const ReconFlags& flags) {
   }
 
   std::cout << "recon: " << summary.frames.size() << " frames of " << flags.functaset << " against "
-            << flags.data << " (PSNR in dB, Psnr() of estimation/trunk_targets.h)\n"
+            << flags.data << " (PSNR in dB, Psnr() of estimation/data/trunk_targets.h)\n"
             << summary.FullReport();
   for (const std::string& p : pictures) std::cout << "recon: wrote " << p << "\n";
   const std::string per_frame = (std::filesystem::path(flags.out) / "frames.csv").string();

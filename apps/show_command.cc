@@ -14,7 +14,7 @@
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
 #include "apps/pictures.h"
-#include "estimation/dataset.h"
+#include "estimation/data/dataset.h"
 
 namespace tactfunc::apps {
 namespace {
@@ -54,7 +54,7 @@ std::vector<std::string> PickIds(const Dataset& dataset, int n) {
 
 Image Difference(const Image& frame, const Image& reference, SensorKind sensor) {
   // Indentation for depth (reference - frame: pressing in is positive), frame -
-  // reference for intensity, as estimation/preprocess.h defines the difference.
+  // reference for intensity, as estimation/data/preprocess.h defines the difference.
   Image difference(frame.rows, frame.cols, frame.channels);
   for (std::size_t i = 0; i < frame.size(); ++i) {
     difference.data[i] = sensor == SensorKind::kSoftBubble

@@ -12,10 +12,10 @@
 
 #include "apps/command.h"
 #include "apps/progress_bar.h"
-#include "estimation/synthetic_dataset.h"
-#include "estimation/dataset.h"
-#include "models/contact_simulator.h"
-#include "models/tool.h"
+#include "estimation/data/synthetic_dataset.h"
+#include "estimation/data/dataset.h"
+#include "models/simulator/contact_simulator.h"
+#include "models/simulator/tool.h"
 
 namespace tactfunc::apps {
 namespace {

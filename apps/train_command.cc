@@ -1,7 +1,7 @@
 // Copyright 2026 The tactfunc Authors.
 //
 // tactfunc train: meta-learns one SIREN trunk per sensor on a dataset's train split
-// (estimation/trunk_trainer.h, docs/TRAINING.md) and writes one model file.
+// (estimation/training/trunk_trainer.h, docs/TRAINING.md) and writes one model file.
 #include <algorithm>
 #include <atomic>
 #include <cmath>
@@ -22,9 +22,9 @@
 #include "apps/dataset_flags.h"
 #include "apps/pictures.h"
 #include "apps/progress_bar.h"
-#include "estimation/dataset.h"
-#include "estimation/trunk_trainer.h"
-#include "models/functa_model.h"
+#include "estimation/data/dataset.h"
+#include "estimation/training/trunk_trainer.h"
+#include "models/trunk/functa_model.h"
 
 namespace tactfunc::apps {
 namespace {

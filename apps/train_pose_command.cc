@@ -1,13 +1,13 @@
 // Copyright 2026 The tactfunc Authors.
 //
 // tactfunc train-pose: the downstream pose regressor g_phi of "Tactile Functasets"
-// (Sec. III-D, IV-C; models/pose_mlp.h) trained on a functaset's latents:
+// (Sec. III-D, IV-C; models/pose/pose_mlp.h) trained on a functaset's latents:
 //
 //   tactfunc train-pose --functaset F.tfs --out P.tpm [--sensor bubble] [--hidden 512,512,512]
 //       [--epochs 100] [--batch 256] [--lr 1e-3] [--seed 0] [--json]
 //
 // Inputs: the labelled TRAIN-split entries of one sensor (latent -> x, y, yaw); each
-// sample's symmetry order n is its tool's (models/tool.h; an unknown tool name gets
+// sample's symmetry order n is its tool's (models/simulator/tool.h; an unknown tool name gets
 // n = 1, i.e. its yaw is taken as is, with a warning). Reports position RMSE (mm, the
 // root of the mean squared Euclidean error) and yaw RMSE (deg, modulo the tool's
 // symmetry, YawErrorModuloSymmetry; hemisphere samples, n = 0, have no observable yaw and
@@ -33,16 +33,16 @@
 
 #include "apps/command.h"
 #include "apps/model_inputs.h"
-#include "estimation/baselines.h"
-#include "estimation/dataset.h"
-#include "estimation/functaset.h"
-#include "estimation/internal/parallel_for.h"
-#include "estimation/latent_fitter.h"
-#include "estimation/trunk_targets.h"
-#include "models/functa_model.h"
-#include "samplers/pose_posterior.h"
-#include "models/pose_mlp.h"
-#include "models/tool.h"
+#include "estimation/evaluation/baselines.h"
+#include "estimation/data/dataset.h"
+#include "estimation/functaset/functaset.h"
+#include "models/core/parallel_for.h"
+#include "estimation/fitting/latent_fitter.h"
+#include "estimation/data/trunk_targets.h"
+#include "models/trunk/functa_model.h"
+#include "estimation/posterior/pose_posterior.h"
+#include "models/pose/pose_mlp.h"
+#include "models/simulator/tool.h"
 
 namespace tactfunc::apps {
 namespace {
@@ -99,7 +99,7 @@ Samples Collect(const Functaset& functaset, SensorKind sensor, Split split,
   return s;
 }
 
-using ErrorSums = PoseErrors;  // estimation/baselines.h: the one pose scoring of tactfunc
+using ErrorSums = PoseErrors;  // estimation/evaluation/baselines.h: the one pose scoring of tactfunc
 
 // Per tool ("" = all) errors of the model on `samples` (ScorePoses, as `eval` scores).
 std::map<std::string, ErrorSums> Evaluate(const PoseMlp& model, const Samples& samples) {
@@ -390,7 +390,7 @@ void RunTrainPose(const TrainPoseFlags& flags) {
       {"rmse_deg",
        {{"train", NumberOrNull(all_train.RmseDeg())}, {"test", NumberOrNull(all_test.RmseDeg())}}}};
   // The latent map the MLP was trained on: what the posteriors must centre on
-  // (LatentMapOfPoseModel, samplers/pose_posterior.h).
+  // (LatentMapOfPoseModel, estimation/posterior/pose_posterior.h).
   // "functaset" = encode's K meta-SGD steps of the trunk.
   const std::string latent_map = flags.refit.empty() ? "functaset" : flags.refit;
   nlohmann::json info = {{"sensor", ToString(sensor)},

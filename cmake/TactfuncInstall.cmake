@@ -1,8 +1,11 @@
-# `cmake --install` exports tactfunc::models, tactfunc::estimation, tactfunc::samplers
-# so that a consumer's find_package(tactfunc) works (tests/install checks it).
+# `cmake --install` exports every library (tactfunc::models, tactfunc::samplers, the
+# estimation/ concepts and the tactfunc::estimation umbrella) so that a consumer's
+# find_package(tactfunc) works (tests/install checks it).
 include(CMakePackageConfigHelpers)
 set(TACTFUNC_CMAKE_DIR ${CMAKE_INSTALL_LIBDIR}/cmake/tactfunc)
-install(TARGETS tactfunc_build_flags tactfunc_models tactfunc_estimation tactfunc_samplers
+install(TARGETS tactfunc_build_flags tactfunc_models tactfunc_samplers tactfunc_data
+                tactfunc_knn tactfunc_pose tactfunc_fitting tactfunc_training
+                tactfunc_functaset tactfunc_posterior tactfunc_evaluation tactfunc_estimation
         EXPORT tactfuncTargets
         ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}
         LIBRARY DESTINATION ${CMAKE_INSTALL_LIBDIR}

@@ -1,7 +1,7 @@
 // Copyright 2026 The tactfunc Authors.
 //
 // Synthesise one paired tactile contact: a tool pressed into a Soft Bubble and a
-// GelSlim at the same pose (models/contact_simulator.h, docs/SIMULATOR.md).
+// GelSlim at the same pose (models/simulator/contact_simulator.h, docs/SIMULATOR.md).
 //
 // The tool's face h(u, v) is placed at sensor_T_tool = (x, y, yaw) and pressed
 // `depth` beyond first touch. The rigid interference
@@ -21,7 +21,7 @@
 #include <cstdio>
 #include <vector>
 
-#include "models/contact_simulator.h"
+#include "models/simulator/contact_simulator.h"
 
 namespace {
 

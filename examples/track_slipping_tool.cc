@@ -1,7 +1,7 @@
 // Copyright 2026 The tactfunc Authors.
 //
 // Track a tool slipping in the grasp with a particle filter over per-frame pose
-// posteriors (estimation/pose_filter.h, docs/FILTERING.md).
+// posteriors (estimation/pose/pose_filter.h, docs/FILTERING.md).
 //
 // The chain, per frame t = 0 .. T-1:
 //   1. ContactSimulator renders a Soft Bubble frame of the tool at the true pose
@@ -9,7 +9,7 @@
 //      from (x, y, yaw) = (-1.5 mm, 1 mm, 10 deg) to (1.5 mm, -1 mm, 30 deg): 3.6 mm and
 //      20 deg in total, starting and stopping gently as a slip does. The frame is stored
 //      and read back in the dataset's 16-bit micrometre encoding, as training frames are.
-//   2. PosePosterior (samplers/pose_posterior.h) turns the frame into a PoseDistribution:
+//   2. PosePosterior (estimation/posterior/pose_posterior.h) turns the frame into a PoseDistribution:
 //      a Ceres fit of the latent z*, N(z*, H^-1) (laplace, default) or SGLD latents,
 //      pushed through the pose MLP; folded by the tool's symmetry order.
 //   3. SE2ParticleFilter: x_i <- x_i Exp(w_i), w_i ~ N(0, Q) (a slip of ~0.2 mm and ~1 deg
@@ -40,16 +40,16 @@
 #include <string>
 #include <vector>
 
-#include "estimation/file_io.h"
-#include "estimation/pose_distribution.h"
-#include "estimation/pose_filter.h"
-#include "estimation/trunk_targets.h"
-#include "models/contact_simulator.h"
-#include "models/functa_model.h"
-#include "models/pose_mlp.h"
-#include "models/seed.h"
-#include "models/tool.h"
-#include "samplers/pose_posterior.h"
+#include "estimation/data/image_io.h"
+#include "estimation/pose/pose_distribution.h"
+#include "estimation/pose/pose_filter.h"
+#include "estimation/data/trunk_targets.h"
+#include "models/simulator/contact_simulator.h"
+#include "models/trunk/functa_model.h"
+#include "models/pose/pose_mlp.h"
+#include "models/core/seed.h"
+#include "models/simulator/tool.h"
+#include "estimation/posterior/pose_posterior.h"
 
 #ifndef TACTFUNC_SOURCE_DIR
 #define TACTFUNC_SOURCE_DIR "."
@@ -137,7 +137,7 @@ SE2d TrueSlip(int t, int frames) {
   return SE2d::FromXYYaw((-1.5 + 3.0 * s) * 1e-3, (1.0 - 2.0 * s) * 1e-3, (10 + 20 * s) * kDeg);
 }
 
-// What a dataset file holds: 16-bit micrometres (estimation/file_io.h).
+// What a dataset file holds: 16-bit micrometres (estimation/data/image_io.h).
 tactfunc::Image AsStored(const tactfunc::Image& depth, const std::string& name) {
   using tactfunc::PixelEncoding;
   return tactfunc::DecodeImage(tactfunc::EncodePng(depth, PixelEncoding::kDepthU16Micrometres),

@@ -29,7 +29,7 @@
 
 #include <Eigen/Core>
 
-#include "estimation/latent_fitter.h"
+#include "estimation/fitting/latent_fitter.h"
 #include "samplers/sgld.h"
 
 namespace tactfunc {

@@ -17,7 +17,7 @@
 #include <boost/random/normal_distribution.hpp>
 #include <boost/random/uniform_int_distribution.hpp>
 
-#include "models/seed.h"
+#include "models/core/seed.h"
 
 namespace tactfunc {
 namespace {

@@ -7,7 +7,7 @@
 //   U(z) = sum_j w_j ||f_theta(x_j; z) - y_j||^2 / (2 sigma^2) + ||z||^2 / (2 sigma_z^2)
 //
 // (valid pixels j with weight w_j, C channels each; Gaussian pixel noise of standard
-// deviation sigma; the N(0, sigma_z^2 I) latent prior of estimation/latent_fitter.h, so
+// deviation sigma; the N(0, sigma_z^2 I) latent prior of estimation/fitting/latent_fitter.h, so
 // the mode of U is exactly LatentFitter's MAP latent). The chain
 //
 //   z_{t+1} = z_t - eta_t P grad U(z_t) + sqrt(2 eta_t) P^{1/2} xi_t,   xi_t ~ N(0, I)
@@ -33,7 +33,7 @@
 // Chains. num_chains chains start at z0 (e.g. the Ceres or meta-SGD fit) plus optional
 // jitter N(0, initial_jitter^2 P) and run independently, in parallel threads; chain c
 // draws all its noise (jitter, xi, minibatches) from boost::random::mt19937_64 seeded
-// with DeriveSeed(seed, c) (models/seed.h), so the samples do not depend on the thread
+// with DeriveSeed(seed, c) (models/core/seed.h), so the samples do not depend on the thread
 // count. Each chain takes burn_in + num_samples_per_chain * thinning steps and keeps
 // every thinning-th state after the burn-in.
 //
@@ -77,8 +77,8 @@
 
 #include <Eigen/Core>
 
-#include "estimation/trunk_targets.h"
-#include "models/functa_model.h"
+#include "estimation/data/trunk_targets.h"
+#include "models/trunk/functa_model.h"
 #include "samplers/step_size_schedule.h"
 
 namespace tactfunc {
@@ -143,7 +143,7 @@ class TrunkPotential : public LatentPotential {
     // Pixel noise standard deviation sigma, normalised target units (TrunkTargets). > 0,
     // or 0 = automatic: the trunk's residual_sigma if > 0 -- the RMS per-pixel residual
     // of the K-step fits on training frames, estimated by the trainer
-    // (estimation/trunk_trainer.h) -- else 0.01, the paper's noise sigma (Sec. IV-C).
+    // (estimation/training/trunk_trainer.h) -- else 0.01, the paper's noise sigma (Sec. IV-C).
     // The same rule as LatentFitter::Options::sigma, so the MAP fit is U's mode.
     double sigma = 0;
     // Prior standard deviation of each latent entry, latent units. > 0. 1.0, as

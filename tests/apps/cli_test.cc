@@ -10,8 +10,8 @@
 #include <sstream>
 #include <string>
 
-#include "estimation/dataset.h"
-#include "estimation/file_io.h"
+#include "estimation/data/dataset.h"
+#include "estimation/data/image_io.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tests/apps/cli_test_util.h"

@@ -17,7 +17,7 @@
 #include <unistd.h>
 
 #include "nlohmann/json.hpp"
-#include "tests/estimation/functa_test_util.h"
+#include "tests/support/functa_test_util.h"
 
 namespace tactfunc::testing_util {
 

@@ -1,7 +1,7 @@
 // Copyright 2026 The tactfunc Authors.
 //
 // `tactfunc fit` and `tactfunc bench fit` as a user runs them: a tiny hand-built model
-// (tests/estimation/functa_test_util.h), a tiny dataset, its functaset from `tactfunc
+// (tests/support/functa_test_util.h), a tiny dataset, its functaset from `tactfunc
 // encode`; exit codes, the --json last line, the files written, the k-NN index kept
 // beside the functaset, and bad input that fails with a message naming the file or flag.
 #include <sys/wait.h>
@@ -14,13 +14,13 @@
 #include <sstream>
 #include <string>
 
-#include "estimation/file_io.h"
-#include "estimation/knn_index.h"
+#include "estimation/data/image_io.h"
+#include "estimation/knn/knn_index.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tests/apps/cli_test_util.h"
 #include "nlohmann/json.hpp"
-#include "tests/estimation/functa_test_util.h"
+#include "tests/support/functa_test_util.h"
 
 namespace tactfunc {
 namespace {

@@ -1,7 +1,7 @@
 // Copyright 2026 The tactfunc Authors.
 //
 // `tactfunc train-pose`, `tactfunc pose` and `tactfunc bench posterior` as a user runs
-// them: a tiny hand-built model (tests/estimation/functa_test_util.h), a tiny dataset, its
+// them: a tiny hand-built model (tests/support/functa_test_util.h), a tiny dataset, its
 // functaset from `tactfunc encode`, and a tiny pose model from `train-pose`; exit codes,
 // the --json last line, the files written, and bad input that fails with a message
 // naming the file or flag.
@@ -14,13 +14,13 @@
 #include <sstream>
 #include <string>
 
-#include "estimation/file_io.h"
+#include "estimation/data/image_io.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tests/apps/cli_test_util.h"
-#include "models/pose_mlp.h"
+#include "models/pose/pose_mlp.h"
 #include "nlohmann/json.hpp"
-#include "tests/estimation/functa_test_util.h"
+#include "tests/support/functa_test_util.h"
 
 namespace tactfunc {
 namespace {

@@ -24,7 +24,7 @@
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "models/functa_model.h"
+#include "models/trunk/functa_model.h"
 #include "tests/apps/cli_test_util.h"
 
 namespace tactfunc {

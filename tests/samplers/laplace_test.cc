@@ -9,7 +9,7 @@
 #include <boost/random/normal_distribution.hpp>
 #include <gtest/gtest.h>
 
-#include "sampler_test_util.h"
+#include "tests/support/sampler_test_util.h"
 
 namespace tactfunc {
 namespace {

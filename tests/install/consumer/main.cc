@@ -2,8 +2,8 @@
 #include <cmath>
 #include <cstdio>
 
-#include "estimation/preprocess.h"
-#include "models/contact_simulator.h"
+#include "estimation/data/preprocess.h"
+#include "models/simulator/contact_simulator.h"
 #include "samplers/step_size_schedule.h"
 
 int main() {

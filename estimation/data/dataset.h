@@ -1,0 +1,265 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// Tactile datasets: a folder (or a video) of sensor frames, one reference frame per
+// sensor (the undeformed sensor), and optional pose labels.
+//
+// The folder format is specified in docs/DATASET_FORMAT.md; in short:
+//
+//   DIR/dataset.json            metadata, written last (its presence marks a complete
+//                               dataset written by DatasetWriter)
+//   DIR/labels.csv              frame,sensor,tool,x_m,y_m,yaw_rad,depth_m,split
+//   DIR/bubble/reference.png    16-bit PNG, micrometres of depth, 0 = invalid pixel
+//   DIR/bubble/000000.png ...
+//   DIR/bubble/clean/000000.png optional noise-free frames (simulated data)
+//   DIR/gelslim/reference.png   8-bit RGB PNG
+//   DIR/gelslim/000000.png ...
+//
+// Frames of the two sensors taken at the same time share their id (the file stem).
+// Dataset::Open also reads folders that users bring without metadata (a flat folder
+// of images, or bubble/ and gelslim/ subfolders) and Dataset::OpenVideo reads a
+// video; see Dataset::Open for the rules.
+//
+// Frames are decoded lazily from disk by LoadFrame (videos are decoded once, in
+// Open, and kept in memory). Open validates the metadata, the references and every
+// labels.csv line; a frame's own size and bit depth are validated when it is loaded
+// (call ValidateAllFrames to check them all up front). A Dataset is immutable after
+// Open: its const methods, LoadFrame included, may be called from several threads.
+//
+// Every bad input raises DatasetError (estimation/data/image_io.h) with a message naming
+// the file, the line and/or field, what was expected and what was found, e.g.
+//   labels.csv:17: field 'yaw_rad': expected a finite number in [-3.1416, 3.1416],
+//   got '7.2'
+#ifndef TACTFUNC_ESTIMATION_DATA_DATASET_H_
+#define TACTFUNC_ESTIMATION_DATA_DATASET_H_
+
+#include <cstddef>
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "estimation/data/image_io.h"
+#include "models/core/image.h"
+#include "models/core/sensor.h"
+
+namespace tactfunc {
+
+enum class Split { kTrain, kTest };
+// "train" / "test", as in labels.csv.
+const char* ToString(Split split);
+// Parses "train" or "test"; returns false and leaves *split untouched otherwise.
+bool SplitFromString(const std::string& name, Split* split);
+
+// A tool's pose in the sensor frame (models/core/sensor.h) when the frame was taken.
+struct PoseLabel {
+  std::string tool;    // tool name; non-empty, no ',', '"' or line breaks
+  double x_m = 0;      // metres; |x_m| <= half the sensor width (cols * pitch / 2)
+                       // when the pixel pitch is known, else <= 1 m
+  double y_m = 0;      // metres; same bound with the sensor height (rows * pitch / 2)
+  double yaw_rad = 0;  // radians, in [-pi, pi] (1e-9 slack)
+  double depth_m = 0;  // indentation depth in metres, in [0, 0.1]
+};
+bool operator==(const PoseLabel& a, const PoseLabel& b);
+inline bool operator!=(const PoseLabel& a, const PoseLabel& b) { return !(a == b); }
+
+// Checks a label against the ranges above for a sensor of the given size and pitch
+// (pitch 0 = unknown). Returns false and sets *error to
+// "field '<name>': expected ..., got '<value>'" for the first bad field.
+bool IsValidPoseLabel(const PoseLabel& label, int rows, int cols, double pixel_pitch_m,
+                      std::string* error);
+
+// The physical scale used when a dataset does not record one (user folders, videos):
+// 0.01 m of depth for the bubble, 0.5 of intensity for GelSlim. See
+// docs/DATASET_FORMAT.md, "Normalisation".
+double DefaultNormalizationScale(SensorKind kind);
+// The encoding each sensor uses on disk: depth_u16_um for the bubble, rgb8 for GelSlim.
+PixelEncoding SensorEncoding(SensorKind kind);
+
+struct SensorInfo {
+  SensorKind kind = SensorKind::kSoftBubble;
+  int rows = 0;      // frame height in pixels, > 0
+  int cols = 0;      // frame width in pixels, > 0
+  int channels = 1;  // 1 for depth; 3 (or 1 for grayscale user data) for rgb8
+  PixelEncoding encoding = PixelEncoding::kDepthU16Micrometres;
+  double pixel_pitch_m = 0;        // metres per pixel on the sensing surface; 0 = unknown
+  double normalization_scale = 0;  // physical units mapping to 1.0 (metres of depth or
+                                   // intensity); 0 = unknown (see preprocess.h)
+  std::string reference;           // reference image path, relative to Dataset::root()
+};
+
+struct FrameRecord {
+  std::string id;  // frame id = file stem; frames of both sensors taken together share it
+  SensorKind sensor = SensorKind::kSoftBubble;
+  std::string path;                // relative to Dataset::root(); for a video "<file>#<index>"
+  std::string clean_path;          // noise-free frame relative to root(), "" if none
+  std::optional<PoseLabel> label;  // absent for unlabelled frames
+  Split split = Split::kTrain;     // from labels.csv; kTrain when there is no row
+};
+
+// How Dataset::Open and Dataset::OpenVideo read data without metadata.
+struct DatasetOpenOptions {
+  // Sensor kind for a folder without dataset.json. Flat folder: the kind of its
+  // images (unset = inferred: 16-bit one-channel -> bubble, 8-bit -> gelslim).
+  // Folder with dataset.json or bubble/ and gelslim/ subfolders: only that sensor
+  // is loaded (unset = all). Video: must be unset or gelslim.
+  std::optional<SensorKind> sensor;
+  // Reference image for a sensor folder without metadata and without a
+  // "reference.<ext>" file: a path relative to the sensor folder (tried first) or
+  // to the working directory, or absolute. If the file lies inside the sensor folder
+  // it is not also a frame. Ignored when dataset.json exists and for videos.
+  std::string reference;
+  // Video only: the frame used as reference (and left out of the frames). >= 0.
+  int reference_index = 0;
+  // Pixel pitch in metres for data without metadata; 0 = unknown. >= 0. With a
+  // known pitch, label positions are checked against the sensor's extent.
+  double pixel_pitch_m = 0;
+  // labels.csv to read; "" = DIR/labels.csv if present for folders, none for videos.
+  std::string labels;
+  bool IsValid(std::string* error) const;
+};
+
+class Dataset {
+ public:
+  // Defined outside the class (DatasetOpenOptions) so that it can be a default
+  // argument below: GCC rejects a nested struct with member initialisers there.
+  using OpenOptions = DatasetOpenOptions;
+
+  // Opens a dataset folder. If DIR/dataset.json exists it is the metadata. Otherwise:
+  // if DIR has bubble/ and/or gelslim/ subfolders each is a sensor folder, else DIR
+  // itself is one. In a sensor folder without metadata the frames are all *.png,
+  // *.jpg and *.jpeg files (any case, hidden files skipped), sorted by name, frame
+  // id = stem; the reference is "reference.<ext>" if present, else
+  // options.reference, else DatasetError. Pixel pitch and normalisation scale come
+  // from the options / DefaultNormalizationScale. labels.csv is optional.
+  // Throws DatasetError for any bad input and std::invalid_argument for bad options.
+  static Dataset Open(const std::string& dir, const OpenOptions& options = OpenOptions());
+  // Opens an AVI/MP4 (anything cv::VideoCapture reads) as a GelSlim rgb8 dataset.
+  // Frame ids are "000000", "000001", ... counting every frame of the video; frame
+  // options.reference_index is the reference and not a frame. All frames are decoded
+  // here and kept in memory (tactile videos are small: 1000 frames of 320x240 RGB
+  // take 900 MB as float -- decode a part with a tool first if yours is larger).
+  static Dataset OpenVideo(const std::string& path, const OpenOptions& options = OpenOptions());
+
+  // The dataset folder (or the video file), as given to Open.
+  const std::string& root() const { return root_; }
+  // The sensors present, in enum order.
+  std::vector<SensorKind> sensors() const;
+  bool has_sensor(SensorKind kind) const;
+  // Throws DatasetError if the sensor is absent.
+  const SensorInfo& sensor_info(SensorKind kind) const;
+  // Sorted by (id, sensor).
+  const std::vector<FrameRecord>& frames() const { return frames_; }
+  // Indices into frames() of one sensor's frames, optionally of one split, in order.
+  std::vector<std::size_t> FrameIndices(SensorKind sensor,
+                                        std::optional<Split> split = std::nullopt) const;
+  // The index of frame (id, sensor) in frames(), or nullopt.
+  std::optional<std::size_t> FindFrame(const std::string& id, SensorKind sensor) const;
+
+  // Decodes frame `index` in physical units (file_io.h). Throws std::out_of_range for
+  // a bad index and DatasetError if the file is missing, corrupt, or not of the
+  // sensor's size, channel count or bit depth.
+  Image LoadFrame(std::size_t index) const;
+  // The noise-free version of frame `index`; throws DatasetError if it has none.
+  Image LoadCleanFrame(std::size_t index) const;
+  // Loads every frame (and clean frame) once; throws on the first bad one.
+  void ValidateAllFrames() const;
+  // The reference (undeformed) frame of a sensor, in physical units. Throws
+  // DatasetError if the sensor is absent.
+  const Image& Reference(SensorKind sensor) const;
+
+  // Bytes of every file the dataset consists of: frames, references, clean frames,
+  // dataset.json and labels.csv (for a video: the video file and labels file).
+  std::uint64_t BytesOnDisk() const;
+  // True if any frame has a clean version.
+  bool has_clean() const { return has_clean_; }
+  // True if the folder had a dataset.json.
+  bool has_metadata() const { return has_metadata_; }
+  // dataset.json's "source" ("" without metadata; the video path for videos).
+  const std::string& source() const { return source_; }
+  // dataset.json's "meta" object as JSON text ("{}" if none).
+  const std::string& meta_json() const { return meta_json_; }
+
+ private:
+  struct SensorData {
+    SensorInfo info;
+    Image reference;
+  };
+  Dataset() = default;
+  const SensorData& sensor_data(SensorKind kind) const;
+  void SortAndIndexFrames();
+  void AttachLabels(const std::string& labels_path, bool ignore_absent_sensors);
+  void KeepOnlySensor(SensorKind kind);
+
+  std::string root_;
+  std::map<SensorKind, SensorData> sensors_;
+  std::vector<FrameRecord> frames_;
+  bool has_clean_ = false;
+  bool has_metadata_ = false;
+  std::string source_;
+  std::string meta_json_ = "{}";
+  std::string labels_path_;  // absolute or relative-to-cwd path of labels.csv, "" if none
+  std::string metadata_path_;
+  // Video datasets: decoded frames, indexed like frames_ (shared so copies are cheap).
+  std::shared_ptr<const std::vector<Image>> video_frames_;
+};
+
+// Writes a dataset in the folder format above. Frames are encoded and written as they
+// are added (each file atomically); Finish writes labels.csv and then dataset.json,
+// which marks the dataset complete. Until Finish, the folder reads as a user folder
+// without metadata. AddSensor and AddFrame may be called from several threads at once.
+class DatasetWriter {
+ public:
+  struct Options {
+    // zlib level of the PNG files, in [0, 9]. 1 is the fast choice (measured: about
+    // as small as 9 for smooth tactile frames).
+    int png_compression = 1;
+    // dataset.json's "source": free text naming what produced the data.
+    std::string source = "tactfunc";
+    // dataset.json's "meta": a JSON object as text (e.g. simulator settings).
+    std::string meta_json = "{}";
+    // If false (default) the constructor refuses a folder that already holds dataset
+    // content (dataset.json, labels.csv, bubble/ or gelslim/). If true that content is
+    // deleted first (dataset.json first, so a half-overwritten folder never looks
+    // complete); other files in the folder are left alone.
+    bool overwrite = false;
+    bool IsValid(std::string* error) const;
+  };
+
+  // Creates `dir` (and parents). Throws std::invalid_argument for invalid options,
+  // DatasetError if `dir` holds a dataset and !options.overwrite, std::runtime_error
+  // if it cannot be created.
+  DatasetWriter(const std::string& dir, const Options& options);
+  ~DatasetWriter();
+  DatasetWriter(const DatasetWriter&) = delete;
+  DatasetWriter& operator=(const DatasetWriter&) = delete;
+
+  // Declares a sensor and writes its reference frame to "<sensor>/reference.png"
+  // (info.reference is ignored and set to that). info must be consistent: rows, cols
+  // > 0; encoding == SensorEncoding(kind); channels 1 for depth, 1 or 3 for rgb8;
+  // pitch and scale >= 0; reference of shape rows x cols x channels. Throws
+  // DatasetError otherwise or if the sensor was already added.
+  void AddSensor(const SensorInfo& info, const Image& reference);
+  // Writes "<sensor>/<id>.png" (and "<sensor>/clean/<id>.png" if clean != nullptr)
+  // and records the label and split. id: 1-64 characters from [A-Za-z0-9_.-], not
+  // starting with '.', not "reference". Throws DatasetError for a bad id, an
+  // unknown sensor, a duplicate (id, sensor), a frame of the wrong shape, a value
+  // that cannot be encoded or a label out of range (IsValidPoseLabel).
+  void AddFrame(const std::string& id, SensorKind sensor, const Image& frame, const Image* clean,
+                const std::optional<PoseLabel>& label, Split split);
+  // Writes labels.csv (one row per frame, sorted by (id, sensor); unlabelled frames
+  // get a row with empty pose fields to carry their split) and then dataset.json,
+  // both atomically. Further calls throw std::logic_error.
+  void Finish();
+
+  std::size_t num_frames() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace tactfunc
+
+#endif  // TACTFUNC_ESTIMATION_DATA_DATASET_H_

@@ -1,0 +1,192 @@
+// Copyright 2026 The tactfunc Authors.
+#include "estimation/data/internal/labels_csv.h"
+
+#include <cmath>
+#include <set>
+#include <utility>
+
+#include "estimation/data/internal/path_util.h"
+
+namespace tactfunc::internal {
+namespace {
+
+constexpr int kNumColumns = 8;
+constexpr const char* kColumnNames[kNumColumns] = {"frame", "sensor",  "tool",    "x_m",
+                                                   "y_m",   "yaw_rad", "depth_m", "split"};
+// 1e-9 rad of slack so that yaws computed as +-pi (atan2, wrapping) are accepted.
+constexpr double kYawSlack = 1e-9;
+constexpr double kMaxDepthM = 0.1;
+constexpr double kMaxPositionWithoutPitchM = 1.0;
+// Relative slack on the half extent, so a position exactly on the edge passes after
+// the pitch itself went through decimal text.
+constexpr double kExtentSlack = 1e-9;
+
+std::vector<std::string> SplitCommas(const std::string& line) {
+  std::vector<std::string> fields;
+  std::size_t start = 0;
+  while (true) {
+    const std::size_t comma = line.find(',', start);
+    if (comma == std::string::npos) {
+      fields.push_back(line.substr(start));
+      return fields;
+    }
+    fields.push_back(line.substr(start, comma - start));
+    start = comma + 1;
+  }
+}
+
+std::string Where(const std::string& path, int line) {
+  return path + ":" + std::to_string(line) + ": ";
+}
+
+std::string RangeText(double lo, double hi) {
+  return "[" + FormatDoubleShort(lo) + ", " + FormatDoubleShort(hi) + "]";
+}
+
+}  // namespace
+
+const char* LabelsColumnName(int column) {
+  return column >= 0 && column < kNumColumns ? kColumnNames[column] : "?";
+}
+
+std::string PoseFieldText(const PoseLabel& label, int column) {
+  switch (column) {
+    case 2:
+      return label.tool;
+    case 3:
+      return FormatDoubleExact(label.x_m);
+    case 4:
+      return FormatDoubleExact(label.y_m);
+    case 5:
+      return FormatDoubleExact(label.yaw_rad);
+    case 6:
+      return FormatDoubleExact(label.depth_m);
+    default:
+      return "";
+  }
+}
+
+std::optional<PoseLabelProblem> FindPoseLabelProblem(const PoseLabel& label, int rows, int cols,
+                                                     double pixel_pitch_m) {
+  if (label.tool.empty() || !IsCsvSafe(label.tool)) {
+    return PoseLabelProblem{2,
+                            "expected a non-empty tool name without ',', '\"' or "
+                            "line breaks"};
+  }
+  const bool pitch_known = pixel_pitch_m > 0 && rows > 0 && cols > 0;
+  const double half_x = pitch_known ? 0.5 * cols * pixel_pitch_m : kMaxPositionWithoutPitchM;
+  const double half_y = pitch_known ? 0.5 * rows * pixel_pitch_m : kMaxPositionWithoutPitchM;
+  const char* why = pitch_known ? " (half the sensor's extent)" : " (pixel pitch unknown)";
+  if (!(std::isfinite(label.x_m) && std::abs(label.x_m) <= half_x * (1 + kExtentSlack))) {
+    return PoseLabelProblem{3, "expected a finite number in " + RangeText(-half_x, half_x) + why};
+  }
+  if (!(std::isfinite(label.y_m) && std::abs(label.y_m) <= half_y * (1 + kExtentSlack))) {
+    return PoseLabelProblem{4, "expected a finite number in " + RangeText(-half_y, half_y) + why};
+  }
+  if (!(std::isfinite(label.yaw_rad) && std::abs(label.yaw_rad) <= M_PI + kYawSlack)) {
+    return PoseLabelProblem{5, "expected a finite number in " + RangeText(-M_PI, M_PI)};
+  }
+  if (!(std::isfinite(label.depth_m) && label.depth_m >= 0 && label.depth_m <= kMaxDepthM)) {
+    return PoseLabelProblem{6, "expected a finite number in " + RangeText(0, kMaxDepthM)};
+  }
+  return std::nullopt;
+}
+
+bool IsCsvSafe(const std::string& text) {
+  return text.find_first_of(",\"\r\n") == std::string::npos;
+}
+
+std::vector<LabelRow> ParseLabelsCsv(const std::string& text, const std::string& path) {
+  std::vector<LabelRow> rows;
+  std::set<std::pair<std::string, SensorKind>> seen;
+  std::size_t pos = 0;
+  int line_number = 0;
+  bool header_seen = false;
+  if (text.compare(0, 3, "\xEF\xBB\xBF") == 0) pos = 3;
+  while (pos < text.size()) {
+    std::size_t end = text.find('\n', pos);
+    if (end == std::string::npos) end = text.size();
+    std::string line = text.substr(pos, end - pos);
+    pos = end + 1;
+    ++line_number;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (!header_seen) {
+      if (line != kLabelsHeader) {
+        throw DatasetError(Where(path, line_number) + "header: expected '" + kLabelsHeader +
+                           "', got '" + line + "'");
+      }
+      header_seen = true;
+      continue;
+    }
+    if (line.find_first_not_of(" \t") == std::string::npos) continue;
+    const std::vector<std::string> fields = SplitCommas(line);
+    const std::string where = Where(path, line_number);
+    if (fields.size() != kNumColumns) {
+      throw DatasetError(where + "expected " + std::to_string(kNumColumns) +
+                         " comma-separated fields (" + kLabelsHeader + "), got " +
+                         std::to_string(fields.size()) + " in '" + line + "'");
+    }
+    auto bad = [&](int column, const std::string& expected) {
+      return DatasetError(where + "field '" + kColumnNames[column] + "': " + expected + ", got '" +
+                          fields[column] + "'");
+    };
+    LabelRow row;
+    row.line = line_number;
+    row.frame = fields[0];
+    if (row.frame.empty()) throw bad(0, "expected a frame id (the image file's stem)");
+    if (!SensorKindFromString(fields[1], &row.sensor)) {
+      throw bad(1, "expected 'bubble' or 'gelslim'");
+    }
+    if (!SplitFromString(fields[7], &row.split)) throw bad(7, "expected 'train' or 'test'");
+    bool all_empty = true;
+    for (int c = 2; c <= 6; ++c) all_empty = all_empty && fields[c].empty();
+    if (!all_empty) {
+      PoseLabel label;
+      label.tool = fields[2];
+      if (label.tool.empty()) {
+        throw bad(2,
+                  "expected a tool name (or all five pose fields empty for an "
+                  "unlabelled frame)");
+      }
+      double* values[4] = {&label.x_m, &label.y_m, &label.yaw_rad, &label.depth_m};
+      for (int c = 3; c <= 6; ++c) {
+        if (!ParseDouble(fields[c], values[c - 3]) || !std::isfinite(*values[c - 3])) {
+          throw bad(c, "expected a finite number");
+        }
+      }
+      if (std::optional<PoseLabelProblem> problem = FindPoseLabelProblem(label, 0, 0, 0)) {
+        throw bad(problem->column, problem->expected);
+      }
+      row.label = std::move(label);
+    }
+    if (!seen.insert({row.frame, row.sensor}).second) {
+      throw DatasetError(where + "duplicate label for frame '" + row.frame + "', sensor '" +
+                         ToString(row.sensor) + "': expected one row per (frame, sensor)");
+    }
+    rows.push_back(std::move(row));
+  }
+  if (!header_seen) {
+    throw DatasetError(Where(path, 1) + "header: expected '" + kLabelsHeader +
+                       "', got an empty file");
+  }
+  return rows;
+}
+
+std::string FormatLabelsCsv(const std::vector<LabelRow>& rows) {
+  std::string out = std::string(kLabelsHeader) + "\n";
+  for (const LabelRow& row : rows) {
+    out += row.frame;
+    out += ',';
+    out += ToString(row.sensor);
+    for (int c = 2; c <= 6; ++c) {
+      out += ',';
+      if (row.label) out += PoseFieldText(*row.label, c);
+    }
+    out += ',';
+    out += ToString(row.split);
+    out += '\n';
+  }
+  return out;
+}
+
+}  // namespace tactfunc::internal

@@ -1,0 +1,129 @@
+// Copyright 2026 The tactfunc Authors.
+#include "estimation/data/trunk_targets.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+#include "estimation/data/dataset.h"
+
+namespace tactfunc {
+
+PreprocessOptions ToPreprocessOptions(const FrameFormat& format) {
+  PreprocessOptions options;
+  options.rows = format.rows;
+  options.cols = format.cols;
+  options.grayscale = format.grayscale;
+  options.normalization = format.per_image_min_max
+                              ? PreprocessOptions::Normalization::kPerImageMinMax
+                              : PreprocessOptions::Normalization::kFixedScale;
+  options.fixed_scale = format.per_image_min_max ? 0.0 : format.scale;
+  return options;
+}
+
+TrunkTargets MakeTrunkTargets(const Image& frame, const Image& reference, SensorKind sensor,
+                              const FrameFormat& format) {
+  const PreprocessedFrame pre =
+      Preprocess(frame, reference, sensor, ToPreprocessOptions(format), format.scale);
+  TrunkTargets out;
+  out.rows = pre.values.rows;
+  out.cols = pre.values.cols;
+  const int n = out.rows * out.cols;
+  const int c = pre.values.channels;
+  out.values = Eigen::Map<const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic,
+                                              Eigen::RowMajor>>(pre.values.data.data(), n, c);
+  out.weights.resize(n);
+  for (int j = 0; j < n; ++j) out.weights[j] = pre.valid[j] ? 1.0f : 0.0f;
+  out.flat = pre.flat;
+  out.scale = pre.scale;
+  out.offset = pre.offset;
+  out.source_range = pre.source_range / pre.scale;
+  return out;
+}
+
+TrunkTargets LoadTrunkTargets(const Dataset& dataset, std::size_t index,
+                              const FrameFormat& format, bool clean) {
+  const FrameRecord& record = dataset.frames().at(index);
+  const Image frame = clean ? dataset.LoadCleanFrame(index) : dataset.LoadFrame(index);
+  return MakeTrunkTargets(frame, dataset.Reference(record.sensor), record.sensor, format);
+}
+
+namespace {
+
+// Sum of squared errors over the valid pixels, their count and the target's range.
+struct ErrorAndRange {
+  double sse = 0;
+  std::int64_t count = 0;
+  double range = 0;
+};
+
+ErrorAndRange MeasureError(const Eigen::MatrixXf& prediction, const TrunkTargets& target) {
+  if (prediction.rows() != target.values.rows() || prediction.cols() != target.values.cols()) {
+    throw std::invalid_argument("Psnr: prediction is " + std::to_string(prediction.rows()) +
+                                "x" + std::to_string(prediction.cols()) + ", target " +
+                                std::to_string(target.values.rows()) + "x" +
+                                std::to_string(target.values.cols()));
+  }
+  double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+  ErrorAndRange out;
+  for (Eigen::Index j = 0; j < target.values.rows(); ++j) {
+    if (!(target.weights[j] > 0)) continue;
+    for (Eigen::Index c = 0; c < target.values.cols(); ++c) {
+      const double t = target.values(j, c);
+      const double d = static_cast<double>(prediction(j, c)) - t;
+      lo = std::min(lo, t);
+      hi = std::max(hi, t);
+      out.sse += d * d;
+      ++out.count;
+    }
+  }
+  out.range = out.count > 0 ? hi - lo : 0.0;
+  return out;
+}
+
+double PsnrAtPeak(const ErrorAndRange& e, double range) {
+  if (e.count == 0) return std::numeric_limits<double>::quiet_NaN();
+  if (!(range >= 1e-9)) range = 1.0;
+  const double mse = e.sse / e.count;
+  if (mse == 0) return std::numeric_limits<double>::infinity();
+  return 10.0 * std::log10(range * range / mse);
+}
+
+}  // namespace
+
+double Psnr(const Eigen::MatrixXf& prediction, const TrunkTargets& target) {
+  const ErrorAndRange e = MeasureError(prediction, target);
+  return PsnrAtPeak(e, e.range);
+}
+
+double PsnrSourcePeak(const Eigen::MatrixXf& prediction, const TrunkTargets& target) {
+  return PsnrAtPeak(MeasureError(prediction, target), target.source_range);
+}
+
+double TargetRange(const TrunkTargets& target) {
+  return MeasureError(target.values, target).range;
+}
+
+double Rmse(const Eigen::MatrixXf& prediction, const TrunkTargets& target) {
+  const ErrorAndRange e = MeasureError(prediction, target);
+  if (e.count == 0) return std::numeric_limits<double>::quiet_NaN();
+  return std::sqrt(e.sse / e.count);
+}
+
+Image TargetsToImage(const Eigen::MatrixXf& values, int rows, int cols) {
+  if (values.rows() != static_cast<Eigen::Index>(rows) * cols) {
+    throw std::invalid_argument("TargetsToImage: " + std::to_string(values.rows()) +
+                                " rows, expected " + std::to_string(rows) + "x" +
+                                std::to_string(cols));
+  }
+  Image image(rows, cols, static_cast<int>(values.cols()));
+  for (int j = 0; j < rows * cols; ++j) {
+    for (int c = 0; c < image.channels; ++c) image.data[j * image.channels + c] = values(j, c);
+  }
+  return image;
+}
+
+}  // namespace tactfunc

@@ -1,0 +1,521 @@
+// Copyright 2026 The tactfunc Authors.
+#include "estimation/fitting/latent_fitter.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <memory>
+#include <sstream>
+#include <stdexcept>
+#include <utility>
+
+#include "ceres/loss_function.h"
+#include "ceres/problem.h"
+#include "estimation/fitting/internal/latent_cost_functions.h"
+
+namespace tactfunc {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double MsSince(Clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+
+const char* kStrategyForms =
+    "expected one of knn, meta_sgd:K, ceres:N, knn+meta_sgd:K, knn+ceres:N "
+    "(K >= 0, N >= 1 integers)";
+
+bool ParseCount(const std::string& text, int* value) {
+  if (text.empty() || text.size() > 9) return false;
+  for (char ch : text) {
+    if (ch < '0' || ch > '9') return false;
+  }
+  *value = std::stoi(text);
+  return true;
+}
+
+std::string Format(const char* format, double value) {
+  char buffer[64];
+  std::snprintf(buffer, sizeof(buffer), format, value);
+  return buffer;
+}
+
+}  // namespace
+
+// ---- FitStrategy -----------------------------------------------------------------------
+
+bool FitStrategy::Parse(const std::string& text, FitStrategy* strategy, std::string* error) {
+  auto fail = [&](const std::string& why) {
+    if (error != nullptr) *error = "bad fit strategy '" + text + "': " + why + "; " + kStrategyForms;
+    return false;
+  };
+  FitStrategy out;
+  std::string rest = text;
+  if (rest == "knn") {
+    out.knn = true;
+    out.refinement = Refinement::kNone;
+    out.steps = 0;
+    *strategy = out;
+    return true;
+  }
+  if (rest.rfind("knn+", 0) == 0) {
+    out.knn = true;
+    rest = rest.substr(4);
+  }
+  const size_t colon = rest.find(':');
+  const std::string name = rest.substr(0, colon);
+  if (name == "meta_sgd") {
+    out.refinement = Refinement::kMetaSgd;
+  } else if (name == "ceres") {
+    out.refinement = Refinement::kCeres;
+  } else if (name.empty()) {
+    return fail("no method");
+  } else {
+    return fail("unknown method '" + name + "'");
+  }
+  if (colon == std::string::npos) return fail("'" + name + "' needs a step count, as " + name + ":10");
+  if (!ParseCount(rest.substr(colon + 1), &out.steps)) {
+    return fail("step count '" + rest.substr(colon + 1) + "' is not a non-negative integer");
+  }
+  std::string why;
+  if (!out.IsValid(&why)) return fail(why);
+  *strategy = out;
+  return true;
+}
+
+FitStrategy FitStrategy::FromString(const std::string& text) {
+  FitStrategy strategy;
+  std::string error;
+  if (!Parse(text, &strategy, &error)) throw std::invalid_argument(error);
+  return strategy;
+}
+
+std::string FitStrategy::ToString() const {
+  std::string out = knn ? "knn" : "";
+  switch (refinement) {
+    case Refinement::kNone:
+      return knn ? out : "none";
+    case Refinement::kMetaSgd:
+      return out + (knn ? "+" : "") + "meta_sgd:" + std::to_string(steps);
+    case Refinement::kCeres:
+      return out + (knn ? "+" : "") + "ceres:" + std::to_string(steps);
+  }
+  return "unknown";
+}
+
+bool FitStrategy::IsValid(std::string* error) const {
+  std::string message;
+  if (refinement == Refinement::kNone && !knn) {
+    message = "a strategy without knn needs a refinement (meta_sgd:K or ceres:N)";
+  } else if (refinement == Refinement::kMetaSgd && steps < 0) {
+    message = "meta_sgd:K needs K >= 0, found " + std::to_string(steps);
+  } else if (refinement == Refinement::kCeres && steps < 1) {
+    message = "ceres:N needs N >= 1, found " + std::to_string(steps);
+  } else if (refinement != Refinement::kNone && refinement != Refinement::kMetaSgd &&
+             refinement != Refinement::kCeres) {
+    message = "refinement is not a Refinement";
+  } else {
+    return true;
+  }
+  if (error != nullptr) *error = message;
+  return false;
+}
+
+// ---- Names -------------------------------------------------------------------------------
+
+const char* ToString(FitTermination termination) {
+  switch (termination) {
+    case FitTermination::kCompleted:
+      return "COMPLETED";
+    case FitTermination::kConvergence:
+      return "CONVERGENCE";
+    case FitTermination::kNoConvergence:
+      return "NO_CONVERGENCE";
+    case FitTermination::kNoValidPixels:
+      return "NO_VALID_PIXELS";
+    case FitTermination::kFailure:
+      return "FAILURE";
+  }
+  return "UNKNOWN";
+}
+
+const char* ToString(LatentFitter::RobustLoss loss) {
+  switch (loss) {
+    case LatentFitter::RobustLoss::kNone:
+      return "none";
+    case LatentFitter::RobustLoss::kHuber:
+      return "huber";
+    case LatentFitter::RobustLoss::kCauchy:
+      return "cauchy";
+  }
+  return "unknown";
+}
+
+const char* ToString(LatentFitter::Precision precision) {
+  return precision == LatentFitter::Precision::kFloat ? "float" : "double";
+}
+
+const char* ToString(LatentFitter::JacobianMode jacobian) {
+  return jacobian == LatentFitter::JacobianMode::kAnalytic ? "analytic" : "autodiff";
+}
+
+// ---- Options -------------------------------------------------------------------------------
+
+LatentFitter::Options::Options() {
+  strategy.knn = false;
+  strategy.refinement = FitStrategy::Refinement::kCeres;
+  strategy.steps = 10;
+  solver_options.minimizer_type = ceres::TRUST_REGION;
+  solver_options.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
+  solver_options.linear_solver_type = ceres::DENSE_NORMAL_CHOLESKY;
+  solver_options.num_threads = 1;
+  solver_options.logging_type = ceres::SILENT;
+  solver_options.minimizer_progress_to_stdout = false;
+}
+
+bool LatentFitter::Options::IsValid(std::string* error) const {
+  std::ostringstream message;
+  std::string why;
+  if (!strategy.IsValid(&why)) {
+    message << "strategy: " << why;
+  } else if (!(sigma >= 0.0) || !std::isfinite(sigma)) {
+    message << "sigma must be finite and > 0 (or 0 = automatic), found " << sigma;
+  } else if (!(sigma_z > 0.0) || !std::isfinite(sigma_z)) {
+    message << "sigma_z must be finite and > 0, found " << sigma_z;
+  } else if (robust_loss != RobustLoss::kNone && robust_loss != RobustLoss::kHuber &&
+             robust_loss != RobustLoss::kCauchy) {
+    message << "robust_loss is not a RobustLoss, found " << static_cast<int>(robust_loss);
+  } else if (!(robust_loss_scale > 0.0) || !std::isfinite(robust_loss_scale)) {
+    message << "robust_loss_scale must be finite and > 0, found " << robust_loss_scale;
+  } else if (pixel_stride < 1) {
+    message << "pixel_stride must be >= 1, found " << pixel_stride;
+  } else if (max_pixels < 0) {
+    message << "max_pixels must be >= 0 (0 = all), found " << max_pixels;
+  } else if (precision != Precision::kFloat && precision != Precision::kDouble) {
+    message << "precision is not a Precision, found " << static_cast<int>(precision);
+  } else if (jacobian != JacobianMode::kAnalytic && jacobian != JacobianMode::kAutoDiff) {
+    message << "jacobian is not a JacobianMode, found " << static_cast<int>(jacobian);
+  } else if (knn_k < 1) {
+    message << "knn_k must be >= 1, found " << knn_k;
+  } else if (solver_options.minimizer_type != ceres::TRUST_REGION) {
+    message << "solver_options.minimizer_type must be TRUST_REGION (LM or dogleg)";
+  } else if (!solver_options.IsValid(&why)) {
+    message << "solver_options: " << why;
+  } else {
+    return true;
+  }
+  if (error != nullptr) *error = "LatentFitter::Options::" + message.str();
+  return false;
+}
+
+// ---- Summary ---------------------------------------------------------------------------------
+
+bool LatentFitter::Summary::IsSolutionUsable() const {
+  return termination_type != FitTermination::kFailure &&
+         termination_type != FitTermination::kNoValidPixels;
+}
+
+std::string LatentFitter::Summary::BriefReport() const {
+  std::ostringstream out;
+  out << "LatentFitter " << strategy.ToString() << ": " << tactfunc::ToString(termination_type)
+      << ", cost " << Format("%.4g", initial_cost) << " -> " << Format("%.4g", final_cost)
+      << ", PSNR " << Format("%.2f", psnr) << " dB, " << iterations << " iterations, "
+      << Format("%.2f", total_time_ms) << " ms";
+  if (!message.empty()) out << " (" << message << ")";
+  return out.str();
+}
+
+std::string LatentFitter::Summary::FullReport() const {
+  std::ostringstream out;
+  out << BriefReport() << "\n";
+  out << "  pixels: " << num_pixels_used << " used of " << num_valid_pixels << " valid, "
+      << num_residuals << " residuals; sigma " << sigma << ", sigma_z " << sigma_z << "\n";
+  for (const Stage& stage : stages) {
+    out << "  stage " << stage.name << ": cost " << Format("%.6g", stage.cost) << ", "
+        << stage.iterations << " iterations, " << Format("%.3f", stage.time_ms) << " ms\n";
+  }
+  if (!neighbor_labels.empty()) {
+    out << "  neighbours (label: squared distance, weight):";
+    for (size_t i = 0; i < neighbor_labels.size(); ++i) {
+      out << " " << neighbor_labels[i] << ": " << Format("%.4g", neighbor_squared_distances[i])
+          << ", " << Format("%.3f", neighbor_weights[i]) << ";";
+    }
+    out << "\n";
+  }
+  if (ceres_ran) out << "  ceres: " << solver_summary.BriefReport() << "\n";
+  return out.str();
+}
+
+// ---- LatentFitter ---------------------------------------------------------------------------
+
+LatentFitter::LatentFitter(const SensorTrunk& trunk, const Options& options)
+    : LatentFitter(trunk, options, nullptr, nullptr) {}
+
+LatentFitter::LatentFitter(const SensorTrunk& trunk, const Options& options,
+                           const KnnIndex* index, const Eigen::MatrixXf* latents)
+    : trunk_(&trunk), options_(options), index_(index), latents_(latents) {
+  std::string error;
+  if (!options_.IsValid(&error)) throw std::invalid_argument(error);
+  const int d = trunk.siren.latent_dim();
+  if (trunk.alpha.size() != d) {
+    throw std::invalid_argument("LatentFitter: trunk.alpha must have latent_dim = " +
+                                std::to_string(d) + " entries, found " +
+                                std::to_string(trunk.alpha.size()));
+  }
+  if (options_.strategy.knn && (index == nullptr || latents == nullptr)) {
+    throw std::invalid_argument("LatentFitter: strategy " + options_.strategy.ToString() +
+                                " needs a k-NN index and the functaset latents");
+  }
+  if (index != nullptr || latents != nullptr) {
+    if (index == nullptr || latents == nullptr) {
+      throw std::invalid_argument("LatentFitter: give both the k-NN index and the latents, or neither");
+    }
+    if (index->dim() != d || latents->cols() != d || latents->rows() != index->size()) {
+      throw std::invalid_argument(
+          "LatentFitter: the k-NN index (" + std::to_string(index->size()) + " x " +
+          std::to_string(index->dim()) + ") and the latents (" + std::to_string(latents->rows()) +
+          " x " + std::to_string(latents->cols()) + ") must both be M x latent_dim (M x " +
+          std::to_string(d) + ") with the same M");
+    }
+  }
+  sigma_ = options_.sigma > 0 ? options_.sigma
+                              : (trunk.residual_sigma > 0 ? trunk.residual_sigma : 0.01);
+}
+
+LatentFitter::Summary LatentFitter::Fit(const TrunkTargets& targets, Eigen::VectorXd* latent) const {
+  return FitImpl(targets, nullptr, latent);
+}
+
+LatentFitter::Summary LatentFitter::Fit(const TrunkTargets& targets,
+                                        const Eigen::VectorXd& initial_latent,
+                                        Eigen::VectorXd* latent) const {
+  return FitImpl(targets, &initial_latent, latent);
+}
+
+namespace {
+
+// K meta-SGD steps from z (MetaSgd::FitLatent's update, from any start).
+template <typename Scalar>
+Eigen::VectorXd MetaSgdSteps(const SensorTrunk& trunk, const internal::LatentResidualData& data,
+                             const Eigen::VectorXd& start, int steps) {
+  using VectorX = LatentModulatedSiren::VectorX<Scalar>;
+  const Scalar two_lambda = static_cast<Scalar>(2.0 * trunk.meta_sgd.latent_l2_weight);
+  const VectorX alpha = trunk.alpha.cast<Scalar>();
+  VectorX z = start.cast<Scalar>();
+  VectorX g;
+  for (int k = 0; k < steps; ++k) {
+    internal::DataLossAndGradient<Scalar>(trunk.siren, data, z, &g);
+    g += two_lambda * z;
+    z -= alpha.cwiseProduct(g);
+  }
+  return z.template cast<double>();
+}
+
+}  // namespace
+
+LatentFitter::Summary LatentFitter::FitImpl(const TrunkTargets& targets,
+                                            const Eigen::VectorXd* initial,
+                                            Eigen::VectorXd* latent) const {
+  const Clock::time_point start_time = Clock::now();
+  const LatentModulatedSiren& siren = trunk_->siren;
+  const int d = siren.latent_dim();
+  if (latent == nullptr) throw std::invalid_argument("LatentFitter::Fit: latent must not be null");
+  if (initial != nullptr) {
+    if (initial->size() != d) {
+      throw std::invalid_argument("LatentFitter::Fit: the initial latent must have latent_dim = " +
+                                  std::to_string(d) + " entries, found " +
+                                  std::to_string(initial->size()));
+    }
+    if (!initial->allFinite()) {
+      throw std::invalid_argument("LatentFitter::Fit: the initial latent has a non-finite entry");
+    }
+  }
+  const internal::LatentResidualData data = internal::SelectPixels(
+      siren, targets, sigma_, options_.pixel_stride, options_.max_pixels);
+
+  Summary summary;
+  summary.strategy = options_.strategy;
+  summary.sigma = sigma_;
+  summary.sigma_z = options_.sigma_z;
+  summary.num_valid_pixels = data.num_valid_pixels;
+  summary.num_pixels_used = data.num_pixels();
+  summary.num_residuals = data.num_residuals() + d;
+
+  Eigen::VectorXd z = initial != nullptr ? *initial : Eigen::VectorXd::Zero(d);
+  if (data.num_pixels() == 0) {
+    latent->setZero(d);
+    summary.termination_type = FitTermination::kNoValidPixels;
+    summary.message = "the frame has no valid pixel (every weight is 0): the latent is the prior mean, 0";
+    summary.total_time_ms = MsSince(start_time);
+    return summary;
+  }
+
+  // The objective's pieces, shared by the cost reports and the Ceres stage.
+  std::unique_ptr<ceres::CostFunction> data_cost;
+  if (options_.jacobian == JacobianMode::kAutoDiff) {
+    data_cost = internal::MakeAutoDiffLatentCost(&siren, &data);
+  } else if (options_.precision == Precision::kFloat) {
+    data_cost = std::make_unique<internal::AnalyticLatentCost<float>>(&siren, &data);
+  } else {
+    data_cost = std::make_unique<internal::AnalyticLatentCost<double>>(&siren, &data);
+  }
+  std::unique_ptr<ceres::LossFunction> loss;
+  if (options_.robust_loss == RobustLoss::kHuber) {
+    loss = std::make_unique<ceres::HuberLoss>(options_.robust_loss_scale);
+  } else if (options_.robust_loss == RobustLoss::kCauchy) {
+    loss = std::make_unique<ceres::CauchyLoss>(options_.robust_loss_scale);
+  }
+  std::unique_ptr<ceres::CostFunction> robust_cost;
+  if (loss) robust_cost = std::make_unique<internal::RobustifiedCost>(data_cost.get(), loss.get());
+  const ceres::CostFunction* objective_data = loss ? robust_cost.get() : data_cost.get();
+  internal::LatentPriorCost prior_cost(d, options_.sigma_z);
+  auto objective = [&](const Eigen::VectorXd& at) {
+    return internal::HalfSquaredNorm(*objective_data, at.data()) +
+           internal::HalfSquaredNorm(prior_cost, at.data());
+  };
+
+  auto add_stage = [&](const char* name, double cost, Clock::time_point began, int iterations) {
+    summary.stages.push_back(Stage{name, cost, MsSince(began), iterations});
+    summary.iterations += iterations;
+  };
+  double cost = objective(z);
+  summary.initial_cost = cost;
+  add_stage("start", cost, start_time, 0);
+  summary.termination_type = FitTermination::kCompleted;
+
+  // A stage whose result is not finite is undone: the fit keeps the last finite latent.
+  auto accept = [&](const Eigen::VectorXd& candidate, const char* stage) {
+    const double candidate_cost = candidate.allFinite() ? objective(candidate)
+                                                        : std::numeric_limits<double>::quiet_NaN();
+    if (!std::isfinite(candidate_cost)) {
+      summary.termination_type = FitTermination::kFailure;
+      summary.message = std::string("the ") + stage +
+                        " stage produced a non-finite latent or cost; kept the latent before it";
+      return false;
+    }
+    z = candidate;
+    cost = candidate_cost;
+    return true;
+  };
+
+  if (options_.strategy.knn) {
+    const Clock::time_point began = Clock::now();
+    Eigen::VectorXd query =
+        initial != nullptr
+            ? *initial
+            : (options_.precision == Precision::kFloat
+                   ? MetaSgdSteps<float>(*trunk_, data, Eigen::VectorXd::Zero(d),
+                                         trunk_->meta_sgd.inner_steps)
+                   : MetaSgdSteps<double>(*trunk_, data, Eigen::VectorXd::Zero(d),
+                                          trunk_->meta_sgd.inner_steps));
+    if (!query.allFinite()) query.setZero();
+    const Eigen::VectorXf query_float = query.cast<float>();
+    const int k = options_.knn_k;
+    std::vector<float> distances(k);
+    std::vector<std::int64_t> labels(k);
+    index_->Search(query_float.data(), 1, k, distances.data(), labels.data());
+    Eigen::VectorXd estimate = Eigen::VectorXd::Zero(d);
+    double weight_sum = 0;
+    int exact_matches = 0;
+    for (int i = 0; i < k; ++i) {
+      if (labels[i] >= 0 && distances[i] <= 0.0f) ++exact_matches;
+    }
+    for (int i = 0; i < k; ++i) {
+      if (labels[i] < 0) continue;
+      const double distance = std::sqrt(static_cast<double>(distances[i]));
+      const double w = exact_matches > 0 ? (distances[i] <= 0.0f ? 1.0 : 0.0) : 1.0 / distance;
+      summary.neighbor_labels.push_back(labels[i]);
+      summary.neighbor_squared_distances.push_back(distances[i]);
+      summary.neighbor_weights.push_back(w);
+      estimate += w * latents_->row(labels[i]).transpose().cast<double>();
+      weight_sum += w;
+    }
+    if (weight_sum > 0 && std::isfinite(weight_sum)) {
+      estimate /= weight_sum;
+      for (double& w : summary.neighbor_weights) w /= weight_sum;
+      accept(estimate, "knn");
+    } else {
+      summary.message = "k-NN found no neighbour (empty index); kept the query latent";
+      accept(query, "knn");
+    }
+    add_stage("knn", cost, began, 0);
+  }
+
+  const int steps = options_.strategy.steps;
+  if (options_.strategy.refinement == FitStrategy::Refinement::kMetaSgd &&
+      summary.termination_type != FitTermination::kFailure) {
+    const Clock::time_point began = Clock::now();
+    const Eigen::VectorXd candidate = options_.precision == Precision::kFloat
+                                          ? MetaSgdSteps<float>(*trunk_, data, z, steps)
+                                          : MetaSgdSteps<double>(*trunk_, data, z, steps);
+    accept(candidate, "meta_sgd");
+    add_stage("meta_sgd", cost, began, steps);
+  }
+
+  if (options_.strategy.refinement == FitStrategy::Refinement::kCeres &&
+      summary.termination_type != FitTermination::kFailure) {
+    const Clock::time_point began = Clock::now();
+    Eigen::VectorXd parameters = z;
+    ceres::Problem::Options problem_options;
+    problem_options.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+    problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+    ceres::Problem problem(problem_options);
+    problem.AddResidualBlock(const_cast<ceres::CostFunction*>(objective_data), nullptr,
+                             parameters.data());
+    problem.AddResidualBlock(&prior_cost, nullptr, parameters.data());
+    ceres::Solver::Options solver_options = options_.solver_options;
+    solver_options.max_num_iterations = steps;
+    ceres::Solve(solver_options, &problem, &summary.solver_summary);
+    summary.ceres_ran = true;
+    const ceres::Solver::Summary& s = summary.solver_summary;
+    // Ceres' iterations[0] is the starting point, not a step.
+    const int iterations = std::max(0, static_cast<int>(s.iterations.size()) - 1);
+    switch (s.termination_type) {
+      case ceres::CONVERGENCE:
+      case ceres::USER_SUCCESS:
+        summary.termination_type = FitTermination::kConvergence;
+        break;
+      case ceres::NO_CONVERGENCE:
+        summary.termination_type = FitTermination::kNoConvergence;
+        break;
+      case ceres::FAILURE:
+      case ceres::USER_FAILURE:
+        summary.termination_type = FitTermination::kFailure;
+        summary.message = "ceres: " + s.message;
+        break;
+    }
+    const Eigen::VectorXd before = z;
+    const double cost_before = cost;
+    if (accept(parameters, "ceres")) {
+      // Ceres keeps the best point it accepted, so the cost cannot rise; if rounding in
+      // a float evaluation made it, the previous latent is kept.
+      if (cost > cost_before) {
+        z = before;
+        cost = cost_before;
+      }
+      if (summary.termination_type != FitTermination::kFailure && summary.message.empty() &&
+          summary.termination_type == FitTermination::kNoConvergence) {
+        summary.message = "ceres used its " + std::to_string(steps) + " iterations";
+      }
+    }
+    add_stage("ceres", cost, began, iterations);
+  }
+
+  summary.final_cost = cost;
+  // PSNR over every valid pixel of the frame, not only the subsample.
+  const Eigen::MatrixXf prediction =
+      options_.precision == Precision::kFloat
+          ? siren.Forward<float>(siren.Grid<float>(targets.rows, targets.cols), z.cast<float>())
+          : siren.Forward<double>(siren.Grid<double>(targets.rows, targets.cols), z)
+                .cast<float>();
+  summary.psnr = Psnr(prediction, targets);  // +inf for an exact fit
+  if (std::isnan(summary.psnr)) summary.psnr = 0;
+  *latent = z;
+  summary.total_time_ms = MsSince(start_time);
+  return summary;
+}
+
+}  // namespace tactfunc

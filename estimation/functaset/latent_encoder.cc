@@ -1,0 +1,395 @@
+// Copyright 2026 The tactfunc Authors.
+#include "estimation/functaset/latent_encoder.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <condition_variable>
+#include <exception>
+#include <filesystem>
+#include <mutex>
+#include <sstream>
+#include <stdexcept>
+#include <thread>
+#include <utility>
+
+namespace tactfunc {
+
+const char* ToString(EncodeTermination termination) {
+  switch (termination) {
+    case EncodeTermination::kComplete:
+      return "complete";
+    case EncodeTermination::kInterrupted:
+      return "interrupted";
+  }
+  return "unknown";
+}
+
+bool LatentEncoder::Options::IsValid(std::string* error) const {
+  std::ostringstream message;
+  if (threads < 1) {
+    message << "threads must be >= 1, found " << threads;
+  } else if (checkpoint_every < 0) {
+    message << "checkpoint_every must be >= 0, found " << checkpoint_every;
+  } else if (resume && checkpoint_path.empty()) {
+    message << "resume needs a checkpoint_path, found \"\"";
+  } else {
+    std::vector<SensorKind> sorted = sensors;
+    std::sort(sorted.begin(), sorted.end());
+    if (std::adjacent_find(sorted.begin(), sorted.end()) != sorted.end()) {
+      message << "sensors lists '" << ToString(*std::adjacent_find(sorted.begin(), sorted.end()))
+              << "' twice";
+    } else {
+      return true;
+    }
+  }
+  if (error != nullptr) *error = "LatentEncoder::Options::" + message.str();
+  return false;
+}
+
+std::string LatentEncoder::Summary::BriefReport() const {
+  std::ostringstream out;
+  out << "encode: " << ToString(termination) << ", " << (frames_encoded + frames_resumed) << "/"
+      << frames_total << " frames (" << frames_encoded << " encoded";
+  if (frames_resumed > 0) out << ", " << frames_resumed << " resumed";
+  out << ") in " << seconds << " s (" << frames_per_second << " frames/s)";
+  for (const auto& [sensor, psnr] : mean_psnr) {
+    out << ", " << ToString(sensor) << " " << psnr << " dB";
+  }
+  return out.str();
+}
+
+std::string LatentEncoder::Summary::FullReport() const {
+  std::ostringstream out;
+  out << "LatentEncoder summary\n"
+      << "  termination          " << ToString(termination) << "\n"
+      << "  message              " << message << "\n"
+      << "  frames selected      " << frames_total << "\n"
+      << "  frames encoded       " << frames_encoded << "\n"
+      << "  frames resumed       " << frames_resumed << "\n"
+      << "  checkpoints written  " << checkpoints_written << "\n"
+      << "  non-finite latents   " << non_finite_latents << "\n"
+      << "  seconds              " << seconds << "\n"
+      << "  frames/s             " << frames_per_second << "\n";
+  for (const auto& [sensor, count] : frames) {
+    const auto it = mean_psnr.find(sensor);
+    out << "  " << ToString(sensor) << ": " << count << " frames, mean PSNR "
+        << (it == mean_psnr.end() ? std::string("n/a") : std::to_string(it->second) + " dB")
+        << "\n";
+  }
+  return out.str();
+}
+
+LatentEncoder::LatentEncoder(const FunctaModel& model, const Options& options)
+    : model_(model), options_(options) {
+  std::string error;
+  if (!options_.IsValid(&error)) throw std::invalid_argument(error);
+  for (SensorKind sensor : model.sensors()) {
+    const SensorTrunk& trunk = model.Trunk(sensor);
+    SensorState state;
+    state.sensor = sensor;
+    state.trunk = &trunk;
+    // One grid per sensor for the whole run: every frame of a sensor has the same
+    // working resolution.
+    state.grid = trunk.siren.Grid<float>(trunk.format.rows, trunk.format.cols);
+    state.alpha = trunk.alpha.cast<float>();
+    state.meta_sgd = MetaSgd(trunk.meta_sgd);
+    states_.push_back(std::move(state));
+  }
+}
+
+const LatentEncoder::SensorState& LatentEncoder::State(SensorKind sensor) const {
+  for (const SensorState& state : states_) {
+    if (state.sensor == sensor) return state;
+  }
+  throw std::invalid_argument(std::string("LatentEncoder: the model has no trunk for sensor '") +
+                              ToString(sensor) + "'");
+}
+
+LatentEncoder::EncodedFrame LatentEncoder::EncodeTargets(SensorKind sensor,
+                                                         const TrunkTargets& targets) const {
+  const SensorState& state = State(sensor);
+  const LatentModulatedSiren& siren = state.trunk->siren;
+  if (targets.values.rows() != state.grid.rows() ||
+      targets.values.cols() != siren.output_channels() ||
+      targets.weights.size() != targets.values.rows()) {
+    throw std::invalid_argument(
+        std::string("LatentEncoder: the ") + ToString(sensor) + " trunk expects " +
+        std::to_string(state.trunk->format.rows) + "x" + std::to_string(state.trunk->format.cols) +
+        " pixels x " + std::to_string(siren.output_channels()) + " channel(s) (" +
+        std::to_string(state.grid.rows()) + " x " + std::to_string(siren.output_channels()) +
+        " targets), found " + std::to_string(targets.values.rows()) + " x " +
+        std::to_string(targets.values.cols()) + " targets and " +
+        std::to_string(targets.weights.size()) + " weights");
+  }
+  EncodedFrame out;
+  out.latent = state.meta_sgd.FitLatent<float>(siren, state.grid, targets.values, targets.weights,
+                                               state.alpha);
+  out.psnr = Psnr(siren.Forward<float>(state.grid, out.latent), targets);
+  return out;
+}
+
+namespace {
+
+struct Job {
+  std::size_t frame = 0;  // index into Dataset::frames()
+  SensorKind sensor = SensorKind::kSoftBubble;
+  bool done = false;
+  FunctasetEntry entry;
+};
+
+double MeanFinite(const std::vector<double>& values) {
+  double sum = 0;
+  std::int64_t count = 0;
+  for (double v : values) {
+    if (std::isfinite(v)) {
+      sum += v;
+      ++count;
+    }
+  }
+  return count > 0 ? sum / count : 0.0;
+}
+
+}  // namespace
+
+Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
+                                const ProgressCallback& progress,
+                                const std::atomic<bool>* interrupt) const {
+  const auto start = std::chrono::steady_clock::now();
+  Summary local_summary;
+  Summary& s = summary != nullptr ? *summary : local_summary;
+  s = Summary();
+
+  // ---- Which sensors, and do their frames fit the trunks? -----------------------------
+  std::vector<SensorKind> sensors = options_.sensors;
+  if (sensors.empty()) {
+    for (SensorKind sensor : dataset.sensors()) {
+      if (model_.HasSensor(sensor)) sensors.push_back(sensor);
+    }
+    if (sensors.empty()) {
+      throw std::invalid_argument("LatentEncoder: the model and the dataset " + dataset.root() +
+                                  " have no sensor in common");
+    }
+  }
+  std::sort(sensors.begin(), sensors.end());
+  for (SensorKind sensor : sensors) {
+    if (!dataset.has_sensor(sensor)) {
+      throw std::invalid_argument(std::string("LatentEncoder: sensor '") + ToString(sensor) +
+                                  "' was requested but the dataset " + dataset.root() +
+                                  " has no frames of it");
+    }
+    const SensorTrunk& trunk = *State(sensor).trunk;
+    const SensorInfo& info = dataset.sensor_info(sensor);
+    const int channels = trunk.format.grayscale ? 1 : info.channels;
+    if (channels != trunk.siren.output_channels()) {
+      throw std::invalid_argument(
+          std::string("LatentEncoder: the model's ") + ToString(sensor) + " trunk outputs " +
+          std::to_string(trunk.siren.output_channels()) + " channel(s), but the dataset's " +
+          std::to_string(info.channels) + "-channel frames give " + std::to_string(channels) +
+          (trunk.format.grayscale ? " (grayscale)" : ""));
+    }
+  }
+
+  // ---- The work list, in output order ------------------------------------------------
+  std::vector<Job> jobs;
+  for (SensorKind sensor : sensors) {
+    for (std::size_t index : dataset.FrameIndices(sensor, options_.split)) {
+      Job job;
+      job.frame = index;
+      job.sensor = sensor;
+      const FrameRecord& record = dataset.frames()[index];
+      job.entry.id = record.id;
+      job.entry.split = record.split;
+      job.entry.label = record.label;
+      jobs.push_back(std::move(job));
+    }
+  }
+  s.frames_total = static_cast<std::int64_t>(jobs.size());
+
+  if (options_.resume && std::filesystem::exists(options_.checkpoint_path)) {
+    const Functaset checkpoint = Functaset::Load(options_.checkpoint_path);
+    checkpoint.CheckModel(model_, "in use", options_.checkpoint_path);
+    std::size_t matched = 0;
+    for (Job& job : jobs) {
+      const auto found = checkpoint.Find(job.sensor, job.entry.id);
+      if (!found) continue;
+      ++matched;
+      const FunctasetEntry& stored = checkpoint.entries(job.sensor)[*found];
+      job.entry.latent = stored.latent;
+      job.entry.psnr = stored.psnr;
+      job.done = true;
+      ++s.frames_resumed;
+    }
+    // Resuming with another selection would drop finished work from the file.
+    if (matched != checkpoint.size()) {
+      std::string example;
+      for (SensorKind sensor : checkpoint.sensors()) {
+        for (const FunctasetEntry& e : checkpoint.entries(sensor)) {
+          const bool selected = std::any_of(jobs.begin(), jobs.end(), [&](const Job& job) {
+            return job.sensor == sensor && job.entry.id == e.id;
+          });
+          if (!selected && example.empty()) example = e.id + " (" + ToString(sensor) + ")";
+        }
+      }
+      throw std::invalid_argument(
+          "LatentEncoder: the checkpoint " + options_.checkpoint_path + " holds " +
+          std::to_string(checkpoint.size() - matched) +
+          " frame(s) that are not among the frames selected from " + dataset.root() + ", e.g. " +
+          example +
+          "; resume with the sensors and split of the interrupted run (or another output)");
+    }
+  }
+
+  std::vector<std::size_t> pending;
+  for (std::size_t j = 0; j < jobs.size(); ++j) {
+    if (!jobs[j].done) pending.push_back(j);
+  }
+
+  // Builds the functaset of the finished jobs. Callers hold `mutex` or have joined the
+  // workers: a job's entry is written before its `done` flag is set under the mutex
+  // and never changes afterwards.
+  auto collect = [&](bool complete) {
+    Functaset out(model_.checksum(), dataset.root());
+    out.set_complete(complete);
+    out.set_latent_precision(options_.latent_precision);
+    for (SensorKind sensor : sensors) {
+      out.AddSensor(sensor, model_.Trunk(sensor).siren.latent_dim());
+    }
+    for (const Job& job : jobs) {
+      if (job.done) out.Add(job.sensor, job.entry);
+    }
+    return out;
+  };
+  auto write_checkpoint = [&](const Functaset& functaset) {
+    if (options_.checkpoint_path.empty()) return;
+    functaset.Save(options_.checkpoint_path);
+    ++s.checkpoints_written;
+  };
+
+  // ---- Workers -------------------------------------------------------------------------
+  std::mutex mutex;
+  std::condition_variable wake;
+  std::atomic<std::size_t> next{0};
+  std::atomic<bool> stop{false};
+  std::exception_ptr failure;
+  std::int64_t done = s.frames_resumed;
+  std::int64_t encoded = 0;
+  double psnr_sum = 0;
+  std::int64_t psnr_count = 0;
+  for (const Job& job : jobs) {
+    if (job.done && std::isfinite(job.entry.psnr)) {
+      psnr_sum += job.entry.psnr;
+      ++psnr_count;
+    }
+  }
+  int running = 0;
+
+  auto interrupted = [&]() { return interrupt != nullptr && interrupt->load(); };
+  auto work = [&]() {
+    for (;;) {
+      if (stop.load() || interrupted()) break;
+      const std::size_t p = next.fetch_add(1);
+      if (p >= pending.size()) break;
+      Job& job = jobs[pending[p]];
+      try {
+        const TrunkTargets targets =
+            LoadTrunkTargets(dataset, job.frame, model_.Trunk(job.sensor).format);
+        EncodedFrame frame = EncodeTargets(job.sensor, targets);
+        job.entry.latent = std::move(frame.latent);
+        job.entry.psnr = static_cast<float>(frame.psnr);
+      } catch (...) {
+        std::lock_guard<std::mutex> lock(mutex);
+        if (!failure) failure = std::current_exception();
+        stop = true;
+        break;
+      }
+      std::lock_guard<std::mutex> lock(mutex);
+      job.done = true;
+      ++done;
+      ++encoded;
+      if (std::isfinite(job.entry.psnr)) {
+        psnr_sum += job.entry.psnr;
+        ++psnr_count;
+      }
+      wake.notify_one();
+    }
+    std::lock_guard<std::mutex> lock(mutex);
+    --running;
+    wake.notify_one();
+  };
+
+  const int num_threads = static_cast<int>(
+      std::min<std::size_t>(options_.threads, std::max<std::size_t>(pending.size(), 1)));
+  std::vector<std::thread> workers;
+  running = num_threads;
+  for (int t = 0; t < num_threads; ++t) workers.emplace_back(work);
+
+  {
+    std::unique_lock<std::mutex> lock(mutex);
+    std::int64_t last_checkpoint = encoded;
+    auto last_report = std::chrono::steady_clock::now() - std::chrono::seconds(1);
+    while (running > 0) {
+      wake.wait_for(lock, std::chrono::milliseconds(100));
+      const auto now = std::chrono::steady_clock::now();
+      if (progress && now - last_report >= std::chrono::milliseconds(100)) {
+        const EncodeProgress report{done, s.frames_total,
+                                    psnr_count > 0 ? psnr_sum / psnr_count : 0.0};
+        lock.unlock();
+        progress(report);
+        lock.lock();
+        last_report = now;
+      }
+      if (options_.checkpoint_every > 0 && !options_.checkpoint_path.empty() &&
+          encoded - last_checkpoint >= options_.checkpoint_every && running > 0) {
+        last_checkpoint = encoded;
+        Functaset partial = collect(false);
+        lock.unlock();
+        write_checkpoint(partial);  // I/O outside the lock: workers keep going
+        lock.lock();
+      }
+    }
+  }
+  for (std::thread& worker : workers) worker.join();
+
+  const bool complete = done == s.frames_total;
+  Functaset result = collect(complete);
+  if (failure) {
+    if (encoded > 0) write_checkpoint(result);
+    std::rethrow_exception(failure);
+  }
+  write_checkpoint(result);
+
+  s.frames_encoded = encoded;
+  s.termination = complete ? EncodeTermination::kComplete : EncodeTermination::kInterrupted;
+  s.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  s.frames_per_second = s.seconds > 0 ? encoded / s.seconds : 0.0;
+  for (SensorKind sensor : sensors) {
+    std::vector<double> psnr;
+    for (const FunctasetEntry& e : result.entries(sensor)) {
+      psnr.push_back(e.psnr);
+      if (!e.latent.allFinite()) ++s.non_finite_latents;
+    }
+    s.frames[sensor] = static_cast<std::int64_t>(psnr.size());
+    if (!psnr.empty()) s.mean_psnr[sensor] = MeanFinite(psnr);
+  }
+  std::ostringstream message;
+  if (complete) {
+    message << "encoded " << s.frames_total << " frames";
+  } else {
+    message << "interrupted after " << done << " of " << s.frames_total << " frames";
+    if (!options_.checkpoint_path.empty()) {
+      message << "; the partial functaset is in " << options_.checkpoint_path
+              << " (resume continues it)";
+    }
+  }
+  if (s.non_finite_latents > 0) {
+    message << "; " << s.non_finite_latents
+            << " latent(s) are not finite (are the meta-SGD rates alpha too large?)";
+  }
+  s.message = message.str();
+  if (progress)
+    progress(EncodeProgress{done, s.frames_total, psnr_count > 0 ? psnr_sum / psnr_count : 0.0});
+  return result;
+}
+
+}  // namespace tactfunc

@@ -1,0 +1,211 @@
+// Copyright 2026 The tactfunc Authors.
+#include "models/trunk/functa_model.h"
+
+#include <algorithm>
+#include <stdexcept>
+
+#include "models/core/atomic_file.h"
+#include "models/core/tensor_file.h"
+#include "nlohmann/json.hpp"
+
+namespace tactfunc {
+namespace {
+
+constexpr const char* kFormat = "tactfunc-model";
+constexpr int kVersion = 1;
+
+std::vector<double> ToVector(const Eigen::VectorXd& v) {
+  return std::vector<double>(v.data(), v.data() + v.size());
+}
+
+}  // namespace
+
+bool FrameFormat::IsValid(std::string* error) const {
+  if (rows <= 0 || cols <= 0) {
+    *error = "FrameFormat::rows and cols must be > 0, got " + std::to_string(rows) + "x" +
+             std::to_string(cols);
+    return false;
+  }
+  if (!per_image_min_max && !(scale > 0 && std::isfinite(scale))) {
+    *error = "FrameFormat::scale must be > 0 and finite for fixed-scale normalisation, got " +
+             std::to_string(scale);
+    return false;
+  }
+  return true;
+}
+
+void FunctaModel::SetTrunk(SensorTrunk trunk) {
+  std::string error;
+  if (!trunk.format.IsValid(&error)) throw std::invalid_argument(error);
+  if (trunk.alpha.size() != trunk.siren.latent_dim()) {
+    throw std::invalid_argument("FunctaModel: alpha has " + std::to_string(trunk.alpha.size()) +
+                                " entries, expected latent_dim = " +
+                                std::to_string(trunk.siren.latent_dim()));
+  }
+  if (!trunk.meta_sgd.IsValid(&error)) throw std::invalid_argument(error);
+  for (SensorTrunk& existing : trunks_) {
+    if (existing.sensor == trunk.sensor) {
+      existing = std::move(trunk);
+      return;
+    }
+  }
+  trunks_.push_back(std::move(trunk));
+  std::sort(trunks_.begin(), trunks_.end(),
+            [](const SensorTrunk& a, const SensorTrunk& b) { return a.sensor < b.sensor; });
+}
+
+bool FunctaModel::HasSensor(SensorKind sensor) const {
+  return std::any_of(trunks_.begin(), trunks_.end(),
+                     [&](const SensorTrunk& t) { return t.sensor == sensor; });
+}
+
+const SensorTrunk& FunctaModel::Trunk(SensorKind sensor) const {
+  for (const SensorTrunk& t : trunks_) {
+    if (t.sensor == sensor) return t;
+  }
+  throw std::invalid_argument(std::string("the model has no trunk for sensor '") +
+                              ToString(sensor) + "'");
+}
+
+SensorTrunk& FunctaModel::MutableTrunk(SensorKind sensor) {
+  return const_cast<SensorTrunk&>(static_cast<const FunctaModel*>(this)->Trunk(sensor));
+}
+
+std::vector<SensorKind> FunctaModel::sensors() const {
+  std::vector<SensorKind> out;
+  for (const SensorTrunk& t : trunks_) out.push_back(t.sensor);
+  return out;
+}
+
+void FunctaModel::set_info_json(const std::string& json) {
+  const nlohmann::json parsed = nlohmann::json::parse(json);
+  if (!parsed.is_object()) throw std::invalid_argument("FunctaModel info must be a JSON object");
+  info_json_ = parsed.dump();
+}
+
+std::string FunctaModel::Serialize() const {
+  TensorFile file("model");
+  nlohmann::json meta;
+  meta["format"] = kFormat;
+  meta["version"] = kVersion;
+  meta["trunks"] = nlohmann::json::array();
+  for (const SensorTrunk& t : trunks_) {
+    const auto& o = t.siren.options();
+    const std::string name = ToString(t.sensor);
+    meta["trunks"].push_back(
+        {{"sensor", name},
+         {"siren",
+          {{"width", o.width},
+           {"num_hidden_layers", o.num_hidden_layers},
+           {"omega_0", o.omega_0},
+           {"latent_dim", o.latent_dim},
+           {"output_channels", o.output_channels},
+           {"coordinates", ToString(o.coordinates)}}},
+         {"frame_format",
+          {{"rows", t.format.rows},
+           {"cols", t.format.cols},
+           {"grayscale", t.format.grayscale},
+           {"normalization", t.format.per_image_min_max ? "per_image_min_max" : "fixed_scale"},
+           {"scale", t.format.scale}}},
+         {"meta_sgd",
+          {{"inner_steps", t.meta_sgd.inner_steps},
+           {"latent_l2_weight", t.meta_sgd.latent_l2_weight},
+           {"first_order", t.meta_sgd.first_order}}},
+         {"residual_sigma", t.residual_sigma}});
+    file.Add(name + "/theta", TensorFile::DType::kFloat32, {t.siren.NumParameters()},
+             ToVector(t.siren.parameters()));
+    file.Add(name + "/alpha", TensorFile::DType::kFloat32, {t.alpha.size()}, ToVector(t.alpha));
+  }
+  meta["info"] = nlohmann::json::parse(info_json_);
+  file.set_meta_json(meta.dump());
+  std::string bytes = file.Serialize();
+  checksum_ = file.checksum();
+  return bytes;
+}
+
+void FunctaModel::Save(const std::string& path) const {
+  WriteFileAtomically(path, Serialize());
+}
+
+FunctaModel FunctaModel::Parse(const std::string& bytes, const std::string& source) {
+  return FromTensorFile(TensorFile::Parse(bytes, source, "model"), source);
+}
+
+FunctaModel FunctaModel::FromTensorFile(const TensorFile& file, const std::string& source) {
+  FunctaModel model;
+  file.CheckFormat(kFormat, kVersion);
+  std::string field = "meta";
+  try {
+    const nlohmann::json meta = nlohmann::json::parse(file.meta_json());
+    for (const auto& entry : meta.at("trunks")) {
+      SensorTrunk trunk;
+      field = "trunks[].sensor";
+      const std::string name = entry.at("sensor").get<std::string>();
+      if (!SensorKindFromString(name, &trunk.sensor)) {
+        throw TensorFileError(source + ": field 'trunks[].sensor': unknown sensor '" + name + "'");
+      }
+      field = name + ".siren";
+      const auto& s = entry.at("siren");
+      LatentModulatedSiren::Options options;
+      options.width = s.at("width").get<int>();
+      options.num_hidden_layers = s.at("num_hidden_layers").get<int>();
+      options.omega_0 = s.at("omega_0").get<double>();
+      options.latent_dim = s.at("latent_dim").get<int>();
+      options.output_channels = s.at("output_channels").get<int>();
+      if (!CoordinateConventionFromString(s.at("coordinates").get<std::string>(),
+                                          &options.coordinates)) {
+        throw TensorFileError(source + ": field '" + field + ".coordinates': unknown convention");
+      }
+      std::string error;
+      if (!options.IsValid(&error)) throw TensorFileError(source + ": " + field + ": " + error);
+      trunk.siren = LatentModulatedSiren(options);
+      field = name + ".frame_format";
+      const auto& f = entry.at("frame_format");
+      trunk.format.rows = f.at("rows").get<int>();
+      trunk.format.cols = f.at("cols").get<int>();
+      trunk.format.grayscale = f.at("grayscale").get<bool>();
+      const std::string normalization = f.at("normalization").get<std::string>();
+      if (normalization != "fixed_scale" && normalization != "per_image_min_max") {
+        throw TensorFileError(source + ": field '" + field +
+                              ".normalization': expected fixed_scale or per_image_min_max, got '" +
+                              normalization + "'");
+      }
+      trunk.format.per_image_min_max = normalization == "per_image_min_max";
+      trunk.format.scale = f.at("scale").get<double>();
+      if (!trunk.format.IsValid(&error)) throw TensorFileError(source + ": " + field + ": " + error);
+      field = name + ".meta_sgd";
+      const auto& m = entry.at("meta_sgd");
+      trunk.meta_sgd.inner_steps = m.at("inner_steps").get<int>();
+      trunk.meta_sgd.latent_l2_weight = m.at("latent_l2_weight").get<double>();
+      trunk.meta_sgd.first_order = m.at("first_order").get<bool>();
+      if (!trunk.meta_sgd.IsValid(&error)) throw TensorFileError(source + ": " + field + ": " + error);
+      field = name + ".residual_sigma";
+      trunk.residual_sigma = entry.at("residual_sigma").get<double>();
+      const auto& theta = file.Get(name + "/theta", {trunk.siren.NumParameters()});
+      trunk.siren.SetParameters(Eigen::Map<const Eigen::VectorXd>(theta.values.data(),
+                                                                  theta.values.size()));
+      const auto& alpha = file.Get(name + "/alpha", {options.latent_dim});
+      trunk.alpha = Eigen::Map<const Eigen::VectorXd>(alpha.values.data(), alpha.values.size());
+      model.SetTrunk(std::move(trunk));
+    }
+    field = "info";
+    model.info_json_ = meta.at("info").dump();
+  } catch (const nlohmann::json::exception& e) {
+    throw TensorFileError(source + ": field '" + field + "' is missing or has the wrong type (" +
+                          e.what() + ")");
+  }
+  model.checksum_ = file.checksum();
+  return model;
+}
+
+FunctaModel FunctaModel::Load(const std::string& path) {
+  return FromTensorFile(TensorFile::Read(path, "model"), path);
+}
+
+std::uint64_t FunctaModel::ParameterBytes() const {
+  std::uint64_t bytes = 0;
+  for (const SensorTrunk& t : trunks_) bytes += 4ull * (t.siren.NumParameters() + t.alpha.size());
+  return bytes;
+}
+
+}  // namespace tactfunc

@@ -1,0 +1,96 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// FunctaModel: what a model file (.tfm) holds -- for each sensor, the meta-learned
+// latent-modulated SIREN trunk (models/trunk/latent_modulated_siren.h), its per-dimension
+// meta-SGD rates alpha (models/trunk/meta_sgd.h) and the frame format that turns a sensor's
+// frames into the trunk's targets (working resolution, grayscale, normalisation).
+//
+// One trunk per sensor. The paper trains one trunk on the combined Bubble + GelSlim
+// data; we keep one per sensor because the two differ in resolution, physics and
+// statistics, so each trunk can be the smallest that meets its sensor's accuracy
+// ("model only what a scene requires"). A model file may hold one or both.
+//
+// On disk (a TensorFile of kind "model", models/core/tensor_file.h): the JSON meta holds
+// {"format": "tactfunc-model", "version": 1, "trunks": [{"sensor", "siren": {...},
+// "frame_format": {...}, "meta_sgd": {...}, "residual_sigma"}], "info": {...}} and
+// the tensors "<sensor>/theta" (float32, the trunk's flat parameters in
+// LatentModulatedSiren's layout) and "<sensor>/alpha" (float32, latent_dim). Loading
+// checks every field and shape and names the file and field on error.
+#ifndef TACTFUNC_MODELS_TRUNK_FUNCTA_MODEL_H_
+#define TACTFUNC_MODELS_TRUNK_FUNCTA_MODEL_H_
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "models/trunk/latent_modulated_siren.h"
+#include "models/trunk/meta_sgd.h"
+#include "models/core/sensor.h"
+
+namespace tactfunc {
+
+class TensorFile;
+
+// How one sensor's frames become trunk targets; mirrors estimation/data/preprocess.h's
+// PreprocessOptions (stored here because models/ does not depend on estimation/).
+struct FrameFormat {
+  int rows = 0;              // working resolution (area interpolation), > 0
+  int cols = 0;
+  bool grayscale = false;    // rgb -> luma before fitting
+  bool per_image_min_max = false;  // false: fixed physical scale (a blank frame stays 0)
+  double scale = 0;          // fixed scale: the physical difference that maps to 1.0, > 0
+  bool IsValid(std::string* error) const;
+};
+
+struct SensorTrunk {
+  SensorKind sensor = SensorKind::kSoftBubble;
+  FrameFormat format;
+  LatentModulatedSiren siren{LatentModulatedSiren::Options()};
+  Eigen::VectorXd alpha;     // meta-SGD inner rates, size latent_dim, each in [0, 1]
+  MetaSgd::Options meta_sgd;
+  // Standard deviation of the per-pixel fit residual on the training frames
+  // (normalised units); the likelihood scale of the posterior samplers. 0 = unknown.
+  double residual_sigma = 0;
+};
+
+class FunctaModel {
+ public:
+  // Adds (or replaces) the trunk of trunk.sensor. Throws std::invalid_argument if alpha
+  // does not have latent_dim entries or the format is invalid.
+  void SetTrunk(SensorTrunk trunk);
+  bool HasSensor(SensorKind sensor) const;
+  // Throws std::invalid_argument naming the sensor if the model has no trunk for it.
+  const SensorTrunk& Trunk(SensorKind sensor) const;
+  SensorTrunk& MutableTrunk(SensorKind sensor);
+  std::vector<SensorKind> sensors() const;
+
+  // Free-form JSON object stored with the model: preset name, training summary.
+  const std::string& info_json() const { return info_json_; }
+  void set_info_json(const std::string& json);  // throws if not a JSON object
+
+  // Atomic write; returns nothing, sets checksum().
+  void Save(const std::string& path) const;
+  // Throws TensorFileError (models/core/tensor_file.h) naming the file and what is wrong.
+  static FunctaModel Load(const std::string& path);
+  // Serialised form, as Save writes it.
+  std::string Serialize() const;
+  static FunctaModel Parse(const std::string& bytes, const std::string& source);
+
+  // CRC-32 of the model file as last saved or loaded: a functaset names its model so.
+  std::uint32_t checksum() const { return checksum_; }
+  // Bytes of the trunk parameters and rates as stored (float32), for compression ratios.
+  std::uint64_t ParameterBytes() const;
+
+ private:
+  static FunctaModel FromTensorFile(const TensorFile& file, const std::string& source);
+
+  std::vector<SensorTrunk> trunks_;
+  std::string info_json_ = "{}";
+  mutable std::uint32_t checksum_ = 0;
+};
+
+}  // namespace tactfunc
+
+#endif  // TACTFUNC_MODELS_TRUNK_FUNCTA_MODEL_H_

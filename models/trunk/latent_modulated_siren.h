@@ -1,0 +1,320 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// LatentModulatedSiren: the shared trunk of a tactile functaset (Sec. III-B of
+// "Tactile Functasets", after Dupont et al., "From data to functa", 2022).
+//
+// The trunk maps a pixel coordinate x in R^2 to the pixel's value y in R^C. One short
+// latent z in R^d per tactile frame shifts every hidden layer through ONE linear map
+// (the paper's gamma_i = W z_i, Eq. 3, plus a bias):
+//
+//   gamma   = A z + c,                 A: (L*width) x d,   c: L*width
+//   gamma_l = gamma[l*width, (l+1)*width)                  (the l-th block of width)
+//   h_0     = x                                            (2 values)
+//   h_{l+1} = sin(omega_0 * (W_l h_l + b_l + gamma_l)),    l = 0 .. L-1
+//   y       = W_out h_L + b_out                            (C values, linear)
+//
+// with L = num_hidden_layers, W_0: width x 2, W_l: width x width for l >= 1,
+// W_out: C x width. theta = {W_l, b_l, A, c, W_out, b_out} is shared across the
+// dataset and meta-learned; z starts at zero for every new frame and a few gradient
+// steps fit it (Eq. 6). At z = 0 the trunk computes the "initial image" of Fig. 3.
+//
+// Parameters. All of theta lives in ONE flat vector (double precision master copy,
+// mirrored in float for the fast paths), so that Adam, SGLD and model files see one
+// array. Its layout, in this order, every matrix column-major:
+//   for l = 0 .. L-1:  W_l (width x fan_in_l), b_l (width)
+//   A ((L*width) x d), c (L*width), W_out (C x width), b_out (C)
+// parameter_blocks() lists (group, layer, offset, rows, cols) for each block, and
+// View() maps a block of any flat vector (parameters or a gradient) as a matrix.
+//
+// Initialisation (deterministic from a seed; Boost.Random mt19937_64, never the
+// clock), following SIREN (Sitzmann et al. 2020, Sec. 3.2) and functa:
+//   W_0, b_0            ~ U(-1/fan_in, 1/fan_in)           (fan_in = 2)
+//   W_l, b_l (l >= 1)   ~ U(-sqrt(6/width)/omega_0, +...)
+//   W_out, b_out        ~ U(-sqrt(6/width)/omega_0, +...)
+//   A                   ~ U(-sqrt(6/d)/omega_0, +...)      (a unit change of one z_k
+//                                                           moves phases by O(1) rad)
+//   c = 0, latents start at zero.
+// Biases take the range of their layer's weights: the first layer's then spreads the
+// phases of the first sines over +-omega_0/2 rad, as PyTorch SIREN's default bias does.
+//
+// Coordinates (CoordinateConvention). Pixel (r, c) of a rows x cols grid, pixel index
+// j = r * cols + c (row-major, as Image stores pixels), maps to x = (x0, x1) with x0
+// following the column (right) and x1 the row (down):
+//   kPixelCenters (default): x0 = 2 (c + 0.5) / cols - 1,  x1 = 2 (r + 0.5) / rows - 1
+//                            (pixel centres strictly inside (-1, 1); the grid's outer
+//                            edges at exactly -1 and +1, so any resolution of the same
+//                            sensor covers the same square);
+//   kPixelCorners:           x0 = 2 c / (cols - 1) - 1,    x1 = 2 r / (rows - 1) - 1
+//                            (first and last pixel at exactly -1 and +1; a single row
+//                            or column maps to 0), as linspace(-1, 1, n) does.
+//
+// Batched buffers (documented once): coords N x 2 (one pixel per row, x0 then x1),
+// outputs and dL/dY N x C (one pixel per row), weights N (per-pixel validity weight
+// >= 0; an empty vector means all ones), latent z of size d, flat theta of size
+// NumParameters(). Every batched method exists in float and double (Scalar).
+//
+// Blocking. Every batched pass runs over the N pixels in blocks of a few hundred (the
+// .cc's kPixelBlock) so that one layer's activations (width x block) stay in L2; the
+// buffers are allocated once per call at block size and reused by every block. Sums
+// over pixels (gradients, Hessian-vector products) are accumulated across blocks and
+// the loss is normalised once over all pixels, so the results are the unblocked ones up
+// to float summation order. Callers pass whole frames; they need not block themselves.
+//
+// Loss. Loss() and friends use the weighted mean squared error over valid pixels
+//   L(theta, z) = sum_j w_j sum_c (y_jc - t_jc)^2 / (C * sum_j w_j)
+// (0 when sum_j w_j = 0). A pixel with w_j = 0 contributes nothing, even if its
+// target is NaN (a dropped-out depth pixel). The mean, as functa uses, keeps learning
+// rates independent of the image size.
+//
+// Errors: a bad Options throws std::invalid_argument from the constructor (with the
+// IsValid message); buffers of the wrong shape throw std::invalid_argument quoting the
+// expected and found shapes. Non-finite inputs give non-finite outputs, never a throw.
+//
+// Thread safety: all const methods are safe to call concurrently (no mutable state).
+#ifndef TACTFUNC_MODELS_TRUNK_LATENT_MODULATED_SIREN_H_
+#define TACTFUNC_MODELS_TRUNK_LATENT_MODULATED_SIREN_H_
+
+#include <cmath>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "Eigen/Core"
+
+namespace tactfunc {
+
+// How pixel indices map to trunk coordinates; see the header comment for formulas.
+enum class CoordinateConvention {
+  kPixelCenters,
+  kPixelCorners,
+};
+// "pixel_centers" / "pixel_corners".
+const char* ToString(CoordinateConvention convention);
+bool CoordinateConventionFromString(const std::string& name,
+                                    CoordinateConvention* convention);
+
+// The six kinds of parameter block in theta.
+enum class ParameterGroup {
+  kHiddenWeight,      // W_l, width x fan_in_l (one block per hidden layer)
+  kHiddenBias,        // b_l, width x 1        (one block per hidden layer)
+  kModulationMatrix,  // A, (L*width) x d
+  kModulationBias,    // c, (L*width) x 1
+  kOutputWeight,      // W_out, C x width
+  kOutputBias,        // b_out, C x 1
+};
+// "hidden_weight", "hidden_bias", "modulation_matrix", "modulation_bias",
+// "output_weight", "output_bias".
+const char* ToString(ParameterGroup group);
+
+// One block of the flat parameter vector: flat[offset .. offset + rows * cols),
+// a rows x cols column-major matrix.
+struct ParameterBlock {
+  ParameterGroup group = ParameterGroup::kHiddenWeight;
+  int layer = 0;  // hidden layer index for kHidden*, 0 otherwise
+  int offset = 0;
+  int rows = 0;
+  int cols = 0;
+  int size() const { return rows * cols; }
+  // "hidden_weight[1]", "modulation_matrix", ... for messages and files.
+  std::string Name() const;
+};
+
+class LatentModulatedSiren {
+ public:
+  template <typename Scalar>
+  using MatrixX = Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic>;
+  template <typename Scalar>
+  using VectorX = Eigen::Matrix<Scalar, Eigen::Dynamic, 1>;
+
+  struct Options {
+    // Number of units per hidden layer. >= 1. 128 is the trunk BUILD-NOTES times for
+    // 32x32 frames; larger frames may need more.
+    int width = 128;
+    // Number of sine layers L (each one shifted by its block of gamma). >= 1.
+    int num_hidden_layers = 4;
+    // SIREN frequency omega_0, rad per unit of coordinate. > 0, finite. 30 is SIREN's
+    // value (Sitzmann et al. 2020, Sec. 3.2) and functa's.
+    double omega_0 = 30.0;
+    // Latent dimension d. >= 1. The paper uses 512 (Sec. IV-A).
+    int latent_dim = 64;
+    // Output channels C: 1 for Soft Bubble depth, 3 for GelSlim RGB. >= 1.
+    int output_channels = 1;
+    // Pixel-to-coordinate mapping used by Grid().
+    CoordinateConvention coordinates = CoordinateConvention::kPixelCenters;
+
+    // True if every field is in range; otherwise false and *error (if not null)
+    // names the bad field and its value.
+    bool IsValid(std::string* error) const;
+  };
+
+  // A trunk with SIREN-initialised theta drawn from `seed` (see header comment).
+  // Throws std::invalid_argument if !options.IsValid().
+  explicit LatentModulatedSiren(const Options& options, std::uint64_t seed = 0);
+
+  const Options& options() const { return options_; }
+  int width() const { return options_.width; }
+  int num_hidden_layers() const { return options_.num_hidden_layers; }
+  int latent_dim() const { return options_.latent_dim; }
+  int output_channels() const { return options_.output_channels; }
+
+  // ---- Parameters ---------------------------------------------------------------
+  int NumParameters() const { return num_parameters_; }
+  // theta, in the layout of the header comment (double master copy).
+  const Eigen::VectorXd& parameters() const { return parameters_; }
+  // Replaces theta (also refreshes the float mirror). Throws std::invalid_argument
+  // if the size is not NumParameters().
+  void SetParameters(const Eigen::VectorXd& parameters);
+  // Re-draws theta from `seed` as the constructor does.
+  void Initialize(std::uint64_t seed);
+
+  // All blocks, in flat order (2 L + 4 of them).
+  const std::vector<ParameterBlock>& parameter_blocks() const { return blocks_; }
+  // The block of `group` (and hidden layer `layer` for kHidden*). Throws
+  // std::out_of_range for a layer outside [0, L).
+  const ParameterBlock& Block(ParameterGroup group, int layer = 0) const;
+  // Block `block` of any flat vector (theta or a gradient) as a rows x cols matrix.
+  template <typename Scalar>
+  static Eigen::Map<const MatrixX<Scalar>> View(const VectorX<Scalar>& flat,
+                                                const ParameterBlock& block) {
+    return Eigen::Map<const MatrixX<Scalar>>(flat.data() + block.offset, block.rows,
+                                             block.cols);
+  }
+  template <typename Scalar>
+  static Eigen::Map<MatrixX<Scalar>> View(VectorX<Scalar>* flat,
+                                          const ParameterBlock& block) {
+    return Eigen::Map<MatrixX<Scalar>>(flat->data() + block.offset, block.rows,
+                                       block.cols);
+  }
+
+  // ---- Coordinates ----------------------------------------------------------------
+  // rows*cols x 2 coordinates of a rows x cols grid, pixel j = r * cols + c in row j.
+  // Throws std::invalid_argument for rows or cols < 1.
+  static Eigen::MatrixXf GridCoordinates(
+      int rows, int cols,
+      CoordinateConvention convention = CoordinateConvention::kPixelCenters);
+  static Eigen::MatrixXd GridCoordinatesD(
+      int rows, int cols,
+      CoordinateConvention convention = CoordinateConvention::kPixelCenters);
+  // The grid in this trunk's convention.
+  template <typename Scalar>
+  MatrixX<Scalar> Grid(int rows, int cols) const;
+
+  // ---- Batched passes (Scalar = float or double) ------------------------------------
+  // Outputs, N x C.
+  template <typename Scalar>
+  MatrixX<Scalar> Forward(const MatrixX<Scalar>& coords, const VectorX<Scalar>& z) const;
+
+  // Exact reverse pass: given dL/dY (N x C) returns dL/dz (size d) and dL/dtheta
+  // (size NumParameters(), flat layout; use View() for W_l, b_l, A, c, W_out, b_out).
+  // Either output may be null. One GEMM per layer and gradient per block of pixels.
+  template <typename Scalar>
+  void Backward(const MatrixX<Scalar>& coords, const VectorX<Scalar>& z,
+                const MatrixX<Scalar>& dL_dY, VectorX<Scalar>* dL_dz,
+                VectorX<Scalar>* dL_dtheta) const;
+
+  // Outputs (N x C, may be null) and the Jacobian of every output w.r.t. z,
+  // J_y_z: (N*C) x d with row j*C + c holding d y_jc / d z (pixel-major, channels
+  // interleaved as in Image). Computed as one batched reverse pass per output
+  // channel w.r.t. the shifts gamma, then times A.
+  template <typename Scalar>
+  void ForwardAndLatentJacobian(const MatrixX<Scalar>& coords, const VectorX<Scalar>& z,
+                                MatrixX<Scalar>* outputs, MatrixX<Scalar>* J_y_z) const;
+
+  // The weighted MSE of the header comment; targets N x C, weights N or empty.
+  template <typename Scalar>
+  Scalar Loss(const MatrixX<Scalar>& coords, const VectorX<Scalar>& z,
+              const MatrixX<Scalar>& targets, const VectorX<Scalar>& weights) const;
+  // The loss and its gradients w.r.t. z and theta (either may be null).
+  template <typename Scalar>
+  Scalar LossAndGradient(const MatrixX<Scalar>& coords, const VectorX<Scalar>& z,
+                         const MatrixX<Scalar>& targets, const VectorX<Scalar>& weights,
+                         VectorX<Scalar>* dL_dz, VectorX<Scalar>* dL_dtheta) const;
+
+  // Hessian-vector product of the loss (exact; Pearlmutter's R-operator, i.e.
+  // forward-mode differentiation of the reverse pass). With H the Hessian of
+  // L(theta, z) over the stacked (theta, z) and direction v = (v_theta, v_z):
+  //   Hv_theta = d/dtheta (grad L . v),   Hv_z = d/dz (grad L . v).
+  // v_theta == nullptr means v_theta = 0 and skips its terms; this is the case meta-
+  // learning needs: with g = dL/dz, Hv_theta = d/dtheta (g . v_z) (mixed Hessian)
+  // and Hv_z = d/dz (g . v_z) (latent Hessian). Returns the loss; fills the gradients
+  // too when dL_dz / dL_dtheta are not null (they come at no extra cost). Hv_theta
+  // and Hv_z may be null. Cost about 2.5 forward+backward passes.
+  template <typename Scalar>
+  Scalar LossGradientAndHessianProduct(
+      const MatrixX<Scalar>& coords, const VectorX<Scalar>& z,
+      const MatrixX<Scalar>& targets, const VectorX<Scalar>& weights,
+      const VectorX<Scalar>* v_theta, const VectorX<Scalar>& v_z, VectorX<Scalar>* dL_dz,
+      VectorX<Scalar>* dL_dtheta, VectorX<Scalar>* Hv_z, VectorX<Scalar>* Hv_theta) const;
+
+  // ---- One pixel, any scalar type (ceres::Jet) -------------------------------------
+  // out[0 .. C) = f_theta(coord2; z) with theta = parameters(). T must support
+  // +, *, and sin found by argument-dependent lookup or std:: (double, float,
+  // ceres::Jet). O(L width^2) per pixel: for checks and AutoDiff cost functions, not
+  // for training.
+  template <typename T>
+  void Evaluate(const T* coord2, const T* z, T* out) const {
+    EvaluateImpl(parameters_.data(), coord2, z, out);
+  }
+  // The same with theta given (NumParameters() values, flat layout) in the same
+  // scalar type, to differentiate w.r.t. theta.
+  template <typename T>
+  void EvaluateWithParameters(const T* theta, const T* coord2, const T* z, T* out) const {
+    EvaluateImpl(theta, coord2, z, out);
+  }
+
+ private:
+  template <typename P, typename T>
+  void EvaluateImpl(const P* theta, const T* coord2, const T* z, T* out) const;
+  template <typename Scalar>
+  const Scalar* ParameterData() const;
+  void BuildLayout();
+
+  Options options_;
+  int num_parameters_ = 0;
+  std::vector<ParameterBlock> blocks_;
+  Eigen::VectorXd parameters_;
+  Eigen::VectorXf parameters_float_;
+};
+
+// ---- Implementation of the one-pixel template ------------------------------------
+template <typename P, typename T>
+void LatentModulatedSiren::EvaluateImpl(const P* theta, const T* coord2, const T* z,
+                                        T* out) const {
+  using std::sin;
+  const int width = options_.width;
+  const int num_layers = options_.num_hidden_layers;
+  const int d = options_.latent_dim;
+  const int channels = options_.output_channels;
+  const int num_shifts = num_layers * width;
+  const P* A = theta + blocks_[2 * num_layers].offset;
+  const P* c = theta + blocks_[2 * num_layers + 1].offset;
+  const P* W_out = theta + blocks_[2 * num_layers + 2].offset;
+  const P* b_out = theta + blocks_[2 * num_layers + 3].offset;
+  const T omega(options_.omega_0);
+
+  std::vector<T> h(coord2, coord2 + 2);
+  std::vector<T> next(width);
+  for (int l = 0; l < num_layers; ++l) {
+    const P* W = theta + blocks_[2 * l].offset;
+    const P* b = theta + blocks_[2 * l + 1].offset;
+    const int fan_in = static_cast<int>(h.size());
+    for (int i = 0; i < width; ++i) {
+      const int row = l * width + i;
+      T pre = T(b[i]) + T(c[row]);
+      for (int k = 0; k < d; ++k) pre += A[row + k * num_shifts] * z[k];
+      for (int j = 0; j < fan_in; ++j) pre += W[i + j * width] * h[j];
+      next[i] = sin(omega * pre);
+    }
+    h.swap(next);
+    next.resize(width);
+  }
+  for (int ch = 0; ch < channels; ++ch) {
+    T y = T(b_out[ch]);
+    for (int i = 0; i < width; ++i) y += W_out[ch + i * channels] * h[i];
+    out[ch] = y;
+  }
+}
+
+}  // namespace tactfunc
+
+#endif  // TACTFUNC_MODELS_TRUNK_LATENT_MODULATED_SIREN_H_

@@ -1,0 +1,619 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// LatentFitter and its cost functions.
+//
+// Derivatives: the analytic batched Jacobian (double) against the ceres::Jet autodiff
+// reference (relative max-norm difference <= 1e-8; both are exact up to rounding, so
+// they agree to about 1e-14) and against 4th-order central differences (<= 1e-6), at
+// z = 0, at a tiny z (1e-7) and at a random z, for a 2-channel trunk with masked pixels.
+// The robust transform's Jacobian is checked against central differences the same way.
+//
+// Fits use small trunks (width 24-32, 3 layers, d = 6-8) on 16x20 frames that the trunk
+// itself generated from a known latent, so that a perfect fit exists (PSNR +inf).
+#include "estimation/fitting/latent_fitter.h"
+
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "ceres/loss_function.h"
+#include "estimation/fitting/internal/latent_cost_functions.h"
+#include "estimation/knn/knn_index.h"
+#include "gtest/gtest.h"
+#include "models/trunk/meta_sgd.h"
+
+namespace tactfunc {
+namespace {
+
+using Eigen::MatrixXd;
+using Eigen::MatrixXf;
+using Eigen::VectorXd;
+using Eigen::VectorXf;
+using Fitter = LatentFitter;
+
+constexpr int kRows = 16, kCols = 20;
+
+// Deterministic numbers in [-1, 1].
+MatrixXd Uniform(int rows, int cols, unsigned seed) {
+  MatrixXd m(rows, cols);
+  unsigned state = seed * 2654435761u + 12345u;
+  for (int i = 0; i < m.size(); ++i) {
+    state = state * 1664525u + 1013904223u;
+    m.data()[i] = 2.0 * (state >> 8) / double(1u << 24) - 1.0;
+  }
+  return m;
+}
+
+SensorTrunk MakeTrunk(int channels = 1, int width = 32, int latent_dim = 8, unsigned seed = 1) {
+  LatentModulatedSiren::Options options;
+  options.width = width;
+  options.num_hidden_layers = 3;
+  options.latent_dim = latent_dim;
+  options.output_channels = channels;
+  SensorTrunk trunk;
+  trunk.siren = LatentModulatedSiren(options, seed);
+  trunk.format.rows = kRows;
+  trunk.format.cols = kCols;
+  trunk.format.scale = 1.0;
+  trunk.alpha = VectorXd::Constant(latent_dim, 0.5);
+  trunk.meta_sgd.inner_steps = 3;
+  return trunk;
+}
+
+// The frame the trunk generates from z (every pixel valid).
+TrunkTargets Generate(const SensorTrunk& trunk, const VectorXd& z, int rows = kRows,
+                      int cols = kCols) {
+  TrunkTargets t;
+  t.rows = rows;
+  t.cols = cols;
+  t.values = trunk.siren.Forward<double>(trunk.siren.Grid<double>(rows, cols), z).cast<float>();
+  t.weights = VectorXf::Ones(rows * cols);
+  return t;
+}
+
+VectorXd TrueLatent(int d, unsigned seed = 3) { return 0.4 * Uniform(d, 1, seed); }
+
+Fitter::Options CeresOptions(int iterations) {
+  Fitter::Options options;
+  options.strategy = FitStrategy::FromString("ceres:" + std::to_string(iterations));
+  return options;
+}
+
+// Jacobian (rows x d, row-major in Ceres' layout) and residuals of a cost at z.
+void EvaluateCost(const ceres::CostFunction& cost, const VectorXd& z, VectorXd* residuals,
+                  MatrixXd* jacobian) {
+  const int d = static_cast<int>(z.size());
+  residuals->resize(cost.num_residuals());
+  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> J(cost.num_residuals(), d);
+  const double* parameters[] = {z.data()};
+  double* jacobians[] = {J.data()};
+  ASSERT_TRUE(cost.Evaluate(parameters, residuals->data(), jacobian ? jacobians : nullptr));
+  if (jacobian) *jacobian = J;
+}
+
+// 4th-order central differences of the residuals.
+MatrixXd NumericJacobian(const ceres::CostFunction& cost, const VectorXd& z, double h = 1e-4) {
+  MatrixXd J(cost.num_residuals(), z.size());
+  for (int k = 0; k < z.size(); ++k) {
+    VectorXd r[4];
+    const double steps[4] = {-2 * h, -h, h, 2 * h};
+    for (int s = 0; s < 4; ++s) {
+      VectorXd zs = z;
+      zs[k] += steps[s];
+      EvaluateCost(cost, zs, &r[s], nullptr);
+    }
+    J.col(k) = (r[0] - 8 * r[1] + 8 * r[2] - r[3]) / (12 * h);
+  }
+  return J;
+}
+
+double RelativeDifference(const MatrixXd& a, const MatrixXd& reference) {
+  return (a - reference).cwiseAbs().maxCoeff() / std::max(reference.cwiseAbs().maxCoeff(), 1e-300);
+}
+
+// ---- Options and strategies -----------------------------------------------------------------
+
+TEST(LatentFitterOptions, DefaultOptionsAreValid) {
+  std::string error;
+  EXPECT_TRUE(Fitter::Options().IsValid(&error)) << error;
+  EXPECT_EQ(Fitter::Options().strategy.ToString(), "ceres:10");
+}
+
+TEST(LatentFitterOptions, BadOptionsNameTheFieldAndTheConstructorThrows) {
+  const SensorTrunk trunk = MakeTrunk();
+  struct Case {
+    const char* field;
+    void (*mutate)(Fitter::Options*);
+  };
+  const Case cases[] = {
+      {"sigma_z", [](Fitter::Options* o) { o->sigma_z = 0; }},
+      {"sigma", [](Fitter::Options* o) { o->sigma = -1; }},
+      {"robust_loss_scale", [](Fitter::Options* o) { o->robust_loss_scale = 0; }},
+      {"pixel_stride", [](Fitter::Options* o) { o->pixel_stride = 0; }},
+      {"max_pixels", [](Fitter::Options* o) { o->max_pixels = -3; }},
+      {"knn_k", [](Fitter::Options* o) { o->knn_k = 0; }},
+      {"solver_options", [](Fitter::Options* o) { o->solver_options.function_tolerance = -1; }},
+      {"strategy", [](Fitter::Options* o) { o->strategy.steps = 0; }},
+  };
+  for (const Case& c : cases) {
+    Fitter::Options options;
+    c.mutate(&options);
+    std::string error;
+    EXPECT_FALSE(options.IsValid(&error)) << c.field;
+    EXPECT_NE(error.find(c.field), std::string::npos) << error;
+    EXPECT_THROW(Fitter(trunk, options), std::invalid_argument) << c.field;
+  }
+}
+
+TEST(LatentFitterStrategy, ParsesEveryFormAndPrintsItBack) {
+  for (const char* text : {"knn", "meta_sgd:3", "meta_sgd:0", "ceres:10", "knn+meta_sgd:2",
+                           "knn+ceres:15"}) {
+    FitStrategy strategy;
+    std::string error;
+    ASSERT_TRUE(FitStrategy::Parse(text, &strategy, &error)) << text << ": " << error;
+    EXPECT_EQ(strategy.ToString(), text);
+  }
+  const FitStrategy s = FitStrategy::FromString("knn+ceres:7");
+  EXPECT_TRUE(s.knn);
+  EXPECT_EQ(s.refinement, FitStrategy::Refinement::kCeres);
+  EXPECT_EQ(s.steps, 7);
+}
+
+TEST(LatentFitterStrategy, BadStringsGiveClearErrors) {
+  const std::pair<const char*, const char*> cases[] = {
+      {"ceres", "needs a step count"},          {"ceres:0", "N >= 1"},
+      {"ceres:-2", "not a non-negative integer"}, {"lbfgs:3", "unknown method 'lbfgs'"},
+      {"knn+", "no method"},                    {"", "no method"},
+      {"ceres:1x", "not a non-negative integer"}, {"knn+knn", "unknown method 'knn'"},
+  };
+  for (const auto& [text, expected] : cases) {
+    FitStrategy strategy;
+    std::string error;
+    EXPECT_FALSE(FitStrategy::Parse(text, &strategy, &error)) << text;
+    EXPECT_NE(error.find(expected), std::string::npos) << text << ": " << error;
+    EXPECT_NE(error.find(std::string("'") + text + "'"), std::string::npos) << error;
+    EXPECT_THROW(FitStrategy::FromString(text), std::invalid_argument);
+  }
+}
+
+TEST(LatentFitter, KnnStrategiesWithoutAnIndexThrow) {
+  const SensorTrunk trunk = MakeTrunk();
+  Fitter::Options options;
+  options.strategy = FitStrategy::FromString("knn+ceres:5");
+  EXPECT_THROW(Fitter(trunk, options), std::invalid_argument);
+  BruteForceKnnIndex index(trunk.siren.latent_dim() + 1);
+  const MatrixXf latents(0, trunk.siren.latent_dim() + 1);
+  try {
+    Fitter(trunk, options, &index, &latents);
+    FAIL() << "expected a throw";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("0 x 9"), std::string::npos) << e.what();
+  }
+}
+
+TEST(LatentFitterOptions, AutomaticSigmaIsTheTrunksResidualSigmaElse001) {
+  SensorTrunk trunk = MakeTrunk();
+  EXPECT_DOUBLE_EQ(Fitter(trunk, Fitter::Options()).sigma(), 0.01);
+  trunk.residual_sigma = 0.03;
+  EXPECT_DOUBLE_EQ(Fitter(trunk, Fitter::Options()).sigma(), 0.03);
+  Fitter::Options options;
+  options.sigma = 0.2;
+  EXPECT_DOUBLE_EQ(Fitter(trunk, options).sigma(), 0.2);
+}
+
+// ---- Cost functions ----------------------------------------------------------------------
+
+class LatentFitterCostTest : public ::testing::Test {
+ protected:
+  LatentFitterCostTest() : trunk_(MakeTrunk(/*channels=*/2, /*width=*/12, /*latent_dim=*/5)) {
+    // Perturb c (0 at initialisation) so no block of the trunk is special.
+    LatentModulatedSiren& siren = trunk_.siren;
+    siren.SetParameters(siren.parameters() + 0.05 * Uniform(siren.NumParameters(), 1, 11));
+    targets_ = Generate(trunk_, TrueLatent(5));
+    targets_.values += 0.1 * Uniform(kRows * kCols, 2, 12).cast<float>();
+    for (int j = 0; j < kRows * kCols; j += 7) {
+      targets_.weights[j] = 0;
+      targets_.values(j, 0) = std::numeric_limits<float>::quiet_NaN();
+    }
+    targets_.weights[5] = 0.25f;  // a fractional weight
+    data_ = internal::SelectPixels(trunk_.siren, targets_, 0.05, 1, 0);
+  }
+  SensorTrunk trunk_;
+  TrunkTargets targets_;
+  internal::LatentResidualData data_;
+};
+
+TEST_F(LatentFitterCostTest, AnalyticJacobianMatchesAutodiffAndFiniteDifferences) {
+  const internal::AnalyticLatentCost<double> analytic(&trunk_.siren, &data_);
+  const std::unique_ptr<ceres::CostFunction> autodiff =
+      internal::MakeAutoDiffLatentCost(&trunk_.siren, &data_);
+  const struct {
+    const char* name;
+    VectorXd z;
+  } points[] = {{"zero", VectorXd::Zero(5)},
+                {"tiny", 1e-7 * Uniform(5, 1, 21)},
+                {"random", 0.8 * Uniform(5, 1, 22)}};
+  for (const auto& p : points) {
+    VectorXd ra, rd;
+    MatrixXd Ja, Jd;
+    EvaluateCost(analytic, p.z, &ra, &Ja);
+    EvaluateCost(*autodiff, p.z, &rd, &Jd);
+    ASSERT_EQ(ra.size(), data_.num_residuals());
+    EXPECT_LE(RelativeDifference(ra, rd), 1e-12) << p.name;
+    EXPECT_LE(RelativeDifference(Ja, Jd), 1e-8) << p.name;
+    EXPECT_LE(RelativeDifference(Ja, NumericJacobian(analytic, p.z)), 1e-6) << p.name;
+  }
+}
+
+TEST_F(LatentFitterCostTest, ResidualsAreWhitenedWeightedErrorsOfTheValidPixelsOnly) {
+  const int n_valid = kRows * kCols - (kRows * kCols + 6) / 7;
+  EXPECT_EQ(data_.num_valid_pixels, n_valid);
+  ASSERT_EQ(data_.num_pixels(), n_valid);
+  const internal::AnalyticLatentCost<double> cost(&trunk_.siren, &data_);
+  const VectorXd z = 0.3 * Uniform(5, 1, 23);
+  VectorXd r;
+  EvaluateCost(cost, z, &r, nullptr);
+  EXPECT_TRUE(r.allFinite());  // the NaN targets sit on masked pixels
+  const MatrixXd y = trunk_.siren.Forward<double>(trunk_.siren.Grid<double>(kRows, kCols), z);
+  int i = 0;
+  for (int j = 0; j < kRows * kCols; ++j) {
+    if (targets_.weights[j] == 0) continue;
+    for (int c = 0; c < 2; ++c, ++i) {
+      const double expected =
+          std::sqrt(targets_.weights[j]) * (y(j, c) - targets_.values(j, c)) / 0.05;
+      EXPECT_NEAR(r[i], expected, 1e-9 * std::max(1.0, std::abs(expected))) << j;
+    }
+  }
+}
+
+TEST_F(LatentFitterCostTest, FloatEvaluationAgreesWithDoubleToFloatPrecision) {
+  const internal::AnalyticLatentCost<double> exact(&trunk_.siren, &data_);
+  const internal::AnalyticLatentCost<float> fast(&trunk_.siren, &data_);
+  const VectorXd z = 0.5 * Uniform(5, 1, 24);
+  VectorXd r64, r32;
+  MatrixXd J64, J32;
+  EvaluateCost(exact, z, &r64, &J64);
+  EvaluateCost(fast, z, &r32, &J32);
+  // Float rounding (6e-8) of the pre-activations is multiplied by omega_0 = 30 in every
+  // sine layer and summed over the width, so outputs carry about 1e-6 absolute error
+  // (measured 8e-7); the bound, 1e-5 in output units (residual * sigma), is ten times that.
+  EXPECT_LE(0.05 * (r32 - r64).cwiseAbs().maxCoeff(), 1e-5);
+  EXPECT_LE(RelativeDifference(J32, J64), 1e-5);
+}
+
+TEST(LatentFitterPriorCost, IsZOverSigmaZWithIdentityOverSigmaZJacobian) {
+  const internal::LatentPriorCost prior(4, 0.5);
+  const VectorXd z = Uniform(4, 1, 31);
+  VectorXd r;
+  MatrixXd J;
+  EvaluateCost(prior, z, &r, &J);
+  EXPECT_LE((r - z / 0.5).cwiseAbs().maxCoeff(), 1e-15);
+  EXPECT_LE((J - 2.0 * MatrixXd::Identity(4, 4)).cwiseAbs().maxCoeff(), 1e-15);
+}
+
+TEST_F(LatentFitterCostTest, RobustTransformGivesTheRobustCostAndItsJacobian) {
+  const internal::AnalyticLatentCost<double> plain(&trunk_.siren, &data_);
+  const VectorXd z = 0.3 * Uniform(5, 1, 25);
+  for (int which = 0; which < 2; ++which) {
+    std::unique_ptr<ceres::LossFunction> loss;
+    if (which == 0) loss = std::make_unique<ceres::HuberLoss>(1.345);
+    else loss = std::make_unique<ceres::CauchyLoss>(2.385);
+    const internal::RobustifiedCost robust(&plain, loss.get());
+    VectorXd r, rr;
+    MatrixXd J;
+    EvaluateCost(plain, z, &r, nullptr);
+    EvaluateCost(robust, z, &rr, &J);
+    double expected = 0;
+    for (int i = 0; i < r.size(); ++i) {
+      double rho[3];
+      loss->Evaluate(r[i] * r[i], rho);
+      expected += 0.5 * rho[0];
+    }
+    EXPECT_NEAR(0.5 * rr.squaredNorm(), expected, 1e-10 * expected) << which;
+    EXPECT_LE(RelativeDifference(J, NumericJacobian(robust, z)), 1e-6) << which;
+  }
+}
+
+// ---- Fits ----------------------------------------------------------------------------------
+
+TEST(LatentFitter, CeresFromZeroRecoversTheLatentOfAFrameTheTrunkGenerated) {
+  const SensorTrunk trunk = MakeTrunk();
+  const VectorXd z_true = TrueLatent(8);
+  const TrunkTargets targets = Generate(trunk, z_true);
+  Fitter::Options options = CeresOptions(50);
+  options.precision = Fitter::Precision::kDouble;
+  options.sigma_z = 1e4;  // no pull towards 0: the exact latent is the optimum
+  VectorXd z;
+  const Fitter::Summary summary = Fitter(trunk, options).Fit(targets, &z);
+  EXPECT_EQ(summary.termination_type, FitTermination::kConvergence) << summary.FullReport();
+  EXPECT_TRUE(summary.ceres_ran);
+  EXPECT_GT(summary.psnr, 80.0) << summary.FullReport();
+  EXPECT_LE((z - z_true).norm(), 1e-3 * z_true.norm()) << summary.FullReport();
+  EXPECT_LT(summary.final_cost, 1e-6 * summary.initial_cost);
+  EXPECT_EQ(summary.num_pixels_used, kRows * kCols);
+  EXPECT_EQ(summary.num_residuals, kRows * kCols + 8);
+  EXPECT_FALSE(summary.BriefReport().empty());
+}
+
+TEST(LatentFitter, AutodiffAndAnalyticFitsAgree) {
+  const SensorTrunk trunk = MakeTrunk(1, 16, 6);
+  const TrunkTargets targets = Generate(trunk, TrueLatent(6, 5));
+  Fitter::Options options = CeresOptions(20);
+  options.precision = Fitter::Precision::kDouble;
+  VectorXd za, zd;
+  const Fitter::Summary sa = Fitter(trunk, options).Fit(targets, &za);
+  options.jacobian = Fitter::JacobianMode::kAutoDiff;
+  const Fitter::Summary sd = Fitter(trunk, options).Fit(targets, &zd);
+  EXPECT_EQ(sa.iterations, sd.iterations);
+  EXPECT_LE((za - zd).norm(), 1e-8 * za.norm()) << sa.FullReport() << sd.FullReport();
+}
+
+TEST(LatentFitter, MetaSgdFromZeroIsTheTrunksInnerLoop) {
+  const SensorTrunk trunk = MakeTrunk();
+  const TrunkTargets targets = Generate(trunk, TrueLatent(8));
+  Fitter::Options options;
+  options.strategy = FitStrategy::FromString("meta_sgd:3");
+  options.precision = Fitter::Precision::kDouble;
+  VectorXd z;
+  const Fitter::Summary summary = Fitter(trunk, options).Fit(targets, &z);
+  EXPECT_EQ(summary.termination_type, FitTermination::kCompleted);
+  EXPECT_EQ(summary.iterations, 3);
+  MetaSgd::Options meta;
+  meta.inner_steps = 3;
+  const VectorXd expected = MetaSgd(meta).FitLatent<double>(
+      trunk.siren, trunk.siren.Grid<double>(kRows, kCols), targets.values.cast<double>(),
+      targets.weights.cast<double>(), trunk.alpha);
+  EXPECT_LE((z - expected).cwiseAbs().maxCoeff(), 1e-12);
+}
+
+TEST(LatentFitter, MaskedPixelsDoNotChangeTheFit) {
+  const SensorTrunk trunk = MakeTrunk();
+  TrunkTargets a = Generate(trunk, TrueLatent(8));
+  a.values += 0.02 * Uniform(kRows * kCols, 1, 41).cast<float>();
+  TrunkTargets b = a;
+  for (int j = 0; j < kRows * kCols; j += 3) {
+    a.weights[j] = b.weights[j] = 0;
+    a.values(j, 0) = std::numeric_limits<float>::quiet_NaN();
+    b.values(j, 0) = 1e6f;
+  }
+  const Fitter fitter(trunk, CeresOptions(10));
+  VectorXd za, zb;
+  const Fitter::Summary sa = fitter.Fit(a, &za);
+  const Fitter::Summary sb = fitter.Fit(b, &zb);
+  EXPECT_EQ(za, zb);
+  EXPECT_EQ(sa.psnr, sb.psnr);
+  EXPECT_EQ(sa.num_valid_pixels, kRows * kCols - (kRows * kCols + 2) / 3);
+}
+
+TEST(LatentFitter, SubsamplingUsesTheRequestedPixels) {
+  const SensorTrunk trunk = MakeTrunk();
+  const TrunkTargets targets = Generate(trunk, TrueLatent(8));
+  Fitter::Options options = CeresOptions(30);
+  options.pixel_stride = 2;
+  options.max_pixels = 100;
+  options.sigma_z = 1e4;
+  VectorXd z;
+  const Fitter::Summary summary = Fitter(trunk, options).Fit(targets, &z);
+  EXPECT_EQ(summary.num_pixels_used, 100);
+  EXPECT_EQ(summary.num_valid_pixels, kRows * kCols);
+  EXPECT_GT(summary.psnr, 60.0) << summary.FullReport();  // PSNR over all pixels
+}
+
+class KnnFitTest : public ::testing::Test {
+ protected:
+  KnnFitTest() : trunk_(MakeTrunk()), index_(8) {
+    latents_ = (0.5 * Uniform(300, 8, 51)).cast<float>();
+    Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> rows = latents_;
+    index_.Add(rows.data(), 300);
+  }
+  SensorTrunk trunk_;
+  BruteForceKnnIndex index_;
+  MatrixXf latents_;
+};
+
+TEST_F(KnnFitTest, AnExactQueryReturnsThatFunctasetLatent) {
+  Fitter::Options options;
+  options.strategy = FitStrategy::FromString("knn");
+  const Fitter fitter(trunk_, options, &index_, &latents_);
+  const VectorXd z17 = latents_.row(17).transpose().cast<double>();
+  VectorXd z;
+  const Fitter::Summary summary = fitter.Fit(Generate(trunk_, z17), z17, &z);
+  EXPECT_EQ(summary.termination_type, FitTermination::kCompleted);
+  ASSERT_EQ(summary.neighbor_labels.size(), 8u);
+  EXPECT_EQ(summary.neighbor_labels[0], 17);
+  EXPECT_DOUBLE_EQ(summary.neighbor_weights[0], 1.0);
+  EXPECT_EQ(z, z17);
+}
+
+TEST_F(KnnFitTest, InverseDistanceWeightsSumToOneAndDecrease) {
+  Fitter::Options options;
+  options.strategy = FitStrategy::FromString("knn");
+  options.knn_k = 5;
+  const Fitter fitter(trunk_, options, &index_, &latents_);
+  const VectorXd z_true = TrueLatent(8, 9);
+  VectorXd z;
+  const Fitter::Summary summary = fitter.Fit(Generate(trunk_, z_true), &z);
+  ASSERT_EQ(summary.neighbor_weights.size(), 5u);
+  double sum = 0;
+  VectorXd expected = VectorXd::Zero(8);
+  for (int i = 0; i < 5; ++i) {
+    sum += summary.neighbor_weights[i];
+    if (i > 0) {
+      EXPECT_LE(summary.neighbor_weights[i], summary.neighbor_weights[i - 1]);
+    }
+    expected += summary.neighbor_weights[i] *
+                latents_.row(summary.neighbor_labels[i]).transpose().cast<double>();
+  }
+  EXPECT_NEAR(sum, 1.0, 1e-12);
+  EXPECT_LE((z - expected).norm(), 1e-6);
+}
+
+TEST_F(KnnFitTest, KnnPlusCeresIsAtLeastAsGoodAsKnn) {
+  // A frame near (not at) functaset entry 40.
+  const VectorXd z_true = latents_.row(40).transpose().cast<double>() + 0.05 * Uniform(8, 1, 61);
+  const TrunkTargets targets = Generate(trunk_, z_true);
+  Fitter::Options options;
+  options.strategy = FitStrategy::FromString("knn");
+  VectorXd z_knn, z_refined;
+  const Fitter::Summary knn = Fitter(trunk_, options, &index_, &latents_).Fit(targets, &z_knn);
+  options.strategy = FitStrategy::FromString("knn+ceres:20");
+  const Fitter::Summary refined =
+      Fitter(trunk_, options, &index_, &latents_).Fit(targets, &z_refined);
+  ASSERT_EQ(refined.stages.size(), 3u);  // start, knn, ceres
+  EXPECT_DOUBLE_EQ(refined.stages[1].cost, knn.final_cost);
+  EXPECT_LE(refined.final_cost, knn.final_cost);
+  EXPECT_GE(refined.psnr, knn.psnr) << knn.BriefReport() << "\n" << refined.BriefReport();
+  EXPECT_TRUE(refined.IsSolutionUsable());
+}
+
+// ---- Extremes ------------------------------------------------------------------------------
+
+// Ceres never raises the objective; meta-SGD descends the trunk's own MSE with fixed
+// rates and need not lower it, so only Ceres fits are checked for descent.
+void ExpectFiniteAndUsable(const Fitter::Summary& summary, const VectorXd& z) {
+  EXPECT_TRUE(z.allFinite()) << summary.FullReport();
+  EXPECT_TRUE(std::isfinite(summary.final_cost)) << summary.FullReport();
+  EXPECT_FALSE(std::isnan(summary.psnr)) << summary.FullReport();
+  EXPECT_TRUE(summary.IsSolutionUsable()) << summary.FullReport();
+  if (summary.ceres_ran) {
+    EXPECT_LE(summary.final_cost, summary.initial_cost) << summary.FullReport();
+  }
+}
+
+TEST(LatentFitterExtremes, BlankAndSaturatedFramesGiveFiniteLatents) {
+  const SensorTrunk trunk = MakeTrunk();
+  for (float value : {0.0f, 1.0f, 1e4f}) {
+    TrunkTargets targets = Generate(trunk, VectorXd::Zero(8));
+    targets.values.setConstant(value);
+    for (const char* strategy : {"ceres:20", "meta_sgd:3"}) {
+      Fitter::Options options;
+      options.strategy = FitStrategy::FromString(strategy);
+      VectorXd z;
+      const Fitter::Summary summary = Fitter(trunk, options).Fit(targets, &z);
+      ExpectFiniteAndUsable(summary, z);
+    }
+  }
+}
+
+TEST(LatentFitterExtremes, AFrameWithNoValidPixelReturnsThePriorMeanAndSaysSo) {
+  const SensorTrunk trunk = MakeTrunk();
+  TrunkTargets targets = Generate(trunk, TrueLatent(8));
+  targets.values.setConstant(std::numeric_limits<float>::quiet_NaN());
+  targets.weights.setZero();
+  for (const char* strategy : {"ceres:10", "meta_sgd:3"}) {
+    Fitter::Options options;
+    options.strategy = FitStrategy::FromString(strategy);
+    VectorXd z = VectorXd::Constant(8, 5.0);
+    const Fitter::Summary summary = Fitter(trunk, options).Fit(targets, &z);
+    EXPECT_EQ(summary.termination_type, FitTermination::kNoValidPixels);
+    EXPECT_FALSE(summary.IsSolutionUsable());
+    EXPECT_NE(summary.message.find("no valid pixel"), std::string::npos);
+    EXPECT_EQ(z, VectorXd::Zero(8));
+    EXPECT_EQ(summary.psnr, 0.0);
+    EXPECT_NE(summary.BriefReport().find("NO_VALID_PIXELS"), std::string::npos);
+  }
+}
+
+TEST(LatentFitterExtremes, AMostlyNanFrameFitsItsFewValidPixels) {
+  const SensorTrunk trunk = MakeTrunk();
+  TrunkTargets targets = Generate(trunk, TrueLatent(8));
+  for (int j = 0; j < kRows * kCols; ++j) {
+    if (j % 20 == 0) continue;  // 5% valid
+    targets.values(j, 0) = std::numeric_limits<float>::quiet_NaN();
+    targets.weights[j] = 0;
+  }
+  VectorXd z;
+  const Fitter::Summary summary = Fitter(trunk, CeresOptions(20)).Fit(targets, &z);
+  ExpectFiniteAndUsable(summary, z);
+  EXPECT_EQ(summary.num_pixels_used, kRows * kCols / 20);
+  EXPECT_GT(summary.psnr, 30.0) << summary.FullReport();
+}
+
+TEST(LatentFitterExtremes, AFarWarmStartComesBackFinite) {
+  const SensorTrunk trunk = MakeTrunk();
+  const VectorXd z_true = TrueLatent(8);
+  const TrunkTargets targets = Generate(trunk, z_true);
+  for (const char* strategy : {"ceres:20", "meta_sgd:3"}) {
+    Fitter::Options options;
+    options.strategy = FitStrategy::FromString(strategy);
+    VectorXd z;
+    const Fitter::Summary summary =
+        Fitter(trunk, options).Fit(targets, VectorXd(100.0 * z_true), &z);
+    ExpectFiniteAndUsable(summary, z);
+  }
+}
+
+TEST(LatentFitterExtremes, TinyAndHugePriorWidthsStayFinite) {
+  const SensorTrunk trunk = MakeTrunk();
+  const VectorXd z_true = TrueLatent(8);
+  const TrunkTargets targets = Generate(trunk, z_true);
+  Fitter::Options options = CeresOptions(30);
+  options.sigma_z = 1e-8;
+  VectorXd z;
+  Fitter::Summary summary = Fitter(trunk, options).Fit(targets, VectorXd(z_true), &z);
+  ExpectFiniteAndUsable(summary, z);
+  EXPECT_LE(z.cwiseAbs().maxCoeff(), 1e-6) << summary.FullReport();  // pinned to the prior mean
+  options.sigma_z = 1e8;
+  summary = Fitter(trunk, options).Fit(targets, &z);
+  ExpectFiniteAndUsable(summary, z);
+  EXPECT_GT(summary.psnr, 60.0) << summary.FullReport();
+}
+
+TEST(LatentFitterExtremes, FloatAndDoubleEvaluationAgree) {
+  // Stated tolerance: latents within 1e-4 relative. Float residuals carry about 1e-7
+  // relative error, which moves the optimum of a well-conditioned fit by about that much
+  // times the condition number of J (about 1e3 here).
+  const SensorTrunk trunk = MakeTrunk();
+  TrunkTargets targets = Generate(trunk, TrueLatent(8));
+  targets.values += 0.01 * Uniform(kRows * kCols, 1, 71).cast<float>();
+  Fitter::Options options = CeresOptions(30);
+  VectorXd z32, z64;
+  const Fitter::Summary s32 = Fitter(trunk, options).Fit(targets, &z32);
+  options.precision = Fitter::Precision::kDouble;
+  const Fitter::Summary s64 = Fitter(trunk, options).Fit(targets, &z64);
+  EXPECT_LE((z32 - z64).norm(), 1e-4 * z64.norm()) << s32.FullReport() << s64.FullReport();
+  EXPECT_NEAR(s32.psnr, s64.psnr, 0.01);
+}
+
+TEST(LatentFitterExtremes, RobustLossesFitAndKeepTheCostFinite) {
+  const SensorTrunk trunk = MakeTrunk();
+  TrunkTargets targets = Generate(trunk, TrueLatent(8));
+  for (int j = 0; j < kRows * kCols; j += 10) targets.values(j, 0) += 5.0f;  // outliers
+  for (auto loss : {Fitter::RobustLoss::kHuber, Fitter::RobustLoss::kCauchy}) {
+    Fitter::Options options = CeresOptions(30);
+    options.robust_loss = loss;
+    VectorXd z;
+    const Fitter::Summary summary = Fitter(trunk, options).Fit(targets, &z);
+    ExpectFiniteAndUsable(summary, z);
+  }
+}
+
+TEST(LatentFitterExtremes, BadInputThrowsQuotingTheShapes) {
+  const SensorTrunk trunk = MakeTrunk();
+  const Fitter fitter(trunk, Fitter::Options());
+  VectorXd z;
+  TrunkTargets targets = Generate(trunk, TrueLatent(8));
+  targets.rows = 10;
+  try {
+    fitter.Fit(targets, &z);
+    FAIL() << "expected a throw";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("200x1"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("320x1"), std::string::npos) << e.what();
+  }
+  targets = Generate(trunk, TrueLatent(8));
+  targets.values(3, 0) = std::numeric_limits<float>::quiet_NaN();  // on a valid pixel
+  EXPECT_THROW(fitter.Fit(targets, &z), std::invalid_argument);
+  targets = Generate(trunk, TrueLatent(8));
+  EXPECT_THROW(fitter.Fit(targets, VectorXd::Zero(3), &z), std::invalid_argument);
+  EXPECT_THROW(fitter.Fit(targets, VectorXd::Constant(8, NAN), &z), std::invalid_argument);
+  targets.weights.resize(5);
+  EXPECT_THROW(fitter.Fit(targets, &z), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace tactfunc

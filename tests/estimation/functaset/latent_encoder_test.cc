@@ -1,0 +1,532 @@
+// Copyright 2026 The tactfunc Authors.
+#include <Eigen/Eigenvalues>
+
+#include "estimation/functaset/latent_encoder.h"
+
+#include <atomic>
+#include <cmath>
+#include <filesystem>
+#include <limits>
+#include <random>
+#include <string>
+
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "models/trunk/meta_sgd.h"
+#include "tests/support/functa_test_util.h"
+#include "tests/support/test_dir.h"
+
+namespace tactfunc {
+namespace {
+
+using ::testing::HasSubstr;
+using testing_util::FrameId;
+using testing_util::kBubbleCols;
+using testing_util::kBubbleRows;
+using testing_util::kBubbleScale;
+using testing_util::kReferenceDepth;
+using testing_util::MakeModel;
+using testing_util::MakeTrunk;
+using testing_util::TestDir;
+using testing_util::WriteTinyDataset;
+
+constexpr int kFrames = 12;
+
+// A latent of norm ~`scale`, deterministic in `seed`.
+Eigen::VectorXf RandomLatent(int d, double scale, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<float> normal(0.0f, static_cast<float>(scale / std::sqrt(d)));
+  Eigen::VectorXf z(d);
+  for (int k = 0; k < d; ++k) z[k] = normal(rng);
+  return z;
+}
+
+// The step size that makes plain gradient descent on the latent converge: 1 / the
+// largest eigenvalue of the Gauss-Newton Hessian 2 J^T J / N at z = 0 (exact for the
+// linearised model; the test keeps z small so that it is close).
+double SafeRate(const LatentModulatedSiren& siren, const Eigen::MatrixXf& grid) {
+  Eigen::MatrixXf J;
+  siren.ForwardAndLatentJacobian<float>(grid, Eigen::VectorXf::Zero(siren.latent_dim()), nullptr,
+                                        &J);
+  const Eigen::MatrixXd H = 2.0 * (J.transpose() * J).cast<double>() / J.rows();
+  return 1.0 / Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(H).eigenvalues().maxCoeff();
+}
+
+// A bubble-only model whose trunk fits its own outputs well: many inner steps at the
+// safe rate.
+FunctaModel SelfFittingModel(int inner_steps) {
+  SensorTrunk trunk = MakeTrunk(SensorKind::kSoftBubble, kBubbleRows, kBubbleCols, kBubbleScale,
+                                false, 24, 2, 8, 0.0, inner_steps, 11);
+  const Eigen::MatrixXf grid = trunk.siren.Grid<float>(kBubbleRows, kBubbleCols);
+  trunk.alpha.setConstant(SafeRate(trunk.siren, grid));
+  FunctaModel model;
+  model.SetTrunk(std::move(trunk));
+  return model;
+}
+
+TrunkTargets TargetsFrom(const Eigen::MatrixXf& values) {
+  TrunkTargets t;
+  t.values = values;
+  t.weights = Eigen::VectorXf::Ones(values.rows());
+  t.rows = kBubbleRows;
+  t.cols = kBubbleCols;
+  return t;
+}
+
+void ExpectSameFunctaset(const Functaset& a, const Functaset& b) {
+  ASSERT_EQ(a.sensors(), b.sensors());
+  EXPECT_EQ(a.complete(), b.complete());
+  EXPECT_EQ(a.model_checksum(), b.model_checksum());
+  for (SensorKind sensor : a.sensors()) {
+    ASSERT_EQ(a.entries(sensor).size(), b.entries(sensor).size());
+    for (std::size_t i = 0; i < a.entries(sensor).size(); ++i) {
+      const FunctasetEntry& x = a.entries(sensor)[i];
+      const FunctasetEntry& y = b.entries(sensor)[i];
+      EXPECT_EQ(x.id, y.id);
+      EXPECT_EQ(x.split, y.split);
+      EXPECT_EQ(x.label.has_value(), y.label.has_value());
+      // Bit-identical, not merely close: encoding is deterministic.
+      EXPECT_TRUE((x.latent.array() == y.latent.array()).all()) << ToString(sensor) << " " << x.id;
+      EXPECT_EQ(x.psnr, y.psnr) << x.id;
+    }
+  }
+}
+
+TEST(LatentEncoder, DefaultOptionsAreValid) {
+  std::string error;
+  EXPECT_TRUE(LatentEncoder::Options().IsValid(&error)) << error;
+}
+
+TEST(LatentEncoder, BadOptionsNameTheField) {
+  std::string error;
+  LatentEncoder::Options options;
+  options.threads = 0;
+  EXPECT_FALSE(options.IsValid(&error));
+  EXPECT_THAT(error, HasSubstr("threads"));
+  options = LatentEncoder::Options();
+  options.checkpoint_every = -1;
+  EXPECT_FALSE(options.IsValid(&error));
+  EXPECT_THAT(error, HasSubstr("checkpoint_every"));
+  options = LatentEncoder::Options();
+  options.resume = true;
+  EXPECT_FALSE(options.IsValid(&error));
+  EXPECT_THAT(error, HasSubstr("resume"));
+  options = LatentEncoder::Options();
+  options.sensors = {SensorKind::kGelSlim, SensorKind::kGelSlim};
+  EXPECT_FALSE(options.IsValid(&error));
+  EXPECT_THAT(error, HasSubstr("sensors"));
+  const FunctaModel model = MakeModel();
+  EXPECT_THROW(LatentEncoder(model, options), std::invalid_argument);
+}
+
+TEST(LatentEncoder, TerminationTypesHaveNames) {
+  EXPECT_STREQ(ToString(EncodeTermination::kComplete), "complete");
+  EXPECT_STREQ(ToString(EncodeTermination::kInterrupted), "interrupted");
+}
+
+TEST(LatentEncoder, EncodingAFrameTheModelGeneratedRecoversIt) {
+  const FunctaModel model = SelfFittingModel(/*inner_steps=*/300);
+  const SensorTrunk& trunk = model.Trunk(SensorKind::kSoftBubble);
+  const Eigen::MatrixXf grid = trunk.siren.Grid<float>(kBubbleRows, kBubbleCols);
+  const LatentEncoder encoder(model, LatentEncoder::Options());
+  for (std::uint64_t seed : {1, 2, 3}) {
+    const Eigen::VectorXf z_true = RandomLatent(8, 0.5, seed);
+    const TrunkTargets targets = TargetsFrom(trunk.siren.Forward<float>(grid, z_true));
+    const LatentEncoder::EncodedFrame fit = encoder.EncodeTargets(SensorKind::kSoftBubble, targets);
+    // The starting point z = 0 is far from the frame; the fit is close to it.
+    const double psnr_zero =
+        Psnr(trunk.siren.Forward<float>(grid, Eigen::VectorXf::Zero(8)), targets);
+    EXPECT_GT(fit.psnr, 45.0) << "seed " << seed << ", z = 0 gives " << psnr_zero << " dB";
+    EXPECT_GT(fit.psnr, psnr_zero + 15.0);
+    // The reported PSNR is the PSNR of the returned latent.
+    EXPECT_DOUBLE_EQ(fit.psnr, Psnr(trunk.siren.Forward<float>(grid, fit.latent), targets));
+  }
+}
+
+TEST(LatentEncoder, EncodeTargetsRunsExactlyTheMetaSgdInnerLoop) {
+  const FunctaModel model = MakeModel(/*inner_steps=*/3, /*alpha=*/0.7);
+  const SensorTrunk& trunk = model.Trunk(SensorKind::kSoftBubble);
+  const Eigen::MatrixXf grid = trunk.siren.Grid<float>(kBubbleRows, kBubbleCols);
+  const TrunkTargets targets =
+      TargetsFrom(trunk.siren.Forward<float>(grid, RandomLatent(8, 1.0, 4)));
+  const Eigen::VectorXf expected =
+      MetaSgd(trunk.meta_sgd)
+          .FitLatent<float>(trunk.siren, grid, targets.values, targets.weights,
+                            trunk.alpha.cast<float>());
+  const LatentEncoder encoder(model, LatentEncoder::Options());
+  EXPECT_TRUE(
+      (encoder.EncodeTargets(SensorKind::kSoftBubble, targets).latent.array() == expected.array())
+          .all());
+}
+
+TEST(LatentEncoder, FramesTheModelGeneratedAreRecoveredThroughTheDataset) {
+  // Frames written as depth PNGs: reference - scale * f(grid; z_i), at the trunk's
+  // working resolution, so only the 1 um depth quantisation separates them from the
+  // model's own output.
+  TestDir dir;
+  const FunctaModel model = SelfFittingModel(/*inner_steps=*/300);
+  const SensorTrunk& trunk = model.Trunk(SensorKind::kSoftBubble);
+  const Eigen::MatrixXf grid = trunk.siren.Grid<float>(kBubbleRows, kBubbleCols);
+  {
+    DatasetWriter writer(dir / "data", DatasetWriter::Options());
+    writer.AddSensor(testing_util::BubbleInfo(),
+                     Image(kBubbleRows, kBubbleCols, 1, static_cast<float>(kReferenceDepth)));
+    for (int i = 0; i < 4; ++i) {
+      const Eigen::MatrixXf y = trunk.siren.Forward<float>(grid, RandomLatent(8, 0.5, 20 + i));
+      Image frame(kBubbleRows, kBubbleCols, 1);
+      for (int j = 0; j < kBubbleRows * kBubbleCols; ++j) {
+        frame.data[j] = static_cast<float>(kReferenceDepth - kBubbleScale * y(j, 0));
+      }
+      writer.AddFrame(FrameId(i), SensorKind::kSoftBubble, frame, nullptr, std::nullopt,
+                      Split::kTrain);
+    }
+    writer.Finish();
+  }
+  const Dataset dataset = Dataset::Open(dir / "data");
+  LatentEncoder::Summary summary;
+  const Functaset functaset =
+      LatentEncoder(model, LatentEncoder::Options()).Encode(dataset, &summary);
+  ASSERT_EQ(functaset.entries(SensorKind::kSoftBubble).size(), 4u);
+  for (const FunctasetEntry& e : functaset.entries(SensorKind::kSoftBubble)) {
+    EXPECT_GT(e.psnr, 40.0) << e.id;
+  }
+  EXPECT_EQ(summary.termination, EncodeTermination::kComplete);
+  EXPECT_GT(summary.mean_psnr.at(SensorKind::kSoftBubble), 40.0);
+}
+
+TEST(LatentEncoder, EncodesEveryFrameOfEverySensorInDatasetOrder) {
+  TestDir dir;
+  WriteTinyDataset(dir / "data", kFrames);
+  const Dataset dataset = Dataset::Open(dir / "data");
+  const FunctaModel model = MakeModel();
+  LatentEncoder::Summary summary;
+  const Functaset f = LatentEncoder(model, LatentEncoder::Options()).Encode(dataset, &summary);
+  EXPECT_TRUE(f.complete());
+  EXPECT_EQ(f.model_checksum(), model.checksum());
+  EXPECT_EQ(f.dataset(), dataset.root());
+  EXPECT_EQ(summary.frames_total, 2 * kFrames);
+  EXPECT_EQ(summary.frames_encoded, 2 * kFrames);
+  EXPECT_EQ(summary.frames_resumed, 0);
+  EXPECT_EQ(summary.non_finite_latents, 0);
+  EXPECT_GT(summary.frames_per_second, 0.0);
+  for (SensorKind sensor : {SensorKind::kSoftBubble, SensorKind::kGelSlim}) {
+    const std::vector<std::size_t> indices = dataset.FrameIndices(sensor);
+    ASSERT_EQ(f.entries(sensor).size(), indices.size());
+    EXPECT_EQ(f.latent_dim(sensor), model.Trunk(sensor).siren.latent_dim());
+    for (std::size_t i = 0; i < indices.size(); ++i) {
+      const FrameRecord& record = dataset.frames()[indices[i]];
+      const FunctasetEntry& e = f.entries(sensor)[i];
+      EXPECT_EQ(e.id, record.id);
+      EXPECT_EQ(e.split, record.split);
+      EXPECT_EQ(e.label.has_value(), record.label.has_value());
+      EXPECT_TRUE(e.latent.allFinite());
+      // The stored PSNR is that of the frame's targets under its latent.
+      const TrunkTargets targets =
+          LoadTrunkTargets(dataset, indices[i], model.Trunk(sensor).format);
+      const Eigen::MatrixXf grid =
+          model.Trunk(sensor).siren.Grid<float>(targets.rows, targets.cols);
+      EXPECT_FLOAT_EQ(e.psnr,
+                      Psnr(model.Trunk(sensor).siren.Forward<float>(grid, e.latent), targets));
+    }
+  }
+  EXPECT_THAT(summary.BriefReport(), HasSubstr("complete"));
+  EXPECT_THAT(summary.FullReport(), HasSubstr("bubble"));
+}
+
+TEST(LatentEncoder, SelectsSensorsAndSplit) {
+  TestDir dir;
+  WriteTinyDataset(dir / "data", kFrames);
+  const Dataset dataset = Dataset::Open(dir / "data");
+  const FunctaModel model = MakeModel();
+  LatentEncoder::Options options;
+  options.sensors = {SensorKind::kGelSlim};
+  options.split = Split::kTest;
+  const Functaset f = LatentEncoder(model, options).Encode(dataset, nullptr);
+  EXPECT_EQ(f.sensors(), std::vector<SensorKind>{SensorKind::kGelSlim});
+  EXPECT_EQ(f.entries(SensorKind::kGelSlim).size(),
+            dataset.FrameIndices(SensorKind::kGelSlim, Split::kTest).size());
+  for (const FunctasetEntry& e : f.entries(SensorKind::kGelSlim)) EXPECT_EQ(e.split, Split::kTest);
+}
+
+TEST(LatentEncoder, ASensorWithoutATrunkIsRejectedByName) {
+  TestDir dir;
+  WriteTinyDataset(dir / "data", 2);
+  const Dataset dataset = Dataset::Open(dir / "data");
+  FunctaModel model;
+  model.SetTrunk(MakeModel().Trunk(SensorKind::kSoftBubble));
+  LatentEncoder::Options options;
+  options.sensors = {SensorKind::kGelSlim};
+  try {
+    LatentEncoder(model, options).Encode(dataset, nullptr);
+    ADD_FAILURE() << "expected std::invalid_argument";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_THAT(e.what(), HasSubstr("gelslim"));
+  }
+  // Without a selection only the sensors the model has are encoded.
+  const Functaset f = LatentEncoder(model, LatentEncoder::Options()).Encode(dataset, nullptr);
+  EXPECT_EQ(f.sensors(), std::vector<SensorKind>{SensorKind::kSoftBubble});
+}
+
+TEST(LatentEncoder, FramesWithTheWrongChannelCountAreRejected) {
+  TestDir dir;
+  WriteTinyDataset(dir / "data", 2);
+  const Dataset dataset = Dataset::Open(dir / "data");
+  FunctaModel model = MakeModel();
+  model.MutableTrunk(SensorKind::kGelSlim).format.grayscale = false;  // 3 channels vs 1 output
+  try {
+    LatentEncoder(model, LatentEncoder::Options()).Encode(dataset, nullptr);
+    ADD_FAILURE() << "expected std::invalid_argument";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_THAT(e.what(), HasSubstr("gelslim trunk outputs 1 channel"));
+  }
+  const LatentEncoder encoder(model, LatentEncoder::Options());
+  EXPECT_THROW(encoder.EncodeTargets(SensorKind::kSoftBubble, TargetsFrom(Eigen::MatrixXf(5, 1))),
+               std::invalid_argument);
+}
+
+TEST(LatentEncoder, OutputIsDeterministicAndIndependentOfTheThreadCount) {
+  TestDir dir;
+  WriteTinyDataset(dir / "data", kFrames);
+  const Dataset dataset = Dataset::Open(dir / "data");
+  const FunctaModel model = MakeModel();
+  LatentEncoder::Options options;
+  const Functaset one = LatentEncoder(model, options).Encode(dataset, nullptr);
+  ExpectSameFunctaset(one, LatentEncoder(model, options).Encode(dataset, nullptr));
+  for (int threads : {2, 3, 7}) {
+    SCOPED_TRACE(threads);
+    options.threads = threads;
+    ExpectSameFunctaset(one, LatentEncoder(model, options).Encode(dataset, nullptr));
+  }
+}
+
+TEST(LatentEncoder, CheckpointFileHoldsTheFinalFunctaset) {
+  TestDir dir;
+  WriteTinyDataset(dir / "data", kFrames);
+  const Dataset dataset = Dataset::Open(dir / "data");
+  const FunctaModel model = MakeModel();
+  LatentEncoder::Options options;
+  options.threads = 2;
+  options.checkpoint_path = dir / "set.tfs";
+  options.checkpoint_every = 2;
+  LatentEncoder::Summary summary;
+  const Functaset f = LatentEncoder(model, options).Encode(dataset, &summary);
+  EXPECT_GE(summary.checkpoints_written, 1);
+  const Functaset saved = Functaset::Load(dir / "set.tfs");
+  EXPECT_TRUE(saved.complete());
+  ExpectSameFunctaset(f, saved);
+}
+
+TEST(LatentEncoder, ResumingAPartialFileGivesTheUninterruptedFunctaset) {
+  TestDir dir;
+  WriteTinyDataset(dir / "data", kFrames);
+  const Dataset dataset = Dataset::Open(dir / "data");
+  const FunctaModel model = MakeModel();
+  const Functaset full = LatentEncoder(model, LatentEncoder::Options()).Encode(dataset, nullptr);
+
+  // A checkpoint holding every third frame, as an interrupted run might leave.
+  Functaset partial(full.model_checksum(), full.dataset());
+  partial.set_complete(false);
+  int kept = 0;
+  for (SensorKind sensor : full.sensors()) {
+    partial.AddSensor(sensor, full.latent_dim(sensor));
+    for (std::size_t i = 0; i < full.entries(sensor).size(); i += 3, ++kept) {
+      partial.Add(sensor, full.entries(sensor)[i]);
+    }
+  }
+  partial.Save(dir / "set.tfs");
+
+  LatentEncoder::Options options;
+  options.threads = 2;
+  options.checkpoint_path = dir / "set.tfs";
+  options.resume = true;
+  LatentEncoder::Summary summary;
+  const Functaset resumed = LatentEncoder(model, options).Encode(dataset, &summary);
+  EXPECT_EQ(summary.frames_resumed, kept);
+  EXPECT_EQ(summary.frames_encoded, 2 * kFrames - kept);
+  ExpectSameFunctaset(full, resumed);
+  ExpectSameFunctaset(full, Functaset::Load(dir / "set.tfs"));
+}
+
+TEST(LatentEncoder, InterruptedRunWritesAPartialFileThatResumesToTheFullFunctaset) {
+  TestDir dir;
+  WriteTinyDataset(dir / "data", kFrames);
+  const Dataset dataset = Dataset::Open(dir / "data");
+  const FunctaModel model = MakeModel();
+  const Functaset full = LatentEncoder(model, LatentEncoder::Options()).Encode(dataset, nullptr);
+
+  LatentEncoder::Options options;
+  options.checkpoint_path = dir / "set.tfs";
+  // Interrupted before the first frame: nothing encoded, an empty partial file.
+  std::atomic<bool> interrupt{true};
+  LatentEncoder::Summary summary;
+  const Functaset none =
+      LatentEncoder(model, options).Encode(dataset, &summary, nullptr, &interrupt);
+  EXPECT_EQ(summary.termination, EncodeTermination::kInterrupted);
+  EXPECT_THAT(summary.message, HasSubstr("interrupted after 0 of 24 frames"));
+  EXPECT_FALSE(none.complete());
+  EXPECT_EQ(none.size(), 0u);
+  EXPECT_FALSE(Functaset::Load(dir / "set.tfs").complete());
+
+  // Interrupted by the first progress report: however many frames were done by then
+  // (that depends on timing), resuming completes the same functaset.
+  interrupt = false;
+  options.threads = 2;
+  options.resume = true;
+  LatentEncoder(model, options)
+      .Encode(
+          dataset, &summary, [&](const EncodeProgress&) { interrupt = true; }, &interrupt);
+  const Functaset checkpoint = Functaset::Load(dir / "set.tfs");
+  EXPECT_EQ(checkpoint.complete(), summary.termination == EncodeTermination::kComplete);
+  interrupt = false;
+  const Functaset resumed =
+      LatentEncoder(model, options).Encode(dataset, &summary, nullptr, &interrupt);
+  EXPECT_EQ(summary.termination, EncodeTermination::kComplete);
+  EXPECT_EQ(summary.frames_resumed, static_cast<std::int64_t>(checkpoint.size()));
+  ExpectSameFunctaset(full, resumed);
+}
+
+TEST(LatentEncoder, ResumeRefusesACheckpointOfAnotherModel) {
+  TestDir dir;
+  WriteTinyDataset(dir / "data", 2);
+  const Dataset dataset = Dataset::Open(dir / "data");
+  const FunctaModel model = MakeModel();  // checksum 0 (never saved)
+  Functaset other(12345, "elsewhere");
+  other.set_complete(false);
+  other.Save(dir / "set.tfs");
+  LatentEncoder::Options options;
+  options.checkpoint_path = dir / "set.tfs";
+  options.resume = true;
+  EXPECT_THROW(LatentEncoder(model, options).Encode(dataset, nullptr), FunctasetModelMismatch);
+}
+
+TEST(LatentEncoder, ResumeRefusesACheckpointHoldingFramesOutsideTheSelection) {
+  // Resuming with a narrower selection would silently drop finished frames.
+  TestDir dir;
+  WriteTinyDataset(dir / "data", 4);
+  const Dataset dataset = Dataset::Open(dir / "data");
+  const FunctaModel model = MakeModel();
+  LatentEncoder::Options options;
+  options.checkpoint_path = dir / "set.tfs";
+  LatentEncoder(model, options).Encode(dataset, nullptr);
+  options.resume = true;
+  options.sensors = {SensorKind::kSoftBubble};
+  try {
+    LatentEncoder(model, options).Encode(dataset, nullptr);
+    ADD_FAILURE() << "expected std::invalid_argument";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_THAT(e.what(), HasSubstr("4 frame(s) that are not among the frames selected"));
+    EXPECT_THAT(e.what(), HasSubstr("(gelslim)"));
+  }
+  EXPECT_EQ(Functaset::Load(dir / "set.tfs").size(), 8u);  // untouched
+}
+
+TEST(LatentEncoder, AFrameThatFailsToLoadIsReportedAfterCheckpointing) {
+  TestDir dir;
+  WriteTinyDataset(dir / "data", 4);
+  std::filesystem::resize_file(dir / "data/gelslim/000003.png", 20);  // truncated PNG
+  const Dataset dataset = Dataset::Open(dir / "data");
+  LatentEncoder::Options options;
+  options.checkpoint_path = dir / "set.tfs";
+  const FunctaModel model = MakeModel();
+  try {
+    LatentEncoder(model, options).Encode(dataset, nullptr);
+    ADD_FAILURE() << "expected DatasetError";
+  } catch (const DatasetError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("000003"));
+  }
+  const Functaset partial = Functaset::Load(dir / "set.tfs");
+  EXPECT_FALSE(partial.complete());
+  EXPECT_GE(partial.entries(SensorKind::kSoftBubble).size(), 4u);  // bubble frames come first
+}
+
+// ---- Extremes --------------------------------------------------------------------------
+
+TEST(LatentEncoder, BlankFrameEncodesToAFiniteLatentAndFinitePsnr) {
+  const FunctaModel model = MakeModel();
+  const LatentEncoder encoder(model, LatentEncoder::Options());
+  const TrunkTargets blank = TargetsFrom(Eigen::MatrixXf::Zero(kBubbleRows * kBubbleCols, 1));
+  const LatentEncoder::EncodedFrame fit = encoder.EncodeTargets(SensorKind::kSoftBubble, blank);
+  EXPECT_TRUE(fit.latent.allFinite());
+  EXPECT_TRUE(std::isfinite(fit.psnr));  // a blank target's range counts as 1
+}
+
+TEST(LatentEncoder, MaskedPixelsAreIgnoredWhateverTheyHold) {
+  const FunctaModel model = MakeModel();
+  const LatentEncoder encoder(model, LatentEncoder::Options());
+  TrunkTargets targets = TargetsFrom(Eigen::MatrixXf::Constant(kBubbleRows * kBubbleCols, 1, 0.3f));
+  for (int j = 0; j < targets.values.rows(); j += 3) targets.weights[j] = 0.0f;
+  const LatentEncoder::EncodedFrame reference =
+      encoder.EncodeTargets(SensorKind::kSoftBubble, targets);
+  for (int j = 0; j < targets.values.rows(); j += 3) {
+    targets.values(j, 0) = std::numeric_limits<float>::quiet_NaN();
+  }
+  const LatentEncoder::EncodedFrame fit = encoder.EncodeTargets(SensorKind::kSoftBubble, targets);
+  EXPECT_TRUE(fit.latent.allFinite());
+  EXPECT_TRUE((fit.latent.array() == reference.latent.array()).all());
+  EXPECT_EQ(fit.psnr, reference.psnr);
+}
+
+TEST(LatentEncoder, FrameWithoutValidPixelsGivesAZeroLatentAndNanPsnr) {
+  const FunctaModel model = MakeModel();
+  const LatentEncoder encoder(model, LatentEncoder::Options());
+  TrunkTargets targets = TargetsFrom(Eigen::MatrixXf::Zero(kBubbleRows * kBubbleCols, 1));
+  targets.weights.setZero();
+  const LatentEncoder::EncodedFrame fit = encoder.EncodeTargets(SensorKind::kSoftBubble, targets);
+  EXPECT_TRUE(fit.latent.isZero());
+  EXPECT_TRUE(std::isnan(fit.psnr));
+}
+
+TEST(LatentEncoder, DatasetExtremesEncodeWithoutNan) {
+  // Blank, saturated and partly-invalid frames read from disk, through the whole path.
+  TestDir dir;
+  {
+    DatasetWriter writer(dir / "data", DatasetWriter::Options());
+    const float ref = static_cast<float>(kReferenceDepth);
+    writer.AddSensor(testing_util::BubbleInfo(), Image(kBubbleRows, kBubbleCols, 1, ref));
+    writer.AddSensor(testing_util::GelInfo(),
+                     Image(testing_util::kGelRows, testing_util::kGelCols, 3, 0.4f));
+    Image holes = testing_util::BubbleFrame(1);
+    for (int c = 0; c < kBubbleCols; ++c) holes.at(3, c) = std::numeric_limits<float>::quiet_NaN();
+    Image none(kBubbleRows, kBubbleCols, 1, std::numeric_limits<float>::quiet_NaN());
+    writer.AddFrame("blank", SensorKind::kSoftBubble, Image(kBubbleRows, kBubbleCols, 1, ref),
+                    nullptr, std::nullopt, Split::kTrain);
+    writer.AddFrame("deep", SensorKind::kSoftBubble, Image(kBubbleRows, kBubbleCols, 1, 0.001f),
+                    nullptr, std::nullopt, Split::kTrain);  // 49 mm in: 4.9 x the scale
+    writer.AddFrame("holes", SensorKind::kSoftBubble, holes, nullptr, std::nullopt, Split::kTrain);
+    writer.AddFrame("dropout", SensorKind::kSoftBubble, none, nullptr, std::nullopt, Split::kTrain);
+    writer.AddFrame("white", SensorKind::kGelSlim,
+                    Image(testing_util::kGelRows, testing_util::kGelCols, 3, 1.0f), nullptr,
+                    std::nullopt, Split::kTrain);
+    writer.AddFrame("black", SensorKind::kGelSlim,
+                    Image(testing_util::kGelRows, testing_util::kGelCols, 3, 0.0f), nullptr,
+                    std::nullopt, Split::kTrain);
+    writer.Finish();
+  }
+  const Dataset dataset = Dataset::Open(dir / "data");
+  LatentEncoder::Summary summary;
+  const FunctaModel model = MakeModel();
+  const Functaset f = LatentEncoder(model, LatentEncoder::Options()).Encode(dataset, &summary);
+  EXPECT_EQ(summary.non_finite_latents, 0);
+  for (SensorKind sensor : f.sensors()) {
+    for (const FunctasetEntry& e : f.entries(sensor)) {
+      SCOPED_TRACE(e.id);
+      EXPECT_TRUE(e.latent.allFinite());
+      if (e.id == "dropout") {
+        EXPECT_TRUE(std::isnan(e.psnr));  // no valid pixel
+      } else {
+        EXPECT_TRUE(std::isfinite(e.psnr));
+      }
+    }
+  }
+  // The mean skips the frame without a PSNR.
+  EXPECT_TRUE(std::isfinite(summary.mean_psnr.at(SensorKind::kSoftBubble)));
+  // And the file keeps the NaN PSNR.
+  f.Save(dir / "set.tfs");
+  EXPECT_TRUE(
+      std::isnan(Functaset::Load(dir / "set.tfs")
+                     .entries(SensorKind::kSoftBubble)[*f.Find(SensorKind::kSoftBubble, "dropout")]
+                     .psnr));
+}
+
+}  // namespace
+}  // namespace tactfunc

@@ -1,0 +1,516 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// TrunkTrainer: options are validated by name; a tiny meta-learning run on a tiny
+// synthetic dataset lowers the outer loss and raises the PSNR after K steps; runs are
+// bit-identical for a seed whatever the thread count, and stopping + resuming from a
+// checkpoint gives bit-identically the parameters of an uninterrupted run; mismatched
+// or corrupt checkpoints are refused with messages naming the field or the file.
+#include "estimation/training/trunk_trainer.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <memory>
+#include <stdexcept>
+#include <string>
+
+#include "estimation/data/dataset.h"
+#include "estimation/data/synthetic_dataset.h"
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "models/core/tensor_file.h"
+#include "tests/support/test_dir.h"
+
+namespace tactfunc {
+namespace {
+
+using ::testing::HasSubstr;
+using testing_util::TestDir;
+
+// 2 tools x 6 bubble contacts (all in the train split), written once per suite.
+class TrunkTrainerTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    data_dir_ = new TestDir();
+    SynthesisPlan plan;
+    plan.out = data_dir_->path() + "/data";
+    plan.tools = {"hemisphere", "l_shape"};
+    plan.sensors = {SensorKind::kSoftBubble};
+    plan.frames_per_tool = 6;
+    plan.seed = 7;
+    plan.test_fraction = 0.0;
+    Synthesize(plan, ContactSimulator::Options());
+    dataset_ = new Dataset(Dataset::Open(plan.out));
+  }
+  static void TearDownTestSuite() {
+    delete dataset_;
+    delete data_dir_;
+    dataset_ = nullptr;
+    data_dir_ = nullptr;
+  }
+
+  // The tiny preset, shortened, on a subset of pixels, with batches that straddle
+  // epochs (3 frames a step out of 12 would not; 5 does) and off-grid monitor points,
+  // so that resuming has to restore every piece of state.
+  static TrunkTrainer::Options ShortOptions() {
+    TrunkTrainer::Options options = TrunkTrainer::Preset("tiny");
+    options.steps = 24;
+    options.batch_size = 5;
+    options.pixels_per_frame = 100;
+    options.monitor_every = 7;
+    options.monitor_frames = 4;
+    options.checkpoint_every = 5;
+    options.residual_frames = 4;
+    options.threads = 2;
+    return options;
+  }
+
+  static TrunkTrainer::Summary Train(const TrunkTrainer::Options& options, SensorTrunk* trunk,
+                                     const TrunkTrainer::StepCallback& callback = nullptr) {
+    return TrunkTrainer(options).Train(*dataset_, SensorKind::kSoftBubble, trunk, callback);
+  }
+
+  static bool SameParameters(const SensorTrunk& a, const SensorTrunk& b) {
+    return a.siren.parameters().size() == b.siren.parameters().size() &&
+           (a.siren.parameters().array() == b.siren.parameters().array()).all() &&
+           a.alpha.size() == b.alpha.size() && (a.alpha.array() == b.alpha.array()).all();
+  }
+
+  static TestDir* data_dir_;
+  static Dataset* dataset_;
+  TestDir dir_;
+};
+TestDir* TrunkTrainerTest::data_dir_ = nullptr;
+Dataset* TrunkTrainerTest::dataset_ = nullptr;
+
+TEST(TrunkTrainerOptions, DefaultOptionsAreValid) {
+  std::string error;
+  EXPECT_TRUE(TrunkTrainer::Options().IsValid(&error)) << error;
+}
+
+TEST(TrunkTrainerOptions, EveryPresetIsValid) {
+  for (const std::string& name : TrunkTrainer::PresetNames()) {
+    std::string error;
+    EXPECT_TRUE(TrunkTrainer::Preset(name).IsValid(&error)) << name << ": " << error;
+  }
+}
+
+TEST(TrunkTrainerOptions, DefaultPresetIsTheDefaultOptions) {
+  const FrameFormat format{70, 88, false, false, 0.01};
+  EXPECT_EQ(TrunkTrainer(TrunkTrainer::Preset("default"))
+                .TrajectoryOptionsJson(SensorKind::kSoftBubble, format),
+            TrunkTrainer(TrunkTrainer::Options())
+                .TrajectoryOptionsJson(SensorKind::kSoftBubble, format));
+  EXPECT_EQ(TrunkTrainer::Preset("default").steps, TrunkTrainer::Options().steps);
+}
+
+TEST(TrunkTrainerOptions, TheDefaultPresetGivesTheGelSlimAShorterLatentThanTheBubble) {
+  const TrunkTrainer::Options bubble = TrunkTrainer::Preset("default", SensorKind::kSoftBubble);
+  const TrunkTrainer::Options gel = TrunkTrainer::Preset("default", SensorKind::kGelSlim);
+  EXPECT_EQ(bubble.siren.latent_dim, 128);
+  EXPECT_EQ(gel.siren.latent_dim, 32);
+  // Everything else is shared.
+  EXPECT_EQ(gel.siren.width, bubble.siren.width);
+  EXPECT_EQ(gel.siren.num_hidden_layers, bubble.siren.num_hidden_layers);
+  EXPECT_EQ(gel.steps, bubble.steps);
+  EXPECT_EQ(gel.batch_size, bubble.batch_size);
+  EXPECT_EQ(gel.pixels_per_frame, bubble.pixels_per_frame);
+  EXPECT_EQ(gel.learning_rate_final_fraction, 0.1);
+  EXPECT_EQ(bubble.learning_rate_final_fraction, 0.1);
+  // The other presets keep the paper's constant rate and are the same for both sensors.
+  EXPECT_EQ(TrunkTrainer::Preset("small").learning_rate_final_fraction, 1.0);
+  EXPECT_EQ(TrunkTrainer::Preset("tiny").learning_rate_final_fraction, 1.0);
+  for (const char* name : {"tiny", "small"}) {
+    EXPECT_EQ(TrunkTrainer::Preset(name, SensorKind::kGelSlim).siren.latent_dim,
+              TrunkTrainer::Preset(name, SensorKind::kSoftBubble).siren.latent_dim)
+        << name;
+  }
+}
+
+TEST(TrunkTrainerOptions, TheLearningRateIsConstantUnlessACosineDecayIsAsked) {
+  TrunkTrainer::Options o = TrunkTrainer::Preset("tiny");
+  o.steps = 100;
+  for (int t : {1, 50, 100}) EXPECT_EQ(TrunkTrainer::LearningRateAt(o, t), o.learning_rate);
+  o.learning_rate_final_fraction = 0.1;
+  EXPECT_DOUBLE_EQ(TrunkTrainer::LearningRateAt(o, 1), o.learning_rate);
+  EXPECT_NEAR(TrunkTrainer::LearningRateAt(o, 51), 0.55 * o.learning_rate, 1e-15);
+  EXPECT_NEAR(TrunkTrainer::LearningRateAt(o, 101), 0.1 * o.learning_rate, 1e-15);
+  for (int t = 2; t <= 100; ++t) {
+    EXPECT_LT(TrunkTrainer::LearningRateAt(o, t), TrunkTrainer::LearningRateAt(o, t - 1)) << t;
+  }
+  std::string error;
+  o.learning_rate_final_fraction = 0;
+  EXPECT_FALSE(o.IsValid(&error));
+  EXPECT_THAT(error, HasSubstr("learning_rate_final_fraction"));
+  o.learning_rate_final_fraction = 1.5;
+  EXPECT_FALSE(o.IsValid(&error));
+}
+
+TEST(TrunkTrainerOptions, WithADecayTheStepCountBelongsToTheTrajectory) {
+  const FrameFormat format{16, 20, false, false, 0.01};
+  TrunkTrainer::Options a = TrunkTrainer::Preset("tiny");
+  TrunkTrainer::Options b = a;
+  b.steps = a.steps + 100;
+  // Constant rate: running longer continues the same trajectory.
+  EXPECT_EQ(TrunkTrainer(a).TrajectoryOptionsJson(SensorKind::kSoftBubble, format),
+            TrunkTrainer(b).TrajectoryOptionsJson(SensorKind::kSoftBubble, format));
+  // Decay: the schedule depends on the step count, so a resume must keep it.
+  a.learning_rate_final_fraction = b.learning_rate_final_fraction = 0.1;
+  EXPECT_NE(TrunkTrainer(a).TrajectoryOptionsJson(SensorKind::kSoftBubble, format),
+            TrunkTrainer(b).TrajectoryOptionsJson(SensorKind::kSoftBubble, format));
+}
+
+TEST(TrunkTrainerOptions, UnknownPresetIsRejectedListingTheNames) {
+  try {
+    TrunkTrainer::Preset("huge");
+    FAIL() << "expected std::invalid_argument";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_THAT(e.what(), HasSubstr("huge"));
+    EXPECT_THAT(e.what(), HasSubstr("tiny, small, default"));
+  }
+}
+
+TEST(TrunkTrainerOptions, BadOptionsNameTheField) {
+  struct Case {
+    const char* field;
+    void (*mutate)(TrunkTrainer::Options*);
+  };
+  const Case cases[] = {
+      {"siren", [](TrunkTrainer::Options* o) { o->siren.width = 0; }},
+      {"rows", [](TrunkTrainer::Options* o) { o->rows = 10; }},
+      {"normalization_scale", [](TrunkTrainer::Options* o) { o->normalization_scale = -1; }},
+      {"meta_sgd", [](TrunkTrainer::Options* o) { o->meta_sgd.inner_steps = -1; }},
+      {"learning_rate", [](TrunkTrainer::Options* o) { o->learning_rate = 0; }},
+      {"alpha_learning_rate", [](TrunkTrainer::Options* o) { o->alpha_learning_rate = -1; }},
+      {"adam_beta1", [](TrunkTrainer::Options* o) { o->adam_beta1 = 1; }},
+      {"adam_beta2", [](TrunkTrainer::Options* o) { o->adam_beta2 = -0.1; }},
+      {"adam_epsilon", [](TrunkTrainer::Options* o) { o->adam_epsilon = 0; }},
+      {"alpha_init_min", [](TrunkTrainer::Options* o) { o->alpha_init_max = 1.5; }},
+      {"alpha_max", [](TrunkTrainer::Options* o) { o->alpha_max = 0; }},
+      {"alpha_init_min", [](TrunkTrainer::Options* o) { o->alpha_max = 0.5; }},  // init 1 > 0.5
+      {"batch_size", [](TrunkTrainer::Options* o) { o->batch_size = 0; }},
+      {"pixels_per_frame", [](TrunkTrainer::Options* o) { o->pixels_per_frame = -1; }},
+      {"steps", [](TrunkTrainer::Options* o) { o->steps = -1; }},
+      {"threads", [](TrunkTrainer::Options* o) { o->threads = 0; }},
+      {"checkpoint_every", [](TrunkTrainer::Options* o) { o->checkpoint_every = -1; }},
+      {"resume", [](TrunkTrainer::Options* o) { o->resume = true; }},
+      {"monitor_every", [](TrunkTrainer::Options* o) { o->monitor_every = 0; }},
+      {"monitor_frames", [](TrunkTrainer::Options* o) { o->monitor_frames = 0; }},
+      {"residual_frames", [](TrunkTrainer::Options* o) { o->residual_frames = 0; }},
+      {"divergence_drop_db", [](TrunkTrainer::Options* o) { o->divergence_drop_db = -1; }},
+      {"divergence_drop_db", [](TrunkTrainer::Options* o) { o->divergence_drop_db = NAN; }},
+  };
+  for (const Case& c : cases) {
+    TrunkTrainer::Options options;
+    c.mutate(&options);
+    std::string error;
+    EXPECT_FALSE(options.IsValid(&error)) << c.field;
+    EXPECT_THAT(error, HasSubstr(c.field));
+    EXPECT_THROW(TrunkTrainer trainer(options), std::invalid_argument) << c.field;
+  }
+}
+
+TEST(TrunkTrainerOptions, TerminationTypesHaveNames) {
+  EXPECT_STREQ(ToString(TrunkTrainer::TerminationType::kCompleted), "completed");
+  EXPECT_STREQ(ToString(TrunkTrainer::TerminationType::kUserStopped), "user_stopped");
+  EXPECT_STREQ(ToString(TrunkTrainer::TerminationType::kNonFinite), "non_finite");
+  EXPECT_STREQ(ToString(TrunkTrainer::TerminationType::kDiverged), "diverged");
+}
+
+TEST_F(TrunkTrainerTest, AFarTooLargeLearningRateStopsAsDivergedAtTheFirstMonitorPointThatShowsIt) {
+  TrunkTrainer::Options options = TrunkTrainer::Preset("tiny");
+  options.learning_rate = 0.03;  // 30x the preset's: the trunk blows up within 50 steps
+  options.steps = 100;
+  options.monitor_every = 10;
+  options.monitor_frames = 4;
+  options.checkpoint_path = dir_ / "diverged.ckpt";
+  options.checkpoint_every = 0;
+  options.threads = 2;
+  SensorTrunk trunk;
+  const TrunkTrainer::Summary summary = Train(options, &trunk);
+  ASSERT_EQ(summary.termination_type, TrunkTrainer::TerminationType::kDiverged)
+      << summary.FullReport();
+  EXPECT_LT(summary.steps_done, options.steps);
+  EXPECT_EQ(summary.steps_done % options.monitor_every, 0);
+  // The last point is the first one more than 6 dB below the best before it.
+  double best = summary.history.front().psnr;
+  for (std::size_t i = 0; i + 1 < summary.history.size(); ++i) {
+    best = std::max(best, summary.history[i].psnr);
+    EXPECT_LE(best - summary.history[i].psnr, options.divergence_drop_db) << i;
+  }
+  EXPECT_GT(best - summary.history.back().psnr, options.divergence_drop_db);
+  EXPECT_EQ(summary.history.back().step, summary.steps_done);
+  EXPECT_THAT(summary.message, HasSubstr("diverged"));
+  EXPECT_THAT(summary.message, HasSubstr("learning_rate"));
+  // Nothing to resume from: a diverged state is not checkpointed.
+  EXPECT_FALSE(std::filesystem::exists(options.checkpoint_path));
+
+  // A fall after the last regular monitor point is caught at the final point.
+  TrunkTrainer::Options late = options;
+  late.monitor_every = 1000;  // only step 0 and the final point
+  late.steps = 60;
+  const TrunkTrainer::Summary at_end = Train(late, &trunk);
+  EXPECT_EQ(at_end.termination_type, TrunkTrainer::TerminationType::kDiverged)
+      << at_end.FullReport();
+  EXPECT_EQ(at_end.steps_done, 60);
+  ASSERT_EQ(at_end.history.size(), 2u);
+
+  // With the check off the same run goes on to the end, far below where it started.
+  const double drop = options.divergence_drop_db;
+  options.divergence_drop_db = 0;
+  const TrunkTrainer::Summary unchecked = Train(options, &trunk);
+  ASSERT_EQ(unchecked.termination_type, TrunkTrainer::TerminationType::kCompleted)
+      << unchecked.message;
+  EXPECT_EQ(unchecked.steps_done, options.steps);
+  EXPECT_LT(unchecked.train_psnr, summary.history.front().psnr - drop);
+}
+
+TEST_F(TrunkTrainerTest, TinyRunLowersTheOuterLossAndRaisesPsnrAfterKSteps) {
+  TrunkTrainer::Options options = TrunkTrainer::Preset("tiny");
+  options.threads = 2;
+  options.monitor_frames = 12;
+  SensorTrunk trunk;
+  const TrunkTrainer::Summary summary = Train(options, &trunk);
+  ASSERT_EQ(summary.termination_type, TrunkTrainer::TerminationType::kCompleted) << summary.message;
+  EXPECT_EQ(summary.steps_done, options.steps);
+  EXPECT_EQ(summary.num_train_frames, 12);
+  ASSERT_GE(summary.history.size(), 2u);
+  const TrunkTrainer::HistoryPoint& first = summary.history.front();
+  EXPECT_EQ(first.step, 0);
+  // The outer loss after K steps falls severalfold from the SIREN initialisation ...
+  EXPECT_LT(summary.final_loss, 0.25 * first.loss) << summary.FullReport();
+  // ... the PSNR after K steps rises by several dB, and beats the trunk alone (z = 0).
+  EXPECT_GT(summary.train_psnr, first.psnr + 5.0) << summary.FullReport();
+  EXPECT_GT(summary.train_psnr, summary.train_psnr_at_zero + 3.0) << summary.FullReport();
+  // The trunk is filled in: sizes, rates in [0, 1], the residual scale.
+  EXPECT_EQ(trunk.sensor, SensorKind::kSoftBubble);
+  EXPECT_EQ(trunk.format.rows, 16);
+  EXPECT_EQ(trunk.format.cols, 20);
+  EXPECT_EQ(trunk.siren.output_channels(), 1);
+  EXPECT_EQ(trunk.siren.latent_dim(), 16);
+  ASSERT_EQ(trunk.alpha.size(), 16);
+  EXPECT_GE(trunk.alpha.minCoeff(), 0.0);
+  EXPECT_LE(trunk.alpha.maxCoeff(), 1.0);
+  EXPECT_GT(trunk.residual_sigma, 0.0);
+  EXPECT_EQ(trunk.residual_sigma, summary.residual_sigma);
+  EXPECT_THAT(summary.BriefReport(), HasSubstr("completed"));
+  EXPECT_THAT(summary.FullReport(), HasSubstr("residual sigma"));
+}
+
+TEST_F(TrunkTrainerTest, TheRatesStayWithinTheirClipBoundAndALargerBoundLetsThemPassOne) {
+  TrunkTrainer::Options options = ShortOptions();
+  options.checkpoint_every = 0;
+  options.alpha_learning_rate = 0.5;  // large, so that 24 steps reach the bounds
+  SensorTrunk clipped;
+  ASSERT_EQ(Train(options, &clipped).termination_type, TrunkTrainer::TerminationType::kCompleted);
+  EXPECT_GE(clipped.alpha.minCoeff(), 0.0);
+  EXPECT_LE(clipped.alpha.maxCoeff(), 1.0);
+
+  options.alpha_max = 4.0;
+  options.alpha_init_min = options.alpha_init_max = 3.0;
+  SensorTrunk lifted;
+  ASSERT_EQ(Train(options, &lifted).termination_type, TrunkTrainer::TerminationType::kCompleted);
+  EXPECT_GE(lifted.alpha.minCoeff(), 0.0);
+  EXPECT_LE(lifted.alpha.maxCoeff(), 4.0);
+  EXPECT_GT(lifted.alpha.maxCoeff(), 1.0);
+  // The bound belongs to the trajectory: a resume must not change it.
+  EXPECT_THAT(TrunkTrainer(options).TrajectoryOptionsJson(SensorKind::kSoftBubble, lifted.format),
+              HasSubstr("\"alpha_max\":4"));
+  EXPECT_THAT(TrunkTrainer(ShortOptions()).TrajectoryOptionsJson(SensorKind::kSoftBubble,
+                                                                  lifted.format),
+              ::testing::Not(HasSubstr("alpha_max")));
+}
+
+TEST_F(TrunkTrainerTest, TheDivergenceCheckDoesNotTouchARunThatDoesNotDiverge) {
+  TrunkTrainer::Options options = ShortOptions();
+  SensorTrunk checked, unchecked;
+  ASSERT_EQ(Train(options, &checked).termination_type, TrunkTrainer::TerminationType::kCompleted);
+  options.divergence_drop_db = 0;
+  ASSERT_EQ(Train(options, &unchecked).termination_type,
+            TrunkTrainer::TerminationType::kCompleted);
+  EXPECT_TRUE(SameParameters(checked, unchecked));
+  // Nor is it part of the trajectory a resume must match.
+  EXPECT_EQ(TrunkTrainer(options).TrajectoryOptionsJson(SensorKind::kSoftBubble, checked.format),
+            TrunkTrainer(ShortOptions())
+                .TrajectoryOptionsJson(SensorKind::kSoftBubble, checked.format));
+}
+
+TEST_F(TrunkTrainerTest, SameSeedGivesTheSameModelWhateverTheThreadCount) {
+  TrunkTrainer::Options options = ShortOptions();
+  SensorTrunk one, two, three, other_seed;
+  options.threads = 1;
+  Train(options, &one);
+  options.threads = 2;
+  Train(options, &two);
+  options.threads = 3;
+  Train(options, &three);
+  EXPECT_TRUE(SameParameters(one, two));
+  EXPECT_TRUE(SameParameters(one, three));
+  EXPECT_EQ(one.residual_sigma, three.residual_sigma);
+  options.seed = 1;
+  Train(options, &other_seed);
+  EXPECT_FALSE(SameParameters(one, other_seed));
+}
+
+TEST_F(TrunkTrainerTest, StoppingAndResumingIsBitIdenticalToAnUninterruptedRun) {
+  TrunkTrainer::Options options = ShortOptions();
+  SensorTrunk uninterrupted;
+  Train(options, &uninterrupted);
+
+  // Stopped by the callback after step 11 (between checkpoints and monitor points).
+  options.checkpoint_path = dir_ / "run.ckpt";
+  SensorTrunk stopped;
+  const TrunkTrainer::Summary first = Train(
+      options, &stopped, [](const TrunkTrainer::StepReport& report) { return report.step < 11; });
+  EXPECT_EQ(first.termination_type, TrunkTrainer::TerminationType::kUserStopped);
+  EXPECT_EQ(first.steps_done, 11);
+  EXPECT_FALSE(SameParameters(stopped, uninterrupted));
+
+  options.resume = true;
+  options.threads = 1;  // a different thread count on resume changes nothing
+  SensorTrunk resumed;
+  const TrunkTrainer::Summary second = Train(options, &resumed);
+  EXPECT_EQ(second.termination_type, TrunkTrainer::TerminationType::kCompleted);
+  EXPECT_EQ(second.start_step, 11);
+  EXPECT_EQ(second.steps_done, options.steps);
+  EXPECT_TRUE(SameParameters(resumed, uninterrupted));
+  EXPECT_EQ(resumed.residual_sigma, uninterrupted.residual_sigma);
+}
+
+TEST_F(TrunkTrainerTest, WithACosineDecayResumingIsStillBitIdenticalAndTheDecayChangesTheModel) {
+  TrunkTrainer::Options options = ShortOptions();
+  SensorTrunk constant;
+  Train(options, &constant);
+  options.learning_rate_final_fraction = 0.1;
+  SensorTrunk uninterrupted;
+  Train(options, &uninterrupted);
+  EXPECT_FALSE(SameParameters(uninterrupted, constant));
+
+  options.checkpoint_path = dir_ / "decay.ckpt";
+  SensorTrunk stopped;
+  Train(options, &stopped, [](const TrunkTrainer::StepReport& report) { return report.step < 11; });
+  options.resume = true;
+  SensorTrunk resumed;
+  const TrunkTrainer::Summary second = Train(options, &resumed);
+  EXPECT_EQ(second.start_step, 11);
+  EXPECT_TRUE(SameParameters(resumed, uninterrupted));
+}
+
+TEST_F(TrunkTrainerTest, ExtendingAFinishedRunEqualsTrainingLongerAtOnce) {
+  TrunkTrainer::Options options = ShortOptions();
+  SensorTrunk at_once;
+  Train(options, &at_once);  // 24 steps
+
+  options.checkpoint_path = dir_ / "run.ckpt";
+  options.steps = 12;
+  SensorTrunk half;
+  Train(options, &half);
+  options.steps = 24;
+  options.resume = true;
+  SensorTrunk extended;
+  const TrunkTrainer::Summary summary = Train(options, &extended);
+  EXPECT_EQ(summary.start_step, 12);
+  EXPECT_TRUE(SameParameters(extended, at_once));
+}
+
+TEST_F(TrunkTrainerTest, ResumeWithoutACheckpointStartsAtStepZero) {
+  TrunkTrainer::Options options = ShortOptions();
+  options.checkpoint_path = dir_ / "absent.ckpt";
+  options.resume = true;
+  SensorTrunk trunk;
+  const TrunkTrainer::Summary summary = Train(options, &trunk);
+  EXPECT_EQ(summary.start_step, 0);
+  EXPECT_EQ(summary.steps_done, options.steps);
+}
+
+TEST_F(TrunkTrainerTest, ResumeRejectsMismatchedOptionsNamingTheField) {
+  TrunkTrainer::Options options = ShortOptions();
+  options.steps = 5;
+  options.checkpoint_path = dir_ / "run.ckpt";
+  SensorTrunk trunk;
+  Train(options, &trunk);
+
+  options.resume = true;
+  options.steps = 10;
+  TrunkTrainer::Options changed = options;
+  changed.learning_rate *= 2;
+  try {
+    Train(changed, &trunk);
+    FAIL() << "expected std::runtime_error";
+  } catch (const std::runtime_error& e) {
+    EXPECT_THAT(e.what(), HasSubstr("learning_rate"));
+    EXPECT_THAT(e.what(), HasSubstr("run.ckpt"));
+  }
+  changed = options;
+  changed.siren.latent_dim = 8;
+  EXPECT_THROW(
+      {
+        try {
+          Train(changed, &trunk);
+        } catch (const std::runtime_error& e) {
+          EXPECT_THAT(e.what(), HasSubstr("siren.latent_dim"));
+          throw;
+        }
+      },
+      std::runtime_error);
+  // Other training frames (here: fewer of them) are refused too.
+  const std::vector<std::size_t> indices =
+      dataset_->FrameIndices(SensorKind::kSoftBubble, Split::kTrain);
+  const TrunkTrainer trainer(options);
+  const FrameFormat format = trainer.ResolveFormat(
+      SensorKind::kSoftBubble, dataset_->sensor_info(SensorKind::kSoftBubble).normalization_scale);
+  std::vector<TrunkTargets> frames;
+  for (std::size_t i = 0; i + 1 < indices.size(); ++i) {
+    frames.push_back(LoadTrunkTargets(*dataset_, indices[i], format));
+  }
+  try {
+    trainer.Train(frames, SensorKind::kSoftBubble, format, 42, &trunk);
+    FAIL() << "expected std::runtime_error";
+  } catch (const std::runtime_error& e) {
+    EXPECT_THAT(e.what(), HasSubstr("training frames differ"));
+  }
+  // Options that do not shape the trajectory may change.
+  changed = options;
+  changed.threads = 1;
+  changed.monitor_every = 3;
+  changed.checkpoint_every = 0;
+  EXPECT_NO_THROW(Train(changed, &trunk));
+}
+
+TEST_F(TrunkTrainerTest, CorruptCheckpointGivesAClearError) {
+  TrunkTrainer::Options options = ShortOptions();
+  options.steps = 5;
+  options.checkpoint_path = dir_ / "run.ckpt";
+  SensorTrunk trunk;
+  Train(options, &trunk);
+  std::string bytes;
+  {
+    std::ifstream in(options.checkpoint_path, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  ASSERT_GT(bytes.size(), 100u);
+  bytes[bytes.size() - 50] ^= 0x55;  // a payload byte: only the checksum notices
+  {
+    std::ofstream out(options.checkpoint_path, std::ios::binary | std::ios::trunc);
+    out << bytes;
+  }
+  options.resume = true;
+  options.steps = 10;
+  try {
+    Train(options, &trunk);
+    FAIL() << "expected TensorFileError";
+  } catch (const TensorFileError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("cannot resume from checkpoint"));
+    EXPECT_THAT(e.what(), HasSubstr("run.ckpt"));
+  }
+  // A file of another kind (a model) is refused as well.
+  FunctaModel model;
+  model.SetTrunk(trunk);
+  model.Save(options.checkpoint_path);
+  EXPECT_THROW(Train(options, &trunk), TensorFileError);
+}
+
+}  // namespace
+}  // namespace tactfunc

@@ -1,0 +1,172 @@
+// Copyright 2026 The tactfunc Authors.
+#include "models/core/tensor_file.h"
+#include "models/core/atomic_file.h"
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+
+namespace tactfunc {
+namespace {
+
+using ::testing::HasSubstr;
+
+TensorFile Example() {
+  TensorFile file("model");
+  file.set_meta_json(R"({"width": 16, "note": "example"})");
+  file.Add("W0", TensorFile::DType::kFloat32, {2, 3}, {1, 2, 3, 4, 5, 6.25});
+  file.Add("alpha", TensorFile::DType::kFloat64, {3}, {0.1, 1e-300, -7});
+  file.Add("empty", TensorFile::DType::kFloat32, {0, 4}, {});
+  return file;
+}
+
+std::string TempPath(const std::string& name) {
+  return (std::filesystem::path(testing::TempDir()) / name).string();
+}
+
+TEST(TensorFile, RoundTripsTensorsAndMetaExactly) {
+  const TensorFile original = Example();
+  const std::string path = TempPath("round_trip.tfm");
+  original.Write(path);
+  const TensorFile read = TensorFile::Read(path, "model");
+  EXPECT_EQ(read.kind(), "model");
+  EXPECT_THAT(read.meta_json(), HasSubstr("\"width\":16"));
+  ASSERT_EQ(read.tensors().size(), 3u);
+  EXPECT_EQ(read.Get("W0", {2, 3}).values, original.Get("W0").values);
+  EXPECT_EQ(read.Get("alpha").values, original.Get("alpha").values);
+  EXPECT_EQ(read.Get("empty").numel(), 0);
+  EXPECT_EQ(read.checksum(), original.checksum());
+  EXPECT_NE(read.checksum(), 0u);
+}
+
+TEST(TensorFile, Float32TensorsAreRoundedOnAdd) {
+  TensorFile file("model");
+  file.Add("x", TensorFile::DType::kFloat32, {1}, {0.1});
+  EXPECT_EQ(file.Get("x").values[0], static_cast<double>(0.1f));
+}
+
+TEST(TensorFile, Float16TensorsAreRoundedToHalfAndReadBackExactly) {
+  TensorFile file("functaset");
+  // 1 + 2^-11 is halfway between two halves (ties to even: 1); 65504 is the largest half.
+  file.Add("z", TensorFile::DType::kFloat16, {5}, {0.1, -2.5, 1.0 + std::ldexp(1.0, -11), 65504.0, 0.0});
+  const std::vector<double>& v = file.Get("z").values;
+  EXPECT_NEAR(v[0], 0.1, 0.1 * std::ldexp(1.0, -11));
+  EXPECT_NE(v[0], 0.1);
+  EXPECT_EQ(v[1], -2.5);
+  EXPECT_EQ(v[2], 1.0);
+  EXPECT_EQ(v[3], 65504.0);
+  EXPECT_EQ(v[4], 0.0);
+  const TensorFile read = TensorFile::Parse(file.Serialize(), "half.tfs", "functaset");
+  EXPECT_EQ(read.Get("z").dtype, TensorFile::DType::kFloat16);
+  EXPECT_EQ(read.Get("z").values, v);
+  // Two bytes per value instead of four: the payload shrinks by 800 bytes (the JSON
+  // header only by a digit or so of its byte counts).
+  TensorFile wide("functaset");
+  wide.Add("z", TensorFile::DType::kFloat32, {400}, std::vector<double>(400, 0.5));
+  TensorFile half("functaset");
+  half.Add("z", TensorFile::DType::kFloat16, {400}, std::vector<double>(400, 0.5));
+  const std::size_t saved = wide.Serialize().size() - half.Serialize().size();
+  EXPECT_GE(saved, 800u);
+  EXPECT_LE(saved, 808u);
+}
+
+TEST(TensorFile, ChecksumMatchesZlibCrc32) {
+  // zlib.crc32(b"123456789") == 0xCBF43926, the standard CRC-32 check value.
+  EXPECT_EQ(Crc32("123456789", 9), 0xCBF43926u);
+}
+
+TEST(TensorFile, RejectsTruncatedFiles) {
+  const std::string bytes = Example().Serialize();
+  for (std::size_t keep : {std::size_t{0}, std::size_t{10}, bytes.size() / 2, bytes.size() - 1}) {
+    try {
+      TensorFile::Parse(bytes.substr(0, keep), "cut.tfm");
+      FAIL() << "accepted a file truncated to " << keep << " bytes";
+    } catch (const TensorFileError& e) {
+      EXPECT_THAT(e.what(), HasSubstr("cut.tfm"));
+    }
+  }
+}
+
+TEST(TensorFile, RejectsACorruptByteAnywhere) {
+  const std::string bytes = Example().Serialize();
+  for (std::size_t at = 8; at < bytes.size(); at += 7) {
+    std::string corrupt = bytes;
+    corrupt[at] = static_cast<char>(corrupt[at] ^ 0x5a);
+    EXPECT_THROW(TensorFile::Parse(corrupt, "bad.tfm"), TensorFileError) << "byte " << at;
+  }
+}
+
+TEST(TensorFile, RejectsAnotherVersionWithAClearMessage) {
+  std::string bytes = Example().Serialize();
+  bytes[8] = 9;  // version 9
+  try {
+    TensorFile::Parse(bytes, "future.tfm");
+    FAIL();
+  } catch (const TensorFileError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("version 9"));
+  }
+}
+
+TEST(TensorFile, RejectsForeignFilesAndTheWrongKind) {
+  EXPECT_THROW(TensorFile::Parse(std::string(100, 'x'), "junk"), TensorFileError);
+  try {
+    TensorFile::Parse(Example().Serialize(), "m.tfm", "functaset");
+    FAIL();
+  } catch (const TensorFileError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("expected a 'functaset' file"));
+  }
+  EXPECT_THROW(TensorFile::Read(TempPath("does_not_exist.tfm")), TensorFileError);
+}
+
+TEST(TensorFile, GetNamesMissingTensorsAndWrongShapes) {
+  const TensorFile file = TensorFile::Parse(Example().Serialize(), "m.tfm");
+  try {
+    file.Get("nope");
+    FAIL();
+  } catch (const TensorFileError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("'nope'"));
+  }
+  try {
+    file.Get("W0", {3, 2});
+    FAIL();
+  } catch (const TensorFileError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("[2, 3]"));
+    EXPECT_THAT(e.what(), HasSubstr("[3, 2]"));
+  }
+}
+
+TEST(TensorFile, AddRejectsMismatchedShapesAndDuplicates) {
+  TensorFile file("model");
+  EXPECT_THROW(file.Add("a", TensorFile::DType::kFloat32, {2, 2}, {1, 2, 3}),
+               std::invalid_argument);
+  file.Add("a", TensorFile::DType::kFloat32, {1}, {1});
+  EXPECT_THROW(file.Add("a", TensorFile::DType::kFloat32, {1}, {1}), std::invalid_argument);
+  EXPECT_THROW(file.set_meta_json("[1, 2]"), TensorFileError);
+}
+
+TEST(TensorFile, AtomicWriteReplacesTheWholeFileAndLeavesNoTemporaries) {
+  const std::string dir = TempPath("atomic_dir");
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const std::string path = dir + "/f.tfm";
+  {
+    std::ofstream(path) << "old contents that are longer than nothing";
+  }
+  Example().Write(path);
+  EXPECT_NO_THROW(TensorFile::Read(path));
+  int entries = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(dir)) {
+    (void)entry;
+    ++entries;
+  }
+  EXPECT_EQ(entries, 1);
+  EXPECT_THROW(WriteFileAtomically(dir + "/missing_subdir/f", "x"), std::runtime_error);
+}
+
+}  // namespace
+}  // namespace tactfunc

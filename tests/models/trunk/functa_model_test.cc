@@ -1,0 +1,123 @@
+// Copyright 2026 The tactfunc Authors.
+#include "models/trunk/functa_model.h"
+
+#include <filesystem>
+
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "models/core/tensor_file.h"
+
+namespace tactfunc {
+namespace {
+
+using ::testing::HasSubstr;
+
+SensorTrunk SmallTrunk(SensorKind sensor, std::uint64_t seed) {
+  LatentModulatedSiren::Options options;
+  options.width = 8;
+  options.num_hidden_layers = 2;
+  options.latent_dim = 4;
+  SensorTrunk trunk;
+  trunk.sensor = sensor;
+  trunk.siren = LatentModulatedSiren(options, seed);
+  trunk.alpha = Eigen::VectorXd::Constant(4, 0.25);
+  trunk.format.rows = 10;
+  trunk.format.cols = 12;
+  trunk.format.scale = 0.015;
+  trunk.format.grayscale = sensor == SensorKind::kGelSlim;
+  trunk.residual_sigma = 0.02;
+  return trunk;
+}
+
+FunctaModel TwoSensorModel() {
+  FunctaModel model;
+  model.SetTrunk(SmallTrunk(SensorKind::kGelSlim, 2));
+  model.SetTrunk(SmallTrunk(SensorKind::kSoftBubble, 1));
+  model.set_info_json(R"({"preset": "test"})");
+  return model;
+}
+
+TEST(FunctaModel, RoundTripsEveryTrunkThroughItsFile) {
+  const FunctaModel model = TwoSensorModel();
+  const std::string path = (std::filesystem::path(testing::TempDir()) / "m.tfm").string();
+  model.Save(path);
+  const FunctaModel read = FunctaModel::Load(path);
+  EXPECT_EQ(read.checksum(), model.checksum());
+  ASSERT_EQ(read.sensors().size(), 2u);
+  for (SensorKind sensor : {SensorKind::kSoftBubble, SensorKind::kGelSlim}) {
+    const SensorTrunk& a = model.Trunk(sensor);
+    const SensorTrunk& b = read.Trunk(sensor);
+    // The file stores float32: parameters agree to float precision.
+    EXPECT_TRUE(a.siren.parameters().cast<float>().cast<double>().isApprox(
+        b.siren.parameters(), 0.0));
+    EXPECT_EQ(b.alpha, a.alpha);
+    EXPECT_EQ(b.format.rows, 10);
+    EXPECT_EQ(b.format.grayscale, sensor == SensorKind::kGelSlim);
+    EXPECT_EQ(b.residual_sigma, 0.02);
+    EXPECT_EQ(b.meta_sgd.inner_steps, a.meta_sgd.inner_steps);
+  }
+  EXPECT_THAT(read.info_json(), HasSubstr("test"));
+  EXPECT_EQ(read.ParameterBytes(), model.ParameterBytes());
+}
+
+TEST(FunctaModel, DifferentParametersGiveDifferentChecksums) {
+  FunctaModel a = TwoSensorModel();
+  FunctaModel b = TwoSensorModel();
+  b.SetTrunk(SmallTrunk(SensorKind::kSoftBubble, 99));
+  a.Serialize();
+  b.Serialize();
+  EXPECT_NE(a.checksum(), b.checksum());
+}
+
+TEST(FunctaModel, RejectsCorruptFilesAndOtherKindsNamingTheFile) {
+  std::string bytes = TwoSensorModel().Serialize();
+  bytes[bytes.size() / 2] ^= 0x11;
+  EXPECT_THROW(FunctaModel::Parse(bytes, "bad.tfm"), TensorFileError);
+  TensorFile other("functaset");
+  try {
+    FunctaModel::Parse(other.Serialize(), "f.tfs");
+    FAIL();
+  } catch (const TensorFileError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("f.tfs"));
+    EXPECT_THAT(e.what(), HasSubstr("'model'"));
+  }
+}
+
+TEST(FunctaModel, RejectsAModelFileWithAMissingField) {
+  TensorFile file("model");
+  file.set_meta_json(R"({"format": "tactfunc-model", "version": 1,
+                         "trunks": [{"sensor": "bubble"}], "info": {}})");
+  try {
+    FunctaModel::Parse(file.Serialize(), "m.tfm");
+    FAIL();
+  } catch (const TensorFileError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("m.tfm"));
+    EXPECT_THAT(e.what(), HasSubstr("bubble.siren"));
+  }
+  file.set_meta_json(R"({"format": "tactfunc-model", "version": 7, "trunks": [], "info": {}})");
+  EXPECT_THROW(FunctaModel::Parse(file.Serialize(), "m.tfm"), TensorFileError);
+}
+
+TEST(FunctaModel, AskingForAMissingSensorNamesIt) {
+  FunctaModel model;
+  model.SetTrunk(SmallTrunk(SensorKind::kSoftBubble, 1));
+  try {
+    model.Trunk(SensorKind::kGelSlim);
+    FAIL();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_THAT(e.what(), HasSubstr("gelslim"));
+  }
+}
+
+TEST(FunctaModel, SetTrunkRejectsInconsistentTrunks) {
+  SensorTrunk trunk = SmallTrunk(SensorKind::kSoftBubble, 1);
+  trunk.alpha = Eigen::VectorXd::Zero(3);
+  FunctaModel model;
+  EXPECT_THROW(model.SetTrunk(trunk), std::invalid_argument);
+  trunk = SmallTrunk(SensorKind::kSoftBubble, 1);
+  trunk.format.scale = 0;
+  EXPECT_THROW(model.SetTrunk(trunk), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace tactfunc

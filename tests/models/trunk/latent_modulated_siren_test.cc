@@ -1,0 +1,616 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// Every analytic derivative of the SIREN (w.r.t. z and each parameter group, the
+// latent Jacobian, the Hessian-vector product) is checked against central finite
+// differences and against ceres::Jet autodiff, at zero latent, at tiny inputs and at
+// random ones, in double precision. Nets are tiny (width 8-12, 2-3 layers).
+//
+// Tolerances: analytic vs Jet and vs 4th-order central differences must agree to a
+// relative error of 1e-6 per parameter block (max-norm of the difference over the
+// max-norm of the reference), with an absolute floor of 1e-10 (finite differences)
+// or 1e-13 (Jet) for blocks whose exact derivative is 0 (dL/dA at z = 0).
+#include "models/trunk/latent_modulated_siren.h"
+
+#include <cmath>
+#include <functional>
+#include <limits>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "ceres/jet.h"
+#include "gtest/gtest.h"
+
+namespace tactfunc {
+namespace {
+
+using Siren = LatentModulatedSiren;
+using Eigen::MatrixXd;
+using Eigen::MatrixXf;
+using Eigen::VectorXd;
+using Eigen::VectorXf;
+
+constexpr int kChunk = 8;
+using Jet = ceres::Jet<double, kChunk>;
+
+Siren::Options SmallOptions(int channels = 2) {
+  Siren::Options options;
+  options.width = 8;
+  options.num_hidden_layers = 2;
+  options.latent_dim = 4;
+  options.output_channels = channels;
+  return options;
+}
+
+Siren::Options DeeperOptions() {
+  Siren::Options options;
+  options.width = 12;
+  options.num_hidden_layers = 3;
+  options.latent_dim = 6;
+  options.output_channels = 1;
+  return options;
+}
+
+// Deterministic pseudo-random numbers in [-1, 1] (Eigen's Random uses rand()).
+MatrixXd Uniform(int rows, int cols, unsigned seed) {
+  MatrixXd m(rows, cols);
+  unsigned state = seed * 2654435761u + 12345u;
+  for (int i = 0; i < m.size(); ++i) {
+    state = state * 1664525u + 1013904223u;
+    m.data()[i] = 2.0 * (state >> 8) / double(1u << 24) - 1.0;
+  }
+  return m;
+}
+
+// A trunk whose c and every other block are generic (c = 0 at initialisation would
+// hide mistakes in dL/dc-dependent terms).
+Siren PerturbedSiren(const Siren::Options& options, unsigned seed) {
+  Siren siren(options, seed);
+  siren.SetParameters(siren.parameters() +
+                      0.05 * Uniform(siren.NumParameters(), 1, seed + 7));
+  return siren;
+}
+
+struct Frame {
+  std::string name;
+  MatrixXd coords;
+  VectorXd z;
+  MatrixXd targets;
+  VectorXd weights;
+};
+
+// Zero latent, tiny inputs, random inputs; some pixels masked out.
+std::vector<Frame> Frames(const Siren& siren) {
+  const int n = 7;
+  const int d = siren.latent_dim();
+  const int c = siren.output_channels();
+  VectorXd weights = 0.5 * (Uniform(n, 1, 3).array() + 1.0);
+  weights[2] = 0.0;
+  MatrixXd targets = 0.3 * Uniform(n, c, 4);
+  targets(2, 0) = std::numeric_limits<double>::quiet_NaN();  // masked: must not leak
+  return {
+      {"zero_latent", Uniform(n, 2, 1), VectorXd::Zero(d), targets, weights},
+      {"tiny_inputs", 1e-4 * Uniform(n, 2, 5), 1e-5 * Uniform(d, 1, 6), targets, weights},
+      {"random_inputs", Uniform(n, 2, 8), Uniform(d, 1, 9), targets, weights},
+  };
+}
+
+// max |a - b| <= rel * max |b| + floor, reported with the block's name.
+void ExpectClose(const VectorXd& actual, const VectorXd& expected, double rel,
+                 double floor, const std::string& what) {
+  ASSERT_EQ(actual.size(), expected.size()) << what;
+  const double error = (actual - expected).cwiseAbs().maxCoeff();
+  const double scale = expected.cwiseAbs().maxCoeff();
+  EXPECT_LE(error, rel * scale + floor)
+      << what << ": max error " << error << ", max |expected| " << scale;
+}
+
+void ExpectBlocksClose(const Siren& siren, const VectorXd& actual,
+                       const VectorXd& expected, double rel, double floor,
+                       const std::string& what) {
+  for (const ParameterBlock& block : siren.parameter_blocks()) {
+    ExpectClose(actual.segment(block.offset, block.size()),
+                expected.segment(block.offset, block.size()), rel, floor,
+                what + " " + block.Name());
+  }
+}
+
+// 4th-order central difference of f at 0.
+double Derivative(const std::function<double(double)>& f, double h) {
+  return (-f(2 * h) + 8 * f(h) - 8 * f(-h) + f(-2 * h)) / (12 * h);
+}
+
+VectorXd NumericGradientTheta(const Siren& siren, const Frame& frame) {
+  VectorXd gradient(siren.NumParameters());
+  Siren probe = siren;
+  for (int i = 0; i < siren.NumParameters(); ++i) {
+    gradient[i] = Derivative(
+        [&](double delta) {
+          VectorXd theta = siren.parameters();
+          theta[i] += delta;
+          probe.SetParameters(theta);
+          return probe.Loss<double>(frame.coords, frame.z, frame.targets, frame.weights);
+        },
+        1e-4);
+  }
+  return gradient;
+}
+
+VectorXd NumericGradientZ(const Siren& siren, const Frame& frame) {
+  VectorXd gradient(siren.latent_dim());
+  for (int k = 0; k < siren.latent_dim(); ++k) {
+    gradient[k] = Derivative(
+        [&](double delta) {
+          VectorXd z = frame.z;
+          z[k] += delta;
+          return siren.Loss<double>(frame.coords, z, frame.targets, frame.weights);
+        },
+        1e-4);
+  }
+  return gradient;
+}
+
+// The weighted MSE from the one-pixel template path, in any scalar type.
+template <typename T>
+T TemplateLoss(const Siren& siren, const T* theta, const T* z, const Frame& frame) {
+  const int channels = siren.output_channels();
+  T loss(0.0);
+  double weight_sum = 0.0;
+  std::vector<T> out(channels);
+  for (int j = 0; j < frame.coords.rows(); ++j) {
+    if (frame.weights[j] == 0.0) continue;
+    weight_sum += frame.weights[j];
+    const T x[2] = {T(frame.coords(j, 0)), T(frame.coords(j, 1))};
+    siren.EvaluateWithParameters(theta, x, z, out.data());
+    for (int c = 0; c < channels; ++c) {
+      const T r = out[c] - frame.targets(j, c);
+      loss += frame.weights[j] * r * r;
+    }
+  }
+  return loss / (channels * weight_sum);
+}
+
+// dL/dtheta and dL/dz by forward-mode autodiff, kChunk directions at a time.
+void JetGradient(const Siren& siren, const Frame& frame, VectorXd* dtheta, VectorXd* dz) {
+  const int p = siren.NumParameters();
+  const int d = siren.latent_dim();
+  dtheta->resize(p);
+  dz->resize(d);
+  const int total = p + d;
+  for (int start = 0; start < total; start += kChunk) {
+    std::vector<Jet> theta(p), z(d);
+    for (int i = 0; i < p; ++i) theta[i] = Jet(siren.parameters()[i]);
+    for (int k = 0; k < d; ++k) z[k] = Jet(frame.z[k]);
+    for (int i = start; i < std::min(total, start + kChunk); ++i) {
+      Jet& seed = i < p ? theta[i] : z[i - p];
+      seed.v[i - start] = 1.0;
+    }
+    const Jet loss = TemplateLoss(siren, theta.data(), z.data(), frame);
+    for (int i = start; i < std::min(total, start + kChunk); ++i) {
+      (i < p ? (*dtheta)[i] : (*dz)[i - p]) = loss.v[i - start];
+    }
+  }
+}
+
+// ---- Options and construction ------------------------------------------------------
+
+TEST(LatentModulatedSirenOptions, DefaultOptionsAreValid) {
+  std::string error;
+  EXPECT_TRUE(Siren::Options().IsValid(&error)) << error;
+  EXPECT_TRUE(Siren::Options().IsValid(nullptr));
+}
+
+TEST(LatentModulatedSirenOptions, BadOptionsNameTheField) {
+  const std::vector<std::pair<std::string, std::function<void(Siren::Options*)>>> cases =
+      {
+          {"width", [](Siren::Options* o) { o->width = 0; }},
+          {"num_hidden_layers", [](Siren::Options* o) { o->num_hidden_layers = 0; }},
+          {"omega_0", [](Siren::Options* o) { o->omega_0 = -1.0; }},
+          {"omega_0", [](Siren::Options* o) { o->omega_0 = std::nan(""); }},
+          {"latent_dim", [](Siren::Options* o) { o->latent_dim = 0; }},
+          {"output_channels", [](Siren::Options* o) { o->output_channels = -2; }},
+          {"coordinates",
+           [](Siren::Options* o) {
+             o->coordinates = static_cast<CoordinateConvention>(7);
+           }},
+      };
+  for (const auto& [field, spoil] : cases) {
+    Siren::Options options;
+    spoil(&options);
+    std::string error;
+    EXPECT_FALSE(options.IsValid(&error)) << field;
+    EXPECT_NE(error.find(field), std::string::npos) << error;
+    EXPECT_THROW(Siren(options, 1), std::invalid_argument) << field;
+  }
+}
+
+TEST(LatentModulatedSiren, ParameterBlocksTileTheFlatVectorInTheDocumentedOrder) {
+  const Siren siren(SmallOptions(), 1);
+  const std::vector<ParameterBlock>& blocks = siren.parameter_blocks();
+  ASSERT_EQ(blocks.size(), 2u * 2 + 4);
+  int offset = 0;
+  for (const ParameterBlock& block : blocks) {
+    EXPECT_EQ(block.offset, offset) << block.Name();
+    offset += block.size();
+  }
+  EXPECT_EQ(offset, siren.NumParameters());
+  EXPECT_EQ(siren.NumParameters(), (16 + 8) + (64 + 8) + 16 * 4 + 16 + 2 * 8 + 2);
+  const ParameterBlock& w0 = siren.Block(ParameterGroup::kHiddenWeight, 0);
+  EXPECT_EQ(w0.rows, 8);
+  EXPECT_EQ(w0.cols, 2);
+  EXPECT_EQ(siren.Block(ParameterGroup::kHiddenBias, 1).Name(), "hidden_bias[1]");
+  EXPECT_EQ(siren.Block(ParameterGroup::kModulationMatrix).rows, 16);
+  EXPECT_EQ(siren.Block(ParameterGroup::kModulationMatrix).cols, 4);
+  EXPECT_EQ(siren.Block(ParameterGroup::kOutputWeight).rows, 2);
+  EXPECT_THROW(siren.Block(ParameterGroup::kHiddenWeight, 2), std::out_of_range);
+  VectorXd theta = siren.parameters();
+  EXPECT_EQ(Siren::View(&theta, siren.Block(ParameterGroup::kOutputBias))(1, 0),
+            theta[siren.NumParameters() - 1]);
+}
+
+TEST(LatentModulatedSiren, InitialisationStaysInTheDocumentedRanges) {
+  Siren::Options options;  // default size: enough draws to see the bounds
+  options.width = 64;
+  options.num_hidden_layers = 3;
+  options.latent_dim = 32;
+  const Siren siren(options, 42);
+  const double omega = options.omega_0;
+  for (const ParameterBlock& block : siren.parameter_blocks()) {
+    double bound = std::sqrt(6.0 / 64) / omega;
+    if (block.group == ParameterGroup::kHiddenWeight ||
+        block.group == ParameterGroup::kHiddenBias) {
+      if (block.layer == 0) bound = 0.5;
+    } else if (block.group == ParameterGroup::kModulationMatrix) {
+      bound = std::sqrt(6.0 / 32) / omega;
+    } else if (block.group == ParameterGroup::kModulationBias) {
+      bound = 0.0;
+    }
+    const double largest = Siren::View(siren.parameters(), block).cwiseAbs().maxCoeff();
+    EXPECT_LE(largest, bound) << block.Name();
+    if (block.size() >= 64) {
+      EXPECT_GE(largest, 0.9 * bound) << block.Name() << " uses too little of its range";
+    }
+  }
+}
+
+TEST(LatentModulatedSiren, SameSeedGivesSameParametersAndOtherSeedsDiffer) {
+  const Siren a(SmallOptions(), 5), b(SmallOptions(), 5), c(SmallOptions(), 6);
+  EXPECT_EQ(a.parameters(), b.parameters());
+  EXPECT_NE(a.parameters(), c.parameters());
+  Siren d(SmallOptions(), 6);
+  d.Initialize(5);
+  EXPECT_EQ(a.parameters(), d.parameters());
+}
+
+TEST(LatentModulatedSiren, SetParametersRejectsTheWrongSize) {
+  Siren siren(SmallOptions(), 1);
+  EXPECT_THROW(siren.SetParameters(VectorXd::Zero(3)), std::invalid_argument);
+}
+
+// ---- Coordinates ---------------------------------------------------------------------
+
+TEST(LatentModulatedSiren, PixelCentersFollowTheDocumentedFormula) {
+  const MatrixXd grid = Siren::GridCoordinatesD(2, 4);
+  ASSERT_EQ(grid.rows(), 8);
+  // pixel (r, c) = (1, 3) is row 1 * 4 + 3 = 7.
+  EXPECT_DOUBLE_EQ(grid(7, 0), 2.0 * 3.5 / 4 - 1.0);
+  EXPECT_DOUBLE_EQ(grid(7, 1), 2.0 * 1.5 / 2 - 1.0);
+  EXPECT_DOUBLE_EQ(grid(0, 0), -0.75);
+  EXPECT_DOUBLE_EQ(grid(0, 1), -0.5);
+  const MatrixXf gridf = Siren::GridCoordinates(2, 4);
+  EXPECT_TRUE(gridf.cast<double>().isApprox(grid));
+}
+
+TEST(LatentModulatedSiren, PixelCornersReachMinusOneAndOne) {
+  const MatrixXd grid =
+      Siren::GridCoordinatesD(3, 5, CoordinateConvention::kPixelCorners);
+  EXPECT_DOUBLE_EQ(grid(0, 0), -1.0);
+  EXPECT_DOUBLE_EQ(grid(0, 1), -1.0);
+  EXPECT_DOUBLE_EQ(grid(14, 0), 1.0);
+  EXPECT_DOUBLE_EQ(grid(14, 1), 1.0);
+  EXPECT_DOUBLE_EQ(grid(7, 0), 0.0);  // (1, 2): the centre
+  const MatrixXd line =
+      Siren::GridCoordinatesD(1, 1, CoordinateConvention::kPixelCorners);
+  EXPECT_DOUBLE_EQ(line(0, 0), 0.0);
+  EXPECT_THROW(Siren::GridCoordinatesD(0, 3), std::invalid_argument);
+  CoordinateConvention parsed;
+  ASSERT_TRUE(CoordinateConventionFromString("pixel_corners", &parsed));
+  EXPECT_EQ(parsed, CoordinateConvention::kPixelCorners);
+}
+
+// ---- Forward -----------------------------------------------------------------------
+
+TEST(LatentModulatedSiren, BatchedForwardMatchesTheOnePixelTemplate) {
+  const Siren siren = PerturbedSiren(SmallOptions(), 11);
+  for (const Frame& frame : Frames(siren)) {
+    const MatrixXd y = siren.Forward<double>(frame.coords, frame.z);
+    ASSERT_EQ(y.rows(), frame.coords.rows());
+    ASSERT_EQ(y.cols(), 2);
+    for (int j = 0; j < y.rows(); ++j) {
+      double out[2];
+      const double x[2] = {frame.coords(j, 0), frame.coords(j, 1)};
+      siren.Evaluate(x, frame.z.data(), out);
+      EXPECT_NEAR(y(j, 0), out[0], 1e-13) << frame.name;
+      EXPECT_NEAR(y(j, 1), out[1], 1e-13) << frame.name;
+    }
+  }
+}
+
+TEST(LatentModulatedSiren, AtZeroLatentWithZeroModulationBiasTheTrunkIgnoresA) {
+  Siren siren(SmallOptions(), 3);
+  const MatrixXd coords = Uniform(5, 2, 2);
+  const MatrixXd before = siren.Forward<double>(coords, VectorXd::Zero(4));
+  VectorXd theta = siren.parameters();
+  Siren::View(&theta, siren.Block(ParameterGroup::kModulationMatrix)).setRandom();
+  siren.SetParameters(theta);
+  EXPECT_EQ(before, siren.Forward<double>(coords, VectorXd::Zero(4)));
+}
+
+// float runs sin(omega_0 * pre) with |pre| ~ 1 in single precision; a phase error of
+// ~30 * 6e-8 per layer gives output errors ~1e-6. 2e-5 leaves a margin, ten times
+// below the output's own spread (~0.1).
+TEST(LatentModulatedSiren, FloatAndDoubleForwardAgreeTo2em5) {
+  const Siren siren = PerturbedSiren(DeeperOptions(), 12);
+  const MatrixXd coords = siren.Grid<double>(9, 11);
+  const VectorXd z = Uniform(6, 1, 13);
+  const MatrixXd y = siren.Forward<double>(coords, z);
+  const MatrixXf yf = siren.Forward<float>(coords.cast<float>(), z.cast<float>());
+  EXPECT_LE((yf.cast<double>() - y).cwiseAbs().maxCoeff(), 2e-5);
+  EXPECT_GE(y.cwiseAbs().maxCoeff(), 1e-2);  // not comparing zeros
+  // Gradients too, relative to their size.
+  const MatrixXd targets = 0.2 * Uniform(99, 1, 14);
+  VectorXd dz, dtheta;
+  VectorXf dzf, dthetaf;
+  siren.LossAndGradient<double>(coords, z, targets, VectorXd(), &dz, &dtheta);
+  siren.LossAndGradient<float>(coords.cast<float>(), z.cast<float>(),
+                               targets.cast<float>(), VectorXf(), &dzf, &dthetaf);
+  ExpectClose(dzf.cast<double>(), dz, 1e-4, 0.0, "float dL/dz");
+  ExpectClose(dthetaf.cast<double>(), dtheta, 1e-4, 0.0, "float dL/dtheta");
+}
+
+TEST(LatentModulatedSiren, ExtremeInputsGiveFiniteOutputs) {
+  const Siren siren(SmallOptions(), 4);
+  MatrixXd coords(4, 2);
+  coords << 1e6, -1e6, 1e12, 3.0, -50.0, 1e9, 0.0, 0.0;
+  for (double scale : {1e3, 1e6, 1e12}) {
+    const VectorXd z = scale * Uniform(4, 1, 15);
+    const MatrixXd y = siren.Forward<double>(coords, z);
+    EXPECT_TRUE(y.allFinite()) << scale;
+    const MatrixXf yf = siren.Forward<float>(coords.cast<float>(), z.cast<float>());
+    EXPECT_TRUE(yf.allFinite()) << scale;
+    MatrixXd values, J;
+    siren.ForwardAndLatentJacobian<double>(coords, z, &values, &J);
+    EXPECT_TRUE(J.allFinite()) << scale;
+    VectorXd dz, dtheta;
+    siren.LossAndGradient<double>(coords, z, MatrixXd::Zero(4, 2), VectorXd(), &dz,
+                                  &dtheta);
+    EXPECT_TRUE(dz.allFinite() && dtheta.allFinite()) << scale;
+    // sin is bounded, so the output is bounded by |W_out|_1 + |b_out|.
+    EXPECT_LE(y.cwiseAbs().maxCoeff(), 1.0) << scale;
+  }
+}
+
+TEST(LatentModulatedSiren, WrongShapesThrowAndQuoteTheShapes) {
+  const Siren siren(SmallOptions(), 1);
+  try {
+    siren.Forward<double>(MatrixXd::Zero(3, 3), VectorXd::Zero(4));
+    FAIL() << "expected std::invalid_argument";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("3x2"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("3x3"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(siren.Forward<double>(MatrixXd::Zero(3, 2), VectorXd::Zero(5)),
+               std::invalid_argument);
+  VectorXd dz;
+  EXPECT_THROW(siren.Backward<double>(MatrixXd::Zero(3, 2), VectorXd::Zero(4),
+                                      MatrixXd::Zero(3, 1), &dz, nullptr),
+               std::invalid_argument);
+  EXPECT_THROW(siren.Loss<double>(MatrixXd::Zero(3, 2), VectorXd::Zero(4),
+                                  MatrixXd::Zero(3, 2), VectorXd::Zero(2)),
+               std::invalid_argument);
+}
+
+// ---- Gradients -----------------------------------------------------------------------
+
+TEST(LatentModulatedSiren, LossGradientMatchesFiniteDifferencesForEveryGroup) {
+  for (const Siren::Options& options : {SmallOptions(), DeeperOptions()}) {
+    const Siren siren = PerturbedSiren(options, 21);
+    for (const Frame& frame : Frames(siren)) {
+      VectorXd dz, dtheta;
+      siren.LossAndGradient<double>(frame.coords, frame.z, frame.targets, frame.weights,
+                                    &dz, &dtheta);
+      ExpectBlocksClose(siren, dtheta, NumericGradientTheta(siren, frame), 1e-6, 1e-10,
+                        frame.name + " numeric");
+      ExpectClose(dz, NumericGradientZ(siren, frame), 1e-6, 1e-10,
+                  frame.name + " numeric dL/dz");
+    }
+  }
+}
+
+TEST(LatentModulatedSiren, LossGradientMatchesJetAutodiffForEveryGroup) {
+  for (const Siren::Options& options : {SmallOptions(), DeeperOptions()}) {
+    const Siren siren = PerturbedSiren(options, 22);
+    for (const Frame& frame : Frames(siren)) {
+      VectorXd dz, dtheta, jet_dz, jet_dtheta;
+      siren.LossAndGradient<double>(frame.coords, frame.z, frame.targets, frame.weights,
+                                    &dz, &dtheta);
+      JetGradient(siren, frame, &jet_dtheta, &jet_dz);
+      ExpectBlocksClose(siren, dtheta, jet_dtheta, 1e-6, 1e-13, frame.name + " jet");
+      ExpectClose(dz, jet_dz, 1e-6, 1e-13, frame.name + " jet dL/dz");
+    }
+  }
+}
+
+TEST(LatentModulatedSiren, BackwardOfAnyOutputGradientMatchesJetAutodiff) {
+  const Siren siren = PerturbedSiren(SmallOptions(), 23);
+  const Frame frame = Frames(siren)[2];
+  const MatrixXd dL_dY = Uniform(frame.coords.rows(), 2, 24);
+  VectorXd dz, dtheta;
+  siren.Backward<double>(frame.coords, frame.z, dL_dY, &dz, &dtheta);
+  // The same as the gradient of sum(dL_dY .* Y): a weighted MSE against targets
+  // Y - dL_dY/2 (all weights 1) has gradient 2/(C N) (Y - targets) = dL_dY / (C N).
+  Frame mse = frame;
+  mse.weights = VectorXd::Ones(frame.coords.rows());
+  mse.targets = siren.Forward<double>(frame.coords, frame.z) - 0.5 * dL_dY;
+  VectorXd jet_dz, jet_dtheta;
+  JetGradient(siren, mse, &jet_dtheta, &jet_dz);
+  const double scale = 2.0 * frame.coords.rows();
+  ExpectBlocksClose(siren, dtheta, scale * jet_dtheta, 1e-6, 1e-13, "backward");
+  ExpectClose(dz, scale * jet_dz, 1e-6, 1e-13, "backward dL/dz");
+  VectorXd dz_only;
+  siren.Backward<double>(frame.coords, frame.z, dL_dY, &dz_only, nullptr);
+  EXPECT_EQ(dz_only, dz);
+}
+
+TEST(LatentModulatedSiren, MaskedPixelsContributeNothingEvenWithNanTargets) {
+  const Siren siren = PerturbedSiren(SmallOptions(), 25);
+  const Frame frame = Frames(siren)[2];  // pixel 2 has weight 0 and a NaN target
+  std::vector<int> kept;
+  for (int j = 0; j < frame.coords.rows(); ++j) {
+    if (frame.weights[j] != 0.0) kept.push_back(j);
+  }
+  const MatrixXd coords = frame.coords(kept, Eigen::all);
+  const MatrixXd targets = frame.targets(kept, Eigen::all);
+  const VectorXd weights = frame.weights(kept);
+  VectorXd dz, dtheta, kept_dz, kept_dtheta;
+  const double loss = siren.LossAndGradient<double>(frame.coords, frame.z, frame.targets,
+                                                    frame.weights, &dz, &dtheta);
+  const double kept_loss = siren.LossAndGradient<double>(coords, frame.z, targets,
+                                                         weights, &kept_dz, &kept_dtheta);
+  EXPECT_TRUE(std::isfinite(loss));
+  EXPECT_NEAR(loss, kept_loss, 1e-15);
+  ExpectClose(dz, kept_dz, 1e-12, 0.0, "dz");
+  ExpectClose(dtheta, kept_dtheta, 1e-12, 0.0, "dtheta");
+  // All pixels masked: zero loss and gradient.
+  const double none =
+      siren.LossAndGradient<double>(frame.coords, frame.z, frame.targets,
+                                    VectorXd::Zero(frame.coords.rows()), &dz, &dtheta);
+  EXPECT_EQ(none, 0.0);
+  EXPECT_EQ(dz.cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_EQ(dtheta.cwiseAbs().maxCoeff(), 0.0);
+}
+
+// ---- Latent Jacobian
+// -------------------------------------------------------------------
+
+TEST(LatentModulatedSiren, LatentJacobianEqualsTheBackwardPassPerOutput) {
+  for (const Siren::Options& options : {SmallOptions(3), DeeperOptions()}) {
+    const Siren siren = PerturbedSiren(options, 31);
+    const int channels = options.output_channels;
+    for (const Frame& frame : Frames(siren)) {
+      const int n = frame.coords.rows();
+      MatrixXd y, J;
+      siren.ForwardAndLatentJacobian<double>(frame.coords, frame.z, &y, &J);
+      ASSERT_EQ(J.rows(), n * channels);
+      ASSERT_EQ(J.cols(), options.latent_dim);
+      EXPECT_EQ(y, siren.Forward<double>(frame.coords, frame.z));
+      for (int j = 0; j < n; ++j) {
+        for (int c = 0; c < channels; ++c) {
+          MatrixXd seed = MatrixXd::Zero(n, channels);
+          seed(j, c) = 1.0;
+          VectorXd dz;
+          siren.Backward<double>(frame.coords, frame.z, seed, &dz, nullptr);
+          ExpectClose(J.row(j * channels + c).transpose(), dz, 1e-12, 1e-15,
+                      frame.name + " pixel " + std::to_string(j));
+        }
+      }
+    }
+  }
+}
+
+TEST(LatentModulatedSiren, LatentJacobianMatchesJetAutodiff) {
+  const Siren siren = PerturbedSiren(SmallOptions(), 32);
+  for (const Frame& frame : Frames(siren)) {
+    MatrixXd J;
+    siren.ForwardAndLatentJacobian<double>(frame.coords, frame.z, nullptr, &J);
+    for (int j = 0; j < frame.coords.rows(); ++j) {
+      const Jet x[2] = {Jet(frame.coords(j, 0)), Jet(frame.coords(j, 1))};
+      Jet z[4], out[2];
+      for (int k = 0; k < 4; ++k) z[k] = Jet(frame.z[k], k);
+      siren.Evaluate(x, z, out);
+      for (int c = 0; c < 2; ++c) {
+        ExpectClose(J.row(j * 2 + c).transpose(), out[c].v.head(4), 1e-6, 1e-13,
+                    frame.name);
+      }
+    }
+  }
+}
+
+// ---- Hessian-vector products
+// -------------------------------------------------------------
+
+void CheckHessianProduct(const Siren& siren, const Frame& frame, bool with_theta) {
+  // Small enough that 4th-order differences resolve 1e-6 (a unit step in W_0 moves
+  // phases by omega_0 = 30 rad).
+  const VectorXd v_theta = 0.1 * Uniform(siren.NumParameters(), 1, 41);
+  const VectorXd v_z = Uniform(siren.latent_dim(), 1, 42);
+  VectorXd dz, dtheta, Hv_z, Hv_theta;
+  const double loss = siren.LossGradientAndHessianProduct<double>(
+      frame.coords, frame.z, frame.targets, frame.weights,
+      with_theta ? &v_theta : nullptr, v_z, &dz, &dtheta, &Hv_z, &Hv_theta);
+  // Value and gradients equal LossAndGradient's.
+  VectorXd ref_dz, ref_dtheta;
+  EXPECT_EQ(loss, siren.LossAndGradient<double>(frame.coords, frame.z, frame.targets,
+                                                frame.weights, &ref_dz, &ref_dtheta));
+  EXPECT_EQ(dz, ref_dz);
+  EXPECT_EQ(dtheta, ref_dtheta);
+  // Central differences of the exact gradient along (v_theta, v_z).
+  Siren probe = siren;
+  auto gradient_at = [&](double t, VectorXd* g_theta, VectorXd* g_z) {
+    VectorXd theta = siren.parameters();
+    if (with_theta) theta += t * v_theta;
+    probe.SetParameters(theta);
+    probe.LossAndGradient<double>(frame.coords, frame.z + t * v_z, frame.targets,
+                                  frame.weights, g_z, g_theta);
+  };
+  const double h = 1e-4;
+  VectorXd numeric_theta = VectorXd::Zero(siren.NumParameters());
+  VectorXd numeric_z = VectorXd::Zero(siren.latent_dim());
+  const double coefficients[4] = {-1, 8, -8, 1};
+  const double steps[4] = {2 * h, h, -h, -2 * h};
+  for (int i = 0; i < 4; ++i) {
+    VectorXd g_theta, g_z;
+    gradient_at(steps[i], &g_theta, &g_z);
+    numeric_theta += coefficients[i] / (12 * h) * g_theta;
+    numeric_z += coefficients[i] / (12 * h) * g_z;
+  }
+  const std::string what = frame.name + (with_theta ? " (theta, z)" : " (0, z)");
+  ExpectBlocksClose(siren, Hv_theta, numeric_theta, 1e-6, 1e-9, what);
+  ExpectClose(Hv_z, numeric_z, 1e-6, 1e-9, what + " Hv_z");
+}
+
+TEST(LatentModulatedSiren, HessianProductAlongTheLatentMatchesFiniteDifferences) {
+  for (const Siren::Options& options : {SmallOptions(), DeeperOptions()}) {
+    const Siren siren = PerturbedSiren(options, 43);
+    for (const Frame& frame : Frames(siren)) CheckHessianProduct(siren, frame, false);
+  }
+}
+
+TEST(LatentModulatedSiren, HessianProductAlongThetaAndLatentMatchesFiniteDifferences) {
+  for (const Siren::Options& options : {SmallOptions(), DeeperOptions()}) {
+    const Siren siren = PerturbedSiren(options, 44);
+    for (const Frame& frame : Frames(siren)) CheckHessianProduct(siren, frame, true);
+  }
+}
+
+TEST(LatentModulatedSiren, FloatHessianProductAgreesWithDouble) {
+  const Siren siren = PerturbedSiren(DeeperOptions(), 45);
+  const Frame frame = Frames(siren)[2];
+  const VectorXd v_z = Uniform(siren.latent_dim(), 1, 46);
+  VectorXd Hv_z, Hv_theta;
+  VectorXf Hv_zf, Hv_thetaf;
+  siren.LossGradientAndHessianProduct<double>(frame.coords, frame.z, frame.targets,
+                                              frame.weights, nullptr, v_z, nullptr,
+                                              nullptr, &Hv_z, &Hv_theta);
+  MatrixXf targets = frame.targets.cast<float>();
+  targets(2, 0) = 0.0f;
+  siren.LossGradientAndHessianProduct<float>(
+      frame.coords.cast<float>(), frame.z.cast<float>(), targets,
+      frame.weights.cast<float>(), nullptr, v_z.cast<float>(), nullptr, nullptr, &Hv_zf,
+      &Hv_thetaf);
+  ExpectClose(Hv_zf.cast<double>(), Hv_z, 1e-4, 0.0, "float Hv_z");
+  ExpectClose(Hv_thetaf.cast<double>(), Hv_theta, 1e-4, 0.0, "float Hv_theta");
+}
+
+}  // namespace
+}  // namespace tactfunc
