@@ -46,7 +46,7 @@
 #include "ceres/solver.h"
 #include "estimation/data/dataset.h"
 #include "estimation/functaset/functaset.h"
-#include "estimation/fitting/internal/latent_cost_functions.h"
+#include "estimation/fitting/latent_costs.h"
 #include "estimation/knn/knn_index.h"
 #include "estimation/fitting/latent_fitter.h"
 #include "estimation/evaluation/reconstruction.h"
@@ -137,18 +137,18 @@ std::vector<SensorKind> ParseSensors(const std::string& text) {
 // One row of the table: a strategy with a precision and a Jacobian mode.
 struct Variant {
   std::string strategy;
-  LatentFitter::Precision precision = LatentFitter::Precision::kFloat;
+  LatentProblem::Precision precision = LatentProblem::Precision::kFloat;
   LatentFitter::JacobianMode jacobian = LatentFitter::JacobianMode::kAnalytic;
   int max_frames = 0;  // 0 = all test frames; autodiff runs on a couple only (it is slow)
 
   std::string Label() const {
     if (jacobian == LatentFitter::JacobianMode::kAutoDiff) return strategy + " autodiff";
-    return strategy + (precision == LatentFitter::Precision::kDouble ? " double" : "");
+    return strategy + (precision == LatentProblem::Precision::kDouble ? " double" : "");
   }
 };
 
 std::vector<Variant> FitVariants(int autodiff_frames) {
-  using P = LatentFitter::Precision;
+  using P = LatentProblem::Precision;
   using J = LatentFitter::JacobianMode;
   std::vector<Variant> variants;
   for (const char* s : {"meta_sgd:1", "meta_sgd:3", "meta_sgd:10", "ceres:2", "ceres:5", "ceres:10",
@@ -210,7 +210,6 @@ void ForFrames(int n, int threads, const Fn& fn) {
 LatentFitter::Options VariantOptions(const Variant& v) {
   LatentFitter::Options options;
   options.strategy = FitStrategy::FromString(v.strategy);
-  options.precision = v.precision;
   options.jacobian = v.jacobian;
   options.knn_k = 8;
   return options;
@@ -220,7 +219,6 @@ LatentFitter::Options VariantOptions(const Variant& v) {
 LatentFitter::Options ConvergedOptions() {
   LatentFitter::Options options;
   options.strategy = FitStrategy::FromString("ceres:100");
-  options.precision = LatentFitter::Precision::kDouble;
   options.solver_options.function_tolerance = 1e-12;
   options.solver_options.gradient_tolerance = 1e-14;
   options.solver_options.parameter_tolerance = 1e-12;
@@ -246,15 +244,14 @@ double TimeEvaluate(const ceres::CostFunction& cost, const Eigen::VectorXd& z, i
 }
 
 void MeasureJacobians(SensorFitData* s, const Eigen::VectorXd& z) {
-  const LatentModulatedSiren& siren = s->trunk->siren;
-  const double sigma = s->trunk->residual_sigma > 0 ? s->trunk->residual_sigma : 0.01;
-  const internal::LatentResidualData data =
-      internal::SelectPixels(siren, s->targets[0], sigma, 1, 0);
-  const int n = data.num_residuals();
-  internal::AnalyticLatentCost<float> analytic_float(&siren, &data);
-  internal::AnalyticLatentCost<double> analytic_double(&siren, &data);
-  const std::unique_ptr<ceres::CostFunction> autodiff =
-      internal::MakeAutoDiffLatentCost(&siren, &data);
+  LatentProblem::Options float_options, double_options;
+  double_options.precision = LatentProblem::Precision::kDouble;
+  const LatentProblem problem_float(*s->trunk, s->targets[0], float_options);
+  const LatentProblem problem_double(*s->trunk, s->targets[0], double_options);
+  const int n = problem_float.num_residuals();
+  AnalyticLatentCost analytic_float(&problem_float);
+  AnalyticLatentCost analytic_double(&problem_double);
+  const std::unique_ptr<ceres::CostFunction> autodiff = MakeAutoDiffLatentCost(&problem_double);
   TimeEvaluate(analytic_float, z, n, true, 2);  // warm-up
   s->jacobian_float_ms = TimeEvaluate(analytic_float, z, n, true, 21);
   s->jacobian_double_ms = TimeEvaluate(analytic_double, z, n, true, 21);
@@ -378,7 +375,7 @@ cv::Mat ParetoPlot(const std::vector<VariantResult>& results,
     const cv::Scalar colour = SensorColour(r.sensor);
     if (r.variant.jacobian == LatentFitter::JacobianMode::kAutoDiff) {
       cv::rectangle(canvas, p - cv::Point(5, 5), p + cv::Point(5, 5), colour, 2, cv::LINE_AA);
-    } else if (r.variant.precision == LatentFitter::Precision::kDouble) {
+    } else if (r.variant.precision == LatentProblem::Precision::kDouble) {
       cv::circle(canvas, p, 5, colour, 2, cv::LINE_AA);
     } else {
       cv::circle(canvas, p, 5, colour, cv::FILLED, cv::LINE_AA);
@@ -599,13 +596,16 @@ void RunFitBench(const FitBenchFlags& flags) {
               << " train latents\n";
     {  // converged
       const LatentFitter fitter(*s.trunk, ConvergedOptions());
+      LatentProblem::Options converged_problem;
+      converged_problem.precision = LatentProblem::Precision::kDouble;
       s.converged_psnr.assign(n, 0);
       s.converged_psnr_clean.assign(n, std::numeric_limits<double>::quiet_NaN());
       std::vector<double> ms(n), iterations(n);
       std::vector<Eigen::VectorXd> latents(n);
       ForFrames(n, flags.threads, [&](int i) {
         const Clock::time_point start = Clock::now();
-        const LatentFitter::Summary summary = fitter.Fit(s.targets[i], &latents[i]);
+        const LatentFitter::Summary summary =
+            fitter.Fit(LatentProblem(*s.trunk, s.targets[i], converged_problem), &latents[i]);
         ms[i] = MsSince(start);
         iterations[i] = summary.iterations;
         s.converged_psnr[i] = summary.psnr;
@@ -626,6 +626,8 @@ void RunFitBench(const FitBenchFlags& flags) {
     }
     for (const Variant& v : variants) {
       const LatentFitter::Options options = VariantOptions(v);
+      LatentProblem::Options problem_options;
+      problem_options.precision = v.precision;
       const Eigen::MatrixXf& latents = s.train_latents;
       const LatentFitter fitter = options.strategy.knn
                                       ? LatentFitter(*s.trunk, options, s.index.get(), &latents)
@@ -634,7 +636,9 @@ void RunFitBench(const FitBenchFlags& flags) {
       // One untimed warm-up fit: first-touch page faults and cold caches are not a frame's cost.
       {
         Eigen::VectorXd z;
-        if (v.jacobian == LatentFitter::JacobianMode::kAnalytic) fitter.Fit(s.targets[0], &z);
+        if (v.jacobian == LatentFitter::JacobianMode::kAnalytic) {
+          fitter.Fit(LatentProblem(*s.trunk, s.targets[0], problem_options), &z);
+        }
       }
       VariantResult r;
       r.variant = v;
@@ -646,7 +650,8 @@ void RunFitBench(const FitBenchFlags& flags) {
       ForFrames(m, flags.threads, [&](int i) {
         Eigen::VectorXd z;
         const Clock::time_point start = Clock::now();
-        const LatentFitter::Summary summary = fitter.Fit(s.targets[i], &z);
+        const LatentFitter::Summary summary =
+            fitter.Fit(LatentProblem(*s.trunk, s.targets[i], problem_options), &z);
         r.ms[i] = MsSince(start);
         r.psnr[i] = summary.psnr;
         r.iterations[i] = summary.iterations;
@@ -811,7 +816,8 @@ struct KernelSetup {
   std::string label;
   SensorTrunk trunk;
   TrunkTargets targets;
-  internal::LatentResidualData data;
+  // The frame's latent problem at sigma 0.01, evaluated in float and in double.
+  std::unique_ptr<LatentProblem> problem_float, problem_double;
   Eigen::VectorXd z;
 };
 
@@ -831,7 +837,11 @@ std::shared_ptr<KernelSetup> MakeKernelSetup(const std::string& label, const Sen
     s->targets.values.data()[i] += static_cast<float>(0.01 * normal(rng));
   }
   s->targets.weights = Eigen::VectorXf::Ones(rows * cols);
-  s->data = internal::SelectPixels(s->trunk.siren, s->targets, 0.01, 1, 0);
+  LatentProblem::Options options;
+  options.sigma = 0.01;
+  s->problem_float = std::make_unique<LatentProblem>(s->trunk, s->targets, options);
+  options.precision = LatentProblem::Precision::kDouble;
+  s->problem_double = std::make_unique<LatentProblem>(s->trunk, s->targets, options);
   s->z = Eigen::VectorXd::Zero(d);
   for (int k = 0; k < d; ++k) s->z[k] = 0.1 * normal(rng);
   return s;
@@ -846,12 +856,12 @@ void EvaluateCost(const ceres::CostFunction& cost, const KernelSetup& s, bool ja
 
 void RegisterKernelBenchmarks(const std::shared_ptr<KernelSetup>& s) {
   const std::string p = "kernels/" + s->label + "/";
-  const int n = s->data.num_residuals(), d = s->trunk.siren.latent_dim();
+  const int n = s->problem_float->num_residuals(), d = s->trunk.siren.latent_dim();
   auto pixels = [s](benchmark::State& state) {
-    state.SetItemsProcessed(state.iterations() * s->data.num_pixels());
+    state.SetItemsProcessed(state.iterations() * s->problem_float->num_pixels());
   };
   benchmark::RegisterBenchmark((p + "forward/float").c_str(), [s, pixels](benchmark::State& state) {
-    const Eigen::MatrixXf coords = s->data.coords_float;
+    const Eigen::MatrixXf coords = s->problem_float->coords().cast<float>();
     const Eigen::VectorXf z = s->z.cast<float>();
     for (auto _ : state)
       benchmark::DoNotOptimize(s->trunk.siren.Forward<float>(coords, z));
@@ -861,7 +871,7 @@ void RegisterKernelBenchmarks(const std::shared_ptr<KernelSetup>& s) {
                                                                 pixels](benchmark::State& state) {
     for (auto _ : state) {
       benchmark::DoNotOptimize(
-          s->trunk.siren.Forward<double>(s->data.coords, s->z));
+          s->trunk.siren.Forward<double>(s->problem_double->coords(), s->z));
     }
     pixels(state);
   })->Unit(benchmark::kMillisecond);
@@ -869,23 +879,17 @@ void RegisterKernelBenchmarks(const std::shared_ptr<KernelSetup>& s) {
     benchmark::RegisterBenchmark(
         (p + "forward_latent_jacobian_analytic/" + (use_double ? "double" : "float")).c_str(),
         [s, n, d, use_double, pixels](benchmark::State& state) {
-          std::unique_ptr<ceres::CostFunction> cost;
-          if (use_double) {
-            cost =
-                std::make_unique<internal::AnalyticLatentCost<double>>(&s->trunk.siren, &s->data);
-          } else {
-            cost = std::make_unique<internal::AnalyticLatentCost<float>>(&s->trunk.siren, &s->data);
-          }
+          const AnalyticLatentCost cost(use_double ? s->problem_double.get()
+                                                   : s->problem_float.get());
           std::vector<double> r(n), J(static_cast<std::size_t>(n) * d);
-          for (auto _ : state) EvaluateCost(*cost, *s, true, &r, &J);
+          for (auto _ : state) EvaluateCost(cost, *s, true, &r, &J);
           pixels(state);
         })
         ->Unit(benchmark::kMillisecond);
   }
   benchmark::RegisterBenchmark((p + "residuals_analytic/float").c_str(),
                                [s, n, d, pixels](benchmark::State& state) {
-                                 internal::AnalyticLatentCost<float> cost(&s->trunk.siren,
-                                                                          &s->data);
+                                 const AnalyticLatentCost cost(s->problem_float.get());
                                  std::vector<double> r(n), J(static_cast<std::size_t>(n) * d);
                                  for (auto _ : state) EvaluateCost(cost, *s, false, &r, &J);
                                  pixels(state);
@@ -895,7 +899,7 @@ void RegisterKernelBenchmarks(const std::shared_ptr<KernelSetup>& s) {
   benchmark::RegisterBenchmark((p + "jacobian_autodiff/double").c_str(),
                                [s, n, d, pixels](benchmark::State& state) {
                                  const auto cost =
-                                     internal::MakeAutoDiffLatentCost(&s->trunk.siren, &s->data);
+                                     MakeAutoDiffLatentCost(s->problem_double.get());
                                  std::vector<double> r(n), J(static_cast<std::size_t>(n) * d);
                                  for (auto _ : state) EvaluateCost(*cost, *s, true, &r, &J);
                                  pixels(state);
@@ -909,8 +913,8 @@ void RegisterKernelBenchmarks(const std::shared_ptr<KernelSetup>& s) {
     benchmark::RegisterBenchmark(
         (p + "lm_solve/float/iterations:" + std::to_string(iterations)).c_str(),
         [s, d, iterations](benchmark::State& state) {
-          internal::AnalyticLatentCost<float> cost(&s->trunk.siren, &s->data);
-          internal::LatentPriorCost prior(d, 1.0);
+          AnalyticLatentCost cost(s->problem_float.get());
+          LatentPriorCost prior(d, 1.0);
           ceres::Solver::Options options = LatentFitter::Options().solver_options;
           options.max_num_iterations = iterations;
           options.function_tolerance = 0;
@@ -932,13 +936,9 @@ void RegisterKernelBenchmarks(const std::shared_ptr<KernelSetup>& s) {
   }
   benchmark::RegisterBenchmark((p + "meta_sgd_step/float").c_str(), [s,
                                                                      d](benchmark::State& state) {
-    const Eigen::VectorXf alpha = s->trunk.alpha.cast<float>();
-    Eigen::VectorXf z = Eigen::VectorXf::Zero(d), g;
-    const float two_lambda = static_cast<float>(2.0 * s->trunk.meta_sgd.latent_l2_weight);
+    Eigen::VectorXd z = Eigen::VectorXd::Zero(d);
     for (auto _ : state) {
-      internal::DataLossAndGradient<float>(s->trunk.siren, s->data, z, &g);
-      g += two_lambda * z;
-      z -= alpha.cwiseProduct(g);
+      z = s->problem_float->MetaSgdSteps(z, 1);
       benchmark::DoNotOptimize(z.data());
     }
   })->Unit(benchmark::kMillisecond);

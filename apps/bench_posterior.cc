@@ -145,8 +145,8 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
   options.fit.strategy = LatentMapOfPoseModel(pose_model, trunk);
   options.model_error = !flags.no_model_error;
   options.sgld.num_threads = 1;  // one core, as the header says (chains run serially)
-  if (flags.sigma_z > 0) options.potential.sigma_z = flags.sigma_z;
-  if (flags.sigma > 0) options.potential.sigma = flags.sigma;
+  if (flags.sigma_z > 0) options.problem.sigma_z = flags.sigma_z;
+  if (flags.sigma > 0) options.problem.sigma = flags.sigma;
   std::string error;
   if (!options.IsValid(&error)) throw UsageError(error);
   FunctasetKnn knn;
@@ -161,12 +161,11 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
     o.sampler = t.sampler;
     posteriors.push_back(std::make_unique<PosePosterior>(trunk, pose_model, o, knn.posterior.get()));
   }
-  // The point estimate's fit: the posterior's own fit settings (header comment), as the
-  // posterior resolved them (its sigma may come from the pose model's calibration).
+  // The point estimate's fit: the posterior's own fit on its own latent problem (header
+  // comment), as the posterior resolved them (its sigma may come from the pose model's
+  // calibration).
   const PosePosterior::Options& resolved = posteriors.front()->options();
-  LatentFitter::Options fit_options = resolved.fit;
-  fit_options.sigma = resolved.potential.sigma;
-  fit_options.sigma_z = resolved.potential.sigma_z;
+  const LatentFitter::Options& fit_options = resolved.fit;
   const LatentFitter fitter(trunk, fit_options);
   // ... and at the functaset's own latent map, K meta-SGD steps from 0 (what `encode`
   // stores and train-pose trains on): the gap between the two is the pose MLP's
@@ -189,12 +188,13 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
     const PoseLabel& label = *dataset.frames()[index].label;
     const int n = SymmetryOrderOfTool(label.tool);
     const TrunkTargets targets = LoadTrunkTargets(dataset, index, trunk.format);
+    const LatentProblem problem(trunk, targets, resolved.problem);
     Eigen::VectorXd latent;
-    fitter.Fit(targets, &latent);
+    fitter.Fit(problem, &latent);
     const Eigen::Vector3d point = pose_model.Predict(latent, n);
     point_position_sq += std::pow(point.x() - label.x_m, 2) + std::pow(point.y() - label.y_m, 2);
     Eigen::VectorXd meta_latent;
-    meta_fitter.Fit(targets, &meta_latent);
+    meta_fitter.Fit(problem, &meta_latent);
     const Eigen::Vector3d meta_point = pose_model.Predict(meta_latent, n);
     meta_position_sq +=
         std::pow(meta_point.x() - label.x_m, 2) + std::pow(meta_point.y() - label.y_m, 2);

@@ -218,12 +218,13 @@ void RunFit(const FitFlags& flags) {
   }
   LatentFitter::Options options;
   options.strategy = strategy;
-  options.sigma = flags.sigma;
-  options.sigma_z = flags.sigma_z;
-  options.max_pixels = flags.max_pixels;
   options.knn_k = flags.knn_k;
+  LatentProblem::Options problem_options;
+  problem_options.sigma = flags.sigma;
+  problem_options.sigma_z = flags.sigma_z;
+  problem_options.max_pixels = flags.max_pixels;
   if (flags.precision == "double") {
-    options.precision = LatentFitter::Precision::kDouble;
+    problem_options.precision = LatentProblem::Precision::kDouble;
   } else if (flags.precision != "float") {
     throw UsageError("--precision: expected float or double, got '" + flags.precision + "'");
   }
@@ -232,7 +233,7 @@ void RunFit(const FitFlags& flags) {
   } else if (flags.jacobian != "analytic") {
     throw UsageError("--jacobian: expected analytic or autodiff, got '" + flags.jacobian + "'");
   }
-  if (!options.IsValid(&error)) throw UsageError(error);
+  if (!problem_options.IsValid(&error) || !options.IsValid(&error)) throw UsageError(error);
 
   SensorKind sensor;
   if (!ParseSensorFlag(flags.sensor, &sensor)) sensor = InferSensor(flags.frame, "--frame");
@@ -277,13 +278,15 @@ void RunFit(const FitFlags& flags) {
   const LatentFitter fitter = strategy.knn ? LatentFitter(trunk, options, index.get(), &latents)
                                            : LatentFitter(trunk, options);
   Eigen::VectorXd latent;
-  const LatentFitter::Summary summary = fitter.Fit(targets, &latent);
+  const LatentProblem problem(trunk, targets, problem_options);
+  const LatentFitter::Summary summary = fitter.Fit(problem, &latent);
 
   std::cout << (flags.full_report ? summary.FullReport() : summary.BriefReport() + "\n");
   std::cout << "fit: " << ToString(sensor) << " " << targets.rows << "x" << targets.cols
             << ", PSNR " << FormatFixed(summary.psnr, 2) << " dB in "
             << FormatFixed(summary.total_time_ms, 1) << " ms (" << summary.strategy.ToString()
-            << ", " << ToString(options.precision) << ", " << ToString(options.jacobian) << ")\n";
+            << ", " << ToString(problem_options.precision) << ", " << ToString(options.jacobian)
+            << ")\n";
   if (strategy.knn && !summary.neighbor_labels.empty()) {
     const auto& entries = functaset.entries(sensor);
     std::cout << "fit: nearest functaset frame " << entries[summary.neighbor_labels[0]].id
@@ -310,7 +313,7 @@ void RunFit(const FitFlags& flags) {
         {"iterations", summary.iterations},
         {"initial_cost", summary.initial_cost},
         {"final_cost", summary.final_cost},
-        {"precision", ToString(options.precision)},
+        {"precision", ToString(problem_options.precision)},
         {"jacobian", ToString(options.jacobian)},
         {"frame", flags.frame},
         {"reference", flags.reference},

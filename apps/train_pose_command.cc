@@ -190,7 +190,7 @@ void RunTrainPose(const TrainPoseFlags& flags) {
   const Functaset* source = &functaset;
   if (!flags.refit.empty()) {
     // Latents re-fitted with the posterior's fit settings (PosePosterior::Options::fit
-    // with the potential's sigma, sigma_z), so that g_phi is trained on the latent map
+    // on its latent problem, Options::problem), so that g_phi is trained on the latent map
     // the sgld / laplace posteriors are centred on (docs/CLI.md, "Latent maps").
     // The fit's sigma is the trunk's residual_sigma (unless --refit-sigma) even when
     // --posterior-sigma gives the posteriors a smaller one: sigma only weighs the pixels
@@ -206,9 +206,8 @@ void RunTrainPose(const TrainPoseFlags& flags) {
     const Dataset dataset = Dataset::Open(flags.data);
     const PosePosterior::Options posterior_options;
     LatentFitter::Options fit = posterior_options.fit;
-    fit.sigma =
-        flags.refit_sigma > 0 ? flags.refit_sigma : posterior_options.potential.sigma;
-    fit.sigma_z = posterior_options.potential.sigma_z;
+    LatentProblem::Options problem_options = posterior_options.problem;
+    if (flags.refit_sigma > 0) problem_options.sigma = flags.refit_sigma;
     if (!FitStrategy::Parse(flags.refit, &fit.strategy, &error) || fit.strategy.knn) {
       throw UsageError("--refit: expected meta_sgd:K or ceres:N, got '" + flags.refit + "'");
     }
@@ -233,9 +232,10 @@ void RunTrainPose(const TrainPoseFlags& flags) {
     internal::ParallelFor(static_cast<int>(entries.size()), ResolveThreads(flags.threads),
                           [&](int i) {
                             if (!entries[i].label.has_value()) return;
+                            const TrunkTargets targets =
+                                LoadTrunkTargets(dataset, frame_of[i], trunk.format);
                             Eigen::VectorXd latent;
-                            fitter.Fit(LoadTrunkTargets(dataset, frame_of[i], trunk.format),
-                                       &latent);
+                            fitter.Fit(LatentProblem(trunk, targets, problem_options), &latent);
                             latents[i] = latent.cast<float>();
                           });
     for (std::size_t i = 0; i < entries.size(); ++i) {

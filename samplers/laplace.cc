@@ -157,13 +157,13 @@ LaplaceSampler::Summary LaplaceSampler::Sample(const LatentPotential& potential,
   return summary;
 }
 
-LaplaceSampler::Summary LaplaceSampler::Sample(const LatentPotential& potential,
+LaplaceSampler::Summary LaplaceSampler::Sample(const LatentProblem& problem,
                                                const LatentFitter& fitter,
-                                               const TrunkTargets& targets,
                                                Eigen::MatrixXd* samples) const {
   const auto start = std::chrono::steady_clock::now();
+  const TrunkPotential potential(problem);
   Eigen::VectorXd mode;
-  LatentFitter::Summary fit = fitter.Fit(targets, &mode);
+  LatentFitter::Summary fit = fitter.Fit(problem, &mode);
   const double fit_ms = MsSince(start);
   if (!fit.IsSolutionUsable()) {
     Summary summary;

@@ -1,13 +1,13 @@
 // Copyright 2026 The tactfunc Authors.
 //
 // LaplaceSampler: the Laplace approximation of a frame's latent posterior -- the fast
-// end of the speed/accuracy trade of docs/SAMPLERS.md. Around the mode z* of
-//   U(z) = sum_j w_j ||f_theta(x_j; z) - y_j||^2 / (2 sigma^2) + ||z||^2 / (2 sigma_z^2)
-// (samplers/sgld.h) the posterior is approximated by the Gaussian
-//   p(z | y) ~ N(z*, Sigma),   Sigma = H^-1,   H = J^T W J / sigma^2 + I / sigma_z^2,
-// with J = d f / d z (N*C x d, the trunk's analytic latent Jacobian) at z*: the
-// Gauss-Newton Hessian of U, exact for a model linear in z (then the approximation is
-// the exact posterior). Samples z_i = z* + L^-T xi_i, xi_i ~ N(0, I) (Boost.Random
+// end of the speed/accuracy trade of docs/SAMPLERS.md. Around the mode z* of a frame's
+// U(z) (its LatentProblem, estimation/fitting/latent_problem.h) the posterior is
+// approximated by the Gaussian
+//   p(z | y) ~ N(z*, Sigma),   Sigma = H^-1,   H = H_GN(z*) = J^T W J / sigma^2 + I / sigma_z^2
+// (without a robust loss), with J = d f / d z (N*C x d, the trunk's analytic latent
+// Jacobian) at z*: the Gauss-Newton Hessian of U, exact for a model linear in z (then the
+// approximation is the exact posterior). Samples z_i = z* + L^-T xi_i, xi_i ~ N(0, I) (Boost.Random
 // mt19937_64, normal_distribution) with H = P^T L D L^T P from Eigen's LDLT -- so
 // Cov(z_i) = H^-1 without forming the inverse -- in fact z_i = z* + P^T L^-T D^-1/2 xi.
 // The mode is given (any fit), or found by a LatentFitter (a Ceres strategy: the
@@ -88,11 +88,10 @@ class LaplaceSampler {
   // not finite.
   Summary Sample(const LatentPotential& potential, const Eigen::VectorXd& mode,
                  Eigen::MatrixXd* samples) const;
-  // The same at the mode `fitter` finds for the potential's frame (`targets` must be
-  // the targets the potential was built from). The fitter's sigma and sigma_z should
-  // equal the potential's, or the Gaussian is not centred at U's mode.
-  Summary Sample(const LatentPotential& potential, const LatentFitter& fitter,
-                 const TrunkTargets& targets, Eigen::MatrixXd* samples) const;
+  // The same for a frame's LatentProblem at the mode `fitter` finds for it (so the
+  // Gaussian is centred at U's mode by construction).
+  Summary Sample(const LatentProblem& problem, const LatentFitter& fitter,
+                 Eigen::MatrixXd* samples) const;
 
  private:
   Options options_;

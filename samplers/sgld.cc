@@ -10,13 +10,13 @@
 #include <sstream>
 #include <stdexcept>
 #include <thread>
-#include <type_traits>
 
 #include <Eigen/Cholesky>
 #include <boost/random/mersenne_twister.hpp>
 #include <boost/random/normal_distribution.hpp>
 #include <boost/random/uniform_int_distribution.hpp>
 
+#include "models/core/parallel_for.h"
 #include "models/core/seed.h"
 
 namespace tactfunc {
@@ -74,183 +74,23 @@ bool GaussianPotential::GaussNewtonHessian(const Eigen::VectorXd& /*z*/,
 
 // ---- TrunkPotential -------------------------------------------------------------------
 
-bool TrunkPotential::Options::IsValid(std::string* error) const {
-  std::ostringstream message;
-  if (!(sigma >= 0.0) || !std::isfinite(sigma)) {
-    message << "TrunkPotential::Options::sigma must be finite and > 0 (or 0 = automatic), got "
-            << sigma;
-  } else if (!(sigma_z > 0.0) || !std::isfinite(sigma_z)) {
-    message << "TrunkPotential::Options::sigma_z must be finite and > 0, got " << sigma_z;
-  } else {
-    return true;
-  }
-  if (error != nullptr) *error = message.str();
-  return false;
-}
+TrunkPotential::TrunkPotential(const LatentProblem& problem) : problem_(&problem) {}
 
-TrunkPotential::TrunkPotential(const SensorTrunk& trunk, const TrunkTargets& targets,
-                               const Options& options)
-    : trunk_(&trunk), options_(options) {
-  std::string error;
-  if (!options_.IsValid(&error)) throw std::invalid_argument(error);
-  const int channels = trunk.siren.output_channels();
-  const long n = static_cast<long>(targets.rows) * targets.cols;
-  if (targets.rows < 1 || targets.cols < 1 || targets.values.rows() != n ||
-      targets.values.cols() != channels || targets.weights.size() != n) {
-    std::ostringstream m;
-    m << "TrunkPotential: expected targets of rows*cols x C = " << targets.rows << "*"
-      << targets.cols << " x " << channels << " values and " << n << " weights, got "
-      << targets.values.rows() << " x " << targets.values.cols() << " values and "
-      << targets.weights.size() << " weights";
-    throw std::invalid_argument(m.str());
-  }
-  sigma_ = options_.sigma > 0 ? options_.sigma
-                              : (trunk.residual_sigma > 0 ? trunk.residual_sigma : 0.01);
-  const Eigen::MatrixXd grid = trunk.siren.Grid<double>(targets.rows, targets.cols);
-  std::vector<long> valid;
-  for (long j = 0; j < n; ++j) {
-    const float w = targets.weights[j];
-    if (!std::isfinite(w) || w < 0) {
-      throw std::invalid_argument("TrunkPotential: pixel weights must be finite and >= 0, got " +
-                                  std::to_string(w) + " at pixel " + std::to_string(j));
-    }
-    if (w > 0) {
-      if (!targets.values.row(j).allFinite()) {
-        throw std::invalid_argument("TrunkPotential: valid pixel " + std::to_string(j) +
-                                    " has a non-finite target value");
-      }
-      valid.push_back(j);
-    }
-  }
-  num_valid_ = static_cast<int>(valid.size());
-  coords_.resize(num_valid_, 2);
-  targets_.resize(num_valid_, channels);
-  weights_.resize(num_valid_);
-  for (int i = 0; i < num_valid_; ++i) {
-    coords_.row(i) = grid.row(valid[i]);
-    targets_.row(i) = targets.values.row(valid[i]).cast<double>();
-    weights_[i] = targets.weights[valid[i]];
-  }
-  coords_f_ = coords_.cast<float>();
-  targets_f_ = targets_.cast<float>();
-  weights_f_ = weights_.cast<float>();
-}
-
-int TrunkPotential::dim() const { return trunk_->siren.latent_dim(); }
-
-template <typename Scalar>
-double TrunkPotential::EvaluateRows(const Eigen::VectorXd& z, const std::vector<int>* rows,
-                                    double scale, Eigen::VectorXd* gradient) const {
-  using Matrix = Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic>;
-  using Vector = Eigen::Matrix<Scalar, Eigen::Dynamic, 1>;
-  const int d = dim();
-  if (z.size() != d) {
-    throw std::invalid_argument("TrunkPotential: expected a latent of size " +
-                                std::to_string(d) + ", got " + std::to_string(z.size()));
-  }
-  const double prior = 0.5 * z.squaredNorm() / (options_.sigma_z * options_.sigma_z);
-  if (gradient != nullptr) *gradient = z / (options_.sigma_z * options_.sigma_z);
-  const Matrix* all_coords_ptr;
-  const Matrix* all_targets_ptr;
-  const Vector* all_weights_ptr;
-  if constexpr (std::is_same<Scalar, float>::value) {
-    all_coords_ptr = &coords_f_;
-    all_targets_ptr = &targets_f_;
-    all_weights_ptr = &weights_f_;
-  } else {
-    all_coords_ptr = &coords_;
-    all_targets_ptr = &targets_;
-    all_weights_ptr = &weights_;
-  }
-  const Matrix& all_coords = *all_coords_ptr;
-  const Matrix& all_targets = *all_targets_ptr;
-  const Vector& all_weights = *all_weights_ptr;
-  const long n = rows == nullptr ? num_valid_ : static_cast<long>(rows->size());
-  if (n == 0) return prior;
-  // One trunk pass over the pixels (the trunk blocks its passes internally to stay in
-  // cache). LossAndGradient's loss is sum_j w_j ||r_j||^2 / (C sum_j w_j).
-  const Vector zs = z.cast<Scalar>();
-  const double unit = scale * trunk_->siren.output_channels() / (2.0 * sigma_ * sigma_);
-  Vector dL_dz;
-  double sum_w, loss;
-  auto evaluate = [&](const Matrix& coords, const Matrix& targets, const Vector& weights) {
-    sum_w = weights.template cast<double>().sum();
-    if (!(sum_w > 0)) return;
-    loss = static_cast<double>(trunk_->siren.template LossAndGradient<Scalar>(
-        coords, zs, targets, weights, gradient != nullptr ? &dL_dz : nullptr, nullptr));
-  };
-  sum_w = 0;
-  if (rows == nullptr) {
-    evaluate(all_coords, all_targets, all_weights);
-  } else {
-    evaluate(all_coords(*rows, Eigen::all), all_targets(*rows, Eigen::all),
-             all_weights(*rows));
-  }
-  if (!(sum_w > 0)) return prior;
-  const double data = unit * sum_w * loss;
-  if (gradient != nullptr) *gradient += (unit * sum_w) * dL_dz.template cast<double>();
-  return prior + data;
-}
+int TrunkPotential::dim() const { return problem_->dim(); }
 
 double TrunkPotential::Evaluate(const Eigen::VectorXd& z, Eigen::VectorXd* gradient) const {
-  return options_.precision == Precision::kFloat
-             ? EvaluateRows<float>(z, nullptr, 1.0, gradient)
-             : EvaluateRows<double>(z, nullptr, 1.0, gradient);
+  return problem_->Evaluate(z, gradient);
 }
 
 double TrunkPotential::EvaluateMinibatch(const Eigen::VectorXd& z,
                                          const std::vector<int>& indices,
                                          Eigen::VectorXd* gradient) const {
-  for (int i : indices) {
-    if (i < 0 || i >= num_valid_) {
-      throw std::invalid_argument("TrunkPotential::EvaluateMinibatch: index " +
-                                  std::to_string(i) + " outside [0, " +
-                                  std::to_string(num_valid_) + ")");
-    }
-  }
-  if (indices.empty()) return Evaluate(z, gradient);
-  const double scale = static_cast<double>(num_valid_) / indices.size();
-  return options_.precision == Precision::kFloat
-             ? EvaluateRows<float>(z, &indices, scale, gradient)
-             : EvaluateRows<double>(z, &indices, scale, gradient);
+  return problem_->EvaluateMinibatch(z, indices, gradient);
 }
 
 bool TrunkPotential::GaussNewtonHessian(const Eigen::VectorXd& z,
                                         Eigen::MatrixXd* hessian) const {
-  const int d = dim();
-  const int channels = trunk_->siren.output_channels();
-  if (z.size() != d) {
-    throw std::invalid_argument("TrunkPotential: expected a latent of size " +
-                                std::to_string(d) + ", got " + std::to_string(z.size()));
-  }
-  hessian->setIdentity(d, d);
-  *hessian /= options_.sigma_z * options_.sigma_z;
-  if (num_valid_ == 0) return true;
-  // Rows j*C + c of J scaled by sqrt(w_j) / sigma, then J^T J by SYRK.
-  auto accumulate = [&](auto tag) {
-    using Scalar = decltype(tag);
-    using Matrix = Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic>;
-    const Matrix* coords;
-    if constexpr (std::is_same<Scalar, float>::value) {
-      coords = &coords_f_;
-    } else {
-      coords = &coords_;
-    }
-    const Eigen::Matrix<Scalar, Eigen::Dynamic, 1> zs = z.cast<Scalar>();
-    Matrix jtj = Matrix::Zero(d, d), J;
-    trunk_->siren.template ForwardAndLatentJacobian<Scalar>(*coords, zs, nullptr, &J);
-    for (long j = 0; j < num_valid_; ++j) {
-      J.middleRows(j * channels, channels) *=
-          static_cast<Scalar>(std::sqrt(weights_[j]) / sigma_);
-    }
-    jtj.template selfadjointView<Eigen::Lower>().rankUpdate(J.transpose());
-    *hessian += jtj.template selfadjointView<Eigen::Lower>().toDenseMatrix().template cast<double>();
-  };
-  if (options_.precision == Precision::kFloat) {
-    accumulate(float());
-  } else {
-    accumulate(double());
-  }
+  problem_->GaussNewtonHessian(z, hessian);
   return true;
 }
 
@@ -662,18 +502,7 @@ Sgld::Summary Sgld::Sample(const LatentPotential& potential, const Eigen::Vector
     num_threads = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
   }
   num_threads = std::min(num_threads, options_.num_chains);
-  if (num_threads <= 1) {
-    for (int c = 0; c < options_.num_chains; ++c) run_chain(c);
-  } else {
-    std::atomic<int> next{0};
-    std::vector<std::thread> threads;
-    for (int i = 0; i < num_threads; ++i) {
-      threads.emplace_back([&]() {
-        for (int c = next++; c < options_.num_chains; c = next++) run_chain(c);
-      });
-    }
-    for (auto& t : threads) t.join();
-  }
+  internal::ParallelFor(options_.num_chains, num_threads, run_chain);
   summary.sampling_time_ms = MsSince(sampling_start);
 
   // Gather the healthy chains, then the diagnostics.

@@ -2,13 +2,13 @@
 //
 // Sgld: Stochastic Gradient Langevin Dynamics over a frame's latent code (Sec. III-C of
 // "Tactile Functasets"; Welling & Teh 2011). With the trunk f_theta frozen, the
-// posterior of the latent z in R^d of one tactile frame is p(z | y) ~ exp(-U(z)) with
+// posterior of the latent z in R^d of one tactile frame is p(z | y) ~ exp(-U(z)), U the
+// frame's LatentProblem (estimation/fitting/latent_problem.h: without a robust loss
 //
 //   U(z) = sum_j w_j ||f_theta(x_j; z) - y_j||^2 / (2 sigma^2) + ||z||^2 / (2 sigma_z^2)
 //
-// (valid pixels j with weight w_j, C channels each; Gaussian pixel noise of standard
-// deviation sigma; the N(0, sigma_z^2 I) latent prior of estimation/fitting/latent_fitter.h, so
-// the mode of U is exactly LatentFitter's MAP latent). The chain
+// over its valid pixels j with weight w_j), whose mode is LatentFitter's MAP latent for the
+// same problem. The chain
 //
 //   z_{t+1} = z_t - eta_t P grad U(z_t) + sqrt(2 eta_t) P^{1/2} xi_t,   xi_t ~ N(0, I)
 //
@@ -21,7 +21,8 @@
 //   kDense     P = H_GN(z0)^-1 (Cholesky), which makes eta dimensionless in EVERY
 //              direction: for a Gaussian posterior each direction then contracts by
 //              (1 - eta) per step, so eta ~ 0.3-0.5 mixes in a few steps.
-// H_GN = J^T W J / sigma^2 + I / sigma_z^2 with J = d f / d z over the pixels.
+// H_GN = J^T W J / sigma^2 + I / sigma_z^2 with J = d f / d z over the pixels
+// (LatentProblem::GaussNewtonHessian).
 // With P = I, eta is in latent^2 per nat of U; with a preconditioner it is dimensionless.
 //
 // Discretisation bias. With a constant eta the chain samples a slightly wrong law:
@@ -77,8 +78,7 @@
 
 #include <Eigen/Core>
 
-#include "estimation/data/trunk_targets.h"
-#include "models/trunk/functa_model.h"
+#include "estimation/fitting/latent_problem.h"
 #include "samplers/step_size_schedule.h"
 
 namespace tactfunc {
@@ -132,65 +132,25 @@ class GaussianPotential : public LatentPotential {
   Eigen::MatrixXd precision_;
 };
 
-// The latent posterior of one frame under a frozen trunk: U(z) of the header comment
-// over the frame's valid pixels (weight > 0). Gradients are analytic (the trunk's
-// batched reverse pass, LossAndGradient), the Gauss-Newton Hessian comes from its
-// latent Jacobian (ForwardAndLatentJacobian).
+// The latent posterior of one frame under a frozen trunk: exp(-U) of its LatentProblem
+// (estimation/fitting/latent_problem.h, where U, grad U and H_GN are defined). Minibatches
+// draw from the problem's selected pixels.
 class TrunkPotential : public LatentPotential {
  public:
-  enum class Precision { kFloat, kDouble };
-  struct Options {
-    // Pixel noise standard deviation sigma, normalised target units (TrunkTargets). > 0,
-    // or 0 = automatic: the trunk's residual_sigma if > 0 -- the RMS per-pixel residual
-    // of the K-step fits on training frames, estimated by the trainer
-    // (estimation/training/trunk_trainer.h) -- else 0.01, the paper's noise sigma (Sec. IV-C).
-    // The same rule as LatentFitter::Options::sigma, so the MAP fit is U's mode.
-    double sigma = 0;
-    // Prior standard deviation of each latent entry, latent units. > 0. 1.0, as
-    // LatentFitter::Options::sigma_z (trained latents are O(1) per entry).
-    double sigma_z = 1.0;
-    // Precision of the trunk passes. float is about 2x faster (as LatentFitter
-    // measured); U and its gradient then carry float rounding (~1e-6 relative), far
-    // below the injected noise.
-    Precision precision = Precision::kFloat;
-    bool IsValid(std::string* error) const;
-  };
-
-  // `trunk` must outlive the potential; the targets are copied (valid pixels only).
-  // Throws std::invalid_argument for bad options, targets whose values are not
-  // rows*cols x C with rows*cols weights, or a NaN in a valid pixel.
-  TrunkPotential(const SensorTrunk& trunk, const TrunkTargets& targets, const Options& options);
+  // `problem` must outlive the potential.
+  explicit TrunkPotential(const LatentProblem& problem);
 
   int dim() const override;
   double Evaluate(const Eigen::VectorXd& z, Eigen::VectorXd* gradient) const override;
-  int NumDataTerms() const override { return num_valid_; }
+  int NumDataTerms() const override { return problem_->num_pixels(); }
   double EvaluateMinibatch(const Eigen::VectorXd& z, const std::vector<int>& indices,
                            Eigen::VectorXd* gradient) const override;
   bool GaussNewtonHessian(const Eigen::VectorXd& z, Eigen::MatrixXd* hessian) const override;
 
-  // sigma after the automatic choice, and sigma_z.
-  double sigma() const { return sigma_; }
-  double sigma_z() const { return options_.sigma_z; }
-  const SensorTrunk& trunk() const { return *trunk_; }
-  const Options& options() const { return options_; }
+  const LatentProblem& problem() const { return *problem_; }
 
  private:
-  // U and gradient over the pixels (compact rows) with data scale `scale` (N / n).
-  template <typename Scalar>
-  double EvaluateRows(const Eigen::VectorXd& z, const std::vector<int>* rows, double scale,
-                      Eigen::VectorXd* gradient) const;
-
-  const SensorTrunk* trunk_;
-  Options options_;
-  double sigma_ = 0.01;
-  int num_valid_ = 0;
-  // Valid pixels only: coordinates N x 2, targets N x C, weights N.
-  Eigen::MatrixXd coords_;
-  Eigen::MatrixXd targets_;
-  Eigen::VectorXd weights_;
-  Eigen::MatrixXf coords_f_;
-  Eigen::MatrixXf targets_f_;
-  Eigen::VectorXf weights_f_;
+  const LatentProblem* problem_;
 };
 
 // ---- Diagnostics -------------------------------------------------------------------

@@ -11,9 +11,8 @@
 #include <stdexcept>
 #include <utility>
 
-#include "ceres/loss_function.h"
 #include "ceres/problem.h"
-#include "estimation/fitting/internal/latent_cost_functions.h"
+#include "estimation/fitting/latent_costs.h"
 
 namespace tactfunc {
 namespace {
@@ -142,22 +141,6 @@ const char* ToString(FitTermination termination) {
   return "UNKNOWN";
 }
 
-const char* ToString(LatentFitter::RobustLoss loss) {
-  switch (loss) {
-    case LatentFitter::RobustLoss::kNone:
-      return "none";
-    case LatentFitter::RobustLoss::kHuber:
-      return "huber";
-    case LatentFitter::RobustLoss::kCauchy:
-      return "cauchy";
-  }
-  return "unknown";
-}
-
-const char* ToString(LatentFitter::Precision precision) {
-  return precision == LatentFitter::Precision::kFloat ? "float" : "double";
-}
-
 const char* ToString(LatentFitter::JacobianMode jacobian) {
   return jacobian == LatentFitter::JacobianMode::kAnalytic ? "analytic" : "autodiff";
 }
@@ -181,21 +164,6 @@ bool LatentFitter::Options::IsValid(std::string* error) const {
   std::string why;
   if (!strategy.IsValid(&why)) {
     message << "strategy: " << why;
-  } else if (!(sigma >= 0.0) || !std::isfinite(sigma)) {
-    message << "sigma must be finite and > 0 (or 0 = automatic), found " << sigma;
-  } else if (!(sigma_z > 0.0) || !std::isfinite(sigma_z)) {
-    message << "sigma_z must be finite and > 0, found " << sigma_z;
-  } else if (robust_loss != RobustLoss::kNone && robust_loss != RobustLoss::kHuber &&
-             robust_loss != RobustLoss::kCauchy) {
-    message << "robust_loss is not a RobustLoss, found " << static_cast<int>(robust_loss);
-  } else if (!(robust_loss_scale > 0.0) || !std::isfinite(robust_loss_scale)) {
-    message << "robust_loss_scale must be finite and > 0, found " << robust_loss_scale;
-  } else if (pixel_stride < 1) {
-    message << "pixel_stride must be >= 1, found " << pixel_stride;
-  } else if (max_pixels < 0) {
-    message << "max_pixels must be >= 0 (0 = all), found " << max_pixels;
-  } else if (precision != Precision::kFloat && precision != Precision::kDouble) {
-    message << "precision is not a Precision, found " << static_cast<int>(precision);
   } else if (jacobian != JacobianMode::kAnalytic && jacobian != JacobianMode::kAutoDiff) {
     message << "jacobian is not a JacobianMode, found " << static_cast<int>(jacobian);
   } else if (knn_k < 1) {
@@ -281,48 +249,30 @@ LatentFitter::LatentFitter(const SensorTrunk& trunk, const Options& options,
           std::to_string(d) + ") with the same M");
     }
   }
-  sigma_ = options_.sigma > 0 ? options_.sigma
-                              : (trunk.residual_sigma > 0 ? trunk.residual_sigma : 0.01);
 }
 
-LatentFitter::Summary LatentFitter::Fit(const TrunkTargets& targets, Eigen::VectorXd* latent) const {
-  return FitImpl(targets, nullptr, latent);
+LatentFitter::Summary LatentFitter::Fit(const LatentProblem& problem,
+                                        Eigen::VectorXd* latent) const {
+  return FitImpl(problem, nullptr, latent);
 }
 
-LatentFitter::Summary LatentFitter::Fit(const TrunkTargets& targets,
+LatentFitter::Summary LatentFitter::Fit(const LatentProblem& problem,
                                         const Eigen::VectorXd& initial_latent,
                                         Eigen::VectorXd* latent) const {
-  return FitImpl(targets, &initial_latent, latent);
+  return FitImpl(problem, &initial_latent, latent);
 }
 
-namespace {
-
-// K meta-SGD steps from z (MetaSgd::FitLatent's update, from any start).
-template <typename Scalar>
-Eigen::VectorXd MetaSgdSteps(const SensorTrunk& trunk, const internal::LatentResidualData& data,
-                             const Eigen::VectorXd& start, int steps) {
-  using VectorX = LatentModulatedSiren::VectorX<Scalar>;
-  const Scalar two_lambda = static_cast<Scalar>(2.0 * trunk.meta_sgd.latent_l2_weight);
-  const VectorX alpha = trunk.alpha.cast<Scalar>();
-  VectorX z = start.cast<Scalar>();
-  VectorX g;
-  for (int k = 0; k < steps; ++k) {
-    internal::DataLossAndGradient<Scalar>(trunk.siren, data, z, &g);
-    g += two_lambda * z;
-    z -= alpha.cwiseProduct(g);
-  }
-  return z.template cast<double>();
-}
-
-}  // namespace
-
-LatentFitter::Summary LatentFitter::FitImpl(const TrunkTargets& targets,
+LatentFitter::Summary LatentFitter::FitImpl(const LatentProblem& problem,
                                             const Eigen::VectorXd* initial,
                                             Eigen::VectorXd* latent) const {
   const Clock::time_point start_time = Clock::now();
-  const LatentModulatedSiren& siren = trunk_->siren;
-  const int d = siren.latent_dim();
+  const int d = trunk_->siren.latent_dim();
   if (latent == nullptr) throw std::invalid_argument("LatentFitter::Fit: latent must not be null");
+  if (problem.dim() != d) {
+    throw std::invalid_argument("LatentFitter::Fit: the problem's latent has " +
+                                std::to_string(problem.dim()) + " entries, the fitter's trunk " +
+                                std::to_string(d));
+  }
   if (initial != nullptr) {
     if (initial->size() != d) {
       throw std::invalid_argument("LatentFitter::Fit: the initial latent must have latent_dim = " +
@@ -333,19 +283,16 @@ LatentFitter::Summary LatentFitter::FitImpl(const TrunkTargets& targets,
       throw std::invalid_argument("LatentFitter::Fit: the initial latent has a non-finite entry");
     }
   }
-  const internal::LatentResidualData data = internal::SelectPixels(
-      siren, targets, sigma_, options_.pixel_stride, options_.max_pixels);
-
   Summary summary;
   summary.strategy = options_.strategy;
-  summary.sigma = sigma_;
-  summary.sigma_z = options_.sigma_z;
-  summary.num_valid_pixels = data.num_valid_pixels;
-  summary.num_pixels_used = data.num_pixels();
-  summary.num_residuals = data.num_residuals() + d;
+  summary.sigma = problem.sigma();
+  summary.sigma_z = problem.sigma_z();
+  summary.num_valid_pixels = problem.num_valid_pixels();
+  summary.num_pixels_used = problem.num_pixels();
+  summary.num_residuals = problem.num_residuals() + d;
 
   Eigen::VectorXd z = initial != nullptr ? *initial : Eigen::VectorXd::Zero(d);
-  if (data.num_pixels() == 0) {
+  if (problem.num_pixels() == 0) {
     latent->setZero(d);
     summary.termination_type = FitTermination::kNoValidPixels;
     summary.message = "the frame has no valid pixel (every weight is 0): the latent is the prior mean, 0";
@@ -353,28 +300,18 @@ LatentFitter::Summary LatentFitter::FitImpl(const TrunkTargets& targets,
     return summary;
   }
 
-  // The objective's pieces, shared by the cost reports and the Ceres stage.
+  // The objective's pieces, shared by the cost reports and the Ceres stage: U as Ceres
+  // sees it (the robust loss is inside the data residuals, LatentProblem).
   std::unique_ptr<ceres::CostFunction> data_cost;
   if (options_.jacobian == JacobianMode::kAutoDiff) {
-    data_cost = internal::MakeAutoDiffLatentCost(&siren, &data);
-  } else if (options_.precision == Precision::kFloat) {
-    data_cost = std::make_unique<internal::AnalyticLatentCost<float>>(&siren, &data);
+    data_cost = MakeAutoDiffLatentCost(&problem);
   } else {
-    data_cost = std::make_unique<internal::AnalyticLatentCost<double>>(&siren, &data);
+    data_cost = std::make_unique<AnalyticLatentCost>(&problem);
   }
-  std::unique_ptr<ceres::LossFunction> loss;
-  if (options_.robust_loss == RobustLoss::kHuber) {
-    loss = std::make_unique<ceres::HuberLoss>(options_.robust_loss_scale);
-  } else if (options_.robust_loss == RobustLoss::kCauchy) {
-    loss = std::make_unique<ceres::CauchyLoss>(options_.robust_loss_scale);
-  }
-  std::unique_ptr<ceres::CostFunction> robust_cost;
-  if (loss) robust_cost = std::make_unique<internal::RobustifiedCost>(data_cost.get(), loss.get());
-  const ceres::CostFunction* objective_data = loss ? robust_cost.get() : data_cost.get();
-  internal::LatentPriorCost prior_cost(d, options_.sigma_z);
+  LatentPriorCost prior_cost(d, problem.sigma_z());
   auto objective = [&](const Eigen::VectorXd& at) {
-    return internal::HalfSquaredNorm(*objective_data, at.data()) +
-           internal::HalfSquaredNorm(prior_cost, at.data());
+    return HalfSquaredNorm(*data_cost, at.data()) +
+           HalfSquaredNorm(prior_cost, at.data());
   };
 
   auto add_stage = [&](const char* name, double cost, Clock::time_point began, int iterations) {
@@ -406,11 +343,7 @@ LatentFitter::Summary LatentFitter::FitImpl(const TrunkTargets& targets,
     Eigen::VectorXd query =
         initial != nullptr
             ? *initial
-            : (options_.precision == Precision::kFloat
-                   ? MetaSgdSteps<float>(*trunk_, data, Eigen::VectorXd::Zero(d),
-                                         trunk_->meta_sgd.inner_steps)
-                   : MetaSgdSteps<double>(*trunk_, data, Eigen::VectorXd::Zero(d),
-                                          trunk_->meta_sgd.inner_steps));
+            : problem.MetaSgdSteps(Eigen::VectorXd::Zero(d), problem.trunk().meta_sgd.inner_steps);
     if (!query.allFinite()) query.setZero();
     const Eigen::VectorXf query_float = query.cast<float>();
     const int k = options_.knn_k;
@@ -448,9 +381,7 @@ LatentFitter::Summary LatentFitter::FitImpl(const TrunkTargets& targets,
   if (options_.strategy.refinement == FitStrategy::Refinement::kMetaSgd &&
       summary.termination_type != FitTermination::kFailure) {
     const Clock::time_point began = Clock::now();
-    const Eigen::VectorXd candidate = options_.precision == Precision::kFloat
-                                          ? MetaSgdSteps<float>(*trunk_, data, z, steps)
-                                          : MetaSgdSteps<double>(*trunk_, data, z, steps);
+    const Eigen::VectorXd candidate = problem.MetaSgdSteps(z, steps);
     accept(candidate, "meta_sgd");
     add_stage("meta_sgd", cost, began, steps);
   }
@@ -462,13 +393,12 @@ LatentFitter::Summary LatentFitter::FitImpl(const TrunkTargets& targets,
     ceres::Problem::Options problem_options;
     problem_options.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
     problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
-    ceres::Problem problem(problem_options);
-    problem.AddResidualBlock(const_cast<ceres::CostFunction*>(objective_data), nullptr,
-                             parameters.data());
-    problem.AddResidualBlock(&prior_cost, nullptr, parameters.data());
+    ceres::Problem ceres_problem(problem_options);
+    ceres_problem.AddResidualBlock(data_cost.get(), nullptr, parameters.data());
+    ceres_problem.AddResidualBlock(&prior_cost, nullptr, parameters.data());
     ceres::Solver::Options solver_options = options_.solver_options;
     solver_options.max_num_iterations = steps;
-    ceres::Solve(solver_options, &problem, &summary.solver_summary);
+    ceres::Solve(solver_options, &ceres_problem, &summary.solver_summary);
     summary.ceres_ran = true;
     const ceres::Solver::Summary& s = summary.solver_summary;
     // Ceres' iterations[0] is the starting point, not a step.
@@ -506,13 +436,7 @@ LatentFitter::Summary LatentFitter::FitImpl(const TrunkTargets& targets,
 
   summary.final_cost = cost;
   // PSNR over every valid pixel of the frame, not only the subsample.
-  const Eigen::MatrixXf prediction =
-      options_.precision == Precision::kFloat
-          ? siren.Forward<float>(siren.Grid<float>(targets.rows, targets.cols), z.cast<float>())
-          : siren.Forward<double>(siren.Grid<double>(targets.rows, targets.cols), z)
-                .cast<float>();
-  summary.psnr = Psnr(prediction, targets);  // +inf for an exact fit
-  if (std::isnan(summary.psnr)) summary.psnr = 0;
+  summary.psnr = problem.Psnr(z);
   *latent = z;
   summary.total_time_ms = MsSince(start_time);
   return summary;

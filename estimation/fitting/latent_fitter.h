@@ -1,26 +1,20 @@
 // Copyright 2026 The tactfunc Authors.
 //
 // LatentFitter: inference over a tactile functaset (Sec. III-C of "Tactile Functasets"):
-// with the meta-learned trunk f_theta frozen, find the latent z of a new frame.
-//
-// The problem (docs/FITTING.md writes it out). For the frame's valid pixels j (weight
-// w_j > 0; optionally subsampled) and channels c, and the latent prior N(0, sigma_z^2 I),
-//
-//   z* = argmin_z  1/2 sum_{j,c} rho( r_{j,c}(z)^2 ) + 1/2 sum_k (z_k / sigma_z)^2
-//   r_{j,c}(z) = sqrt(w_j) (f_theta(x_j; z)_c - y_{j,c}) / sigma
-//
-// i.e. the MAP latent under Gaussian pixel noise of standard deviation sigma (the
-// paper's Eq. 5 with L_rec the squared error, plus a prior; rho = identity unless a
-// robust loss is chosen). Ceres solves it with Levenberg-Marquardt (or dogleg) over the
-// d-dimensional z, with the whole Jacobian (N*C x d) from ONE batched pass per channel
-// (internal/latent_cost_functions.h); a ceres::Jet autodiff version is the reference.
+// with the meta-learned trunk f_theta frozen, find the latent z of a new frame: the mode
+// z* = argmin_z U(z) of the frame's LatentProblem (estimation/fitting/latent_problem.h,
+// where U, its pixels, sigma, sigma_z and the robust loss are defined once; docs/FITTING.md
+// writes it out), i.e. the MAP latent under Gaussian pixel noise (the paper's Eq. 5 plus a
+// prior). Ceres solves it with Levenberg-Marquardt (or dogleg) over the d-dimensional z,
+// with the whole Jacobian (N*C x d) from ONE batched pass per channel
+// (estimation/fitting/latent_costs.h); a ceres::Jet autodiff version is the reference.
 //
 // Strategies (FitStrategy; strings as the CLI takes them):
-//   meta_sgd:K      K steps of the trunk's meta-SGD inner loop (models/trunk/meta_sgd.h), the
-//                   paper's Eq. 6 with the learned per-dimension rates alpha, from z = 0
-//                   (or the warm start). K = the trunk's inner_steps is what it was
-//                   trained for. Ignores sigma, sigma_z and the robust loss: it descends
-//                   the trunk's own weighted MSE (+ its latent_l2_weight).
+//   meta_sgd:K      K steps of the trunk's meta-SGD inner loop (LatentProblem::MetaSgdSteps,
+//                   models/trunk/meta_sgd.h), the paper's Eq. 6 with the learned
+//                   per-dimension rates alpha, from z = 0 (or the warm start). K = the
+//                   trunk's inner_steps is what it was trained for. It descends the
+//                   trunk's own weighted MSE (+ its latent_l2_weight), not U.
 //   ceres:N         at most N Ceres iterations from z = 0 (or the warm start).
 //   knn             the paper's k-NN estimate: z = sum_i w_i z_i over the k nearest
 //                   functaset latents z_i of a query latent, w_i proportional to
@@ -33,12 +27,12 @@
 //                   the same refinements started from the k-NN estimate (the paper's
 //                   "initialize z_new close to known solutions").
 //
-// Errors (STYLE, three tiers): a bad Options, or a knn strategy without an index, throws
-// std::invalid_argument from the constructor; targets of the wrong shape, a NaN in a
-// valid pixel, or a warm start of the wrong size or not finite throw
-// std::invalid_argument from Fit, quoting the shapes; everything that can happen while
-// fitting (no valid pixel, the solver failing, a step producing NaN) comes back in the
-// Summary's termination type and message -- Fit never returns a NaN latent.
+// Errors (docs/ARCHITECTURE.md, three tiers): a bad Options, or a knn strategy without an
+// index, throws std::invalid_argument from the constructor; a problem of another latent
+// size, or a warm start of the wrong size or not finite, throws std::invalid_argument from
+// Fit (bad targets already threw from LatentProblem's constructor); everything that can
+// happen while fitting (no valid pixel, the solver failing, a step producing NaN) comes back
+// in the Summary's termination type and message -- Fit never returns a NaN latent.
 //
 // Thread safety: Fit is const and may run concurrently on one LatentFitter.
 #ifndef TACTFUNC_ESTIMATION_FITTING_LATENT_FITTER_H_
@@ -51,8 +45,8 @@
 #include <Eigen/Core>
 
 #include "ceres/solver.h"
+#include "estimation/fitting/latent_problem.h"
 #include "estimation/knn/knn_index.h"
-#include "estimation/data/trunk_targets.h"
 #include "models/trunk/functa_model.h"
 
 namespace tactfunc {
@@ -93,8 +87,6 @@ const char* ToString(FitTermination termination);
 
 class LatentFitter {
  public:
-  enum class RobustLoss { kNone, kHuber, kCauchy };
-  enum class Precision { kFloat, kDouble };
   enum class JacobianMode { kAnalytic, kAutoDiff };
 
   struct Options {
@@ -103,33 +95,6 @@ class LatentFitter {
     // The strategy; see the header comment. Default ceres:10: needs no functaset, and LM
     // converged in 5-7 iterations on the 70x88 measurement frames (docs/FITTING.md).
     FitStrategy strategy;
-    // Pixel noise standard deviation sigma, normalised target units (TrunkTargets). > 0,
-    // or 0 = automatic: the trunk's residual_sigma if > 0, else 0.01 (the paper's
-    // Gaussian noise sigma, Sec. IV-C, on min-max normalised frames). It weighs the data
-    // against the prior; with no prior (sigma_z huge) it does not change z*.
-    double sigma = 0;
-    // Prior standard deviation of each latent entry, same units as z. > 0. 1.0: trained
-    // latents are O(1) per entry (the modulation matrix A is initialised so that a unit
-    // change of one z_k moves the phases by O(1) rad), so N(0, I) is weakly informative:
-    // against thousands of pixel residuals at sigma = 0.01 it only decides directions the
-    // pixels leave unconstrained (blank or masked frames), and keeps LM's normal
-    // equations positive definite.
-    double sigma_z = 1.0;
-    // Per-pixel robust loss rho of the data residuals (the prior is never robustified),
-    // and its scale a in units of sigma (Huber: quadratic below a sigma, linear above;
-    // Cauchy: a^2 log(1 + r^2/a^2)). > 0. 1.345 is Huber's 95%-efficiency constant for
-    // Gaussian noise (Cauchy's is 2.385).
-    RobustLoss robust_loss = RobustLoss::kNone;
-    double robust_loss_scale = 1.345;
-    // Pixel subsampling of the data term: every pixel_stride-th valid pixel (>= 1), then
-    // at most max_pixels of them, evenly spaced (>= 0; 0 = no limit), in pixel order
-    // (deterministic). Costs are over the selected pixels, the PSNR over all valid ones.
-    int pixel_stride = 1;
-    int max_pixels = 0;
-    // Precision of the trunk evaluations of the analytic Jacobian and the meta-SGD steps
-    // (Ceres always accumulates in double). float: about 2x faster; latents agree with
-    // double within 1e-4 relative (latent_fitter_test). Autodiff always runs in double.
-    Precision precision = Precision::kFloat;
     // Data-term Jacobian: analytic (batched, the default) or ceres::Jet autodiff (the
     // reference; 60-150x slower than analytic at d = 64, for checks).
     JacobianMode jacobian = JacobianMode::kAnalytic;
@@ -138,7 +103,7 @@ class LatentFitter {
     int knn_k = 8;
     // Passed to ceres::Solve, except max_num_iterations (set from ceres:N). Defaults set
     // here: LEVENBERG_MARQUARDT (trust_region_strategy_type = DOGLEG for dogleg),
-    // DENSE_NORMAL_CHOLESKY (one d-dimensional block; faster than DENSE_QR, BUILD-NOTES),
+    // DENSE_NORMAL_CHOLESKY (one d-dimensional block; faster than DENSE_QR, docs/FITTING.md),
     // num_threads 1 (parallelise over frames), logging SILENT, function_tolerance 1e-6,
     // gradient_tolerance 1e-10, parameter_tolerance 1e-8 (Ceres' defaults).
     ceres::Solver::Options solver_options;
@@ -164,9 +129,9 @@ class LatentFitter {
     bool ceres_ran = false;
     ceres::Solver::Summary solver_summary;
     std::vector<Stage> stages;
-    // The objective 1/2 sum rho(r^2) + 1/2 ||z / sigma_z||^2 over the selected pixels, at
-    // the starting latent (0 or the warm start) and at the result. Finite unless the
-    // warm start itself overflowed.
+    // The objective U(z) = 1/2 sum rho(r^2) + 1/2 ||z / sigma_z||^2 over the selected
+    // pixels (LatentProblem), at the starting latent (0 or the warm start) and at the
+    // result. Finite unless the warm start itself overflowed.
     double initial_cost = 0;
     double final_cost = 0;
     // PSNR (estimation/data/trunk_targets.h, THE definition) in dB of f_theta(.; z) over all
@@ -178,7 +143,7 @@ class LatentFitter {
     int num_valid_pixels = 0;  // in the frame
     int num_pixels_used = 0;   // after subsampling
     int num_residuals = 0;     // data residuals (pixels x channels) + d prior residuals
-    double sigma = 0;          // the sigma used (after the automatic choice)
+    double sigma = 0;          // the problem's sigma (after the automatic choice)
     double sigma_z = 0;
     // The knn stage's neighbours (labels, squared distances, weights), nearest first.
     std::vector<std::int64_t> neighbor_labels;
@@ -203,31 +168,25 @@ class LatentFitter {
                const Eigen::MatrixXf* latents);
 
   const Options& options() const { return options_; }
-  // sigma after the automatic choice.
-  double sigma() const { return sigma_; }
 
-  // Fits the latent of one frame (targets: rows*cols x C values and rows*cols weights,
-  // any resolution -- the trunk is continuous). *latent receives z (size d, always
-  // finite). Throws std::invalid_argument on bad shapes or NaN in valid pixels.
-  Summary Fit(const TrunkTargets& targets, Eigen::VectorXd* latent) const;
+  // Fits the latent of one frame: the mode of `problem` (whose latent size must be the
+  // fitter's trunk's). *latent receives z (size d, always finite).
+  Summary Fit(const LatentProblem& problem, Eigen::VectorXd* latent) const;
   // The same from a warm start (size d, finite): ceres/meta_sgd start there; knn
   // strategies use it as the query.
-  Summary Fit(const TrunkTargets& targets, const Eigen::VectorXd& initial_latent,
+  Summary Fit(const LatentProblem& problem, const Eigen::VectorXd& initial_latent,
               Eigen::VectorXd* latent) const;
 
  private:
-  Summary FitImpl(const TrunkTargets& targets, const Eigen::VectorXd* initial,
+  Summary FitImpl(const LatentProblem& problem, const Eigen::VectorXd* initial,
                   Eigen::VectorXd* latent) const;
 
   const SensorTrunk* trunk_;
   Options options_;
-  double sigma_ = 0.01;
   const KnnIndex* index_ = nullptr;
   const Eigen::MatrixXf* latents_ = nullptr;
 };
 
-const char* ToString(LatentFitter::RobustLoss loss);        // "none", "huber", "cauchy"
-const char* ToString(LatentFitter::Precision precision);    // "float", "double"
 const char* ToString(LatentFitter::JacobianMode jacobian);  // "analytic", "autodiff"
 
 }  // namespace tactfunc

@@ -29,14 +29,10 @@ double MsSince(std::chrono::steady_clock::time_point start) {
       .count();
 }
 
-// The fit options with the potential's sigma and sigma_z (same automatic rule).
 LatentFitter::Options FitOptions(const PosePosterior::Options& options) {
   std::string error;
   if (!options.IsValid(&error)) throw std::invalid_argument(error);
-  LatentFitter::Options fit = options.fit;
-  fit.sigma = options.potential.sigma;
-  fit.sigma_z = options.potential.sigma_z;
-  return fit;
+  return options.fit;
 }
 
 LatentFitter::Options QueryOptions(const PosePosterior::Options& options,
@@ -49,13 +45,13 @@ LatentFitter::Options QueryOptions(const PosePosterior::Options& options,
   return fit;
 }
 
-// potential.sigma = 0 (automatic) takes the pose model's calibrated posterior sigma if
-// it has one (header comment); otherwise TrunkPotential's own rule applies.
+// problem.sigma = 0 (automatic) takes the pose model's calibrated posterior sigma if
+// it has one (header comment); otherwise LatentProblem's own rule applies.
 PosePosterior::Options WithPoseModelSigma(PosePosterior::Options options,
                                           const PoseMlp& pose_mlp) {
-  if (options.potential.sigma == 0) {
+  if (options.problem.sigma == 0) {
     const double sigma = PosteriorSigmaOfPoseModel(pose_mlp);
-    if (sigma > 0) options.potential.sigma = sigma;
+    if (sigma > 0) options.problem.sigma = sigma;
   }
   return options;
 }
@@ -107,8 +103,8 @@ bool PosePosterior::Options::IsValid(std::string* error) const {
   } else if (knn_query_meta_sgd_steps < -1) {
     m << "PosePosterior::Options::knn_query_meta_sgd_steps must be >= -1, got "
       << knn_query_meta_sgd_steps;
-  } else if (!potential.IsValid(&why)) {
-    m << "PosePosterior::Options::potential: " << why;
+  } else if (!problem.IsValid(&why)) {
+    m << "PosePosterior::Options::problem: " << why;
   } else if (!fit.IsValid(&why)) {
     m << "PosePosterior::Options::fit: " << why;
   } else if (!sgld.IsValid(&why)) {
@@ -221,6 +217,9 @@ PosePosterior::Summary PosePosterior::EstimateImpl(const TrunkTargets& targets,
     return summary;
   };
 
+  // The frame's one latent problem: the fit finds its mode, the samplers sample it.
+  const LatentProblem problem(*trunk_, targets, options_.problem);
+
   // The latent the sampler starts from: given, or fitted.
   auto t = std::chrono::steady_clock::now();
   Eigen::VectorXd z0;
@@ -229,7 +228,7 @@ PosePosterior::Summary PosePosterior::EstimateImpl(const TrunkTargets& targets,
   } else {
     const LatentFitter& fitter =
         options_.sampler == PosteriorSampler::kKnn ? query_fitter_ : fitter_;
-    summary.fit_summary = fitter.Fit(targets, &z0);
+    summary.fit_summary = fitter.Fit(problem, &z0);
     summary.fit_ran = true;
     if (!summary.fit_summary.IsSolutionUsable() &&
         summary.fit_summary.termination_type != FitTermination::kNoValidPixels) {
@@ -252,7 +251,7 @@ PosePosterior::Summary PosePosterior::EstimateImpl(const TrunkTargets& targets,
     poses = neighbours->samples();
     weights = neighbours->weights();
   } else {
-    const TrunkPotential potential(*trunk_, targets, options_.potential);
+    const TrunkPotential potential(problem);
     if (options_.sampler == PosteriorSampler::kSgld) {
       Sgld::Options sgld_options = options_.sgld;
       sgld_options.seed = options_.seed;

@@ -13,7 +13,7 @@
 //
 // Pipeline per frame:
 //   sgld     fit (LatentFitter, Options::fit, default ceres:10) -> z*; Sgld chains from
-//            z* (+ jitter) on TrunkPotential -> num_samples latents -> PoseMlp.
+//            z* (+ jitter) on the frame's U -> num_samples latents -> PoseMlp.
 //   laplace  fit -> z*; N(z*, H^-1) -> num_samples latents -> PoseMlp.
 //   model error (sgld, laplace; Options::model_error): each MLP pose x_i is composed
 //            with a residual r_j of the MLP drawn (uniformly, seeded) from its
@@ -26,8 +26,8 @@
 // With Estimate(targets, latent, ...) the given latent replaces the fit (the mode for
 // laplace, the start for sgld, the query for knn).
 //
-// The fit uses the potential's sigma and sigma_z (Options::fit.sigma and .sigma_z are
-// overwritten), so that z* is the mode of the U that the samplers sample.
+// Each frame has one LatentProblem (estimation/fitting/latent_problem.h, Options::problem):
+// the fit finds its mode and the samplers sample it, so z* is the mode of the U sampled.
 //
 // Errors: bad options throw std::invalid_argument from the constructor (so does a knn
 // sampler without a KnnPosterior, or a pose MLP whose input_dim is not the trunk's
@@ -80,12 +80,11 @@ class PosePosterior {
     int num_samples = 100;
     // Seed of the sampler (overrides sgld.seed and laplace.seed).
     std::uint64_t seed = 0;
-    // The posterior over the latent (sigma, sigma_z, precision). sigma = 0 (automatic):
-    // the pose model's calibrated PosteriorSigmaOfPoseModel if it has one, else the
-    // trunk's residual_sigma (TrunkPotential's rule).
-    TrunkPotential::Options potential;
-    // The latent fit (mode / start). Default: LatentFitter's (ceres:10). sigma and
-    // sigma_z are overwritten by the potential's.
+    // The latent problem of each frame (sigma, sigma_z, robust loss, pixels, precision).
+    // sigma = 0 (automatic): the pose model's calibrated PosteriorSigmaOfPoseModel if it
+    // has one, else LatentProblem::AutomaticSigma (the trunk's residual_sigma).
+    LatentProblem::Options problem;
+    // The latent fit (mode / start) of that problem. Default: LatentFitter's (ceres:10).
     LatentFitter::Options fit;
     // Meta-SGD steps of the knn sampler's query latent; -1 = the trunk's inner_steps
     // (what it was trained for), >= -1.
@@ -181,7 +180,7 @@ FitStrategy LatentMapOfPoseModel(const PoseMlp& pose_model, const SensorTrunk& t
 
 // The pixel sigma the pose model was calibrated with (its info's "posterior_sigma",
 // `train-pose --posterior-sigma`), or 0 if it has none. PosePosterior uses it when
-// Options::potential.sigma is 0 (automatic) -- see "Calibration" in docs/POSES.md: the
+// Options::problem.sigma is 0 (automatic) -- see "Calibration" in docs/POSES.md: the
 // calibration residuals already hold the pose error that the latent's noise causes at
 // the fit, so the latent posterior is tempered (a smaller sigma) to avoid counting that
 // error twice; the value is chosen on calibration data and checked on fresh contacts

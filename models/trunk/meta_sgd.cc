@@ -47,16 +47,35 @@ MetaSgd::VectorX<Scalar> MetaSgd::FitLatent(const LatentModulatedSiren& siren,
                                             const VectorX<Scalar>& weights,
                                             const VectorX<Scalar>& alpha,
                                             Scalar* loss) const {
+  const VectorX<Scalar> z = InnerLoop<Scalar>(siren, coords, targets, weights, alpha,
+                                              VectorX<Scalar>::Zero(siren.latent_dim()),
+                                              options_.inner_steps);
+  if (loss != nullptr) *loss = siren.Loss<Scalar>(coords, z, targets, weights);
+  return z;
+}
+
+template <typename Scalar>
+MetaSgd::VectorX<Scalar> MetaSgd::InnerLoop(const LatentModulatedSiren& siren,
+                                            const MatrixX<Scalar>& coords,
+                                            const MatrixX<Scalar>& targets,
+                                            const VectorX<Scalar>& weights,
+                                            const VectorX<Scalar>& alpha,
+                                            const VectorX<Scalar>& z0, int steps) const {
   CheckAlpha(siren, alpha);
+  if (z0.size() != siren.latent_dim() || steps < 0) {
+    throw std::invalid_argument("MetaSgd::InnerLoop: expected a start of latent_dim = " +
+                                std::to_string(siren.latent_dim()) +
+                                " entries and steps >= 0, found " + std::to_string(z0.size()) +
+                                " entries and " + std::to_string(steps) + " steps");
+  }
   const Scalar two_lambda = static_cast<Scalar>(2.0 * options_.latent_l2_weight);
-  VectorX<Scalar> z = VectorX<Scalar>::Zero(siren.latent_dim());
+  VectorX<Scalar> z = z0;
   VectorX<Scalar> g;
-  for (int k = 0; k < options_.inner_steps; ++k) {
+  for (int k = 0; k < steps; ++k) {
     siren.LossAndGradient<Scalar>(coords, z, targets, weights, &g, nullptr);
     g += two_lambda * z;
     z -= alpha.cwiseProduct(g);
   }
-  if (loss != nullptr) *loss = siren.Loss<Scalar>(coords, z, targets, weights);
   return z;
 }
 
@@ -108,7 +127,10 @@ MetaSgd::Result<Scalar> MetaSgd::OuterLossAndGradient(
       const VectorX<S>&, const VectorX<S>&) const;                       \
   template MetaSgd::VectorX<S> MetaSgd::FitLatent<S>(                    \
       const LatentModulatedSiren&, const MatrixX<S>&, const MatrixX<S>&, \
-      const VectorX<S>&, const VectorX<S>&, S*) const;
+      const VectorX<S>&, const VectorX<S>&, S*) const;                  \
+  template MetaSgd::VectorX<S> MetaSgd::InnerLoop<S>(                    \
+      const LatentModulatedSiren&, const MatrixX<S>&, const MatrixX<S>&, \
+      const VectorX<S>&, const VectorX<S>&, const VectorX<S>&, int) const;
 
 TACTFUNC_INSTANTIATE_META_SGD(float)
 TACTFUNC_INSTANTIATE_META_SGD(double)

@@ -81,12 +81,22 @@ class MetaSgd {
                                       const VectorX<Scalar>& alpha) const;
 
   // Only z_K (the inner loop, as used to fit latents at test time), and optionally
-  // the loss at z_K.
+  // the loss at z_K: InnerLoop from z = 0 with options().inner_steps steps.
   template <typename Scalar>
   VectorX<Scalar> FitLatent(const LatentModulatedSiren& siren,
                             const MatrixX<Scalar>& coords, const MatrixX<Scalar>& targets,
                             const VectorX<Scalar>& weights, const VectorX<Scalar>& alpha,
                             Scalar* loss = nullptr) const;
+
+  // The inner loop's update z <- z - alpha (*) d/dz [L(theta, z) + lambda ||z||^2],
+  // `steps` (>= 0) times from z0 (size d): the one implementation of the inner loop, also
+  // used to continue a fit from any start (LatentProblem::MetaSgdSteps). Throws
+  // std::invalid_argument on wrong shapes.
+  template <typename Scalar>
+  VectorX<Scalar> InnerLoop(const LatentModulatedSiren& siren, const MatrixX<Scalar>& coords,
+                            const MatrixX<Scalar>& targets, const VectorX<Scalar>& weights,
+                            const VectorX<Scalar>& alpha, const VectorX<Scalar>& z0,
+                            int steps) const;
 
  private:
   Options options_;

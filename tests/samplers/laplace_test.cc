@@ -123,13 +123,14 @@ TEST(LaplaceSampler, CovarianceOnATinyTrunkIsSymmetricPositiveDefinite) {
   Eigen::VectorXd z_true(6);
   z_true << 0.3, -0.2, 0.1, 0.4, -0.3, 0.2;
   const TrunkTargets targets = testing_util::MakeTargets(trunk, z_true, 0.05, 2);
-  const TrunkPotential potential(trunk, targets, {});
+  const LatentProblem problem(trunk, targets, {});
+  const TrunkPotential potential(problem);
   LatentFitter::Options fit;
   fit.strategy = FitStrategy::FromString("ceres:50");
   const LatentFitter fitter(trunk, fit);
   const LaplaceSampler laplace{LaplaceSampler::Options()};
   Eigen::MatrixXd samples;
-  const LaplaceSampler::Summary summary = laplace.Sample(potential, fitter, targets, &samples);
+  const LaplaceSampler::Summary summary = laplace.Sample(problem, fitter, &samples);
   ASSERT_TRUE(summary.IsSolutionUsable()) << summary.FullReport();
   EXPECT_TRUE(summary.fit_ran);
   EXPECT_EQ(samples.rows(), 100);
@@ -138,7 +139,7 @@ TEST(LaplaceSampler, CovarianceOnATinyTrunkIsSymmetricPositiveDefinite) {
   EXPECT_EQ(cov, cov.transpose());
   Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(cov);
   EXPECT_GT(eigen.eigenvalues().minCoeff(), 0.0);
-  // At the mode the gradient of U vanishes (the fit used the potential's sigma rule).
+  // At the mode the gradient of U vanishes (fit and sampler share the problem).
   Eigen::VectorXd g;
   potential.Evaluate(summary.mode, &g);
   EXPECT_LT(g.norm(), 1e-2 * std::sqrt(potential.NumDataTerms()));

@@ -89,7 +89,6 @@ Sgld::Options GaussianOptions(Sgld::Preconditioner preconditioner, double eta) {
 TEST(Sgld, DefaultOptionsAreValid) {
   std::string error;
   EXPECT_TRUE(Sgld::Options().IsValid(&error)) << error;
-  EXPECT_TRUE(TrunkPotential::Options().IsValid(&error)) << error;
 }
 
 TEST(Sgld, BadOptionsNameTheField) {
@@ -115,10 +114,6 @@ TEST(Sgld, BadOptionsNameTheField) {
   EXPECT_FALSE(options.IsValid(&error));
   EXPECT_NE(error.find("divergence_potential_increase"), std::string::npos) << error;
   EXPECT_THROW(Sgld{options}, std::invalid_argument);
-  TrunkPotential::Options potential;
-  potential.sigma_z = 0;
-  EXPECT_FALSE(potential.IsValid(&error));
-  EXPECT_NE(error.find("sigma_z"), std::string::npos) << error;
 }
 
 TEST(Sgld, DensePreconditionedChainRecoversGaussianMoments) {
@@ -297,117 +292,34 @@ TEST(Sgld, ThrowsForABadInitialLatent) {
 
 // ---- TrunkPotential ----------------------------------------------------------------
 
-TEST(TrunkPotential, GradientMatchesCentralDifferences) {
+// U, its gradient, minibatches and H_GN are LatentProblem's, tested in
+// tests/estimation/fitting/latent_problem_test.cc; the potential only forwards them.
+TEST(TrunkPotential, ForwardsItsLatentProblem) {
   const SensorTrunk trunk = testing_util::MakeTinyTrunk(6, 7, 16, 2, 4, 3);
-  const Eigen::Vector4d z_true(0.3, -0.2, 0.1, 0.4);
-  const TrunkTargets targets = testing_util::MakeTargets(trunk, z_true, 0.05, 1);
-  TrunkPotential::Options options;
-  options.precision = TrunkPotential::Precision::kDouble;
-  const TrunkPotential potential(trunk, targets, options);
-  EXPECT_EQ(potential.sigma(), 0.05);  // the trunk's residual_sigma
+  const TrunkTargets targets =
+      testing_util::MakeTargets(trunk, Eigen::Vector4d(0.3, -0.2, 0.1, 0.4), 0.05, 1);
+  const LatentProblem problem(trunk, targets, {});
+  const TrunkPotential potential(problem);
+  EXPECT_EQ(potential.dim(), 4);
   EXPECT_EQ(potential.NumDataTerms(), 42);
-  for (const Eigen::Vector4d& z : {Eigen::Vector4d::Zero().eval(), z_true,
-                                  Eigen::Vector4d(1e-6, -1e-6, 0, 1e-6)}) {
-    Eigen::VectorXd g;
-    potential.Evaluate(z, &g);
-    for (int k = 0; k < 4; ++k) {
-      const double h = 1e-6;
-      Eigen::VectorXd zp = z, zm = z;
-      zp[k] += h;
-      zm[k] -= h;
-      const double numeric = (potential.Evaluate(zp, nullptr) - potential.Evaluate(zm, nullptr)) / (2 * h);
-      EXPECT_NEAR(g[k], numeric, 1e-6 * (1 + std::abs(numeric))) << "k " << k;
-    }
-  }
-}
-
-TEST(TrunkPotential, PotentialIsTheWeightedSumOfSquaresPlusPrior) {
-  const SensorTrunk trunk = testing_util::MakeTinyTrunk(6, 7, 16, 2, 4, 3);
-  const Eigen::Vector4d z(0.3, -0.2, 0.1, 0.4);
-  TrunkTargets targets = testing_util::MakeTargets(trunk, z, 0.05, 1);
-  targets.weights[5] = 0;
-  targets.values(5, 0) = NAN;  // an invalid pixel may hold NaN
-  targets.weights[6] = 0.5;
-  TrunkPotential::Options options;
-  options.precision = TrunkPotential::Precision::kDouble;
-  options.sigma = 0.1;
-  options.sigma_z = 2.0;
-  const TrunkPotential potential(trunk, targets, options);
-  const Eigen::VectorXd zq = Eigen::Vector4d(0.1, 0.1, -0.1, 0.0);
-  const Eigen::MatrixXd y = trunk.siren.Forward<double>(trunk.siren.Grid<double>(6, 7), zq);
-  double expected = zq.squaredNorm() / (2 * 4.0);
-  for (int j = 0; j < 42; ++j) {
-    if (targets.weights[j] > 0) {
-      expected += targets.weights[j] * std::pow(y(j, 0) - targets.values(j, 0), 2) / (2 * 0.01);
-    }
-  }
-  EXPECT_NEAR(potential.Evaluate(zq, nullptr), expected, 1e-9 * expected);
-  EXPECT_EQ(potential.NumDataTerms(), 41);
-}
-
-TEST(TrunkPotential, MinibatchesOfAPartitionAverageToTheFullGradient) {
-  const SensorTrunk trunk = testing_util::MakeTinyTrunk(6, 7, 16, 2, 4, 3);
-  const TrunkTargets targets = testing_util::MakeTargets(trunk, Eigen::Vector4d(0.3, -0.2, 0.1, 0.4), 0.05, 1);
-  TrunkPotential::Options options;
-  options.precision = TrunkPotential::Precision::kDouble;
-  const TrunkPotential potential(trunk, targets, options);
   const Eigen::VectorXd z = Eigen::Vector4d(0.1, 0.2, 0.3, 0.4);
-  Eigen::VectorXd full, g, sum = Eigen::VectorXd::Zero(4);
-  const double u = potential.Evaluate(z, &full);
-  double u_sum = 0;
-  for (int part = 0; part < 6; ++part) {  // 6 batches of 7 of the 42 pixels
-    std::vector<int> batch;
-    for (int i = part; i < 42; i += 6) batch.push_back(i);
-    u_sum += potential.EvaluateMinibatch(z, batch, &g) / 6;
-    sum += g / 6;
-  }
-  EXPECT_NEAR(u_sum, u, 1e-9 * u);
-  EXPECT_TRUE(sum.isApprox(full, 1e-9));
-}
-
-TEST(TrunkPotential, GaussNewtonHessianIsTheHessianAtAnExactFit) {
-  // With noise-free targets the residuals vanish at z_true, where J^T J / sigma^2 +
-  // I / sigma_z^2 is the exact Hessian of U: compare with differences of the gradient.
-  const SensorTrunk trunk = testing_util::MakeTinyTrunk(6, 7, 16, 2, 4, 3);
-  const Eigen::Vector4d z_true(0.3, -0.2, 0.1, 0.4);
-  const TrunkTargets targets = testing_util::MakeTargets(trunk, z_true, 0.0, 1);
-  for (auto precision : {TrunkPotential::Precision::kDouble, TrunkPotential::Precision::kFloat}) {
-    TrunkPotential::Options options;
-    options.precision = precision;
-    const TrunkPotential potential(trunk, targets, options);
-    Eigen::MatrixXd H;
-    ASSERT_TRUE(potential.GaussNewtonHessian(z_true, &H));
-    EXPECT_TRUE(H.isApprox(H.transpose(), 1e-12));
-    if (precision == TrunkPotential::Precision::kFloat) continue;
-    Eigen::MatrixXd numeric(4, 4);
-    for (int k = 0; k < 4; ++k) {
-      const double h = 1e-5;
-      Eigen::VectorXd zp = z_true, zm = z_true, gp, gm;
-      zp[k] += h;
-      zm[k] -= h;
-      potential.Evaluate(zp, &gp);
-      potential.Evaluate(zm, &gm);
-      numeric.col(k) = (gp - gm) / (2 * h);
-    }
-    EXPECT_TRUE(H.isApprox(numeric, 1e-5)) << H << "\n\n" << numeric;
-  }
-}
-
-TEST(TrunkPotential, ThrowsForTargetsOfTheWrongShape) {
-  const SensorTrunk trunk = testing_util::MakeTinyTrunk(6, 7, 16, 2, 4, 3);
-  TrunkTargets targets = testing_util::MakeTargets(trunk, Eigen::Vector4d::Zero(), 0.0, 1);
-  targets.weights.resize(10);
-  EXPECT_THROW(TrunkPotential(trunk, targets, {}), std::invalid_argument);
-  targets = testing_util::MakeTargets(trunk, Eigen::Vector4d::Zero(), 0.0, 1);
-  targets.values(3, 0) = NAN;
-  EXPECT_THROW(TrunkPotential(trunk, targets, {}), std::invalid_argument);
+  Eigen::VectorXd g, gp;
+  EXPECT_EQ(potential.Evaluate(z, &g), problem.Evaluate(z, &gp));
+  EXPECT_EQ(g, gp);
+  EXPECT_EQ(potential.EvaluateMinibatch(z, {1, 5}, &g), problem.EvaluateMinibatch(z, {1, 5}, &gp));
+  EXPECT_EQ(g, gp);
+  Eigen::MatrixXd H, Hp;
+  ASSERT_TRUE(potential.GaussNewtonHessian(z, &H));
+  problem.GaussNewtonHessian(z, &Hp);
+  EXPECT_EQ(H, Hp);
 }
 
 TEST(Sgld, RunsOnATinyTrunkWithMinibatches) {
   const SensorTrunk trunk = testing_util::MakeTinyTrunk(6, 7, 16, 2, 4, 3);
   const Eigen::Vector4d z_true(0.3, -0.2, 0.1, 0.4);
   const TrunkTargets targets = testing_util::MakeTargets(trunk, z_true, 0.05, 1);
-  const TrunkPotential potential(trunk, targets, {});
+  const LatentProblem problem(trunk, targets, {});
+  const TrunkPotential potential(problem);
   Sgld::Options options;
   options.minibatch_size = 21;
   options.num_threads = 2;

@@ -21,7 +21,7 @@
 #include <vector>
 
 #include "ceres/loss_function.h"
-#include "estimation/fitting/internal/latent_cost_functions.h"
+#include "estimation/fitting/latent_costs.h"
 #include "estimation/knn/knn_index.h"
 #include "gtest/gtest.h"
 #include "models/trunk/meta_sgd.h"
@@ -83,6 +83,19 @@ Fitter::Options CeresOptions(int iterations) {
   return options;
 }
 
+LatentProblem::Options DoubleProblem() {
+  LatentProblem::Options options;
+  options.precision = LatentProblem::Precision::kDouble;
+  return options;
+}
+
+// The fit of one frame: a fitter of `options` on the frame's latent problem.
+Fitter::Summary FitFrame(const SensorTrunk& trunk, const Fitter::Options& options,
+                         const TrunkTargets& targets, VectorXd* z,
+                         const LatentProblem::Options& problem = {}) {
+  return Fitter(trunk, options).Fit(LatentProblem(trunk, targets, problem), z);
+}
+
 // Jacobian (rows x d, row-major in Ceres' layout) and residuals of a cost at z.
 void EvaluateCost(const ceres::CostFunction& cost, const VectorXd& z, VectorXd* residuals,
                   MatrixXd* jacobian) {
@@ -130,11 +143,7 @@ TEST(LatentFitterOptions, BadOptionsNameTheFieldAndTheConstructorThrows) {
     void (*mutate)(Fitter::Options*);
   };
   const Case cases[] = {
-      {"sigma_z", [](Fitter::Options* o) { o->sigma_z = 0; }},
-      {"sigma", [](Fitter::Options* o) { o->sigma = -1; }},
-      {"robust_loss_scale", [](Fitter::Options* o) { o->robust_loss_scale = 0; }},
-      {"pixel_stride", [](Fitter::Options* o) { o->pixel_stride = 0; }},
-      {"max_pixels", [](Fitter::Options* o) { o->max_pixels = -3; }},
+      {"jacobian", [](Fitter::Options* o) { o->jacobian = Fitter::JacobianMode(7); }},
       {"knn_k", [](Fitter::Options* o) { o->knn_k = 0; }},
       {"solver_options", [](Fitter::Options* o) { o->solver_options.function_tolerance = -1; }},
       {"strategy", [](Fitter::Options* o) { o->strategy.steps = 0; }},
@@ -195,16 +204,6 @@ TEST(LatentFitter, KnnStrategiesWithoutAnIndexThrow) {
   }
 }
 
-TEST(LatentFitterOptions, AutomaticSigmaIsTheTrunksResidualSigmaElse001) {
-  SensorTrunk trunk = MakeTrunk();
-  EXPECT_DOUBLE_EQ(Fitter(trunk, Fitter::Options()).sigma(), 0.01);
-  trunk.residual_sigma = 0.03;
-  EXPECT_DOUBLE_EQ(Fitter(trunk, Fitter::Options()).sigma(), 0.03);
-  Fitter::Options options;
-  options.sigma = 0.2;
-  EXPECT_DOUBLE_EQ(Fitter(trunk, options).sigma(), 0.2);
-}
-
 // ---- Cost functions ----------------------------------------------------------------------
 
 class LatentFitterCostTest : public ::testing::Test {
@@ -220,17 +219,24 @@ class LatentFitterCostTest : public ::testing::Test {
       targets_.values(j, 0) = std::numeric_limits<float>::quiet_NaN();
     }
     targets_.weights[5] = 0.25f;  // a fractional weight
-    data_ = internal::SelectPixels(trunk_.siren, targets_, 0.05, 1, 0);
+  }
+  LatentProblem Problem(LatentProblem::Precision precision = LatentProblem::Precision::kDouble,
+                        LatentProblem::RobustLoss loss = LatentProblem::RobustLoss::kNone) const {
+    LatentProblem::Options options;
+    options.sigma = 0.05;
+    options.precision = precision;
+    options.robust_loss = loss;
+    options.robust_loss_scale = loss == LatentProblem::RobustLoss::kCauchy ? 2.385 : 1.345;
+    return LatentProblem(trunk_, targets_, options);
   }
   SensorTrunk trunk_;
   TrunkTargets targets_;
-  internal::LatentResidualData data_;
 };
 
 TEST_F(LatentFitterCostTest, AnalyticJacobianMatchesAutodiffAndFiniteDifferences) {
-  const internal::AnalyticLatentCost<double> analytic(&trunk_.siren, &data_);
-  const std::unique_ptr<ceres::CostFunction> autodiff =
-      internal::MakeAutoDiffLatentCost(&trunk_.siren, &data_);
+  const LatentProblem problem = Problem();
+  const AnalyticLatentCost analytic(&problem);
+  const std::unique_ptr<ceres::CostFunction> autodiff = MakeAutoDiffLatentCost(&problem);
   const struct {
     const char* name;
     VectorXd z;
@@ -242,7 +248,7 @@ TEST_F(LatentFitterCostTest, AnalyticJacobianMatchesAutodiffAndFiniteDifferences
     MatrixXd Ja, Jd;
     EvaluateCost(analytic, p.z, &ra, &Ja);
     EvaluateCost(*autodiff, p.z, &rd, &Jd);
-    ASSERT_EQ(ra.size(), data_.num_residuals());
+    ASSERT_EQ(ra.size(), problem.num_residuals());
     EXPECT_LE(RelativeDifference(ra, rd), 1e-12) << p.name;
     EXPECT_LE(RelativeDifference(Ja, Jd), 1e-8) << p.name;
     EXPECT_LE(RelativeDifference(Ja, NumericJacobian(analytic, p.z)), 1e-6) << p.name;
@@ -251,9 +257,10 @@ TEST_F(LatentFitterCostTest, AnalyticJacobianMatchesAutodiffAndFiniteDifferences
 
 TEST_F(LatentFitterCostTest, ResidualsAreWhitenedWeightedErrorsOfTheValidPixelsOnly) {
   const int n_valid = kRows * kCols - (kRows * kCols + 6) / 7;
-  EXPECT_EQ(data_.num_valid_pixels, n_valid);
-  ASSERT_EQ(data_.num_pixels(), n_valid);
-  const internal::AnalyticLatentCost<double> cost(&trunk_.siren, &data_);
+  const LatentProblem problem = Problem();
+  EXPECT_EQ(problem.num_valid_pixels(), n_valid);
+  ASSERT_EQ(problem.num_pixels(), n_valid);
+  const AnalyticLatentCost cost(&problem);
   const VectorXd z = 0.3 * Uniform(5, 1, 23);
   VectorXd r;
   EvaluateCost(cost, z, &r, nullptr);
@@ -271,8 +278,9 @@ TEST_F(LatentFitterCostTest, ResidualsAreWhitenedWeightedErrorsOfTheValidPixelsO
 }
 
 TEST_F(LatentFitterCostTest, FloatEvaluationAgreesWithDoubleToFloatPrecision) {
-  const internal::AnalyticLatentCost<double> exact(&trunk_.siren, &data_);
-  const internal::AnalyticLatentCost<float> fast(&trunk_.siren, &data_);
+  const LatentProblem problem64 = Problem(), problem32 = Problem(LatentProblem::Precision::kFloat);
+  const AnalyticLatentCost exact(&problem64);
+  const AnalyticLatentCost fast(&problem32);
   const VectorXd z = 0.5 * Uniform(5, 1, 24);
   VectorXd r64, r32;
   MatrixXd J64, J32;
@@ -286,7 +294,7 @@ TEST_F(LatentFitterCostTest, FloatEvaluationAgreesWithDoubleToFloatPrecision) {
 }
 
 TEST(LatentFitterPriorCost, IsZOverSigmaZWithIdentityOverSigmaZJacobian) {
-  const internal::LatentPriorCost prior(4, 0.5);
+  const LatentPriorCost prior(4, 0.5);
   const VectorXd z = Uniform(4, 1, 31);
   VectorXd r;
   MatrixXd J;
@@ -296,15 +304,22 @@ TEST(LatentFitterPriorCost, IsZOverSigmaZWithIdentityOverSigmaZJacobian) {
 }
 
 TEST_F(LatentFitterCostTest, RobustTransformGivesTheRobustCostAndItsJacobian) {
-  const internal::AnalyticLatentCost<double> plain(&trunk_.siren, &data_);
+  const LatentProblem plain_problem = Problem();
+  const AnalyticLatentCost plain(&plain_problem);
   const VectorXd z = 0.3 * Uniform(5, 1, 25);
   for (int which = 0; which < 2; ++which) {
     std::unique_ptr<ceres::LossFunction> loss;
     if (which == 0) loss = std::make_unique<ceres::HuberLoss>(1.345);
     else loss = std::make_unique<ceres::CauchyLoss>(2.385);
-    const internal::RobustifiedCost robust(&plain, loss.get());
-    VectorXd r, rr;
-    MatrixXd J;
+    const LatentProblem robust_problem =
+        Problem(LatentProblem::Precision::kDouble,
+                which == 0 ? LatentProblem::RobustLoss::kHuber : LatentProblem::RobustLoss::kCauchy);
+    const AnalyticLatentCost robust(&robust_problem);
+    // The autodiff reference robustifies the same way.
+    const std::unique_ptr<ceres::CostFunction> robust_autodiff =
+        MakeAutoDiffLatentCost(&robust_problem);
+    VectorXd r, rr, rd;
+    MatrixXd J, Jd;
     EvaluateCost(plain, z, &r, nullptr);
     EvaluateCost(robust, z, &rr, &J);
     double expected = 0;
@@ -315,6 +330,9 @@ TEST_F(LatentFitterCostTest, RobustTransformGivesTheRobustCostAndItsJacobian) {
     }
     EXPECT_NEAR(0.5 * rr.squaredNorm(), expected, 1e-10 * expected) << which;
     EXPECT_LE(RelativeDifference(J, NumericJacobian(robust, z)), 1e-6) << which;
+    EvaluateCost(*robust_autodiff, z, &rd, &Jd);
+    EXPECT_LE(RelativeDifference(rr, rd), 1e-12) << which;
+    EXPECT_LE(RelativeDifference(J, Jd), 1e-8) << which;
   }
 }
 
@@ -324,11 +342,10 @@ TEST(LatentFitter, CeresFromZeroRecoversTheLatentOfAFrameTheTrunkGenerated) {
   const SensorTrunk trunk = MakeTrunk();
   const VectorXd z_true = TrueLatent(8);
   const TrunkTargets targets = Generate(trunk, z_true);
-  Fitter::Options options = CeresOptions(50);
-  options.precision = Fitter::Precision::kDouble;
-  options.sigma_z = 1e4;  // no pull towards 0: the exact latent is the optimum
+  LatentProblem::Options problem = DoubleProblem();
+  problem.sigma_z = 1e4;  // no pull towards 0: the exact latent is the optimum
   VectorXd z;
-  const Fitter::Summary summary = Fitter(trunk, options).Fit(targets, &z);
+  const Fitter::Summary summary = FitFrame(trunk, CeresOptions(50), targets, &z, problem);
   EXPECT_EQ(summary.termination_type, FitTermination::kConvergence) << summary.FullReport();
   EXPECT_TRUE(summary.ceres_ran);
   EXPECT_GT(summary.psnr, 80.0) << summary.FullReport();
@@ -343,11 +360,10 @@ TEST(LatentFitter, AutodiffAndAnalyticFitsAgree) {
   const SensorTrunk trunk = MakeTrunk(1, 16, 6);
   const TrunkTargets targets = Generate(trunk, TrueLatent(6, 5));
   Fitter::Options options = CeresOptions(20);
-  options.precision = Fitter::Precision::kDouble;
   VectorXd za, zd;
-  const Fitter::Summary sa = Fitter(trunk, options).Fit(targets, &za);
+  const Fitter::Summary sa = FitFrame(trunk, options, targets, &za, DoubleProblem());
   options.jacobian = Fitter::JacobianMode::kAutoDiff;
-  const Fitter::Summary sd = Fitter(trunk, options).Fit(targets, &zd);
+  const Fitter::Summary sd = FitFrame(trunk, options, targets, &zd, DoubleProblem());
   EXPECT_EQ(sa.iterations, sd.iterations);
   EXPECT_LE((za - zd).norm(), 1e-8 * za.norm()) << sa.FullReport() << sd.FullReport();
 }
@@ -357,9 +373,8 @@ TEST(LatentFitter, MetaSgdFromZeroIsTheTrunksInnerLoop) {
   const TrunkTargets targets = Generate(trunk, TrueLatent(8));
   Fitter::Options options;
   options.strategy = FitStrategy::FromString("meta_sgd:3");
-  options.precision = Fitter::Precision::kDouble;
   VectorXd z;
-  const Fitter::Summary summary = Fitter(trunk, options).Fit(targets, &z);
+  const Fitter::Summary summary = FitFrame(trunk, options, targets, &z, DoubleProblem());
   EXPECT_EQ(summary.termination_type, FitTermination::kCompleted);
   EXPECT_EQ(summary.iterations, 3);
   MetaSgd::Options meta;
@@ -382,8 +397,8 @@ TEST(LatentFitter, MaskedPixelsDoNotChangeTheFit) {
   }
   const Fitter fitter(trunk, CeresOptions(10));
   VectorXd za, zb;
-  const Fitter::Summary sa = fitter.Fit(a, &za);
-  const Fitter::Summary sb = fitter.Fit(b, &zb);
+  const Fitter::Summary sa = fitter.Fit(LatentProblem(trunk, a, {}), &za);
+  const Fitter::Summary sb = fitter.Fit(LatentProblem(trunk, b, {}), &zb);
   EXPECT_EQ(za, zb);
   EXPECT_EQ(sa.psnr, sb.psnr);
   EXPECT_EQ(sa.num_valid_pixels, kRows * kCols - (kRows * kCols + 2) / 3);
@@ -392,12 +407,12 @@ TEST(LatentFitter, MaskedPixelsDoNotChangeTheFit) {
 TEST(LatentFitter, SubsamplingUsesTheRequestedPixels) {
   const SensorTrunk trunk = MakeTrunk();
   const TrunkTargets targets = Generate(trunk, TrueLatent(8));
-  Fitter::Options options = CeresOptions(30);
-  options.pixel_stride = 2;
-  options.max_pixels = 100;
-  options.sigma_z = 1e4;
+  LatentProblem::Options problem;
+  problem.pixel_stride = 2;
+  problem.max_pixels = 100;
+  problem.sigma_z = 1e4;
   VectorXd z;
-  const Fitter::Summary summary = Fitter(trunk, options).Fit(targets, &z);
+  const Fitter::Summary summary = FitFrame(trunk, CeresOptions(30), targets, &z, problem);
   EXPECT_EQ(summary.num_pixels_used, 100);
   EXPECT_EQ(summary.num_valid_pixels, kRows * kCols);
   EXPECT_GT(summary.psnr, 60.0) << summary.FullReport();  // PSNR over all pixels
@@ -421,7 +436,8 @@ TEST_F(KnnFitTest, AnExactQueryReturnsThatFunctasetLatent) {
   const Fitter fitter(trunk_, options, &index_, &latents_);
   const VectorXd z17 = latents_.row(17).transpose().cast<double>();
   VectorXd z;
-  const Fitter::Summary summary = fitter.Fit(Generate(trunk_, z17), z17, &z);
+  const TrunkTargets targets = Generate(trunk_, z17);
+  const Fitter::Summary summary = fitter.Fit(LatentProblem(trunk_, targets, {}), z17, &z);
   EXPECT_EQ(summary.termination_type, FitTermination::kCompleted);
   ASSERT_EQ(summary.neighbor_labels.size(), 8u);
   EXPECT_EQ(summary.neighbor_labels[0], 17);
@@ -436,7 +452,8 @@ TEST_F(KnnFitTest, InverseDistanceWeightsSumToOneAndDecrease) {
   const Fitter fitter(trunk_, options, &index_, &latents_);
   const VectorXd z_true = TrueLatent(8, 9);
   VectorXd z;
-  const Fitter::Summary summary = fitter.Fit(Generate(trunk_, z_true), &z);
+  const TrunkTargets targets = Generate(trunk_, z_true);
+  const Fitter::Summary summary = fitter.Fit(LatentProblem(trunk_, targets, {}), &z);
   ASSERT_EQ(summary.neighbor_weights.size(), 5u);
   double sum = 0;
   VectorXd expected = VectorXd::Zero(8);
@@ -459,10 +476,11 @@ TEST_F(KnnFitTest, KnnPlusCeresIsAtLeastAsGoodAsKnn) {
   Fitter::Options options;
   options.strategy = FitStrategy::FromString("knn");
   VectorXd z_knn, z_refined;
-  const Fitter::Summary knn = Fitter(trunk_, options, &index_, &latents_).Fit(targets, &z_knn);
+  const LatentProblem problem(trunk_, targets, {});
+  const Fitter::Summary knn = Fitter(trunk_, options, &index_, &latents_).Fit(problem, &z_knn);
   options.strategy = FitStrategy::FromString("knn+ceres:20");
   const Fitter::Summary refined =
-      Fitter(trunk_, options, &index_, &latents_).Fit(targets, &z_refined);
+      Fitter(trunk_, options, &index_, &latents_).Fit(problem, &z_refined);
   ASSERT_EQ(refined.stages.size(), 3u);  // start, knn, ceres
   EXPECT_DOUBLE_EQ(refined.stages[1].cost, knn.final_cost);
   EXPECT_LE(refined.final_cost, knn.final_cost);
@@ -493,7 +511,7 @@ TEST(LatentFitterExtremes, BlankAndSaturatedFramesGiveFiniteLatents) {
       Fitter::Options options;
       options.strategy = FitStrategy::FromString(strategy);
       VectorXd z;
-      const Fitter::Summary summary = Fitter(trunk, options).Fit(targets, &z);
+      const Fitter::Summary summary = FitFrame(trunk, options, targets, &z);
       ExpectFiniteAndUsable(summary, z);
     }
   }
@@ -508,7 +526,7 @@ TEST(LatentFitterExtremes, AFrameWithNoValidPixelReturnsThePriorMeanAndSaysSo) {
     Fitter::Options options;
     options.strategy = FitStrategy::FromString(strategy);
     VectorXd z = VectorXd::Constant(8, 5.0);
-    const Fitter::Summary summary = Fitter(trunk, options).Fit(targets, &z);
+    const Fitter::Summary summary = FitFrame(trunk, options, targets, &z);
     EXPECT_EQ(summary.termination_type, FitTermination::kNoValidPixels);
     EXPECT_FALSE(summary.IsSolutionUsable());
     EXPECT_NE(summary.message.find("no valid pixel"), std::string::npos);
@@ -527,7 +545,7 @@ TEST(LatentFitterExtremes, AMostlyNanFrameFitsItsFewValidPixels) {
     targets.weights[j] = 0;
   }
   VectorXd z;
-  const Fitter::Summary summary = Fitter(trunk, CeresOptions(20)).Fit(targets, &z);
+  const Fitter::Summary summary = FitFrame(trunk, CeresOptions(20), targets, &z);
   ExpectFiniteAndUsable(summary, z);
   EXPECT_EQ(summary.num_pixels_used, kRows * kCols / 20);
   EXPECT_GT(summary.psnr, 30.0) << summary.FullReport();
@@ -541,8 +559,8 @@ TEST(LatentFitterExtremes, AFarWarmStartComesBackFinite) {
     Fitter::Options options;
     options.strategy = FitStrategy::FromString(strategy);
     VectorXd z;
-    const Fitter::Summary summary =
-        Fitter(trunk, options).Fit(targets, VectorXd(100.0 * z_true), &z);
+    const Fitter::Summary summary = Fitter(trunk, options).Fit(
+        LatentProblem(trunk, targets, {}), VectorXd(100.0 * z_true), &z);
     ExpectFiniteAndUsable(summary, z);
   }
 }
@@ -551,14 +569,16 @@ TEST(LatentFitterExtremes, TinyAndHugePriorWidthsStayFinite) {
   const SensorTrunk trunk = MakeTrunk();
   const VectorXd z_true = TrueLatent(8);
   const TrunkTargets targets = Generate(trunk, z_true);
-  Fitter::Options options = CeresOptions(30);
-  options.sigma_z = 1e-8;
+  const Fitter fitter(trunk, CeresOptions(30));
+  LatentProblem::Options problem;
+  problem.sigma_z = 1e-8;
   VectorXd z;
-  Fitter::Summary summary = Fitter(trunk, options).Fit(targets, VectorXd(z_true), &z);
+  Fitter::Summary summary =
+      fitter.Fit(LatentProblem(trunk, targets, problem), VectorXd(z_true), &z);
   ExpectFiniteAndUsable(summary, z);
   EXPECT_LE(z.cwiseAbs().maxCoeff(), 1e-6) << summary.FullReport();  // pinned to the prior mean
-  options.sigma_z = 1e8;
-  summary = Fitter(trunk, options).Fit(targets, &z);
+  problem.sigma_z = 1e8;
+  summary = fitter.Fit(LatentProblem(trunk, targets, problem), &z);
   ExpectFiniteAndUsable(summary, z);
   EXPECT_GT(summary.psnr, 60.0) << summary.FullReport();
 }
@@ -570,11 +590,9 @@ TEST(LatentFitterExtremes, FloatAndDoubleEvaluationAgree) {
   const SensorTrunk trunk = MakeTrunk();
   TrunkTargets targets = Generate(trunk, TrueLatent(8));
   targets.values += 0.01 * Uniform(kRows * kCols, 1, 71).cast<float>();
-  Fitter::Options options = CeresOptions(30);
   VectorXd z32, z64;
-  const Fitter::Summary s32 = Fitter(trunk, options).Fit(targets, &z32);
-  options.precision = Fitter::Precision::kDouble;
-  const Fitter::Summary s64 = Fitter(trunk, options).Fit(targets, &z64);
+  const Fitter::Summary s32 = FitFrame(trunk, CeresOptions(30), targets, &z32);
+  const Fitter::Summary s64 = FitFrame(trunk, CeresOptions(30), targets, &z64, DoubleProblem());
   EXPECT_LE((z32 - z64).norm(), 1e-4 * z64.norm()) << s32.FullReport() << s64.FullReport();
   EXPECT_NEAR(s32.psnr, s64.psnr, 0.01);
 }
@@ -583,36 +601,32 @@ TEST(LatentFitterExtremes, RobustLossesFitAndKeepTheCostFinite) {
   const SensorTrunk trunk = MakeTrunk();
   TrunkTargets targets = Generate(trunk, TrueLatent(8));
   for (int j = 0; j < kRows * kCols; j += 10) targets.values(j, 0) += 5.0f;  // outliers
-  for (auto loss : {Fitter::RobustLoss::kHuber, Fitter::RobustLoss::kCauchy}) {
-    Fitter::Options options = CeresOptions(30);
-    options.robust_loss = loss;
+  for (auto loss : {LatentProblem::RobustLoss::kHuber, LatentProblem::RobustLoss::kCauchy}) {
+    LatentProblem::Options problem;
+    problem.robust_loss = loss;
     VectorXd z;
-    const Fitter::Summary summary = Fitter(trunk, options).Fit(targets, &z);
+    const Fitter::Summary summary = FitFrame(trunk, CeresOptions(30), targets, &z, problem);
     ExpectFiniteAndUsable(summary, z);
   }
 }
 
-TEST(LatentFitterExtremes, BadInputThrowsQuotingTheShapes) {
+TEST(LatentFitterExtremes, BadWarmStartsAndProblemsOfAnotherTrunkThrow) {
   const SensorTrunk trunk = MakeTrunk();
   const Fitter fitter(trunk, Fitter::Options());
   VectorXd z;
-  TrunkTargets targets = Generate(trunk, TrueLatent(8));
-  targets.rows = 10;
+  const TrunkTargets targets = Generate(trunk, TrueLatent(8));
+  const LatentProblem problem(trunk, targets, {});
+  EXPECT_THROW(fitter.Fit(problem, VectorXd::Zero(3), &z), std::invalid_argument);
+  EXPECT_THROW(fitter.Fit(problem, VectorXd::Constant(8, NAN), &z), std::invalid_argument);
+  EXPECT_THROW(fitter.Fit(problem, nullptr), std::invalid_argument);
+  const SensorTrunk other = MakeTrunk(1, 32, /*latent_dim=*/6);
+  const TrunkTargets other_targets = Generate(other, TrueLatent(6));
   try {
-    fitter.Fit(targets, &z);
+    fitter.Fit(LatentProblem(other, other_targets, {}), &z);
     FAIL() << "expected a throw";
   } catch (const std::invalid_argument& e) {
-    EXPECT_NE(std::string(e.what()).find("200x1"), std::string::npos) << e.what();
-    EXPECT_NE(std::string(e.what()).find("320x1"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("6 entries"), std::string::npos) << e.what();
   }
-  targets = Generate(trunk, TrueLatent(8));
-  targets.values(3, 0) = std::numeric_limits<float>::quiet_NaN();  // on a valid pixel
-  EXPECT_THROW(fitter.Fit(targets, &z), std::invalid_argument);
-  targets = Generate(trunk, TrueLatent(8));
-  EXPECT_THROW(fitter.Fit(targets, VectorXd::Zero(3), &z), std::invalid_argument);
-  EXPECT_THROW(fitter.Fit(targets, VectorXd::Constant(8, NAN), &z), std::invalid_argument);
-  targets.weights.resize(5);
-  EXPECT_THROW(fitter.Fit(targets, &z), std::invalid_argument);
 }
 
 }  // namespace

@@ -1,0 +1,293 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// LatentProblem: the one definition of a frame's latent posterior U(z). Checked here:
+// U against its formula, grad U and H_GN against central differences (with and without a
+// robust loss), the Ceres view (1/2 ||r'||^2 + prior) against the samplers' view
+// (Evaluate), minibatches against the full gradient, the meta-SGD steps against
+// MetaSgd's own inner loop, the automatic sigma rule, pixel selection, and bad input.
+#include "estimation/fitting/latent_problem.h"
+
+#include <cmath>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "gtest/gtest.h"
+#include "models/trunk/meta_sgd.h"
+#include "tests/support/sampler_test_util.h"
+
+namespace tactfunc {
+namespace {
+
+using Eigen::MatrixXd;
+using Eigen::VectorXd;
+using RowMajor = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+
+constexpr int kRows = 6, kCols = 7;
+
+SensorTrunk Trunk() { return testing_util::MakeTinyTrunk(kRows, kCols, 16, 2, 4, 3); }
+const Eigen::Vector4d kTrue(0.3, -0.2, 0.1, 0.4);
+
+LatentProblem::Options DoubleOptions() {
+  LatentProblem::Options options;
+  options.precision = LatentProblem::Precision::kDouble;
+  return options;
+}
+
+// Central differences of U's gradient.
+VectorXd NumericGradient(const LatentProblem& problem, const VectorXd& z, double h = 1e-6) {
+  VectorXd g(z.size());
+  for (int k = 0; k < z.size(); ++k) {
+    VectorXd zp = z, zm = z;
+    zp[k] += h;
+    zm[k] -= h;
+    g[k] = (problem.Evaluate(zp) - problem.Evaluate(zm)) / (2 * h);
+  }
+  return g;
+}
+
+TEST(LatentProblemOptions, DefaultOptionsAreValid) {
+  std::string error;
+  EXPECT_TRUE(LatentProblem::Options().IsValid(&error)) << error;
+}
+
+TEST(LatentProblemOptions, BadOptionsNameTheFieldAndTheConstructorThrows) {
+  const SensorTrunk trunk = Trunk();
+  const TrunkTargets targets = testing_util::MakeTargets(trunk, kTrue, 0.0, 1);
+  const struct {
+    const char* field;
+    void (*spoil)(LatentProblem::Options*);
+  } cases[] = {
+      {"sigma", [](LatentProblem::Options* o) { o->sigma = -1; }},
+      {"sigma_z", [](LatentProblem::Options* o) { o->sigma_z = 0; }},
+      {"robust_loss_scale", [](LatentProblem::Options* o) { o->robust_loss_scale = NAN; }},
+      {"pixel_stride", [](LatentProblem::Options* o) { o->pixel_stride = 0; }},
+      {"max_pixels", [](LatentProblem::Options* o) { o->max_pixels = -1; }},
+  };
+  for (const auto& c : cases) {
+    LatentProblem::Options options;
+    c.spoil(&options);
+    std::string error;
+    EXPECT_FALSE(options.IsValid(&error)) << c.field;
+    EXPECT_NE(error.find(c.field), std::string::npos) << error;
+    EXPECT_THROW(LatentProblem(trunk, targets, options), std::invalid_argument) << c.field;
+  }
+}
+
+TEST(LatentProblem, AutomaticSigmaIsTheTrunksResidualSigmaElse001) {
+  SensorTrunk trunk = Trunk();
+  const TrunkTargets targets = testing_util::MakeTargets(trunk, kTrue, 0.0, 1);
+  EXPECT_EQ(LatentProblem(trunk, targets, {}).sigma(), 0.05);
+  trunk.residual_sigma = 0;
+  EXPECT_EQ(LatentProblem::AutomaticSigma(trunk), 0.01);
+  EXPECT_EQ(LatentProblem(trunk, targets, {}).sigma(), 0.01);
+  LatentProblem::Options options;
+  options.sigma = 0.2;
+  EXPECT_EQ(LatentProblem(trunk, targets, options).sigma(), 0.2);
+}
+
+TEST(LatentProblem, PotentialIsTheWeightedSumOfSquaresPlusPrior) {
+  const SensorTrunk trunk = Trunk();
+  TrunkTargets targets = testing_util::MakeTargets(trunk, kTrue, 0.05, 1);
+  targets.weights[5] = 0;
+  targets.values(5, 0) = NAN;  // an invalid pixel may hold NaN
+  targets.weights[6] = 0.5;
+  LatentProblem::Options options = DoubleOptions();
+  options.sigma = 0.1;
+  options.sigma_z = 2.0;
+  const LatentProblem problem(trunk, targets, options);
+  const VectorXd z = Eigen::Vector4d(0.1, 0.1, -0.1, 0.0);
+  const MatrixXd y = trunk.siren.Forward<double>(trunk.siren.Grid<double>(kRows, kCols), z);
+  double expected = z.squaredNorm() / (2 * 4.0);
+  for (int j = 0; j < kRows * kCols; ++j) {
+    if (targets.weights[j] > 0) {
+      expected += targets.weights[j] * std::pow(y(j, 0) - targets.values(j, 0), 2) / (2 * 0.01);
+    }
+  }
+  EXPECT_NEAR(problem.Evaluate(z), expected, 1e-9 * expected);
+  EXPECT_EQ(problem.num_valid_pixels(), kRows * kCols - 1);
+  EXPECT_EQ(problem.num_pixels(), kRows * kCols - 1);
+}
+
+// What Ceres minimises (1/2 ||r'||^2 + 1/2 ||z / sigma_z||^2) is the U the samplers see,
+// with and without a robust loss.
+TEST(LatentProblem, CeresViewAndSamplerViewAreTheSameFunction) {
+  const SensorTrunk trunk = Trunk();
+  TrunkTargets targets = testing_util::MakeTargets(trunk, kTrue, 0.05, 2);
+  for (int j = 0; j < kRows * kCols; j += 5) targets.values(j, 0) += 1.0f;  // outliers
+  for (auto loss : {LatentProblem::RobustLoss::kNone, LatentProblem::RobustLoss::kHuber,
+                    LatentProblem::RobustLoss::kCauchy}) {
+    LatentProblem::Options options = DoubleOptions();
+    options.robust_loss = loss;
+    options.sigma_z = 0.7;
+    const LatentProblem problem(trunk, targets, options);
+    const VectorXd z = Eigen::Vector4d(0.2, -0.1, 0.0, 0.3);
+    VectorXd r(problem.num_residuals());
+    ASSERT_TRUE(problem.ResidualsAndJacobian(z.data(), r.data(), nullptr));
+    const double ceres_view = 0.5 * r.squaredNorm() + 0.5 * (z / 0.7).squaredNorm();
+    EXPECT_NEAR(problem.Evaluate(z), ceres_view, 1e-10 * ceres_view) << ToString(loss);
+  }
+}
+
+TEST(LatentProblem, GradientMatchesCentralDifferencesWithAndWithoutRobustLoss) {
+  const SensorTrunk trunk = Trunk();
+  TrunkTargets targets = testing_util::MakeTargets(trunk, kTrue, 0.05, 1);
+  for (int j = 0; j < kRows * kCols; j += 6) targets.values(j, 0) -= 0.8f;  // outliers
+  for (auto loss : {LatentProblem::RobustLoss::kNone, LatentProblem::RobustLoss::kHuber,
+                    LatentProblem::RobustLoss::kCauchy}) {
+    LatentProblem::Options options = DoubleOptions();
+    options.robust_loss = loss;
+    const LatentProblem problem(trunk, targets, options);
+    for (const Eigen::Vector4d& z :
+         {Eigen::Vector4d::Zero().eval(), kTrue, Eigen::Vector4d(1e-6, -1e-6, 0, 1e-6)}) {
+      VectorXd g;
+      problem.Evaluate(z, &g);
+      const VectorXd numeric = NumericGradient(problem, z);
+      for (int k = 0; k < 4; ++k) {
+        EXPECT_NEAR(g[k], numeric[k], 1e-6 * (1 + std::abs(numeric[k])))
+            << ToString(loss) << " k " << k;
+      }
+    }
+  }
+}
+
+TEST(LatentProblem, RobustJacobianMatchesCentralDifferencesOfTheResiduals) {
+  const SensorTrunk trunk = Trunk();
+  TrunkTargets targets = testing_util::MakeTargets(trunk, kTrue, 0.05, 4);
+  for (int j = 0; j < kRows * kCols; j += 4) targets.values(j, 0) += 0.5f;
+  LatentProblem::Options options = DoubleOptions();
+  options.robust_loss = LatentProblem::RobustLoss::kCauchy;
+  options.robust_loss_scale = 2.385;
+  const LatentProblem problem(trunk, targets, options);
+  const int n = problem.num_residuals();
+  const VectorXd z = Eigen::Vector4d(0.1, 0.3, -0.2, 0.2);
+  VectorXd r(n);
+  RowMajor J(n, 4);
+  ASSERT_TRUE(problem.ResidualsAndJacobian(z.data(), r.data(), J.data()));
+  const double h = 1e-6;
+  for (int k = 0; k < 4; ++k) {
+    VectorXd zp = z, zm = z, rp(n), rm(n);
+    zp[k] += h;
+    zm[k] -= h;
+    problem.ResidualsAndJacobian(zp.data(), rp.data(), nullptr);
+    problem.ResidualsAndJacobian(zm.data(), rm.data(), nullptr);
+    const VectorXd numeric = (rp - rm) / (2 * h);
+    EXPECT_LE((J.col(k) - numeric).cwiseAbs().maxCoeff(), 1e-5 * (1 + numeric.cwiseAbs().maxCoeff()))
+        << "k " << k;
+  }
+}
+
+TEST(LatentProblem, MinibatchesOfAPartitionAverageToTheFullGradient) {
+  const SensorTrunk trunk = Trunk();
+  const TrunkTargets targets = testing_util::MakeTargets(trunk, kTrue, 0.05, 1);
+  for (auto loss : {LatentProblem::RobustLoss::kNone, LatentProblem::RobustLoss::kHuber}) {
+    LatentProblem::Options options = DoubleOptions();
+    options.robust_loss = loss;
+    options.robust_loss_scale = 0.5;  // some residuals in Huber's linear part
+    const LatentProblem problem(trunk, targets, options);
+    const VectorXd z = Eigen::Vector4d(0.1, 0.2, 0.3, 0.4);
+    VectorXd full, g, sum = VectorXd::Zero(4);
+    const double u = problem.Evaluate(z, &full);
+    double u_sum = 0;
+    for (int part = 0; part < 6; ++part) {  // 6 batches of 7 of the 42 pixels
+      std::vector<int> batch;
+      for (int i = part; i < kRows * kCols; i += 6) batch.push_back(i);
+      u_sum += problem.EvaluateMinibatch(z, batch, &g) / 6;
+      sum += g / 6;
+    }
+    EXPECT_NEAR(u_sum, u, 1e-9 * u) << ToString(loss);
+    EXPECT_TRUE(sum.isApprox(full, 1e-9)) << ToString(loss);
+  }
+  const LatentProblem problem(trunk, targets, {});
+  VectorXd g;
+  EXPECT_THROW(problem.EvaluateMinibatch(VectorXd::Zero(4), {42}, &g), std::invalid_argument);
+}
+
+TEST(LatentProblem, GaussNewtonHessianIsTheHessianAtAnExactFit) {
+  // With noise-free targets the residuals vanish at the true latent, where J^T J / sigma^2
+  // + I / sigma_z^2 is the exact Hessian of U: compare with differences of the gradient.
+  const SensorTrunk trunk = Trunk();
+  const TrunkTargets targets = testing_util::MakeTargets(trunk, kTrue, 0.0, 1);
+  for (auto loss : {LatentProblem::RobustLoss::kNone, LatentProblem::RobustLoss::kHuber}) {
+    for (auto precision : {LatentProblem::Precision::kDouble, LatentProblem::Precision::kFloat}) {
+      LatentProblem::Options options;
+      options.precision = precision;
+      options.robust_loss = loss;
+      const LatentProblem problem(trunk, targets, options);
+      MatrixXd H;
+      problem.GaussNewtonHessian(kTrue, &H);
+      EXPECT_TRUE(H.isApprox(H.transpose(), 1e-12));
+      if (precision == LatentProblem::Precision::kFloat) continue;
+      MatrixXd numeric(4, 4);
+      for (int k = 0; k < 4; ++k) {
+        const double h = 1e-5;
+        VectorXd zp = kTrue, zm = kTrue, gp, gm;
+        zp[k] += h;
+        zm[k] -= h;
+        problem.Evaluate(zp, &gp);
+        problem.Evaluate(zm, &gm);
+        numeric.col(k) = (gp - gm) / (2 * h);
+      }
+      EXPECT_TRUE(H.isApprox(numeric, 1e-5)) << ToString(loss) << "\n" << H << "\n\n" << numeric;
+    }
+  }
+}
+
+TEST(LatentProblem, MetaSgdStepsAreTheTrunksInnerLoopFromAnyStart) {
+  const SensorTrunk trunk = Trunk();
+  const TrunkTargets targets = testing_util::MakeTargets(trunk, kTrue, 0.02, 5);
+  const LatentProblem problem(trunk, targets, DoubleOptions());
+  const MatrixXd grid = trunk.siren.Grid<double>(kRows, kCols);
+  const VectorXd expected = MetaSgd(trunk.meta_sgd).FitLatent<double>(
+      trunk.siren, grid, targets.values.cast<double>(), targets.weights.cast<double>(),
+      trunk.alpha);
+  EXPECT_LE((problem.MetaSgdSteps(VectorXd::Zero(4), 3) - expected).cwiseAbs().maxCoeff(), 1e-12);
+  // Three steps are one step, then two more from where it ended.
+  const VectorXd one = problem.MetaSgdSteps(VectorXd::Zero(4), 1);
+  EXPECT_LE((problem.MetaSgdSteps(one, 2) - expected).cwiseAbs().maxCoeff(), 1e-12);
+  EXPECT_EQ(problem.MetaSgdSteps(one, 0), one);
+}
+
+TEST(LatentProblem, SelectsEveryStrideThPixelThenAtMostMaxPixels) {
+  const SensorTrunk trunk = Trunk();
+  TrunkTargets targets = testing_util::MakeTargets(trunk, kTrue, 0.0, 1);
+  targets.weights[0] = 0;  // 41 valid pixels
+  LatentProblem::Options options;
+  options.pixel_stride = 2;
+  EXPECT_EQ(LatentProblem(trunk, targets, options).num_pixels(), 21);
+  options.max_pixels = 10;
+  const LatentProblem problem(trunk, targets, options);
+  EXPECT_EQ(problem.num_pixels(), 10);
+  EXPECT_EQ(problem.num_valid_pixels(), 41);
+  EXPECT_EQ(problem.num_residuals(), 10);
+  // Psnr is over all valid pixels: the true latent reproduces every one.
+  EXPECT_GT(problem.Psnr(kTrue), 100.0);
+}
+
+TEST(LatentProblem, BadInputThrowsQuotingTheShapes) {
+  const SensorTrunk trunk = Trunk();
+  TrunkTargets targets = testing_util::MakeTargets(trunk, kTrue, 0.0, 1);
+  targets.rows = 5;
+  try {
+    LatentProblem(trunk, targets, {});
+    FAIL() << "expected a throw";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("35x1"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("42x1"), std::string::npos) << e.what();
+  }
+  targets = testing_util::MakeTargets(trunk, kTrue, 0.0, 1);
+  targets.values(3, 0) = NAN;  // on a valid pixel
+  EXPECT_THROW(LatentProblem(trunk, targets, {}), std::invalid_argument);
+  targets = testing_util::MakeTargets(trunk, kTrue, 0.0, 1);
+  targets.weights[2] = -1;
+  EXPECT_THROW(LatentProblem(trunk, targets, {}), std::invalid_argument);
+  targets.weights.resize(10);
+  EXPECT_THROW(LatentProblem(trunk, targets, {}), std::invalid_argument);
+  targets = testing_util::MakeTargets(trunk, kTrue, 0.0, 1);
+  const LatentProblem problem(trunk, targets, {});
+  EXPECT_THROW(problem.Evaluate(VectorXd::Zero(3)), std::invalid_argument);
+  EXPECT_THROW(problem.MetaSgdSteps(VectorXd::Zero(5), 1), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace tactfunc
