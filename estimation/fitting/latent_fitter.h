@@ -138,7 +138,7 @@ class LatentFitter {
     int knn_k = 8;
     // Passed to ceres::Solve, except max_num_iterations (set from ceres:N). Defaults set
     // here: LEVENBERG_MARQUARDT (trust_region_strategy_type = DOGLEG for dogleg),
-    // DENSE_NORMAL_CHOLESKY (one d-dimensional block; faster than DENSE_QR, BUILD-NOTES),
+    // DENSE_NORMAL_CHOLESKY (one d-dimensional block; faster than DENSE_QR, docs/BUILD.md),
     // num_threads 1 (parallelise over frames), logging SILENT, function_tolerance 1e-6,
     // gradient_tolerance 1e-10, parameter_tolerance 1e-8 (Ceres' defaults).
     ceres::Solver::Options solver_options;
