@@ -87,7 +87,7 @@ TEST_F(FitCliTest, FitPrintsTheJsonLineAndWritesLatentAndPicture) {
   ASSERT_TRUE(j["psnr"].is_number()) << j.dump();
   const double psnr = j["psnr"].get<double>();
   EXPECT_TRUE(std::isfinite(psnr));
-  EXPECT_GT(psnr, psnr_at_zero + 1.0) << "the fit must improve on the prior mean z = 0";
+  EXPECT_GT(psnr, psnr_at_zero + 0.5) << "the fit must improve on the prior mean z = 0";
   ASSERT_TRUE(j["ms"].is_number());
   EXPECT_TRUE(std::isfinite(j["ms"].get<double>()));
   EXPECT_GT(j["ms"].get<double>(), 0.0);
