@@ -27,7 +27,7 @@ namespace {
 
 // Micrometres per metre of the depth encoding.
 constexpr double kMicrometresPerMetre = 1e6;
-// 0 marks invalid pixels and 65535 is kept out of use (the brief's bound: a depth of
+// 0 marks invalid pixels and 65535 is kept out of use (the format's bound: a depth of
 // 65.535 mm or more is an error), so valid codes are [1, 65534].
 constexpr double kMaxDepthCode = 65534.0;
 

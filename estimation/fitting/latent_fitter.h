@@ -103,7 +103,7 @@ class LatentFitter {
     int knn_k = 8;
     // Passed to ceres::Solve, except max_num_iterations (set from ceres:N). Defaults set
     // here: LEVENBERG_MARQUARDT (trust_region_strategy_type = DOGLEG for dogleg),
-    // DENSE_NORMAL_CHOLESKY (one d-dimensional block; faster than DENSE_QR, docs/FITTING.md),
+    // DENSE_NORMAL_CHOLESKY (one d-dimensional block; faster than DENSE_QR, docs/BUILD.md),
     // num_threads 1 (parallelise over frames), logging SILENT, function_tolerance 1e-6,
     // gradient_tolerance 1e-10, parameter_tolerance 1e-8 (Ceres' defaults).
     ceres::Solver::Options solver_options;
@@ -135,7 +135,7 @@ class LatentFitter {
     double initial_cost = 0;
     double final_cost = 0;
     // PSNR (estimation/data/trunk_targets.h, THE definition) in dB of f_theta(.; z) over all
-    // valid pixels of the frame (evaluated in `precision`). +inf for an exact fit; 0 when
+    // valid pixels of the frame (evaluated in the problem's precision). +inf for an exact fit; 0 when
     // the frame has no valid pixel.
     double psnr = 0;
     int iterations = 0;  // meta-SGD steps + Ceres iterations

@@ -29,10 +29,10 @@
 // required) are taken from it and not encoded again; since encoding is deterministic
 // the result equals an uninterrupted run.
 //
-// Errors (STYLE.md's three tiers): bad Options -> std::invalid_argument from the
-// constructor; an interrupted run -> Summary::termination == kInterrupted; bad input
-// (no trunk for a requested sensor, frames whose channels do not match the trunk, a
-// corrupt frame file, a checkpoint of another model) -> an exception naming it.
+// Errors (docs/ARCHITECTURE.md's three tiers): bad Options -> std::invalid_argument
+// from the constructor; an interrupted run -> Summary::termination == kInterrupted; bad
+// input (no trunk for a requested sensor, frames whose channels do not match the trunk,
+// a corrupt frame file, a checkpoint of another model) -> an exception naming it.
 //
 // Thread safety: Encode and EncodeTargets are const and may run concurrently; the
 // model must outlive the encoder and not change while it is used.

@@ -140,8 +140,8 @@ class FlannKnnIndex : public KnnIndex {
   // Build parameters (faiss: the index's constructor arguments).
   struct Options {
     Algorithm algorithm = Algorithm::kKdForest;
-    // kd-forest: number of randomized trees. >= 1. FLANN's default is 4; BUILD-NOTES
-    // measured 4 trees on 30,000 x 512 (0.27 s, 7.5 MB).
+    // kd-forest: number of randomized trees. >= 1. FLANN's default is 4; 4 trees
+    // on 30,000 x 512 build in 0.27 s and take 7.5 MB (docs/BUILD.md).
     int trees = 4;
     // k-means: branching factor of the tree. >= 2. FLANN's default 32.
     int branching = 32;
@@ -172,9 +172,9 @@ class FlannKnnIndex : public KnnIndex {
   struct SearchParams {
     // Leaves (kd-forest) or points (k-means) examined per query; -1 = all, which runs
     // the exact search of BruteForceKnnIndex instead (FLANN's own exact kd-forest
-    // search prints a warning per query). >= 1 or -1. BUILD-NOTES: recall@8 0.35 / 0.49 / 0.65 at 64 /
-    // 128 / 256 checks on 512-d latents near a 16-d subspace; re-measured for d = 64
-    // in docs/FITTING.md. An autotuned index ignores this and uses the checks it tuned.
+    // search prints a warning per query). >= 1 or -1. recall@8 0.35 / 0.49 / 0.65 at
+    // 64 / 128 / 256 checks on 512-d latents near a 16-d subspace (docs/BUILD.md; d =
+    // 64: docs/FITTING.md). An autotuned index ignores this and uses the checks it tuned.
     int checks = 256;
     // Approximation slack: a branch is pruned if it cannot hold a point closer than
     // (1 + eps) times the current k-th distance. >= 0. 0 is FLANN's default.

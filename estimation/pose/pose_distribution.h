@@ -71,11 +71,11 @@
 // only. n = 1: nothing to fold; n = 0 (hemisphere): yaw is unobservable and is set to
 // 0, so the yaw row and column of the covariance are 0 and mean nothing.
 //
-// Errors (the three tiers of STYLE.md): bad options are reported by IsValid() and
-// thrown as std::invalid_argument by the functions taking them; bad inputs (no
-// samples, NaN or infinite samples or weights, negative weights, all weights zero, a
-// p outside (0, 1]) throw std::invalid_argument saying what was expected and found; a
-// Mean() that does not converge is reported in its MeanSummary, never thrown.
+// Errors (the three tiers of docs/ARCHITECTURE.md): bad options are reported by
+// IsValid() and thrown as std::invalid_argument by the functions taking them; bad
+// inputs (no samples, NaN or infinite samples or weights, negative weights, all weights
+// zero, a p outside (0, 1]) throw std::invalid_argument saying what was expected and
+// found; a Mean() that does not converge is reported in its MeanSummary, never thrown.
 #ifndef TACTFUNC_ESTIMATION_POSE_POSE_DISTRIBUTION_H_
 #define TACTFUNC_ESTIMATION_POSE_POSE_DISTRIBUTION_H_
 

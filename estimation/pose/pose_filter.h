@@ -73,12 +73,12 @@
 // every platform); results are a deterministic function of the seed and the sequence of
 // calls.
 //
-// Errors (the three tiers of STYLE.md): bad options are reported by Options::IsValid()
-// and thrown as std::invalid_argument by the constructor; bad inputs (a measurement with
-// no samples, e.g. a moved-from PoseDistribution; a non-finite or non-positive-definite
-// initial covariance; a non-finite or negative dt) throw std::invalid_argument saying what
-// was expected and found; an incompatible measurement is an outcome (kRejected), never
-// thrown.
+// Errors (the three tiers of docs/ARCHITECTURE.md): bad options are reported by
+// Options::IsValid() and thrown as std::invalid_argument by the constructor; bad inputs
+// (a measurement with no samples, e.g. a moved-from PoseDistribution; a non-finite or
+// non-positive-definite initial covariance; a non-finite or negative dt) throw
+// std::invalid_argument saying what was expected and found; an incompatible measurement
+// is an outcome (kRejected), never thrown.
 //
 // Thread safety: none; one filter per thread (the const members may run concurrently).
 #ifndef TACTFUNC_ESTIMATION_POSE_POSE_FILTER_H_

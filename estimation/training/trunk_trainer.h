@@ -136,9 +136,9 @@ class TrunkTrainer {
     double alpha_init_min = 1.0;
     double alpha_init_max = 1.0;
     // Upper clip bound of the meta-SGD rates: after each Adam step alpha is clipped to
-    // [0, alpha_max]. > 0, and >= alpha_init_max. Default 1: the [0, 1] of the issue and
-    // of functa. The rates sit at 1 in every run, so the bound binds; lifting it
-    // (with alpha_init above 1) measured +0.4 dB on the GelSlim at 2000 steps
+    // [0, alpha_max]. > 0, and >= alpha_init_max. Default 1: the [0, 1] of functa. The
+    // rates sit at 1 in every run, so the bound binds; lifting it (with alpha_init
+    // above 1) measured +0.4 dB on the GelSlim at 2000 steps
     // (docs/RESULTS_RECONSTRUCTION.md), an experiment knob, not the default.
     double alpha_max = 1.0;
 

@@ -5,8 +5,8 @@
 // A tactile frame is a small dense grid of floats: a Soft Bubble depth image (one
 // channel, metres, NaN where the time-of-flight camera dropped out) or a GelSlim RGB
 // image (three channels, intensities in [0, 1]). Keeping OpenCV out of the public
-// headers (see STYLE.md) means the library passes this plain struct around; the .cc
-// files wrap `data` in a cv::Mat header without copying when they need OpenCV.
+// headers (docs/ARCHITECTURE.md) means the library passes this plain struct around;
+// the .cc files wrap `data` in a cv::Mat header without copying when they need OpenCV.
 //
 // Layout: row-major, channels interleaved ("HWC"):
 //   data[(row * cols + col) * channels + channel],  size rows * cols * channels.

@@ -127,7 +127,7 @@ class LatentModulatedSiren {
   using VectorX = Eigen::Matrix<Scalar, Eigen::Dynamic, 1>;
 
   struct Options {
-    // Number of units per hidden layer. >= 1. 128 is the trunk BUILD-NOTES times for
+    // Number of units per hidden layer. >= 1. 128 is the trunk docs/BUILD.md times for
     // 32x32 frames; larger frames may need more.
     int width = 128;
     // Number of sine layers L (each one shifted by its block of gamma). >= 1.

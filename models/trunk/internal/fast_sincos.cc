@@ -1,7 +1,7 @@
 // Copyright 2026 The tactfunc Authors.
 //
 // Compiled with -ffast-math (models/CMakeLists.txt). Keep sin and cos in separate
-// loops: GCC 12 stops vectorising a loop that calls both (BUILD-NOTES).
+// loops: GCC 12 stops vectorising a loop that calls both (docs/BUILD.md).
 #include "models/trunk/internal/fast_sincos.h"
 
 #include <cmath>

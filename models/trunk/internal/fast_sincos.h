@@ -3,7 +3,7 @@
 // Vectorised sin / cos for the SIREN's batched passes. Eigen 3.4 evaluates double sin
 // and cos one element at a time; fast_sincos.cc is compiled with -ffast-math (see
 // models/CMakeLists.txt), under which glibc declares SIMD variants of sin/cos
-// (libmvec, <= 4 ulp) and GCC vectorises the plain loops below (BUILD-NOTES: about
+// (libmvec, <= 4 ulp) and GCC vectorises the plain loops below (docs/BUILD.md: about
 // 25x faster for double). That TU includes only <cmath> so no inline function built
 // with -ffast-math can be merged into the rest of the program (ODR).
 #ifndef TACTFUNC_MODELS_TRUNK_INTERNAL_FAST_SINCOS_H_

@@ -19,6 +19,7 @@ namespace tactfunc {
 namespace {
 
 using ::testing::HasSubstr;
+using testing_util::ListDir;
 using testing_util::TestDir;
 using testing_util::WriteText;
 
@@ -43,15 +44,6 @@ Image GridRgb(int rows, int cols, int channels, unsigned seed) {
   Image image(rows, cols, channels);
   for (float& v : image.data) v = code(rng) / 255.0f;
   return image;
-}
-
-std::vector<std::string> ListDir(const std::string& dir) {
-  std::vector<std::string> names;
-  for (const auto& entry : std::filesystem::directory_iterator(dir)) {
-    names.push_back(entry.path().filename().string());
-  }
-  std::sort(names.begin(), names.end());
-  return names;
 }
 
 TEST(PixelEncoding, NamesRoundTrip) {

@@ -136,41 +136,6 @@ TEST(RepresentationSize, CompressionRatioArithmetic) {
                std::invalid_argument);
 }
 
-TEST(PsnrSourcePeak, DiffersFromPsnrOnlyByThePeak) {
-  // A 2-pixel target of range 0.5 whose source frame had range 2: the same MSE, a
-  // peak four times larger, so 20 log10(4) = 12.04 dB more.
-  TrunkTargets t;
-  t.values = Eigen::MatrixXf(2, 1);
-  t.values << 0.0f, 0.5f;
-  t.weights = Eigen::VectorXf::Ones(2);
-  t.source_range = 2.0;
-  Eigen::MatrixXf p(2, 1);
-  p << 0.05f, 0.45f;
-  EXPECT_NEAR(Psnr(p, t), 10 * std::log10(0.25 / 0.0025), 1e-5);
-  EXPECT_NEAR(PsnrSourcePeak(p, t) - Psnr(p, t), 20 * std::log10(4.0), 1e-9);
-  // No recorded source range (hand-made targets) falls back to a peak of 1.
-  t.source_range = 0;
-  EXPECT_NEAR(PsnrSourcePeak(p, t), 10 * std::log10(1 / 0.0025), 1e-5);
-  EXPECT_TRUE(std::isinf(PsnrSourcePeak(t.values, t)));
-}
-
-TEST(Rmse, IsTheRootMeanSquareOverValidPixelsAndPsnrFollowsFromItAndTheRange) {
-  // Three pixels, the middle one invalid (its huge error must not count).
-  TrunkTargets t;
-  t.values = Eigen::MatrixXf(3, 1);
-  t.values << -0.2f, 9.0f, 0.6f;
-  t.weights = Eigen::Vector3f(1, 0, 1);
-  Eigen::MatrixXf p(3, 1);
-  p << -0.1f, -50.0f, 0.4f;
-  EXPECT_NEAR(TargetRange(t), 0.8, 1e-6);
-  EXPECT_NEAR(Rmse(p, t), std::sqrt((0.01 + 0.04) / 2), 1e-6);
-  EXPECT_NEAR(Psnr(p, t), 20 * std::log10(TargetRange(t) / Rmse(p, t)), 1e-5);
-  // No valid pixel: no range, no error.
-  t.weights.setZero();
-  EXPECT_EQ(TargetRange(t), 0.0);
-  EXPECT_TRUE(std::isnan(Rmse(p, t)));
-}
-
 // ---- Evaluation on a dataset ------------------------------------------------------------
 
 struct Encoded {
