@@ -57,7 +57,7 @@
 //          half-chain means, W the mean half-chain variance. ~1 when converged; > 1.01
 //          (Vehtari) or > 1.1 (BDA3) says run longer. Not rank-normalised.
 //
-// Outcomes (STYLE's tier 2: never thrown): a chain whose state or U becomes non-finite,
+// Outcomes (tier 2 of docs/ARCHITECTURE.md, Conventions: never thrown): a chain whose state or U becomes non-finite,
 // or whose U rises more than divergence_potential_increase * d above its start, has
 // DIVERGED: it stops and its samples are dropped; the run ends kDiverged (samples from
 // the other chains, possibly none). If the diffusion a run could achieve,
