@@ -32,8 +32,8 @@ nlohmann::json MachineDescription();
 
 // Suites.
 void RegisterSynthBenchmarks();
-// `bench fit`, `bench kernels` and `bench knn` (apps/bench_fit.cc): adds the three
-// subcommands to `bench`.
+// `bench fit`, `bench kernels` and `bench knn` (apps/bench/): adds the three subcommands
+// to `bench`.
 void RegisterFitBenchmarks(CLI::App* bench, CommandBody* selected);
 // `bench posterior` (apps/bench_posterior.cc): calibration and speed of the pose posteriors.
 void RegisterPosteriorBenchmark(CLI::App* bench, CommandBody* selected);

@@ -1,7 +1,7 @@
 // Copyright 2026 The tactfunc Authors.
 //
 // tactfunc bench posterior: are the pose posteriors calibrated, how accurate are their
-// means, and how long does one take (issue 5, section 4)?
+// means, and how long does one take?
 //
 //   tactfunc bench posterior --model M.tfm --pose-model P.tpm --functaset F.tfs --data D
 //       [--sensor bubble] [--frames 60] [--samplers sgld,laplace,knn] [--json]

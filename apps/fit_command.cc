@@ -74,85 +74,42 @@ struct FitFlags {
 
 // ---- The k-NN index beside the functaset -------------------------------------------------
 
-std::unique_ptr<KnnIndex> NewIndex(const std::string& type, int dim, int checks) {
-  if (type == "brute_force") return std::make_unique<BruteForceKnnIndex>(dim);
-  FlannKnnIndex::Options options;
-  if (!FlannAlgorithmFromString(type, &options.algorithm) ||
-      options.algorithm == FlannKnnIndex::Algorithm::kAutotuned) {
+// The index options of --knn-index and --knn-checks (fit's FLANN build parameters are
+// the defaults).
+KnnIndexOptions IndexOptions(const FitFlags& flags) {
+  KnnIndexOptions options;
+  FlannKnnIndex::Algorithm algorithm;
+  if (flags.knn_index != "brute_force" &&
+      (!FlannAlgorithmFromString(flags.knn_index, &algorithm) ||
+       algorithm == FlannKnnIndex::Algorithm::kAutotuned)) {
     // Autotuning takes minutes and tunes recall@1 (docs/FITTING.md): not offered here.
     throw UsageError("--knn-index: expected brute_force, kd_forest, kmeans or linear, got '" +
-                     type + "'");
+                     flags.knn_index + "'");
   }
-  FlannKnnIndex::SearchParams search;
-  search.checks = checks;
-  return std::make_unique<FlannKnnIndex>(dim, options, search);
-}
-
-// Why an index loaded from a file cannot serve these latents with these parameters, or
-// "" if it can.
-std::string WhyStale(const KnnIndex& index, const Functaset::LatentMatrix& latents,
-                     const std::string& type) {
-  if (index.dim() != latents.cols() || index.size() != latents.rows()) {
-    return "it holds " + std::to_string(index.size()) + " x " + std::to_string(index.dim()) +
-           " vectors, the functaset " + std::to_string(latents.rows()) + " x " +
-           std::to_string(latents.cols());
-  }
-  const std::size_t bytes = static_cast<std::size_t>(latents.size()) * sizeof(float);
-  if (Crc32(index.data(), bytes) != Crc32(latents.data(), bytes)) {
-    return "its vectors differ from the functaset's latents (CRC-32)";
-  }
-  const auto* flann = dynamic_cast<const FlannKnnIndex*>(&index);
-  const std::string found = flann != nullptr ? ToString(flann->options().algorithm) : "brute_force";
-  if (found != type) return "it is a " + found + " index, " + type + " was asked for";
-  if (flann != nullptr) {
-    const FlannKnnIndex::Options defaults;
-    const FlannKnnIndex::Options& o = flann->options();
-    if (o.trees != defaults.trees || o.branching != defaults.branching ||
-        o.kmeans_iterations != defaults.kmeans_iterations || o.cb_index != defaults.cb_index ||
-        o.seed != defaults.seed) {
-      return "it was built with other parameters (" + index.Describe() + ")";
-    }
-  }
-  return "";
+  options.type = flags.knn_index;
+  options.search.checks = flags.knn_checks;
+  return options;
 }
 
 // Loads "<functaset>.<sensor>.knn" if it is current, else builds the index and saves it
-// there atomically. Prints what it did to stderr.
+// there atomically (LoadOrBuildKnnIndex). Prints what it did to stderr.
 std::unique_ptr<KnnIndex> LoadOrBuildIndex(const std::string& functaset_path, SensorKind sensor,
                                            const Functaset::LatentMatrix& latents,
                                            const FitFlags& flags, std::string* index_path,
                                            bool* rebuilt) {
   *index_path = functaset_path + "." + ToString(sensor) + ".knn";
-  std::string why = "it does not exist";
-  if (fs::exists(*index_path)) {
-    try {
-      std::unique_ptr<KnnIndex> index = KnnIndex::Load(*index_path);
-      why = WhyStale(*index, latents, flags.knn_index);
-      if (why.empty()) {
-        if (auto* flann = dynamic_cast<FlannKnnIndex*>(index.get())) {
-          FlannKnnIndex::SearchParams search = flann->search_params();
-          search.checks = flags.knn_checks;
-          flann->set_search_params(search);
-        }
-        *rebuilt = false;
-        return index;
-      }
-    } catch (const std::exception& e) {
-      why = std::string("it cannot be read (") + e.what() + ")";
-    }
-  }
+  KnnIndexCacheSummary summary;
   std::unique_ptr<KnnIndex> index =
-      NewIndex(flags.knn_index, static_cast<int>(latents.cols()), flags.knn_checks);
-  index->Add(latents.data(), latents.rows());
-  try {
-    index->Save(*index_path);  // atomic (models/core/atomic_file.h)
-    std::cerr << "fit: note: built the k-NN index " << *index_path << " (" << why << ")\n";
-  } catch (const std::exception& e) {
+      LoadOrBuildKnnIndex(*index_path, latents, IndexOptions(flags), &summary);
+  if (summary.rebuilt && summary.save_error.empty()) {
+    std::cerr << "fit: note: built the k-NN index " << *index_path << " ("
+              << summary.why_rebuilt << ")\n";
+  } else if (summary.rebuilt) {
     // A read-only functaset folder must not stop the fit: the index is then used unsaved.
-    std::cerr << "fit: warning: could not save the k-NN index " << *index_path << ": " << e.what()
-              << "\n";
+    std::cerr << "fit: warning: could not save the k-NN index " << *index_path << ": "
+              << summary.save_error << "\n";
   }
-  *rebuilt = true;
+  *rebuilt = summary.rebuilt;
   return index;
 }
 

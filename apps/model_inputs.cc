@@ -11,7 +11,7 @@
 #include "apps/command.h"
 #include "estimation/data/image_io.h"
 #include "models/simulator/tool.h"
-#include "nlohmann/json.hpp"
+#include "models/pose/pose_model_provenance.h"
 
 namespace tactfunc::apps {
 
@@ -54,18 +54,6 @@ bool ParseSensorFlag(const std::string& text, SensorKind* sensor) {
   return true;
 }
 
-int SymmetryOrderOfTool(const std::string& name, bool* known) {
-  if (known != nullptr) *known = false;
-  if (name.empty()) return 1;
-  try {
-    const int n = GetTool(name).symmetry_order();
-    if (known != nullptr) *known = true;
-    return n;
-  } catch (const std::invalid_argument&) {
-    return 1;
-  }
-}
-
 double DatasetPixelPitch(const std::string& frame_path, SensorKind sensor) {
   std::error_code ec;
   const fs::path root = fs::absolute(frame_path, ec).parent_path().parent_path();
@@ -104,8 +92,7 @@ FunctasetKnn MakeFunctasetKnn(const Functaset& functaset, SensorKind sensor, boo
       std::min<int>(static_cast<int>(poses.size()), std::max(options.k, options.search_k) + unlabelled);
   knn_options.search_k = std::max(knn_options.search_k, knn_options.k);
   FunctasetKnn knn;
-  knn.index = std::make_unique<BruteForceKnnIndex>(static_cast<int>(latents.cols()));
-  knn.index->Add(latents.data(), latents.rows());
+  knn.index = BuildKnnIndex(latents, KnnIndexOptions());  // exact
   knn.posterior = std::make_unique<KnnPosterior>(*knn.index, std::move(poses), knn_options);
   knn.size = static_cast<int>(latents.rows());
   return knn;
@@ -121,24 +108,25 @@ PoseMlp LoadPoseModelFor(const std::string& path, const FunctaModel& model, Sens
                        "-dimensional latents but the " + ToString(sensor) + " trunk of --model '" +
                        model_path + "' has latent dimension " + std::to_string(latent_dim));
   }
-  const nlohmann::json info = nlohmann::json::parse(pose.info_json(), nullptr, false);
-  if (info.is_object() && info.contains("sensor") && info["sensor"].is_string() &&
-      info["sensor"].get<std::string>() != ToString(sensor)) {
-    throw DatasetError("--pose-model '" + path + "' was trained on " +
-                       info["sensor"].get<std::string>() + " latents, but the frame is " +
-                       ToString(sensor) + " (give --sensor or the matching pose model)");
+  PoseModelProvenance provenance;
+  try {
+    provenance = PoseModelProvenance::FromJson(pose.info_json(), path);
+  } catch (const std::invalid_argument& e) {
+    throw DatasetError(std::string("--pose-model: ") + e.what());
   }
-  if (info.is_object() && info.contains("model_checksum") &&
-      info["model_checksum"].is_number_unsigned() &&
-      info["model_checksum"].get<std::uint32_t>() != model.checksum()) {
+  if (!provenance.sensor.empty() && provenance.sensor != ToString(sensor)) {
+    throw DatasetError("--pose-model '" + path + "' was trained on " + provenance.sensor +
+                       " latents, but the frame is " + ToString(sensor) +
+                       " (give --sensor or the matching pose model)");
+  }
+  if (provenance.model_checksum && *provenance.model_checksum != model.checksum()) {
     char buffer[128];
     std::snprintf(buffer, sizeof(buffer), "0x%08x, but --model has 0x%08x",
-                  info["model_checksum"].get<std::uint32_t>(), model.checksum());
+                  *provenance.model_checksum, model.checksum());
     throw DatasetError("--pose-model '" + path + "' was trained on latents of model checksum " +
                        buffer + " ('" + model_path + "'): its latent space is another");
   }
   return pose;
 }
-
 
 }  // namespace tactfunc::apps

@@ -2,7 +2,7 @@
 //
 // Inputs the model-using subcommands share (fit, pose, bench posterior): reading one
 // frame and its reference from the command line (sensor inferred from the file as
-// Dataset::Open infers a user folder's), the symmetry order of a tool by name, and the
+// Dataset::Open infers a user folder's), and the
 // k-NN pose posterior over a functaset's labelled training latents.
 #ifndef TACTFUNC_APPS_MODEL_INPUTS_H_
 #define TACTFUNC_APPS_MODEL_INPUTS_H_
@@ -17,6 +17,7 @@
 #include "models/core/image.h"
 #include "models/pose/pose_mlp.h"
 #include "models/core/sensor.h"
+#include "models/simulator/tool.h"  // SymmetryOrderOfTool
 #include "estimation/posterior/knn_posterior.h"
 
 namespace tactfunc::apps {
@@ -31,9 +32,6 @@ std::string Shape(const Image& image);
 // Parses --sensor (empty = not given: returns false); throws UsageError for a bad name.
 bool ParseSensorFlag(const std::string& text, SensorKind* sensor);
 
-// The symmetry order n of tool `name` (models/simulator/tool.h); 1 for an unknown or empty name
-// (nothing is folded). *known (optional) says whether the name was a known tool.
-int SymmetryOrderOfTool(const std::string& name, bool* known = nullptr);
 
 // Pixel pitch (m) of `sensor` in the tactfunc dataset a frame file lies in
 // (<dataset>/<sensor>/<id>.png with <dataset>/dataset.json), or 0 if it is not in one.
@@ -45,7 +43,7 @@ double DatasetPixelPitch(const std::string& frame_path, SensorKind sensor);
 // are). Only the TRAIN split by default: a test frame must not find its own labelled
 // entry (that would make bench posterior's k-NN coverage meaningless).
 struct FunctasetKnn {
-  std::unique_ptr<BruteForceKnnIndex> index;
+  std::unique_ptr<KnnIndex> index;  // brute force (BuildKnnIndex's default)
   std::unique_ptr<KnnPosterior> posterior;
   int size = 0;  // latents in the index
 };
@@ -55,8 +53,9 @@ FunctasetKnn MakeFunctasetKnn(const Functaset& functaset, SensorKind sensor, boo
 
 // Loads a pose model (--pose-model) for the trunk of `sensor` in `model`: throws
 // DatasetError naming the file when its input dimension is not the trunk's latent
-// dimension, or when its info (written by train-pose) names another sensor or a
-// functaset of another model checksum (a latent space it was not trained on).
+// dimension, when its info is not a PoseModelProvenance (written by train-pose), or
+// when that names another sensor or a functaset of another model checksum (a latent
+// space it was not trained on).
 PoseMlp LoadPoseModelFor(const std::string& path, const FunctaModel& model, SensorKind sensor,
                          const std::string& model_path);
 

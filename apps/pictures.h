@@ -1,7 +1,8 @@
 // Copyright 2026 The tactfunc Authors.
 //
 // Pictures people look at: tactile frames as colour tiles, pose arrows, tile grids.
-// OpenCV stays in apps/ (STYLE.md): the libraries hand over tactfunc::Image.
+// OpenCV stays in apps/, so that the libraries keep no drawing dependency: they hand
+// over tactfunc::Image.
 #ifndef TACTFUNC_APPS_PICTURES_H_
 #define TACTFUNC_APPS_PICTURES_H_
 

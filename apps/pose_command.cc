@@ -42,6 +42,7 @@
 #include "apps/model_inputs.h"
 #include "apps/pictures.h"
 #include "estimation/data/dataset.h"
+#include "estimation/data/preprocess.h"
 #include "estimation/functaset/functaset.h"
 #include "estimation/data/trunk_targets.h"
 #include "models/core/atomic_file.h"
@@ -85,17 +86,11 @@ const cv::Scalar kModeColour(255, 80, 255);   // magenta
 // A frame to estimate: its trunk targets, its contact image and what is known about it.
 struct Input {
   SensorKind sensor = SensorKind::kSoftBubble;
-  Image difference;     // frame - reference, physical units
+  Image difference;     // Difference (estimation/data/preprocess.h), physical units
   double pitch_m = 0;   // 0 = unknown
   std::optional<PoseLabel> label;
   std::string name;     // for titles
 };
-
-Image Difference(const Image& frame, const Image& reference) {
-  Image d = frame;
-  for (std::size_t i = 0; i < d.data.size(); ++i) d.data[i] -= reference.data[i];
-  return d;
-}
 
 // ---- The picture -------------------------------------------------------------------------
 
@@ -382,7 +377,8 @@ void RunPose(const PoseFlags& flags) {
                          ToString(sensor));
     }
     targets = LoadTrunkTargets(dataset, *index, model.Trunk(sensor).format);
-    input.difference = Difference(dataset.LoadFrame(*index), dataset.Reference(sensor));
+    input.difference =
+        Difference(dataset.LoadFrame(*index), dataset.Reference(sensor), sensor);
     input.pitch_m = dataset.sensor_info(sensor).pixel_pitch_m;
     input.label = dataset.frames()[*index].label;
     input.name = "frame " + flags.id;
@@ -401,7 +397,7 @@ void RunPose(const PoseFlags& flags) {
                          ToString(sensor));
     }
     targets = MakeTrunkTargets(frame, reference, sensor, model.Trunk(sensor).format);
-    input.difference = Difference(frame, reference);
+    input.difference = Difference(frame, reference, sensor);
     input.pitch_m = DatasetPixelPitch(flags.frame, sensor);
     input.name = fs::path(flags.frame).filename().string();
   }

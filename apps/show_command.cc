@@ -15,6 +15,7 @@
 #include "apps/dataset_flags.h"
 #include "apps/pictures.h"
 #include "estimation/data/dataset.h"
+#include "estimation/data/preprocess.h"
 
 namespace tactfunc::apps {
 namespace {
@@ -50,18 +51,6 @@ std::vector<std::string> PickIds(const Dataset& dataset, int n) {
     if (seen_ids.insert(id).second) ids.push_back(id);
   }
   return ids;
-}
-
-Image Difference(const Image& frame, const Image& reference, SensorKind sensor) {
-  // Indentation for depth (reference - frame: pressing in is positive), frame -
-  // reference for intensity, as estimation/data/preprocess.h defines the difference.
-  Image difference(frame.rows, frame.cols, frame.channels);
-  for (std::size_t i = 0; i < frame.size(); ++i) {
-    difference.data[i] = sensor == SensorKind::kSoftBubble
-                             ? reference.data[i] - frame.data[i]
-                             : frame.data[i] - reference.data[i];
-  }
-  return difference;
 }
 
 double DifferenceScale(const SensorInfo& info) {

@@ -389,7 +389,7 @@ void RegisterTrain(CLI::App& app, CommandBody* selected) {
   flags->alpha_max_option =
       sub->add_option("--alpha-max", flags->alpha_max,
                       "Upper clip bound of the learned meta-SGD rates (default 1, the "
-                      "issue's and functa's [0, 1]; docs/TRAINING.md)")
+                      "range of functa's meta-SGD rates, [0, 1]; docs/TRAINING.md)")
           ->check(CLI::PositiveNumber);
   flags->divergence_drop_db_option =
       sub->add_option("--divergence-drop-db", flags->divergence_drop_db,

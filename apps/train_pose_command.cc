@@ -12,9 +12,10 @@
 // root of the mean squared Euclidean error) and yaw RMSE (deg, modulo the tool's
 // symmetry, YawErrorModuloSymmetry; hemisphere samples, n = 0, have no observable yaw and
 // are left out of the yaw figures) on the train and test splits, overall and per tool,
-// as a table. Writes P atomically (PoseMlp::Save) with a JSON info block naming the
-// sensor, the functaset, its model checksum and the figures, so that `tactfunc pose`
-// can check it is given a matching model.
+// as a table. Writes P atomically (PoseMlp::Save) with its PoseModelProvenance as the
+// info (models/pose/pose_model_provenance.h): the sensor, the functaset, its model
+// checksum, the latent map and the figures, so that `tactfunc pose` can check it is
+// given a matching model.
 //
 // --refit STRATEGY --model M --data D (decision): the functaset stores meta-SGD latents
 // z_K, but the sgld / laplace posteriors are centred on the MAP fit z* (ceres:10); a
@@ -42,6 +43,7 @@
 #include "models/trunk/functa_model.h"
 #include "estimation/posterior/pose_posterior.h"
 #include "models/pose/pose_mlp.h"
+#include "models/pose/pose_model_provenance.h"
 #include "models/simulator/tool.h"
 
 namespace tactfunc::apps {
@@ -393,25 +395,27 @@ void RunTrainPose(const TrainPoseFlags& flags) {
   // (LatentMapOfPoseModel, estimation/posterior/pose_posterior.h).
   // "functaset" = encode's K meta-SGD steps of the trunk.
   const std::string latent_map = flags.refit.empty() ? "functaset" : flags.refit;
-  nlohmann::json info = {{"sensor", ToString(sensor)},
-                         {"functaset", flags.functaset},
-                         {"model_checksum", functaset.model_checksum()},
-                         {"train_samples", train.inputs.rows()},
-                         {"latents", flags.refit.empty() ? "functaset" : "refit " + flags.refit},
-                         {"latent_map", latent_map},
-                         {"calibration_samples", calibration.inputs.rows()},
-                         {"posterior_sigma", flags.posterior_sigma},
-                         {"calibration_tools", flags.calibration_tools},
-                         {"excluded_tools", flags.exclude_tools},
-                         {"epochs", summary.epochs_completed},
-                         {"batch", flags.batch},
-                         {"learning_rate", flags.lr},
-                         {"seed", flags.seed},
-                         {"final_loss", summary.final_loss},
-                         {"termination", ToString(summary.termination)}};
-  if (flags.refit_sigma > 0) info["refit_sigma"] = flags.refit_sigma;
-  info.update(figures);
-  model.set_info_json(info.dump());
+  PoseModelProvenance provenance;
+  provenance.sensor = ToString(sensor);
+  provenance.functaset = flags.functaset;
+  provenance.model_checksum = functaset.model_checksum();
+  provenance.train_samples = train.inputs.rows();
+  provenance.latents = flags.refit.empty() ? "functaset" : "refit " + flags.refit;
+  provenance.latent_map = latent_map;
+  provenance.calibration_samples = calibration.inputs.rows();
+  provenance.posterior_sigma = flags.posterior_sigma;
+  provenance.refit_sigma = flags.refit_sigma;
+  provenance.calibration_tools = flags.calibration_tools;
+  provenance.excluded_tools = flags.exclude_tools;
+  provenance.epochs = summary.epochs_completed;
+  provenance.batch = flags.batch;
+  provenance.learning_rate = flags.lr;
+  provenance.seed = flags.seed;
+  provenance.final_loss = summary.final_loss;
+  provenance.termination = ToString(summary.termination);
+  provenance.rmse_mm = {all_train.RmseMm(), all_test.RmseMm()};
+  provenance.rmse_deg = {all_train.RmseDeg(), all_test.RmseDeg()};
+  model.set_info_json(provenance.ToJson());
   model.Save(flags.out);  // atomic
   std::cout << "train-pose: wrote " << flags.out << " in "
             << summary.total_time_in_seconds << " s of training\n";

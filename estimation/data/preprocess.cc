@@ -100,6 +100,19 @@ std::size_t PreprocessedFrame::num_valid() const {
   return static_cast<std::size_t>(std::count(valid.begin(), valid.end(), 1));
 }
 
+Image Difference(const Image& frame, const Image& reference, SensorKind sensor) {
+  if (!frame.SameShape(reference) || reference.size() != frame.size()) {
+    throw std::invalid_argument("Difference: reference: expected the frame's shape " +
+                                frame.ShapeString() + ", got " + reference.ShapeString());
+  }
+  Image difference(frame.rows, frame.cols, frame.channels);
+  for (std::size_t i = 0; i < frame.size(); ++i) {
+    difference.data[i] = sensor == SensorKind::kSoftBubble ? reference.data[i] - frame.data[i]
+                                                           : frame.data[i] - reference.data[i];
+  }
+  return difference;
+}
+
 PreprocessedFrame Preprocess(const Image& frame, const Image& reference, SensorKind sensor,
                              const PreprocessOptions& options, double sensor_scale) {
   std::string error;

@@ -81,6 +81,13 @@ struct PreprocessedFrame {
   std::size_t num_valid() const;
 };
 
+// Step 1 alone, for pictures: the raw difference of `frame` with `reference` (same
+// shape, else std::invalid_argument) in physical units, with Preprocess's sign per
+// sensor: reference - frame for Soft Bubble depth (a press, which brings the membrane
+// closer to the camera, is positive), frame - reference for GelSlim intensity.
+// Non-finite pixels stay non-finite (no mask, no resize, no normalisation).
+Image Difference(const Image& frame, const Image& reference, SensorKind sensor);
+
 // Preprocesses `frame` against `reference` (same shape, else std::invalid_argument)
 // for a sensor of the given kind. sensor_scale: the sensor's normalisation scale, used
 // in kFixedScale mode when options.fixed_scale is 0. Throws std::invalid_argument if

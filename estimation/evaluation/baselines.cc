@@ -741,13 +741,12 @@ Eigen::MatrixXd KnnPoseRegressor::Predict(const Eigen::MatrixXf& queries,
                                 std::to_string(inputs_.cols()));
   }
   CheckOrders(symmetry_orders, queries.rows(), "KnnPoseRegressor::Predict");
-  BruteForceKnnIndex index(static_cast<int>(inputs_.cols()));
-  index.Add(inputs_.data(), inputs_.rows());
+  const std::unique_ptr<KnnIndex> index = BuildKnnIndex(inputs_, KnnIndexOptions());  // exact
   const int k = static_cast<int>(std::min<Eigen::Index>(options_.k, inputs_.rows()));
   const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> q = queries;
   std::vector<float> distances(static_cast<std::size_t>(q.rows()) * k);
   std::vector<std::int64_t> labels(distances.size());
-  index.Search(q.data(), q.rows(), k, distances.data(), labels.data());
+  index->Search(q.data(), q.rows(), k, distances.data(), labels.data());
   Eigen::MatrixXd poses(q.rows(), 3);
   for (Eigen::Index i = 0; i < q.rows(); ++i) {
     const int n = OrderAt(symmetry_orders, i);

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
 #include <limits>
 #include <numeric>
 #include <sstream>
@@ -558,6 +559,101 @@ double Recall(const KnnIndex& approx, const KnnIndex& exact, const float* querie
     }
   }
   return total == 0 ? 1.0 : static_cast<double>(hits) / static_cast<double>(total);
+}
+
+// ---- Construction -------------------------------------------------------------------
+
+bool KnnIndexOptions::IsValid(std::string* error) const {
+  FlannKnnIndex::Algorithm algorithm;
+  if (type != "brute_force" && !FlannAlgorithmFromString(type, &algorithm)) {
+    if (error != nullptr) {
+      *error = "KnnIndexOptions::type: expected brute_force, kd_forest, kmeans, autotuned or "
+               "linear, got '" + type + "'";
+    }
+    return false;
+  }
+  return flann.IsValid(error) && search.IsValid(error);
+}
+
+std::unique_ptr<KnnIndex> BuildKnnIndex(const KnnVectors& vectors,
+                                        const KnnIndexOptions& options) {
+  std::string error;
+  if (!options.IsValid(&error)) throw std::invalid_argument(error);
+  const int dim = static_cast<int>(vectors.cols());
+  std::unique_ptr<KnnIndex> index;
+  if (options.type == "brute_force") {
+    index = std::make_unique<BruteForceKnnIndex>(dim);
+  } else {
+    FlannKnnIndex::Options flann = options.flann;
+    FlannAlgorithmFromString(options.type, &flann.algorithm);
+    index = std::make_unique<FlannKnnIndex>(dim, flann, options.search);
+  }
+  index->Add(vectors.data(), vectors.rows());
+  return index;
+}
+
+std::string WhyKnnIndexIsStale(const KnnIndex& index, const KnnVectors& vectors,
+                               const KnnIndexOptions& options) {
+  if (index.dim() != vectors.cols() || index.size() != vectors.rows()) {
+    return "it holds " + std::to_string(index.size()) + " x " + std::to_string(index.dim()) +
+           " vectors, the functaset " + std::to_string(vectors.rows()) + " x " +
+           std::to_string(vectors.cols());
+  }
+  const std::size_t bytes = static_cast<std::size_t>(vectors.size()) * sizeof(float);
+  if (Crc32(index.data(), bytes) != Crc32(vectors.data(), bytes)) {
+    return "its vectors differ from the functaset's latents (CRC-32)";
+  }
+  const auto* flann = dynamic_cast<const FlannKnnIndex*>(&index);
+  const std::string found =
+      flann != nullptr ? ToString(flann->options().algorithm) : "brute_force";
+  if (found != options.type) return "it is a " + found + " index, " + options.type + " was asked for";
+  if (flann != nullptr) {
+    const FlannKnnIndex::Options& wanted = options.flann;
+    const FlannKnnIndex::Options& o = flann->options();
+    if (o.trees != wanted.trees || o.branching != wanted.branching ||
+        o.kmeans_iterations != wanted.kmeans_iterations || o.cb_index != wanted.cb_index ||
+        o.seed != wanted.seed) {
+      return "it was built with other parameters (" + index.Describe() + ")";
+    }
+  }
+  return "";
+}
+
+std::unique_ptr<KnnIndex> LoadOrBuildKnnIndex(const std::string& path, const KnnVectors& vectors,
+                                              const KnnIndexOptions& options,
+                                              KnnIndexCacheSummary* summary) {
+  KnnIndexCacheSummary local;
+  KnnIndexCacheSummary& s = summary != nullptr ? *summary : local;
+  s = KnnIndexCacheSummary();
+  s.path = path;
+  std::string error;
+  if (!options.IsValid(&error)) throw std::invalid_argument(error);
+  s.why_rebuilt = "it does not exist";
+  std::error_code ec;
+  if (std::filesystem::exists(path, ec)) {
+    try {
+      std::unique_ptr<KnnIndex> index = KnnIndex::Load(path);
+      s.why_rebuilt = WhyKnnIndexIsStale(*index, vectors, options);
+      if (s.why_rebuilt.empty()) {
+        if (auto* flann = dynamic_cast<FlannKnnIndex*>(index.get())) {
+          FlannKnnIndex::SearchParams search = flann->search_params();
+          search.checks = options.search.checks;
+          flann->set_search_params(search);
+        }
+        return index;
+      }
+    } catch (const std::exception& e) {
+      s.why_rebuilt = std::string("it cannot be read (") + e.what() + ")";
+    }
+  }
+  std::unique_ptr<KnnIndex> index = BuildKnnIndex(vectors, options);
+  s.rebuilt = true;
+  try {
+    index->Save(path);  // atomic (models/core/atomic_file.h)
+  } catch (const std::exception& e) {
+    s.save_error = e.what();
+  }
+  return index;
 }
 
 }  // namespace tactfunc

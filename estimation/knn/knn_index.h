@@ -27,7 +27,7 @@
 //                           exist (k > size(), or an approximate index found fewer) the
 //                           row is padded with label -1 and distance +infinity, as faiss
 //
-// Errors (STYLE: three tiers): a bad Options throws std::invalid_argument from the
+// Errors (three tiers): a bad Options throws std::invalid_argument from the
 // constructor with the IsValid message; a bad buffer (d mismatch, n < 0, k < 1, NaN
 // or infinite entries in vectors) throws std::invalid_argument quoting the shapes or
 // the offending row; a corrupt or foreign file throws TensorFileError
@@ -239,6 +239,56 @@ bool FlannAlgorithmFromString(const std::string& name, FlannKnnIndex::Algorithm*
 // std::invalid_argument if the two indexes differ in dim or size.
 double Recall(const KnnIndex& approx, const KnnIndex& exact, const float* queries,
               std::int64_t n, int k);
+
+// ---- Construction ---------------------------------------------------------------------
+// The one way the library and the commands make an index over a set of vectors (the
+// latents of a functaset, the pixels of a baseline), in memory or cached in a file.
+
+// Vectors, one per row (n x d, row-major): the layout of Functaset::LatentMatrix.
+using KnnVectors = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+
+struct KnnIndexOptions {
+  // "brute_force" (default: exact) or a FLANN algorithm, as FlannAlgorithmFromString
+  // names it ("kd_forest", "kmeans", "autotuned", "linear").
+  std::string type = "brute_force";
+  // FLANN's build parameters; `algorithm` is ignored (type decides). Defaults as
+  // FlannKnnIndex::Options.
+  FlannKnnIndex::Options flann;
+  // FLANN's per-query parameters. Defaults as FlannKnnIndex::SearchParams.
+  FlannKnnIndex::SearchParams search;
+
+  bool IsValid(std::string* error) const;
+};
+
+// A new index of options.type over `vectors` (n x d, d >= 1; n may be 0). Throws
+// std::invalid_argument for invalid options or vectors (as KnnIndex::Add).
+std::unique_ptr<KnnIndex> BuildKnnIndex(const KnnVectors& vectors, const KnnIndexOptions& options);
+
+// Why `index` (loaded from a file) cannot serve `vectors` with `options`, or "" if it
+// can: another size or dim, other vectors (CRC-32 of the float32 bytes), another type,
+// or other FLANN build parameters.
+std::string WhyKnnIndexIsStale(const KnnIndex& index, const KnnVectors& vectors,
+                               const KnnIndexOptions& options);
+
+// What LoadOrBuildKnnIndex did.
+struct KnnIndexCacheSummary {
+  std::string path;
+  bool rebuilt = false;      // false: the file was current and was loaded
+  std::string why_rebuilt;   // "it does not exist", "it cannot be read (...)", or a
+                             // WhyKnnIndexIsStale reason; "" when loaded
+  std::string save_error;    // rebuilt but not saved (e.g. a read-only folder); "" = saved
+};
+
+// The index of `vectors` kept in the file `path`: loaded when the file holds exactly
+// these vectors and was built with these options (the search parameters of a loaded
+// FLANN index are then set to options.search); otherwise (missing, stale, corrupt or
+// other parameters) built and saved atomically (KnnIndex::Save), so a crash never
+// leaves a half-written index. A failed save does not fail the call: the index is
+// returned unsaved and summary->save_error says why. summary may be null. Throws as
+// BuildKnnIndex.
+std::unique_ptr<KnnIndex> LoadOrBuildKnnIndex(const std::string& path, const KnnVectors& vectors,
+                                              const KnnIndexOptions& options,
+                                              KnnIndexCacheSummary* summary);
 
 }  // namespace tactfunc
 

@@ -15,6 +15,7 @@
 #include <nlohmann/json.hpp>
 
 #include "models/core/seed.h"
+#include "models/pose/pose_model_provenance.h"
 #include "models/simulator/tool.h"
 
 namespace tactfunc {
@@ -59,13 +60,7 @@ PosePosterior::Options WithPoseModelSigma(PosePosterior::Options options,
 }  // namespace
 
 double PosteriorSigmaOfPoseModel(const PoseMlp& pose_model) {
-  const nlohmann::json info = nlohmann::json::parse(pose_model.info_json(), nullptr, false);
-  if (info.is_object() && info.contains("posterior_sigma") &&
-      info["posterior_sigma"].is_number()) {
-    const double sigma = info["posterior_sigma"].get<double>();
-    if (std::isfinite(sigma) && sigma > 0) return sigma;
-  }
-  return 0;
+  return PoseModelProvenance::FromJson(pose_model.info_json(), "pose model").posterior_sigma;
 }
 
 const char* ToString(PosteriorSampler sampler) {
@@ -343,14 +338,8 @@ Eigen::MatrixXd CalibrationResiduals(const PoseMlp& model, const Eigen::MatrixXf
 }
 
 FitStrategy LatentMapOfPoseModel(const PoseMlp& pose_model, const SensorTrunk& trunk) {
-  const nlohmann::json info = nlohmann::json::parse(pose_model.info_json(), nullptr, false);
-  std::string map = "functaset";
-  if (info.is_object() && info.contains("latent_map") && info["latent_map"].is_string()) {
-    map = info["latent_map"].get<std::string>();
-  } else if (info.is_object() && info.contains("latents") && info["latents"].is_string()) {
-    const std::string latents = info["latents"].get<std::string>();
-    if (latents.rfind("refit ", 0) == 0) map = latents.substr(6);
-  }
+  std::string map =
+      PoseModelProvenance::FromJson(pose_model.info_json(), "pose model").latent_map;
   if (map == "functaset") map = "meta_sgd:" + std::to_string(trunk.meta_sgd.inner_steps);
   FitStrategy strategy;
   std::string error;

@@ -175,12 +175,15 @@ Eigen::MatrixXd CalibrationResiduals(const PoseMlp& model, const Eigen::MatrixXf
 // `encode` stores; else a strategy such as "ceres:10" from --refit), or the older
 // "latents" field ("functaset" / "refit <strategy>"). Posteriors centre on this map so
 // that the MLP sees the kind of latent it was trained on (docs/POSES.md, "Latent maps").
-// A model without either field gives the trunk's meta_sgd:K.
+// A model without either field gives the trunk's meta_sgd:K. The info is read as
+// PoseModelProvenance (models/pose/pose_model_provenance.h), which throws
+// std::invalid_argument naming a field of the wrong type.
 FitStrategy LatentMapOfPoseModel(const PoseMlp& pose_model, const SensorTrunk& trunk);
 
 // The pixel sigma the pose model was calibrated with (its info's "posterior_sigma",
-// `train-pose --posterior-sigma`), or 0 if it has none. PosePosterior uses it when
-// Options::problem.sigma is 0 (automatic) -- see "Calibration" in docs/POSES.md: the
+// `train-pose --posterior-sigma`, read as PoseModelProvenance), or 0 if it has none.
+// PosePosterior uses it when Options::problem.sigma is 0 (automatic) -- see
+// "Calibration" in docs/POSES.md: the
 // calibration residuals already hold the pose error that the latent's noise causes at
 // the fit, so the latent posterior is tempered (a smaller sigma) to avoid counting that
 // error twice; the value is chosen on calibration data and checked on fresh contacts

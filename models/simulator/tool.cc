@@ -253,6 +253,17 @@ const Tool& GetTool(const std::string& name) {
   throw std::invalid_argument("unknown tool '" + name + "'; valid tools are: " + valid);
 }
 
+int SymmetryOrderOfTool(const std::string& name, bool* known) {
+  if (known != nullptr) *known = false;
+  for (const Tool& tool : ToolSet()) {
+    if (tool.name() == name) {
+      if (known != nullptr) *known = true;
+      return tool.symmetry_order();
+    }
+  }
+  return 1;
+}
+
 std::vector<std::string> ToolNames() {
   std::vector<std::string> names;
   for (const Tool& tool : ToolSet()) names.push_back(tool.name());

@@ -76,6 +76,9 @@ const std::vector<Tool>& ToolSet();
 const Tool& GetTool(const std::string& name);
 // The names of ToolSet(), in order.
 std::vector<std::string> ToolNames();
+// The symmetry order n of tool `name`; 1 for an unknown or empty name (nothing is
+// folded). *known (optional) says whether the name was a known tool.
+int SymmetryOrderOfTool(const std::string& name, bool* known = nullptr);
 
 // Smallest absolute yaw difference modulo the symmetry, in [0, pi/n] (n >= 1); 0 for
 // n == 0. E.g. for the rod (n = 2) yaws 0.1 and 0.1 + pi are 0 apart. Throws

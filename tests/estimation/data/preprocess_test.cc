@@ -276,5 +276,41 @@ TEST(PreprocessFrame, UsesTheDatasetSensorAndItsScale) {
   EXPECT_NEAR(out.values.at(8, 8), 0.5, 1e-4);
 }
 
+TEST(Difference, ABubblePressHasTheSignPreprocessGivesIt) {
+  // Pressing the membrane brings it closer to the camera: smaller depth.
+  const Image reference = FlatDepth(8, 8, 0.05f);
+  const Image frame = PressedDepth(reference, 0.004f);
+  PreprocessOptions options;
+  const PreprocessedFrame preprocessed =
+      Preprocess(frame, reference, SensorKind::kSoftBubble, options, 0.01);
+  const Image difference = Difference(frame, reference, SensorKind::kSoftBubble);
+  ASSERT_TRUE(difference.SameShape(frame));
+  EXPECT_GT(difference.at(4, 4), 0.0f);  // a press is positive, as in Preprocess
+  EXPECT_NEAR(difference.at(4, 4), 0.004f, 1e-6f);
+  EXPECT_EQ(difference.at(0, 0), 0.0f);
+  for (std::size_t i = 0; i < difference.size(); ++i) {
+    EXPECT_NEAR(difference.data[i] / 0.01, preprocessed.values.data[i], 1e-6) << i;
+  }
+}
+
+TEST(Difference, GelSlimIsFrameMinusReferenceAsInPreprocess) {
+  Image reference(2, 2, 3, 0.25f), frame(2, 2, 3, 0.25f);
+  frame.data[5] = 0.75f;
+  const Image difference = Difference(frame, reference, SensorKind::kGelSlim);
+  EXPECT_FLOAT_EQ(difference.data[5], 0.5f);
+  const PreprocessedFrame preprocessed =
+      Preprocess(frame, reference, SensorKind::kGelSlim, PreprocessOptions(), 1.0);
+  EXPECT_FLOAT_EQ(preprocessed.values.data[5], 0.5f);
+}
+
+TEST(Difference, AShapeMismatchThrowsNamingTheShapes) {
+  try {
+    Difference(Image(2, 2, 1, 0.0f), Image(2, 3, 1, 0.0f), SensorKind::kSoftBubble);
+    FAIL() << "expected std::invalid_argument";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_THAT(e.what(), HasSubstr("reference"));
+  }
+}
+
 }  // namespace
 }  // namespace tactfunc

@@ -390,5 +390,55 @@ TEST(KnnIndex, RecallOfAnIndexAgainstItselfIsOneAndMismatchesThrow) {
   EXPECT_THROW(Recall(a, small, data.data(), 20, 3), std::invalid_argument);
 }
 
+TEST(BuildKnnIndex, BuildsTheRequestedTypeOverTheVectors) {
+  KnnVectors vectors = KnnVectors::Random(40, 4);
+  const std::unique_ptr<KnnIndex> exact = BuildKnnIndex(vectors, KnnIndexOptions());
+  EXPECT_EQ(exact->TypeName(), "brute_force");
+  EXPECT_EQ(exact->size(), 40);
+  KnnIndexOptions options;
+  options.type = "kd_forest";
+  options.flann.trees = 2;
+  options.search.checks = 7;
+  const std::unique_ptr<KnnIndex> flann = BuildKnnIndex(vectors, options);
+  const auto& f = dynamic_cast<const FlannKnnIndex&>(*flann);
+  EXPECT_EQ(f.options().algorithm, FlannKnnIndex::Algorithm::kKdForest);
+  EXPECT_EQ(f.options().trees, 2);
+  EXPECT_EQ(f.search_params().checks, 7);
+  options.type = "octree";
+  std::string error;
+  EXPECT_FALSE(options.IsValid(&error));
+  EXPECT_NE(error.find("type"), std::string::npos) << error;
+  EXPECT_THROW(BuildKnnIndex(vectors, options), std::invalid_argument);
+}
+
+TEST(LoadOrBuildKnnIndex, ReusesACurrentFileAndRebuildsAStaleOne) {
+  const testing_util::TestDir test_dir;
+  const std::string path = test_dir / "latents.knn";
+  KnnVectors vectors = KnnVectors::Random(30, 3);
+  KnnIndexCacheSummary summary;
+  LoadOrBuildKnnIndex(path, vectors, KnnIndexOptions(), &summary);
+  EXPECT_TRUE(summary.rebuilt);
+  EXPECT_EQ(summary.why_rebuilt, "it does not exist");
+  EXPECT_TRUE(summary.save_error.empty()) << summary.save_error;
+  std::unique_ptr<KnnIndex> index = LoadOrBuildKnnIndex(path, vectors, KnnIndexOptions(), &summary);
+  EXPECT_FALSE(summary.rebuilt);
+  EXPECT_EQ(index->size(), 30);
+  vectors(4, 1) += 1.0f;  // other vectors: the CRC differs
+  LoadOrBuildKnnIndex(path, vectors, KnnIndexOptions(), &summary);
+  EXPECT_TRUE(summary.rebuilt);
+  EXPECT_NE(summary.why_rebuilt.find("CRC-32"), std::string::npos) << summary.why_rebuilt;
+  KnnIndexOptions kd;
+  kd.type = "kd_forest";
+  kd.search.checks = 11;
+  LoadOrBuildKnnIndex(path, vectors, kd, &summary);
+  EXPECT_TRUE(summary.rebuilt);  // another type was asked for
+  index = LoadOrBuildKnnIndex(path, vectors, kd, &summary);
+  EXPECT_FALSE(summary.rebuilt);
+  EXPECT_EQ(dynamic_cast<const FlannKnnIndex&>(*index).search_params().checks, 11);
+  kd.flann.trees = 8;
+  LoadOrBuildKnnIndex(path, vectors, kd, &summary);
+  EXPECT_TRUE(summary.rebuilt);  // other build parameters
+}
+
 }  // namespace
 }  // namespace tactfunc

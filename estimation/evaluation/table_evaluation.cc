@@ -1,0 +1,534 @@
+// Copyright 2026 The tactfunc Authors.
+#include "estimation/evaluation/table_evaluation.h"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <set>
+#include <stdexcept>
+#include <utility>
+
+#include "estimation/data/image_io.h"
+#include "estimation/data/trunk_targets.h"
+#include "estimation/evaluation/reconstruction.h"
+#include "models/core/parallel_for.h"
+#include "models/pose/pose_model_provenance.h"
+#include "models/simulator/tool.h"
+
+namespace tactfunc {
+namespace {
+
+using Observer = TableEvaluation::Observer;
+using Row = TableEvaluation::Row;
+using RdCurves = TableEvaluation::RdCurves;
+
+constexpr double kNan = std::numeric_limits<double>::quiet_NaN();
+
+// Mean of the finite values (ComputePsnrStats' rule: NaN and +inf left out).
+double MeanPsnr(const std::vector<double>& values) { return ComputePsnrStats(values).mean; }
+
+// The observer's task around internal::ParallelFor over [0, n): ticks after each item.
+template <typename Fn>
+void ParallelForWithTicks(std::size_t n, int threads, Observer* observer, const Fn& fn) {
+  internal::ParallelFor(static_cast<int>(n), threads, [&](int i) {
+    fn(static_cast<std::size_t>(i));
+    if (observer != nullptr) observer->Tick();
+  });
+}
+
+// One sensor's frames as every approach sees them.
+struct SensorFrames {
+  SensorKind sensor = SensorKind::kSoftBubble;
+  const SensorTrunk* trunk = nullptr;
+  std::vector<const FunctasetEntry*> entries;  // the functaset's, in its order
+  std::vector<TrunkTargets> targets;           // the same frames at the working resolution
+  std::vector<std::size_t> train, test;        // indices into entries
+  const std::vector<std::size_t>& Of(Split split) const {
+    return split == Split::kTrain ? train : test;
+  }
+  std::vector<const TrunkTargets*> Targets(const std::vector<std::size_t>& indices) const {
+    std::vector<const TrunkTargets*> out;
+    for (std::size_t i : indices) out.push_back(&targets[i]);
+    return out;
+  }
+};
+
+SensorFrames LoadSensorFrames(const TableEvaluation::Inputs& in, const SensorTrunk& trunk,
+                              int threads, Observer* observer) {
+  SensorFrames s;
+  s.sensor = trunk.sensor;
+  s.trunk = &trunk;
+  std::vector<std::size_t> dataset_index;
+  for (const FunctasetEntry& e : in.functaset->entries(trunk.sensor)) {
+    const std::optional<std::size_t> index = in.dataset->FindFrame(e.id, trunk.sensor);
+    if (!index) {
+      throw DatasetError("dataset '" + in.dataset_name + "' has no " + ToString(trunk.sensor) +
+                         " frame '" + e.id + "' of functaset '" + in.functaset_name +
+                         "' (a functaset of another dataset?)");
+    }
+    (e.split == Split::kTrain ? s.train : s.test).push_back(s.entries.size());
+    s.entries.push_back(&e);
+    dataset_index.push_back(*index);
+  }
+  s.targets.resize(s.entries.size());
+  if (observer) {
+    observer->BeginTask(std::string("eval: loading ") + ToString(trunk.sensor),
+                        static_cast<std::int64_t>(s.entries.size()), "frames");
+  }
+  ParallelForWithTicks(s.entries.size(), threads, observer, [&](std::size_t i) {
+    s.targets[i] = LoadTrunkTargets(*in.dataset, dataset_index[i], trunk.format);
+  });
+  if (observer) observer->EndTask();
+  return s;
+}
+
+// Per-frame PSNR of f(grid; z) for every entry of `frames` with the latents of `entries`.
+std::vector<double> LatentPsnrs(const SensorTrunk& trunk,
+                                const std::vector<const FunctasetEntry*>& entries,
+                                const std::vector<const TrunkTargets*>& targets, int threads,
+                                const std::string& label, Observer* observer) {
+  std::vector<double> psnr(entries.size(), kNan);
+  if (observer) observer->BeginTask(label, static_cast<std::int64_t>(entries.size()), "frames");
+  ParallelForWithTicks(entries.size(), threads, observer, [&](std::size_t i) {
+    psnr[i] = Psnr(Reconstruct(trunk, entries[i]->latent), *targets[i]);
+  });
+  if (observer) observer->EndTask();
+  return psnr;
+}
+
+std::vector<double> Pick(const std::vector<double>& values, const std::vector<std::size_t>& idx) {
+  std::vector<double> out;
+  for (std::size_t i : idx) out.push_back(values[i]);
+  return out;
+}
+
+// Labelled frames of one split as pose samples.
+struct PoseSamples {
+  std::vector<std::size_t> frames;  // indices into SensorFrames::entries
+  PoseTargets targets;
+};
+
+PoseSamples LabelledSamples(const SensorFrames& s, Split split) {
+  PoseSamples p;
+  for (std::size_t i : s.Of(split)) {
+    if (s.entries[i]->label.has_value()) p.frames.push_back(i);
+  }
+  const int m = static_cast<int>(p.frames.size());
+  p.targets.poses.resize(m, 3);
+  p.targets.symmetry_orders.resize(m);
+  for (int k = 0; k < m; ++k) {
+    const PoseLabel& label = *s.entries[p.frames[k]]->label;
+    p.targets.poses.row(k) << label.x_m, label.y_m, label.yaw_rad;
+    p.targets.symmetry_orders[k] = SymmetryOrderOfTool(label.tool);
+  }
+  return p;
+}
+
+// Rows of `source` (one per frame of s.entries) picked for the samples.
+Eigen::MatrixXf Rows(const Eigen::MatrixXf& source, const std::vector<std::size_t>& frames) {
+  Eigen::MatrixXf out(static_cast<Eigen::Index>(frames.size()), source.cols());
+  for (std::size_t k = 0; k < frames.size(); ++k) out.row(k) = source.row(frames[k]);
+  return out;
+}
+
+void CheckInputs(const TableEvaluation::Inputs& in, const TableEvaluation::Options& options) {
+  std::string error;
+  if (!options.IsValid(&error)) throw std::invalid_argument(error);
+  if (in.dataset == nullptr || in.model == nullptr || in.functaset == nullptr ||
+      in.pose_model == nullptr) {
+    throw std::invalid_argument(
+        "TableEvaluation::Inputs: dataset, model, functaset and pose_model must be set");
+  }
+  if (in.sensors.empty()) throw std::invalid_argument("TableEvaluation::Inputs: no sensor");
+  if (std::find(in.sensors.begin(), in.sensors.end(), in.pose_sensor) == in.sensors.end()) {
+    throw std::invalid_argument(std::string("TableEvaluation::Inputs: pose_sensor ") +
+                                ToString(in.pose_sensor) + " is not among the sensors");
+  }
+  for (const TableEvaluation::Extra& e : in.extras) {
+    if (e.model == nullptr || e.functaset == nullptr) {
+      throw std::invalid_argument("TableEvaluation::Inputs: an extra without model or functaset");
+    }
+  }
+}
+
+}  // namespace
+
+bool TableEvaluation::Options::IsValid(std::string* error) const {
+  std::string message;
+  if (threads < 1) {
+    message = "threads must be >= 1, found " + std::to_string(threads);
+  } else if (raw_downsample < 1) {
+    message = "raw_downsample must be >= 1, found " + std::to_string(raw_downsample);
+  } else if (knn_k < 1) {
+    message = "knn_k must be >= 1, found " + std::to_string(knn_k);
+  } else {
+    for (int q : jpeg_curve_qualities) {
+      if (q < 1 || q > 100) {
+        message = "jpeg_curve_qualities must lie in [1, 100], found " + std::to_string(q);
+        break;
+      }
+    }
+    if (message.empty()) return true;
+  }
+  if (error != nullptr) *error = "TableEvaluation::Options::" + message;
+  return false;
+}
+
+TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Options& options,
+                                                  Observer* observer) {
+  CheckInputs(in, options);
+  const int threads = options.threads;
+  const FunctaModel& model = *in.model;
+  const Functaset& functaset = *in.functaset;
+  const Dataset& dataset = *in.dataset;
+  const PoseMlp& pose_model = *in.pose_model;
+  const PoseModelProvenance provenance =
+      PoseModelProvenance::FromJson(pose_model.info_json(), "pose model");
+  auto message = [&](const std::string& line) {
+    if (observer) observer->Message(line);
+  };
+
+  Result result;
+  result.pose_sensor = in.pose_sensor;
+  for (SensorKind sensor : in.sensors) {
+    SensorResult sensor_result;
+    sensor_result.sensor = sensor;
+    RdCurves& curves = sensor_result.curves;
+    Details& details = sensor_result.details;
+    const SensorTrunk& trunk = model.Trunk(sensor);
+    const SensorFrames s = LoadSensorFrames(in, trunk, threads, observer);
+    if (s.train.empty()) {
+      throw DatasetError("functaset '" + in.functaset_name + "' has no train-split " +
+                         ToString(sensor) + " entries: the baselines are fitted on those");
+    }
+    const std::uint64_t m = s.entries.size();
+    const int d = functaset.latent_dim(sensor);
+    const int channels = static_cast<int>(s.targets[0].values.cols());
+    message("eval: " + std::string(ToString(sensor)) + ": " + std::to_string(s.train.size()) +
+            " train + " + std::to_string(s.test.size()) + " test frames at " +
+            std::to_string(trunk.format.rows) + "x" + std::to_string(trunk.format.cols) + "x" +
+            std::to_string(channels) + ", latent " + std::to_string(d) + " floats\n");
+
+    // -- TactFunc ------------------------------------------------------------------------
+    std::vector<const TrunkTargets*> frame_targets;
+    for (const TrunkTargets& t : s.targets) frame_targets.push_back(&t);
+    const std::vector<double> tf_psnr =
+        LatentPsnrs(trunk, s.entries, frame_targets, threads,
+                    std::string("eval: TactFunc ") + ToString(sensor), observer);
+    const std::uint64_t trunk_bytes = 4ull * (trunk.siren.NumParameters() + trunk.alpha.size());
+    // Bytes per frame as stored (4 or 2 per latent float: encode --latent-precision).
+    const double tf_frame_bytes = static_cast<double>(functaset.BytesPerLatentFloat()) * d;
+    const std::uint64_t tf_rep = trunk_bytes + m * static_cast<std::uint64_t>(tf_frame_bytes);
+    curves.tactfunc.push_back(
+        {tf_frame_bytes, MeanPsnr(Pick(tf_psnr, s.test)), "d=" + std::to_string(d)});
+
+    // -- PCA -----------------------------------------------------------------------------
+    const Eigen::MatrixXf train_matrix = StackFrames(s.Targets(s.train));
+    std::set<int> sweep = {std::max(1, d / 4), std::max(1, d / 2), d, 2 * d, 4 * d};
+    for (const Extra& e : in.extras) {
+      if (e.functaset->has_sensor(sensor)) sweep.insert(e.functaset->latent_dim(sensor));
+    }
+    PcaCodec::Options pca_options;
+    pca_options.components = *sweep.rbegin();
+    PcaCodec::Summary pca_summary;
+    message("eval: fitting PCA (cv::PCA) on " + std::to_string(s.train.size()) + " frames of " +
+            std::to_string(train_matrix.cols()) + " floats...\n");
+    const PcaCodec pca_full = PcaCodec::Fit(train_matrix, pca_options, &pca_summary);
+    message(pca_summary.BriefReport() + "\n");
+    const int pca_n = std::min(d, pca_full.components());
+    const PcaCodec pca = pca_full.Truncated(pca_n);
+    Eigen::MatrixXf all_matrix(static_cast<Eigen::Index>(m), train_matrix.cols());
+    for (std::size_t i = 0; i < m; ++i) all_matrix.row(i) = FlattenFrame(s.targets[i]);
+    const Eigen::MatrixXf full_codes = pca_full.Encode(all_matrix);  // m x n_max
+    auto pca_psnrs = [&](int n) {
+      const Eigen::MatrixXf decoded = pca_full.Truncated(n).Decode(full_codes.leftCols(n));
+      std::vector<double> psnr(m);
+      for (std::size_t i = 0; i < m; ++i) {
+        psnr[i] = Psnr(UnflattenFrame(decoded.row(i), channels), s.targets[i]);
+      }
+      return psnr;
+    };
+    const std::vector<double> pca_psnr = pca_psnrs(pca_n);
+    for (int n : sweep) {
+      if (n > pca_full.components()) continue;
+      curves.pca.push_back(
+          {4.0 * n, MeanPsnr(Pick(pca_psnrs(n), s.test)), "n=" + std::to_string(n)});
+    }
+    std::string pca_note;
+    if (pca_n < d) {
+      pca_note = "only " + std::to_string(pca_n) + " components (train frames)";
+    }
+
+    // -- JPEG ----------------------------------------------------------------------------
+    JpegCodec::Options jpeg_options;
+    JpegRangeOfFrames(s.Targets(s.train), &jpeg_options.lo, &jpeg_options.hi);
+    const JpegQualitySearchSummary search =
+        FindJpegQuality(s.Targets(s.train), jpeg_options, tf_frame_bytes);
+    message(search.BriefReport() + "\n");
+    jpeg_options.quality = search.quality;
+    auto jpeg_eval = [&](const JpegCodec::Options& o, std::vector<double>* psnr,
+                         std::vector<double>* bytes) {
+      const JpegCodec codec(o);
+      psnr->assign(m, kNan);
+      bytes->assign(m, 0);
+      internal::ParallelFor(static_cast<int>(m), threads, [&](int i) {
+        Eigen::MatrixXf decoded;
+        (*bytes)[i] = static_cast<double>(
+            codec.EncodeDecode(s.targets[i].values, s.targets[i].rows, s.targets[i].cols, &decoded));
+        (*psnr)[i] = Psnr(decoded, s.targets[i]);
+      });
+    };
+    std::vector<double> jpeg_psnr, jpeg_bytes;
+    jpeg_eval(jpeg_options, &jpeg_psnr, &jpeg_bytes);
+    const std::uint64_t jpeg_tables =
+        JpegCodec(jpeg_options).TableBytes(s.targets[0].values, s.targets[0].rows, s.targets[0].cols);
+    double jpeg_total = 0;
+    for (double b : jpeg_bytes) jpeg_total += b;
+    const std::uint64_t jpeg_rep = jpeg_tables + static_cast<std::uint64_t>(jpeg_total);
+    for (int quality : options.jpeg_curve_qualities) {
+      JpegCodec::Options o = jpeg_options;
+      o.quality = quality;
+      std::vector<double> p, b;
+      jpeg_eval(o, &p, &b);
+      const std::vector<double> test_bytes = Pick(b, s.test.empty() ? s.train : s.test);
+      double mean_bytes = 0;
+      for (double v : test_bytes) mean_bytes += v / test_bytes.size();
+      curves.jpeg.push_back(
+          {mean_bytes, MeanPsnr(Pick(p, s.test)), "q=" + std::to_string(quality)});
+    }
+
+    // -- Raw frames ----------------------------------------------------------------------
+    const std::uint64_t raw_frame = RawFrameBytes(dataset.sensor_info(sensor));
+
+    // -- Extra TactFunc points -----------------------------------------------------------
+    for (const Extra& e : in.extras) {
+      if (!e.functaset->has_sensor(sensor)) continue;
+      const SensorTrunk& t2 = e.model->Trunk(sensor);
+      std::vector<const FunctasetEntry*> test_entries;
+      for (const FunctasetEntry& entry : e.functaset->entries(sensor)) {
+        if (entry.split == Split::kTest) test_entries.push_back(&entry);
+      }
+      std::vector<TrunkTargets> own(test_entries.size());
+      std::vector<const TrunkTargets*> t_targets(test_entries.size());
+      const bool same_format = t2.format.rows == trunk.format.rows &&
+                               t2.format.cols == trunk.format.cols &&
+                               t2.format.grayscale == trunk.format.grayscale &&
+                               t2.format.per_image_min_max == trunk.format.per_image_min_max &&
+                               t2.format.scale == trunk.format.scale;
+      for (std::size_t k = 0; k < test_entries.size(); ++k) {
+        const std::optional<std::size_t> in_main = functaset.Find(sensor, test_entries[k]->id);
+        if (same_format && in_main) {
+          t_targets[k] = &s.targets[*in_main];
+          continue;
+        }
+        const std::optional<std::size_t> index = dataset.FindFrame(test_entries[k]->id, sensor);
+        if (!index) {
+          throw DatasetError("dataset '" + in.dataset_name + "' has no " + ToString(sensor) +
+                             " frame '" + test_entries[k]->id + "' of functaset '" +
+                             e.functaset_name + "'");
+        }
+        own[k] = LoadTrunkTargets(dataset, *index, t2.format);
+        t_targets[k] = &own[k];
+      }
+      const int d2 = e.functaset->latent_dim(sensor);
+      const std::vector<double> psnr =
+          LatentPsnrs(t2, test_entries, t_targets, threads,
+                      "eval: TactFunc d=" + std::to_string(d2) + " " + ToString(sensor), observer);
+      curves.tactfunc.push_back(
+          {e.functaset->BytesPerLatentFloat() * 1.0 * d2, MeanPsnr(psnr), "d=" + std::to_string(d2)});
+    }
+
+    // -- Poses ---------------------------------------------------------------------------
+    std::map<std::pair<std::string, Split>, PoseErrors> pose;
+    if (sensor == in.pose_sensor) {
+      const PoseSamples train = LabelledSamples(s, Split::kTrain);
+      const PoseSamples test = LabelledSamples(s, Split::kTest);
+      if (train.frames.empty()) {
+        throw DatasetError("functaset '" + in.functaset_name + "' has no labelled train-split " +
+                           ToString(sensor) + " entries: the pose baselines are trained on those");
+      }
+      Eigen::MatrixXf latents(static_cast<Eigen::Index>(m), d);
+      for (std::size_t i = 0; i < m; ++i) latents.row(i) = s.entries[i]->latent.transpose();
+      const Eigen::MatrixXf codes = full_codes.leftCols(pca_n);
+      const int factor = options.raw_downsample;
+      Eigen::MatrixXf pixels;
+      for (std::size_t i = 0; i < m; ++i) {
+        const Eigen::RowVectorXf row = DownsamplePixels(s.targets[i], factor);
+        if (i == 0) pixels.resize(static_cast<Eigen::Index>(m), row.size());
+        pixels.row(i) = row;
+      }
+      auto score = [&](const std::string& key, const auto& predict) {
+        for (const PoseSamples* p : {&train, &test}) {
+          if (p->frames.empty()) continue;
+          const Split split = p == &train ? Split::kTrain : Split::kTest;
+          pose[{key, split}] =
+              ScorePoses(predict(p->frames, p->targets.symmetry_orders), p->targets.poses,
+                         p->targets.symmetry_orders);
+        }
+      };
+      // TactFunc: the pose model on the latents.
+      score("tactfunc", [&](const std::vector<std::size_t>& f, const Eigen::VectorXi& n) {
+        return PredictPoses(pose_model, Rows(latents, f), n);
+      });
+      // PCA codes: the same architecture, trained as the pose model was (its provenance:
+      // epochs, batch, learning rate, seed; train-pose's defaults where it says nothing).
+      PoseMlp::Options mlp_options = pose_model.options();
+      mlp_options.input_dim = pca_n;
+      PoseMlpTrainingOptions training;
+      training.epochs = provenance.epochs.value_or(training.epochs);
+      training.batch_size = provenance.batch.value_or(training.batch_size);
+      training.learning_rate = provenance.learning_rate.value_or(training.learning_rate);
+      training.seed = provenance.seed.value_or(training.seed);
+      PoseMlp pca_mlp(mlp_options, training.seed);
+      {
+        if (observer) observer->BeginTask("eval: pose MLP on PCA codes", training.epochs, "epochs");
+        const PoseMlpTrainingSummary summary =
+            TrainPoseMlp(&pca_mlp, Rows(codes, train.frames), train.targets, training,
+                         [&](int, double) {
+                           if (observer) observer->Tick();
+                           return true;
+                         });
+        if (observer) observer->EndTask();
+        message("eval: pose MLP on PCA codes: " + summary.BriefReport() + "\n");
+        if (summary.termination == PoseMlpTrainingTermination::kNonFinite && observer) {
+          observer->Warning("eval: warning: the pose MLP on PCA codes diverged (" +
+                            summary.message + "); its last finite parameters are scored\n");
+        }
+      }
+      score("pca", [&](const std::vector<std::size_t>& f, const Eigen::VectorXi& n) {
+        return PredictPoses(pca_mlp, Rows(codes, f), n);
+      });
+      // Raw pixels: ridge and k-NN.
+      RidgePoseRegressor::Options ridge_options;
+      ridge_options.position_scale = pose_model.options().position_scale;
+      RidgePoseRegressor::Summary ridge_summary;
+      const RidgePoseRegressor ridge = RidgePoseRegressor::Fit(
+          Rows(pixels, train.frames), train.targets, ridge_options, &ridge_summary);
+      message("eval: " + ridge_summary.BriefReport() + "\n");
+      score("ridge", [&](const std::vector<std::size_t>& f, const Eigen::VectorXi& n) {
+        return ridge.Predict(Rows(pixels, f), n);
+      });
+      KnnPoseRegressor::Options knn_options;
+      knn_options.k = options.knn_k;
+      const KnnPoseRegressor knn(Rows(pixels, train.frames), train.targets, knn_options);
+      score("knn", [&](const std::vector<std::size_t>& f, const Eigen::VectorXi& n) {
+        return knn.Predict(Rows(pixels, f), n);
+      });
+      Details::Pose p;
+      p.mlp_hidden = pose_model.options().hidden_sizes;
+      p.mlp_training = training;
+      p.ridge = ridge_summary;
+      p.raw_downsample = factor;
+      p.raw_features = pixels.cols();
+      p.knn_k = options.knn_k;
+      p.labelled_train = train.frames.size();
+      p.labelled_test = test.frames.size();
+      details.pose = p;
+    }
+
+    // -- Rows ----------------------------------------------------------------------------
+    const std::string down = std::to_string(options.raw_downsample);
+    for (Split split : {Split::kTrain, Split::kTest}) {
+      const std::vector<std::size_t>& idx = s.Of(split);
+      if (idx.empty()) continue;
+      auto find_pose = [&](const std::string& key) {
+        const auto it = pose.find({key, split});
+        return it == pose.end() ? PoseErrors() : it->second;
+      };
+      const bool posed = sensor == in.pose_sensor;
+      Row tf{"TactFunc", posed ? "pose MLP on latents" : "", sensor, split, tf_rep, tf_frame_bytes,
+             MeanPsnr(Pick(tf_psnr, idx)), true, static_cast<int>(idx.size()),
+             find_pose("tactfunc"), ""};
+      Row pc{"PCA", posed ? "pose MLP on PCA codes" : "", sensor, split,
+             pca.ModelBytes() + m * pca.BytesPerFrame(), static_cast<double>(pca.BytesPerFrame()),
+             MeanPsnr(Pick(pca_psnr, idx)), true, static_cast<int>(idx.size()), find_pose("pca"),
+             pca_note};
+      double jb = 0;
+      for (std::size_t i : idx) jb += jpeg_bytes[i] / idx.size();
+      Row jp{"JPEG", "", sensor, split, jpeg_rep, jb, MeanPsnr(Pick(jpeg_psnr, idx)), true,
+             static_cast<int>(idx.size()), PoseErrors(),
+             "quality " + std::to_string(search.quality)};
+      Row raw_ridge{"Raw frames", posed ? "ridge on pixels /" + down : "", sensor, split,
+                    m * raw_frame, static_cast<double>(raw_frame), kNan, false,
+                    static_cast<int>(idx.size()), find_pose("ridge"), ""};
+      result.rows.push_back(tf);
+      result.rows.push_back(pc);
+      result.rows.push_back(jp);
+      result.rows.push_back(raw_ridge);
+      if (posed) {
+        Row raw_knn = raw_ridge;
+        raw_knn.pose_from = "k-NN (k=" + std::to_string(options.knn_k) + ") on pixels /" + down;
+        raw_knn.pose = find_pose("knn");
+        result.rows.push_back(raw_knn);
+      }
+    }
+
+    // -- Targets (test split) --------------------------------------------------------------
+    Targets& t = sensor_result.targets;
+    const double tf_test = MeanPsnr(Pick(tf_psnr, s.test));
+    // The PSNR target compares at equal bytes per frame: PCA with as many float32
+    // components as TactFunc's stored latent has bytes / 4 (= d for float32 latents,
+    // d / 2 for float16 ones); the PCA row itself keeps d components, as many as the
+    // latent has floats.
+    const int pca_equal_n =
+        std::max(1, std::min(pca_full.components(), static_cast<int>(tf_frame_bytes / 4)));
+    const double pca_test = pca_equal_n == pca_n ? MeanPsnr(Pick(pca_psnr, s.test))
+                                                 : MeanPsnr(Pick(pca_psnrs(pca_equal_n), s.test));
+    const double jpeg_test = MeanPsnr(Pick(jpeg_psnr, s.test));
+    double jpeg_test_bytes = 0;
+    for (std::size_t i : s.test) jpeg_test_bytes += jpeg_bytes[i] / s.test.size();
+    t.psnr_above_pca.met =
+        std::isfinite(tf_test) && std::isfinite(pca_test) && tf_test >= pca_test + 3;
+    t.psnr_above_pca.tactfunc_db = tf_test;
+    t.psnr_above_pca.pca_db = pca_test;
+    t.psnr_above_pca.margin_db = tf_test - pca_test;
+    t.psnr_above_pca.required_margin_db = 3;
+    t.psnr_above_pca.pca_components = pca_equal_n;
+    t.psnr_above_pca.bytes_per_frame = tf_frame_bytes;
+    t.psnr_above_jpeg.met =
+        std::isfinite(tf_test) && std::isfinite(jpeg_test) && tf_test > jpeg_test;
+    t.psnr_above_jpeg.tactfunc_db = tf_test;
+    t.psnr_above_jpeg.jpeg_db = jpeg_test;
+    t.psnr_above_jpeg.margin_db = tf_test - jpeg_test;
+    t.psnr_above_jpeg.tactfunc_bytes_per_frame = tf_frame_bytes;
+    t.psnr_above_jpeg.jpeg_bytes_per_frame = jpeg_test_bytes;
+    t.psnr_above_jpeg.jpeg_quality = search.quality;
+    t.psnr_above_jpeg.jpeg_target_reachable = search.target_reachable;
+    result.all_targets_met =
+        result.all_targets_met && t.psnr_above_pca.met && t.psnr_above_jpeg.met;
+    if (sensor == in.pose_sensor) {
+      const auto mse = [&](const std::string& key) {
+        const auto it = pose.find({key, Split::kTest});
+        return it == pose.end() ? kNan : it->second.PoseMse();
+      };
+      const double tf_mse = mse("tactfunc"), pca_mse = mse("pca");
+      const double raw_mse = std::min(mse("ridge"), mse("knn"));
+      t.has_pose = true;
+      t.pose_beats_pca_codes.met =
+          std::isfinite(tf_mse) && std::isfinite(pca_mse) && tf_mse < pca_mse;
+      t.pose_beats_pca_codes.tactfunc_pose_mse = tf_mse;
+      t.pose_beats_pca_codes.pca_pose_mse = pca_mse;
+      t.pose_not_worse_than_raw.met =
+          std::isfinite(tf_mse) && std::isfinite(raw_mse) && tf_mse <= raw_mse;
+      t.pose_not_worse_than_raw.tactfunc_pose_mse = tf_mse;
+      t.pose_not_worse_than_raw.raw_best_pose_mse = raw_mse;
+      t.pose_not_worse_than_raw.ridge_pose_mse = mse("ridge");
+      t.pose_not_worse_than_raw.knn_pose_mse = mse("knn");
+      result.all_targets_met = result.all_targets_met && t.pose_beats_pca_codes.met &&
+                               t.pose_not_worse_than_raw.met;
+    }
+    details.pca = pca_summary;
+    details.pca_components = pca_n;
+    details.jpeg_search = search;
+    details.jpeg = jpeg_options;
+    details.jpeg_table_bytes = jpeg_tables;
+    details.rows = trunk.format.rows;
+    details.cols = trunk.format.cols;
+    details.channels = channels;
+    details.raw_frame_bytes = raw_frame;
+    result.sensors.push_back(std::move(sensor_result));
+  }
+  return result;
+}
+
+}  // namespace tactfunc

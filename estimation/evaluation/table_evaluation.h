@@ -1,0 +1,204 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// The paper's Table I on a dataset ("Tactile Functasets", Tab. I): representation size,
+// reconstruction PSNR and pose error of TactFunc against the baselines of
+// estimation/evaluation/baselines.h, per sensor and split, plus the rate-distortion
+// curves and the product's targets. `tactfunc eval` parses flags, calls Evaluate and
+// prints / writes / draws the Result.
+//
+// Rows, per sensor and split (every frame of the functaset; the test rows are the
+// held-out frames):
+//   TactFunc    the functaset's latents decoded by the model's trunk; pose: the pose
+//               model on the latents
+//   PCA         cv::PCA fitted on the train frames, as many components as the latent has
+//               floats; pose: the same MLP architecture, trained as the pose model was
+//               (its PoseModelProvenance: epochs, batch, learning rate, seed; train-pose's
+//               defaults where it says nothing), on PCA codes
+//   JPEG        8-bit JPEG, quality chosen on the train frames so that its mean bytes per
+//               frame match the latent's bytes; no pose row
+//   Raw frames  the frames uncompressed; PSNR not applicable; pose: ridge and k-NN on
+//               downsampled pixels (stand-ins for the paper's ResNet-18)
+// Every PSNR is THE PSNR of estimation/data/trunk_targets.h on the model's working-
+// resolution frames; pose errors are scored as train-pose scores them (ScorePoses).
+//
+// Targets (test split, per sensor):
+//   psnr_3db_above_pca      TactFunc >= 3 dB above PCA at equal bytes per frame (PCA
+//                           with as many float32 components as the stored latent has
+//                           bytes / 4)
+//   psnr_above_jpeg         TactFunc above JPEG at matched bytes
+//   pose_beats_pca_codes    (pose sensor) pose MSE from latents below that from PCA codes
+//   pose_not_worse_than_raw (pose sensor) pose MSE from latents <= the best raw-pixel one
+//
+// Errors: invalid Options or Inputs throw std::invalid_argument; data that cannot be
+// evaluated (a functaset frame missing from the dataset, no train-split frames, no
+// labelled train-split frames of the pose sensor) throws DatasetError naming the files.
+#ifndef TACTFUNC_ESTIMATION_EVALUATION_TABLE_EVALUATION_H_
+#define TACTFUNC_ESTIMATION_EVALUATION_TABLE_EVALUATION_H_
+
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "estimation/data/dataset.h"
+#include "estimation/evaluation/baselines.h"
+#include "estimation/functaset/functaset.h"
+#include "models/core/sensor.h"
+#include "models/pose/pose_mlp.h"
+#include "models/trunk/functa_model.h"
+
+namespace tactfunc {
+
+class TableEvaluation {
+ public:
+  struct Options {
+    // Worker threads for per-frame work. >= 1. Default 1.
+    int threads = 1;
+    // Block size of the pixel features of the raw-pixel pose baselines. >= 1. Default 2
+    // (2x2 block means of the working-resolution frame).
+    int raw_downsample = 2;
+    // Neighbours of the raw-pixel k-NN pose baseline. >= 1. Default 5.
+    int knn_k = 5;
+    // JPEG qualities of the rate-distortion curve.
+    std::vector<int> jpeg_curve_qualities = {1, 3, 5, 10, 20, 30, 50, 70, 90};
+
+    bool IsValid(std::string* error) const;
+  };
+
+  // Another functaset of the same data (e.g. another latent size) with its model: a
+  // further TactFunc point of the rate-distortion curves (test split).
+  struct Extra {
+    const FunctaModel* model = nullptr;
+    const Functaset* functaset = nullptr;
+    std::string functaset_name;  // for messages
+  };
+
+  // What is evaluated. The pointers must outlive Evaluate.
+  struct Inputs {
+    const Dataset* dataset = nullptr;
+    std::string dataset_name;  // for messages
+    const FunctaModel* model = nullptr;
+    const Functaset* functaset = nullptr;  // checked against model by the caller
+    std::string functaset_name;
+    // The pose model of pose_sensor's latents (LoadPoseModelFor-checked by the caller).
+    const PoseMlp* pose_model = nullptr;
+    SensorKind pose_sensor = SensorKind::kSoftBubble;
+    // The sensors to evaluate, in table order; each in the functaset and the dataset,
+    // pose_sensor among them.
+    std::vector<SensorKind> sensors;
+    std::vector<Extra> extras;
+  };
+
+  // Progress and log lines while Evaluate runs (all optional). Tick may be called from
+  // worker threads; everything else from the calling thread.
+  class Observer {
+   public:
+    virtual ~Observer() = default;
+    // One line of the log, with its trailing newline.
+    virtual void Message(const std::string& /*line*/) {}
+    virtual void Warning(const std::string& /*line*/) {}
+    // A task of `total` units ("frames", "epochs") begins / advances by one / ends.
+    virtual void BeginTask(const std::string& /*label*/, std::int64_t /*total*/,
+                           const std::string& /*unit*/) {}
+    virtual void Tick() {}
+    virtual void EndTask() {}
+  };
+
+  // One row of the table.
+  struct Row {
+    std::string approach;   // TactFunc, PCA, JPEG, Raw frames
+    std::string pose_from;  // how the pose column was obtained ("" = no pose)
+    SensorKind sensor = SensorKind::kSoftBubble;
+    Split split = Split::kTrain;
+    std::uint64_t rep_bytes = 0;  // model + per-frame data, all frames of the sensor
+    double bytes_per_frame = std::numeric_limits<double>::quiet_NaN();
+    double psnr = std::numeric_limits<double>::quiet_NaN();  // NaN: n/a or no finite value
+    bool psnr_applicable = true;
+    int frames = 0;
+    PoseErrors pose;  // count 0: no pose
+    std::string note;
+  };
+
+  // A point of the rate-distortion curves (test split).
+  struct RdPoint {
+    double bytes_per_frame = 0;
+    double psnr = std::numeric_limits<double>::quiet_NaN();
+    std::string label;  // "d=64", "n=32", "q=20"
+  };
+  struct RdCurves {
+    std::vector<RdPoint> tactfunc, pca, jpeg;
+  };
+
+  // The targets of one sensor (header comment), with the figures they compare.
+  struct Targets {
+    struct PsnrAbovePca {
+      bool met = false;
+      double tactfunc_db = 0, pca_db = 0, margin_db = 0;
+      int required_margin_db = 3;
+      int pca_components = 0;
+      double bytes_per_frame = 0;
+    } psnr_above_pca;
+    struct PsnrAboveJpeg {
+      bool met = false;
+      double tactfunc_db = 0, jpeg_db = 0, margin_db = 0;
+      double tactfunc_bytes_per_frame = 0, jpeg_bytes_per_frame = 0;
+      int jpeg_quality = 0;
+      bool jpeg_target_reachable = true;
+    } psnr_above_jpeg;
+    bool has_pose = false;  // the two below are filled for the pose sensor only
+    struct PoseBeatsPca {
+      bool met = false;
+      double tactfunc_pose_mse = 0, pca_pose_mse = 0;
+    } pose_beats_pca_codes;
+    struct PoseNotWorseThanRaw {
+      bool met = false;
+      double tactfunc_pose_mse = 0, raw_best_pose_mse = 0, ridge_pose_mse = 0,
+             knn_pose_mse = 0;
+    } pose_not_worse_than_raw;
+  };
+
+  // How the baselines of one sensor were set up.
+  struct Details {
+    PcaCodec::Summary pca;  // of the fit with the most components
+    int pca_components = 0;
+    JpegQualitySearchSummary jpeg_search;
+    JpegCodec::Options jpeg;  // the chosen quality and range
+    std::uint64_t jpeg_table_bytes = 0;
+    int rows = 0, cols = 0, channels = 0;  // working resolution
+    std::uint64_t raw_frame_bytes = 0;
+    // The pose sensor only.
+    struct Pose {
+      std::vector<int> mlp_hidden;
+      PoseMlpTrainingOptions mlp_training;
+      RidgePoseRegressor::Summary ridge;
+      int raw_downsample = 0;
+      std::int64_t raw_features = 0;
+      int knn_k = 0;
+      std::size_t labelled_train = 0, labelled_test = 0;
+    };
+    std::optional<Pose> pose;
+  };
+
+  struct SensorResult {
+    SensorKind sensor = SensorKind::kSoftBubble;
+    RdCurves curves;
+    Targets targets;
+    Details details;
+  };
+
+  struct Result {
+    std::vector<Row> rows;               // in table order
+    std::vector<SensorResult> sensors;   // in Inputs::sensors order
+    bool all_targets_met = true;
+    SensorKind pose_sensor = SensorKind::kSoftBubble;
+  };
+
+  // Evaluates; see the header comment. observer may be null.
+  static Result Evaluate(const Inputs& inputs, const Options& options, Observer* observer);
+};
+
+}  // namespace tactfunc
+
+#endif  // TACTFUNC_ESTIMATION_EVALUATION_TABLE_EVALUATION_H_
