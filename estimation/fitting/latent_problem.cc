@@ -285,24 +285,7 @@ double LatentProblem::DataTermAndGradient(const Eigen::VectorXd& z, const std::v
 
 double LatentProblem::Evaluate(const Eigen::VectorXd& z, Eigen::VectorXd* gradient) const {
   CheckLatent(z, "Evaluate");
-  const double variance = options_.sigma_z * options_.sigma_z;
-  const double prior = 0.5 * z.squaredNorm() / variance;
-  if (gradient != nullptr) *gradient = z / variance;
-  if (num_pixels() == 0) return prior;
-  if (options_.robust_loss != RobustLoss::kNone) {
-    // U = 1/2 ||r'||^2 + prior, grad U = J'^T r' + z / sigma_z^2 (header comment).
-    const int d = dim();
-    Eigen::VectorXd residuals(num_residuals());
-    RowMajorMatrixXd jacobian;
-    if (gradient != nullptr) jacobian.resize(num_residuals(), d);
-    ResidualsAndJacobian(z.data(), residuals.data(),
-                         gradient != nullptr ? jacobian.data() : nullptr);
-    if (gradient != nullptr) *gradient += jacobian.transpose() * residuals;
-    return prior + 0.5 * residuals.squaredNorm();
-  }
-  return prior + (options_.precision == Precision::kFloat
-                      ? DataTermAndGradient<float>(z, nullptr, 1.0, gradient)
-                      : DataTermAndGradient<double>(z, nullptr, 1.0, gradient));
+  return EvaluateRows(z, nullptr, gradient);
 }
 
 double LatentProblem::EvaluateMinibatch(const Eigen::VectorXd& z, const std::vector<int>& rows,
@@ -314,32 +297,44 @@ double LatentProblem::EvaluateMinibatch(const Eigen::VectorXd& z, const std::vec
                                   " outside [0, " + std::to_string(num_pixels()) + ")");
     }
   }
-  if (rows.empty()) return Evaluate(z, gradient);
-  const double scale = static_cast<double>(num_pixels()) / rows.size();
+  return EvaluateRows(z, rows.empty() ? nullptr : &rows, gradient);
+}
+
+double LatentProblem::EvaluateRows(const Eigen::VectorXd& z, const std::vector<int>* rows,
+                                   Eigen::VectorXd* gradient) const {
+  const double scale =
+      rows == nullptr ? 1.0 : static_cast<double>(num_pixels()) / rows->size();
   const double variance = options_.sigma_z * options_.sigma_z;
   const double prior = 0.5 * z.squaredNorm() / variance;
   if (gradient != nullptr) *gradient = z / variance;
-  if (options_.robust_loss != RobustLoss::kNone) {
-    const int d = dim();
-    const int c_count = channels();
-    Eigen::VectorXd residuals(num_residuals());
-    RowMajorMatrixXd jacobian;
-    if (gradient != nullptr) jacobian.resize(num_residuals(), d);
-    ResidualsAndJacobian(z.data(), residuals.data(),
-                         gradient != nullptr ? jacobian.data() : nullptr);
-    double data = 0;
-    for (int j : rows) {
-      for (int c = 0; c < c_count; ++c) {
-        const long i = static_cast<long>(j) * c_count + c;
-        data += residuals[i] * residuals[i];
-        if (gradient != nullptr) *gradient += scale * residuals[i] * jacobian.row(i).transpose();
-      }
-    }
-    return prior + 0.5 * scale * data;
+  if (num_pixels() == 0) return prior;
+  if (options_.robust_loss == RobustLoss::kNone) {
+    return prior + (options_.precision == Precision::kFloat
+                        ? DataTermAndGradient<float>(z, rows, scale, gradient)
+                        : DataTermAndGradient<double>(z, rows, scale, gradient));
   }
-  return prior + (options_.precision == Precision::kFloat
-                      ? DataTermAndGradient<float>(z, &rows, scale, gradient)
-                      : DataTermAndGradient<double>(z, &rows, scale, gradient));
+  // U = 1/2 ||r'||^2 + prior, grad U = J'^T r' + z / sigma_z^2 (header comment), over
+  // the rows' residuals scaled by N / n. The residuals of every selected pixel are
+  // computed (one batched pass) and the rows picked from them.
+  const int d = dim();
+  const int c_count = channels();
+  Eigen::VectorXd residuals(num_residuals());
+  RowMajorMatrixXd jacobian;
+  if (gradient != nullptr) jacobian.resize(num_residuals(), d);
+  ResidualsAndJacobian(z.data(), residuals.data(), gradient != nullptr ? jacobian.data() : nullptr);
+  if (rows == nullptr) {
+    if (gradient != nullptr) *gradient += jacobian.transpose() * residuals;
+    return prior + 0.5 * residuals.squaredNorm();
+  }
+  double data = 0;
+  for (int j : *rows) {
+    for (int c = 0; c < c_count; ++c) {
+      const long i = static_cast<long>(j) * c_count + c;
+      data += residuals[i] * residuals[i];
+      if (gradient != nullptr) *gradient += scale * residuals[i] * jacobian.row(i).transpose();
+    }
+  }
+  return prior + 0.5 * scale * data;
 }
 
 void LatentProblem::GaussNewtonHessian(const Eigen::VectorXd& z, Eigen::MatrixXd* hessian) const {

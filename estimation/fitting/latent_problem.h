@@ -147,6 +147,9 @@ class LatentProblem {
   double Psnr(const Eigen::VectorXd& z) const;
 
  private:
+  // U over the selected pixels (rows == nullptr) or the minibatch `rows` (scaled by N / n).
+  double EvaluateRows(const Eigen::VectorXd& z, const std::vector<int>* rows,
+                      Eigen::VectorXd* gradient) const;
   template <typename Scalar>
   double DataTermAndGradient(const Eigen::VectorXd& z, const std::vector<int>* rows,
                              double scale, Eigen::VectorXd* gradient) const;
