@@ -39,6 +39,7 @@ struct EncodeFlags {
   std::string sensors;
   std::string split;
   std::string latent_precision = "float16";
+  std::string strategy;  // "" = each trunk's meta_sgd:K
   bool json = false;
   DatasetFlags dataset;
 };
@@ -74,6 +75,7 @@ std::string ResumeCommand(const EncodeFlags& flags) {
       "tactfunc encode --model " + flags.model + " --data " + flags.data + " --out " + flags.out;
   if (!flags.sensors.empty()) command += " --sensors " + flags.sensors;
   if (!flags.split.empty()) command += " --split " + flags.split;
+  if (!flags.strategy.empty()) command += " --strategy " + flags.strategy;
   if (flags.threads > 0) command += " --threads " + std::to_string(flags.threads);
   if (!flags.dataset.sensor.empty()) command += " --sensor " + flags.dataset.sensor;
   if (!flags.dataset.reference.empty()) command += " --reference " + flags.dataset.reference;
@@ -117,6 +119,8 @@ void RunEncode(const EncodeFlags& flags) {
   options.latent_precision = flags.latent_precision == "float16"
                                  ? Functaset::LatentPrecision::kFloat16
                                  : Functaset::LatentPrecision::kFloat32;
+  options.strategy = flags.strategy;
+  if (std::string error; !options.IsValid(&error)) throw UsageError("--strategy: " + error);
 
   // Never silently throw away a partial run.
   const bool out_exists = std::filesystem::exists(flags.out);
@@ -176,13 +180,16 @@ void RunEncode(const EncodeFlags& flags) {
   for (const auto& [sensor, psnr] : summary.mean_psnr) {
     std::cout << "  " << ToString(sensor) << ": " << summary.frames.at(sensor)
               << " frames, mean PSNR " << FormatFixed(psnr, 2)
-              << " dB (against the noisy frames)\n";
+              << " dB (against the noisy frames), fit " << functaset.fit_strategy(sensor) << "\n";
   }
   if (summary.non_finite_latents > 0) std::cout << "  warning: " << summary.message << "\n";
 
   if (flags.json) {
-    nlohmann::json psnr = nlohmann::json::object();
+    nlohmann::json psnr = nlohmann::json::object(), strategy = nlohmann::json::object();
     for (const auto& [sensor, value] : summary.mean_psnr) psnr[ToString(sensor)] = value;
+    for (SensorKind sensor : functaset.sensors()) {
+      strategy[ToString(sensor)] = functaset.fit_strategy(sensor);
+    }
     EmitJson({{"frames", functaset.size()},
               {"frames_encoded", summary.frames_encoded},
               {"frames_resumed", summary.frames_resumed},
@@ -191,6 +198,7 @@ void RunEncode(const EncodeFlags& flags) {
               {"frames_per_s", summary.frames_per_second},
               {"threads", options.threads},
               {"psnr_mean", psnr},
+              {"fit_strategy", strategy},
               {"model_checksum", model.checksum()},
               {"out", flags.out}});
   }
@@ -233,6 +241,10 @@ void RegisterEncode(CLI::App& app, CommandBody* selected) {
                   "Storage of the latents: float16 (default: half the bytes, no measurable PSNR "
                   "cost, docs/RESULTS_RECONSTRUCTION.md) or float32")
       ->check(CLI::IsMember({"float32", "float16"}));
+  sub->add_option("--strategy", flags->strategy,
+                  "How each frame's latent is fitted: meta_sgd:K or ceres:N (default: the "
+                  "trunk's own meta_sgd:K, what it was trained for; ceres:N fits the latent "
+                  "problem to convergence, docs/FITTING.md)");
   sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
   AddDatasetFlags(sub, &flags->dataset);
   sub->callback([flags, selected]() { *selected = [flags]() { RunEncode(*flags); }; });

@@ -364,6 +364,9 @@ void RunEval(const EvalFlags& flags) {
     curves[r.sensor] = r.curves;
     targets[ToString(r.sensor)] = TargetsJson(r.targets);
     details[ToString(r.sensor)] = DetailsJson(r.details);
+    const std::string& strategy = functaset.fit_strategy(r.sensor);
+    details[ToString(r.sensor)]["fit_strategy"] =
+        strategy.empty() ? nlohmann::json(nullptr) : nlohmann::json(strategy);
   }
 
   // ---- Output ------------------------------------------------------------------------------

@@ -155,8 +155,11 @@ nlohmann::json DescribeFunctaset(const std::string& bytes, const std::string& pa
       psnrs[e.split].push_back(e.psnr);
       if (e.label) ++labelled;
     }
-    std::printf("  %-8s %zu latents of %d floats (%d labelled)", ToString(sensor),
-                functaset.entries(sensor).size(), functaset.latent_dim(sensor), labelled);
+    const std::string strategy =
+        functaset.fit_strategy(sensor).empty() ? "n/a" : functaset.fit_strategy(sensor);
+    std::printf("  %-8s %zu latents of %d floats (%d labelled), fit %s", ToString(sensor),
+                functaset.entries(sensor).size(), functaset.latent_dim(sensor), labelled,
+                strategy.c_str());
     nlohmann::json splits = nlohmann::json::object();
     for (const auto& [split, values] : psnrs) {
       const PsnrStats stats = ComputePsnrStats(values);
@@ -166,6 +169,9 @@ nlohmann::json DescribeFunctaset(const std::string& bytes, const std::string& pa
     }
     std::printf("\n");
     sensors[ToString(sensor)] = {{"latent_dim", functaset.latent_dim(sensor)},
+                                 {"fit_strategy", functaset.fit_strategy(sensor).empty()
+                                                      ? nlohmann::json(nullptr)
+                                                      : nlohmann::json(functaset.fit_strategy(sensor))},
                                  {"count", functaset.entries(sensor).size()},
                                  {"labelled", labelled},
                                  {"splits", splits}};

@@ -238,6 +238,15 @@ void RunRecon(const ReconFlags& flags) {
   std::cout << "recon: " << summary.frames.size() << " frames of " << flags.functaset << " against "
             << flags.data << " (PSNR in dB, Psnr() of estimation/data/trunk_targets.h)\n"
             << summary.FullReport();
+  nlohmann::json fit_strategies = nlohmann::json::object();
+  for (SensorKind sensor : functaset.sensors()) {
+    const std::string& strategy = functaset.fit_strategy(sensor);
+    std::cout << "recon: " << ToString(sensor) << " latents fitted with "
+              << (strategy.empty() ? "the trunk's meta-SGD steps (not recorded)" : strategy)
+              << "\n";
+    fit_strategies[ToString(sensor)] =
+        strategy.empty() ? nlohmann::json(nullptr) : nlohmann::json(strategy);
+  }
   for (const std::string& p : pictures) std::cout << "recon: wrote " << p << "\n";
   const std::string per_frame = (std::filesystem::path(flags.out) / "frames.csv").string();
   WritePerFrameCsv(per_frame, summary, dataset);
@@ -256,6 +265,7 @@ void RunRecon(const ReconFlags& flags) {
       return out;
     };
     using Group = ReconstructionEvaluator::GroupSummary;
+    figures["fit_strategy"] = fit_strategies;
     figures["psnr_test"] = per_sensor(Split::kTest, &Group::noisy);
     figures["psnr_train"] = per_sensor(Split::kTrain, &Group::noisy);
     figures["psnr_test_clean"] =

@@ -65,6 +65,15 @@ const Functaset::SensorBlock& Functaset::Block(SensorKind sensor) const {
 
 int Functaset::latent_dim(SensorKind sensor) const { return Block(sensor).latent_dim; }
 
+const std::string& Functaset::fit_strategy(SensorKind sensor) const {
+  return Block(sensor).fit_strategy;
+}
+
+void Functaset::set_fit_strategy(SensorKind sensor, const std::string& strategy) {
+  Block(sensor);  // throws for an undeclared sensor
+  blocks_[sensor].fit_strategy = strategy;
+}
+
 void Functaset::Add(SensorKind sensor, FunctasetEntry entry) {
   auto it = blocks_.find(sensor);
   if (it == blocks_.end()) {
@@ -176,6 +185,7 @@ std::string Functaset::Serialize() const {
     }
     meta["sensors"].push_back({{"sensor", name},
                                {"latent_dim", block.latent_dim},
+                               {"fit_strategy", block.fit_strategy},
                                {"count", m},
                                {"ids", std::move(ids)},
                                {"splits", std::move(splits)},
@@ -261,6 +271,10 @@ Functaset Functaset::Parse(const std::string& bytes, const std::string& source) 
         out.latent_precision_ = LatentPrecision::kFloat16;
       }
       out.AddSensor(sensor, d);
+      if (entry.contains("fit_strategy")) {
+        field = where + ".fit_strategy";
+        out.set_fit_strategy(sensor, entry.at("fit_strategy").get<std::string>());
+      }
       for (std::int64_t i = 0; i < m; ++i) {
         const std::string item = "[" + std::to_string(i) + "]";
         FunctasetEntry e;

@@ -21,7 +21,7 @@
 // "functaset", written atomically, with the JSON meta
 //   {"format": "tactfunc-functaset", "version": 1, "complete": true|false,
 //    "model_checksum": <uint32>, "dataset": "<path>",
-//    "sensors": [{"sensor": "bubble", "latent_dim": d, "count": M,
+//    "sensors": [{"sensor": "bubble", "latent_dim": d, "count": M, "fit_strategy": "...",
 //                 "ids": [M strings], "splits": [M of "train"|"test"],
 //                 "tools": [M of tool name or null (unlabelled)]}, ...]}
 // and per sensor the tensors
@@ -111,6 +111,12 @@ class Functaset {
   std::vector<SensorKind> sensors() const;
   // Throws std::invalid_argument naming the sensor if it was not declared.
   int latent_dim(SensorKind sensor) const;
+  // How the sensor's latents were fitted: a fit strategy as LatentFitter names it
+  // ("meta_sgd:3", "ceres:20"; estimation/fitting/latent_fitter.h). "" for files written
+  // before the field existed (their encoder ran the trunk's meta-SGD inner loop).
+  // Throws like latent_dim().
+  const std::string& fit_strategy(SensorKind sensor) const;
+  void set_fit_strategy(SensorKind sensor, const std::string& strategy);
 
   // Appends an entry to a declared sensor. Throws std::invalid_argument if the sensor
   // is not declared, the latent does not have latent_dim(sensor) entries, the id is
@@ -147,6 +153,7 @@ class Functaset {
  private:
   struct SensorBlock {
     int latent_dim = 0;
+    std::string fit_strategy;
     std::vector<FunctasetEntry> entries;
     std::unordered_map<std::string, std::size_t> index;  // id -> entries position
   };

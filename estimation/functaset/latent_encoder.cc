@@ -27,12 +27,20 @@ const char* ToString(EncodeTermination termination) {
 
 bool LatentEncoder::Options::IsValid(std::string* error) const {
   std::ostringstream message;
+  std::string why;
   if (threads < 1) {
     message << "threads must be >= 1, found " << threads;
   } else if (checkpoint_every < 0) {
     message << "checkpoint_every must be >= 0, found " << checkpoint_every;
   } else if (resume && checkpoint_path.empty()) {
     message << "resume needs a checkpoint_path, found \"\"";
+  } else if (FitStrategy parsed; !strategy.empty() && !FitStrategy::Parse(strategy, &parsed, &why)) {
+    message << "strategy: " << why;
+  } else if (!strategy.empty() && parsed.knn) {
+    message << "strategy '" << strategy
+            << "': the k-NN strategies need a functaset to search; use meta_sgd:K or ceres:N";
+  } else if (!problem.IsValid(&why)) {
+    message << "problem: " << why;
   } else {
     std::vector<SensorKind> sorted = sensors;
     std::sort(sorted.begin(), sorted.end());
@@ -94,6 +102,15 @@ LatentEncoder::LatentEncoder(const FunctaModel& model, const Options& options)
     state.grid = trunk.siren.Grid<float>(trunk.format.rows, trunk.format.cols);
     state.alpha = trunk.alpha.cast<float>();
     state.meta_sgd = MetaSgd(trunk.meta_sgd);
+    state.strategy = options_.strategy.empty()
+                         ? FitStrategy::FromString("meta_sgd:" +
+                                                   std::to_string(trunk.meta_sgd.inner_steps))
+                         : FitStrategy::FromString(options_.strategy);
+    if (state.strategy.refinement == FitStrategy::Refinement::kCeres) {
+      LatentFitter::Options fit;
+      fit.strategy = state.strategy;
+      state.fitter.emplace(trunk, fit);
+    }
     states_.push_back(std::move(state));
   }
 }
@@ -123,8 +140,17 @@ LatentEncoder::EncodedFrame LatentEncoder::EncodeTargets(SensorKind sensor,
         std::to_string(targets.weights.size()) + " weights");
   }
   EncodedFrame out;
-  out.latent = state.meta_sgd.FitLatent<float>(siren, state.grid, targets.values, targets.weights,
-                                               state.alpha);
+  if (state.fitter) {
+    const LatentProblem problem(*state.trunk, targets, options_.problem);
+    Eigen::VectorXd latent;
+    out.psnr = state.fitter->Fit(problem, &latent).psnr;
+    out.latent = latent.cast<float>();
+    return out;
+  }
+  // meta_sgd:K over every pixel (invalid ones weigh 0), as in training.
+  out.latent = state.meta_sgd.InnerLoop<float>(siren, state.grid, targets.values, targets.weights,
+                                               state.alpha, Eigen::VectorXf::Zero(siren.latent_dim()),
+                                               state.strategy.steps);
   out.psnr = Psnr(siren.Forward<float>(state.grid, out.latent), targets);
   return out;
 }
@@ -209,6 +235,22 @@ Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
   if (options_.resume && std::filesystem::exists(options_.checkpoint_path)) {
     const Functaset checkpoint = Functaset::Load(options_.checkpoint_path);
     checkpoint.CheckModel(model_, "in use", options_.checkpoint_path);
+    for (SensorKind sensor : checkpoint.sensors()) {
+      const SensorState& state = State(sensor);
+      const std::string ours = state.strategy.ToString();
+      // A file without the field was written by an encoder that always ran the trunk's
+      // own meta-SGD steps.
+      const std::string theirs =
+          checkpoint.fit_strategy(sensor).empty()
+              ? "meta_sgd:" + std::to_string(state.trunk->meta_sgd.inner_steps)
+              : checkpoint.fit_strategy(sensor);
+      if (theirs != ours) {
+        throw std::invalid_argument(
+            "LatentEncoder: the checkpoint " + options_.checkpoint_path + " fitted its " +
+            ToString(sensor) + " latents with strategy '" + theirs + "', this run with '" + ours +
+            "'; resume with the strategy of the interrupted run (or another output)");
+      }
+    }
     std::size_t matched = 0;
     for (Job& job : jobs) {
       const auto found = checkpoint.Find(job.sensor, job.entry.id);
@@ -254,6 +296,7 @@ Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
     out.set_latent_precision(options_.latent_precision);
     for (SensorKind sensor : sensors) {
       out.AddSensor(sensor, model_.Trunk(sensor).siren.latent_dim());
+      out.set_fit_strategy(sensor, State(sensor).strategy.ToString());
     }
     for (const Job& job : jobs) {
       if (job.done) out.Add(job.sensor, job.entry);

@@ -11,10 +11,13 @@
 //   z_0 = 0;   z_{k+1} = z_k - alpha_s (*) d/dz [ L(theta_s, z_k) + lambda ||z_k||^2 ]
 //   latent_i = z_K,   psnr_i = Psnr(f_theta_s(grid; z_K), t_i)          (trunk_targets.h)
 //
-// with K = the trunk's meta_sgd.inner_steps, in float. Using the same K and alpha as in
-// training matters: meta-learning shaped theta so that THESE K steps land well; more
-// or other steps are a different encoder (Sec. III-C's "until convergence" refinement
-// is the latent fitter's job, not this class's).
+// with K = the trunk's meta_sgd.inner_steps, in float: the default strategy. Using the
+// same K and alpha as in training matters: meta-learning shaped theta so that THESE K
+// steps land well. Options::strategy chooses another fit per frame: meta_sgd:K (K steps
+// of the same loop) or ceres:N (Sec. III-C's "until convergence": at most N
+// Levenberg-Marquardt iterations on the frame's LatentProblem, estimation/fitting/
+// latent_problem.h, from z = 0, with Options::problem's sigma, sigma_z and robust loss).
+// The functaset records the strategy of each sensor (Functaset::fit_strategy).
 //
 // Parallelism and determinism. Frames are independent; `threads` workers take them
 // from a shared counter. Each frame is computed by one thread with the same code, so
@@ -50,6 +53,7 @@
 #include <Eigen/Core>
 
 #include "estimation/data/dataset.h"
+#include "estimation/fitting/latent_fitter.h"
 #include "estimation/functaset/functaset.h"
 #include "estimation/data/trunk_targets.h"
 #include "models/trunk/functa_model.h"
@@ -93,6 +97,14 @@ class LatentEncoder {
     // Storage precision of the latents in the written functaset (Functaset::
     // LatentPrecision). The per-frame PSNR is that of the unrounded fit.
     Functaset::LatentPrecision latent_precision = Functaset::LatentPrecision::kFloat32;
+    // The fit of every frame, as LatentFitter names it: "" (default) = each trunk's own
+    // meta_sgd:K, what it was meta-trained for; "meta_sgd:K" (K >= 0) or "ceres:N"
+    // (N >= 1). The k-NN strategies are not offered: they need a second functaset to
+    // search. A resumed checkpoint must have been written with the same strategy.
+    std::string strategy;
+    // The latent problem of the ceres strategy (unused by meta_sgd): sigma (0 = the
+    // trunk's residual_sigma), sigma_z, robust loss, pixel selection, precision.
+    LatentProblem::Options problem;
 
     // True if every field is in range; otherwise false and *error (if not null) names
     // the bad field and its value.
@@ -149,6 +161,8 @@ class LatentEncoder {
     Eigen::MatrixXf grid;   // rows*cols x 2, built once
     Eigen::VectorXf alpha;  // float copy of the trunk's rates
     MetaSgd meta_sgd{MetaSgd::Options()};
+    FitStrategy strategy;   // resolved: the trunk's meta_sgd:K when Options::strategy is ""
+    std::optional<LatentFitter> fitter;  // for ceres:N
   };
   const SensorState& State(SensorKind sensor) const;
 

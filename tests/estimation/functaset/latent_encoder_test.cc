@@ -159,6 +159,78 @@ TEST(LatentEncoder, EncodeTargetsRunsExactlyTheMetaSgdInnerLoop) {
           .all());
 }
 
+TEST(LatentEncoder, StrategiesAreValidatedByName) {
+  std::string error;
+  LatentEncoder::Options options;
+  options.strategy = "lbfgs:3";
+  EXPECT_FALSE(options.IsValid(&error));
+  EXPECT_THAT(error, HasSubstr("strategy"));
+  options.strategy = "knn+ceres:5";
+  EXPECT_FALSE(options.IsValid(&error));
+  EXPECT_THAT(error, HasSubstr("k-NN"));
+  options.strategy = "ceres:5";
+  options.problem.sigma_z = 0;
+  EXPECT_FALSE(options.IsValid(&error));
+  EXPECT_THAT(error, HasSubstr("sigma_z"));
+  options.problem.sigma_z = 1;
+  EXPECT_TRUE(options.IsValid(&error)) << error;
+}
+
+TEST(LatentEncoder, CeresStrategyIsTheLatentFittersFitAndBeatsTheInnerLoop) {
+  const FunctaModel model = MakeModel(/*inner_steps=*/3, /*alpha=*/0.7);
+  const SensorTrunk& trunk = model.Trunk(SensorKind::kSoftBubble);
+  const Eigen::MatrixXf grid = trunk.siren.Grid<float>(kBubbleRows, kBubbleCols);
+  const TrunkTargets targets =
+      TargetsFrom(trunk.siren.Forward<float>(grid, RandomLatent(8, 1.0, 4)));
+  LatentEncoder::Options options;
+  options.strategy = "ceres:30";
+  const LatentEncoder::EncodedFrame ceres =
+      LatentEncoder(model, options).EncodeTargets(SensorKind::kSoftBubble, targets);
+  const LatentEncoder::EncodedFrame inner =
+      LatentEncoder(model, LatentEncoder::Options()).EncodeTargets(SensorKind::kSoftBubble, targets);
+  LatentFitter::Options fit;
+  fit.strategy = FitStrategy::FromString("ceres:30");
+  Eigen::VectorXd expected;
+  const double psnr = LatentFitter(trunk, fit).Fit(LatentProblem(trunk, targets, {}), &expected).psnr;
+  EXPECT_TRUE((ceres.latent.array() == expected.cast<float>().array()).all());
+  EXPECT_EQ(ceres.psnr, psnr);
+  EXPECT_GT(ceres.psnr, inner.psnr + 3.0) << "3 meta-SGD steps: " << inner.psnr << " dB";
+  // meta_sgd:K with the trunk's own K is the default, bit for bit.
+  options.strategy = "meta_sgd:3";
+  const LatentEncoder::EncodedFrame explicit_inner =
+      LatentEncoder(model, options).EncodeTargets(SensorKind::kSoftBubble, targets);
+  EXPECT_TRUE((explicit_inner.latent.array() == inner.latent.array()).all());
+}
+
+TEST(LatentEncoder, TheFunctasetRecordsTheStrategyAndResumeInsistsOnIt) {
+  TestDir dir;
+  WriteTinyDataset(dir / "data", kFrames);
+  const Dataset dataset = Dataset::Open(dir / "data");
+  const FunctaModel model = MakeModel(/*inner_steps=*/3);
+  LatentEncoder::Options options;
+  options.checkpoint_path = dir / "set.tfs";
+  const Functaset by_default = LatentEncoder(model, options).Encode(dataset, nullptr);
+  for (SensorKind sensor : by_default.sensors()) {
+    EXPECT_EQ(by_default.fit_strategy(sensor), "meta_sgd:3");
+    EXPECT_EQ(Functaset::Load(dir / "set.tfs").fit_strategy(sensor), "meta_sgd:3");
+  }
+  options.resume = true;
+  options.strategy = "ceres:2";
+  try {
+    LatentEncoder(model, options).Encode(dataset, nullptr);
+    FAIL() << "resumed a meta_sgd:3 checkpoint with ceres:2";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_THAT(e.what(), HasSubstr("'meta_sgd:3'"));
+    EXPECT_THAT(e.what(), HasSubstr("'ceres:2'"));
+  }
+  options.resume = false;
+  options.checkpoint_path = dir / "ceres.tfs";
+  const Functaset by_ceres = LatentEncoder(model, options).Encode(dataset, nullptr);
+  for (SensorKind sensor : by_ceres.sensors()) {
+    EXPECT_EQ(Functaset::Load(dir / "ceres.tfs").fit_strategy(sensor), "ceres:2");
+  }
+}
+
 TEST(LatentEncoder, FramesTheModelGeneratedAreRecoveredThroughTheDataset) {
   // Frames written as depth PNGs: reference - scale * f(grid; z_i), at the trunk's
   // working resolution, so only the 1 um depth quantisation separates them from the
