@@ -110,6 +110,28 @@ TEST_F(EvalCliTest, TargetsSayPlainlyWhetherEachIsMetWithTheNumbers) {
     EXPECT_TRUE(t["bubble"][key]["met"].is_boolean()) << key;
   }
   EXPECT_TRUE(t["bubble"]["psnr_3db_above_pca"]["pca_db"].is_number());
+  // The fixture has noise-free frames: the same target against them, with the figures of
+  // the TactFunc and PCA test rows' clean PSNR (PCA at equal bytes: 2 * d / 4 components).
+  for (const char* sensor : {"bubble", "gelslim"}) {
+    const nlohmann::json& c = t[sensor]["psnr_3db_above_pca_clean"];
+    ASSERT_TRUE(c.is_object()) << sensor << ": " << t[sensor].dump();
+    EXPECT_TRUE(c["met"].is_boolean());
+    for (const nlohmann::json& row : j["rows"]) {
+      if (row["sensor"] != sensor || row["split"] != "test") continue;
+      if (row["approach"] == "TactFunc") {
+        ASSERT_TRUE(row["psnr_clean"].is_number()) << row.dump();
+        EXPECT_DOUBLE_EQ(c["tactfunc_db"].get<double>(), row["psnr_clean"].get<double>());
+        EXPECT_NE(row["psnr_clean"].get<double>(), row["psnr"].get<double>());  // other frames
+      }
+      if (row["approach"] == "PCA") EXPECT_TRUE(row["psnr_clean"].is_number()) << row.dump();
+      if (row["approach"] == "JPEG") EXPECT_TRUE(row["psnr_clean"].is_null()) << row.dump();
+    }
+    EXPECT_DOUBLE_EQ(c["margin_db"].get<double>(),
+                     c["tactfunc_db"].get<double>() - c["pca_db"].get<double>());
+    EXPECT_EQ(c["met"].get<bool>(), c["margin_db"].get<double>() >= 3);
+  }
+  EXPECT_THAT(r.out, HasSubstr("PSNR clean (dB)"));
+  EXPECT_THAT(r.out, HasSubstr("noise-free frames (test)"));
   EXPECT_FALSE(t["gelslim"].contains("pose_beats_pca_codes"));  // no pose model for gelslim
   EXPECT_TRUE(j["all_targets_met"].is_boolean());
   EXPECT_THAT(r.out, HasSubstr("Targets:"));
