@@ -11,6 +11,8 @@
 #include "estimation/data/image_io.h"
 #include "estimation/data/trunk_targets.h"
 #include "estimation/evaluation/reconstruction.h"
+#include "estimation/fitting/latent_fitter.h"
+#include "estimation/posterior/pose_posterior.h"
 #include "models/core/parallel_for.h"
 #include "models/pose/pose_model_provenance.h"
 #include "models/simulator/tool.h"
@@ -362,6 +364,7 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
 
     // -- Poses ---------------------------------------------------------------------------
     std::map<std::pair<std::string, Split>, PoseErrors> pose;
+    std::string tf_pose_latents;  // the latent map the TactFunc pose rows used
     if (sensor == in.pose_sensor) {
       const PoseSamples train = LabelledSamples(s, Split::kTrain);
       const PoseSamples test = LabelledSamples(s, Split::kTest);
@@ -369,8 +372,37 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
         throw DatasetError("functaset '" + in.functaset_name + "' has no labelled train-split " +
                            ToString(sensor) + " entries: the pose baselines are trained on those");
       }
+      // The pose model reads the kind of latent it was trained on (its latent map,
+      // PosePosterior's rule): the functaset's own latents if they were fitted that way,
+      // else the frames re-fitted with that map, as train-pose --refit fitted them.
+      const FitStrategy latent_map = LatentMapOfPoseModel(pose_model, trunk);
+      const std::string stored =
+          functaset.fit_strategy(sensor).empty()
+              ? "meta_sgd:" + std::to_string(trunk.meta_sgd.inner_steps)
+              : functaset.fit_strategy(sensor);
       Eigen::MatrixXf latents(static_cast<Eigen::Index>(m), d);
-      for (std::size_t i = 0; i < m; ++i) latents.row(i) = s.entries[i]->latent.transpose();
+      if (latent_map.ToString() == stored) {
+        for (std::size_t i = 0; i < m; ++i) latents.row(i) = s.entries[i]->latent.transpose();
+      } else {
+        LatentFitter::Options fit;
+        fit.strategy = latent_map;
+        const LatentFitter fitter(trunk, fit);
+        LatentProblem::Options problem;
+        problem.sigma = provenance.refit_sigma;  // 0 = the trunk's residual sigma
+        if (observer) {
+          observer->BeginTask("eval: latents for the pose model (" + latent_map.ToString() + ")",
+                              static_cast<std::int64_t>(m), "frames");
+        }
+        ParallelForWithTicks(m, threads, observer, [&](std::size_t i) {
+          Eigen::VectorXd z;
+          fitter.Fit(LatentProblem(trunk, s.targets[i], problem), &z);
+          latents.row(static_cast<Eigen::Index>(i)) = z.cast<float>().transpose();
+        });
+        if (observer) observer->EndTask();
+        message("eval: the pose model reads " + latent_map.ToString() + " latents, the functaset holds " +
+                stored + " ones: re-fitted every " + ToString(sensor) + " frame for the pose rows\n");
+      }
+      tf_pose_latents = latent_map.ToString();
       const Eigen::MatrixXf codes = full_codes.leftCols(pca_n);
       const int factor = options.raw_downsample;
       Eigen::MatrixXf pixels;
@@ -458,7 +490,8 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
         return it == pose.end() ? PoseErrors() : it->second;
       };
       const bool posed = sensor == in.pose_sensor;
-      Row tf{"TactFunc", posed ? "pose MLP on latents" : "", sensor, split, tf_rep, tf_frame_bytes,
+      Row tf{"TactFunc", posed ? "pose MLP on " + tf_pose_latents + " latents" : "", sensor, split,
+             tf_rep, tf_frame_bytes,
              MeanPsnr(Pick(tf_psnr, idx)), true, static_cast<int>(idx.size()),
              find_pose("tactfunc"), "", MeanPsnr(Pick(tf_psnr_clean, idx))};
       Row pc{"PCA", posed ? "pose MLP on PCA codes" : "", sensor, split,

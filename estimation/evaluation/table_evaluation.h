@@ -9,7 +9,9 @@
 // Rows, per sensor and split (every frame of the functaset; the test rows are the
 // held-out frames):
 //   TactFunc    the functaset's latents decoded by the model's trunk; pose: the pose
-//               model on the latents
+//               model on latents of the kind it was trained on (LatentMapOfPoseModel):
+//               the functaset's if its fit strategy is that map, else every frame
+//               re-fitted with the map (the row's pose_from names it)
 //   PCA         cv::PCA fitted on the train frames, as many components as the latent has
 //               floats; pose: the same MLP architecture, trained as the pose model was
 //               (its PoseModelProvenance: epochs, batch, learning rate, seed; train-pose's

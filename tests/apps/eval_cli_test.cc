@@ -137,6 +137,39 @@ TEST_F(EvalCliTest, TargetsSayPlainlyWhetherEachIsMetWithTheNumbers) {
   EXPECT_THAT(r.out, HasSubstr("Targets:"));
 }
 
+TEST_F(EvalCliTest, PoseRowsReadLatentsOfThePoseModelsOwnMap) {
+  // The fixture's pose model was trained on the functaset's own latents: used as stored.
+  const nlohmann::json j = eval_->LastJson();
+  for (const nlohmann::json& row : j["rows"]) {
+    if (row["approach"] == "TactFunc" && row["sensor"] == "bubble") {
+      EXPECT_EQ(row["pose_from"], "pose MLP on meta_sgd:3 latents") << row.dump();
+    }
+  }
+  EXPECT_THAT(eval_->out, ::testing::Not(HasSubstr("re-fitted")));
+  // A pose model trained on re-fitted latents (train-pose --refit) gets latents of that
+  // map: eval re-fits the frames and says so, instead of feeding it the stored ones.
+  const Result refit_pose =
+      Run("train-pose --functaset " + Root("f.tfs") + " --model " + Root("m.tfm") + " --data " +
+          Root("d") + " --refit ceres:3 --out " + Root("pr.tpm") +
+          " --hidden 16,16 --epochs 20 --batch 4");
+  ASSERT_EQ(refit_pose.exit_code, 0) << refit_pose.err;
+  const Result r = Run("eval --data " + Root("d") + " --model " + Root("m.tfm") + " --functaset " +
+                       Root("f.tfs") + " --pose-model " + Root("pr.tpm") + " --out " +
+                       Root("table_refit") + " --threads 1 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("the pose model reads ceres:3 latents, the functaset holds "
+                               "meta_sgd:3 ones"));
+  int rows = 0;
+  const nlohmann::json refit_json = r.LastJson();
+  for (const nlohmann::json& row : refit_json["rows"]) {
+    if (row["approach"] != "TactFunc" || row["sensor"] != "bubble") continue;
+    ++rows;
+    EXPECT_EQ(row["pose_from"], "pose MLP on ceres:3 latents") << row.dump();
+    EXPECT_TRUE(row["pose_mse"].is_number()) << row.dump();
+  }
+  EXPECT_EQ(rows, 2);  // train and test
+}
+
 TEST_F(EvalCliTest, WritesTheTableJsonAndTheRateDistortionPicture) {
   const Result& r = *eval_;
   ASSERT_EQ(r.exit_code, 0) << r.err;
