@@ -186,21 +186,23 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
   ProgressBar bar("posterior", static_cast<std::int64_t>(num_frames) * tallies.size(), "posteriors");
   for (std::size_t index : frames) {
     const PoseLabel& label = *dataset.frames()[index].label;
+    const SE2d& label_pose = label.sensor_T_object;
     const int n = SymmetryOrderOfTool(label.tool);
     const TrunkTargets targets = LoadTrunkTargets(dataset, index, trunk.format);
     const LatentProblem problem(trunk, targets, resolved.problem);
     Eigen::VectorXd latent;
     fitter.Fit(problem, &latent);
-    const Eigen::Vector3d point = pose_model.Predict(latent, n);
-    point_position_sq += std::pow(point.x() - label.x_m, 2) + std::pow(point.y() - label.y_m, 2);
+    const SE2d point = pose_model.Predict(latent, n);
+    point_position_sq +=
+        std::pow(point.x() - label_pose.x(), 2) + std::pow(point.y() - label_pose.y(), 2);
     Eigen::VectorXd meta_latent;
     meta_fitter.Fit(problem, &meta_latent);
-    const Eigen::Vector3d meta_point = pose_model.Predict(meta_latent, n);
+    const SE2d meta_point = pose_model.Predict(meta_latent, n);
     meta_position_sq +=
-        std::pow(meta_point.x() - label.x_m, 2) + std::pow(meta_point.y() - label.y_m, 2);
+        std::pow(meta_point.x() - label_pose.x(), 2) + std::pow(meta_point.y() - label_pose.y(), 2);
     if (n != 0) {
-      point_yaw_sq += std::pow(YawErrorModuloSymmetry(point.z(), label.yaw_rad, n), 2);
-      meta_yaw_sq += std::pow(YawErrorModuloSymmetry(meta_point.z(), label.yaw_rad, n), 2);
+      point_yaw_sq += std::pow(YawErrorModuloSymmetry(point.yaw(), label_pose.yaw(), n), 2);
+      meta_yaw_sq += std::pow(YawErrorModuloSymmetry(meta_point.yaw(), label_pose.yaw(), n), 2);
       ++point_yaw_count;
     }
     for (std::size_t s = 0; s < tallies.size(); ++s) {
@@ -218,13 +220,14 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
         continue;
       }
       const SE2d& mean = summary.mean;
-      const SE2d truth =
-          SE2d::FromXYYaw(label.x_m, label.y_m, FoldYawNear(label.yaw_rad, mean.yaw(), n));
+      const SE2d truth = SE2d::FromXYYaw(label_pose.x(), label_pose.y(),
+                                         FoldYawNear(label_pose.yaw(), mean.yaw(), n));
       t.covered_50 += distribution->Region(0.5).Contains(truth);
       t.covered_90 += distribution->Region(0.9).Contains(truth);
-      t.position_sq += std::pow(mean.x() - label.x_m, 2) + std::pow(mean.y() - label.y_m, 2);
+      t.position_sq +=
+          std::pow(mean.x() - label_pose.x(), 2) + std::pow(mean.y() - label_pose.y(), 2);
       if (n != 0) {
-        t.yaw_sq += std::pow(YawErrorModuloSymmetry(mean.yaw(), label.yaw_rad, n), 2);
+        t.yaw_sq += std::pow(YawErrorModuloSymmetry(mean.yaw(), label_pose.yaw(), n), 2);
         ++t.yaw_count;
       }
     }

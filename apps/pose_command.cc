@@ -239,8 +239,8 @@ void WritePosteriorPicture(const std::string& path, const Input& input, const Po
   const int n = s.symmetry_order;
   std::optional<SE2d> truth;
   if (input.label) {
-    truth = SE2d::FromXYYaw(input.label->x_m, input.label->y_m,
-                            FoldYawNear(input.label->yaw_rad, s.mean.yaw(), n));
+    const SE2d& label = input.label->sensor_T_object;
+    truth = SE2d::FromXYYaw(label.x(), label.y(), FoldYawNear(label.yaw(), s.mean.yaw(), n));
   }
   // Sample spread for the zoom and the tick length.
   double spread = 0;
@@ -301,7 +301,7 @@ void WritePosteriorPicture(const std::string& path, const Input& input, const Po
   for (const cv::Mat& p : panels) total_width += p.cols + 4;
   total_width -= 8;
   const std::optional<double> truth_yaw =
-      input.label ? std::optional<double>(input.label->yaw_rad) : std::nullopt;
+      input.label ? std::optional<double>(input.label->sensor_T_object.yaw()) : std::nullopt;
   const cv::Mat histogram = YawHistogram(total_width, 150, d, s.mean, truth_yaw, n);
 
   const std::string headline =
@@ -448,10 +448,11 @@ void RunPose(const PoseFlags& flags) {
   std::printf("pose: sd   x = %.3f mm, y = %.3f mm, yaw = %.2f deg\n",
               std::sqrt(cov(0, 0)) * 1e3, std::sqrt(cov(1, 1)) * 1e3, std::sqrt(cov(2, 2)) * kDeg);
   if (input.label) {
-    const double e_mm = 1e3 * std::hypot(mean.x() - input.label->x_m, mean.y() - input.label->y_m);
+    const SE2d& truth = input.label->sensor_T_object;
+    const double e_mm = 1e3 * std::hypot(mean.x() - truth.x(), mean.y() - truth.y());
     std::printf("pose: truth x = %.3f mm, y = %.3f mm, yaw = %.2f deg; error %.3f mm, %.2f deg\n",
-                input.label->x_m * 1e3, input.label->y_m * 1e3, input.label->yaw_rad * kDeg, e_mm,
-                YawErrorModuloSymmetry(mean.yaw(), input.label->yaw_rad, n) * kDeg);
+                truth.x() * 1e3, truth.y() * 1e3, truth.yaw() * kDeg, e_mm,
+                YawErrorModuloSymmetry(mean.yaw(), truth.yaw(), n) * kDeg);
   }
   std::printf("pose: covariance, tangent space at the mean (right perturbations), "
               "order x [m], y [m], yaw [rad]:\n");
@@ -496,8 +497,8 @@ void RunPose(const PoseFlags& flags) {
         {"model", flags.model},
         {"pose_model", flags.pose_model}};
     if (input.label) {
-      record["truth"] = {{"x_m", input.label->x_m}, {"y_m", input.label->y_m},
-                         {"yaw_rad", input.label->yaw_rad}, {"tool", input.label->tool}};
+      record["truth"] = PoseJson(input.label->sensor_T_object);
+      record["truth"]["tool"] = input.label->tool;
     }
     const std::string json_path = (fs::path(flags.out) / "posterior.json").string();
     const std::string png_path = (fs::path(flags.out) / "posterior.png").string();
@@ -519,8 +520,7 @@ void RunPose(const PoseFlags& flags) {
                         {"sensor", ToString(sensor)},
                         {"termination", ToString(summary.termination_type)}};
     if (input.label) {
-      j["truth"] = {{"x_m", input.label->x_m}, {"y_m", input.label->y_m},
-                    {"yaw_rad", input.label->yaw_rad}};
+      j["truth"] = PoseJson(input.label->sensor_T_object);
     }
     EmitJson(j);
   }

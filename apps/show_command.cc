@@ -112,9 +112,10 @@ void RunShow(const ShowFlags& flags) {
                                     h)};
       if (record.label) {
         const PoseLabel& label = *record.label;
+        const SE2d& pose = label.sensor_T_object;
         for (cv::Mat& tile : tiles) {
-          DrawPoseArrow(tile, info.rows, info.cols, info.pixel_pitch_m, label.x_m,
-                        label.y_m, label.yaw_rad, kArrow);
+          DrawPoseArrow(tile, info.rows, info.cols, info.pixel_pitch_m, pose.x(), pose.y(),
+                        pose.yaw(), kArrow);
         }
         char text[96];
         std::snprintf(text, sizeof(text), "%s d=%.1fmm", ToString(sensor),
@@ -122,10 +123,10 @@ void RunShow(const ShowFlags& flags) {
         PutLabel(caption, text, {6, sensor == SensorKind::kSoftBubble ? 104 : 122}, 0.42);
         if (sensor == sensors.front()) {
           PutLabel(caption, label.tool, {6, 44}, 0.5, cv::Scalar(255, 0, 255));
-          std::snprintf(text, sizeof(text), "x=%.1f y=%.1f mm", label.x_m * 1e3,
-                        label.y_m * 1e3);
+          std::snprintf(text, sizeof(text), "x=%.1f y=%.1f mm", pose.x() * 1e3,
+                        pose.y() * 1e3);
           PutLabel(caption, text, {6, 64}, 0.42);
-          std::snprintf(text, sizeof(text), "yaw=%.0f deg", label.yaw_rad * 180 / M_PI);
+          std::snprintf(text, sizeof(text), "yaw=%.0f deg", pose.yaw() * 180 / M_PI);
           PutLabel(caption, text, {6, 82}, 0.42);
         }
       }

@@ -92,7 +92,8 @@ Samples Collect(const Functaset& functaset, SensorKind sensor, Split split,
   for (int i = 0; i < m; ++i) {
     const FunctasetEntry& e = *chosen[i];
     s.inputs.row(i) = e.latent.transpose();
-    s.targets.poses.row(i) << e.label->x_m, e.label->y_m, e.label->yaw_rad;
+    const SE2d& pose = e.label->sensor_T_object;
+    s.targets.poses.row(i) << pose.x(), pose.y(), pose.yaw();
     bool known = false;
     s.targets.symmetry_orders[i] = SymmetryOrderOfTool(e.label->tool, &known);
     if (!known) unknown_tools->insert(e.label->tool);

@@ -77,9 +77,10 @@ int main(int argc, char** argv) {
   std::printf("stddev x %.2f mm, y %.2f mm, yaw %.1f deg\n",
               1e3 * std::sqrt(summary.covariance(0, 0)), 1e3 * std::sqrt(summary.covariance(1, 1)),
               std::sqrt(summary.covariance(2, 2)) / kDeg);
+  const SE2d& truth = contact.sensor_T_object;
   std::printf("truth  x %.2f mm, y %.2f mm, yaw %.1f deg (%.1f modulo the %s's symmetry order %d)\n",
-              1e3 * contact.x_m, 1e3 * contact.y_m, contact.yaw_rad / kDeg,
-              FoldYawNear(contact.yaw_rad, mean.yaw(), symmetry_order) / kDeg,
+              1e3 * truth.x(), 1e3 * truth.y(), truth.yaw() / kDeg,
+              FoldYawNear(truth.yaw(), mean.yaw(), symmetry_order) / kDeg,
               contact.tool.c_str(), symmetry_order);
   std::printf("%zu pose samples from %s\n", posterior->samples().size(), frame_path.c_str());
   return 0;

@@ -3,9 +3,9 @@
 // Synthesise one paired tactile contact: a tool pressed into a Soft Bubble and a
 // GelSlim at the same pose (models/simulator/contact_simulator.h, docs/SIMULATOR.md).
 //
-// The tool's face h(u, v) is placed at sensor_T_tool = (x, y, yaw) and pressed
+// The tool's face h(u, v) is placed at sensor_T_object = (x, y, yaw) and pressed
 // `depth` beyond first touch. The rigid interference
-//   s(p) = max(0, h(tool_T_sensor p) + z0(p) - m + depth)
+//   s(p) = max(0, h(object_T_sensor p) + z0(p) - m + depth)
 // is wrapped by an elastic surface w >= s of least energy
 //   E(w) = integral |grad w|^2 / 2 + w^2 / (2 l^2)
 // (a tensioned membrane on a gas spring, l = 15 mm, for the bubble; a gel layer on
@@ -52,8 +52,9 @@ int main() {
   const tactfunc::PairedContact contact = simulator.SamplePairedContact("lines2_60", 2026);
   std::printf("tool %s at x = %.2f mm, y = %.2f mm, yaw = %.1f deg; press %.2f mm (bubble), "
               "%.2f mm (gelslim)\n",
-              contact.bubble.tool.c_str(), 1e3 * contact.bubble.x_m,
-              1e3 * contact.bubble.y_m, contact.bubble.yaw_rad * 180.0 / kPi,
+              contact.bubble.tool.c_str(), 1e3 * contact.bubble.sensor_T_object.x(),
+              1e3 * contact.bubble.sensor_T_object.y(),
+              contact.bubble.sensor_T_object.yaw() * 180.0 / kPi,
               1e3 * contact.bubble.depth_m, 1e3 * contact.gelslim.depth_m);
 
   const auto bubble = simulator.Render(SensorKind::kSoftBubble, contact.bubble, 1);

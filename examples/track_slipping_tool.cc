@@ -211,9 +211,7 @@ int Run(const Flags& flags) {
     const SE2d truth = TrueSlip(t, flags.frames);
     Contact contact;
     contact.tool = flags.tool;
-    contact.x_m = truth.x();
-    contact.y_m = truth.y();
-    contact.yaw_rad = truth.yaw();
+    contact.sensor_T_object = truth;
     contact.depth_m = 8e-3;
     const ContactSimulator::Rendering rendering =
         simulator.Render(sensor, contact, DeriveSeed(flags.seed, 3 * t));

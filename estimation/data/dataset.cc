@@ -180,11 +180,6 @@ bool SplitFromString(const std::string& name, Split* split) {
   return false;
 }
 
-bool operator==(const PoseLabel& a, const PoseLabel& b) {
-  return a.tool == b.tool && a.x_m == b.x_m && a.y_m == b.y_m && a.yaw_rad == b.yaw_rad &&
-         a.depth_m == b.depth_m;
-}
-
 bool IsValidPoseLabel(const PoseLabel& label, int rows, int cols, double pixel_pitch_m,
                       std::string* error) {
   const std::optional<internal::PoseLabelProblem> problem =

@@ -43,6 +43,7 @@
 #include "estimation/data/image_io.h"
 #include "models/core/image.h"
 #include "models/core/sensor.h"
+#include "models/simulator/contact.h"
 
 namespace tactfunc {
 
@@ -52,17 +53,17 @@ const char* ToString(Split split);
 // Parses "train" or "test"; returns false and leaves *split untouched otherwise.
 bool SplitFromString(const std::string& name, Split* split);
 
-// A tool's pose in the sensor frame (models/core/sensor.h) when the frame was taken.
-struct PoseLabel {
-  std::string tool;    // tool name; non-empty, no ',', '"' or line breaks
-  double x_m = 0;      // metres; |x_m| <= half the sensor width (cols * pitch / 2)
-                       // when the pixel pitch is known, else <= 1 m
-  double y_m = 0;      // metres; same bound with the sensor height (rows * pitch / 2)
-  double yaw_rad = 0;  // radians, in [-pi, pi] (1e-9 slack)
-  double depth_m = 0;  // indentation depth in metres, in [0, 0.1]
-};
-bool operator==(const PoseLabel& a, const PoseLabel& b);
-inline bool operator!=(const PoseLabel& a, const PoseLabel& b) { return !(a == b); }
+// The label of a frame: the tool, its pose sensor_T_object in the sensor frame
+// (models/core/sensor.h) and its press depth when the frame was taken. A label is a
+// Contact (models/simulator/contact.h), the same type the simulator renders; ==
+// compares every field exactly. Ranges a valid label keeps (IsValidPoseLabel):
+//   tool               non-empty, no ',', '"' or line breaks
+//   sensor_T_object    x, y finite with |x| <= half the sensor width (cols * pitch / 2)
+//                      and |y| <= half its height (rows * pitch / 2) when the pixel
+//                      pitch is known, else <= 1 m; yaw finite (SE2d keeps it in
+//                      (-pi, pi]; labels.csv accepts [-pi, pi] with 1e-9 slack)
+//   depth_m            indentation depth in metres, in [0, 0.1]
+using PoseLabel = Contact;
 
 // Checks a label against the ranges above for a sensor of the given size and pitch
 // (pitch 0 = unknown). Returns false and sets *error to

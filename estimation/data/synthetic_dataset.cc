@@ -128,14 +128,9 @@ SynthesisReport Synthesize(const SynthesisPlan& plan,
           DeriveSeed(plan.seed, 3 * i + (sensor == SensorKind::kSoftBubble ? 1 : 2));
       const ContactSimulator::Rendering rendering =
           simulator.Render(sensor, contact, noise_seed);
-      PoseLabel label;
-      label.tool = contact.tool;
-      label.x_m = contact.x_m;
-      label.y_m = contact.y_m;
-      label.yaw_rad = contact.yaw_rad;
-      label.depth_m = contact.depth_m;
+      // The contact is the frame's label (PoseLabel is Contact).
       writer.AddFrame(FrameId(i), sensor, rendering.frame,
-                      plan.write_clean ? &rendering.clean : nullptr, label, split);
+                      plan.write_clean ? &rendering.clean : nullptr, contact, split);
     }
     if (progress) progress(1);
   });

@@ -449,8 +449,10 @@ Eigen::MatrixXd PredictPoses(const PoseMlp& model, const Eigen::MatrixXf& inputs
   for (const auto& [n, rows] : by_order) {
     Eigen::MatrixXf batch(static_cast<Eigen::Index>(rows.size()), inputs.cols());
     for (std::size_t k = 0; k < rows.size(); ++k) batch.row(k) = inputs.row(rows[k]);
-    const Eigen::MatrixXd predicted = model.PredictBatch(batch, n);
-    for (std::size_t k = 0; k < rows.size(); ++k) poses.row(rows[k]) = predicted.row(k);
+    const std::vector<SE2d> predicted = model.PredictBatch(batch, n);
+    for (std::size_t k = 0; k < rows.size(); ++k) {
+      poses.row(rows[k]) << predicted[k].x(), predicted[k].y(), predicted[k].yaw();
+    }
   }
   return poses;
 }

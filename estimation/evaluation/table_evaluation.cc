@@ -134,7 +134,8 @@ PoseSamples LabelledSamples(const SensorFrames& s, Split split) {
   p.targets.symmetry_orders.resize(m);
   for (int k = 0; k < m; ++k) {
     const PoseLabel& label = *s.entries[p.frames[k]]->label;
-    p.targets.poses.row(k) << label.x_m, label.y_m, label.yaw_rad;
+    const SE2d& pose = label.sensor_T_object;
+    p.targets.poses.row(k) << pose.x(), pose.y(), pose.yaw();
     p.targets.symmetry_orders[k] = SymmetryOrderOfTool(label.tool);
   }
   return p;

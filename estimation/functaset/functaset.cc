@@ -175,7 +175,8 @@ std::string Functaset::Serialize() const {
       splits.push_back(ToString(e.split));
       if (e.label) {
         tools.push_back(e.label->tool);
-        poses.insert(poses.end(), {e.label->x_m, e.label->y_m, e.label->yaw_rad, e.label->depth_m});
+        const SE2d& pose = e.label->sensor_T_object;
+        poses.insert(poses.end(), {pose.x(), pose.y(), pose.yaw(), e.label->depth_m});
       } else {
         tools.push_back(nullptr);
         poses.insert(poses.end(), {kNaN, kNaN, kNaN, kNaN});
@@ -298,9 +299,7 @@ Functaset Functaset::Parse(const std::string& bytes, const std::string& source) 
             field = name + "/poses" + item;
             throw fail("labelled frame '" + e.id + "' has a non-finite pose");
           }
-          label.x_m = p[0];
-          label.y_m = p[1];
-          label.yaw_rad = p[2];
+          label.sensor_T_object = SE2d::FromXYYaw(p[0], p[1], p[2]);
           label.depth_m = p[3];
           e.label = std::move(label);
         }

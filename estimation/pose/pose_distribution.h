@@ -7,8 +7,8 @@
 // Contains(), a multi-hypothesis tracker takes Modes().
 //
 // Conventions (models/core/se2.h; docs/POSES.md has the long form):
-//   * Every sample is a pose reference_T_object (typically sensor_T_object: object
-//     frame -> sensor frame), x and y in metres, yaw in rad.
+//   * Every sample is a pose sensor_T_object (object frame -> sensor frame), x and y
+//     in metres, yaw in rad.
 //   * Tangent vectors are ordered (x, y, yaw) and perturb on the RIGHT: a sample is
 //     written  x_i = mean * Exp(r_i),  r_i = Log(mean^-1 x_i)  (the body frame of the
 //     mean).
@@ -92,7 +92,7 @@ namespace tactfunc {
 // One mode of a PoseDistribution (see Modes()).
 struct PoseMode {
   double weight = 0;                                     // posterior mass, in (0, 1]
-  SE2d mean;                                             // reference_T_object
+  SE2d mean;                                             // sensor_T_object
   Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();  // tangent at mean, (x, y, yaw)
   int num_samples = 0;                                   // samples assigned to the mode
 };
@@ -197,7 +197,7 @@ class PoseDistribution {
   using CredibleRegion = PoseCredibleRegion;
   using ModeOptions = PoseModeOptions;
 
-  // samples: reference_T_object poses. weights: one per sample, finite, >= 0, not all
+  // samples: sensor_T_object poses. weights: one per sample, finite, >= 0, not all
   // zero; empty means equal weights. They are normalised to sum to 1. Throws
   // std::invalid_argument for no samples, a non-finite sample (naming its index and
   // components), a weights size other than 0 or samples.size(), or a bad weight.
@@ -254,7 +254,7 @@ double FoldYaw(double yaw, int symmetry_order);
 
 // In which frame ToRosPoseCovariance expresses the (x, y) perturbation.
 enum class RosCovarianceFrame {
-  // The message's header frame (the parent, "reference" of reference_T_object): the
+  // The message's header frame (the parent, "sensor" of sensor_T_object): the
   // (x, y) block rotated by the mean's yaw, Sigma_ros = J Sigma J^T with
   // J = diag(R(yaw), 1) -- first order, since T * Exp(d) moves the position by
   // R(yaw) d_xy + O(|d|^2) and the yaw by d_yaw. What AMCL publishes and

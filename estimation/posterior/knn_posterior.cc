@@ -72,7 +72,7 @@ std::vector<std::optional<SE2d>> KnnPosterior::PosesOf(const Functaset& functase
   for (const FunctasetEntry& entry : functaset.entries(sensor)) {
     if (split && entry.split != *split) continue;
     if (entry.label) {
-      poses.emplace_back(SE2d::FromXYYaw(entry.label->x_m, entry.label->y_m, entry.label->yaw_rad));
+      poses.push_back(entry.label->sensor_T_object);
     } else {
       poses.emplace_back(std::nullopt);
     }

@@ -273,14 +273,12 @@ PosePosterior::Summary PosePosterior::EstimateImpl(const TrunkTargets& targets,
       }
     }
     // Pose MLP, batched in float (PredictBatch); n = 0 gives yaw 0.
-    const Eigen::MatrixXd xyyaw =
-        pose_mlp_->PredictBatch(z_samples.cast<float>(), symmetry_order);
-    poses.reserve(xyyaw.rows());
-    for (Eigen::Index i = 0; i < xyyaw.rows(); ++i) {
-      if (!xyyaw.row(i).allFinite()) {
+    poses = pose_mlp_->PredictBatch(z_samples.cast<float>(), symmetry_order);
+    for (std::size_t i = 0; i < poses.size(); ++i) {
+      if (!(std::isfinite(poses[i].x()) && std::isfinite(poses[i].y()) &&
+            std::isfinite(poses[i].yaw()))) {
         return fail("the pose MLP gave a non-finite pose for latent sample " + std::to_string(i));
       }
-      poses.push_back(SE2d::FromXYYaw(xyyaw(i, 0), xyyaw(i, 1), xyyaw(i, 2)));
     }
     const Eigen::MatrixXd& residuals = pose_mlp_->calibration_residuals();
     if (options_.model_error && residuals.rows() > 0) {
@@ -327,11 +325,10 @@ Eigen::MatrixXd CalibrationResiduals(const PoseMlp& model, const Eigen::MatrixXf
   Eigen::MatrixXd residuals(m, 3);
   for (Eigen::Index i = 0; i < m; ++i) {
     const int n = targets.symmetry_orders.size() ? targets.symmetry_orders[i] : 1;
-    const Eigen::Vector3d p = model.Predict(inputs.row(i).transpose().cast<double>(), n);
+    const SE2d predicted = model.Predict(inputs.row(i).transpose().cast<double>(), n);
     const Eigen::Vector3d t = targets.poses.row(i).transpose();
     // n = 0: FoldYawNear gives 0, the yaw Predict returns: no yaw residual.
-    const double true_yaw = FoldYawNear(t[2], p[2], n);
-    const SE2d predicted = SE2d::FromXYYaw(p[0], p[1], p[2]);
+    const double true_yaw = FoldYawNear(t[2], predicted.yaw(), n);
     residuals.row(i) = (predicted.Inverse() * SE2d::FromXYYaw(t[0], t[1], true_yaw)).Log().transpose();
   }
   return residuals;

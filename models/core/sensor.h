@@ -8,7 +8,7 @@
 // picture is viewed. A pixel (row r, col c) of a rows x cols image with pitch p metres
 // per pixel has its centre at
 //   x = (c + 0.5 - cols / 2) * p,   y = (rows / 2 - r - 0.5) * p.
-// A tool's pose in this frame is sensor_T_tool = (x_m, y_m, yaw_rad).
+// A tool's pose in this frame is sensor_T_object = (x, y, yaw) (models/core/se2.h).
 #ifndef TACTFUNC_MODELS_CORE_SENSOR_H_
 #define TACTFUNC_MODELS_CORE_SENSOR_H_
 

@@ -273,8 +273,8 @@ Eigen::MatrixXd PoseMlp::InputJacobian(const Eigen::VectorXd& z) const {
 
 // ---- Poses ------------------------------------------------------------------------
 
-Eigen::Vector3d PoseMlp::Predict(const Eigen::VectorXd& z, int symmetry_order,
-                                 Eigen::MatrixXd* J_pose_z) const {
+SE2d PoseMlp::Predict(const Eigen::VectorXd& z, int symmetry_order,
+                      Eigen::MatrixXd* J_xyyaw_z) const {
   Check(symmetry_order >= 0,
         "PoseMlp::Predict: symmetry order must be >= 0, got " + std::to_string(symmetry_order));
   Check(z.size() == options_.input_dim, "PoseMlp::Predict: expected a latent of size " +
@@ -283,34 +283,34 @@ Eigen::Vector3d PoseMlp::Predict(const Eigen::VectorXd& z, int symmetry_order,
   const Eigen::MatrixXd o = Forward<double>(Eigen::MatrixXd(z.transpose()));
   const double s = options_.position_scale;
   const double c = o(0, 2), sn = o(0, 3);
-  Eigen::Vector3d pose(s * o(0, 0), s * o(0, 1), 0.0);
-  if (symmetry_order >= 1) pose[2] = std::atan2(sn, c) / symmetry_order;
-  if (J_pose_z != nullptr) {
+  const double yaw = symmetry_order >= 1 ? std::atan2(sn, c) / symmetry_order : 0.0;
+  if (J_xyyaw_z != nullptr) {
     const Eigen::MatrixXd j = InputJacobian(z);
-    J_pose_z->resize(3, options_.input_dim);
-    J_pose_z->row(0) = s * j.row(0);
-    J_pose_z->row(1) = s * j.row(1);
+    J_xyyaw_z->resize(3, options_.input_dim);
+    J_xyyaw_z->row(0) = s * j.row(0);
+    J_xyyaw_z->row(1) = s * j.row(1);
     const double r2 = c * c + sn * sn;
     if (symmetry_order >= 1 && r2 > 0) {
-      J_pose_z->row(2) = (c * j.row(3) - sn * j.row(2)) / (r2 * symmetry_order);
+      J_xyyaw_z->row(2) = (c * j.row(3) - sn * j.row(2)) / (r2 * symmetry_order);
     } else {
-      J_pose_z->row(2).setZero();
+      J_xyyaw_z->row(2).setZero();
     }
   }
-  return pose;
+  return SE2d::FromXYYaw(s * o(0, 0), s * o(0, 1), yaw);
 }
 
-Eigen::MatrixXd PoseMlp::PredictBatch(const Eigen::MatrixXf& inputs, int symmetry_order) const {
+std::vector<SE2d> PoseMlp::PredictBatch(const Eigen::MatrixXf& inputs,
+                                        int symmetry_order) const {
   Check(symmetry_order >= 0, "PoseMlp::PredictBatch: symmetry order must be >= 0, got " +
                                  std::to_string(symmetry_order));
   const Eigen::MatrixXf o = Forward<float>(inputs);
-  Eigen::MatrixXd poses(o.rows(), 3);
+  std::vector<SE2d> poses;
+  poses.reserve(static_cast<std::size_t>(o.rows()));
   const double s = options_.position_scale;
   for (Eigen::Index i = 0; i < o.rows(); ++i) {
-    poses(i, 0) = s * o(i, 0);
-    poses(i, 1) = s * o(i, 1);
-    poses(i, 2) =
+    const double yaw =
         symmetry_order >= 1 ? std::atan2(double(o(i, 3)), double(o(i, 2))) / symmetry_order : 0.0;
+    poses.push_back(SE2d::FromXYYaw(s * o(i, 0), s * o(i, 1), yaw));
   }
   return poses;
 }

@@ -12,7 +12,8 @@
 //
 // with s = Options::position_scale (metres per output unit, 5 mm by default) so that
 // every target is O(1), and n the tool's symmetry order (below). Predict() turns o
-// into (x, y, yaw): x = s o_0, y = s o_1, yaw = atan2(o_3, o_2) / n.
+// into the pose sensor_T_object = (x, y, yaw): x = s o_0, y = s o_1,
+// yaw = atan2(o_3, o_2) / n.
 //
 // Symmetric tools (decision). For a tool with C_n symmetry (models/simulator/tool.h) the tactile
 // image at yaw and at yaw + 2 pi k / n is the same, so regressing the raw yaw (or its
@@ -63,6 +64,7 @@
 #include <vector>
 
 #include "Eigen/Core"
+#include "models/core/se2.h"
 
 namespace tactfunc {
 
@@ -139,13 +141,15 @@ class PoseMlp {
   Eigen::MatrixXd InputJacobian(const Eigen::VectorXd& z) const;
 
   // ---- Poses -------------------------------------------------------------------------
-  // (x (m), y (m), yaw (rad)) at latent z for a tool of symmetry order n (header
-  // comment). J_pose_z (optional): 3 x d, d(x, y, yaw)/dz. Throws for n < 0 or a z of
-  // the wrong size.
-  Eigen::Vector3d Predict(const Eigen::VectorXd& z, int symmetry_order = 1,
-                          Eigen::MatrixXd* J_pose_z = nullptr) const;
-  // Batched: N x 3 poses for inputs N x d, all of symmetry order n.
-  Eigen::MatrixXd PredictBatch(const Eigen::MatrixXf& inputs, int symmetry_order = 1) const;
+  // The pose sensor_T_object (x, y in m, yaw in rad) at latent z for a tool of symmetry
+  // order n (header comment). J_xyyaw_z (optional): 3 x d, the derivative of the
+  // coordinates (x, y, yaw) with respect to z (not a right Jacobian on SE(2)). Throws
+  // for n < 0 or a z of the wrong size.
+  SE2d Predict(const Eigen::VectorXd& z, int symmetry_order = 1,
+               Eigen::MatrixXd* J_xyyaw_z = nullptr) const;
+  // Batched, in float: one sensor_T_object per row of inputs (N x d), all of symmetry
+  // order n. A non-finite output gives a pose with non-finite coordinates.
+  std::vector<SE2d> PredictBatch(const Eigen::MatrixXf& inputs, int symmetry_order = 1) const;
 
   // ---- Loss ----------------------------------------------------------------------------
   // The training targets o* (M x 4) of `targets` and the per-sample yaw mask (1, or 0

@@ -53,8 +53,9 @@ struct Patch {
 Patch ComputeInterference(const Tool& tool, const Contact& contact, int rows, int cols,
                           double pitch, const std::vector<float>& lift, int margin_px) {
   Patch patch;
-  const double cc = contact.x_m / pitch + 0.5 * cols - 0.5;
-  const double rc = 0.5 * rows - 0.5 - contact.y_m / pitch;
+  const SE2d& sensor_T_object = contact.sensor_T_object;
+  const double cc = sensor_T_object.x() / pitch + 0.5 * cols - 0.5;
+  const double rc = 0.5 * rows - 0.5 - sensor_T_object.y() / pitch;
   const double radius = tool.footprint_radius() / pitch + 1.0;
   const int c_lo = std::max(0, static_cast<int>(std::floor(cc - radius)));
   const int c_hi = std::min(cols - 1, static_cast<int>(std::ceil(cc + radius)));
@@ -65,14 +66,14 @@ Patch ComputeInterference(const Tool& tool, const Contact& contact, int rows, in
   const int box_cols = c_hi - c_lo + 1, box_rows = r_hi - r_lo + 1;
   constexpr float kNoFace = -std::numeric_limits<float>::infinity();
   std::vector<float> value(static_cast<std::size_t>(box_rows) * box_cols, kNoFace);
-  const double cos_yaw = std::cos(contact.yaw_rad), sin_yaw = std::sin(contact.yaw_rad);
+  const double cos_yaw = std::cos(sensor_T_object.yaw()), sin_yaw = std::sin(sensor_T_object.yaw());
   float first_touch = lift.empty() ? static_cast<float>(tool.max_height()) : kNoFace;
   for (int r = r_lo; r <= r_hi; ++r) {
-    const double dy = (0.5 * rows - r - 0.5) * pitch - contact.y_m;
+    const double dy = (0.5 * rows - r - 0.5) * pitch - sensor_T_object.y();
     float* out = value.data() + static_cast<std::size_t>(r - r_lo) * box_cols;
     for (int c = c_lo; c <= c_hi; ++c) {
-      const double dx = (c + 0.5 - 0.5 * cols) * pitch - contact.x_m;
-      // tool_T_sensor: rotate the offset by -yaw.
+      const double dx = (c + 0.5 - 0.5 * cols) * pitch - sensor_T_object.x();
+      // object_T_sensor: rotate the offset by -yaw.
       const double u = cos_yaw * dx + sin_yaw * dy;
       const double v = -sin_yaw * dx + cos_yaw * dy;
       const double h = tool.Height(u, v);
@@ -367,11 +368,12 @@ ContactSimulator::Rendering ContactSimulator::Render(SensorKind sensor,
                                                      const Contact& contact,
                                                      std::uint64_t seed) const {
   const Tool& tool = GetTool(contact.tool);
-  if (!std::isfinite(contact.x_m) || !std::isfinite(contact.y_m) ||
-      !std::isfinite(contact.yaw_rad)) {
+  const SE2d& sensor_T_object = contact.sensor_T_object;
+  if (!std::isfinite(sensor_T_object.x()) || !std::isfinite(sensor_T_object.y()) ||
+      !std::isfinite(sensor_T_object.yaw())) {
     throw std::invalid_argument("ContactSimulator::Render: the pose must be finite, got (" +
-                                Str(contact.x_m) + ", " + Str(contact.y_m) + ", " +
-                                Str(contact.yaw_rad) + ")");
+                                Str(sensor_T_object.x()) + ", " + Str(sensor_T_object.y()) +
+                                ", " + Str(sensor_T_object.yaw()) + ")");
   }
   if (!std::isfinite(contact.depth_m) || contact.depth_m < 0.0) {
     throw std::invalid_argument(
@@ -479,9 +481,11 @@ PairedContact ContactSimulator::SamplePairedContact(const std::string& tool,
   };
   Contact pose;
   pose.tool = tool;
-  pose.x_m = uniform(o.x_min_m, o.x_max_m);
-  pose.y_m = uniform(o.y_min_m, o.y_max_m);
-  pose.yaw_rad = uniform(o.yaw_min_rad, o.yaw_max_rad);
+  // Drawn in this order (x, y, yaw): the draws are part of the seed's meaning.
+  const double x = uniform(o.x_min_m, o.x_max_m);
+  const double y = uniform(o.y_min_m, o.y_max_m);
+  const double yaw = uniform(o.yaw_min_rad, o.yaw_max_rad);
+  pose.sensor_T_object = SE2d::FromXYYaw(x, y, yaw);
   const double press = uniform(0.0, 1.0);
   PairedContact paired{pose, pose};
   paired.bubble.depth_m =

@@ -3,12 +3,13 @@
 // ContactSimulator: synthetic Soft Bubble and GelSlim frames of a tool pressed into
 // the sensor, the forward model behind tactfunc's synthetic datasets.
 //
-// A contact is a rigid tool (models/simulator/tool.h) at pose sensor_T_tool = (x, y, yaw) in
-// the sensor frame (models/core/sensor.h), pressed `depth` beyond first touch. Rendering a
-// contact takes three steps (docs/SIMULATOR.md has the physics and the numbers):
+// A contact (models/simulator/contact.h) is a rigid tool (models/simulator/tool.h) at
+// pose sensor_T_object = (x, y, yaw) in the sensor frame (models/core/sensor.h), pressed
+// `depth` beyond first touch. Rendering a contact takes three steps (docs/SIMULATOR.md
+// has the physics and the numbers):
 //
 // 1. Interference. How far the undeformed sensor surface would sit inside the tool:
-//      s(p) = max(0, h(tool_T_sensor p) + z0(p) - m + depth)    where h(.) > 0,
+//      s(p) = max(0, h(object_T_sensor p) + z0(p) - m + depth)    where h(.) > 0,
 //    h the tool's face, z0 the undeformed surface's outward bulge (the Soft Bubble's
 //    dome; 0 for the flat gel) and m = max(h + z0) over the face, so first touch is
 //    at depth 0. For the GelSlim this is exactly s = max(0, h - (max_height - depth)).
@@ -37,17 +38,10 @@
 
 #include "models/core/image.h"
 #include "models/core/sensor.h"
+#include "models/simulator/contact.h"
 #include "models/simulator/tool.h"
 
 namespace tactfunc {
-
-// A tool pressed into one sensor at sensor_T_tool.
-struct Contact {
-  std::string tool;  // a name from ToolNames()
-  // Pose of the tool frame in the sensor frame: metres, metres, radians (CCW).
-  double x_m = 0, y_m = 0, yaw_rad = 0;
-  double depth_m = 0;  // press depth beyond first touch, metres (>= 0)
-};
 
 // One contact seen by both sensors: the same tool and pose, a press depth per sensor.
 struct PairedContact {

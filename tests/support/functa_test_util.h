@@ -142,8 +142,10 @@ inline void WriteTinyDataset(const std::string& dir, int n, bool clean = false) 
   for (int i = 0; i < n; ++i) {
     std::optional<PoseLabel> label;
     if (i != 2) {
-      label = PoseLabel{i % 2 ? "pen" : "hex_key", 0.0001 * (i % 7) - 0.0003,
-                        0.0002 - 0.0001 * (i % 5), 0.3 * (i % 10) - 1.4, 0.001 + 0.0002 * i};
+      label = PoseLabel{i % 2 ? "pen" : "hex_key",
+                        SE2d::FromXYYaw(0.0001 * (i % 7) - 0.0003, 0.0002 - 0.0001 * (i % 5),
+                                        0.3 * (i % 10) - 1.4),
+                        0.001 + 0.0002 * i};
     }
     const Split split = i % 4 == 3 ? Split::kTest : Split::kTrain;
     const Image bubble_clean = BubbleFrame(i), gel_clean = GelFrame(i);

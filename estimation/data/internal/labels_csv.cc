@@ -54,11 +54,11 @@ std::string PoseFieldText(const PoseLabel& label, int column) {
     case 2:
       return label.tool;
     case 3:
-      return FormatDoubleExact(label.x_m);
+      return FormatDoubleExact(label.sensor_T_object.x());
     case 4:
-      return FormatDoubleExact(label.y_m);
+      return FormatDoubleExact(label.sensor_T_object.y());
     case 5:
-      return FormatDoubleExact(label.yaw_rad);
+      return FormatDoubleExact(label.sensor_T_object.yaw());
     case 6:
       return FormatDoubleExact(label.depth_m);
     default:
@@ -66,9 +66,14 @@ std::string PoseFieldText(const PoseLabel& label, int column) {
   }
 }
 
-std::optional<PoseLabelProblem> FindPoseLabelProblem(const PoseLabel& label, int rows, int cols,
-                                                     double pixel_pitch_m) {
-  if (label.tool.empty() || !IsCsvSafe(label.tool)) {
+namespace {
+
+// The checks of FindPoseLabelProblem on the raw fields, so that the reader can check a
+// yaw before SE2d normalises it.
+std::optional<PoseLabelProblem> FindPoseFieldProblem(const std::string& tool, double x_m,
+                                                     double y_m, double yaw_rad, double depth_m,
+                                                     int rows, int cols, double pixel_pitch_m) {
+  if (tool.empty() || !IsCsvSafe(tool)) {
     return PoseLabelProblem{2,
                             "expected a non-empty tool name without ',', '\"' or "
                             "line breaks"};
@@ -77,19 +82,28 @@ std::optional<PoseLabelProblem> FindPoseLabelProblem(const PoseLabel& label, int
   const double half_x = pitch_known ? 0.5 * cols * pixel_pitch_m : kMaxPositionWithoutPitchM;
   const double half_y = pitch_known ? 0.5 * rows * pixel_pitch_m : kMaxPositionWithoutPitchM;
   const char* why = pitch_known ? " (half the sensor's extent)" : " (pixel pitch unknown)";
-  if (!(std::isfinite(label.x_m) && std::abs(label.x_m) <= half_x * (1 + kExtentSlack))) {
+  if (!(std::isfinite(x_m) && std::abs(x_m) <= half_x * (1 + kExtentSlack))) {
     return PoseLabelProblem{3, "expected a finite number in " + RangeText(-half_x, half_x) + why};
   }
-  if (!(std::isfinite(label.y_m) && std::abs(label.y_m) <= half_y * (1 + kExtentSlack))) {
+  if (!(std::isfinite(y_m) && std::abs(y_m) <= half_y * (1 + kExtentSlack))) {
     return PoseLabelProblem{4, "expected a finite number in " + RangeText(-half_y, half_y) + why};
   }
-  if (!(std::isfinite(label.yaw_rad) && std::abs(label.yaw_rad) <= M_PI + kYawSlack)) {
+  if (!(std::isfinite(yaw_rad) && std::abs(yaw_rad) <= M_PI + kYawSlack)) {
     return PoseLabelProblem{5, "expected a finite number in " + RangeText(-M_PI, M_PI)};
   }
-  if (!(std::isfinite(label.depth_m) && label.depth_m >= 0 && label.depth_m <= kMaxDepthM)) {
+  if (!(std::isfinite(depth_m) && depth_m >= 0 && depth_m <= kMaxDepthM)) {
     return PoseLabelProblem{6, "expected a finite number in " + RangeText(0, kMaxDepthM)};
   }
   return std::nullopt;
+}
+
+}  // namespace
+
+std::optional<PoseLabelProblem> FindPoseLabelProblem(const PoseLabel& label, int rows, int cols,
+                                                     double pixel_pitch_m) {
+  const SE2d& pose = label.sensor_T_object;
+  return FindPoseFieldProblem(label.tool, pose.x(), pose.y(), pose.yaw(), label.depth_m, rows,
+                              cols, pixel_pitch_m);
 }
 
 bool IsCsvSafe(const std::string& text) {
@@ -141,22 +155,27 @@ std::vector<LabelRow> ParseLabelsCsv(const std::string& text, const std::string&
     bool all_empty = true;
     for (int c = 2; c <= 6; ++c) all_empty = all_empty && fields[c].empty();
     if (!all_empty) {
-      PoseLabel label;
-      label.tool = fields[2];
-      if (label.tool.empty()) {
+      if (fields[2].empty()) {
         throw bad(2,
                   "expected a tool name (or all five pose fields empty for an "
                   "unlabelled frame)");
       }
-      double* values[4] = {&label.x_m, &label.y_m, &label.yaw_rad, &label.depth_m};
+      double values[4] = {0, 0, 0, 0};  // x_m, y_m, yaw_rad, depth_m
       for (int c = 3; c <= 6; ++c) {
-        if (!ParseDouble(fields[c], values[c - 3]) || !std::isfinite(*values[c - 3])) {
+        if (!ParseDouble(fields[c], &values[c - 3]) || !std::isfinite(values[c - 3])) {
           throw bad(c, "expected a finite number");
         }
       }
-      if (std::optional<PoseLabelProblem> problem = FindPoseLabelProblem(label, 0, 0, 0)) {
+      if (std::optional<PoseLabelProblem> problem = FindPoseFieldProblem(
+              fields[2], values[0], values[1], values[2], values[3], 0, 0, 0)) {
         throw bad(problem->column, problem->expected);
       }
+      // The one conversion from the file's columns to the in-memory pose. A yaw in the
+      // file's 1e-9 slack beyond +-pi (and -pi itself) becomes its (-pi, pi] equivalent.
+      PoseLabel label;
+      label.tool = fields[2];
+      label.sensor_T_object = SE2d::FromXYYaw(values[0], values[1], values[2]);
+      label.depth_m = values[3];
       row.label = std::move(label);
     }
     if (!seen.insert({row.frame, row.sensor}).second) {

@@ -123,10 +123,12 @@ Written WriteDataset(const std::string& dir) {
       w.frames[key] = bubble ? BubbleFrame(i) : GelFrame(i);
       std::optional<PoseLabel> label;
       if (i != 3) {
-        label = PoseLabel{i % 2 ? "hex_key" : "pen", 0.0001 * i - 0.0002, -0.0003 * i + 0.001,
-                          0.7 * i - 1.4, 0.001 + 0.0005 * i};
+        // i == 4: yaw pi, the edge of the range.
+        label = PoseLabel{i % 2 ? "hex_key" : "pen",
+                          SE2d::FromXYYaw(0.0001 * i - 0.0002, -0.0003 * i + 0.001,
+                                          i == 4 ? M_PI : 0.7 * i - 1.4),
+                          0.001 + 0.0005 * i};
       }
-      if (i == 4) label->yaw_rad = M_PI;  // edge of the range
       w.labels[key] = label;
       w.splits[key] = (i == 1 || i == 3) ? Split::kTest : Split::kTrain;
       const Image* clean = nullptr;
@@ -207,13 +209,15 @@ TEST(Split, NamesRoundTrip) {
 }
 
 TEST(PoseLabel, ValidityNamesTheFieldAndTheValue) {
-  PoseLabel label{"pen", 0.001, 0.0, 7.2, 0.002};
+  PoseLabel label{"pen", SE2d::FromXYYaw(0.001, 0.0, 0.5), 0.2};
   std::string error;
   EXPECT_FALSE(IsValidPoseLabel(label, 0, 0, 0, &error));
-  EXPECT_EQ(error, "field 'yaw_rad': expected a finite number in [-3.1416, 3.1416], got '7.2'");
-  label.yaw_rad = -M_PI - 5e-10;
+  EXPECT_EQ(error, "field 'depth_m': expected a finite number in [0, 0.1], got '0.2'");
+  label.depth_m = 0.002;
   EXPECT_TRUE(IsValidPoseLabel(label, 0, 0, 0, &error)) << error;
-  label.x_m = 0.004;  // beyond 15 * 0.4 mm / 2 = 3 mm
+  // The yaw of an SE2d is always in (-pi, pi]; labels.csv's yaw range is checked by its
+  // reader (labels_csv_test.cc).
+  label.sensor_T_object = SE2d::FromXYYaw(0.004, 0.0, 0.5);  // beyond 15 * 0.4 mm / 2 = 3 mm
   EXPECT_FALSE(IsValidPoseLabel(label, kBubbleRows, kBubbleCols, kBubblePitch, &error));
   EXPECT_THAT(error, HasSubstr("field 'x_m'"));
   EXPECT_TRUE(IsValidPoseLabel(label, kBubbleRows, kBubbleCols, 0, &error)) << error;
@@ -338,7 +342,7 @@ TEST(DatasetWriter, RejectsBadIdsUnknownSensorsDuplicatesWrongShapesAndBadLabels
   DatasetWriter writer(dir.path(), DatasetWriter::Options());
   writer.AddSensor(BubbleInfo(), BubbleFrame(1));
   const Image frame = BubbleFrame(2);
-  const PoseLabel good{"pen", 0, 0, 0, 0.002};
+  const PoseLabel good{"pen", SE2d(), 0.002};
   ExpectDatasetError([&] { writer.AddSensor(BubbleInfo(), BubbleFrame(1)); }, {"twice"});
   SensorInfo bad_gel = GelInfo();
   bad_gel.channels = 2;
@@ -365,7 +369,7 @@ TEST(DatasetWriter, RejectsBadIdsUnknownSensorsDuplicatesWrongShapesAndBadLabels
       },
       {"expected 12x15x1", "got 10x14x1"});
   PoseLabel far = good;
-  far.y_m = 0.0025;  // beyond 12 * 0.4 mm / 2 = 2.4 mm
+  far.sensor_T_object = SE2d::Trans(0.0, 0.0025);  // beyond 12 * 0.4 mm / 2 = 2.4 mm
   ExpectDatasetError(
       [&] { writer.AddFrame("z", SensorKind::kSoftBubble, frame, nullptr, far, Split::kTrain); },
       {"AddFrame(z, bubble)", "field 'y_m'", "0.0025"});
@@ -394,7 +398,7 @@ TEST(DatasetWriter, AddFrameFromSeveralThreadsWritesEveryFrame) {
     threads.emplace_back([&, t] {
       for (int i = t; i < 40; i += 4) {
         writer.AddFrame(Id(i), SensorKind::kGelSlim, GelFrame(i), nullptr,
-                        PoseLabel{"pen", 0, 0, 0, 0.001 * (i % 10)}, Split::kTrain);
+                        PoseLabel{"pen", SE2d(), 0.001 * (i % 10)}, Split::kTrain);
       }
     });
   }
@@ -476,7 +480,7 @@ TEST(Dataset, LabelsWithCrLfAndBlankRowsAreRead) {
   const Dataset dataset = Dataset::Open(dir.path());
   const FrameRecord& record = dataset.frames()[*dataset.FindFrame("000002", SensorKind::kGelSlim)];
   ASSERT_TRUE(record.label);
-  EXPECT_EQ(record.label->y_m, -0.002);
+  EXPECT_EQ(record.label->sensor_T_object.y(), -0.002);
   EXPECT_EQ(record.split, Split::kTest);
   EXPECT_FALSE(dataset.frames()[0].label);
 }

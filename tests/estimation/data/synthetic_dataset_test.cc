@@ -90,8 +90,8 @@ TEST(Synthesize, WritesPairedLabelledFramesWithEveryTenthContactInTest) {
     const FrameRecord& g = dataset.frames()[gel[k]];
     EXPECT_EQ(b.id, g.id);
     ASSERT_TRUE(b.label && g.label);
-    EXPECT_EQ(b.label->x_m, g.label->x_m);
-    EXPECT_EQ(b.label->yaw_rad, g.label->yaw_rad);
+    EXPECT_EQ(b.label->sensor_T_object.x(), g.label->sensor_T_object.x());
+    EXPECT_EQ(b.label->sensor_T_object.yaw(), g.label->sensor_T_object.yaw());
     EXPECT_GT(b.label->depth_m, g.label->depth_m);
     EXPECT_EQ(b.split, g.split);
   }

@@ -42,7 +42,7 @@ Functaset MakeFunctaset() {
     FunctasetEntry e;
     e.id = "frame_" + std::to_string(i);
     e.split = i == 3 ? Split::kTest : Split::kTrain;
-    if (i != 1) e.label = PoseLabel{"pen", 0.001 * i, -0.0005, 0.25 - i, 0.0021};
+    if (i != 1) e.label = PoseLabel{"pen", SE2d::FromXYYaw(0.001 * i, -0.0005, 0.25 - i), 0.0021};
     e.latent = Latent(5, i);
     e.psnr = i == 0 ? kNaN : (i == 2 ? kInf : 30.125f + i);
     f.Add(SensorKind::kSoftBubble, e);

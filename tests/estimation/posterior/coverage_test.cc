@@ -80,12 +80,13 @@ Coverage Measure(const SensorTrunk& trunk, const PoseMlp& pose_mlp, PosteriorSam
       return;
     }
     // The truth's yaw modulo the symmetry, the copy nearest the posterior mean.
-    const SE2d truth = SE2d::FromXYYaw(contact.x_m, contact.y_m,
-                                       FoldYawNear(contact.yaw_rad, summary.mean.yaw(), n));
+    const SE2d& pose = contact.sensor_T_object;
+    const SE2d truth =
+        SE2d::FromXYYaw(pose.x(), pose.y(), FoldYawNear(pose.yaw(), summary.mean.yaw(), n));
     c.covered_50 += posterior->Region(0.5).Contains(truth);
     c.covered_90 += posterior->Region(0.9).Contains(truth);
-    c.position_sq += std::pow(summary.mean.x() - contact.x_m, 2) +
-                     std::pow(summary.mean.y() - contact.y_m, 2);
+    c.position_sq += std::pow(summary.mean.x() - pose.x(), 2) +
+                     std::pow(summary.mean.y() - pose.y(), 2);
   });
   Coverage all;
   for (const Coverage& c : per_contact) {

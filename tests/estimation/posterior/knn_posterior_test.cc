@@ -113,7 +113,7 @@ TEST(KnnPosterior, PosesOfAFunctasetFollowItsLatentRows) {
     entry.id = "f" + std::to_string(i);
     entry.split = i == 1 ? Split::kTest : Split::kTrain;
     entry.latent = Eigen::Vector2f(i, 0);
-    if (i != 2) entry.label = PoseLabel{"rod", 0.001 * i, 0.002, 0.3, 0.0};
+    if (i != 2) entry.label = PoseLabel{"rod", SE2d::FromXYYaw(0.001 * i, 0.002, 0.3), 0.0};
     functaset.Add(SensorKind::kSoftBubble, entry);
   }
   const auto all = KnnPosterior::PosesOf(functaset, SensorKind::kSoftBubble);

@@ -86,9 +86,9 @@ TEST(PosePosterior, SgldAndLaplaceGiveFiniteDistributions) {
     std::optional<PoseDistribution> again;
     posterior_estimator.Estimate(f.targets, f.z_true, 1, &again, &latents);
     ASSERT_EQ(latents.rows(), 100);
-    const Eigen::Vector3d pose = f.mlp.Predict(latents.row(7).transpose(), 1);
-    EXPECT_NEAR(again->samples()[7].x(), pose[0], 1e-6);
-    EXPECT_NEAR(again->samples()[7].yaw(), pose[2], 1e-4);
+    const SE2d pose = f.mlp.Predict(latents.row(7).transpose(), 1);
+    EXPECT_NEAR(again->samples()[7].x(), pose.x(), 1e-6);
+    EXPECT_NEAR(again->samples()[7].yaw(), pose.yaw(), 1e-4);
   }
 }
 
@@ -141,17 +141,17 @@ TEST(PosePosterior, CalibrationResidualsOfTheModelsOwnPredictionsAreZeroModuloSy
   for (int i = 0; i < 6; ++i) {
     const int n = i % 3 + 1;  // 1, 2, 3
     targets.symmetry_orders[i] = n;
-    const Eigen::Vector3d p = f.mlp.Predict(inputs.row(i).transpose().cast<double>(), n);
+    const SE2d p = f.mlp.Predict(inputs.row(i).transpose().cast<double>(), n);
     // The truth is the prediction turned by a whole number of symmetry periods.
-    targets.poses.row(i) << p[0], p[1], p[2] + (i % 2) * 2 * M_PI / n;
+    targets.poses.row(i) << p.x(), p.y(), p.yaw() + (i % 2) * 2 * M_PI / n;
   }
   const Eigen::MatrixXd r = CalibrationResiduals(f.mlp, inputs, targets);
   ASSERT_EQ(r.rows(), 6);
   EXPECT_LT(r.cwiseAbs().maxCoeff(), 1e-9) << r;
   // A known offset in the body frame comes back as the residual.
-  const Eigen::Vector3d p = f.mlp.Predict(inputs.row(0).transpose().cast<double>(), 1);
+  const SE2d p = f.mlp.Predict(inputs.row(0).transpose().cast<double>(), 1);
   const Eigen::Vector3d offset(1e-3, -2e-3, 0.2);
-  const SE2d truth = SE2d::FromXYYaw(p[0], p[1], p[2]) * SE2d::Exp(offset);
+  const SE2d truth = p * SE2d::Exp(offset);
   targets.poses.row(0) << truth.x(), truth.y(), truth.yaw();
   EXPECT_LT((CalibrationResiduals(f.mlp, inputs, targets).row(0).transpose() - offset).norm(), 1e-9);
 }

@@ -260,17 +260,18 @@ TEST(PoseMlp, PredictJacobianMatchesFiniteDifferences) {
         VectorXd plus = z, minus = z;
         plus[k] += kStep;
         minus[k] -= kStep;
-        Eigen::Vector3d diff = mlp.Predict(plus, n) - mlp.Predict(minus, n);
+        const SE2d p = mlp.Predict(plus, n), m = mlp.Predict(minus, n);
+        Eigen::Vector3d diff(p.x() - m.x(), p.y() - m.y(), p.yaw() - m.yaw());
         diff[2] = std::remainder(diff[2], 2 * kPi / n);  // away from the atan2 cut
         numeric.col(k) = diff / (2 * kStep);
       }
-      ExpectNear(analytic, numeric, "J_pose_z n=" + std::to_string(n) + " at " + c.name);
+      ExpectNear(analytic, numeric, "J_xyyaw_z n=" + std::to_string(n) + " at " + c.name);
     }
   }
   // n = 0: yaw is unobservable, reported as 0 with a zero Jacobian row.
   MatrixXd j;
-  const Eigen::Vector3d pose = mlp.Predict(VectorXd::Ones(3), 0, &j);
-  EXPECT_EQ(pose[2], 0.0);
+  const SE2d pose = mlp.Predict(VectorXd::Ones(3), 0, &j);
+  EXPECT_EQ(pose.yaw(), 0.0);
   EXPECT_TRUE(j.row(2).isZero(0.0));
 }
 
@@ -388,14 +389,17 @@ PoseMlpTrainingOptions FastTraining() {
 
 // RMS position error (m) and RMS yaw error modulo the symmetry (rad).
 std::pair<double, double> Errors(const PoseMlp& mlp, const Synthetic& s, int n) {
-  const MatrixXd predicted = mlp.PredictBatch(s.inputs, n);
+  const std::vector<SE2d> predicted = mlp.PredictBatch(s.inputs, n);
   double position = 0, yaw = 0;
-  for (int i = 0; i < predicted.rows(); ++i) {
-    position += (predicted.row(i).head<2>() - s.targets.poses.row(i).head<2>()).squaredNorm();
-    const double e = YawErrorModuloSymmetry(predicted(i, 2), s.targets.poses(i, 2), n);
+  for (std::size_t i = 0; i < predicted.size(); ++i) {
+    const Eigen::Index row = static_cast<Eigen::Index>(i);
+    position += (predicted[i].translation() - s.targets.poses.row(row).head<2>().transpose())
+                    .squaredNorm();
+    const double e = YawErrorModuloSymmetry(predicted[i].yaw(), s.targets.poses(row, 2), n);
     yaw += e * e;
   }
-  return {std::sqrt(position / predicted.rows()), std::sqrt(yaw / predicted.rows())};
+  const double count = static_cast<double>(predicted.size());
+  return {std::sqrt(position / count), std::sqrt(yaw / count)};
 }
 
 TEST(PoseMlp, TrainingFitsALinearMappingAndLowersTheLoss) {

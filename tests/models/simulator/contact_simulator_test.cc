@@ -25,9 +25,7 @@ const ContactSimulator& Simulator() {
 Contact MakeContact(const std::string& tool, double x, double y, double yaw, double depth) {
   Contact contact;
   contact.tool = tool;
-  contact.x_m = x;
-  contact.y_m = y;
-  contact.yaw_rad = yaw;
+  contact.sensor_T_object = SE2d::FromXYYaw(x, y, yaw);
   contact.depth_m = depth;
   return contact;
 }
@@ -399,15 +397,16 @@ TEST(ContactSimulator, SamplesOnePoseForBothSensorsAndOnePressFraction) {
     const PairedContact p = Simulator().SamplePairedContact("rod", seed);
     EXPECT_EQ(p.bubble.tool, "rod");
     EXPECT_EQ(p.gelslim.tool, "rod");
-    EXPECT_EQ(p.bubble.x_m, p.gelslim.x_m);
-    EXPECT_EQ(p.bubble.y_m, p.gelslim.y_m);
-    EXPECT_EQ(p.bubble.yaw_rad, p.gelslim.yaw_rad);
-    EXPECT_GE(p.bubble.x_m, o.x_min_m);
-    EXPECT_LE(p.bubble.x_m, o.x_max_m);
-    EXPECT_GE(p.bubble.y_m, o.y_min_m);
-    EXPECT_LE(p.bubble.y_m, o.y_max_m);
-    EXPECT_GE(p.bubble.yaw_rad, -kPi);
-    EXPECT_LT(p.bubble.yaw_rad, kPi);
+    const SE2d& pose = p.bubble.sensor_T_object;
+    EXPECT_EQ(pose.x(), p.gelslim.sensor_T_object.x());
+    EXPECT_EQ(pose.y(), p.gelslim.sensor_T_object.y());
+    EXPECT_EQ(pose.yaw(), p.gelslim.sensor_T_object.yaw());
+    EXPECT_GE(pose.x(), o.x_min_m);
+    EXPECT_LE(pose.x(), o.x_max_m);
+    EXPECT_GE(pose.y(), o.y_min_m);
+    EXPECT_LE(pose.y(), o.y_max_m);
+    EXPECT_GE(pose.yaw(), -kPi);
+    EXPECT_LT(pose.yaw(), kPi);
     const double fb = (p.bubble.depth_m - o.bubble_depth_min_m) /
                       (o.bubble_depth_max_m - o.bubble_depth_min_m);
     const double fg = (p.gelslim.depth_m - o.gelslim_depth_min_m) /
@@ -422,9 +421,9 @@ TEST(ContactSimulator, SamplingIsDeterministicInTheSeed) {
   const PairedContact a = Simulator().SamplePairedContact("square", 11);
   const PairedContact b = Simulator().SamplePairedContact("square", 11);
   const PairedContact c = Simulator().SamplePairedContact("square", 12);
-  EXPECT_EQ(a.bubble.x_m, b.bubble.x_m);
+  EXPECT_EQ(a.bubble.sensor_T_object.x(), b.bubble.sensor_T_object.x());
   EXPECT_EQ(a.gelslim.depth_m, b.gelslim.depth_m);
-  EXPECT_NE(a.bubble.x_m, c.bubble.x_m);
+  EXPECT_NE(a.bubble.sensor_T_object.x(), c.bubble.sensor_T_object.x());
   EXPECT_THROW(Simulator().SamplePairedContact("spoon", 1), std::invalid_argument);
 }
 

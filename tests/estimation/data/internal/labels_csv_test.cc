@@ -32,7 +32,7 @@ LabelRow Row(const std::string& frame, SensorKind sensor, Split split) {
 LabelRow LabelledRow(const std::string& frame, SensorKind sensor, const std::string& tool,
                      double x, double y, double yaw, double depth, Split split) {
   LabelRow row = Row(frame, sensor, split);
-  row.label = PoseLabel{tool, x, y, yaw, depth};
+  row.label = PoseLabel{tool, SE2d::FromXYYaw(x, y, yaw), depth};
   return row;
 }
 
@@ -73,12 +73,31 @@ TEST(LabelsCsv, FormatThenParseRoundTripsBitExactly) {
     ASSERT_EQ(parsed[i].label.has_value(), rows[i].label.has_value());
     if (rows[i].label) {
       EXPECT_TRUE(*parsed[i].label == *rows[i].label);  // operator== compares exactly
-      EXPECT_EQ(parsed[i].label->x_m, rows[i].label->x_m);
-      EXPECT_EQ(parsed[i].label->y_m, rows[i].label->y_m);
+      EXPECT_EQ(parsed[i].label->sensor_T_object.x(), rows[i].label->sensor_T_object.x());
+      EXPECT_EQ(parsed[i].label->sensor_T_object.y(), rows[i].label->sensor_T_object.y());
     }
   }
   // Writing what was read gives the same text (deterministic output).
   EXPECT_EQ(FormatLabelsCsv(parsed), text);
+}
+
+TEST(LabelsCsv, ReadsThePoseIntoAnSe2dOnceWithItsYawInMinusPiToPi) {
+  // The yaw column accepts [-pi, pi] with 1e-9 slack; in memory the pose is an SE2d,
+  // whose yaw is in (-pi, pi]: -pi reads as pi and a yaw in the slack wraps around.
+  const std::vector<LabelRow> parsed = ParseLabelsCsv(
+      WithHeader("a,bubble,rod,0.001,-0.002,-3.141592653589793,0.003,train\n"
+                 "b,bubble,rod,0,0,0.5,0,test\n"),
+      kPath);
+  ASSERT_EQ(parsed.size(), 2u);
+  ASSERT_TRUE(parsed[0].label.has_value());
+  EXPECT_EQ(parsed[0].label->sensor_T_object.x(), 0.001);
+  EXPECT_EQ(parsed[0].label->sensor_T_object.y(), -0.002);
+  EXPECT_EQ(parsed[0].label->sensor_T_object.yaw(), M_PI);
+  EXPECT_EQ(parsed[0].label->depth_m, 0.003);
+  EXPECT_EQ(parsed[1].label->sensor_T_object.yaw(), 0.5);
+  EXPECT_THAT(ParseError(WithHeader("a,bubble,rod,0,0,3.2,0,train\n")),
+              HasSubstr("field 'yaw_rad': expected a finite number in "
+                        "[-3.1416, 3.1416], got '3.2'"));
 }
 
 TEST(LabelsCsv, AcceptsCrLfBlankLinesAByteOrderMarkAndSensorAliases) {
@@ -164,17 +183,16 @@ TEST(LabelsCsv, AMissingOrWrongHeaderIsAnErrorOnLineOne) {
 TEST(FindPoseLabelProblem, ChecksPositionsAgainstTheSensorsExtentWhenThePitchIsKnown) {
   PoseLabel label;
   label.tool = "rod";
-  label.x_m = 0.009;  // a 100-pixel-wide sensor at 0.2 mm: half width 10 mm
-  label.y_m = -0.005;
+  // A 100-pixel-wide sensor at 0.2 mm: half width 10 mm.
+  label.sensor_T_object = SE2d::Trans(0.009, -0.005);
   EXPECT_FALSE(FindPoseLabelProblem(label, 50, 100, 2e-4).has_value());
-  label.x_m = 0.011;
+  label.sensor_T_object = SE2d::Trans(0.011, -0.005);
   std::optional<PoseLabelProblem> problem = FindPoseLabelProblem(label, 50, 100, 2e-4);
   ASSERT_TRUE(problem.has_value());
   EXPECT_EQ(problem->column, 3);
   EXPECT_STREQ(LabelsColumnName(problem->column), "x_m");
   EXPECT_THAT(problem->expected, HasSubstr("half the sensor's extent"));
-  label.x_m = 0;
-  label.y_m = 0.006;  // half height 5 mm
+  label.sensor_T_object = SE2d::Trans(0, 0.006);  // half height 5 mm
   problem = FindPoseLabelProblem(label, 50, 100, 2e-4);
   ASSERT_TRUE(problem.has_value());
   EXPECT_EQ(problem->column, 4);
@@ -193,7 +211,7 @@ TEST(LabelsCsv, ColumnNamesAndFieldTextFollowTheHeader) {
   EXPECT_STREQ(LabelsColumnName(8), "?");
   PoseLabel label;
   label.tool = "square";
-  label.x_m = 0.1;
+  label.sensor_T_object = SE2d::Trans(0.1, 0);
   label.depth_m = 0.002;
   EXPECT_EQ(PoseFieldText(label, 2), "square");
   double x = 0;
