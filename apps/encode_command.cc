@@ -116,9 +116,10 @@ void RunEncode(const EncodeFlags& flags) {
     }
     options.split = split;
   }
-  options.latent_precision = flags.latent_precision == "float16"
-                                 ? Functaset::LatentPrecision::kFloat16
-                                 : Functaset::LatentPrecision::kFloat32;
+  if (!LatentPrecisionFromString(flags.latent_precision, &options.latent_precision)) {
+    throw UsageError("--latent-precision: expected float32, float16, uint8, uint6 or uint4, got '" +
+                     flags.latent_precision + "'");
+  }
   options.strategy = flags.strategy;
   if (std::string error; !options.IsValid(&error)) throw UsageError("--strategy: " + error);
 
@@ -239,8 +240,11 @@ void RegisterEncode(CLI::App& app, CommandBody* selected) {
   sub->add_option("--split", flags->split, "Only frames of this split: train or test");
   sub->add_option("--latent-precision", flags->latent_precision,
                   "Storage of the latents: float16 (default: half the bytes, no measurable PSNR "
-                  "cost, docs/RESULTS_RECONSTRUCTION.md) or float32")
-      ->check(CLI::IsMember({"float32", "float16"}));
+                  "cost, docs/RESULTS_RECONSTRUCTION.md), float32, or uint8 / uint6 / uint4: "
+                  "8-, 6- or 4-bit codes on a uniform grid per sensor and latent dimension "
+                  "between its min and max over the frames (ceil(d b / 8) bytes per frame plus "
+                  "2 x d float32 per sensor; docs/FUNCTASET.md, \"Latent precision\")")
+      ->check(CLI::IsMember({"float32", "float16", "uint8", "uint6", "uint4"}));
   sub->add_option("--strategy", flags->strategy,
                   "How each frame's latent is fitted: meta_sgd:K or ceres:N (default: the "
                   "trunk's own meta_sgd:K, what it was trained for; ceres:N fits the latent "

@@ -449,7 +449,9 @@ void RunEval(const EvalFlags& flags) {
        << " cores.\n\n"
        << md.str()
        << "\nrep. size: model + per-frame data for every frame of the sensor (train + test). "
-          "bytes/frame: codes as stored (TactFunc latents float16 by default, PCA float32); JPEG without its shared tables "
+          "bytes/frame: codes as stored (TactFunc latents as encode --latent-precision stored them, "
+          "float16 by default, b-bit codes without their per-dimension offset/step tables "
+          "(counted once in rep. size); PCA float32); JPEG without its shared tables "
           "(counted once in rep. size); raw: rows x cols x channels x bytes per sample at the "
           "native resolution. PSNR: mean over the split's frames of THE PSNR of "
           "estimation/data/trunk_targets.h at the model's working resolution (n/a for raw frames: "

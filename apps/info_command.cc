@@ -145,7 +145,7 @@ nlohmann::json DescribeFunctaset(const std::string& bytes, const std::string& pa
   const Functaset functaset = Functaset::Parse(bytes, path);
   std::printf("  model checksum %u, dataset %s, latents %s%s\n", functaset.model_checksum(),
               functaset.dataset().c_str(),
-              functaset.BytesPerLatentFloat() == 2 ? "float16" : "float32",
+              ToString(functaset.latent_precision()),
               functaset.complete() ? "" : ", PARTIAL (encode --resume continues it)");
   nlohmann::json sensors = nlohmann::json::object();
   for (SensorKind sensor : functaset.sensors()) {
@@ -178,7 +178,7 @@ nlohmann::json DescribeFunctaset(const std::string& bytes, const std::string& pa
   }
   return {{"model_checksum", functaset.model_checksum()},
           {"dataset", functaset.dataset()},
-          {"latent_precision", functaset.BytesPerLatentFloat() == 2 ? "float16" : "float32"},
+          {"latent_precision", ToString(functaset.latent_precision())},
           {"complete", functaset.complete()},
           {"sensors", sensors}};
 }

@@ -63,8 +63,9 @@ RepresentationSize ComputeRepresentationSize(const FunctaModel& model, const Fun
     const std::uint64_t m = functaset.entries(sensor).size();
     size.frames += static_cast<std::int64_t>(m);
     size.model_bytes += 4ull * (trunk.siren.NumParameters() + trunk.alpha.size());
-    size.latent_bytes += static_cast<std::uint64_t>(functaset.BytesPerLatentFloat()) * m *
-                         functaset.latent_dim(sensor);
+    // As on disk: per-frame codes plus the sensor's shared tables (b-bit latents).
+    size.latent_bytes += static_cast<std::uint64_t>(functaset.BytesPerFrame(sensor)) * m +
+                         functaset.SharedLatentBytes(sensor);
     size.raw_bytes += m * RawFrameBytes(*info);
   }
   size.representation_bytes = size.model_bytes + size.latent_bytes;

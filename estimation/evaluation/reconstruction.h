@@ -57,7 +57,8 @@ PsnrStats ComputePsnrStats(const std::vector<double>& values);
 struct RepresentationSize {
   std::int64_t frames = 0;                 // functaset entries counted
   std::uint64_t model_bytes = 0;           // trunks of the functaset's sensors, float32
-  std::uint64_t latent_bytes = 0;          // sum_s M_s d_s (4, or 2 for float16 latents)
+  // sum_s M_s x Functaset::BytesPerFrame(s) + SharedLatentBytes(s): bytes on disk.
+  std::uint64_t latent_bytes = 0;
   std::uint64_t representation_bytes = 0;  // model_bytes + latent_bytes
   std::uint64_t raw_bytes = 0;             // the entries' frames, uncompressed, native size
   double compression_ratio = 0;            // raw_bytes / representation_bytes (0 if empty)

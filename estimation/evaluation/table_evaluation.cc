@@ -235,9 +235,11 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
                     std::string("eval: TactFunc ") + ToString(sensor), observer, &s.clean,
                     &tf_psnr_clean);
     const std::uint64_t trunk_bytes = 4ull * (trunk.siren.NumParameters() + trunk.alpha.size());
-    // Bytes per frame as stored (4 or 2 per latent float: encode --latent-precision).
-    const double tf_frame_bytes = static_cast<double>(functaset.BytesPerLatentFloat()) * d;
-    const std::uint64_t tf_rep = trunk_bytes + m * static_cast<std::uint64_t>(tf_frame_bytes);
+    // Bytes per frame as stored (encode --latent-precision); the representation also
+    // counts the b-bit codes' shared tables.
+    const double tf_frame_bytes = functaset.BytesPerFrame(sensor);
+    const std::uint64_t tf_rep = trunk_bytes + m * static_cast<std::uint64_t>(tf_frame_bytes) +
+                                 functaset.SharedLatentBytes(sensor);
     curves.tactfunc.push_back(
         {tf_frame_bytes, MeanPsnr(Pick(tf_psnr, s.test)), "d=" + std::to_string(d)});
 
@@ -360,7 +362,7 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
           LatentPsnrs(t2, test_entries, t_targets, threads,
                       "eval: TactFunc d=" + std::to_string(d2) + " " + ToString(sensor), observer);
       curves.tactfunc.push_back(
-          {e.functaset->BytesPerLatentFloat() * 1.0 * d2, MeanPsnr(psnr), "d=" + std::to_string(d2)});
+          {e.functaset->BytesPerFrame(sensor), MeanPsnr(psnr), "d=" + std::to_string(d2)});
     }
 
     // -- Poses ---------------------------------------------------------------------------
@@ -524,8 +526,8 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
     const double tf_test = MeanPsnr(Pick(tf_psnr, s.test));
     // The PSNR target compares at equal bytes per frame: PCA with as many float32
     // components as TactFunc's stored latent has bytes / 4 (= d for float32 latents,
-    // d / 2 for float16 ones); the PCA row itself keeps d components, as many as the
-    // latent has floats.
+    // d / 2 for float16 ones, d / 4 for 8-bit codes); the PCA row itself keeps d
+    // components, as many as the latent has values.
     const int pca_equal_n =
         std::max(1, std::min(pca_full.components(), static_cast<int>(tf_frame_bytes / 4)));
     std::vector<double> pca_equal_clean = pca_psnr_clean;

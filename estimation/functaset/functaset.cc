@@ -1,6 +1,7 @@
 // Copyright 2026 The tactfunc Authors.
 #include "estimation/functaset/functaset.h"
 
+#include <algorithm>
 #include <cinttypes>
 #include <cmath>
 #include <cstdio>
@@ -26,7 +27,92 @@ std::string Hex(std::uint32_t value) {
   return buffer;
 }
 
+// Bytes of one frame's packed b-bit codes.
+std::int64_t CodeBytes(int d, int bits) { return (static_cast<std::int64_t>(d) * bits + 7) / 8; }
+
+// Packs codes (each < 2^bits) LSB-first into `out` (CodeBytes(codes.size(), bits) bytes,
+// zeroed by the caller).
+void PackCodes(const std::vector<std::uint32_t>& codes, int bits, double* out) {
+  std::vector<std::uint32_t> bytes(CodeBytes(static_cast<int>(codes.size()), bits), 0);
+  for (std::size_t k = 0; k < codes.size(); ++k) {
+    const std::size_t bit = k * bits;
+    const std::uint32_t shifted = codes[k] << (bit % 8);  // at most 8 + 7 bits
+    bytes[bit / 8] |= shifted & 0xff;
+    if (shifted > 0xff) bytes[bit / 8 + 1] |= shifted >> 8;
+  }
+  for (std::size_t j = 0; j < bytes.size(); ++j) out[j] = bytes[j];
+}
+
+std::uint32_t UnpackCode(const double* row, int k, int bits) {
+  const std::size_t bit = static_cast<std::size_t>(k) * bits;
+  std::uint32_t word = static_cast<std::uint32_t>(row[bit / 8]);
+  if (bit % 8 + bits > 8) word |= static_cast<std::uint32_t>(row[bit / 8 + 1]) << 8;
+  return (word >> (bit % 8)) & ((1u << bits) - 1);
+}
+
+// Code of z on the grid offset + q step with q in [0, levels].
+std::uint32_t Quantise(float z, float offset, float step, std::uint32_t levels) {
+  if (!(step > 0)) return 0;
+  const double q = std::round((static_cast<double>(z) - offset) / step);
+  if (!(q > 0)) return 0;  // also NaN
+  return static_cast<std::uint32_t>(std::clamp(q, 0.0, static_cast<double>(levels)));
+}
+
+float Dequantise(std::uint32_t q, float offset, float step) {
+  return static_cast<float>(offset + static_cast<double>(q) * step);
+}
+
 }  // namespace
+
+namespace {
+
+struct PrecisionInfo {
+  Functaset::LatentPrecision precision;
+  const char* name;
+  int bits;
+};
+constexpr PrecisionInfo kPrecisions[] = {{Functaset::LatentPrecision::kFloat32, "float32", 32},
+                                         {Functaset::LatentPrecision::kFloat16, "float16", 16},
+                                         {Functaset::LatentPrecision::kUint8, "uint8", 8},
+                                         {Functaset::LatentPrecision::kUint6, "uint6", 6},
+                                         {Functaset::LatentPrecision::kUint4, "uint4", 4}};
+
+const PrecisionInfo& Info(Functaset::LatentPrecision precision) {
+  for (const PrecisionInfo& info : kPrecisions) {
+    if (info.precision == precision) return info;
+  }
+  return kPrecisions[0];
+}
+
+}  // namespace
+
+const char* ToString(Functaset::LatentPrecision precision) { return Info(precision).name; }
+
+bool LatentPrecisionFromString(const std::string& name, Functaset::LatentPrecision* precision) {
+  for (const PrecisionInfo& info : kPrecisions) {
+    if (name == info.name) {
+      *precision = info.precision;
+      return true;
+    }
+  }
+  return false;
+}
+
+int LatentBits(Functaset::LatentPrecision precision) { return Info(precision).bits; }
+
+bool IsQuantised(Functaset::LatentPrecision precision) { return LatentBits(precision) <= 8; }
+
+double Functaset::BytesPerFrame(SensorKind sensor) const {
+  const int d = latent_dim(sensor);
+  const int bits = LatentBits(latent_precision_);
+  return IsQuantised(latent_precision_) ? static_cast<double>(CodeBytes(d, bits))
+                                        : static_cast<double>(d) * bits / 8;
+}
+
+std::uint64_t Functaset::SharedLatentBytes(SensorKind sensor) const {
+  const int d = latent_dim(sensor);
+  return IsQuantised(latent_precision_) ? 8ull * static_cast<std::uint64_t>(d) : 0;
+}
 
 void Functaset::AddSensor(SensorKind sensor, int latent_dim) {
   if (latent_dim < 1) {
@@ -151,6 +237,40 @@ void Functaset::CheckModel(const FunctaModel& model, const std::string& model_na
   }
 }
 
+Functaset::CodeTable Functaset::Codes(const SensorBlock& block, int bits) {
+  const std::uint32_t levels = (1u << bits) - 1;
+  const int d = block.latent_dim;
+  // The grid the entries were read with, if every latent still lies on it.
+  if (block.codes && block.codes->bits == bits) {
+    const CodeTable& t = *block.codes;
+    bool on_grid = true;
+    for (const FunctasetEntry& e : block.entries) {
+      for (int k = 0; k < d && on_grid; ++k) {
+        const float z = e.latent[k];
+        on_grid = Dequantise(Quantise(z, t.offset[k], t.step[k], levels), t.offset[k],
+                             t.step[k]) == z;
+      }
+      if (!on_grid) break;
+    }
+    if (on_grid) return t;
+  }
+  CodeTable table;
+  table.bits = bits;
+  table.offset = Eigen::VectorXf::Zero(d);
+  table.step = Eigen::VectorXf::Zero(d);
+  for (int k = 0; k < d; ++k) {
+    if (block.entries.empty()) break;
+    float lo = block.entries.front().latent[k], hi = lo;
+    for (const FunctasetEntry& e : block.entries) {
+      lo = std::min(lo, e.latent[k]);
+      hi = std::max(hi, e.latent[k]);
+    }
+    table.offset[k] = lo;
+    table.step[k] = static_cast<float>((static_cast<double>(hi) - lo) / levels);
+  }
+  return table;
+}
+
 std::string Functaset::Serialize() const {
   TensorFile file(kKind);
   nlohmann::json meta;
@@ -181,7 +301,9 @@ std::string Functaset::Serialize() const {
         tools.push_back(nullptr);
         poses.insert(poses.end(), {kNaN, kNaN, kNaN, kNaN});
       }
-      for (Eigen::Index k = 0; k < d; ++k) latents.push_back(e.latent[k]);
+      if (!IsQuantised(latent_precision_)) {
+        for (Eigen::Index k = 0; k < d; ++k) latents.push_back(e.latent[k]);
+      }
       psnr.push_back(e.psnr);
     }
     meta["sensors"].push_back({{"sensor", name},
@@ -191,10 +313,32 @@ std::string Functaset::Serialize() const {
                                {"ids", std::move(ids)},
                                {"splits", std::move(splits)},
                                {"tools", std::move(tools)}});
-    file.Add(name + "/latents",
-             latent_precision_ == LatentPrecision::kFloat16 ? TensorFile::DType::kFloat16
-                                                            : TensorFile::DType::kFloat32,
-             {m, d}, std::move(latents));
+    if (IsQuantised(latent_precision_)) {
+      const int bits = LatentBits(latent_precision_);
+      meta["sensors"].back()["latent_bits"] = bits;
+      const CodeTable table = Codes(block, bits);
+      const std::uint32_t levels = (1u << bits) - 1;
+      const std::int64_t row_bytes = CodeBytes(block.latent_dim, bits);
+      std::vector<double> codes(m * row_bytes, 0.0);
+      std::vector<std::uint32_t> q(d);
+      for (std::int64_t i = 0; i < m; ++i) {
+        for (std::int64_t k = 0; k < d; ++k) {
+          q[k] = Quantise(block.entries[i].latent[k], table.offset[k], table.step[k], levels);
+        }
+        PackCodes(q, bits, codes.data() + i * row_bytes);
+      }
+      file.Add(name + "/latent_codes", TensorFile::DType::kUint8, {m, row_bytes},
+               std::move(codes));
+      file.Add(name + "/latent_offset", TensorFile::DType::kFloat32, {d},
+               std::vector<double>(table.offset.data(), table.offset.data() + d));
+      file.Add(name + "/latent_step", TensorFile::DType::kFloat32, {d},
+               std::vector<double>(table.step.data(), table.step.data() + d));
+    } else {
+      file.Add(name + "/latents",
+               latent_precision_ == LatentPrecision::kFloat16 ? TensorFile::DType::kFloat16
+                                                              : TensorFile::DType::kFloat32,
+               {m, d}, std::move(latents));
+    }
     file.Add(name + "/psnr", TensorFile::DType::kFloat32, {m}, std::move(psnr));
     file.Add(name + "/poses", TensorFile::DType::kFloat64, {m, 4}, std::move(poses));
   }
@@ -260,17 +404,66 @@ Functaset Functaset::Parse(const std::string& bytes, const std::string& source) 
       const auto& id_array = array("ids");
       const auto& split_array = array("splits");
       const auto& tool_array = array("tools");
-      const auto& latents = file.Get(name + "/latents", {m, d});
       const auto& psnr = file.Get(name + "/psnr", {m});
       const auto& poses = file.Get(name + "/poses", {m, 4});
-      if (latents.dtype == TensorFile::DType::kFloat64 ||
-          psnr.dtype != TensorFile::DType::kFloat32 || poses.dtype != TensorFile::DType::kFloat64) {
+      if (psnr.dtype != TensorFile::DType::kFloat32 || poses.dtype != TensorFile::DType::kFloat64) {
         field = name + "/*";
-        throw fail("expected latents float32 or float16, psnr float32, poses float64");
+        throw fail("expected psnr float32, poses float64");
       }
-      if (latents.dtype == TensorFile::DType::kFloat16) {
-        out.latent_precision_ = LatentPrecision::kFloat16;
+      // Float latents, or b-bit codes with their grid (told apart by the tensors present).
+      LatentPrecision precision = LatentPrecision::kFloat32;
+      const TensorFile::Tensor* latents = nullptr;
+      const TensorFile::Tensor* codes = nullptr;
+      CodeTable table;
+      if (file.Has(name + "/latents")) {
+        latents = &file.Get(name + "/latents", {m, d});
+        if (latents->dtype != TensorFile::DType::kFloat32 &&
+            latents->dtype != TensorFile::DType::kFloat16) {
+          field = name + "/latents";
+          throw fail(std::string("expected float32 or float16, got ") + ToString(latents->dtype));
+        }
+        if (latents->dtype == TensorFile::DType::kFloat16) precision = LatentPrecision::kFloat16;
+      } else {
+        field = where + ".latent_bits";
+        if (!file.Has(name + "/latent_codes")) {
+          throw fail("tensor '" + name + "/latents' (float latents) or '" + name +
+                     "/latent_codes' (b-bit codes) is missing");
+        }
+        table.bits = entry.at("latent_bits").get<int>();
+        if (table.bits != 8 && table.bits != 6 && table.bits != 4) {
+          throw fail("expected 8, 6 or 4, got " + std::to_string(table.bits));
+        }
+        precision = table.bits == 8   ? LatentPrecision::kUint8
+                    : table.bits == 6 ? LatentPrecision::kUint6
+                                      : LatentPrecision::kUint4;
+        codes = &file.Get(name + "/latent_codes", {m, CodeBytes(d, table.bits)});
+        const auto& offset = file.Get(name + "/latent_offset", {d});
+        const auto& step = file.Get(name + "/latent_step", {d});
+        field = name + "/latent_*";
+        if (codes->dtype != TensorFile::DType::kUint8 ||
+            offset.dtype != TensorFile::DType::kFloat32 ||
+            step.dtype != TensorFile::DType::kFloat32) {
+          throw fail("expected latent_codes uint8, latent_offset and latent_step float32");
+        }
+        table.offset.resize(d);
+        table.step.resize(d);
+        for (int k = 0; k < d; ++k) {
+          table.offset[k] = static_cast<float>(offset.values[k]);
+          table.step[k] = static_cast<float>(step.values[k]);
+          if (!std::isfinite(table.offset[k]) || !(table.step[k] >= 0) ||
+              !std::isfinite(table.step[k])) {
+            field = name + "/latent_step[" + std::to_string(k) + "]";
+            throw fail("expected a finite offset and a finite step >= 0");
+          }
+        }
       }
+      if (s > 0 && precision != out.latent_precision_ &&
+          (IsQuantised(precision) || IsQuantised(out.latent_precision_))) {
+        field = where;
+        throw fail(std::string("latents stored as ") + ToString(precision) +
+                   ", but an earlier sensor's as " + ToString(out.latent_precision_));
+      }
+      if (precision != LatentPrecision::kFloat32) out.latent_precision_ = precision;
       out.AddSensor(sensor, d);
       if (entry.contains("fit_strategy")) {
         field = where + ".fit_strategy";
@@ -304,12 +497,22 @@ Functaset Functaset::Parse(const std::string& bytes, const std::string& source) 
           e.label = std::move(label);
         }
         e.latent.resize(d);
-        for (int k = 0; k < d; ++k) {
-          e.latent[k] = static_cast<float>(latents.values[static_cast<std::size_t>(i) * d + k]);
+        if (latents != nullptr) {
+          for (int k = 0; k < d; ++k) {
+            e.latent[k] =
+                static_cast<float>(latents->values[static_cast<std::size_t>(i) * d + k]);
+          }
+        } else {
+          const double* row = codes->values.data() + i * codes->shape[1];
+          for (int k = 0; k < d; ++k) {
+            e.latent[k] =
+                Dequantise(UnpackCode(row, k, table.bits), table.offset[k], table.step[k]);
+          }
         }
         e.psnr = static_cast<float>(psnr.values[i]);
         out.Add(sensor, std::move(e));
       }
+      if (codes != nullptr) out.blocks_[sensor].codes = std::move(table);
     }
   } catch (const nlohmann::json::exception& e) {
     throw TensorFileError(source + ": field '" + field + "' is missing or has the wrong type (" +

@@ -8,7 +8,7 @@
 // raw frames.
 //
 // Per entry: the frame id (the dataset's file stem), its split, its pose label if it
-// has one, the latent (float32, latent_dim of its sensor's trunk) and the PSNR of the
+// has one, the latent (latent_dim floats of its sensor's trunk) and the PSNR of the
 // fit against the (noisy) frame it was encoded from (estimation/data/trunk_targets.h, Psnr).
 // Entries are grouped by sensor (in SensorKind order); within a sensor they keep the
 // order in which they were added (the encoder adds them in Dataset::frames() order).
@@ -25,9 +25,22 @@
 //                 "ids": [M strings], "splits": [M of "train"|"test"],
 //                 "tools": [M of tool name or null (unlabelled)]}, ...]}
 // and per sensor the tensors
-//   "<sensor>/latents"  float32 [M x d]   row i = latent of entry i
+//   "<sensor>/latents"  float32 [M x d]   row i = latent of entry i (float16 at kFloat16)
 //   "<sensor>/psnr"     float32 [M]       dB; NaN if the frame had no valid pixel
 //   "<sensor>/poses"    float64 [M x 4]   x_m, y_m, yaw_rad, depth_m; NaN if unlabelled
+// With b-bit latents (kUint8/6/4) "<sensor>/latents" is absent and the sensor's meta
+// holds "latent_bits": b; instead
+//   "<sensor>/latent_codes"   uint8   [M x B]  B = ceil(d b / 8): row i = the codes
+//                                               q_0..q_{d-1} of entry i packed LSB-first
+//                                               (q_k occupies bits k b .. k b + b - 1 of
+//                                               the row), zero-padded to whole bytes
+//   "<sensor>/latent_offset"  float32 [d]      lo_k = min_i z_ik
+//   "<sensor>/latent_step"    float32 [d]      step_k = (max_i z_ik - lo_k) / (2^b - 1)
+// and z_ik = lo_k + q_ik step_k, q_ik = round((z_ik - lo_k) / step_k) in [0, 2^b - 1]
+// (q = 0 and step 0 for a dimension constant over the entries). Readers tell the layouts
+// apart by the tensors present; the format version stays 1. The stored PSNR is that of
+// the unrounded fit at every precision. A partial file (below) written at b-bit
+// precision by the encoder holds float32 latents, so that resuming re-quantises nothing.
 // "complete": false marks a partial file written by an interrupted or running encoder
 // (estimation/functaset/latent_encoder.h), which `tactfunc encode --resume` continues.
 //
@@ -88,16 +101,24 @@ class Functaset {
   // The dataset the frames came from (as given to the encoder; informational).
   const std::string& dataset() const { return dataset_; }
   void set_dataset(const std::string& dataset) { dataset_ = dataset; }
-  // Storage precision of the latents in the file: float32 (default) or float16 (half the
-  // bytes; IEEE binary16, relative rounding error <= 2^-11 -- its PSNR cost is measured
-  // in docs/RESULTS_RECONSTRUCTION.md). In memory latents stay float; Save rounds,
-  // Load reads either and reports which. Bytes per latent float: 4 or 2.
-  enum class LatentPrecision { kFloat32, kFloat16 };
+  // Storage precision of the latents in the file:
+  //   kFloat32 (default)  4 bytes per latent value;
+  //   kFloat16            IEEE binary16, 2 bytes, relative rounding error <= 2^-11 (its
+  //                       PSNR cost is measured in docs/RESULTS_RECONSTRUCTION.md);
+  //   kUint8/6/4          b-bit unsigned codes (b = 8, 6, 4) of a per-sensor, per-dimension
+  //                       uniform grid over [min, max] of that dimension over the sensor's
+  //                       entries: absolute error <= step_k / 2, step_k = range_k / (2^b - 1).
+  // In memory latents stay float; Save rounds or quantises, Load reads any of them,
+  // hands out the rounded / dequantised values and reports which precision it read.
+  enum class LatentPrecision { kFloat32, kFloat16, kUint8, kUint6, kUint4 };
   LatentPrecision latent_precision() const { return latent_precision_; }
   void set_latent_precision(LatentPrecision precision) { latent_precision_ = precision; }
-  int BytesPerLatentFloat() const {
-    return latent_precision_ == LatentPrecision::kFloat16 ? 2 : 4;
-  }
+  // Bytes one frame's latent of `sensor` takes on disk: 4 d, 2 d or ceil(d b / 8) (codes
+  // of a frame are padded to whole bytes). Throws like latent_dim().
+  double BytesPerFrame(SensorKind sensor) const;
+  // Bytes on disk shared by all of the sensor's frames for their latents: the b-bit
+  // codes' offset and step tables (2 x d float32), 0 for float latents.
+  std::uint64_t SharedLatentBytes(SensorKind sensor) const;
 
   // False for a partial functaset (an interrupted or running encoder's checkpoint).
   bool complete() const { return complete_; }
@@ -151,13 +172,23 @@ class Functaset {
   const std::string& source() const { return source_; }
 
  private:
+  // A sensor's b-bit grid: z_k = offset[k] + q_k * step[k] (float32 in the file).
+  struct CodeTable {
+    int bits = 0;
+    Eigen::VectorXf offset, step;
+  };
   struct SensorBlock {
     int latent_dim = 0;
+    // The grid the entries were read with (Load of a b-bit file); Serialize reuses it
+    // while every latent still lies on it, so a second save writes the same codes.
+    std::optional<CodeTable> codes;
     std::string fit_strategy;
     std::vector<FunctasetEntry> entries;
     std::unordered_map<std::string, std::size_t> index;  // id -> entries position
   };
   const SensorBlock& Block(SensorKind sensor) const;
+  // The b-bit grid Serialize writes the block's latents on.
+  static CodeTable Codes(const SensorBlock& block, int bits);
 
   std::uint32_t model_checksum_ = 0;
   std::string dataset_;
@@ -166,6 +197,15 @@ class Functaset {
   std::map<SensorKind, SensorBlock> blocks_;
   std::string source_;
 };
+
+// "float32", "float16", "uint8", "uint6", "uint4".
+const char* ToString(Functaset::LatentPrecision precision);
+// Parses ToString's names; false for anything else.
+bool LatentPrecisionFromString(const std::string& name, Functaset::LatentPrecision* precision);
+// Bits per stored latent value: 32, 16, 8, 6 or 4.
+int LatentBits(Functaset::LatentPrecision precision);
+// True for the b-bit code precisions (kUint8, kUint6, kUint4).
+bool IsQuantised(Functaset::LatentPrecision precision);
 
 }  // namespace tactfunc
 

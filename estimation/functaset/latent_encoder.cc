@@ -293,7 +293,11 @@ Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
   auto collect = [&](bool complete) {
     Functaset out(model_.checksum(), dataset.root());
     out.set_complete(complete);
-    out.set_latent_precision(options_.latent_precision);
+    // A partial file keeps b-bit latents as float32: resuming re-quantises nothing (the
+    // grid depends on all of the sensor's entries).
+    out.set_latent_precision(!complete && IsQuantised(options_.latent_precision)
+                                 ? Functaset::LatentPrecision::kFloat32
+                                 : options_.latent_precision);
     for (SensorKind sensor : sensors) {
       out.AddSensor(sensor, model_.Trunk(sensor).siren.latent_dim());
       out.set_fit_strategy(sensor, State(sensor).strategy.ToString());

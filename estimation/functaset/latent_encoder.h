@@ -95,7 +95,9 @@ class LatentEncoder {
     // Only frames of this split (nullopt = all frames).
     std::optional<Split> split;
     // Storage precision of the latents in the written functaset (Functaset::
-    // LatentPrecision). The per-frame PSNR is that of the unrounded fit.
+    // LatentPrecision). The per-frame PSNR is that of the unrounded fit. Checkpoints
+    // (partial files) of b-bit runs hold float32 latents: the codes' grid spans all
+    // of a sensor's entries, so only the complete file is quantised.
     Functaset::LatentPrecision latent_precision = Functaset::LatentPrecision::kFloat32;
     // The fit of every frame, as LatentFitter names it: "" (default) = each trunk's own
     // meta_sgd:K, what it was meta-trained for; "meta_sgd:K" (K >= 0) or "ceres:N"

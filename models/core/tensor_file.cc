@@ -71,6 +71,8 @@ std::int64_t TensorFile::Tensor::numel() const {
 
 std::size_t ElementBytes(TensorFile::DType dtype) {
   switch (dtype) {
+    case TensorFile::DType::kUint8:
+      return 1;
     case TensorFile::DType::kFloat16:
       return 2;
     case TensorFile::DType::kFloat32:
@@ -83,6 +85,8 @@ std::size_t ElementBytes(TensorFile::DType dtype) {
 
 const char* ToString(TensorFile::DType dtype) {
   switch (dtype) {
+    case TensorFile::DType::kUint8:
+      return "uint8";
     case TensorFile::DType::kFloat16:
       return "float16";
     case TensorFile::DType::kFloat32:
@@ -180,7 +184,17 @@ std::string TensorFile::Serialize() const {
   std::uint64_t at = 0;
   for (const Tensor& t : tensors_) {
     char* dst = out.data() + payload + at;
-    if (t.dtype == DType::kFloat16) {
+    if (t.dtype == DType::kUint8) {
+      for (std::size_t i = 0; i < t.values.size(); ++i) {
+        const double v = t.values[i];
+        if (!(v >= 0 && v <= 255 && v == std::floor(v))) {
+          throw std::invalid_argument("TensorFile: uint8 tensor '" + t.name + "' element " +
+                                      std::to_string(i) + " is " + std::to_string(v) +
+                                      ", expected an integer in [0, 255]");
+        }
+        *dst++ = static_cast<char>(static_cast<unsigned char>(v));
+      }
+    } else if (t.dtype == DType::kFloat16) {
       for (double v : t.values) {
         const std::uint16_t bits = HalfBits(v);
         *dst++ = static_cast<char>(bits & 0xff);
@@ -264,9 +278,11 @@ TensorFile TensorFile::Parse(const std::string& bytes, const std::string& source
         t.dtype = DType::kFloat64;
       } else if (dtype == "float16") {
         t.dtype = DType::kFloat16;
+      } else if (dtype == "uint8") {
+        t.dtype = DType::kUint8;
       } else {
         throw fail("tensor '" + t.name + "': dtype '" + dtype +
-                   "', expected float16, float32 or float64");
+                   "', expected uint8, float16, float32 or float64");
       }
       t.shape = entry.at("shape").get<std::vector<std::int64_t>>();
       const auto offset = entry.at("offset").get<std::uint64_t>();
@@ -282,7 +298,9 @@ TensorFile TensorFile::Parse(const std::string& bytes, const std::string& source
       t.values.resize(t.numel());
       const char* src = bytes.data() + payload + offset;
       for (auto& v : t.values) {
-        if (t.dtype == DType::kFloat16) {
+        if (t.dtype == DType::kUint8) {
+          v = static_cast<unsigned char>(*src++);
+        } else if (t.dtype == DType::kFloat16) {
           std::uint16_t bits = static_cast<unsigned char>(*src++);
           bits |= static_cast<std::uint16_t>(static_cast<unsigned char>(*src++)) << 8;
           v = FromHalfBits(bits);

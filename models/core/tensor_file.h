@@ -12,6 +12,7 @@
 //   24      J     JSON header (UTF-8): {"kind": "model"|"functaset"|..., "meta": {...},
 //                   "tensors": [{"name": s, "dtype": "float32"|"float64",
 //                                "shape": [d0, d1, ...], "offset": o, "bytes": b}, ...]}
+//                   (dtype also "float16" or "uint8")
 //   24+J    P     payload: the tensors, row-major (C order), each starting at
 //                 `offset` bytes into the payload (8-byte aligned)
 //   24+J+P  4     u32 CRC-32 (zlib's polynomial) of every byte before it
@@ -50,7 +51,10 @@ class TensorFile {
  public:
   // float16: IEEE binary16 (numpy's float16), e.g. a functaset's latents at half the
   // bytes; values are rounded to nearest-even when added.
-  enum class DType { kFloat32, kFloat64, kFloat16 };
+  // uint8: one unsigned byte per element (numpy's uint8), e.g. a functaset's packed
+  // latent codes. In memory the values are doubles holding integers 0..255; Serialize
+  // throws std::invalid_argument naming the tensor for any other value.
+  enum class DType { kFloat32, kFloat64, kFloat16, kUint8 };
   struct Tensor {
     std::string name;
     DType dtype = DType::kFloat32;
@@ -108,7 +112,7 @@ class TensorFile {
 };
 
 const char* ToString(TensorFile::DType dtype);
-// Bytes one element of `dtype` takes in the file: 2, 4 or 8.
+// Bytes one element of `dtype` takes in the file: 1, 2, 4 or 8.
 std::size_t ElementBytes(TensorFile::DType dtype);
 
 // CRC-32 (zlib's polynomial 0xEDB88320), as Python's zlib.crc32.

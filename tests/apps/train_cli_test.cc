@@ -6,7 +6,8 @@
 // model; bad knobs fail before any data is read with a message naming the flag or
 // field, and a diverging run fails naming the learning rate. On the result, `recon`
 // writes a per-frame CSV that agrees with its own summary and pictures the worst
-// frames, and `info` describes the model, functaset and checkpoint files.
+// frames, and `info` describes the model, functaset and checkpoint files; an 8-bit
+// functaset is reported as such, its latent bytes as on disk.
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -211,6 +212,30 @@ TEST_F(TrainCliTest, InfoDescribesTheModelTheFunctasetAndTheCheckpointItIsGiven)
   EXPECT_EQ(cut.exit_code, 1);
   EXPECT_THAT(cut.err, HasSubstr(Root("cut.tfm")));
   EXPECT_THAT(cut.err, HasSubstr("truncated"));
+}
+
+TEST_F(TrainCliTest, EncodeWritesEightBitLatentsThatInfoAndReconReport) {
+  ASSERT_NO_FATAL_FAILURE(TrainAndEncode("q"));
+  const Result encode = Run("encode --model " + Root("q.tfm") + " --data " + Root("d") +
+                            " --out " + Root("q8.tfs") + " --threads 1 --latent-precision uint8");
+  ASSERT_EQ(encode.exit_code, 0) << encode.err;
+  const Result info = Run("info " + Root("q8.tfs") + " --json");
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  EXPECT_THAT(info.out, HasSubstr("latents uint8"));
+  EXPECT_EQ(info.LastJson()["functaset"]["latent_precision"], "uint8");
+  EXPECT_EQ(info.LastJson()["functaset"]["sensors"]["bubble"]["count"], 8);
+  // 8 frames x 16 one-byte codes, plus the 16 float32 offsets and steps.
+  const Result recon = Run("recon --model " + Root("q.tfm") + " --functaset " + Root("q8.tfs") +
+                           " --data " + Root("d") + " --out " + Root("q8_recon") +
+                           " --examples 1 --threads 1 --json");
+  ASSERT_EQ(recon.exit_code, 0) << recon.err;
+  EXPECT_EQ(recon.LastJson()["latent_bytes"], 8 * 16 + 2 * 16 * 4);
+  EXPECT_TRUE(recon.LastJson()["psnr_train"]["bubble"].is_number());
+  const Result bad = Run("encode --model " + Root("q.tfm") + " --data " + Root("d") + " --out " +
+                         Root("q2.tfs") + " --latent-precision uint2");
+  EXPECT_NE(bad.exit_code, 0);
+  EXPECT_THAT(bad.err, HasSubstr("--latent-precision"));
+  EXPECT_FALSE(fs::exists(Root("q2.tfs")));
 }
 
 TEST_F(TrainCliTest, ADivergingRunFailsNamingTheLearningRateAndWritesNoModel) {

@@ -282,5 +282,151 @@ TEST(Functaset, CheckModelRejectsAnotherLatentDimension) {
   EXPECT_THROW(f.CheckModel(model), FunctasetModelMismatch);
 }
 
+// ---- b-bit latents -----------------------------------------------------------------------
+
+constexpr Functaset::LatentPrecision kCodePrecisions[] = {Functaset::LatentPrecision::kUint8,
+                                                          Functaset::LatentPrecision::kUint6,
+                                                          Functaset::LatentPrecision::kUint4};
+
+// M = 40 bubble entries of d = 7 (codes of 7 x 6 and 7 x 4 bits straddle bytes), whose
+// dimension 2 is constant and dimension 0 spans [-3, 5] exactly.
+Functaset MakeCodeFunctaset(Functaset::LatentPrecision precision) {
+  Functaset f(7, "/data");
+  f.set_latent_precision(precision);
+  f.AddSensor(SensorKind::kSoftBubble, 7);
+  for (int i = 0; i < 40; ++i) {
+    FunctasetEntry e;
+    e.id = std::to_string(i);
+    e.latent = Latent(7, i) * (1.0f + 0.1f * i);
+    e.latent[2] = 0.375f;
+    e.latent[0] = i == 0 ? -3.0f : (i == 1 ? 5.0f : 1.0f + 3.99f * std::sin(0.9f * i));
+    e.psnr = 20.0f + 0.25f * i;
+    f.Add(SensorKind::kSoftBubble, e);
+  }
+  return f;
+}
+
+TEST(Functaset, CodeLatentsRoundTripWithinHalfAStepAndReproduceExactly) {
+  for (Functaset::LatentPrecision precision : kCodePrecisions) {
+    SCOPED_TRACE(ToString(precision));
+    const int bits = LatentBits(precision);
+    const Functaset original = MakeCodeFunctaset(precision);
+    const Functaset loaded = Functaset::Parse(original.Serialize(), "codes.tfs");
+    EXPECT_EQ(loaded.latent_precision(), precision);
+    const auto& a = original.entries(SensorKind::kSoftBubble);
+    const auto& b = loaded.entries(SensorKind::kSoftBubble);
+    ASSERT_EQ(a.size(), b.size());
+    const Functaset::LatentMatrix z = original.Latents(SensorKind::kSoftBubble);
+    for (int k = 0; k < 7; ++k) {
+      const double step = (z.col(k).maxCoeff() - z.col(k).minCoeff()) / ((1 << bits) - 1.0);
+      for (std::size_t i = 0; i < a.size(); ++i) {
+        // Half a step, plus the float32 rounding of the step and of the result.
+        EXPECT_NEAR(b[i].latent[k], a[i].latent[k], step / 2 * (1 + 1e-5) + 1e-6)
+            << "entry " << i << " dimension " << k;
+      }
+    }
+    // The stored PSNR is the unrounded fit's, untouched.
+    for (std::size_t i = 0; i < a.size(); ++i) EXPECT_EQ(a[i].psnr, b[i].psnr);
+    // A second save writes the same codes: the latents come back bit for bit.
+    const std::string again = loaded.Serialize();
+    ExpectIdentical(loaded, Functaset::Parse(again, "again.tfs"));
+  }
+}
+
+TEST(Functaset, CodesReachBothEndsOfTheRangeAndAConstantDimensionIsExact) {
+  for (Functaset::LatentPrecision precision : kCodePrecisions) {
+    SCOPED_TRACE(ToString(precision));
+    const int bits = LatentBits(precision);
+    const Functaset original = MakeCodeFunctaset(precision);
+    const TensorFile file = TensorFile::Parse(original.Serialize(), "mem", "functaset");
+    const std::vector<double>& offset = file.Get("bubble/latent_offset", {7}).values;
+    const std::vector<double>& step = file.Get("bubble/latent_step", {7}).values;
+    EXPECT_EQ(offset[0], -3.0);
+    EXPECT_FLOAT_EQ(step[0], 8.0 / ((1 << bits) - 1));
+    EXPECT_EQ(offset[2], 0.375);
+    EXPECT_EQ(step[2], 0.0);
+    // Dimension 0 of entries 0 and 1: codes 0 and 2^b - 1, read back as the min and max.
+    const std::vector<double>& codes = file.Get("bubble/latent_codes").values;
+    const std::int64_t row = (7 * bits + 7) / 8;
+    EXPECT_EQ(static_cast<int>(codes[0]) & ((1 << bits) - 1), 0);
+    EXPECT_EQ(static_cast<int>(codes[row]) & ((1 << bits) - 1), (1 << bits) - 1);
+    const Functaset loaded = Functaset::Parse(file.Serialize(), "mem");
+    const auto& entries = loaded.entries(SensorKind::kSoftBubble);
+    EXPECT_EQ(entries[0].latent[0], -3.0f);
+    EXPECT_FLOAT_EQ(entries[1].latent[0], 5.0f);
+    for (const FunctasetEntry& e : entries) EXPECT_EQ(e.latent[2], 0.375f);
+  }
+}
+
+TEST(Functaset, CodeLatentsTakeCeilOfDTimesBitsOverEightBytesPerFrame) {
+  for (Functaset::LatentPrecision precision : kCodePrecisions) {
+    SCOPED_TRACE(ToString(precision));
+    const int bits = LatentBits(precision);
+    const Functaset f = MakeCodeFunctaset(precision);
+    const std::int64_t row = (7 * bits + 7) / 8;  // 7, 6, 4 bytes
+    EXPECT_EQ(f.BytesPerFrame(SensorKind::kSoftBubble), static_cast<double>(row));
+    EXPECT_EQ(f.SharedLatentBytes(SensorKind::kSoftBubble), 2u * 7 * 4);
+    const std::string bytes = f.Serialize();
+    const TensorFile file = TensorFile::Parse(bytes, "mem", "functaset");
+    EXPECT_FALSE(file.Has("bubble/latents"));
+    const TensorFile::Tensor& codes = file.Get("bubble/latent_codes", {40, row});
+    EXPECT_EQ(codes.dtype, TensorFile::DType::kUint8);
+    // The payload bytes of the codes tensor, as the container's header states them.
+    const nlohmann::json meta = nlohmann::json::parse(file.meta_json());
+    EXPECT_EQ(meta["sensors"][0]["latent_bits"], bits);
+    const std::uint64_t header_length = *reinterpret_cast<const std::uint64_t*>(bytes.data() + 16);
+    const nlohmann::json header = nlohmann::json::parse(bytes.substr(24, header_length));
+    for (const nlohmann::json& t : header["tensors"]) {
+      if (t["name"] == "bubble/latent_codes") EXPECT_EQ(t["bytes"], 40 * row);
+    }
+  }
+  // The float precisions: 4 d and 2 d bytes per frame, no shared tables.
+  Functaset f = MakeCodeFunctaset(Functaset::LatentPrecision::kFloat32);
+  EXPECT_EQ(f.BytesPerFrame(SensorKind::kSoftBubble), 28.0);
+  EXPECT_EQ(f.SharedLatentBytes(SensorKind::kSoftBubble), 0u);
+  f.set_latent_precision(Functaset::LatentPrecision::kFloat16);
+  EXPECT_EQ(f.BytesPerFrame(SensorKind::kSoftBubble), 14.0);
+}
+
+TEST(Functaset, FloatLatentFilesStillParse) {
+  for (Functaset::LatentPrecision precision :
+       {Functaset::LatentPrecision::kFloat32, Functaset::LatentPrecision::kFloat16}) {
+    Functaset f = MakeFunctaset();
+    f.set_latent_precision(precision);
+    const TensorFile file = TensorFile::Parse(f.Serialize(), "mem", "functaset");
+    EXPECT_EQ(file.Get("bubble/latents").dtype, precision == Functaset::LatentPrecision::kFloat16
+                                                     ? TensorFile::DType::kFloat16
+                                                     : TensorFile::DType::kFloat32);
+    EXPECT_FALSE(file.Has("bubble/latent_codes"));
+    const nlohmann::json meta = nlohmann::json::parse(file.meta_json());
+    EXPECT_FALSE(meta["sensors"][0].contains("latent_bits"));
+    const Functaset loaded = Functaset::Parse(file.Serialize(), "mem");
+    EXPECT_EQ(loaded.latent_precision(), precision);
+    if (precision == Functaset::LatentPrecision::kFloat32) ExpectIdentical(f, loaded);
+  }
+}
+
+TEST(Functaset, BadCodeFieldsAreRejectedNamingThem) {
+  const Functaset f = MakeCodeFunctaset(Functaset::LatentPrecision::kUint6);
+  ExpectFileError([&] { Functaset::Parse(WithMeta(f, [](nlohmann::json& m) {
+                                           m["sensors"][0]["latent_bits"] = 5;
+                                         }), "bad.tfs"); },
+                  {"bad.tfs", "sensors[0].latent_bits", "expected 8, 6 or 4, got 5"});
+  ExpectFileError([&] { Functaset::Parse(WithMeta(f, [](nlohmann::json& m) {
+                                           m["sensors"][0]["latent_bits"] = 8;
+                                         }), "bad.tfs"); },
+                  {"bad.tfs", "bubble/latent_codes", "shape [40, 6], expected [40, 7]"});
+}
+
+TEST(Functaset, LatentPrecisionNamesRoundTrip) {
+  for (const char* name : {"float32", "float16", "uint8", "uint6", "uint4"}) {
+    Functaset::LatentPrecision p;
+    ASSERT_TRUE(LatentPrecisionFromString(name, &p)) << name;
+    EXPECT_STREQ(ToString(p), name);
+  }
+  Functaset::LatentPrecision p;
+  EXPECT_FALSE(LatentPrecisionFromString("uint16", &p));
+}
+
 }  // namespace
 }  // namespace tactfunc

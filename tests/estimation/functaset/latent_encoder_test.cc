@@ -6,6 +6,8 @@
 #include <atomic>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <limits>
 #include <random>
 #include <string>
@@ -455,6 +457,43 @@ TEST(LatentEncoder, InterruptedRunWritesAPartialFileThatResumesToTheFullFunctase
   EXPECT_EQ(summary.termination, EncodeTermination::kComplete);
   EXPECT_EQ(summary.frames_resumed, static_cast<std::int64_t>(checkpoint.size()));
   ExpectSameFunctaset(full, resumed);
+}
+
+TEST(LatentEncoder, BitCodeRunsCheckpointFloatLatentsAndResumeToTheUninterruptedFile) {
+  TestDir dir;
+  WriteTinyDataset(dir / "data", kFrames);
+  const Dataset dataset = Dataset::Open(dir / "data");
+  const FunctaModel model = MakeModel();
+  LatentEncoder::Options options;
+  options.latent_precision = Functaset::LatentPrecision::kUint6;
+  options.checkpoint_path = dir / "full.tfs";
+  LatentEncoder(model, options).Encode(dataset, nullptr);
+  EXPECT_EQ(Functaset::Load(dir / "full.tfs").latent_precision(),
+            Functaset::LatentPrecision::kUint6);
+
+  // Interrupted by the first progress report: the partial file keeps float32 latents
+  // (the codes' grid spans all entries); resuming writes the uninterrupted run's bytes.
+  options.checkpoint_path = dir / "set.tfs";
+  options.threads = 1;  // stops after the frame in hand: a partial file
+  options.checkpoint_every = 2;
+  std::atomic<bool> interrupt{false};
+  LatentEncoder::Summary summary;
+  LatentEncoder(model, options)
+      .Encode(
+          dataset, &summary, [&](const EncodeProgress&) { interrupt = true; }, &interrupt);
+  const Functaset checkpoint = Functaset::Load(dir / "set.tfs");
+  ASSERT_FALSE(checkpoint.complete());
+  EXPECT_GT(checkpoint.size(), 0u);
+  EXPECT_EQ(checkpoint.latent_precision(), Functaset::LatentPrecision::kFloat32);
+  interrupt = false;
+  options.resume = true;
+  LatentEncoder(model, options).Encode(dataset, &summary, nullptr, &interrupt);
+  EXPECT_EQ(summary.termination, EncodeTermination::kComplete);
+  auto bytes = [](const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  };
+  EXPECT_EQ(bytes(dir / "set.tfs"), bytes(dir / "full.tfs"));
 }
 
 TEST(LatentEncoder, ResumeRefusesACheckpointOfAnotherModel) {

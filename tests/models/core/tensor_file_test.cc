@@ -2,6 +2,7 @@
 #include "models/core/tensor_file.h"
 #include "models/core/atomic_file.h"
 
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -50,6 +51,15 @@ TEST(TensorFile, Float32TensorsAreRoundedOnAdd) {
   EXPECT_EQ(file.Get("x").values[0], static_cast<double>(0.1f));
 }
 
+// Bytes a file with n values 7 of `dtype` is smaller than the same as float32.
+std::size_t BytesSavedOverFloat32(TensorFile::DType dtype, int n) {
+  TensorFile wide("functaset");
+  wide.Add("z", TensorFile::DType::kFloat32, {n}, std::vector<double>(n, 7));
+  TensorFile narrow("functaset");
+  narrow.Add("z", dtype, {n}, std::vector<double>(n, 7));
+  return wide.Serialize().size() - narrow.Serialize().size();
+}
+
 TEST(TensorFile, Float16TensorsAreRoundedToHalfAndReadBackExactly) {
   TensorFile file("functaset");
   // 1 + 2^-11 is halfway between two halves (ties to even: 1); 65504 is the largest half.
@@ -66,13 +76,37 @@ TEST(TensorFile, Float16TensorsAreRoundedToHalfAndReadBackExactly) {
   EXPECT_EQ(read.Get("z").values, v);
   // Two bytes per value instead of four: the payload shrinks by 800 bytes (the JSON
   // header only by a digit or so of its byte counts).
-  TensorFile wide("functaset");
-  wide.Add("z", TensorFile::DType::kFloat32, {400}, std::vector<double>(400, 0.5));
-  TensorFile half("functaset");
-  half.Add("z", TensorFile::DType::kFloat16, {400}, std::vector<double>(400, 0.5));
-  const std::size_t saved = wide.Serialize().size() - half.Serialize().size();
+  const std::size_t saved = BytesSavedOverFloat32(TensorFile::DType::kFloat16, 400);
   EXPECT_GE(saved, 800u);
   EXPECT_LE(saved, 808u);
+}
+
+TEST(TensorFile, Uint8TensorsTakeOneByteAndRoundTrip) {
+  TensorFile file("functaset");
+  file.Add("q", TensorFile::DType::kUint8, {2, 3}, {0, 1, 127, 128, 254, 255});
+  const TensorFile read = TensorFile::Parse(file.Serialize(), "codes.tfs", "functaset");
+  EXPECT_EQ(read.Get("q", {2, 3}).dtype, TensorFile::DType::kUint8);
+  EXPECT_EQ(read.Get("q").values, file.Get("q").values);
+  EXPECT_EQ(ElementBytes(TensorFile::DType::kUint8), 1u);
+  EXPECT_STREQ(ToString(TensorFile::DType::kUint8), "uint8");
+  // One byte per value instead of four: 400 values save 1200 bytes of payload.
+  const std::size_t saved = BytesSavedOverFloat32(TensorFile::DType::kUint8, 400);
+  EXPECT_GE(saved, 1200u);
+  EXPECT_LE(saved, 1208u);
+}
+
+TEST(TensorFile, Uint8SerializeRejectsValuesThatAreNotBytes) {
+  for (double bad : {-1.0, 256.0, 2.5, std::nan("")}) {
+    TensorFile file("functaset");
+    file.Add("codes", TensorFile::DType::kUint8, {3}, {0, bad, 1});
+    try {
+      file.Serialize();
+      ADD_FAILURE() << "accepted " << bad;
+    } catch (const std::invalid_argument& e) {
+      EXPECT_THAT(e.what(), HasSubstr("'codes' element 1"));
+      EXPECT_THAT(e.what(), HasSubstr("expected an integer in [0, 255]"));
+    }
+  }
 }
 
 TEST(TensorFile, ChecksumMatchesZlibCrc32) {
