@@ -62,10 +62,6 @@ float Dequantise(std::uint32_t q, float offset, float step) {
   return static_cast<float>(offset + static_cast<double>(q) * step);
 }
 
-}  // namespace
-
-namespace {
-
 struct PrecisionInfo {
   Functaset::LatentPrecision precision;
   const char* name;
