@@ -157,8 +157,9 @@ nlohmann::json DescribeFunctaset(const std::string& bytes, const std::string& pa
     }
     const std::string strategy =
         functaset.fit_strategy(sensor).empty() ? "n/a" : functaset.fit_strategy(sensor);
-    std::printf("  %-8s %zu latents of %d floats (%d labelled), fit %s", ToString(sensor),
-                functaset.entries(sensor).size(), functaset.latent_dim(sensor), labelled,
+    std::printf("  %-8s %zu latents of %d values, %s B each on disk (%d labelled), fit %s",
+                ToString(sensor), functaset.entries(sensor).size(), functaset.latent_dim(sensor),
+                FormatFixed(functaset.BytesPerFrame(sensor), 0).c_str(), labelled,
                 strategy.c_str());
     nlohmann::json splits = nlohmann::json::object();
     for (const auto& [split, values] : psnrs) {
