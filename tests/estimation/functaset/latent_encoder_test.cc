@@ -471,24 +471,37 @@ TEST(LatentEncoder, BitCodeRunsCheckpointFloatLatentsAndResumeToTheUninterrupted
   EXPECT_EQ(Functaset::Load(dir / "full.tfs").latent_precision(),
             Functaset::LatentPrecision::kUint6);
 
-  // Interrupted by the first progress report: the partial file keeps float32 latents
-  // (the codes' grid spans all entries); resuming writes the uninterrupted run's bytes.
+  // A run interrupted before its first frame leaves a partial file of float32 latents
+  // (the codes' grid spans all of a sensor's entries, so only a complete file has codes).
   options.checkpoint_path = dir / "set.tfs";
-  options.threads = 1;  // stops after the frame in hand: a partial file
-  options.checkpoint_every = 2;
-  std::atomic<bool> interrupt{false};
+  std::atomic<bool> interrupt{true};
   LatentEncoder::Summary summary;
-  LatentEncoder(model, options)
-      .Encode(
-          dataset, &summary, [&](const EncodeProgress&) { interrupt = true; }, &interrupt);
-  const Functaset checkpoint = Functaset::Load(dir / "set.tfs");
-  ASSERT_FALSE(checkpoint.complete());
-  EXPECT_GT(checkpoint.size(), 0u);
-  EXPECT_EQ(checkpoint.latent_precision(), Functaset::LatentPrecision::kFloat32);
+  LatentEncoder(model, options).Encode(dataset, &summary, nullptr, &interrupt);
+  EXPECT_EQ(summary.termination, EncodeTermination::kInterrupted);
+  EXPECT_FALSE(Functaset::Load(dir / "set.tfs").complete());
+  EXPECT_EQ(Functaset::Load(dir / "set.tfs").latent_precision(),
+            Functaset::LatentPrecision::kFloat32);
+  // A partial file holding every third frame's float32 latent, as an interrupted run
+  // leaves one (built here so that the test does not depend on thread timing): resuming
+  // it writes the uninterrupted run's bytes.
+  LatentEncoder::Options float_options;
+  float_options.checkpoint_path = dir / "float.tfs";
+  const Functaset full = LatentEncoder(model, float_options).Encode(dataset, nullptr);
+  Functaset partial(full.model_checksum(), full.dataset());
+  partial.set_complete(false);
+  for (SensorKind sensor : full.sensors()) {
+    partial.AddSensor(sensor, full.latent_dim(sensor));
+    partial.set_fit_strategy(sensor, full.fit_strategy(sensor));
+    for (std::size_t i = 0; i < full.entries(sensor).size(); i += 3) {
+      partial.Add(sensor, full.entries(sensor)[i]);
+    }
+  }
+  partial.Save(dir / "set.tfs");
   interrupt = false;
   options.resume = true;
   LatentEncoder(model, options).Encode(dataset, &summary, nullptr, &interrupt);
   EXPECT_EQ(summary.termination, EncodeTermination::kComplete);
+  EXPECT_EQ(summary.frames_resumed, static_cast<std::int64_t>(partial.size()));
   auto bytes = [](const std::string& path) {
     std::ifstream in(path, std::ios::binary);
     return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
