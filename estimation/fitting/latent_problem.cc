@@ -91,6 +91,7 @@ LatentProblem::LatentProblem(const SensorTrunk& trunk, const TrunkTargets& targe
                                 std::to_string(trunk.alpha.size()));
   }
   sigma_ = options_.sigma > 0 ? options_.sigma : AutomaticSigma(trunk);
+  loss_ = MakeLoss(options_);
 
   const long rows = targets.rows, cols = targets.cols;
   const int channels = siren.output_channels();
@@ -221,13 +222,12 @@ bool LatentProblem::ResidualsAndJacobian(const double* z_data, double* residuals
 
 void LatentProblem::Robustify(int num_residuals, double* residuals, double* jacobian,
                               int cols) const {
-  const std::unique_ptr<ceres::LossFunction> loss = MakeLoss(options_);
-  if (!loss) return;
+  if (!loss_) return;
   for (int i = 0; i < num_residuals; ++i) {
     const double r = residuals[i];
     const double s = r * r;
     double rho[3];
-    loss->Evaluate(s, rho);
+    loss_->Evaluate(s, rho);
     const double root = std::sqrt(rho[0]);
     double factor = 1.0;  // rho'(0) = 1 for every loss Ceres ships
     if (s > 0 && root > 0) {

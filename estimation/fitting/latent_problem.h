@@ -45,6 +45,7 @@
 #ifndef TACTFUNC_ESTIMATION_FITTING_LATENT_PROBLEM_H_
 #define TACTFUNC_ESTIMATION_FITTING_LATENT_PROBLEM_H_
 
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -52,6 +53,10 @@
 
 #include "estimation/data/trunk_targets.h"
 #include "models/trunk/functa_model.h"
+
+namespace ceres {
+class LossFunction;
+}  // namespace ceres
 
 namespace tactfunc {
 
@@ -167,6 +172,8 @@ class LatentProblem {
   Eigen::MatrixXf targets_float_;
   Eigen::VectorXf weights_float_;
   Eigen::VectorXd residual_scale_;  // N C: sqrt(w_j) / sigma for every channel of pixel j
+  // rho of Options::robust_loss (null without one), made once; Evaluate is const.
+  std::shared_ptr<const ceres::LossFunction> loss_;
 };
 
 const char* ToString(LatentProblem::RobustLoss loss);       // "none", "huber", "cauchy"
