@@ -220,6 +220,9 @@ struct EvalGeneratorFlags {
   bool unknown_tool = false;
   double sigma_inflation = 0;
   int max_pixels = 768;
+  int refined_starts = 3;
+  int iterations = 12;
+  int knn_k = 4;
   bool json = false;
 };
 
@@ -243,11 +246,15 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
   GeneratorPosterior::Options options;
   options.sigma_inflation = flags.sigma_inflation;
   options.problem.max_pixels = flags.max_pixels;
+  options.fit.max_refined_starts = flags.refined_starts;
+  options.fit.max_iterations = flags.iterations;
+  options.knn_k = flags.knn_k;
   const GeneratorPosterior posterior(trunk, generator, options, knn.get(), mlp.get());
   const ContactSimulator simulator;
   const Image reference = AsStored(simulator.Reference(SensorKind::kSoftBubble));
   int contacts = 0, failures = 0, c50 = 0, c90 = 0, yaw_count = 0, identified = 0;
   double pos_sq = 0, yaw_sq = 0;
+  std::vector<double> yaw_errors;
   std::vector<double> times;
   std::map<std::string, std::pair<double, int>> per_tool_pos;
   const std::vector<std::string>& tools = generator.options().tools;
@@ -284,7 +291,9 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
       per_tool_pos[tools[t]].first += dp;
       per_tool_pos[tools[t]].second += 1;
       if (n != 0) {
-        yaw_sq += std::pow(YawErrorModuloSymmetry(mode.yaw(), truth.yaw(), n), 2);
+        const double e = YawErrorModuloSymmetry(mode.yaw(), truth.yaw(), n);
+        yaw_sq += e * e;
+        yaw_errors.push_back(e);
         ++yaw_count;
       }
       const bool has_tool = std::any_of(mixture.components().begin(), mixture.components().end(),
@@ -305,6 +314,14 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
               flags.unknown_tool ? "unknown (every tool fitted)" : "given");
   std::printf("  position RMSE %.3f mm, yaw RMSE %.2f deg (modulo symmetry, hemisphere left out)\n",
               rmse_mm, rmse_deg);
+  std::sort(yaw_errors.begin(), yaw_errors.end());
+  const double yaw_median = yaw_errors.empty() ? 0 : kDeg * yaw_errors[yaw_errors.size() / 2];
+  const double yaw_within5 =
+      yaw_errors.empty() ? 0
+                         : static_cast<double>(std::lower_bound(yaw_errors.begin(), yaw_errors.end(),
+                                                                5 / kDeg) -
+                                               yaw_errors.begin()) / yaw_errors.size();
+  std::printf("  yaw error median %.2f deg, within 5 deg: %.3f\n", yaw_median, yaw_within5);
   std::printf("  coverage 50%%: %.3f, 90%%: %.3f\n", static_cast<double>(c50) / std::max(1, ok),
               static_cast<double>(c90) / std::max(1, ok));
   std::printf("  time per frame (fit + Laplace, one thread): median %.1f ms, mean %.1f ms\n",
@@ -320,6 +337,8 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
               {"failures", failures},
               {"rmse_mm", rmse_mm},
               {"rmse_deg", rmse_deg},
+              {"yaw_median_deg", yaw_median},
+              {"yaw_within_5deg", yaw_within5},
               {"coverage_50", static_cast<double>(c50) / std::max(1, ok)},
               {"coverage_90", static_cast<double>(c90) / std::max(1, ok)},
               {"median_ms", median},
@@ -389,6 +408,14 @@ void RegisterEvalGenerator(CLI::App& app, CommandBody* selected) {
       ->check(CLI::NonNegativeNumber);
   sub->add_option("--max-pixels", flags->max_pixels, "Pixels per trunk pass (default 768)")
       ->check(CLI::Range(0, 1 << 20));
+  sub->add_option("--refined-starts", flags->refined_starts,
+                  "Best distinct starts refined per tool (default 3)")
+      ->check(CLI::Range(1, 100));
+  sub->add_option("--iterations", flags->iterations,
+                  "Levenberg-Marquardt iterations per start (default 12)")
+      ->check(CLI::Range(1, 1000));
+  sub->add_option("--knn-k", flags->knn_k, "k-NN starts per tool (default 4)")
+      ->check(CLI::Range(0, 1000));
   sub->add_flag("--unknown-tool", flags->unknown_tool, "Fit every tool and identify it");
   sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
   sub->callback([flags, selected]() { *selected = [flags]() { RunEvalGenerator(*flags); }; });

@@ -229,8 +229,8 @@ std::vector<PoseStart> GeneratorPosterior::Starts(const LatentProblem& problem,
     const SE2d p = pose_mlp_->Predict(query.cast<double>(), n);
     starts.push_back({p, 0.5 * (options_.fit.depth_min_m + options_.fit.depth_max_m), "mlp"});
   }
-  if (starts.empty()) {
-    // No prior knowledge: a coarse grid over yaw at the centre.
+  if (knn_ == nullptr) {
+    // No labelled neighbours: a coarse grid over yaw at the centre.
     const int count = n == 0 ? 1 : std::max(1, 8 / std::max(1, n));
     for (int k = 0; k < count; ++k) {
       const double yaw = (n == 0 ? 0 : 2 * M_PI / std::max(1, n)) * k / count;

@@ -11,7 +11,7 @@
 //      tools, each of these turned by pi (near-symmetric faces: half_disc, l_shape,
 //      lines3_*). The generator is invariant under the tool's symmetry by construction
 //      (models/pose/pose_generator.h), so the symmetry-equivalent yaws of a C_n tool are
-//      the same start and are not repeated; without any start, a yaw grid at the centre;
+//      the same start and are not repeated; without k-NN starts, a yaw grid at the centre;
 //   2. modes: FitPoseModes (estimation/synthesis/pose_fitter.h) in Ceres on SE(2);
 //   3. Laplace: at mode m with whitened residuals r at the posterior's pixel sigma s and
 //      Jacobian J over (tangent x, y, theta of the right perturbation, depth),
