@@ -223,6 +223,13 @@ struct EvalGeneratorFlags {
   int refined_starts = 3;
   int iterations = 12;
   int knn_k = 4;
+  int yaw_grid = 12;
+  int coarse_pixels = 128;
+  double position_grid_mm = 2.5;
+  int position_rings = 2;
+  int coarse_starts = 6;
+  int coarse_iterations = 4;
+  bool diagnose = false;
   bool json = false;
 };
 
@@ -249,13 +256,20 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
   options.fit.max_refined_starts = flags.refined_starts;
   options.fit.max_iterations = flags.iterations;
   options.knn_k = flags.knn_k;
+  options.yaw_grid = flags.yaw_grid;
+  options.coarse_pixels = flags.coarse_pixels;
+  options.position_grid_m = 1e-3 * flags.position_grid_mm;
+  options.position_grid_rings = flags.position_rings;
+  options.fit.coarse_refined_starts = flags.coarse_starts;
+  options.fit.coarse_iterations = flags.coarse_iterations;
   const GeneratorPosterior posterior(trunk, generator, options, knn.get(), mlp.get());
   const ContactSimulator simulator;
   const Image reference = AsStored(simulator.Reference(SensorKind::kSoftBubble));
   int contacts = 0, failures = 0, c50 = 0, c90 = 0, yaw_count = 0, identified = 0;
   double pos_sq = 0, yaw_sq = 0;
+  int wrong = 0, search_failures = 0, model_failures = 0;
   std::vector<double> yaw_errors;
-  std::vector<double> times;
+  std::vector<double> times, cpu_times;
   std::map<std::string, std::pair<double, int>> per_tool_pos;
   const std::vector<std::string>& tools = generator.options().tools;
   for (std::size_t t = 0; t < tools.size(); ++t) {
@@ -275,6 +289,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
         continue;
       }
       times.push_back(s.total_time_ms);
+      cpu_times.push_back(s.cpu_time_ms);
       identified += s.tool == tools[t];
       const int n = generator.SymmetryOrder(static_cast<int>(t));
       const SE2d& truth = contact.sensor_T_object;
@@ -295,6 +310,37 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
         yaw_sq += e * e;
         yaw_errors.push_back(e);
         ++yaw_count;
+      }
+      if (flags.diagnose) {
+        // Is the truth's objective lower than the chosen mode's (a search failure) or
+        // higher (the generator and trunk prefer the wrong pose: a model failure)? The
+        // truth is also refined (from the true pose and depth) to its local minimum.
+        const double e = n != 0 ? kDeg * YawErrorModuloSymmetry(mode.yaw(), truth.yaw(), n) : 0;
+        if (e > 5 || std::sqrt(dp) > 1e-3) {
+          ++wrong;
+          const LatentProblem problem(trunk, targets, options.problem);
+          const int ti = static_cast<int>(t);
+          double mode_depth = 0;
+          for (const LaplaceComponent& c : mixture.components()) {
+            if (c.tool == tools[t]) {
+              mode_depth = c.depth_m;
+              break;
+            }
+          }
+          const double c_mode = PoseCost(problem, generator, ti, mode, mode_depth);
+          const double c_truth = PoseCost(problem, generator, ti, truth, contact.depth_m);
+          const std::vector<PoseFit> refined = FitPoseModes(
+              problem, generator, ti, {{truth, contact.depth_m, "truth"}}, options.fit);
+          const double c_refined = refined.empty() ? std::nan("") : refined.front().cost;
+          // Lower by more than 1% of the mode's cost (not the same minimum re-found).
+          const bool search = c_refined < c_mode - 0.01 * std::abs(c_mode);
+          search_failures += search;
+          model_failures += !search;
+          std::printf("  contact %d %-11s yaw err %6.1f deg pos err %.2f mm | cost: mode %.1f, "
+                      "truth %.1f, truth refined %.1f -> %s failure\n",
+                      k, tools[t].c_str(), e, 1e3 * std::sqrt(dp), c_mode, c_truth, c_refined,
+                      search ? "search" : "model");
+        }
       }
       const bool has_tool = std::any_of(mixture.components().begin(), mixture.components().end(),
                                         [&](const LaplaceComponent& c) { return c.tool == tools[t]; });
@@ -324,8 +370,16 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
   std::printf("  yaw error median %.2f deg, within 5 deg: %.3f\n", yaw_median, yaw_within5);
   std::printf("  coverage 50%%: %.3f, 90%%: %.3f\n", static_cast<double>(c50) / std::max(1, ok),
               static_cast<double>(c90) / std::max(1, ok));
-  std::printf("  time per frame (fit + Laplace, one thread): median %.1f ms, mean %.1f ms\n",
-              median, mean_ms);
+  std::sort(cpu_times.begin(), cpu_times.end());
+  const double cpu_median = cpu_times.empty() ? 0 : cpu_times[cpu_times.size() / 2];
+  std::printf("  time per frame (fit + Laplace, one thread): median %.1f ms, mean %.1f ms; "
+              "CPU time median %.1f ms\n",
+              median, mean_ms, cpu_median);
+  if (flags.diagnose) {
+    std::printf("  wrong (yaw > 5 deg or position > 1 mm): %d; truth's refined cost lower "
+                "(search failure): %d, higher (model failure): %d\n",
+                wrong, search_failures, model_failures);
+  }
   if (flags.unknown_tool) {
     std::printf("  tool identified: %.3f\n", static_cast<double>(identified) / std::max(1, ok));
   }
@@ -343,6 +397,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
               {"coverage_90", static_cast<double>(c90) / std::max(1, ok)},
               {"median_ms", median},
               {"mean_ms", mean_ms},
+              {"cpu_median_ms", cpu_median},
               {"tool_identified", flags.unknown_tool ? NumberOrNull(static_cast<double>(identified) /
                                                                      std::max(1, ok))
                                                      : nlohmann::json()}});
@@ -416,7 +471,29 @@ void RegisterEvalGenerator(CLI::App& app, CommandBody* selected) {
       ->check(CLI::Range(1, 1000));
   sub->add_option("--knn-k", flags->knn_k, "k-NN starts per tool (default 4)")
       ->check(CLI::Range(0, 1000));
+  sub->add_option("--yaw-grid", flags->yaw_grid,
+                  "Yaws per start position over the full turn (default 12; 1 = none)")
+      ->check(CLI::Range(1, 360));
+  sub->add_option("--coarse-pixels", flags->coarse_pixels,
+                  "Pixels of the coarse stage (start scoring and first refinement; default "
+                  "128, 0 = none)")
+      ->check(CLI::Range(0, 1 << 20));
+  sub->add_option("--position-grid", flags->position_grid_mm,
+                  "Spacing (mm) of the shifted copies of the first start (default 2.5, 0 = none)")
+      ->check(CLI::NonNegativeNumber);
+  sub->add_option("--position-rings", flags->position_rings,
+                  "Rings of shifted copies of the first start (default 2: a 5 x 5 grid)")
+      ->check(CLI::Range(0, 10));
+  sub->add_option("--coarse-starts", flags->coarse_starts,
+                  "Starts refined in the coarse stage per tool (default 6)")
+      ->check(CLI::Range(1, 1000));
+  sub->add_option("--coarse-iterations", flags->coarse_iterations,
+                  "Levenberg-Marquardt iterations in the coarse stage (default 4)")
+      ->check(CLI::Range(1, 1000));
   sub->add_flag("--unknown-tool", flags->unknown_tool, "Fit every tool and identify it");
+  sub->add_flag("--diagnose", flags->diagnose,
+                "For every contact whose mode is > 5 deg or > 1 mm off: the objective at the "
+                "mode, at the truth and at the truth refined (search or model failure)");
   sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
   sub->callback([flags, selected]() { *selected = [flags]() { RunEvalGenerator(*flags); }; });
 }

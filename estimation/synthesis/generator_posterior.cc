@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <limits>
 #include <stdexcept>
+#include <time.h>
 
 #include <Eigen/Cholesky>
 #include <Eigen/LU>
@@ -24,6 +25,13 @@ constexpr double kChi2_3_90 = 6.251388631170325;  // chi-square(3) 0.9-quantile
 
 double Ms(std::chrono::steady_clock::time_point a, std::chrono::steady_clock::time_point b) {
   return std::chrono::duration<double, std::milli>(b - a).count();
+}
+
+// The calling thread's CPU time, ms (what one core spends, whatever else runs).
+double ThreadCpuMs() {
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return 1e3 * t.tv_sec + 1e-6 * t.tv_nsec;
 }
 
 // The truth's yaw modulo the component's symmetry, nearest the component's mean.
@@ -182,6 +190,12 @@ bool GeneratorPosterior::Options::IsValid(std::string* error) const {
     return false;
   };
   if (knn_k < 0) return fail("knn_k must be >= 0");
+  if (yaw_grid < 1) return fail("yaw_grid must be >= 1");
+  if (coarse_pixels < 0) return fail("coarse_pixels must be >= 0");
+  if (position_grid_rings < 0) return fail("position_grid_rings must be >= 0");
+  if (!(position_grid_m >= 0) || !std::isfinite(position_grid_m)) {
+    return fail("position_grid_m must be finite and >= 0");
+  }
   if (!(sigma_inflation >= 0) || !std::isfinite(sigma_inflation)) {
     return fail("sigma_inflation must be finite and >= 0");
   }
@@ -237,12 +251,40 @@ std::vector<PoseStart> GeneratorPosterior::Starts(const LatentProblem& problem,
       starts.push_back({SE2d::FromXYYaw(0, 0, yaw), 0.009, "grid"});
     }
   }
-  if (options_.flip_starts && n == 1) {
+  if (options_.flip_starts && n == 1 && !yaw_grid_active(n)) {
     const std::size_t base = starts.size();
     for (std::size_t i = 0; i < base; ++i) {
       const SE2d& p = starts[i].sensor_T_object;
       starts.push_back({SE2d::FromXYYaw(p.x(), p.y(), p.yaw() + M_PI), starts[i].depth_m,
                         starts[i].source + "+pi"});
+    }
+  }
+  if (options_.position_grid_m > 0 && !starts.empty()) {
+    const PoseStart first = starts.front();
+    const double h = options_.position_grid_m;
+    const int rings = options_.position_grid_rings;
+    for (int a = -rings; a <= rings; ++a) {
+      for (int b = -rings; b <= rings; ++b) {
+        if (a == 0 && b == 0) continue;
+        const SE2d& p = first.sensor_T_object;
+        starts.push_back({SE2d::FromXYYaw(p.x() + a * h, p.y() + b * h, p.yaw()), first.depth_m,
+                          first.source + "+shift"});
+      }
+    }
+  }
+  if (yaw_grid_active(n)) {
+    // Every start position at the grid's yaws (those inside one symmetry period).
+    const int grid = options_.yaw_grid;
+    const double period = 2 * M_PI / n;
+    const std::size_t base = starts.size();
+    for (std::size_t i = 0; i < base; ++i) {
+      const SE2d& p = starts[i].sensor_T_object;
+      for (int k = 1; k < grid; ++k) {
+        const double offset = 2 * M_PI * k / grid;
+        if (offset > period - 1e-9) break;
+        starts.push_back({SE2d::FromXYYaw(p.x(), p.y(), p.yaw() + offset), starts[i].depth_m,
+                          starts[i].source + "+grid"});
+      }
     }
   }
   (void)problem;
@@ -253,6 +295,7 @@ GeneratorPosterior::Summary GeneratorPosterior::Estimate(const TrunkTargets& tar
                                                          const std::string& tool,
                                                          PoseMixture* mixture) const {
   const auto t0 = std::chrono::steady_clock::now();
+  const double cpu0 = ThreadCpuMs();
   std::vector<int> candidates;
   if (tool.empty()) {
     for (int i = 0; i < generator_->num_tools(); ++i) candidates.push_back(i);
@@ -268,6 +311,12 @@ GeneratorPosterior::Summary GeneratorPosterior::Estimate(const TrunkTargets& tar
   }
   Summary summary;
   const LatentProblem problem(*trunk_, targets, options_.problem);
+  std::optional<LatentProblem> coarse;
+  if (options_.coarse_pixels > 0 && options_.coarse_pixels < problem.num_pixels()) {
+    LatentProblem::Options co = options_.problem;
+    co.max_pixels = options_.coarse_pixels;
+    coarse.emplace(*trunk_, targets, co);
+  }
   if (problem.num_pixels() == 0) {
     summary.message = "the frame has no valid pixel";
     if (mixture != nullptr) *mixture = PoseMixture();
@@ -287,7 +336,8 @@ GeneratorPosterior::Summary GeneratorPosterior::Estimate(const TrunkTargets& tar
   for (int t : candidates) {
     const std::vector<PoseStart> starts = Starts(problem, query, t);
     summary.num_starts += static_cast<int>(starts.size());
-    ToolModes tm{t, FitPoseModes(problem, *generator_, t, starts, options_.fit)};
+    ToolModes tm{t, FitPoseModes(problem, *generator_, t, starts, options_.fit,
+                                          coarse ? &*coarse : nullptr)};
     for (const PoseFit& f : tm.modes) best_msr = std::min(best_msr, f.mean_squared_residual);
     all.push_back(std::move(tm));
   }
@@ -297,6 +347,7 @@ GeneratorPosterior::Summary GeneratorPosterior::Estimate(const TrunkTargets& tar
     summary.message = "no fit converged to a usable mode";
     if (mixture != nullptr) *mixture = PoseMixture();
     summary.total_time_ms = Ms(t0, std::chrono::steady_clock::now());
+    summary.cpu_time_ms = ThreadCpuMs() - cpu0;
     return summary;
   }
   double kappa = options_.sigma_inflation > 0 ? options_.sigma_inflation
@@ -346,6 +397,7 @@ GeneratorPosterior::Summary GeneratorPosterior::Estimate(const TrunkTargets& tar
     summary.message = "every mode had a singular Hessian";
     if (mixture != nullptr) *mixture = PoseMixture();
     summary.total_time_ms = Ms(t0, std::chrono::steady_clock::now());
+    summary.cpu_time_ms = ThreadCpuMs() - cpu0;
     return summary;
   }
   double max_log = -std::numeric_limits<double>::infinity();
@@ -374,6 +426,7 @@ GeneratorPosterior::Summary GeneratorPosterior::Estimate(const TrunkTargets& tar
   summary.usable = true;
   if (mixture != nullptr) *mixture = PoseMixture(std::move(components));
   summary.total_time_ms = Ms(t0, std::chrono::steady_clock::now());
+  summary.cpu_time_ms = ThreadCpuMs() - cpu0;
   return summary;
 }
 

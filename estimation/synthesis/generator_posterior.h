@@ -12,7 +12,9 @@
 //      lines3_*). The generator is invariant under the tool's symmetry by construction
 //      (models/pose/pose_generator.h), so the symmetry-equivalent yaws of a C_n tool are
 //      the same start and are not repeated; without k-NN starts, a yaw grid at the centre;
-//   2. modes: FitPoseModes (estimation/synthesis/pose_fitter.h) in Ceres on SE(2);
+//      every start position is also tried at a grid of yaws (Options::yaw_grid);
+//   2. modes: FitPoseModes (estimation/synthesis/pose_fitter.h) in Ceres on SE(2), the
+//      starts scored and first refined on Options::coarse_pixels pixels of the frame;
 //   3. Laplace: at mode m with whitened residuals r at the posterior's pixel sigma s and
 //      Jacobian J over (tangent x, y, theta of the right perturbation, depth),
 //        H_m = J^T J,  Sigma_m = H_m^-1 (4 x 4),
@@ -130,6 +132,19 @@ class GeneratorPosterior {
     PoseFitOptions fit;
     int knn_k = 4;                 // k-NN starts per tool, >= 0
     bool flip_starts = true;       // add yaw + pi starts for asymmetric tools
+    // Yaw grid: every start position is also tried at yaw_grid yaws evenly spaced over the
+    // full turn (those equivalent under the tool's symmetry once), >= 1 (1 = no grid;
+    // it subsumes flip_starts when even).
+    int yaw_grid = 12;
+    // Pixels of the coarse stage (scoring the starts, their first refinement,
+    // pose_fitter.h); 0 = no coarse stage (the starts are scored on the full problem).
+    int coarse_pixels = 128;
+    // Position grid: the first start (the nearest neighbour's label, else the pose MLP's)
+    // is also tried at the positions (a, b) * position_grid_m away in x and y for
+    // |a|, |b| <= position_grid_rings (each at the yaw grid); 0 = none. Catches a wrong
+    // mirror mode whose position is off by millimetres too.
+    double position_grid_m = 2.5e-3;
+    int position_grid_rings = 2;
     // kappa of the header comment; 0 = the generator's sigma_inflation (3 if it has none).
     double sigma_inflation = 0;
     int num_region_samples = 400;  // for regions and sample clouds, >= 10
@@ -148,7 +163,8 @@ class GeneratorPosterior {
     double sigma = 0;       // the pixel sigma the posterior used
     double rms_residual = 0;  // of the best mode (normalised units)
     int num_starts = 0, num_modes = 0;
-    double fit_time_ms = 0, total_time_ms = 0;
+    double fit_time_ms = 0, total_time_ms = 0;  // wall clock
+    double cpu_time_ms = 0;  // the calling thread's CPU time over the whole estimate
     std::string BriefReport() const;
   };
 
@@ -169,6 +185,10 @@ class GeneratorPosterior {
  private:
   std::vector<PoseStart> Starts(const LatentProblem& problem, const Eigen::VectorXf& query,
                                 int tool_index) const;
+
+  bool yaw_grid_active(int symmetry_order) const {
+    return options_.yaw_grid > 1 && symmetry_order > 0 && 2 * symmetry_order <= options_.yaw_grid;
+  }
 
   const SensorTrunk* trunk_;
   const PoseGenerator* generator_;

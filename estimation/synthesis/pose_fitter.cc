@@ -87,6 +87,8 @@ bool PoseFitOptions::IsValid(std::string* error) const {
   };
   if (max_iterations < 1) return fail("max_iterations must be >= 1");
   if (max_refined_starts < 1) return fail("max_refined_starts must be >= 1");
+  if (coarse_refined_starts < 1) return fail("coarse_refined_starts must be >= 1");
+  if (coarse_iterations < 1) return fail("coarse_iterations must be >= 1");
   if (!(depth_min_m >= 0 && depth_max_m > depth_min_m)) {
     return fail("expected 0 <= depth_min_m < depth_max_m");
   }
@@ -113,26 +115,42 @@ bool Same(const SE2d& a, const SE2d& b, int n, const PoseFitOptions& o) {
   return dp <= o.merge_position_m && YawErrorModuloSymmetry(a.yaw(), b.yaw(), n) <= o.merge_yaw_rad;
 }
 
-}  // namespace
+ceres::Solver::Options SolverOptions(int iterations) {
+  ceres::Solver::Options solver;
+  solver.minimizer_type = ceres::TRUST_REGION;
+  solver.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
+  solver.linear_solver_type = ceres::DENSE_QR;
+  solver.max_num_iterations = iterations;
+  solver.num_threads = 1;
+  solver.logging_type = ceres::SILENT;
+  solver.minimizer_progress_to_stdout = false;
+  solver.function_tolerance = 1e-7;
+  solver.gradient_tolerance = 1e-10;
+  solver.parameter_tolerance = 1e-8;
+  return solver;
+}
 
-std::vector<PoseFit> FitPoseModes(const LatentProblem& problem, const PoseGenerator& generator,
-                                  int tool_index, const std::vector<PoseStart>& starts,
-                                  const PoseFitOptions& options) {
-  std::string error;
-  if (!options.IsValid(&error)) throw std::invalid_argument(error);
-  if (starts.empty()) throw std::invalid_argument("FitPoseModes: no starts");
-  const int n = generator.SymmetryOrder(tool_index);
-  // Score every start; refine the best distinct ones.
-  std::vector<std::pair<double, int>> scored;
-  for (std::size_t i = 0; i < starts.size(); ++i) {
-    const double depth =
-        std::clamp(starts[i].depth_m, options.depth_min_m, options.depth_max_m);
-    scored.emplace_back(PoseCost(problem, generator, tool_index, starts[i].sensor_T_object, depth),
-                        static_cast<int>(i));
-  }
-  std::stable_sort(scored.begin(), scored.end(),
-                   [](const auto& a, const auto& b) { return a.first < b.first; });
-  // Merge starts with a coarser tolerance so that refined starts differ.
+// Levenberg-Marquardt from (pose, depth) in place; returns the iterations run.
+int Refine(const LatentProblem& problem, const PoseGenerator& generator, int tool_index,
+           const PoseFitOptions& options, int iterations, double pose[3], double* depth) {
+  ceres::Problem::Options po;
+  po.cost_function_ownership = ceres::TAKE_OWNERSHIP;
+  po.manifold_ownership = ceres::TAKE_OWNERSHIP;
+  ceres::Problem cp(po);
+  cp.AddResidualBlock(new GeneratorPoseCost(problem, generator, tool_index), nullptr, pose, depth);
+  cp.SetManifold(pose, new SE2Manifold);
+  cp.SetParameterLowerBound(depth, 0, options.depth_min_m);
+  cp.SetParameterUpperBound(depth, 0, options.depth_max_m);
+  ceres::Solver::Summary summary;
+  ceres::Solve(SolverOptions(iterations), &cp, &summary);
+  return static_cast<int>(summary.iterations.size());
+}
+
+// The best distinct (coarse tolerance) finite-cost entries of `scored` (sorted by cost),
+// at most `count`.
+std::vector<int> BestDistinct(const std::vector<std::pair<double, int>>& scored,
+                              const std::vector<PoseStart>& starts, int n, int count,
+                              const PoseFitOptions& options) {
   PoseFitOptions coarse = options;
   coarse.merge_position_m = std::max(options.merge_position_m, 0.5e-3);
   coarse.merge_yaw_rad = std::max(options.merge_yaw_rad, 0.15);
@@ -143,41 +161,63 @@ std::vector<PoseFit> FitPoseModes(const LatentProblem& problem, const PoseGenera
     for (int c : chosen) dup |= Same(starts[c].sensor_T_object, starts[i].sensor_T_object, n, coarse);
     if (dup) continue;
     chosen.push_back(i);
-    if (static_cast<int>(chosen.size()) >= options.max_refined_starts) break;
+    if (static_cast<int>(chosen.size()) >= count) break;
   }
+  return chosen;
+}
 
-  ceres::Solver::Options solver;
-  solver.minimizer_type = ceres::TRUST_REGION;
-  solver.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
-  solver.linear_solver_type = ceres::DENSE_QR;
-  solver.max_num_iterations = options.max_iterations;
-  solver.num_threads = 1;
-  solver.logging_type = ceres::SILENT;
-  solver.minimizer_progress_to_stdout = false;
-  solver.function_tolerance = 1e-7;
-  solver.gradient_tolerance = 1e-10;
-  solver.parameter_tolerance = 1e-8;
+}  // namespace
+
+std::vector<PoseFit> FitPoseModes(const LatentProblem& problem, const PoseGenerator& generator,
+                                  int tool_index, const std::vector<PoseStart>& starts_in,
+                                  const PoseFitOptions& options, const LatentProblem* coarse) {
+  std::string error;
+  if (!options.IsValid(&error)) throw std::invalid_argument(error);
+  if (starts_in.empty()) throw std::invalid_argument("FitPoseModes: no starts");
+  const int n = generator.SymmetryOrder(tool_index);
+  const LatentProblem& scoring = coarse != nullptr ? *coarse : problem;
+  std::vector<PoseStart> starts = starts_in;
+  for (PoseStart& s : starts) s.depth_m = std::clamp(s.depth_m, options.depth_min_m, options.depth_max_m);
+  // Score every start (one forward pass each); sort by cost.
+  auto score = [&](const std::vector<PoseStart>& list) {
+    std::vector<std::pair<double, int>> scored;
+    for (std::size_t i = 0; i < list.size(); ++i) {
+      scored.emplace_back(
+          PoseCost(scoring, generator, tool_index, list[i].sensor_T_object, list[i].depth_m),
+          static_cast<int>(i));
+    }
+    std::stable_sort(scored.begin(), scored.end(),
+                     [](const auto& a, const auto& b) { return a.first < b.first; });
+    return scored;
+  };
+  std::vector<int> chosen;
+  if (coarse != nullptr) {
+    // Stage 1: refine the best distinct starts on the coarse problem, re-score.
+    const std::vector<int> first =
+        BestDistinct(score(starts), starts, n, options.coarse_refined_starts, options);
+    std::vector<PoseStart> refined;
+    for (int i : first) {
+      double pose[3] = {starts[i].sensor_T_object.x(), starts[i].sensor_T_object.y(),
+                        starts[i].sensor_T_object.yaw()};
+      double depth = starts[i].depth_m;
+      Refine(*coarse, generator, tool_index, options, options.coarse_iterations, pose, &depth);
+      refined.push_back({SE2d::FromXYYaw(pose[0], pose[1], pose[2]), depth, starts[i].source});
+    }
+    starts = std::move(refined);
+  }
+  chosen = BestDistinct(score(starts), starts, n, options.max_refined_starts, options);
 
   std::vector<PoseFit> modes;
   for (int i : chosen) {
     double pose[3] = {starts[i].sensor_T_object.x(), starts[i].sensor_T_object.y(),
                       starts[i].sensor_T_object.yaw()};
-    double depth = std::clamp(starts[i].depth_m, options.depth_min_m, options.depth_max_m);
-    ceres::Problem::Options po;
-    po.cost_function_ownership = ceres::TAKE_OWNERSHIP;
-    po.manifold_ownership = ceres::TAKE_OWNERSHIP;
-    ceres::Problem cp(po);
-    auto* cost = new GeneratorPoseCost(problem, generator, tool_index);
-    cp.AddResidualBlock(cost, nullptr, pose, &depth);
-    cp.SetManifold(pose, new SE2Manifold);
-    cp.SetParameterLowerBound(&depth, 0, options.depth_min_m);
-    cp.SetParameterUpperBound(&depth, 0, options.depth_max_m);
-    ceres::Solver::Summary summary;
-    ceres::Solve(solver, &cp, &summary);
+    double depth = starts[i].depth_m;
     PoseFit fit;
+    fit.iterations = Refine(problem, generator, tool_index, options, options.max_iterations, pose,
+                            &depth);
+    const GeneratorPoseCost cost(problem, generator, tool_index);
     fit.sensor_T_object = SE2d::FromXYYaw(pose[0], pose[1], pose[2]);
     fit.depth_m = depth;
-    fit.iterations = static_cast<int>(summary.iterations.size());
     fit.start = starts[i].source;
     // Residuals and the tangent J^T J at the mode.
     const int m = problem.num_residuals();
@@ -186,7 +226,7 @@ std::vector<PoseFit> FitPoseModes(const LatentProblem& problem, const PoseGenera
     Eigen::VectorXd J1(m);
     const double* params[2] = {pose, &depth};
     double* jac[2] = {J0.data(), J1.data()};
-    if (!cost->Evaluate(params, r.data(), jac)) continue;
+    if (!cost.Evaluate(params, r.data(), jac)) continue;
     Eigen::Matrix<double, Eigen::Dynamic, 4> J(m, 4);
     J.leftCols<3>() = J0 * PoseCoordinatesFromTangent(fit.sensor_T_object);
     J.col(3) = J1;

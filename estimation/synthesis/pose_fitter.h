@@ -15,7 +15,12 @@
 // Multi-start: every start is scored by one forward pass, the best distinct
 // max_refined_starts are refined, and every distinct converged mode is kept (two modes are
 // the same when their positions are within merge_position_m and their yaws, modulo the
-// tool's symmetry, within merge_yaw_rad).
+// tool's symmetry, within merge_yaw_rad). With a coarse problem (the same frame, fewer
+// pixels) the search runs in two stages: the starts are scored on it, the best distinct
+// coarse_refined_starts are refined on it for coarse_iterations, and the best distinct
+// max_refined_starts of those (by their coarse cost) are refined on the full problem.
+// Starts are many and cheap there (a yaw grid per start position), the full-resolution
+// Jacobians few.
 //
 // Errors: bad options throw std::invalid_argument; fits that fail come back with
 // usable = false. Thread-safe (const).
@@ -86,6 +91,8 @@ struct PoseFit {
 struct PoseFitOptions {
   int max_iterations = 12;         // Levenberg-Marquardt iterations per start, >= 1
   int max_refined_starts = 3;      // best distinct starts refined, >= 1
+  int coarse_refined_starts = 6;   // with a coarse problem: starts refined on it, >= 1
+  int coarse_iterations = 4;       // their iterations there, >= 1
   double depth_min_m = 0.0015;     // depth bounds, 0 <= min < max
   double depth_max_m = 0.0175;
   double merge_position_m = 0.3e-3;  // > 0
@@ -94,10 +101,12 @@ struct PoseFitOptions {
 };
 
 // Fits the pose of tool `tool_index` from `starts` (non-empty); returns the distinct
-// usable modes, lowest cost first. *fit_evaluations (optional) counts trunk passes.
+// usable modes, lowest cost first. coarse (optional): the same frame with fewer pixels
+// for the first stage (header comment); it must outlive the call.
 std::vector<PoseFit> FitPoseModes(const LatentProblem& problem, const PoseGenerator& generator,
                                   int tool_index, const std::vector<PoseStart>& starts,
-                                  const PoseFitOptions& options);
+                                  const PoseFitOptions& options,
+                                  const LatentProblem* coarse = nullptr);
 
 // 1/2 ||r||^2 (problem sigma) at one pose, one forward pass; +inf if not finite.
 double PoseCost(const LatentProblem& problem, const PoseGenerator& generator, int tool_index,
