@@ -219,9 +219,9 @@ struct EvalGeneratorFlags {
   std::uint64_t seed = 0x5eed0000u;
   bool unknown_tool = false;
   double sigma_inflation = 0;
-  int max_pixels = 768;
-  int refined_starts = 3;
-  int iterations = 12;
+  int max_pixels = 384;
+  int refined_starts = 2;
+  int iterations = 6;
   int knn_k = 4;
   int yaw_grid = 12;
   int coarse_pixels = 128;
@@ -461,13 +461,13 @@ void RegisterEvalGenerator(CLI::App& app, CommandBody* selected) {
   sub->add_option("--sigma-inflation", flags->sigma_inflation,
                   "Override the generator's calibrated sigma inflation (0 = stored)")
       ->check(CLI::NonNegativeNumber);
-  sub->add_option("--max-pixels", flags->max_pixels, "Pixels per trunk pass (default 768)")
+  sub->add_option("--max-pixels", flags->max_pixels, "Pixels per trunk pass (default 384)")
       ->check(CLI::Range(0, 1 << 20));
   sub->add_option("--refined-starts", flags->refined_starts,
-                  "Best distinct starts refined per tool (default 3)")
+                  "Best distinct starts refined per tool (default 2)")
       ->check(CLI::Range(1, 100));
   sub->add_option("--iterations", flags->iterations,
-                  "Levenberg-Marquardt iterations per start (default 12)")
+                  "Levenberg-Marquardt iterations per start (default 6)")
       ->check(CLI::Range(1, 1000));
   sub->add_option("--knn-k", flags->knn_k, "k-NN starts per tool (default 4)")
       ->check(CLI::Range(0, 1000));

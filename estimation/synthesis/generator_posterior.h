@@ -28,8 +28,11 @@
 // The pixel sigma s. The residuals of a rendering are dominated by the generator's and
 // the trunk's model error, spatially correlated, not by independent pixel noise, so the
 // trunk's residual_sigma would give far too narrow regions. s = kappa * RMS residual of
-// the frame's best mode (over all candidate tools); kappa (PoseGenerator::sigma_inflation,
-// or Options::sigma_inflation) is calibrated on held-out labelled contacts
+// the frame's best mode (over all candidate tools) * sqrt(N / 768), N the pixels of the
+// problem: a correlated model error carries about as much information at any N, so the
+// regions stay the same when fewer pixels are used for speed (768 is the pixel count
+// kappa is defined at); kappa (PoseGenerator::sigma_inflation, or
+// Options::sigma_inflation) is calibrated on held-out labelled contacts
 // (CalibrateSigmaInflation) and checked on fresh contacts
 // (tests/estimation/synthesis/generator_coverage_test.cc).
 //
@@ -124,9 +127,12 @@ class KnnPoseStarts {
 
 class GeneratorPosterior {
  public:
+  // The pixel count kappa is defined at (header comment).
+  static constexpr double kReferencePixels = 768;
+
   struct Options {
     // The frame's latent problem. Its sigma only scales the fit (the posterior sets its
-    // own, header comment); max_pixels bounds the time per trunk pass (default 768 of the
+    // own, header comment); max_pixels bounds the time per trunk pass (default 384 of the
     // 70 x 88 bubble frame's 6160 pixels).
     LatentProblem::Options problem = DefaultProblem();
     PoseFitOptions fit;
@@ -161,6 +167,7 @@ class GeneratorPosterior {
     SE2d mean;  // the mode of the heaviest component
     Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();  // its (x, y, yaw) block
     double sigma = 0;       // the pixel sigma the posterior used
+    int num_pixels = 0;     // N, the pixels of the frame's problem
     double rms_residual = 0;  // of the best mode (normalised units)
     int num_starts = 0, num_modes = 0;
     double fit_time_ms = 0, total_time_ms = 0;  // wall clock
