@@ -227,7 +227,7 @@ struct EvalGeneratorFlags {
   int coarse_pixels = 128;
   double position_grid_mm = 2.5;
   int position_rings = 2;
-  int coarse_starts = 6;
+  int coarse_starts = 4;
   int coarse_iterations = 4;
   bool diagnose = false;
   bool json = false;
@@ -485,7 +485,7 @@ void RegisterEvalGenerator(CLI::App& app, CommandBody* selected) {
                   "Rings of shifted copies of the first start (default 2: a 5 x 5 grid)")
       ->check(CLI::Range(0, 10));
   sub->add_option("--coarse-starts", flags->coarse_starts,
-                  "Starts refined in the coarse stage per tool (default 6)")
+                  "Starts refined in the coarse stage per tool (default 4)")
       ->check(CLI::Range(1, 1000));
   sub->add_option("--coarse-iterations", flags->coarse_iterations,
                   "Levenberg-Marquardt iterations in the coarse stage (default 4)")

@@ -148,11 +148,13 @@ int Refine(const LatentProblem& problem, const PoseGenerator& generator, int too
 
 // The best distinct (coarse tolerance) finite-cost entries of `scored` (sorted by cost),
 // at most `count`.
+// yaw_only: distinct in yaw alone (any position), so that every yaw hypothesis is
+// represented by its best position.
 std::vector<int> BestDistinct(const std::vector<std::pair<double, int>>& scored,
                               const std::vector<PoseStart>& starts, int n, int count,
-                              const PoseFitOptions& options) {
+                              const PoseFitOptions& options, bool yaw_only = false) {
   PoseFitOptions coarse = options;
-  coarse.merge_position_m = std::max(options.merge_position_m, 0.5e-3);
+  coarse.merge_position_m = yaw_only ? 1.0 : std::max(options.merge_position_m, 0.5e-3);
   coarse.merge_yaw_rad = std::max(options.merge_yaw_rad, 0.15);
   std::vector<int> chosen;
   for (const auto& [cost, i] : scored) {
@@ -194,7 +196,8 @@ std::vector<PoseFit> FitPoseModes(const LatentProblem& problem, const PoseGenera
   if (coarse != nullptr) {
     // Stage 1: refine the best distinct starts on the coarse problem, re-score.
     const std::vector<int> first =
-        BestDistinct(score(starts), starts, n, options.coarse_refined_starts, options);
+        BestDistinct(score(starts), starts, n, options.coarse_refined_starts, options,
+                     /*yaw_only=*/true);
     std::vector<PoseStart> refined;
     for (int i : first) {
       double pose[3] = {starts[i].sensor_T_object.x(), starts[i].sensor_T_object.y(),

@@ -91,7 +91,7 @@ struct PoseFit {
 struct PoseFitOptions {
   int max_iterations = 6;          // Levenberg-Marquardt iterations per start, >= 1
   int max_refined_starts = 2;      // best distinct starts refined, >= 1
-  int coarse_refined_starts = 6;   // with a coarse problem: starts refined on it, >= 1
+  int coarse_refined_starts = 4;   // with a coarse problem: starts refined on it, >= 1
   int coarse_iterations = 4;       // their iterations there, >= 1
   double depth_min_m = 0.0015;     // depth bounds, 0 <= min < max
   double depth_max_m = 0.0175;
