@@ -355,8 +355,10 @@ GeneratorPosterior::Summary GeneratorPosterior::Estimate(const TrunkTargets& tar
   if (!(kappa > 0)) kappa = 3;
   summary.rms_residual = std::sqrt(best_msr);
   summary.num_pixels = problem.num_pixels();
-  summary.sigma = kappa * std::max(summary.rms_residual, 1e-6) *
-                  std::sqrt(problem.num_pixels() / kReferencePixels);
+  summary.pixel_factor = std::sqrt(
+      problem.num_pixels() /
+      std::min(kReferencePixels, static_cast<double>(problem.num_valid_pixels())));
+  summary.sigma = kappa * std::max(summary.rms_residual, 1e-6) * summary.pixel_factor;
   const double scale = std::pow(problem.sigma() / summary.sigma, 2);  // r_s^2 = r_0^2 scale
 
   std::vector<LaplaceComponent> components;
@@ -446,8 +448,7 @@ double CalibrateSigmaInflation(const GeneratorPosterior& posterior,
     if (!s.usable) continue;
     const LaplaceComponent& c = mixture.components().front();
     // Mahalanobis distance at kappa = 1: the covariance scales with kappa^2.
-    const double kappa = s.sigma / std::max(s.rms_residual, 1e-6) /
-                         std::sqrt(s.num_pixels / GeneratorPosterior::kReferencePixels);
+    const double kappa = s.sigma / std::max(s.rms_residual, 1e-6) / s.pixel_factor;
     const Eigen::Matrix3d cov = c.covariance.topLeftCorner<3, 3>() / (kappa * kappa);
     const SE2d::Tangent r = Folded(labels[i].sensor_T_object, c).Minus(c.mean);
     if (c.symmetry_order == 0) {

@@ -28,10 +28,10 @@
 // The pixel sigma s. The residuals of a rendering are dominated by the generator's and
 // the trunk's model error, spatially correlated, not by independent pixel noise, so the
 // trunk's residual_sigma would give far too narrow regions. s = kappa * RMS residual of
-// the frame's best mode (over all candidate tools) * sqrt(N / 768), N the pixels of the
-// problem: a correlated model error carries about as much information at any N, so the
-// regions stay the same when fewer pixels are used for speed (768 is the pixel count
-// kappa is defined at); kappa (PoseGenerator::sigma_inflation, or
+// the frame's best mode (over all candidate tools) * sqrt(N / N_ref), N the pixels of the
+// problem and N_ref = min(768, the frame's valid pixels): a correlated model error carries
+// about as much information at any N, so the regions stay the same when fewer pixels are
+// used for speed (N_ref is the pixel count kappa is defined at); kappa (PoseGenerator::sigma_inflation, or
 // Options::sigma_inflation) is calibrated on held-out labelled contacts
 // (CalibrateSigmaInflation) and checked on fresh contacts
 // (tests/estimation/synthesis/generator_coverage_test.cc).
@@ -168,6 +168,7 @@ class GeneratorPosterior {
     Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();  // its (x, y, yaw) block
     double sigma = 0;       // the pixel sigma the posterior used
     int num_pixels = 0;     // N, the pixels of the frame's problem
+    double pixel_factor = 1;  // sqrt(N / min(768, valid pixels)) (header comment)
     double rms_residual = 0;  // of the best mode (normalised units)
     int num_starts = 0, num_modes = 0;
     double fit_time_ms = 0, total_time_ms = 0;  // wall clock
