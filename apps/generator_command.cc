@@ -13,12 +13,17 @@
 //
 //   tactfunc eval-generator --model M.tfm --generator G.tpg [--functaset F.tfs]
 //       [--pose-model P.tpm] [--contacts-per-tool 20] [--seed 1592590336] [--unknown-tool]
-//       [--json]
+//       [--diagnose] [search knobs: --max-pixels, --refined-starts, --iterations, --knn-k,
+//       --yaw-grid, --position-grid, --position-rings, --coarse-pixels, --coarse-starts,
+//       --coarse-iterations] [--json]
 //     fresh Soft Bubble contacts (ContactSimulator, seeded; contact k uses DeriveSeed(seed,
 //     k)) of every tool the generator knows through GeneratorPosterior (one thread): the
 //     posterior mode's position RMSE (mm) and yaw RMSE (deg, modulo symmetry, hemisphere
 //     left out), the coverage of the 50% and 90% highest-density regions, the time per
-//     frame (fit + Laplace), and with --unknown-tool the tool identification rate.
+//     frame (fit + Laplace; wall clock and the thread's CPU time), and with --unknown-tool
+//     the tool identification rate. --diagnose: for every contact whose mode is > 5 deg or
+//     > 1 mm off, the objective at the mode, the truth and the truth refined (a lower
+//     refined truth = a search failure, else a model failure).
 #include <algorithm>
 #include <chrono>
 #include <cmath>
