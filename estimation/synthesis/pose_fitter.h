@@ -16,8 +16,9 @@
 // max_refined_starts are refined, and every distinct converged mode is kept (two modes are
 // the same when their positions are within merge_position_m and their yaws, modulo the
 // tool's symmetry, within merge_yaw_rad). With a coarse problem (the same frame, fewer
-// pixels) the search runs in two stages: the starts are scored on it, the best distinct
-// coarse_refined_starts are refined on it for coarse_iterations, and the best distinct
+// pixels) the search runs in two stages: the starts are scored on it, the best start of
+// each of the coarse_refined_starts best distinct yaws (any position) is refined on it
+// for coarse_iterations, and the best distinct
 // max_refined_starts of those (by their coarse cost) are refined on the full problem.
 // Starts are many and cheap there (a yaw grid per start position), the full-resolution
 // Jacobians few.
