@@ -33,6 +33,7 @@
 #include <cstdio>
 #include <iostream>
 #include <limits>
+#include <map>
 #include <memory>
 #include <optional>
 
@@ -47,6 +48,8 @@
 #include "models/trunk/functa_model.h"
 #include "models/simulator/tool.h"
 #include "estimation/posterior/pose_posterior.h"
+#include "estimation/synthesis/generator_posterior.h"
+#include "models/pose/pose_generator.h"
 
 namespace tactfunc::apps {
 namespace {
@@ -68,6 +71,7 @@ struct PosteriorBenchFlags {
   bool no_model_error = false;
   double sigma_z = 0;
   double sigma = 0;
+  std::string generator;  // adds the generator path's row (bubble)
 };
 
 double Median(std::vector<double> v) {
@@ -86,6 +90,8 @@ double Quantile(std::vector<double> v, double q) {
 
 struct Tally {
   PosteriorSampler sampler;
+  std::string name;  // the sampler's name, or "generator"
+  std::map<std::string, std::pair<double, int>> tool_position_sq, tool_yaw_sq;
   int frames = 0, failures = 0, covered_50 = 0, covered_90 = 0;
   double position_sq = 0, yaw_sq = 0;
   int yaw_count = 0;
@@ -100,9 +106,16 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
     if (!PosteriorSamplerFromString(name, &t.sampler)) {
       throw UsageError("--samplers: expected a list of sgld, laplace, knn, got '" + name + "'");
     }
+    t.name = ToString(t.sampler);
     tallies.push_back(t);
   }
   if (tallies.empty()) throw UsageError("--samplers: empty list");
+  const std::size_t num_latent = tallies.size();
+  if (!flags.generator.empty()) {
+    Tally t;
+    t.name = "generator";
+    tallies.push_back(t);
+  }
 
   const FunctaModel model = FunctaModel::Load(flags.model);
   const Functaset functaset = Functaset::Load(flags.functaset);
@@ -155,8 +168,24 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
   if (need_knn) {
     knn = MakeFunctasetKnn(functaset, sensor, /*train_only=*/true, options.knn, flags.functaset);
   }
+  std::unique_ptr<PoseGenerator> generator;
+  std::unique_ptr<KnnPoseStarts> knn_starts;
+  std::unique_ptr<GeneratorPosterior> generator_posterior;
+  if (!flags.generator.empty()) {
+    if (sensor != SensorKind::kSoftBubble) {
+      throw UsageError("--generator: the generator path models Soft Bubble frames, not " +
+                       std::string(ToString(sensor)));
+    }
+    generator = std::make_unique<PoseGenerator>(PoseGenerator::Load(flags.generator));
+    knn_starts = std::make_unique<KnnPoseStarts>(functaset, sensor);
+    GeneratorPosterior::Options go;
+    go.seed = flags.seed;
+    generator_posterior = std::make_unique<GeneratorPosterior>(trunk, *generator, go,
+                                                               knn_starts.get(), &pose_model);
+  }
   std::vector<std::unique_ptr<PosePosterior>> posteriors;
-  for (const Tally& t : tallies) {
+  for (std::size_t s = 0; s < num_latent; ++s) {
+    const Tally& t = tallies[s];
     PosePosterior::Options o = options;
     o.sampler = t.sampler;
     posteriors.push_back(std::make_unique<PosePosterior>(trunk, pose_model, o, knn.posterior.get()));
@@ -205,7 +234,44 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
       meta_yaw_sq += std::pow(YawErrorModuloSymmetry(meta_point.yaw(), label_pose.yaw(), n), 2);
       ++point_yaw_count;
     }
-    for (std::size_t s = 0; s < tallies.size(); ++s) {
+    auto per_tool = [&](Tally& t, const SE2d& mean) {
+      auto& p = t.tool_position_sq[label.tool];
+      p.first += std::pow(mean.x() - label_pose.x(), 2) + std::pow(mean.y() - label_pose.y(), 2);
+      ++p.second;
+      if (n != 0) {
+        auto& y = t.tool_yaw_sq[label.tool];
+        y.first += std::pow(YawErrorModuloSymmetry(mean.yaw(), label_pose.yaw(), n), 2);
+        ++y.second;
+      }
+    };
+    if (generator_posterior) {
+      Tally& t = tallies.back();
+      ++t.frames;
+      PoseMixture mixture;
+      const bool known = generator->ToolIndex(label.tool) >= 0;
+      GeneratorPosterior::Summary gs;
+      if (known) gs = generator_posterior->Estimate(targets, label.tool, &mixture);
+      bar.Tick();
+      if (!known || !gs.usable) {
+        ++t.failures;
+        std::cerr << "bench posterior: generator failed on frame " << dataset.frames()[index].id
+                  << ": " << (known ? gs.message : "the generator does not know tool " + label.tool)
+                  << "\n";
+      } else {
+        t.ms.push_back(gs.total_time_ms);
+        t.ms_after_fit.push_back(gs.total_time_ms - gs.fit_time_ms);
+        t.covered_50 += mixture.Contains(label_pose, 0.5, 400, flags.seed, label.tool);
+        t.covered_90 += mixture.Contains(label_pose, 0.9, 400, flags.seed, label.tool);
+        t.position_sq += std::pow(gs.mean.x() - label_pose.x(), 2) +
+                         std::pow(gs.mean.y() - label_pose.y(), 2);
+        if (n != 0) {
+          t.yaw_sq += std::pow(YawErrorModuloSymmetry(gs.mean.yaw(), label_pose.yaw(), n), 2);
+          ++t.yaw_count;
+        }
+        per_tool(t, gs.mean);
+      }
+    }
+    for (std::size_t s = 0; s < num_latent; ++s) {
       Tally& t = tallies[s];
       ++t.frames;
       std::optional<PoseDistribution> distribution;
@@ -230,6 +296,7 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
         t.yaw_sq += std::pow(YawErrorModuloSymmetry(mean.yaw(), label_pose.yaw(), n), 2);
         ++t.yaw_count;
       }
+      per_tool(t, mean);
     }
   }
   bar.Finish();
@@ -252,11 +319,22 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
     const double deg = t.yaw_count ? kDeg * std::sqrt(t.yaw_sq / t.yaw_count) : NAN;
     std::printf("%-8s %6d %4d | %5.3f [%4.2f, %4.2f]%s | %5.3f [%4.2f, %4.2f]%s | %8.3f %8.2f | "
                 "%8.1f %8.1f   (%.1f ms after the fit)\n",
-                ToString(t.sampler), t.frames, t.failures, c50, band50.first, band50.second,
+                t.name.c_str(), t.frames, t.failures, c50, band50.first, band50.second,
                 (c50 < band50.first || c50 > band50.second) ? "!" : " ", c90, band90.first,
                 band90.second, (c90 < band90.first || c90 > band90.second) ? "!" : " ", mm, deg,
                 Median(t.ms), Quantile(t.ms, 0.9), Median(t.ms_after_fit));
-    list.push_back({{"name", ToString(t.sampler)},
+    nlohmann::json tools = nlohmann::json::object();
+    for (const auto& [tool, v] : t.tool_position_sq) {
+      const auto y = t.tool_yaw_sq.find(tool);
+      tools[tool] = {{"rmse_mm", 1e3 * std::sqrt(v.first / v.second)},
+                     {"rmse_deg", y == t.tool_yaw_sq.end()
+                                      ? nlohmann::json()
+                                      : nlohmann::json(kDeg * std::sqrt(y->second.first /
+                                                                        y->second.second))},
+                     {"frames", v.second}};
+    }
+    list.push_back({{"name", t.name},
+                    {"per_tool", tools},
                     {"coverage", {{"0.5", c50}, {"0.9", c90}}},
                     {"coverage_bounds_99",
                      {{"0.5", {band50.first, band50.second}}, {"0.9", {band90.first, band90.second}}}},
@@ -268,6 +346,25 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
                     {"failures", t.failures},
                     {"point_rmse_mm", NumberOrNull(point_mm)},
                     {"point_rmse_deg", NumberOrNull(point_deg)}});
+  }
+  // Error per tool and method: RMSE of the posterior mean (mode for the generator).
+  std::printf("%-11s", "tool");
+  for (const Tally& t : tallies) std::printf(" | %-9s mm   deg", t.name.c_str());
+  std::printf("\n");
+  std::map<std::string, int> tool_names;
+  for (const Tally& t : tallies) {
+    for (const auto& [tool, v] : t.tool_position_sq) tool_names[tool] = 0;
+  }
+  for (const auto& [tool, unused] : tool_names) {
+    std::printf("%-11s", tool.c_str());
+    for (const Tally& t : tallies) {
+      const auto p = t.tool_position_sq.find(tool);
+      const auto y = t.tool_yaw_sq.find(tool);
+      const double mm = p == t.tool_position_sq.end() ? NAN : 1e3 * std::sqrt(p->second.first / p->second.second);
+      const double deg = y == t.tool_yaw_sq.end() ? NAN : kDeg * std::sqrt(y->second.first / y->second.second);
+      std::printf(" | %12.3f %6.2f", mm, deg);
+    }
+    std::printf("\n");
   }
   std::printf("pose MLP point estimate g(z*), z* = the posterior's fit: %.3f mm, %.2f deg\n",
               point_mm, point_deg);
@@ -309,6 +406,9 @@ void RegisterPosteriorBenchmark(CLI::App* bench, CommandBody* selected) {
   sub->add_option("--frames", flags->frames, "First N labelled test frames (default 60)")
       ->check(CLI::Range(1, 1000000));
   sub->add_option("--samplers", flags->samplers, "Comma-separated (default sgld,laplace,knn)");
+  sub->add_option("--generator", flags->generator,
+                  "Generator (.tpg): adds the generator path's row (Laplace mixture over the "
+                  "pose modes, k-NN starts from --functaset, the label's tool; bubble only)");
   sub->add_option("--samples", flags->samples, "Pose samples per posterior (default 100)")
       ->check(CLI::Range(1, 1000000));
   sub->add_option("--seed", flags->seed, "Sampler seed (default 0)");

@@ -36,6 +36,8 @@ void RegisterFit(CLI::App& app, CommandBody* selected);     // apps/fit_command.
 void RegisterTrainPose(CLI::App& app, CommandBody* selected);  // apps/train_pose_command.cc
 void RegisterPose(CLI::App& app, CommandBody* selected);         // apps/pose_command.cc
 void RegisterEval(CLI::App& app, CommandBody* selected);         // apps/eval_command.cc
+void RegisterTrainGenerator(CLI::App& app, CommandBody* selected);  // apps/generator_command.cc
+void RegisterEvalGenerator(CLI::App& app, CommandBody* selected);   // apps/generator_command.cc
 
 // Bad user input that the command detected itself (flag values, lists).
 class UsageError : public std::runtime_error {

@@ -37,6 +37,8 @@ int main(int argc, char** argv) {
   RegisterTrainPose(app, &body);
   RegisterPose(app, &body);
   RegisterEval(app, &body);
+  RegisterTrainGenerator(app, &body);
+  RegisterEvalGenerator(app, &body);
   RegisterBench(app, &body);
   try {
     app.parse(argc, argv);

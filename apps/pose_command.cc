@@ -25,6 +25,16 @@
 //
 // The knn sampler searches the functaset's labelled TRAIN-split latents (a brute-force
 // index built in memory, apps/model_inputs.h), so that a test frame cannot find itself.
+//
+// --method generator (docs/POSES.md, "The generator path"): the pose itself is fitted by
+// analysis-by-synthesis through --generator G.tpg (`tactfunc train-generator`) and the
+// frozen trunk, and the posterior is the Laplace mixture over the modes
+// (estimation/synthesis/generator_posterior.h); --sampler does not apply. Starts: the pose
+// MLP, and the k nearest labelled train latents of --functaset when given. --tool names
+// the tool; without it every tool of the generator is fitted and the tool probabilities
+// are printed. --samples draws from the mixture go into posterior.json / .png.
+//   tactfunc pose --method generator --generator G.tpg --model M.tfm --pose-model P.tpm
+//       --data D --id 000010 [--functaset F.tfs] [--tool NAME] [--out DIR] [--json]
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -49,6 +59,8 @@
 #include "models/trunk/functa_model.h"
 #include "models/simulator/tool.h"
 #include "estimation/posterior/pose_posterior.h"
+#include "estimation/synthesis/generator_posterior.h"
+#include "models/pose/pose_generator.h"
 
 namespace tactfunc::apps {
 namespace {
@@ -66,6 +78,8 @@ struct PoseFlags {
   std::string sensor;
   std::string tool;
   std::string sampler = "sgld";
+  std::string method = "latent";
+  std::string generator;
   int samples = 100;
   std::uint64_t seed = 0;
   int knn_k = 8;
@@ -74,6 +88,7 @@ struct PoseFlags {
   int height = 420;
   bool json = false;
   bool no_model_error = false;
+  bool unknown_tool = false;
 };
 
 constexpr double kDeg = 180.0 / M_PI;
@@ -336,7 +351,155 @@ nlohmann::json MatrixJson(const Eigen::Matrix3d& m) {
   return rows;
 }
 
+void RunGeneratorPose(const PoseFlags& flags, const FunctaModel& model, const Input& input,
+                      const TrunkTargets& targets, const std::string& tool) {
+  if (input.sensor != SensorKind::kSoftBubble) {
+    throw UsageError("--method generator: the generator path models Soft Bubble frames; the "
+                     "frame is " + std::string(ToString(input.sensor)));
+  }
+  if (flags.generator.empty()) {
+    throw UsageError("--method generator needs --generator G.tpg (from `tactfunc "
+                     "train-generator`, e.g. models/pretrained/pose_generator_bubble.tpg)");
+  }
+  const SensorTrunk& trunk = model.Trunk(input.sensor);
+  const PoseGenerator generator = PoseGenerator::Load(flags.generator);
+  if (!tool.empty() && generator.ToolIndex(tool) < 0) {
+    std::string names;
+    for (const std::string& t : generator.options().tools) names += (names.empty() ? "" : ", ") + t;
+    throw UsageError("--tool '" + tool + "': the generator '" + flags.generator +
+                     "' does not know it (it knows " + names + ")");
+  }
+  const PoseMlp pose_model = LoadPoseModelFor(flags.pose_model, model, input.sensor, flags.model);
+  std::unique_ptr<KnnPoseStarts> knn;
+  if (!flags.functaset.empty()) {
+    const Functaset functaset = Functaset::Load(flags.functaset);
+    functaset.CheckModel(model, flags.model, flags.functaset);
+    knn = std::make_unique<KnnPoseStarts>(functaset, input.sensor);
+  }
+  GeneratorPosterior::Options options;
+  options.seed = flags.seed;
+  const GeneratorPosterior posterior(trunk, generator, options, knn.get(), &pose_model);
+  PoseMixture mixture;
+  const GeneratorPosterior::Summary gs = posterior.Estimate(targets, tool, &mixture);
+  std::cout << gs.BriefReport() << "\n";
+  if (!gs.usable) throw std::runtime_error("the generator posterior failed: " + gs.message);
+  const std::string chosen = gs.tool;
+  const int n = generator.SymmetryOrder(generator.ToolIndex(chosen));
+  const PoseDistribution distribution = mixture.Sample(flags.samples, flags.seed, chosen);
+  const SE2d& mean = gs.mean;
+  const Eigen::Matrix3d& cov = gs.covariance;
+  std::printf("pose: %s %s, tool %s%s (n = %d), %d modes, %d samples in %.1f ms\n",
+              ToString(input.sensor), input.name.c_str(), chosen.c_str(),
+              tool.empty() ? " (most probable)" : "", n, gs.num_modes, distribution.size(),
+              gs.total_time_ms);
+  if (tool.empty()) {
+    for (const auto& [name, p] : gs.tool_probabilities) {
+      if (p >= 1e-4) std::printf("pose: P(tool = %s) = %.4f\n", name.c_str(), p);
+    }
+  }
+  std::printf("pose: mode x = %.3f mm, y = %.3f mm, yaw = %.2f deg (sensor_T_object)\n",
+              mean.x() * 1e3, mean.y() * 1e3, mean.yaw() * kDeg);
+  std::printf("pose: sd   x = %.3f mm, y = %.3f mm, yaw = %.2f deg (its Laplace component)\n",
+              std::sqrt(cov(0, 0)) * 1e3, std::sqrt(cov(1, 1)) * 1e3, std::sqrt(cov(2, 2)) * kDeg);
+  if (input.label) {
+    const SE2d& truth = input.label->sensor_T_object;
+    const double e_mm = 1e3 * std::hypot(mean.x() - truth.x(), mean.y() - truth.y());
+    std::printf("pose: truth %s x = %.3f mm, y = %.3f mm, yaw = %.2f deg; error %.3f mm, %.2f deg\n",
+                input.label->tool.c_str(), truth.x() * 1e3, truth.y() * 1e3, truth.yaw() * kDeg,
+                e_mm, YawErrorModuloSymmetry(mean.yaw(), truth.yaw(), n) * kDeg);
+  }
+  std::printf("pose: covariance, tangent space at the mode (right perturbations), "
+              "order x [m], y [m], yaw [rad]:\n");
+  for (int r = 0; r < 3; ++r) {
+    std::printf("  [% .4e  % .4e  % .4e]\n", cov(r, 0), cov(r, 1), cov(r, 2));
+  }
+  const std::array<double, 36> ros = ToRosPoseCovariance(mean, cov);
+  std::printf("pose: ROS PoseWithCovariance.covariance (6x6 row-major over x, y, z, roll, pitch, "
+              "yaw; parent frame, x-y rotated by the mode's yaw; others 0):\n ");
+  for (int i : {0, 1, 5, 6, 7, 11, 30, 31, 35}) std::printf(" [%d] %.4e", i, ros[i]);
+  std::printf("\n");
+  nlohmann::json components = nlohmann::json::array();
+  for (const LaplaceComponent& c : mixture.components()) {
+    components.push_back({{"tool", c.tool},
+                          {"weight", c.weight},
+                          {"log_evidence", c.log_evidence},
+                          {"mean", PoseJson(c.mean)},
+                          {"depth_m", c.depth_m},
+                          {"covariance", MatrixJson(c.covariance.topLeftCorner<3, 3>())},
+                          {"start", c.start}});
+  }
+  nlohmann::json probabilities = nlohmann::json::object();
+  for (const auto& [name, p] : gs.tool_probabilities) probabilities[name] = p;
+  if (!flags.out.empty()) {
+    fs::create_directories(flags.out);
+    nlohmann::json samples = nlohmann::json::array();
+    for (int i = 0; i < distribution.size(); ++i) {
+      const SE2d& p = distribution.samples()[i];
+      samples.push_back({p.x(), p.y(), p.yaw(), distribution.weights()[i]});
+    }
+    nlohmann::json record = {
+        {"sensor", ToString(input.sensor)},
+        {"method", "generator"},
+        {"tool", chosen},
+        {"tool_probabilities", probabilities},
+        {"symmetry_order", n},
+        {"mean", PoseJson(mean)},
+        {"covariance", MatrixJson(cov)},
+        {"covariance_convention",
+         "tangent space at the heaviest mode of the tool, right perturbations, order x (m), "
+         "y (m), yaw (rad)"},
+        {"ros_covariance", ros},
+        {"components", components},
+        {"samples_columns", {"x_m", "y_m", "yaw_rad", "weight"}},
+        {"samples", samples},
+        {"ms", gs.total_time_ms},
+        {"pixel_sigma", gs.sigma},
+        {"model", flags.model},
+        {"generator", flags.generator},
+        {"pose_model", flags.pose_model}};
+    if (input.label) {
+      record["truth"] = PoseJson(input.label->sensor_T_object);
+      record["truth"]["tool"] = input.label->tool;
+    }
+    // The picture takes the latent path's summary: fill what it draws.
+    PosePosterior::Summary ps;
+    ps.termination_type = PosePosteriorTermination::kSuccess;
+    ps.symmetry_order = n == 0 ? 1 : n;
+    ps.num_samples = distribution.size();
+    ps.mean = mean;
+    ps.covariance = cov;
+    ps.total_time_ms = gs.total_time_ms;
+    const std::string json_path = (fs::path(flags.out) / "posterior.json").string();
+    const std::string png_path = (fs::path(flags.out) / "posterior.png").string();
+    WriteFileAtomically(json_path, record.dump(1) + "\n");
+    WritePosteriorPicture(png_path, input, distribution, ps, distribution.Modes(), flags.height,
+                          "generator");
+    std::cout << "pose: wrote " << json_path << " and " << png_path
+              << (input.pitch_m > 0 ? "" : " (pixel pitch unknown: no image panel; give "
+                                           "--pixel-pitch-mm)")
+              << "\n";
+  }
+  if (flags.json) {
+    nlohmann::json j = {{"mean", PoseJson(mean)},
+                        {"covariance", MatrixJson(cov)},
+                        {"ms", gs.total_time_ms},
+                        {"method", "generator"},
+                        {"tool", chosen},
+                        {"tool_probabilities", probabilities},
+                        {"modes", gs.num_modes},
+                        {"samples", distribution.size()},
+                        {"symmetry_order", n},
+                        {"sensor", ToString(input.sensor)},
+                        {"termination", "SUCCESS"}};
+    if (input.label) j["truth"] = PoseJson(input.label->sensor_T_object);
+    EmitJson(j);
+  }
+}
+
 void RunPose(const PoseFlags& flags) {
+  if (flags.method != "latent" && flags.method != "generator") {
+    throw UsageError("--method: expected latent or generator, got '" + flags.method + "'");
+  }
   PosteriorSampler sampler;
   if (!PosteriorSamplerFromString(flags.sampler, &sampler)) {
     throw UsageError("--sampler: expected sgld, laplace or knn, got '" + flags.sampler + "'");
@@ -352,7 +515,7 @@ void RunPose(const PoseFlags& flags) {
   if (from_files && (flags.frame.empty() || flags.reference.empty())) {
     throw UsageError("--frame and --reference go together");
   }
-  if (sampler == PosteriorSampler::kKnn && flags.functaset.empty()) {
+  if (sampler == PosteriorSampler::kKnn && flags.functaset.empty() && flags.method == "latent") {
     throw UsageError("--sampler knn needs --functaset (its labelled latents are the samples)");
   }
 
@@ -403,6 +566,12 @@ void RunPose(const PoseFlags& flags) {
   }
   if (flags.pixel_pitch_mm > 0) input.pitch_m = flags.pixel_pitch_mm * 1e-3;
   input.sensor = sensor;
+  if (flags.method == "generator") {
+    std::string tool = flags.tool;
+    if (tool.empty() && input.label && !flags.unknown_tool) tool = input.label->tool;
+    RunGeneratorPose(flags, model, input, targets, tool);
+    return;
+  }
   const PoseMlp pose_model = LoadPoseModelFor(flags.pose_model, model, sensor, flags.model);
 
   std::string tool = flags.tool;
@@ -532,8 +701,9 @@ void RegisterPose(CLI::App& app, CommandBody* selected) {
   auto flags = std::make_shared<PoseFlags>();
   CLI::App* sub = app.add_subcommand(
       "pose",
-      "In-hand pose posterior of one frame (sgld, laplace or knn): mean, tangent covariance, ROS "
-      "covariance; optionally posterior.json and posterior.png.");
+      "In-hand pose posterior of one frame (--method latent: sgld, laplace or knn; --method "
+      "generator: analysis-by-synthesis, a Laplace mixture over the pose modes): mean, tangent "
+      "covariance, ROS covariance; optionally posterior.json and posterior.png.");
   sub->add_option("--model", flags->model, "Model file (.tfm) from `tactfunc train`")->required();
   sub->add_option("--pose-model", flags->pose_model, "Pose model from `tactfunc train-pose`")
       ->required();
@@ -547,7 +717,16 @@ void RegisterPose(CLI::App& app, CommandBody* selected) {
                   "bubble or gelslim; default: inferred from --frame, or bubble for --data");
   sub->add_option("--tool", flags->tool,
                   "Tool name (sets the symmetry order; default: the frame's label, else none)");
-  sub->add_option("--sampler", flags->sampler, "sgld (default, the paper's), laplace or knn");
+  sub->add_option("--method", flags->method,
+                  "latent (default: the pose MLP on the frame's latent posterior, --sampler) or "
+                  "generator (the pose fitted through --generator and the trunk; a Laplace "
+                  "mixture over its modes, tools identified when --tool is not given)");
+  sub->add_option("--generator", flags->generator,
+                  "Generator (.tpg) from `tactfunc train-generator`, for --method generator");
+  sub->add_flag("--unknown-tool", flags->unknown_tool,
+                "--method generator: ignore the label's tool and fit every tool");
+  sub->add_option("--sampler", flags->sampler,
+                  "sgld (default, the paper's), laplace or knn (--method latent)");
   sub->add_option("--samples", flags->samples,
                   "Pose samples (default 100; knn gives at most --knn-k)")
       ->check(CLI::Range(1, 1000000));

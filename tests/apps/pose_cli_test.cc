@@ -151,6 +151,61 @@ TEST_F(PoseCliTest, PoseWithEachSamplerPrintsMeanCovarianceAndWritesFiles) {
   }
 }
 
+TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities) {
+  ASSERT_EQ(train_pose_->exit_code, 0) << train_pose_->err;
+  // The generator knows the simulator's tools: a small synthetic bubble dataset of them.
+  const Result synth = Run("synth --out " + Root("gd") + " --frames-per-tool 6 --sensors bubble "
+                           "--seed 3 --threads 1");
+  ASSERT_EQ(synth.exit_code, 0) << synth.err;
+  const Result encode = Run("encode --model " + Root("m.tfm") + " --data " + Root("gd") +
+                            " --out " + Root("gf.tfs") + " --threads 1");
+  ASSERT_EQ(encode.exit_code, 0) << encode.err;
+  const Result train = Run("train-generator --model " + Root("m.tfm") + " --functaset " +
+                           Root("gf.tfs") + " --data " + Root("gd") + " --out " + Root("g.tpg") +
+                           " --mode latents --epochs 5 --hidden 16 --calibration-frames 4");
+  ASSERT_EQ(train.exit_code, 0) << train.err;
+  const std::string out = Root("pose_generator");
+  const std::string args = "pose --method generator --model " + Root("m.tfm") + " --pose-model " +
+                           Root("p.tpm") + " --functaset " + Root("gf.tfs") + " --data " +
+                           Root("gd") + " --id 000003 --samples 20";
+  Result r = Run(args + " --generator " + Root("g.tpg") + " --out " + out + " --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("tangent space at the mode"));
+  const nlohmann::json j = r.LastJson();
+  EXPECT_EQ(j["method"], "generator");
+  for (const char* key : {"mean", "covariance", "ms", "tool", "tool_probabilities", "truth"}) {
+    EXPECT_TRUE(j.contains(key)) << key;
+  }
+  EXPECT_EQ(j["samples"].get<int>(), 20);
+  ASSERT_TRUE(fs::exists(out + "/posterior.png"));
+  const nlohmann::json record = nlohmann::json::parse(Slurp(out + "/posterior.json"));
+  EXPECT_GE(record["components"].size(), 1u);
+  EXPECT_EQ(record["samples"].size(), 20u);
+  // Every tool fitted: probabilities over the generator's tools sum to 1.
+  r = Run(args + " --generator " + Root("g.tpg") + " --unknown-tool --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  double total = 0;
+  const nlohmann::json unknown = r.LastJson();
+  ASSERT_GE(unknown["tool_probabilities"].size(), 2u);
+  for (const auto& p : unknown["tool_probabilities"]) total += p.get<double>();
+  EXPECT_NEAR(total, 1.0, 1e-9);
+  // Errors name the flag.
+  r = Run(args);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("--generator"));
+  r = Run(args + " --generator " + Root("g.tpg") + " --method pixels");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.err, HasSubstr("--method"));
+  r = Run(args + " --generator " + Root("g.tpg") + " --tool spoon");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("spoon"));
+  // A frame whose labelled tool the generator never saw.
+  r = Run("pose --method generator --generator " + Root("g.tpg") + " --model " + Root("m.tfm") +
+          " --pose-model " + Root("p.tpm") + " --data " + Root("d") + " --id 000003");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("does not know it"));
+}
+
 TEST_F(PoseCliTest, PoseReadsAFrameAndReferenceFromFiles) {
   ASSERT_EQ(train_pose_->exit_code, 0) << train_pose_->err;
   const Result r = Run("pose --model " + Root("m.tfm") + " --pose-model " + Root("p.tpm") +

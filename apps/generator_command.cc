@@ -1,0 +1,506 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// The generator path of the pose posteriors (docs/POSES.md, "The generator path"):
+//
+//   tactfunc train-generator --model M.tfm --functaset F.tfs --data D --out G.tpg
+//       [--mode latents|pixels] [--epochs 300] [--pixel-epochs 4] [--pixel-frames 200]
+//       [--calibration-frames 120] [--seed 0] [--json]
+//     trains h(tool, T, depth) -> z on the functaset's labelled train-split entries: by
+//     regressing their latents (--mode latents), then (--mode pixels) on --pixel-frames
+//     frames per tool through the frozen trunk for --pixel-epochs more epochs; reports the
+//     mean rendering PSNR on the test split, calibrates the posterior's sigma inflation
+//     on --calibration-frames test-split frames and writes G atomically.
+//
+//   tactfunc eval-generator --model M.tfm --generator G.tpg [--functaset F.tfs]
+//       [--pose-model P.tpm] [--contacts-per-tool 20] [--seed 1592590336] [--unknown-tool]
+//       [--diagnose] [search knobs: --max-pixels, --refined-starts, --iterations, --knn-k,
+//       --yaw-grid, --position-grid, --position-rings, --coarse-pixels, --coarse-starts,
+//       --coarse-iterations] [--json]
+//     fresh Soft Bubble contacts (ContactSimulator, seeded; contact k uses DeriveSeed(seed,
+//     k)) of every tool the generator knows through GeneratorPosterior (one thread): the
+//     posterior mode's position RMSE (mm) and yaw RMSE (deg, modulo symmetry, hemisphere
+//     left out), the coverage of the 50% and 90% highest-density regions, the time per
+//     frame (fit + Laplace; wall clock and the thread's CPU time), and with --unknown-tool
+//     the tool identification rate. --diagnose: for every contact whose mode is > 5 deg or
+//     > 1 mm off, the objective at the mode, the truth and the truth refined (a lower
+//     refined truth = a search failure, else a model failure).
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <iostream>
+#include <map>
+#include <memory>
+#include <numeric>
+
+#include "apps/command.h"
+#include "apps/model_inputs.h"
+#include "estimation/data/dataset.h"
+#include "estimation/data/image_io.h"
+#include "estimation/data/trunk_targets.h"
+#include "estimation/functaset/functaset.h"
+#include "estimation/pose/pose_distribution.h"
+#include "estimation/synthesis/generator_posterior.h"
+#include "estimation/synthesis/generator_training.h"
+#include "models/core/seed.h"
+#include "models/pose/pose_generator.h"
+#include "models/pose/pose_mlp.h"
+#include "models/simulator/contact_simulator.h"
+#include "models/simulator/tool.h"
+#include "models/trunk/functa_model.h"
+
+namespace tactfunc::apps {
+namespace {
+
+constexpr double kDeg = 180.0 / M_PI;
+
+struct TrainGeneratorFlags {
+  std::string model, functaset, data, out;
+  std::string mode = "pixels";
+  std::string hidden = "256,256";
+  int harmonics = 4;
+  int epochs = 300;
+  int pixel_epochs = 4;
+  int pixel_frames = 200;
+  int pixels = 256;
+  int calibration_frames = 120;
+  double lr = 1e-3;
+  std::uint64_t seed = 0;
+  bool json = false;
+};
+
+struct Labelled {
+  std::vector<GeneratorSample> samples;
+  std::vector<std::size_t> frames;  // dataset frame indices
+  Eigen::MatrixXd latents;
+};
+
+Labelled Collect(const PoseGenerator& g, const Functaset& f, const Dataset& dataset, Split split,
+                 int per_tool_limit) {
+  Labelled out;
+  std::map<std::string, int> counts;
+  std::vector<Eigen::VectorXd> z;
+  for (const FunctasetEntry& e : f.entries(SensorKind::kSoftBubble)) {
+    if (e.split != split || !e.label.has_value()) continue;
+    const int tool = g.ToolIndex(e.label->tool);
+    if (tool < 0) continue;
+    if (per_tool_limit > 0 && counts[e.label->tool]++ >= per_tool_limit) continue;
+    const std::optional<std::size_t> index = dataset.FindFrame(e.id, SensorKind::kSoftBubble);
+    if (!index) throw DatasetError("frame '" + e.id + "' of the functaset is not in the dataset");
+    out.samples.push_back({tool, e.label->sensor_T_object, e.label->depth_m});
+    out.frames.push_back(*index);
+    z.push_back(e.latent.cast<double>());
+  }
+  out.latents.resize(z.size(), f.latent_dim(SensorKind::kSoftBubble));
+  for (std::size_t i = 0; i < z.size(); ++i) out.latents.row(i) = z[i].transpose();
+  return out;
+}
+
+std::vector<int> ParseWidths(const std::string& text) {
+  std::vector<int> widths;
+  for (const std::string& w : SplitList(text)) {
+    int v = 0;
+    try {
+      v = std::stoi(w);
+    } catch (const std::exception&) {
+    }
+    if (v < 1) throw UsageError("--hidden: expected comma-separated widths >= 1, got '" + text + "'");
+    widths.push_back(v);
+  }
+  return widths;
+}
+
+void RunTrainGenerator(const TrainGeneratorFlags& flags) {
+  if (flags.mode != "latents" && flags.mode != "pixels") {
+    throw UsageError("--mode: expected latents or pixels, got '" + flags.mode + "'");
+  }
+  const FunctaModel model = FunctaModel::Load(flags.model);
+  const SensorTrunk& trunk = model.Trunk(SensorKind::kSoftBubble);
+  const Functaset functaset = Functaset::Load(flags.functaset);
+  functaset.CheckModel(model, flags.model, flags.functaset);
+  const Dataset dataset = Dataset::Open(flags.data);
+  PoseGenerator::Options options;
+  for (const Tool& t : ToolSet()) {
+    options.tools.push_back(t.name());
+    options.symmetry_orders.push_back(t.symmetry_order());
+  }
+  options.latent_dim = trunk.siren.latent_dim();
+  options.hidden_sizes = ParseWidths(flags.hidden);
+  options.yaw_harmonics = flags.harmonics;
+  PoseGenerator generator(options, DeriveSeed(flags.seed, 0));
+
+  const Labelled train = Collect(generator, functaset, dataset, Split::kTrain, 0);
+  if (train.samples.empty()) {
+    throw DatasetError("--functaset '" + flags.functaset + "' has no labelled bubble train entries");
+  }
+  GeneratorTrainingOptions to;
+  to.epochs = flags.epochs;
+  to.learning_rate = flags.lr;
+  to.seed = DeriveSeed(flags.seed, 1);
+  const GeneratorTrainingSummary reg =
+      TrainGeneratorOnLatents(&generator, train.samples, train.latents, to);
+  std::cout << "train-generator: latent regression on " << train.samples.size() << " contacts: "
+            << reg.BriefReport() << "\n";
+  // Test-split frames for PSNR and calibration.
+  const Labelled test = Collect(generator, functaset, dataset, Split::kTest, 0);
+  std::vector<TrunkTargets> test_frames;
+  const std::size_t psnr_count = std::min<std::size_t>(test.frames.size(), 240);
+  std::vector<GeneratorSample> psnr_samples;
+  for (std::size_t i = 0; i < psnr_count; ++i) {
+    const std::size_t k = i * test.frames.size() / psnr_count;
+    test_frames.push_back(LoadTrunkTargets(dataset, test.frames[k], trunk.format));
+    psnr_samples.push_back(test.samples[k]);
+  }
+  const double psnr_latents = MeanGeneratorPsnr(generator, trunk, psnr_samples, test_frames);
+  std::cout << "train-generator: test rendering PSNR after regression " << psnr_latents << " dB\n";
+  double psnr_pixels = std::nan("");
+  GeneratorTrainingSummary pix;
+  if (flags.mode == "pixels") {
+    const Labelled sub = Collect(generator, functaset, dataset, Split::kTrain, flags.pixel_frames);
+    std::vector<TrunkTargets> frames;
+    for (std::size_t index : sub.frames) frames.push_back(LoadTrunkTargets(dataset, index, trunk.format));
+    GeneratorTrainingOptions po = to;
+    po.epochs = flags.pixel_epochs;
+    po.learning_rate = flags.lr * 0.3;
+    po.batch_size = 32;
+    po.pixels_per_frame = flags.pixels;
+    po.standardize_outputs = false;
+    po.seed = DeriveSeed(flags.seed, 2);
+    pix = TrainGeneratorOnPixels(&generator, trunk, sub.samples, frames, po,
+                                 [](int epoch, double loss) {
+                                   std::cout << "  pixel epoch " << epoch << " loss " << loss << "\n"
+                                             << std::flush;
+                                   return true;
+                                 });
+    psnr_pixels = MeanGeneratorPsnr(generator, trunk, psnr_samples, test_frames);
+    std::cout << "train-generator: through the trunk on " << sub.samples.size()
+              << " frames: " << pix.BriefReport() << "; test rendering PSNR " << psnr_pixels
+              << " dB\n";
+  }
+  // Calibrate the sigma inflation on test-split frames (tool known).
+  std::unique_ptr<KnnPoseStarts> knn = std::make_unique<KnnPoseStarts>(functaset, SensorKind::kSoftBubble);
+  GeneratorPosterior::Options po;
+  po.sigma_inflation = 1;
+  const GeneratorPosterior posterior(trunk, generator, po, knn.get());
+  std::vector<TrunkTargets> cal_frames;
+  std::vector<PoseLabel> cal_labels;
+  const std::size_t cal_count = std::min<std::size_t>(test.frames.size(), flags.calibration_frames);
+  for (std::size_t i = 0; i < cal_count; ++i) {
+    const std::size_t k = (2 * i + 1) * test.frames.size() / (2 * cal_count);
+    cal_frames.push_back(LoadTrunkTargets(dataset, test.frames[k], trunk.format));
+    PoseLabel l;
+    l.tool = options.tools[test.samples[k].tool];
+    l.sensor_T_object = test.samples[k].sensor_T_object;
+    l.depth_m = test.samples[k].depth_m;
+    cal_labels.push_back(l);
+  }
+  const double kappa = CalibrateSigmaInflation(posterior, cal_frames, cal_labels);
+  generator.set_sigma_inflation(kappa);
+  std::cout << "train-generator: sigma inflation " << kappa << " (from " << cal_count
+            << " test-split frames)\n";
+  nlohmann::json info = {{"model", flags.model},
+                         {"model_checksum", model.checksum()},
+                         {"functaset", flags.functaset},
+                         {"mode", flags.mode},
+                         {"train_contacts", train.samples.size()},
+                         {"regression_epochs", reg.epochs_completed},
+                         {"pixel_epochs", pix.epochs_completed},
+                         {"test_psnr_latents", NumberOrNull(psnr_latents)},
+                         {"test_psnr_pixels", NumberOrNull(psnr_pixels)},
+                         {"seed", flags.seed}};
+  generator.set_info_json(info.dump());
+  generator.Save(flags.out);
+  std::cout << "train-generator: wrote " << flags.out << "\n";
+  if (flags.json) {
+    info["sigma_inflation"] = kappa;
+    info["out"] = flags.out;
+    EmitJson(info);
+  }
+}
+
+struct EvalGeneratorFlags {
+  std::string model, generator, functaset, pose_model;
+  int contacts_per_tool = 20;
+  std::uint64_t seed = 0x5eed0000u;
+  bool unknown_tool = false;
+  double sigma_inflation = 0;
+  int max_pixels = 384;
+  int refined_starts = 2;
+  int iterations = 6;
+  int knn_k = 4;
+  int yaw_grid = 12;
+  int coarse_pixels = 128;
+  double position_grid_mm = 2.5;
+  int position_rings = 2;
+  int coarse_starts = 4;
+  int coarse_iterations = 4;
+  bool diagnose = false;
+  bool json = false;
+};
+
+Image AsStored(const Image& depth) {
+  return DecodeImage(EncodePng(depth, PixelEncoding::kDepthU16Micrometres),
+                     PixelEncoding::kDepthU16Micrometres, "fresh contact");
+}
+
+void RunEvalGenerator(const EvalGeneratorFlags& flags) {
+  const FunctaModel model = FunctaModel::Load(flags.model);
+  const SensorTrunk& trunk = model.Trunk(SensorKind::kSoftBubble);
+  const PoseGenerator generator = PoseGenerator::Load(flags.generator);
+  std::unique_ptr<KnnPoseStarts> knn;
+  if (!flags.functaset.empty()) {
+    const Functaset functaset = Functaset::Load(flags.functaset);
+    functaset.CheckModel(model, flags.model, flags.functaset);
+    knn = std::make_unique<KnnPoseStarts>(functaset, SensorKind::kSoftBubble);
+  }
+  std::unique_ptr<PoseMlp> mlp;
+  if (!flags.pose_model.empty()) mlp = std::make_unique<PoseMlp>(PoseMlp::Load(flags.pose_model));
+  GeneratorPosterior::Options options;
+  options.sigma_inflation = flags.sigma_inflation;
+  options.problem.max_pixels = flags.max_pixels;
+  options.fit.max_refined_starts = flags.refined_starts;
+  options.fit.max_iterations = flags.iterations;
+  options.knn_k = flags.knn_k;
+  options.yaw_grid = flags.yaw_grid;
+  options.coarse_pixels = flags.coarse_pixels;
+  options.position_grid_m = 1e-3 * flags.position_grid_mm;
+  options.position_grid_rings = flags.position_rings;
+  options.fit.coarse_refined_starts = flags.coarse_starts;
+  options.fit.coarse_iterations = flags.coarse_iterations;
+  const GeneratorPosterior posterior(trunk, generator, options, knn.get(), mlp.get());
+  const ContactSimulator simulator;
+  const Image reference = AsStored(simulator.Reference(SensorKind::kSoftBubble));
+  int contacts = 0, failures = 0, c50 = 0, c90 = 0, yaw_count = 0, identified = 0;
+  double pos_sq = 0, yaw_sq = 0;
+  int wrong = 0, search_failures = 0, model_failures = 0;
+  std::vector<double> yaw_errors;
+  std::vector<double> times, cpu_times;
+  std::map<std::string, std::pair<double, int>> per_tool_pos;
+  const std::vector<std::string>& tools = generator.options().tools;
+  for (std::size_t t = 0; t < tools.size(); ++t) {
+    for (int j = 0; j < flags.contacts_per_tool; ++j) {
+      const int k = static_cast<int>(t) * flags.contacts_per_tool + j;
+      const std::uint64_t seed = DeriveSeed(flags.seed, k);
+      const Contact contact = simulator.SamplePairedContact(tools[t], seed).bubble;
+      const Image frame = AsStored(simulator.Render(SensorKind::kSoftBubble, contact, seed).frame);
+      const TrunkTargets targets =
+          MakeTrunkTargets(frame, reference, SensorKind::kSoftBubble, trunk.format);
+      PoseMixture mixture;
+      const GeneratorPosterior::Summary s =
+          posterior.Estimate(targets, flags.unknown_tool ? "" : tools[t], &mixture);
+      ++contacts;
+      if (!s.usable) {
+        ++failures;
+        continue;
+      }
+      times.push_back(s.total_time_ms);
+      cpu_times.push_back(s.cpu_time_ms);
+      identified += s.tool == tools[t];
+      const int n = generator.SymmetryOrder(static_cast<int>(t));
+      const SE2d& truth = contact.sensor_T_object;
+      // Score the mode of the true tool's components (the tool-conditional posterior).
+      SE2d mode = s.mean;
+      for (const LaplaceComponent& c : mixture.components()) {
+        if (c.tool == tools[t]) {
+          mode = c.mean;
+          break;
+        }
+      }
+      const double dp = std::pow(mode.x() - truth.x(), 2) + std::pow(mode.y() - truth.y(), 2);
+      pos_sq += dp;
+      per_tool_pos[tools[t]].first += dp;
+      per_tool_pos[tools[t]].second += 1;
+      if (n != 0) {
+        const double e = YawErrorModuloSymmetry(mode.yaw(), truth.yaw(), n);
+        yaw_sq += e * e;
+        yaw_errors.push_back(e);
+        ++yaw_count;
+      }
+      if (flags.diagnose) {
+        // Is the truth's objective lower than the chosen mode's (a search failure) or
+        // higher (the generator and trunk prefer the wrong pose: a model failure)? The
+        // truth is also refined (from the true pose and depth) to its local minimum.
+        const double e = n != 0 ? kDeg * YawErrorModuloSymmetry(mode.yaw(), truth.yaw(), n) : 0;
+        if (e > 5 || std::sqrt(dp) > 1e-3) {
+          ++wrong;
+          const LatentProblem problem(trunk, targets, options.problem);
+          const int ti = static_cast<int>(t);
+          double mode_depth = 0;
+          for (const LaplaceComponent& c : mixture.components()) {
+            if (c.tool == tools[t]) {
+              mode_depth = c.depth_m;
+              break;
+            }
+          }
+          const double c_mode = PoseCost(problem, generator, ti, mode, mode_depth);
+          const double c_truth = PoseCost(problem, generator, ti, truth, contact.depth_m);
+          const std::vector<PoseFit> refined = FitPoseModes(
+              problem, generator, ti, {{truth, contact.depth_m, "truth"}}, options.fit);
+          const double c_refined = refined.empty() ? std::nan("") : refined.front().cost;
+          // Lower by more than 1% of the mode's cost (not the same minimum re-found).
+          const bool search = c_refined < c_mode - 0.01 * std::abs(c_mode);
+          search_failures += search;
+          model_failures += !search;
+          std::printf("  contact %d %-11s yaw err %6.1f deg pos err %.2f mm | cost: mode %.1f, "
+                      "truth %.1f, truth refined %.1f -> %s failure\n",
+                      k, tools[t].c_str(), e, 1e3 * std::sqrt(dp), c_mode, c_truth, c_refined,
+                      search ? "search" : "model");
+        }
+      }
+      const bool has_tool = std::any_of(mixture.components().begin(), mixture.components().end(),
+                                        [&](const LaplaceComponent& c) { return c.tool == tools[t]; });
+      if (has_tool) {
+        c50 += mixture.Contains(truth, 0.5, options.num_region_samples, seed, tools[t]);
+        c90 += mixture.Contains(truth, 0.9, options.num_region_samples, seed, tools[t]);
+      }
+    }
+  }
+  const int ok = contacts - failures;
+  std::sort(times.begin(), times.end());
+  const double median = times.empty() ? 0 : times[times.size() / 2];
+  const double mean_ms = times.empty() ? 0 : std::accumulate(times.begin(), times.end(), 0.0) / times.size();
+  const double rmse_mm = 1e3 * std::sqrt(pos_sq / std::max(1, ok));
+  const double rmse_deg = kDeg * std::sqrt(yaw_sq / std::max(1, yaw_count));
+  std::printf("eval-generator: %d fresh contacts (%d failed), tool %s\n", contacts, failures,
+              flags.unknown_tool ? "unknown (every tool fitted)" : "given");
+  std::printf("  position RMSE %.3f mm, yaw RMSE %.2f deg (modulo symmetry, hemisphere left out)\n",
+              rmse_mm, rmse_deg);
+  std::sort(yaw_errors.begin(), yaw_errors.end());
+  const double yaw_median = yaw_errors.empty() ? 0 : kDeg * yaw_errors[yaw_errors.size() / 2];
+  const double yaw_within5 =
+      yaw_errors.empty() ? 0
+                         : static_cast<double>(std::lower_bound(yaw_errors.begin(), yaw_errors.end(),
+                                                                5 / kDeg) -
+                                               yaw_errors.begin()) / yaw_errors.size();
+  std::printf("  yaw error median %.2f deg, within 5 deg: %.3f\n", yaw_median, yaw_within5);
+  std::printf("  coverage 50%%: %.3f, 90%%: %.3f\n", static_cast<double>(c50) / std::max(1, ok),
+              static_cast<double>(c90) / std::max(1, ok));
+  std::sort(cpu_times.begin(), cpu_times.end());
+  const double cpu_median = cpu_times.empty() ? 0 : cpu_times[cpu_times.size() / 2];
+  std::printf("  time per frame (fit + Laplace, one thread): median %.1f ms, mean %.1f ms; "
+              "CPU time median %.1f ms\n",
+              median, mean_ms, cpu_median);
+  if (flags.diagnose) {
+    std::printf("  wrong (yaw > 5 deg or position > 1 mm): %d; truth's refined cost lower "
+                "(search failure): %d, higher (model failure): %d\n",
+                wrong, search_failures, model_failures);
+  }
+  if (flags.unknown_tool) {
+    std::printf("  tool identified: %.3f\n", static_cast<double>(identified) / std::max(1, ok));
+  }
+  for (const auto& [tool, v] : per_tool_pos) {
+    std::printf("  %-11s position RMSE %.3f mm\n", tool.c_str(), 1e3 * std::sqrt(v.first / v.second));
+  }
+  if (flags.json) {
+    EmitJson({{"contacts", contacts},
+              {"failures", failures},
+              {"rmse_mm", rmse_mm},
+              {"rmse_deg", rmse_deg},
+              {"yaw_median_deg", yaw_median},
+              {"yaw_within_5deg", yaw_within5},
+              {"coverage_50", static_cast<double>(c50) / std::max(1, ok)},
+              {"coverage_90", static_cast<double>(c90) / std::max(1, ok)},
+              {"median_ms", median},
+              {"mean_ms", mean_ms},
+              {"cpu_median_ms", cpu_median},
+              {"tool_identified", flags.unknown_tool ? NumberOrNull(static_cast<double>(identified) /
+                                                                     std::max(1, ok))
+                                                     : nlohmann::json()}});
+  }
+}
+
+}  // namespace
+
+void RegisterTrainGenerator(CLI::App& app, CommandBody* selected) {
+  auto flags = std::make_shared<TrainGeneratorFlags>();
+  CLI::App* sub = app.add_subcommand(
+      "train-generator",
+      "Train the pose-conditioned generator h(tool, pose, depth) -> latent on a functaset's "
+      "labelled bubble train entries (regression, then optionally through the frozen trunk on "
+      "pixels), calibrate its posterior sigma and write it (docs/POSES.md, The generator path).");
+  sub->add_option("--model", flags->model, "Model file (.tfm) of the functaset")->required();
+  sub->add_option("--functaset", flags->functaset, "Labelled functaset (.tfs)")->required();
+  sub->add_option("--data", flags->data, "The functaset's dataset (frames)")->required();
+  sub->add_option("--out", flags->out, "Generator file to write (atomically)")->required();
+  sub->add_option("--mode", flags->mode,
+                  "latents (regress the functaset's latents) or pixels (then fine-tune through "
+                  "the trunk on pixels; default)");
+  sub->add_option("--hidden", flags->hidden, "tanh hidden widths (default 256,256)");
+  sub->add_option("--harmonics", flags->harmonics, "Yaw harmonics K (default 4)")
+      ->check(CLI::Range(1, 64));
+  sub->add_option("--epochs", flags->epochs, "Regression epochs (default 300)")
+      ->check(CLI::Range(1, 1000000));
+  sub->add_option("--pixel-epochs", flags->pixel_epochs, "Epochs through the trunk (default 4)")
+      ->check(CLI::Range(1, 100000));
+  sub->add_option("--pixel-frames", flags->pixel_frames,
+                  "Train frames per tool for the pixel epochs (default 200)")
+      ->check(CLI::Range(1, 1000000));
+  sub->add_option("--pixels", flags->pixels, "Pixels per frame and step (default 256)")
+      ->check(CLI::Range(1, 1 << 20));
+  sub->add_option("--calibration-frames", flags->calibration_frames,
+                  "Test-split frames for the sigma inflation (default 120)")
+      ->check(CLI::Range(1, 1000000));
+  sub->add_option("--lr", flags->lr, "Adam step (default 1e-3; pixels use 0.3x)")
+      ->check(CLI::PositiveNumber);
+  sub->add_option("--seed", flags->seed, "Seed (default 0)");
+  sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
+  sub->callback([flags, selected]() { *selected = [flags]() { RunTrainGenerator(*flags); }; });
+}
+
+void RegisterEvalGenerator(CLI::App& app, CommandBody* selected) {
+  auto flags = std::make_shared<EvalGeneratorFlags>();
+  CLI::App* sub = app.add_subcommand(
+      "eval-generator",
+      "Score the generator pose posterior on fresh simulated bubble contacts of every tool it "
+      "knows: position / yaw RMSE of the mode, 50%/90% region coverage, time per frame, and "
+      "tool identification with --unknown-tool.");
+  sub->add_option("--model", flags->model, "Model file (.tfm)")->required();
+  sub->add_option("--generator", flags->generator, "Generator from `tactfunc train-generator`")
+      ->required();
+  sub->add_option("--functaset", flags->functaset, "Labelled functaset for the k-NN starts");
+  sub->add_option("--pose-model", flags->pose_model, "Pose MLP for an extra start");
+  sub->add_option("--contacts-per-tool", flags->contacts_per_tool, "Default 20")
+      ->check(CLI::Range(1, 100000));
+  sub->add_option("--seed", flags->seed,
+                  "Contact seed (default 0x5eed0000, which no training data uses)");
+  sub->add_option("--sigma-inflation", flags->sigma_inflation,
+                  "Override the generator's calibrated sigma inflation (0 = stored)")
+      ->check(CLI::NonNegativeNumber);
+  sub->add_option("--max-pixels", flags->max_pixels, "Pixels per trunk pass (default 384)")
+      ->check(CLI::Range(0, 1 << 20));
+  sub->add_option("--refined-starts", flags->refined_starts,
+                  "Best distinct starts refined per tool (default 2)")
+      ->check(CLI::Range(1, 100));
+  sub->add_option("--iterations", flags->iterations,
+                  "Levenberg-Marquardt iterations per start (default 6)")
+      ->check(CLI::Range(1, 1000));
+  sub->add_option("--knn-k", flags->knn_k, "k-NN starts per tool (default 4)")
+      ->check(CLI::Range(0, 1000));
+  sub->add_option("--yaw-grid", flags->yaw_grid,
+                  "Yaws per start position over the full turn (default 12; 1 = none)")
+      ->check(CLI::Range(1, 360));
+  sub->add_option("--coarse-pixels", flags->coarse_pixels,
+                  "Pixels of the coarse stage (start scoring and first refinement; default "
+                  "128, 0 = none)")
+      ->check(CLI::Range(0, 1 << 20));
+  sub->add_option("--position-grid", flags->position_grid_mm,
+                  "Spacing (mm) of the shifted copies of the first start (default 2.5, 0 = none)")
+      ->check(CLI::NonNegativeNumber);
+  sub->add_option("--position-rings", flags->position_rings,
+                  "Rings of shifted copies of the first start (default 2: a 5 x 5 grid)")
+      ->check(CLI::Range(0, 10));
+  sub->add_option("--coarse-starts", flags->coarse_starts,
+                  "Starts refined in the coarse stage per tool (default 4)")
+      ->check(CLI::Range(1, 1000));
+  sub->add_option("--coarse-iterations", flags->coarse_iterations,
+                  "Levenberg-Marquardt iterations in the coarse stage (default 4)")
+      ->check(CLI::Range(1, 1000));
+  sub->add_flag("--unknown-tool", flags->unknown_tool, "Fit every tool and identify it");
+  sub->add_flag("--diagnose", flags->diagnose,
+                "For every contact whose mode is > 5 deg or > 1 mm off: the objective at the "
+                "mode, at the truth and at the truth refined (search or model failure)");
+  sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
+  sub->callback([flags, selected]() { *selected = [flags]() { RunEvalGenerator(*flags); }; });
+}
+
+}  // namespace tactfunc::apps

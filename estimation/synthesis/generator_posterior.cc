@@ -1,0 +1,468 @@
+// Copyright 2026 The tactfunc Authors.
+#include "estimation/synthesis/generator_posterior.h"
+
+#include <algorithm>
+#include <boost/random/mersenne_twister.hpp>
+#include <boost/random/normal_distribution.hpp>
+#include <boost/random/uniform_real_distribution.hpp>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <stdexcept>
+#include <time.h>
+
+#include <Eigen/Cholesky>
+#include <Eigen/LU>
+
+#include "models/core/seed.h"
+#include "models/simulator/tool.h"
+
+namespace tactfunc {
+namespace {
+
+constexpr double kChi2_3_90 = 6.251388631170325;  // chi-square(3) 0.9-quantile
+
+double Ms(std::chrono::steady_clock::time_point a, std::chrono::steady_clock::time_point b) {
+  return std::chrono::duration<double, std::milli>(b - a).count();
+}
+
+// The calling thread's CPU time, ms (what one core spends, whatever else runs).
+double ThreadCpuMs() {
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return 1e3 * t.tv_sec + 1e-6 * t.tv_nsec;
+}
+
+// The truth's yaw modulo the component's symmetry, nearest the component's mean.
+SE2d Folded(const SE2d& t, const LaplaceComponent& c) {
+  const double yaw = c.symmetry_order == 0 ? c.mean.yaw()
+                                           : FoldYawNear(t.yaw(), c.mean.yaw(), c.symmetry_order);
+  return SE2d::FromXYYaw(t.x(), t.y(), yaw);
+}
+
+double ComponentDensity(const LaplaceComponent& c, const SE2d& t) {
+  const SE2d::Tangent r = Folded(t, c).Minus(c.mean);
+  if (c.symmetry_order == 0) {
+    const Eigen::Matrix2d s = c.covariance.topLeftCorner<2, 2>();
+    const Eigen::Vector2d v = r.head<2>();
+    const double det = s.determinant();
+    if (!(det > 0)) return 0;
+    return std::exp(-0.5 * v.dot(s.ldlt().solve(v))) / (2 * M_PI * std::sqrt(det));
+  }
+  const Eigen::Matrix3d s = c.covariance.topLeftCorner<3, 3>();
+  const double det = s.determinant();
+  if (!(det > 0)) return 0;
+  return std::exp(-0.5 * r.dot(s.ldlt().solve(r))) / (std::pow(2 * M_PI, 1.5) * std::sqrt(det));
+}
+
+}  // namespace
+
+// ---- PoseMixture ------------------------------------------------------------------------
+
+PoseMixture::PoseMixture(std::vector<LaplaceComponent> components)
+    : components_(std::move(components)) {}
+
+SE2d PoseMixture::Mode() const {
+  if (components_.empty()) throw std::logic_error("PoseMixture::Mode: empty mixture");
+  return std::max_element(components_.begin(), components_.end(),
+                          [](const auto& a, const auto& b) { return a.weight < b.weight; })
+      ->mean;
+}
+
+double PoseMixture::Density(const SE2d& t, const std::string& tool) const {
+  double sum = 0, total = 0;
+  for (const LaplaceComponent& c : components_) {
+    if (!tool.empty() && c.tool != tool) continue;
+    sum += c.weight * ComponentDensity(c, t);
+    total += c.weight;
+  }
+  return total > 0 ? sum / total : 0;
+}
+
+PoseDistribution PoseMixture::Sample(int num, std::uint64_t seed, const std::string& tool) const {
+  std::vector<const LaplaceComponent*> chosen;
+  std::vector<double> cumulative;
+  double total = 0;
+  for (const LaplaceComponent& c : components_) {
+    if (!tool.empty() && c.tool != tool) continue;
+    total += c.weight;
+    chosen.push_back(&c);
+    cumulative.push_back(total);
+  }
+  if (chosen.empty() || !(total > 0)) {
+    throw std::invalid_argument("PoseMixture::Sample: no component" +
+                                (tool.empty() ? std::string() : " of tool '" + tool + "'"));
+  }
+  boost::random::mt19937_64 rng(seed);
+  boost::random::uniform_real_distribution<double> u(0, total);
+  boost::random::normal_distribution<double> g;
+  std::vector<Eigen::Matrix3d> factors;
+  for (const LaplaceComponent* c : chosen) {
+    Eigen::Matrix3d s = c->covariance.topLeftCorner<3, 3>();
+    s += 1e-18 * Eigen::Matrix3d::Identity();
+    factors.push_back(s.llt().matrixL());
+  }
+  std::vector<SE2d> samples;
+  samples.reserve(num);
+  for (int i = 0; i < num; ++i) {
+    const double pick = u(rng);
+    const std::size_t k =
+        std::min<std::size_t>(std::lower_bound(cumulative.begin(), cumulative.end(), pick) -
+                                  cumulative.begin(),
+                              chosen.size() - 1);
+    const Eigen::Vector3d e(g(rng), g(rng), g(rng));
+    SE2d s = chosen[k]->mean.Plus(factors[k] * e);
+    if (chosen[k]->symmetry_order == 0) s = SE2d::FromXYYaw(s.x(), s.y(), 0);
+    samples.push_back(s);
+  }
+  return PoseDistribution(std::move(samples));
+}
+
+bool PoseMixture::Contains(const SE2d& t, double p, int num_region_samples, std::uint64_t seed,
+                           const std::string& tool) const {
+  const PoseDistribution cloud = Sample(num_region_samples, seed, tool);
+  std::vector<double> densities;
+  densities.reserve(cloud.size());
+  for (const SE2d& s : cloud.samples()) densities.push_back(Density(s, tool));
+  std::sort(densities.begin(), densities.end());
+  const std::size_t k = static_cast<std::size_t>(
+      std::clamp(std::floor((1 - p) * densities.size()), 0.0, densities.size() - 1.0));
+  return Density(t, tool) >= densities[k];
+}
+
+// ---- KnnPoseStarts ------------------------------------------------------------------------
+
+KnnPoseStarts::KnnPoseStarts(const Functaset& functaset, SensorKind sensor) {
+  std::map<std::string, std::vector<const FunctasetEntry*>> by_tool;
+  for (const FunctasetEntry& e : functaset.entries(sensor)) {
+    if (e.split == Split::kTrain && e.label.has_value()) by_tool[e.label->tool].push_back(&e);
+  }
+  if (by_tool.empty()) {
+    throw std::invalid_argument("KnnPoseStarts: '" + functaset.source() + "' has no labelled " +
+                                ToString(sensor) + " train entries");
+  }
+  const int d = functaset.latent_dim(sensor);
+  for (const auto& [tool, entries] : by_tool) {
+    ToolIndex t;
+    FlannKnnIndex::Options o;
+    o.algorithm = FlannKnnIndex::Algorithm::kKdForest;
+    t.index = std::make_unique<FlannKnnIndex>(d, o);
+    std::vector<float> data(entries.size() * d);
+    for (std::size_t i = 0; i < entries.size(); ++i) {
+      std::copy(entries[i]->latent.data(), entries[i]->latent.data() + d, data.data() + i * d);
+      t.labels.push_back(*entries[i]->label);
+    }
+    t.index->Add(data.data(), static_cast<std::int64_t>(entries.size()));
+    size_ += static_cast<int>(entries.size());
+    tools_.emplace(tool, std::move(t));
+  }
+}
+
+std::vector<PoseStart> KnnPoseStarts::Starts(const Eigen::VectorXf& query, const std::string& tool,
+                                             int k) const {
+  std::vector<PoseStart> starts;
+  auto it = tools_.find(tool);
+  if (it == tools_.end() || k < 1) return starts;
+  std::vector<float> distances(k);
+  std::vector<std::int64_t> labels(k);
+  it->second.index->Search(query.data(), 1, k, distances.data(), labels.data());
+  for (int i = 0; i < k; ++i) {
+    if (labels[i] < 0) continue;
+    const PoseLabel& l = it->second.labels[labels[i]];
+    starts.push_back({l.sensor_T_object, l.depth_m, "knn"});
+  }
+  return starts;
+}
+
+// ---- GeneratorPosterior ---------------------------------------------------------------------
+
+LatentProblem::Options GeneratorPosterior::Options::DefaultProblem() {
+  LatentProblem::Options o;
+  o.max_pixels = 384;
+  return o;
+}
+
+bool GeneratorPosterior::Options::IsValid(std::string* error) const {
+  if (!problem.IsValid(error) || !fit.IsValid(error)) return false;
+  auto fail = [&](const std::string& m) {
+    if (error != nullptr) *error = "GeneratorPosterior::Options: " + m;
+    return false;
+  };
+  if (knn_k < 0) return fail("knn_k must be >= 0");
+  if (yaw_grid < 1) return fail("yaw_grid must be >= 1");
+  if (coarse_pixels < 0) return fail("coarse_pixels must be >= 0");
+  if (position_grid_rings < 0) return fail("position_grid_rings must be >= 0");
+  if (!(position_grid_m >= 0) || !std::isfinite(position_grid_m)) {
+    return fail("position_grid_m must be finite and >= 0");
+  }
+  if (!(sigma_inflation >= 0) || !std::isfinite(sigma_inflation)) {
+    return fail("sigma_inflation must be finite and >= 0");
+  }
+  if (num_region_samples < 10) return fail("num_region_samples must be >= 10");
+  return true;
+}
+
+std::string GeneratorPosterior::Summary::BriefReport() const {
+  char buffer[256];
+  std::snprintf(buffer, sizeof(buffer),
+                "GeneratorPosterior: %s, tool %s (p = %.3f), mode (%.3f mm, %.3f mm, %.2f deg), "
+                "%d modes from %d starts, sigma %.4g, %.1f ms",
+                usable ? "SUCCESS" : "FAILURE", tool.c_str(),
+                tool_probabilities.count(tool) ? tool_probabilities.at(tool) : 0.0,
+                1e3 * mean.x(), 1e3 * mean.y(), mean.yaw() * 180 / M_PI, num_modes, num_starts,
+                sigma, total_time_ms);
+  return std::string(buffer) + (message.empty() ? "" : ": " + message);
+}
+
+GeneratorPosterior::GeneratorPosterior(const SensorTrunk& trunk, const PoseGenerator& generator,
+                                       const Options& options, const KnnPoseStarts* knn,
+                                       const PoseMlp* pose_mlp)
+    : trunk_(&trunk), generator_(&generator), options_(options), knn_(knn), pose_mlp_(pose_mlp) {
+  std::string error;
+  if (!options_.IsValid(&error)) throw std::invalid_argument(error);
+  if (generator.latent_dim() != trunk.siren.latent_dim()) {
+    throw std::invalid_argument("GeneratorPosterior: the generator's latent_dim " +
+                                std::to_string(generator.latent_dim()) + " is not the trunk's " +
+                                std::to_string(trunk.siren.latent_dim()));
+  }
+  if (pose_mlp != nullptr && pose_mlp->input_dim() != trunk.siren.latent_dim()) {
+    throw std::invalid_argument("GeneratorPosterior: the pose MLP's input_dim is not the trunk's "
+                                "latent_dim");
+  }
+}
+
+std::vector<PoseStart> GeneratorPosterior::Starts(const LatentProblem& problem,
+                                                  const Eigen::VectorXf& query,
+                                                  int tool_index) const {
+  const std::string& tool = generator_->options().tools[tool_index];
+  const int n = generator_->SymmetryOrder(tool_index);
+  std::vector<PoseStart> starts;
+  if (knn_ != nullptr) starts = knn_->Starts(query, tool, options_.knn_k);
+  if (pose_mlp_ != nullptr) {
+    const SE2d p = pose_mlp_->Predict(query.cast<double>(), n);
+    starts.push_back({p, 0.5 * (options_.fit.depth_min_m + options_.fit.depth_max_m), "mlp"});
+  }
+  if (knn_ == nullptr) {
+    // No labelled neighbours: a coarse grid over yaw at the centre.
+    const int count = n == 0 ? 1 : std::max(1, 8 / std::max(1, n));
+    for (int k = 0; k < count; ++k) {
+      const double yaw = (n == 0 ? 0 : 2 * M_PI / std::max(1, n)) * k / count;
+      starts.push_back({SE2d::FromXYYaw(0, 0, yaw), 0.009, "grid"});
+    }
+  }
+  if (options_.flip_starts && n == 1 && !yaw_grid_active(n)) {
+    const std::size_t base = starts.size();
+    for (std::size_t i = 0; i < base; ++i) {
+      const SE2d& p = starts[i].sensor_T_object;
+      starts.push_back({SE2d::FromXYYaw(p.x(), p.y(), p.yaw() + M_PI), starts[i].depth_m,
+                        starts[i].source + "+pi"});
+    }
+  }
+  if (options_.position_grid_m > 0 && !starts.empty()) {
+    const PoseStart first = starts.front();
+    const double h = options_.position_grid_m;
+    const int rings = options_.position_grid_rings;
+    for (int a = -rings; a <= rings; ++a) {
+      for (int b = -rings; b <= rings; ++b) {
+        if (a == 0 && b == 0) continue;
+        const SE2d& p = first.sensor_T_object;
+        starts.push_back({SE2d::FromXYYaw(p.x() + a * h, p.y() + b * h, p.yaw()), first.depth_m,
+                          first.source + "+shift"});
+      }
+    }
+  }
+  if (yaw_grid_active(n)) {
+    // Every start position at the grid's yaws (those inside one symmetry period).
+    const int grid = options_.yaw_grid;
+    const double period = 2 * M_PI / n;
+    const std::size_t base = starts.size();
+    for (std::size_t i = 0; i < base; ++i) {
+      const SE2d& p = starts[i].sensor_T_object;
+      for (int k = 1; k < grid; ++k) {
+        const double offset = 2 * M_PI * k / grid;
+        if (offset > period - 1e-9) break;
+        starts.push_back({SE2d::FromXYYaw(p.x(), p.y(), p.yaw() + offset), starts[i].depth_m,
+                          starts[i].source + "+grid"});
+      }
+    }
+  }
+  (void)problem;
+  return starts;
+}
+
+GeneratorPosterior::Summary GeneratorPosterior::Estimate(const TrunkTargets& targets,
+                                                         const std::string& tool,
+                                                         PoseMixture* mixture) const {
+  const auto t0 = std::chrono::steady_clock::now();
+  const double cpu0 = ThreadCpuMs();
+  std::vector<int> candidates;
+  if (tool.empty()) {
+    for (int i = 0; i < generator_->num_tools(); ++i) candidates.push_back(i);
+  } else {
+    const int index = generator_->ToolIndex(tool);
+    if (index < 0) {
+      std::string names;
+      for (const std::string& t : generator_->options().tools) names += (names.empty() ? "" : ", ") + t;
+      throw std::invalid_argument("GeneratorPosterior: the generator does not know tool '" + tool +
+                                  "' (it knows " + names + ")");
+    }
+    candidates.push_back(index);
+  }
+  Summary summary;
+  const LatentProblem problem(*trunk_, targets, options_.problem);
+  std::optional<LatentProblem> coarse;
+  if (options_.coarse_pixels > 0 && options_.coarse_pixels < problem.num_pixels()) {
+    LatentProblem::Options co = options_.problem;
+    co.max_pixels = options_.coarse_pixels;
+    coarse.emplace(*trunk_, targets, co);
+  }
+  if (problem.num_pixels() == 0) {
+    summary.message = "the frame has no valid pixel";
+    if (mixture != nullptr) *mixture = PoseMixture();
+    return summary;
+  }
+  Eigen::VectorXf query;
+  if (knn_ != nullptr || pose_mlp_ != nullptr) {
+    query = problem.MetaSgdSteps(Eigen::VectorXd::Zero(problem.dim()), trunk_->meta_sgd.inner_steps)
+                .cast<float>();
+  }
+  struct ToolModes {
+    int tool;
+    std::vector<PoseFit> modes;
+  };
+  std::vector<ToolModes> all;
+  double best_msr = std::numeric_limits<double>::infinity();
+  for (int t : candidates) {
+    const std::vector<PoseStart> starts = Starts(problem, query, t);
+    summary.num_starts += static_cast<int>(starts.size());
+    ToolModes tm{t, FitPoseModes(problem, *generator_, t, starts, options_.fit,
+                                          coarse ? &*coarse : nullptr)};
+    for (const PoseFit& f : tm.modes) best_msr = std::min(best_msr, f.mean_squared_residual);
+    all.push_back(std::move(tm));
+  }
+  const auto t1 = std::chrono::steady_clock::now();
+  summary.fit_time_ms = Ms(t0, t1);
+  if (!std::isfinite(best_msr)) {
+    summary.message = "no fit converged to a usable mode";
+    if (mixture != nullptr) *mixture = PoseMixture();
+    summary.total_time_ms = Ms(t0, std::chrono::steady_clock::now());
+    summary.cpu_time_ms = ThreadCpuMs() - cpu0;
+    return summary;
+  }
+  double kappa = options_.sigma_inflation > 0 ? options_.sigma_inflation
+                                              : generator_->sigma_inflation();
+  if (!(kappa > 0)) kappa = 3;
+  summary.rms_residual = std::sqrt(best_msr);
+  summary.num_pixels = problem.num_pixels();
+  summary.pixel_factor = std::sqrt(
+      problem.num_pixels() /
+      std::min(kReferencePixels, static_cast<double>(problem.num_valid_pixels())));
+  summary.sigma = kappa * std::max(summary.rms_residual, 1e-6) * summary.pixel_factor;
+  const double scale = std::pow(problem.sigma() / summary.sigma, 2);  // r_s^2 = r_0^2 scale
+
+  std::vector<LaplaceComponent> components;
+  for (const ToolModes& tm : all) {
+    const int n = generator_->SymmetryOrder(tm.tool);
+    for (const PoseFit& f : tm.modes) {
+      LaplaceComponent c;
+      c.tool = generator_->options().tools[tm.tool];
+      c.symmetry_order = n;
+      c.mean = f.sensor_T_object;
+      c.depth_m = f.depth_m;
+      c.start = f.start;
+      const Eigen::Matrix4d H = f.JtJ * scale;
+      double log_det = 0;
+      int k = 4;
+      if (n == 0) {
+        k = 3;
+        Eigen::Matrix3d h3;
+        const int idx[3] = {0, 1, 3};
+        for (int a = 0; a < 3; ++a) {
+          for (int b = 0; b < 3; ++b) h3(a, b) = H(idx[a], idx[b]);
+        }
+        h3 += 1e-12 * Eigen::Matrix3d::Identity() * h3.trace();
+        const Eigen::Matrix3d s3 = h3.inverse();
+        for (int a = 0; a < 3; ++a) {
+          for (int b = 0; b < 3; ++b) c.covariance(idx[a], idx[b]) = s3(a, b);
+        }
+        log_det = std::log(h3.determinant());
+      } else {
+        Eigen::Matrix4d h4 = H + 1e-12 * Eigen::Matrix4d::Identity() * H.trace();
+        c.covariance = h4.inverse();
+        log_det = std::log(h4.determinant());
+      }
+      c.log_evidence = -f.cost * scale + 0.5 * k * std::log(2 * M_PI) - 0.5 * log_det +
+                       (n == 0 ? std::log(2 * M_PI) : std::log(static_cast<double>(n)));
+      if (std::isfinite(c.log_evidence) && c.covariance.allFinite()) components.push_back(c);
+    }
+  }
+  if (components.empty()) {
+    summary.message = "every mode had a singular Hessian";
+    if (mixture != nullptr) *mixture = PoseMixture();
+    summary.total_time_ms = Ms(t0, std::chrono::steady_clock::now());
+    summary.cpu_time_ms = ThreadCpuMs() - cpu0;
+    return summary;
+  }
+  double max_log = -std::numeric_limits<double>::infinity();
+  for (const LaplaceComponent& c : components) max_log = std::max(max_log, c.log_evidence);
+  double total = 0;
+  for (LaplaceComponent& c : components) total += c.weight = std::exp(c.log_evidence - max_log);
+  for (LaplaceComponent& c : components) {
+    c.weight /= total;
+    summary.tool_probabilities[c.tool] += c.weight;
+  }
+  for (int t : candidates) summary.tool_probabilities[generator_->options().tools[t]] += 0;
+  std::stable_sort(components.begin(), components.end(),
+                   [](const auto& a, const auto& b) { return a.weight > b.weight; });
+  summary.tool = std::max_element(summary.tool_probabilities.begin(),
+                                  summary.tool_probabilities.end(),
+                                  [](const auto& a, const auto& b) { return a.second < b.second; })
+                     ->first;
+  for (const LaplaceComponent& c : components) {
+    if (c.tool == summary.tool) {
+      summary.mean = c.mean;
+      summary.covariance = c.covariance.topLeftCorner<3, 3>();
+      break;
+    }
+  }
+  summary.num_modes = static_cast<int>(components.size());
+  summary.usable = true;
+  if (mixture != nullptr) *mixture = PoseMixture(std::move(components));
+  summary.total_time_ms = Ms(t0, std::chrono::steady_clock::now());
+  summary.cpu_time_ms = ThreadCpuMs() - cpu0;
+  return summary;
+}
+
+double CalibrateSigmaInflation(const GeneratorPosterior& posterior,
+                               const std::vector<TrunkTargets>& frames,
+                               const std::vector<PoseLabel>& labels) {
+  if (frames.size() != labels.size()) {
+    throw std::invalid_argument("CalibrateSigmaInflation: one label per frame expected");
+  }
+  GeneratorPosterior::Options o = posterior.options();
+  std::vector<double> d2;
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    PoseMixture mixture;
+    const GeneratorPosterior::Summary s = posterior.Estimate(frames[i], labels[i].tool, &mixture);
+    if (!s.usable) continue;
+    const LaplaceComponent& c = mixture.components().front();
+    // Mahalanobis distance at kappa = 1: the covariance scales with kappa^2.
+    const double kappa = s.sigma / std::max(s.rms_residual, 1e-6) / s.pixel_factor;
+    const Eigen::Matrix3d cov = c.covariance.topLeftCorner<3, 3>() / (kappa * kappa);
+    const SE2d::Tangent r = Folded(labels[i].sensor_T_object, c).Minus(c.mean);
+    if (c.symmetry_order == 0) {
+      const Eigen::Vector2d v = r.head<2>();
+      // Scale a 2-d distance to the 3-d quantile: chi2_2(0.9) = 4.605.
+      d2.push_back(v.dot(cov.topLeftCorner<2, 2>().ldlt().solve(v)) * kChi2_3_90 / 4.605170186);
+    } else {
+      d2.push_back(r.dot(cov.ldlt().solve(r)));
+    }
+  }
+  if (d2.empty()) return 0;
+  std::sort(d2.begin(), d2.end());
+  const double q = d2[std::min(d2.size() - 1, static_cast<std::size_t>(0.9 * d2.size()))];
+  return std::sqrt(q / kChi2_3_90);
+}
+
+}  // namespace tactfunc

@@ -1,0 +1,218 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// GeneratorPosterior: the pose posterior of one frame by analysis-by-synthesis
+// (docs/POSES.md, "The generator path"). For each candidate tool t (the one the scene
+// names, or every tool of the generator when the tool is unknown):
+//
+//   1. starts: the labels of the k nearest labelled functaset latents of tool t
+//      (KnnPoseStarts: a FLANN index per tool over the train split's meta-SGD latents,
+//      queried with the frame's meta-SGD latent -- the map the functaset stores), the pose
+//      MLP's prediction at the same latent (if a PoseMlp is given), and, for asymmetric
+//      tools, each of these turned by pi (near-symmetric faces: half_disc, l_shape,
+//      lines3_*). The generator is invariant under the tool's symmetry by construction
+//      (models/pose/pose_generator.h), so the symmetry-equivalent yaws of a C_n tool are
+//      the same start and are not repeated; without k-NN starts, a yaw grid at the centre;
+//      every start position is also tried at a grid of yaws (Options::yaw_grid);
+//   2. modes: FitPoseModes (estimation/synthesis/pose_fitter.h) in Ceres on SE(2), the
+//      starts scored and first refined on Options::coarse_pixels pixels of the frame;
+//   3. Laplace: at mode m with whitened residuals r at the posterior's pixel sigma s and
+//      Jacobian J over (tangent x, y, theta of the right perturbation, depth),
+//        H_m = J^T J,  Sigma_m = H_m^-1 (4 x 4),
+//        log Z_m = -1/2 ||r||^2 + (k/2) log 2 pi - 1/2 log det H_m + log c_t,
+//      k = 4, c_t = n for a C_n tool (its n copies of every mode), and for n = 0 (yaw
+//      unobservable) k = 3 over (x, y, depth) and c_t = 2 pi (the yaw integrates out);
+//      the uniform pose prior is the same for every tool and cancels.
+//   Mixture weights w_m = Z_m / sum Z (over the modes of every candidate tool); the tool
+//   probabilities P(t | y) = sum of its modes' weights.
+//
+// The pixel sigma s. The residuals of a rendering are dominated by the generator's and
+// the trunk's model error, spatially correlated, not by independent pixel noise, so the
+// trunk's residual_sigma would give far too narrow regions. s = kappa * RMS residual of
+// the frame's best mode (over all candidate tools) * sqrt(N / N_ref), N the pixels of the
+// problem and N_ref = min(768, the frame's valid pixels): a correlated model error carries
+// about as much information at any N, so the regions stay the same when fewer pixels are
+// used for speed (N_ref is the pixel count kappa is defined at); kappa (PoseGenerator::sigma_inflation, or
+// Options::sigma_inflation) is calibrated on held-out labelled contacts
+// (CalibrateSigmaInflation) and checked on fresh contacts
+// (tests/estimation/synthesis/generator_coverage_test.cc).
+//
+// Regions: PoseMixture::Contains(T, p) is the highest-density region of the mixture's
+// (x, y, yaw) marginal, {density >= c_p}, with c_p the (1 - p)-quantile of the density at
+// num_region_samples draws from the mixture (seeded); the truth's yaw is taken modulo the
+// tool's symmetry (the copy nearest each component).
+//
+// Errors: bad options throw std::invalid_argument; an unknown tool name throws naming
+// the tools the generator knows. Thread-safe (const).
+#ifndef TACTFUNC_ESTIMATION_SYNTHESIS_GENERATOR_POSTERIOR_H_
+#define TACTFUNC_ESTIMATION_SYNTHESIS_GENERATOR_POSTERIOR_H_
+
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "estimation/data/trunk_targets.h"
+#include "estimation/fitting/latent_problem.h"
+#include "estimation/functaset/functaset.h"
+#include "estimation/knn/knn_index.h"
+#include "estimation/pose/pose_distribution.h"
+#include "estimation/synthesis/pose_fitter.h"
+#include "models/pose/pose_generator.h"
+#include "models/pose/pose_mlp.h"
+#include "models/trunk/functa_model.h"
+
+namespace tactfunc {
+
+// One Laplace component: a mode of tool `tool` with its tangent covariance over
+// (x, y, theta, depth) (right perturbations at `mean`).
+struct LaplaceComponent {
+  std::string tool;
+  int symmetry_order = 1;
+  double weight = 0;
+  double log_evidence = 0;
+  SE2d mean;
+  double depth_m = 0;
+  Eigen::Matrix4d covariance = Eigen::Matrix4d::Zero();
+  std::string start;
+};
+
+// The mixture of Laplace components (weights sum to 1).
+class PoseMixture {
+ public:
+  PoseMixture() = default;
+  explicit PoseMixture(std::vector<LaplaceComponent> components);
+  const std::vector<LaplaceComponent>& components() const { return components_; }
+  bool empty() const { return components_.empty(); }
+  // The heaviest component's mean (the MAP mode).
+  SE2d Mode() const;
+  // Density of the (x, y, yaw) marginal at T (the yaw folded per component by its tool's
+  // symmetry; n = 0 components: the (x, y) marginal, yaw ignored). Only components of
+  // `tool` count when it is not empty (density conditional on that tool, renormalised).
+  double Density(const SE2d& sensor_T_object, const std::string& tool = "") const;
+  // num draws (seeded) of (tool index in components, pose): as a PoseDistribution of
+  // the poses of `tool`'s components (all components if empty).
+  PoseDistribution Sample(int num, std::uint64_t seed, const std::string& tool = "") const;
+  // Highest-density region of probability p (header comment), conditional on `tool`.
+  bool Contains(const SE2d& sensor_T_object, double p, int num_region_samples,
+                std::uint64_t seed, const std::string& tool = "") const;
+
+ private:
+  std::vector<LaplaceComponent> components_;
+};
+
+// Starts from the labelled functaset: one FLANN index per tool over the train-split
+// latents. Built once; Search is const.
+class KnnPoseStarts {
+ public:
+  // Throws std::invalid_argument if the functaset has no labelled train entries of
+  // `sensor`.
+  KnnPoseStarts(const Functaset& functaset, SensorKind sensor);
+  // The labels of the k nearest latents of `tool` (empty if the tool has none).
+  std::vector<PoseStart> Starts(const Eigen::VectorXf& query, const std::string& tool,
+                                int k) const;
+  int size() const { return size_; }
+
+ private:
+  struct ToolIndex {
+    std::unique_ptr<KnnIndex> index;
+    std::vector<PoseLabel> labels;
+  };
+  std::map<std::string, ToolIndex> tools_;
+  int size_ = 0;
+};
+
+class GeneratorPosterior {
+ public:
+  // The pixel count kappa is defined at (header comment).
+  static constexpr double kReferencePixels = 768;
+
+  struct Options {
+    // The frame's latent problem. Its sigma only scales the fit (the posterior sets its
+    // own, header comment); max_pixels bounds the time per trunk pass (default 384 of the
+    // 70 x 88 bubble frame's 6160 pixels).
+    LatentProblem::Options problem = DefaultProblem();
+    PoseFitOptions fit;
+    int knn_k = 4;                 // k-NN starts per tool, >= 0
+    bool flip_starts = true;       // add yaw + pi starts for asymmetric tools
+    // Yaw grid: every start position is also tried at yaw_grid yaws evenly spaced over the
+    // full turn (those equivalent under the tool's symmetry once), >= 1 (1 = no grid;
+    // it subsumes flip_starts when even).
+    int yaw_grid = 12;
+    // Pixels of the coarse stage (scoring the starts, their first refinement,
+    // pose_fitter.h); 0 = no coarse stage (the starts are scored on the full problem).
+    int coarse_pixels = 128;
+    // Position grid: the first start (the nearest neighbour's label, else the pose MLP's)
+    // is also tried at the positions (a, b) * position_grid_m away in x and y for
+    // |a|, |b| <= position_grid_rings (each at the yaw grid); 0 = none. Catches a wrong
+    // mirror mode whose position is off by millimetres too.
+    double position_grid_m = 2.5e-3;
+    int position_grid_rings = 2;
+    // kappa of the header comment; 0 = the generator's sigma_inflation (3 if it has none).
+    double sigma_inflation = 0;
+    int num_region_samples = 400;  // for regions and sample clouds, >= 10
+    std::uint64_t seed = 0;
+    bool IsValid(std::string* error) const;
+    static LatentProblem::Options DefaultProblem();
+  };
+
+  struct Summary {
+    bool usable = false;
+    std::string message;
+    std::string tool;  // the most probable tool
+    std::map<std::string, double> tool_probabilities;
+    SE2d mean;  // the mode of the heaviest component
+    Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();  // its (x, y, yaw) block
+    double sigma = 0;       // the pixel sigma the posterior used
+    int num_pixels = 0;     // N, the pixels of the frame's problem
+    double pixel_factor = 1;  // sqrt(N / min(768, valid pixels)) (header comment)
+    double rms_residual = 0;  // of the best mode (normalised units)
+    int num_starts = 0, num_modes = 0;
+    double fit_time_ms = 0, total_time_ms = 0;  // wall clock
+    double cpu_time_ms = 0;  // the calling thread's CPU time over the whole estimate
+    std::string BriefReport() const;
+  };
+
+  // trunk, generator (and knn, pose_mlp if given) must outlive this. Throws
+  // std::invalid_argument for bad options or a generator whose latent_dim is not the
+  // trunk's.
+  GeneratorPosterior(const SensorTrunk& trunk, const PoseGenerator& generator,
+                     const Options& options, const KnnPoseStarts* knn = nullptr,
+                     const PoseMlp* pose_mlp = nullptr);
+
+  // The posterior of one frame. tool = "" fits every tool of the generator; else only
+  // that tool (throws std::invalid_argument if the generator does not know it).
+  Summary Estimate(const TrunkTargets& targets, const std::string& tool,
+                   PoseMixture* mixture) const;
+
+  const Options& options() const { return options_; }
+
+ private:
+  std::vector<PoseStart> Starts(const LatentProblem& problem, const Eigen::VectorXf& query,
+                                int tool_index) const;
+
+  bool yaw_grid_active(int symmetry_order) const {
+    return options_.yaw_grid > 1 && symmetry_order > 0 && 2 * symmetry_order <= options_.yaw_grid;
+  }
+
+  const SensorTrunk* trunk_;
+  const PoseGenerator* generator_;
+  Options options_;
+  const KnnPoseStarts* knn_;
+  const PoseMlp* pose_mlp_;
+};
+
+// kappa such that the 90% regions of the best mode's Laplace Gaussian (x, y, yaw; sigma =
+// RMS of the best mode) cover 90% of the truths of the given labelled frames: the root
+// of the 0.9-quantile of the truths' squared Mahalanobis distances over chi2_3(0.9).
+// Returns 0 if no frame gave a usable fit.
+double CalibrateSigmaInflation(const GeneratorPosterior& posterior,
+                               const std::vector<TrunkTargets>& frames,
+                               const std::vector<PoseLabel>& labels);
+
+}  // namespace tactfunc
+
+#endif  // TACTFUNC_ESTIMATION_SYNTHESIS_GENERATOR_POSTERIOR_H_

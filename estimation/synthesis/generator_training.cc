@@ -1,0 +1,279 @@
+// Copyright 2026 The tactfunc Authors.
+#include "estimation/synthesis/generator_training.h"
+
+#include <algorithm>
+#include <boost/random/mersenne_twister.hpp>
+#include <boost/random/uniform_int_distribution.hpp>
+#include <chrono>
+#include <cmath>
+#include <numeric>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "models/core/seed.h"
+
+namespace tactfunc {
+namespace {
+
+void Check(bool ok, const std::string& message) {
+  if (!ok) throw std::invalid_argument(message);
+}
+
+// Adam over one flat vector.
+class Adam {
+ public:
+  Adam(const GeneratorTrainingOptions& o, Eigen::Index size)
+      : o_(o), m_(Eigen::VectorXd::Zero(size)), v_(Eigen::VectorXd::Zero(size)) {}
+  void Step(double lr, const Eigen::VectorXd& g, Eigen::VectorXd* x) {
+    ++t_;
+    m_ = o_.beta1 * m_ + (1 - o_.beta1) * g;
+    v_ = o_.beta2 * v_ + (1 - o_.beta2) * g.cwiseAbs2();
+    const double c1 = 1 - std::pow(o_.beta1, t_), c2 = 1 - std::pow(o_.beta2, t_);
+    *x -= (lr / c1) * (m_.array() / ((v_.array() / c2).sqrt() + o_.epsilon)).matrix();
+  }
+
+ private:
+  GeneratorTrainingOptions o_;
+  Eigen::VectorXd m_, v_;
+  int t_ = 0;
+};
+
+double LearningRate(const GeneratorTrainingOptions& o, int epoch) {
+  const double t = o.epochs > 1 ? static_cast<double>(epoch) / (o.epochs - 1) : 1.0;
+  const double f = o.final_lr_fraction + (1 - o.final_lr_fraction) * 0.5 * (1 + std::cos(M_PI * t));
+  return o.learning_rate * f;
+}
+
+Eigen::MatrixXd FeatureMatrix(const PoseGenerator& g, const std::vector<GeneratorSample>& s) {
+  Eigen::MatrixXd f(s.size(), g.feature_dim());
+  for (std::size_t i = 0; i < s.size(); ++i) {
+    Check(s[i].tool >= 0 && s[i].tool < g.num_tools(),
+          "generator training: sample " + std::to_string(i) + " has tool index " +
+              std::to_string(s[i].tool) + ", expected [0, " + std::to_string(g.num_tools()) + ")");
+    f.row(i) = g.Features(s[i].tool, s[i].sensor_T_object, s[i].depth_m).transpose();
+  }
+  return f;
+}
+
+std::vector<int> Shuffled(int m, std::uint64_t seed) {
+  std::vector<int> order(m);
+  std::iota(order.begin(), order.end(), 0);
+  boost::random::mt19937_64 rng(seed);
+  for (int i = m - 1; i > 0; --i) {
+    boost::random::uniform_int_distribution<int> u(0, i);
+    std::swap(order[i], order[u(rng)]);
+  }
+  return order;
+}
+
+template <typename BatchLoss>
+GeneratorTrainingSummary RunAdam(PoseGenerator* generator, int m,
+                                 const GeneratorTrainingOptions& options,
+                                 const GeneratorProgressCallback& progress,
+                                 const BatchLoss& batch_loss) {
+  const auto start = std::chrono::steady_clock::now();
+  GeneratorTrainingSummary summary;
+  Eigen::VectorXd theta = generator->parameters();
+  Adam adam(options, theta.size());
+  for (int epoch = 0; epoch < options.epochs; ++epoch) {
+    const std::vector<int> order = Shuffled(m, DeriveSeed(options.seed, epoch));
+    const double lr = LearningRate(options, epoch);
+    double sum = 0;
+    int batches = 0;
+    for (int b = 0; b < m; b += options.batch_size) {
+      const std::vector<int> rows(order.begin() + b,
+                                  order.begin() + std::min(m, b + options.batch_size));
+      Eigen::VectorXd gradient;
+      sum += batch_loss(theta, rows, epoch, &gradient);
+      ++batches;
+      adam.Step(lr, gradient, &theta);
+    }
+    const double loss = sum / std::max(1, batches);
+    if (!std::isfinite(loss)) break;
+    generator->SetParameters(theta);
+    summary.loss_history.push_back(loss);
+    summary.epochs_completed = epoch + 1;
+    if (progress && !progress(epoch, loss)) break;
+  }
+  if (!summary.loss_history.empty()) {
+    summary.initial_loss = summary.loss_history.front();
+    summary.final_loss = summary.loss_history.back();
+  }
+  summary.total_time_in_seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return summary;
+}
+
+}  // namespace
+
+bool GeneratorTrainingOptions::IsValid(std::string* error) const {
+  auto fail = [&](const std::string& m) {
+    if (error != nullptr) *error = "GeneratorTrainingOptions: " + m;
+    return false;
+  };
+  if (epochs < 1) return fail("epochs must be >= 1");
+  if (batch_size < 1) return fail("batch_size must be >= 1");
+  if (!(learning_rate > 0)) return fail("learning_rate must be > 0");
+  if (!(beta1 >= 0 && beta1 < 1 && beta2 >= 0 && beta2 < 1)) return fail("betas must be in [0, 1)");
+  if (!(epsilon > 0)) return fail("epsilon must be > 0");
+  if (!(final_lr_fraction >= 0 && final_lr_fraction <= 1)) {
+    return fail("final_lr_fraction must be in [0, 1]");
+  }
+  if (pixels_per_frame < 1) return fail("pixels_per_frame must be >= 1");
+  return true;
+}
+
+std::string GeneratorTrainingSummary::BriefReport() const {
+  char buffer[160];
+  std::snprintf(buffer, sizeof(buffer), "%d epochs, loss %.6g -> %.6g (%.1f s)", epochs_completed,
+                initial_loss, final_loss, total_time_in_seconds);
+  return buffer;
+}
+
+GeneratorTrainingSummary TrainGeneratorOnLatents(PoseGenerator* generator,
+                                                 const std::vector<GeneratorSample>& samples,
+                                                 const Eigen::MatrixXd& latents,
+                                                 const GeneratorTrainingOptions& options,
+                                                 const GeneratorProgressCallback& progress) {
+  std::string error;
+  Check(options.IsValid(&error), error);
+  Check(generator != nullptr, "TrainGeneratorOnLatents: null generator");
+  const int m = static_cast<int>(samples.size());
+  Check(m > 0 && latents.rows() == m && latents.cols() == generator->latent_dim(),
+        "TrainGeneratorOnLatents: expected " + std::to_string(m) + " x " +
+            std::to_string(generator->latent_dim()) + " latents (one per sample, M > 0), got " +
+            std::to_string(latents.rows()) + " x " + std::to_string(latents.cols()));
+  Check(latents.allFinite(), "TrainGeneratorOnLatents: the latents hold non-finite values");
+  if (options.standardize_outputs) {
+    const Eigen::VectorXd mean = latents.colwise().mean().transpose();
+    Eigen::VectorXd stddev =
+        ((latents.rowwise() - mean.transpose()).cwiseAbs2().colwise().mean()).cwiseSqrt().transpose();
+    for (Eigen::Index k = 0; k < stddev.size(); ++k) {
+      if (!(stddev[k] > 1e-6)) stddev[k] = 1;
+    }
+    generator->SetLatentStandardization(mean, stddev);
+  }
+  const Eigen::MatrixXd features = FeatureMatrix(*generator, samples);
+  const Eigen::VectorXd inv_var = generator->latent_stddev().cwiseAbs2().cwiseInverse();
+  const double d = generator->latent_dim();
+  return RunAdam(generator, m, options, progress,
+                 [&](const Eigen::VectorXd& theta, const std::vector<int>& rows, int,
+                     Eigen::VectorXd* gradient) {
+                   const int b = static_cast<int>(rows.size());
+                   Eigen::MatrixXd f(b, features.cols()), z(b, latents.cols());
+                   for (int i = 0; i < b; ++i) {
+                     f.row(i) = features.row(rows[i]);
+                     z.row(i) = latents.row(rows[i]);
+                   }
+                   const Eigen::MatrixXd diff = generator->Forward(theta, f) - z;
+                   const Eigen::MatrixXd weighted = diff.array().rowwise() * inv_var.transpose().array();
+                   const double loss = (weighted.array() * diff.array()).sum() / (b * d);
+                   generator->Backward(theta, f, (2.0 / (b * d)) * weighted, gradient, nullptr);
+                   return loss;
+                 });
+}
+
+GeneratorTrainingSummary TrainGeneratorOnPixels(PoseGenerator* generator,
+                                                const SensorTrunk& trunk,
+                                                const std::vector<GeneratorSample>& samples,
+                                                const std::vector<TrunkTargets>& frames,
+                                                const GeneratorTrainingOptions& options,
+                                                const GeneratorProgressCallback& progress) {
+  std::string error;
+  Check(options.IsValid(&error), error);
+  Check(generator != nullptr, "TrainGeneratorOnPixels: null generator");
+  Check(generator->latent_dim() == trunk.siren.latent_dim(),
+        "TrainGeneratorOnPixels: the generator's latent_dim " +
+            std::to_string(generator->latent_dim()) + " is not the trunk's " +
+            std::to_string(trunk.siren.latent_dim()));
+  const int m = static_cast<int>(samples.size());
+  Check(m > 0 && static_cast<int>(frames.size()) == m,
+        "TrainGeneratorOnPixels: expected one frame per sample (" + std::to_string(m) +
+            "), got " + std::to_string(frames.size()));
+  const int channels = trunk.siren.output_channels();
+  // Valid pixels and the grid of each frame's resolution.
+  std::vector<std::vector<int>> valid(m);
+  std::vector<Eigen::MatrixXf> grids;
+  std::vector<int> grid_of(m);
+  std::vector<std::pair<int, int>> sizes;
+  for (int i = 0; i < m; ++i) {
+    const TrunkTargets& t = frames[i];
+    Check(t.values.rows() == t.rows * t.cols && t.values.cols() == channels &&
+              t.weights.size() == t.values.rows(),
+          "TrainGeneratorOnPixels: frame " + std::to_string(i) + " has the wrong shape");
+    for (Eigen::Index j = 0; j < t.weights.size(); ++j) {
+      if (t.weights[j] > 0) valid[i].push_back(static_cast<int>(j));
+    }
+    const std::pair<int, int> size(t.rows, t.cols);
+    auto it = std::find(sizes.begin(), sizes.end(), size);
+    if (it == sizes.end()) {
+      sizes.push_back(size);
+      grids.push_back(trunk.siren.Grid<float>(t.rows, t.cols));
+      grid_of[i] = static_cast<int>(grids.size()) - 1;
+    } else {
+      grid_of[i] = static_cast<int>(it - sizes.begin());
+    }
+  }
+  const Eigen::MatrixXd features = FeatureMatrix(*generator, samples);
+  const int p = options.pixels_per_frame;
+  return RunAdam(
+      generator, m, options, progress,
+      [&](const Eigen::VectorXd& theta, const std::vector<int>& rows, int epoch,
+          Eigen::VectorXd* gradient) {
+        const int b = static_cast<int>(rows.size());
+        Eigen::MatrixXd f(b, features.cols());
+        for (int i = 0; i < b; ++i) f.row(i) = features.row(rows[i]);
+        const Eigen::MatrixXd z = generator->Forward(theta, f);
+        Eigen::MatrixXd dL_dZ(b, z.cols());
+        double loss = 0;
+        for (int i = 0; i < b; ++i) {
+          const int s = rows[i];
+          const std::vector<int>& v = valid[s];
+          if (v.empty()) {
+            dL_dZ.row(i).setZero();
+            continue;
+          }
+          boost::random::mt19937_64 rng(DeriveSeed(DeriveSeed(options.seed, epoch), s));
+          boost::random::uniform_int_distribution<int> u(0, static_cast<int>(v.size()) - 1);
+          const int count = std::min<int>(p, static_cast<int>(v.size()));
+          Eigen::MatrixXf coords(count, 2), targets(count, channels);
+          const Eigen::MatrixXf& grid = grids[grid_of[s]];
+          for (int j = 0; j < count; ++j) {
+            const int pixel = count == static_cast<int>(v.size()) ? v[j] : v[u(rng)];
+            coords.row(j) = grid.row(pixel);
+            targets.row(j) = frames[s].values.row(pixel);
+          }
+          Eigen::VectorXf dz;
+          const Eigen::VectorXf zf = z.row(i).transpose().cast<float>();
+          loss += trunk.siren.LossAndGradient<float>(coords, zf, targets, Eigen::VectorXf(), &dz,
+                                                     nullptr);
+          dL_dZ.row(i) = dz.cast<double>().transpose() / b;
+        }
+        generator->Backward(theta, f, dL_dZ, gradient, nullptr);
+        return loss / b;
+      });
+}
+
+double MeanGeneratorPsnr(const PoseGenerator& generator, const SensorTrunk& trunk,
+                         const std::vector<GeneratorSample>& samples,
+                         const std::vector<TrunkTargets>& frames) {
+  Check(samples.size() == frames.size(), "MeanGeneratorPsnr: one frame per sample expected");
+  double sum = 0;
+  int count = 0;
+  for (std::size_t i = 0; i < samples.size(); ++i) {
+    const Eigen::VectorXf z = generator
+                                  .Generate(samples[i].tool, samples[i].sensor_T_object,
+                                            samples[i].depth_m)
+                                  .cast<float>();
+    const Eigen::MatrixXf grid = trunk.siren.Grid<float>(frames[i].rows, frames[i].cols);
+    const double psnr = Psnr(trunk.siren.Forward<float>(grid, z), frames[i]);
+    if (std::isfinite(psnr)) {
+      sum += psnr;
+      ++count;
+    }
+  }
+  return count > 0 ? sum / count : 0;
+}
+
+}  // namespace tactfunc

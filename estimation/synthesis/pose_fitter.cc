@@ -1,0 +1,255 @@
+// Copyright 2026 The tactfunc Authors.
+#include "estimation/synthesis/pose_fitter.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <vector>
+
+#include "ceres/problem.h"
+#include "ceres/solver.h"
+#include "models/simulator/tool.h"
+
+namespace tactfunc {
+
+bool SE2Manifold::Plus(const double* x, const double* delta, double* out) const {
+  const SE2d t = SE2d::FromXYYaw(x[0], x[1], x[2]);
+  const SE2d u = t.Plus(SE2d::Tangent(delta[0], delta[1], delta[2]));
+  out[0] = u.x();
+  out[1] = u.y();
+  out[2] = u.yaw();
+  return true;
+}
+
+bool SE2Manifold::PlusJacobian(const double* x, double* jacobian) const {
+  Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> j(jacobian);
+  j = PoseCoordinatesFromTangent(SE2d::FromXYYaw(x[0], x[1], x[2]));
+  return true;
+}
+
+bool SE2Manifold::Minus(const double* y, const double* x, double* out) const {
+  const SE2d a = SE2d::FromXYYaw(y[0], y[1], y[2]);
+  const SE2d b = SE2d::FromXYYaw(x[0], x[1], x[2]);
+  const SE2d::Tangent d = a.Minus(b);
+  out[0] = d[0];
+  out[1] = d[1];
+  out[2] = d[2];
+  return true;
+}
+
+bool SE2Manifold::MinusJacobian(const double* x, double* jacobian) const {
+  Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> j(jacobian);
+  j = PoseCoordinatesFromTangent(SE2d::FromXYYaw(x[0], x[1], x[2])).transpose();
+  return true;
+}
+
+GeneratorPoseCost::GeneratorPoseCost(const LatentProblem& problem, const PoseGenerator& generator,
+                                     int tool_index)
+    : problem_(&problem), generator_(&generator), tool_(tool_index) {
+  if (generator.latent_dim() != problem.dim()) {
+    throw std::invalid_argument("GeneratorPoseCost: the generator's latent_dim " +
+                                std::to_string(generator.latent_dim()) +
+                                " is not the trunk's " + std::to_string(problem.dim()));
+  }
+  generator.SymmetryOrder(tool_index);  // throws for a bad index
+  set_num_residuals(problem.num_residuals());
+  mutable_parameter_block_sizes()->push_back(3);
+  mutable_parameter_block_sizes()->push_back(1);
+}
+
+bool GeneratorPoseCost::Evaluate(double const* const* parameters, double* residuals,
+                                 double** jacobians) const {
+  const SE2d pose = SE2d::FromXYYaw(parameters[0][0], parameters[0][1], parameters[0][2]);
+  const double depth = parameters[1][0];
+  const bool want = jacobians != nullptr && (jacobians[0] != nullptr || jacobians[1] != nullptr);
+  PoseGenerator::PoseJacobian J_z_pose;
+  const Eigen::VectorXd z = generator_->Generate(tool_, pose, depth, want ? &J_z_pose : nullptr);
+  const int n = problem_->num_residuals(), d = problem_->dim();
+  if (!want) return problem_->ResidualsAndJacobian(z.data(), residuals, nullptr);
+  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> J_r_z(n, d);
+  if (!problem_->ResidualsAndJacobian(z.data(), residuals, J_r_z.data())) return false;
+  const Eigen::Matrix<double, Eigen::Dynamic, 4> J_r_pose = J_r_z * J_z_pose;
+  if (jacobians[0] != nullptr) {
+    Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>(jacobians[0], n, 3) =
+        J_r_pose.leftCols<3>();
+  }
+  if (jacobians[1] != nullptr) {
+    Eigen::Map<Eigen::VectorXd>(jacobians[1], n) = J_r_pose.col(3);
+  }
+  return J_r_pose.allFinite();
+}
+
+bool PoseFitOptions::IsValid(std::string* error) const {
+  auto fail = [&](const std::string& m) {
+    if (error != nullptr) *error = "PoseFitOptions: " + m;
+    return false;
+  };
+  if (max_iterations < 1) return fail("max_iterations must be >= 1");
+  if (max_refined_starts < 1) return fail("max_refined_starts must be >= 1");
+  if (coarse_refined_starts < 1) return fail("coarse_refined_starts must be >= 1");
+  if (coarse_iterations < 1) return fail("coarse_iterations must be >= 1");
+  if (!(depth_min_m >= 0 && depth_max_m > depth_min_m)) {
+    return fail("expected 0 <= depth_min_m < depth_max_m");
+  }
+  if (!(merge_position_m > 0) || !(merge_yaw_rad > 0)) {
+    return fail("merge_position_m and merge_yaw_rad must be > 0");
+  }
+  return true;
+}
+
+double PoseCost(const LatentProblem& problem, const PoseGenerator& generator, int tool_index,
+                const SE2d& pose, double depth_m) {
+  const Eigen::VectorXd z = generator.Generate(tool_index, pose, depth_m);
+  Eigen::VectorXd r(problem.num_residuals());
+  if (!problem.ResidualsAndJacobian(z.data(), r.data(), nullptr)) {
+    return std::numeric_limits<double>::infinity();
+  }
+  return 0.5 * r.squaredNorm();
+}
+
+namespace {
+
+bool Same(const SE2d& a, const SE2d& b, int n, const PoseFitOptions& o) {
+  const double dp = std::hypot(a.x() - b.x(), a.y() - b.y());
+  return dp <= o.merge_position_m && YawErrorModuloSymmetry(a.yaw(), b.yaw(), n) <= o.merge_yaw_rad;
+}
+
+ceres::Solver::Options SolverOptions(int iterations) {
+  ceres::Solver::Options solver;
+  solver.minimizer_type = ceres::TRUST_REGION;
+  solver.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
+  solver.linear_solver_type = ceres::DENSE_QR;
+  solver.max_num_iterations = iterations;
+  solver.num_threads = 1;
+  solver.logging_type = ceres::SILENT;
+  solver.minimizer_progress_to_stdout = false;
+  solver.function_tolerance = 1e-7;
+  solver.gradient_tolerance = 1e-10;
+  solver.parameter_tolerance = 1e-8;
+  return solver;
+}
+
+// Levenberg-Marquardt from (pose, depth) in place; returns the iterations run.
+int Refine(const LatentProblem& problem, const PoseGenerator& generator, int tool_index,
+           const PoseFitOptions& options, int iterations, double pose[3], double* depth) {
+  ceres::Problem::Options po;
+  po.cost_function_ownership = ceres::TAKE_OWNERSHIP;
+  po.manifold_ownership = ceres::TAKE_OWNERSHIP;
+  ceres::Problem cp(po);
+  cp.AddResidualBlock(new GeneratorPoseCost(problem, generator, tool_index), nullptr, pose, depth);
+  cp.SetManifold(pose, new SE2Manifold);
+  cp.SetParameterLowerBound(depth, 0, options.depth_min_m);
+  cp.SetParameterUpperBound(depth, 0, options.depth_max_m);
+  ceres::Solver::Summary summary;
+  ceres::Solve(SolverOptions(iterations), &cp, &summary);
+  return static_cast<int>(summary.iterations.size());
+}
+
+// The best distinct (coarse tolerance) finite-cost entries of `scored` (sorted by cost),
+// at most `count`.
+// yaw_only: distinct in yaw alone (any position), so that every yaw hypothesis is
+// represented by its best position.
+std::vector<int> BestDistinct(const std::vector<std::pair<double, int>>& scored,
+                              const std::vector<PoseStart>& starts, int n, int count,
+                              const PoseFitOptions& options, bool yaw_only = false) {
+  PoseFitOptions coarse = options;
+  coarse.merge_position_m = yaw_only ? 1.0 : std::max(options.merge_position_m, 0.5e-3);
+  coarse.merge_yaw_rad = std::max(options.merge_yaw_rad, 0.15);
+  std::vector<int> chosen;
+  for (const auto& [cost, i] : scored) {
+    if (!std::isfinite(cost)) continue;
+    bool dup = false;
+    for (int c : chosen) dup |= Same(starts[c].sensor_T_object, starts[i].sensor_T_object, n, coarse);
+    if (dup) continue;
+    chosen.push_back(i);
+    if (static_cast<int>(chosen.size()) >= count) break;
+  }
+  return chosen;
+}
+
+}  // namespace
+
+std::vector<PoseFit> FitPoseModes(const LatentProblem& problem, const PoseGenerator& generator,
+                                  int tool_index, const std::vector<PoseStart>& starts_in,
+                                  const PoseFitOptions& options, const LatentProblem* coarse) {
+  std::string error;
+  if (!options.IsValid(&error)) throw std::invalid_argument(error);
+  if (starts_in.empty()) throw std::invalid_argument("FitPoseModes: no starts");
+  const int n = generator.SymmetryOrder(tool_index);
+  const LatentProblem& scoring = coarse != nullptr ? *coarse : problem;
+  std::vector<PoseStart> starts = starts_in;
+  for (PoseStart& s : starts) s.depth_m = std::clamp(s.depth_m, options.depth_min_m, options.depth_max_m);
+  // Score every start (one forward pass each); sort by cost.
+  auto score = [&](const std::vector<PoseStart>& list) {
+    std::vector<std::pair<double, int>> scored;
+    for (std::size_t i = 0; i < list.size(); ++i) {
+      scored.emplace_back(
+          PoseCost(scoring, generator, tool_index, list[i].sensor_T_object, list[i].depth_m),
+          static_cast<int>(i));
+    }
+    std::stable_sort(scored.begin(), scored.end(),
+                     [](const auto& a, const auto& b) { return a.first < b.first; });
+    return scored;
+  };
+  std::vector<int> chosen;
+  if (coarse != nullptr) {
+    // Stage 1: refine the best distinct starts on the coarse problem, re-score.
+    const std::vector<int> first =
+        BestDistinct(score(starts), starts, n, options.coarse_refined_starts, options,
+                     /*yaw_only=*/true);
+    std::vector<PoseStart> refined;
+    for (int i : first) {
+      double pose[3] = {starts[i].sensor_T_object.x(), starts[i].sensor_T_object.y(),
+                        starts[i].sensor_T_object.yaw()};
+      double depth = starts[i].depth_m;
+      Refine(*coarse, generator, tool_index, options, options.coarse_iterations, pose, &depth);
+      refined.push_back({SE2d::FromXYYaw(pose[0], pose[1], pose[2]), depth, starts[i].source});
+    }
+    starts = std::move(refined);
+  }
+  chosen = BestDistinct(score(starts), starts, n, options.max_refined_starts, options);
+
+  std::vector<PoseFit> modes;
+  for (int i : chosen) {
+    double pose[3] = {starts[i].sensor_T_object.x(), starts[i].sensor_T_object.y(),
+                      starts[i].sensor_T_object.yaw()};
+    double depth = starts[i].depth_m;
+    PoseFit fit;
+    fit.iterations = Refine(problem, generator, tool_index, options, options.max_iterations, pose,
+                            &depth);
+    const GeneratorPoseCost cost(problem, generator, tool_index);
+    fit.sensor_T_object = SE2d::FromXYYaw(pose[0], pose[1], pose[2]);
+    fit.depth_m = depth;
+    fit.start = starts[i].source;
+    // Residuals and the tangent J^T J at the mode.
+    const int m = problem.num_residuals();
+    Eigen::VectorXd r(m);
+    Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> J0(m, 3);
+    Eigen::VectorXd J1(m);
+    const double* params[2] = {pose, &depth};
+    double* jac[2] = {J0.data(), J1.data()};
+    if (!cost.Evaluate(params, r.data(), jac)) continue;
+    Eigen::Matrix<double, Eigen::Dynamic, 4> J(m, 4);
+    J.leftCols<3>() = J0 * PoseCoordinatesFromTangent(fit.sensor_T_object);
+    J.col(3) = J1;
+    fit.JtJ = J.transpose() * J;
+    fit.cost = 0.5 * r.squaredNorm();
+    fit.mean_squared_residual = r.squaredNorm() * problem.sigma() * problem.sigma() / m;
+    fit.usable = std::isfinite(fit.cost) && fit.JtJ.allFinite();
+    if (!fit.usable) continue;
+    bool dup = false;
+    for (PoseFit& other : modes) {
+      if (Same(other.sensor_T_object, fit.sensor_T_object, n, options)) {
+        dup = true;
+        if (fit.cost < other.cost) other = fit;
+      }
+    }
+    if (!dup) modes.push_back(fit);
+  }
+  std::sort(modes.begin(), modes.end(),
+            [](const PoseFit& a, const PoseFit& b) { return a.cost < b.cost; });
+  return modes;
+}
+
+}  // namespace tactfunc

@@ -1,0 +1,389 @@
+// Copyright 2026 The tactfunc Authors.
+#include "models/pose/pose_generator.h"
+
+#include <boost/random/mersenne_twister.hpp>
+#include <boost/random/uniform_real_distribution.hpp>
+#include <cmath>
+#include <set>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "models/core/atomic_file.h"
+#include "models/core/tensor_file.h"
+#include "nlohmann/json.hpp"
+
+namespace tactfunc {
+namespace {
+
+constexpr char kKind[] = "pose_generator";
+constexpr char kFormat[] = "tactfunc-pose-generator";
+constexpr int kVersion = 1;
+
+void Check(bool ok, const std::string& message) {
+  if (!ok) throw std::invalid_argument(message);
+}
+
+std::vector<double> ToVector(const Eigen::VectorXd& v) {
+  return std::vector<double>(v.data(), v.data() + v.size());
+}
+
+}  // namespace
+
+bool PoseGenerator::Options::IsValid(std::string* error) const {
+  auto fail = [&](const std::string& message) {
+    if (error != nullptr) *error = "PoseGenerator::Options: " + message;
+    return false;
+  };
+  if (tools.empty()) return fail("tools must name at least one tool");
+  if (symmetry_orders.size() != tools.size()) {
+    return fail("symmetry_orders must have one entry per tool (" +
+                std::to_string(tools.size()) + "), got " +
+                std::to_string(symmetry_orders.size()));
+  }
+  std::set<std::string> seen;
+  for (std::size_t i = 0; i < tools.size(); ++i) {
+    if (tools[i].empty()) return fail("tools[" + std::to_string(i) + "] is empty");
+    if (!seen.insert(tools[i]).second) return fail("tool '" + tools[i] + "' is listed twice");
+    if (symmetry_orders[i] < 0) {
+      return fail("symmetry_orders[" + std::to_string(i) + "] must be >= 0, got " +
+                  std::to_string(symmetry_orders[i]));
+    }
+  }
+  if (latent_dim < 1) return fail("latent_dim must be >= 1, got " + std::to_string(latent_dim));
+  for (int h : hidden_sizes) {
+    if (h < 1) return fail("hidden_sizes must be >= 1, got " + std::to_string(h));
+  }
+  if (yaw_harmonics < 1) {
+    return fail("yaw_harmonics must be >= 1, got " + std::to_string(yaw_harmonics));
+  }
+  if (!(position_scale > 0) || !std::isfinite(position_scale)) {
+    return fail("position_scale must be finite and > 0");
+  }
+  if (!std::isfinite(depth_center)) return fail("depth_center must be finite");
+  if (!(depth_scale > 0) || !std::isfinite(depth_scale)) {
+    return fail("depth_scale must be finite and > 0");
+  }
+  return true;
+}
+
+PoseGenerator::PoseGenerator(const Options& options, std::uint64_t seed) : options_(options) {
+  std::string error;
+  if (!options_.IsValid(&error)) throw std::invalid_argument(error);
+  int in = feature_dim(), offset = 0;
+  std::vector<int> outs = options_.hidden_sizes;
+  outs.push_back(options_.latent_dim);
+  for (int out : outs) {
+    Layer layer;
+    layer.in = in;
+    layer.out = out;
+    layer.weight_offset = offset;
+    offset += in * out;
+    layer.bias_offset = offset;
+    offset += out;
+    layers_.push_back(layer);
+    in = out;
+  }
+  parameters_ = Eigen::VectorXd::Zero(offset);
+  latent_mean_ = Eigen::VectorXd::Zero(options_.latent_dim);
+  latent_stddev_ = Eigen::VectorXd::Ones(options_.latent_dim);
+  Initialize(seed);
+}
+
+void PoseGenerator::Initialize(std::uint64_t seed) {
+  boost::random::mt19937_64 rng(seed);
+  parameters_.setZero();
+  for (const Layer& layer : layers_) {
+    const double limit = std::sqrt(6.0 / (layer.in + layer.out));
+    boost::random::uniform_real_distribution<double> u(-limit, limit);
+    for (int k = 0; k < layer.in * layer.out; ++k) parameters_[layer.weight_offset + k] = u(rng);
+  }
+}
+
+int PoseGenerator::ToolIndex(const std::string& tool) const {
+  for (int i = 0; i < num_tools(); ++i) {
+    if (options_.tools[i] == tool) return i;
+  }
+  return -1;
+}
+
+void PoseGenerator::CheckToolIndex(int tool_index) const {
+  Check(tool_index >= 0 && tool_index < num_tools(),
+        "PoseGenerator: tool index " + std::to_string(tool_index) + " outside [0, " +
+            std::to_string(num_tools()) + ")");
+}
+
+int PoseGenerator::SymmetryOrder(int tool_index) const {
+  CheckToolIndex(tool_index);
+  return options_.symmetry_orders[tool_index];
+}
+
+void PoseGenerator::SetParameters(const Eigen::VectorXd& parameters) {
+  Check(parameters.size() == parameters_.size(),
+        "PoseGenerator::SetParameters: expected " + std::to_string(parameters_.size()) +
+            " values, got " + std::to_string(parameters.size()));
+  parameters_ = parameters;
+}
+
+void PoseGenerator::SetLatentStandardization(const Eigen::VectorXd& mean,
+                                             const Eigen::VectorXd& stddev) {
+  Check(mean.size() == options_.latent_dim && stddev.size() == options_.latent_dim,
+        "PoseGenerator::SetLatentStandardization: expected " +
+            std::to_string(options_.latent_dim) + " entries, got " +
+            std::to_string(mean.size()) + " and " + std::to_string(stddev.size()));
+  Check(mean.allFinite() && stddev.allFinite() && (stddev.array() > 0).all(),
+        "PoseGenerator::SetLatentStandardization: expected finite values and stddev > 0");
+  latent_mean_ = mean;
+  latent_stddev_ = stddev;
+}
+
+void PoseGenerator::set_sigma_inflation(double kappa) {
+  Check(kappa >= 0 && std::isfinite(kappa),
+        "PoseGenerator::set_sigma_inflation: expected a finite value >= 0, got " +
+            std::to_string(kappa));
+  sigma_inflation_ = kappa;
+}
+
+Eigen::VectorXd PoseGenerator::Features(int tool_index, const SE2d& pose, double depth_m,
+                                        PoseJacobian* J_f_pose) const {
+  CheckToolIndex(tool_index);
+  const int n = options_.symmetry_orders[tool_index];
+  const int b = num_tools();
+  Eigen::VectorXd f = Eigen::VectorXd::Zero(feature_dim());
+  if (J_f_pose != nullptr) *J_f_pose = PoseJacobian::Zero(feature_dim(), 4);
+  f[tool_index] = 1;
+  f[b] = pose.x() / options_.position_scale;
+  f[b + 1] = pose.y() / options_.position_scale;
+  f[b + 2] = (depth_m - options_.depth_center) / options_.depth_scale;
+  if (J_f_pose != nullptr) {
+    (*J_f_pose)(b, 0) = 1 / options_.position_scale;
+    (*J_f_pose)(b + 1, 1) = 1 / options_.position_scale;
+    (*J_f_pose)(b + 2, 3) = 1 / options_.depth_scale;
+  }
+  if (n != 0) {
+    for (int k = 1; k <= options_.yaw_harmonics; ++k) {
+      const double m = static_cast<double>(k * n);
+      const double c = std::cos(m * pose.yaw()), s = std::sin(m * pose.yaw());
+      f[b + 1 + 2 * k] = c;
+      f[b + 2 + 2 * k] = s;
+      if (J_f_pose != nullptr) {
+        (*J_f_pose)(b + 1 + 2 * k, 2) = -m * s;
+        (*J_f_pose)(b + 2 + 2 * k, 2) = m * c;
+      }
+    }
+  }
+  return f;
+}
+
+Eigen::MatrixXd PoseGenerator::Forward(const Eigen::MatrixXd& features) const {
+  return Forward(parameters_, features);
+}
+
+Eigen::MatrixXd PoseGenerator::Forward(const Eigen::VectorXd& parameters,
+                                       const Eigen::MatrixXd& features) const {
+  Check(parameters.size() == parameters_.size() && features.cols() == feature_dim(),
+        "PoseGenerator::Forward: expected " + std::to_string(parameters_.size()) +
+            " parameters and N x " + std::to_string(feature_dim()) + " features, got " +
+            std::to_string(parameters.size()) + " and " + std::to_string(features.rows()) +
+            " x " + std::to_string(features.cols()));
+  Eigen::MatrixXd h = features.transpose();  // F x N
+  for (std::size_t l = 0; l < layers_.size(); ++l) {
+    const Layer& L = layers_[l];
+    Eigen::Map<const Eigen::MatrixXd> W(parameters.data() + L.weight_offset, L.out, L.in);
+    Eigen::Map<const Eigen::VectorXd> bias(parameters.data() + L.bias_offset, L.out);
+    Eigen::MatrixXd a = W * h;
+    a.colwise() += bias;
+    h = l + 1 < layers_.size() ? Eigen::MatrixXd(a.array().tanh()) : a;
+  }
+  Eigen::MatrixXd z = h.transpose();  // N x d
+  z.array().rowwise() *= latent_stddev_.transpose().array();
+  z.rowwise() += latent_mean_.transpose();
+  return z;
+}
+
+void PoseGenerator::Backward(const Eigen::VectorXd& parameters, const Eigen::MatrixXd& features,
+                             const Eigen::MatrixXd& dL_dZ, Eigen::VectorXd* dL_dparameters,
+                             Eigen::MatrixXd* dL_dfeatures) const {
+  Check(parameters.size() == parameters_.size() && features.cols() == feature_dim() &&
+            dL_dZ.rows() == features.rows() && dL_dZ.cols() == options_.latent_dim,
+        "PoseGenerator::Backward: expected " + std::to_string(parameters_.size()) +
+            " parameters, N x " + std::to_string(feature_dim()) + " features and N x " +
+            std::to_string(options_.latent_dim) + " dL/dZ, got " +
+            std::to_string(parameters.size()) + ", " + std::to_string(features.rows()) +
+            " x " + std::to_string(features.cols()) + ", " + std::to_string(dL_dZ.rows()) +
+            " x " + std::to_string(dL_dZ.cols()));
+  std::vector<Eigen::MatrixXd> acts;  // inputs of each layer, in x N
+  acts.push_back(features.transpose());
+  for (std::size_t l = 0; l + 1 < layers_.size(); ++l) {
+    const Layer& L = layers_[l];
+    Eigen::Map<const Eigen::MatrixXd> W(parameters.data() + L.weight_offset, L.out, L.in);
+    Eigen::Map<const Eigen::VectorXd> bias(parameters.data() + L.bias_offset, L.out);
+    Eigen::MatrixXd a = W * acts.back();
+    a.colwise() += bias;
+    acts.push_back(a.array().tanh().matrix());
+  }
+  if (dL_dparameters != nullptr) *dL_dparameters = Eigen::VectorXd::Zero(parameters_.size());
+  Eigen::MatrixXd delta = dL_dZ.transpose();  // d x N, w.r.t. the output u
+  delta.array().colwise() *= latent_stddev_.array();
+  for (int l = static_cast<int>(layers_.size()) - 1; l >= 0; --l) {
+    const Layer& L = layers_[l];
+    Eigen::Map<const Eigen::MatrixXd> W(parameters.data() + L.weight_offset, L.out, L.in);
+    if (dL_dparameters != nullptr) {
+      Eigen::Map<Eigen::MatrixXd>(dL_dparameters->data() + L.weight_offset, L.out, L.in) =
+          delta * acts[l].transpose();
+      Eigen::Map<Eigen::VectorXd>(dL_dparameters->data() + L.bias_offset, L.out) =
+          delta.rowwise().sum();
+    }
+    if (l == 0 && dL_dfeatures == nullptr) break;
+    Eigen::MatrixXd back = W.transpose() * delta;  // in x N
+    if (l > 0) {
+      back.array() *= 1 - acts[l].array().square();
+      delta.swap(back);
+    } else {
+      *dL_dfeatures = back.transpose();
+    }
+  }
+}
+
+Eigen::VectorXd PoseGenerator::Generate(int tool_index, const SE2d& pose, double depth_m,
+                                        PoseJacobian* J_z_pose) const {
+  PoseJacobian J_f;
+  const Eigen::VectorXd f = Features(tool_index, pose, depth_m, J_z_pose ? &J_f : nullptr);
+  // One sample: forward keeping activations, then forward-mode through 4 directions.
+  Eigen::VectorXd h = f;
+  Eigen::MatrixXd dh = J_f;  // current layer's d h / d pose (only if wanted)
+  for (std::size_t l = 0; l < layers_.size(); ++l) {
+    const Layer& L = layers_[l];
+    Eigen::Map<const Eigen::MatrixXd> W(parameters_.data() + L.weight_offset, L.out, L.in);
+    Eigen::Map<const Eigen::VectorXd> bias(parameters_.data() + L.bias_offset, L.out);
+    Eigen::VectorXd a = W * h + bias;
+    if (J_z_pose != nullptr) dh = W * dh;
+    if (l + 1 < layers_.size()) {
+      h = a.array().tanh();
+      if (J_z_pose != nullptr) dh.array().colwise() *= 1 - h.array().square();
+    } else {
+      h = a;
+    }
+  }
+  if (J_z_pose != nullptr) {
+    *J_z_pose = dh;
+    J_z_pose->array().colwise() *= latent_stddev_.array();
+  }
+  return latent_mean_ + latent_stddev_.cwiseProduct(h);
+}
+
+Eigen::Matrix3d PoseCoordinatesFromTangent(const SE2d& pose) {
+  Eigen::Matrix3d j = Eigen::Matrix3d::Identity();
+  j.topLeftCorner<2, 2>() = pose.Rotation();
+  return j;
+}
+
+void PoseGenerator::set_info_json(const std::string& json) {
+  nlohmann::json parsed;
+  try {
+    parsed = nlohmann::json::parse(json);
+  } catch (const nlohmann::json::exception& e) {
+    throw std::invalid_argument(std::string("PoseGenerator::set_info_json: not JSON: ") + e.what());
+  }
+  Check(parsed.is_object(), "PoseGenerator::set_info_json: expected a JSON object");
+  info_json_ = parsed.dump();
+}
+
+std::string PoseGenerator::Serialize() const {
+  TensorFile file(kKind);
+  nlohmann::json meta;
+  meta["format"] = kFormat;
+  meta["version"] = kVersion;
+  meta["tools"] = options_.tools;
+  meta["symmetry_orders"] = options_.symmetry_orders;
+  meta["latent_dim"] = options_.latent_dim;
+  meta["hidden_sizes"] = options_.hidden_sizes;
+  meta["yaw_harmonics"] = options_.yaw_harmonics;
+  meta["position_scale"] = options_.position_scale;
+  meta["depth_center"] = options_.depth_center;
+  meta["depth_scale"] = options_.depth_scale;
+  meta["sigma_inflation"] = sigma_inflation_;
+  meta["info"] = nlohmann::json::parse(info_json_);
+  file.set_meta_json(meta.dump());
+  file.Add("parameters", TensorFile::DType::kFloat64, {parameters_.size()}, ToVector(parameters_));
+  file.Add("latent_mean", TensorFile::DType::kFloat64, {latent_mean_.size()},
+           ToVector(latent_mean_));
+  file.Add("latent_stddev", TensorFile::DType::kFloat64, {latent_stddev_.size()},
+           ToVector(latent_stddev_));
+  return file.Serialize();
+}
+
+void PoseGenerator::Save(const std::string& path) const {
+  WriteFileAtomically(path, Serialize());
+}
+
+namespace {
+
+PoseGenerator FromTensorFile(const TensorFile& file, const std::string& source) {
+  file.CheckFormat(kFormat, kVersion);
+  std::string field = "meta";
+  try {
+    const nlohmann::json meta = nlohmann::json::parse(file.meta_json());
+    PoseGenerator::Options options;
+    field = "tools";
+    options.tools = meta.at("tools").get<std::vector<std::string>>();
+    field = "symmetry_orders";
+    options.symmetry_orders = meta.at("symmetry_orders").get<std::vector<int>>();
+    field = "latent_dim";
+    options.latent_dim = meta.at("latent_dim").get<int>();
+    field = "hidden_sizes";
+    options.hidden_sizes = meta.at("hidden_sizes").get<std::vector<int>>();
+    field = "yaw_harmonics";
+    options.yaw_harmonics = meta.at("yaw_harmonics").get<int>();
+    field = "position_scale";
+    options.position_scale = meta.at("position_scale").get<double>();
+    field = "depth_center";
+    options.depth_center = meta.at("depth_center").get<double>();
+    field = "depth_scale";
+    options.depth_scale = meta.at("depth_scale").get<double>();
+    std::string error;
+    if (!options.IsValid(&error)) throw TensorFileError(source + ": " + error);
+    PoseGenerator model(options);
+    field = "sigma_inflation";
+    const double kappa = meta.at("sigma_inflation").get<double>();
+    if (!(kappa >= 0) || !std::isfinite(kappa)) {
+      throw TensorFileError(source + ": field 'sigma_inflation' must be finite and >= 0");
+    }
+    model.set_sigma_inflation(kappa);
+    field = "info";
+    const nlohmann::json& info = meta.at("info");
+    if (!info.is_object()) throw TensorFileError(source + ": field 'info' must be an object");
+    model.set_info_json(info.dump());
+    auto read = [&](const std::string& name, Eigen::Index size) {
+      const TensorFile::Tensor& t = file.Get(name, {static_cast<std::int64_t>(size)});
+      Eigen::VectorXd v = Eigen::Map<const Eigen::VectorXd>(t.values.data(), size);
+      if (!v.allFinite()) {
+        throw TensorFileError(source + ": tensor '" + name + "' holds non-finite values");
+      }
+      return v;
+    };
+    model.SetParameters(read("parameters", model.NumParameters()));
+    const Eigen::VectorXd mean = read("latent_mean", options.latent_dim);
+    const Eigen::VectorXd stddev = read("latent_stddev", options.latent_dim);
+    if (!(stddev.array() > 0).all()) {
+      throw TensorFileError(source + ": tensor 'latent_stddev' must be > 0 everywhere");
+    }
+    model.SetLatentStandardization(mean, stddev);
+    return model;
+  } catch (const nlohmann::json::exception& e) {
+    throw TensorFileError(source + ": field '" + field + "' is missing or has the wrong type (" +
+                          e.what() + ")");
+  }
+}
+
+}  // namespace
+
+PoseGenerator PoseGenerator::Parse(const std::string& bytes, const std::string& source) {
+  return FromTensorFile(TensorFile::Parse(bytes, source, kKind), source);
+}
+
+PoseGenerator PoseGenerator::Load(const std::string& path) {
+  return FromTensorFile(TensorFile::Read(path, kKind), path);
+}
+
+}  // namespace tactfunc

@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# Reproduces models/pretrained/pose_generator_bubble.tpg, the pose-conditioned generator of
+# the generator pose posterior (docs/POSES.md, "The generator path"), and the latent-only
+# variant it was compared with. Data: 12 tools x 1000 Soft Bubble contacts, seed 2 (as
+# scripts/train_pretrained_pose.sh), encoded with models/pretrained/default.tfm.
+# A few minutes on one core. Deterministic for the seeds.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+WORK=${WORK:-/tmp/pose_se2}
+TF=build/bin/tactfunc
+test -x "$TF" || bash scripts/build.sh
+mkdir -p "$WORK"
+run() { echo "+ $*"; "$@"; }
+run "$TF" synth --out "$WORK/data" --frames-per-tool 1000 --sensors bubble --seed 2 --threads 1 --overwrite
+run "$TF" encode --model models/pretrained/default.tfm --data "$WORK/data" --out "$WORK/f.tfs" --threads 1
+run "$TF" train-generator --model models/pretrained/default.tfm --functaset "$WORK/f.tfs" \
+  --data "$WORK/data" --out "$WORK/g_lat.tpg" --mode latents --epochs 100 --calibration-frames 60
+run "$TF" train-generator --model models/pretrained/default.tfm --functaset "$WORK/f.tfs" \
+  --data "$WORK/data" --out models/pretrained/pose_generator_bubble.tpg --mode pixels --epochs 100 \
+  --pixel-frames 400 --pixel-epochs 20 --calibration-frames 60

@@ -1,0 +1,200 @@
+// Copyright 2026 The tactfunc Authors.
+#include "estimation/synthesis/pose_fitter.h"
+
+#include <cmath>
+#include <memory>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "ceres/autodiff_cost_function.h"
+#include "ceres/dynamic_autodiff_cost_function.h"
+#include "ceres/dynamic_numeric_diff_cost_function.h"
+#include "ceres/jet.h"
+#include "estimation/synthesis/generator_posterior.h"
+#include "models/simulator/tool.h"
+#include "tests/support/sampler_test_util.h"
+
+namespace tactfunc {
+namespace {
+
+constexpr int kRows = 10, kCols = 12, kLatent = 6;
+
+SensorTrunk Trunk() { return testing_util::MakeTinyTrunk(kRows, kCols, 16, 2, kLatent, 11); }
+
+PoseGenerator Generator() {
+  PoseGenerator::Options o;
+  o.tools = {"l_shape", "rod"};
+  o.symmetry_orders = {1, 2};
+  o.latent_dim = kLatent;
+  o.hidden_sizes = {12};
+  o.yaw_harmonics = 2;
+  PoseGenerator g(o, 5);
+  g.SetLatentStandardization(Eigen::VectorXd::Zero(kLatent), Eigen::VectorXd::Constant(kLatent, 0.6));
+  return g;
+}
+
+// The frame the generator renders at a pose (noise-free unless noise > 0).
+TrunkTargets Render(const SensorTrunk& trunk, const PoseGenerator& g, int tool, const SE2d& pose,
+                    double depth, double noise = 0) {
+  return testing_util::MakeTargets(trunk, g.Generate(tool, pose, depth), noise, 17);
+}
+
+TEST(SE2Manifold, PlusMinusRoundTripAndJacobiansMatchDifferences) {
+  const SE2Manifold m;
+  const double x[3] = {0.01, -0.02, 2.9};
+  const double delta[3] = {0.003, -0.001, 0.5};  // crosses yaw = pi
+  double y[3], back[3];
+  ASSERT_TRUE(m.Plus(x, delta, y));
+  EXPECT_LE(y[2], M_PI);
+  ASSERT_TRUE(m.Minus(y, x, back));
+  for (int i = 0; i < 3; ++i) EXPECT_NEAR(back[i], delta[i], 1e-12);
+  double J[9], Jm[9];
+  ASSERT_TRUE(m.PlusJacobian(x, J));
+  ASSERT_TRUE(m.MinusJacobian(x, Jm));
+  for (int c = 0; c < 3; ++c) {
+    double d[3] = {0, 0, 0};
+    d[c] = 1e-7;
+    double yp[3], ym[3];
+    m.Plus(x, d, yp);
+    d[c] = -1e-7;
+    m.Plus(x, d, ym);
+    for (int r = 0; r < 3; ++r) EXPECT_NEAR(J[3 * r + c], (yp[r] - ym[r]) / 2e-7, 1e-6);
+  }
+  const Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> P(J), M(Jm);
+  EXPECT_TRUE((M * P).isApprox(Eigen::Matrix3d::Identity(), 1e-12));
+}
+
+// The autodiff reference: trunk and generator as Jet templates.
+struct AutoDiffPoseResidual {
+  const LatentProblem* problem;
+  const PoseGenerator* g;
+  int tool;
+  template <typename T>
+  bool operator()(T const* const* p, T* r) const {
+    std::vector<T> z(kLatent);
+    g->GenerateT<T>(tool, p[0], p[1][0], z.data());
+    const double inv = 1.0 / problem->sigma();
+    for (int j = 0; j < problem->num_pixels(); ++j) {
+      const T coord[2] = {T(problem->coords()(j, 0)), T(problem->coords()(j, 1))};
+      T out;
+      problem->trunk().siren.Evaluate(coord, z.data(), &out);
+      r[j] = (out - T(problem->pixel_targets()(j, 0))) *
+             T(std::sqrt(problem->pixel_weights()[j]) * inv);
+    }
+    return true;
+  }
+};
+
+TEST(GeneratorPoseCost, AnalyticJacobianMatchesAutodiffAndNumericDifferentiation) {
+  const SensorTrunk trunk = Trunk();
+  const PoseGenerator g = Generator();
+  const TrunkTargets targets = Render(trunk, g, 0, SE2d::FromXYYaw(1e-3, 0, 0.7), 0.008, 0.01);
+  LatentProblem::Options po;
+  po.precision = LatentProblem::Precision::kDouble;  // central differences need double passes
+  const LatentProblem problem(trunk, targets, po);
+  const GeneratorPoseCost analytic(problem, g, 0);
+  const double pose[3] = {-5e-4, 1.5e-3, -2.2};
+  const double depth = 0.011;
+  const double* params[2] = {pose, &depth};
+  const int n = problem.num_residuals();
+  std::vector<double> r(n), J0(3 * n), J1(n);
+  double* jac[2] = {J0.data(), J1.data()};
+  ASSERT_TRUE(analytic.Evaluate(params, r.data(), jac));
+
+  auto* functor = new AutoDiffPoseResidual{&problem, &g, 0};
+  ceres::DynamicAutoDiffCostFunction<AutoDiffPoseResidual, 4> autodiff(functor);
+  autodiff.AddParameterBlock(3);
+  autodiff.AddParameterBlock(1);
+  autodiff.SetNumResiduals(n);
+  std::vector<double> ra(n), A0(3 * n), A1(n);
+  double* ajac[2] = {A0.data(), A1.data()};
+  ASSERT_TRUE(autodiff.Evaluate(params, ra.data(), ajac));
+
+  struct Numeric {
+    const GeneratorPoseCost* cost;
+    bool operator()(double const* const* p, double* r) const { return cost->Evaluate(p, r, nullptr); }
+  };
+  ceres::NumericDiffOptions nd;
+  ceres::DynamicNumericDiffCostFunction<Numeric, ceres::CENTRAL> numeric(
+      new Numeric{&analytic}, ceres::TAKE_OWNERSHIP, nd);
+  numeric.AddParameterBlock(3);
+  numeric.AddParameterBlock(1);
+  numeric.SetNumResiduals(n);
+  std::vector<double> rn(n), N0(3 * n), N1(n);
+  double* njac[2] = {N0.data(), N1.data()};
+  ASSERT_TRUE(numeric.Evaluate(params, rn.data(), njac));
+
+  double scale = 0;
+  for (double v : A0) scale = std::max(scale, std::abs(v));
+  for (int i = 0; i < n; ++i) {
+    EXPECT_NEAR(r[i], ra[i], 1e-9 * (1 + std::abs(ra[i])));
+    for (int c = 0; c < 3; ++c) {
+      EXPECT_NEAR(J0[3 * i + c], A0[3 * i + c], 1e-9 * scale) << "residual " << i << " col " << c;
+      EXPECT_NEAR(J0[3 * i + c], N0[3 * i + c], 1e-5 * scale) << "residual " << i << " col " << c;
+    }
+    EXPECT_NEAR(J1[i], A1[i], 1e-9 * scale);
+    EXPECT_NEAR(J1[i], N1[i], 1e-5 * scale);
+  }
+}
+
+TEST(FitPoseModes, RecoversTheRenderedPoseFromNearbyStartsAndKeepsDistinctModes) {
+  const SensorTrunk trunk = Trunk();
+  const PoseGenerator g = Generator();
+  const SE2d truth = SE2d::FromXYYaw(1.2e-3, -0.8e-3, 0.6);
+  const TrunkTargets targets = Render(trunk, g, 0, truth, 0.009);
+  LatentProblem::Options po;
+  po.sigma = 0.01;
+  const LatentProblem problem(trunk, targets, po);
+  PoseFitOptions options;
+  options.max_iterations = 50;
+  const std::vector<PoseStart> starts = {
+      {SE2d::FromXYYaw(1.0e-3, -0.6e-3, 0.5), 0.0085, "near"},
+      {SE2d::FromXYYaw(1.3e-3, -0.9e-3, 0.65), 0.0095, "near2"}};
+  const std::vector<PoseFit> modes = FitPoseModes(problem, g, 0, starts, options);
+  ASSERT_FALSE(modes.empty());
+  EXPECT_TRUE(modes[0].usable);
+  EXPECT_NEAR(modes[0].sensor_T_object.x(), truth.x(), 2e-5);
+  EXPECT_NEAR(modes[0].sensor_T_object.y(), truth.y(), 2e-5);
+  EXPECT_NEAR(modes[0].sensor_T_object.yaw(), truth.yaw(), 1e-3);
+  EXPECT_NEAR(modes[0].depth_m, 0.009, 2e-5);
+  EXPECT_LT(modes[0].cost, 1e-4);
+  // The two nearby starts reach one mode.
+  EXPECT_EQ(modes.size(), 1u);
+  // The depth stays inside its bounds from a start outside them.
+  const std::vector<PoseFit> bounded = FitPoseModes(
+      problem, g, 0, {{SE2d::FromXYYaw(1.2e-3, -0.8e-3, 0.6), 0.5, "deep"}}, options);
+  ASSERT_FALSE(bounded.empty());
+  EXPECT_LE(bounded[0].depth_m, options.depth_max_m);
+}
+
+TEST(GeneratorPosterior, LaplaceCoversTheTruthAndPrefersTheRenderingTool) {
+  const SensorTrunk trunk = Trunk();
+  const PoseGenerator g = Generator();
+  const SE2d truth = SE2d::FromXYYaw(-0.7e-3, 0.4e-3, -1.0);
+  const TrunkTargets targets = Render(trunk, g, 0, truth, 0.010, 0.002);
+  GeneratorPosterior::Options options;
+  options.sigma_inflation = 1;
+  options.fit.max_iterations = 50;
+  const GeneratorPosterior posterior(trunk, g, options);  // no k-NN: grid starts
+  PoseMixture mixture;
+  const GeneratorPosterior::Summary s = posterior.Estimate(targets, "", &mixture);
+  ASSERT_TRUE(s.usable) << s.message;
+  EXPECT_EQ(s.tool, "l_shape");
+  EXPECT_GT(s.tool_probabilities.at("l_shape"), 0.95);
+  EXPECT_NEAR(s.mean.x(), truth.x(), 5e-4);
+  EXPECT_NEAR(YawErrorModuloSymmetry(s.mean.yaw(), truth.yaw(), 1), 0, 0.05);
+  EXPECT_TRUE(mixture.Contains(truth, 0.9, 400, 1, "l_shape"));
+  // A scene that names the tool fits only that tool.
+  const GeneratorPosterior::Summary named = posterior.Estimate(targets, "rod", &mixture);
+  ASSERT_TRUE(named.usable);
+  for (const LaplaceComponent& c : mixture.components()) EXPECT_EQ(c.tool, "rod");
+  EXPECT_THROW(posterior.Estimate(targets, "spoon", &mixture), std::invalid_argument);
+  // Deterministic.
+  PoseMixture again;
+  posterior.Estimate(targets, "", &again);
+  EXPECT_EQ(again.Mode().x(), posterior.Estimate(targets, "", &mixture).mean.x());
+}
+
+}  // namespace
+}  // namespace tactfunc

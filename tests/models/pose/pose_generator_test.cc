@@ -1,0 +1,162 @@
+// Copyright 2026 The tactfunc Authors.
+#include "models/pose/pose_generator.h"
+
+#include <cmath>
+#include <filesystem>
+#include <string>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "ceres/jet.h"
+#include "models/core/tensor_file.h"
+
+namespace tactfunc {
+namespace {
+
+PoseGenerator::Options SmallOptions() {
+  PoseGenerator::Options o;
+  o.tools = {"rod", "l_shape", "hemisphere"};
+  o.symmetry_orders = {2, 1, 0};
+  o.latent_dim = 5;
+  o.hidden_sizes = {7, 6};
+  o.yaw_harmonics = 3;
+  return o;
+}
+
+PoseGenerator Trained() {
+  PoseGenerator g(SmallOptions(), 3);
+  Eigen::VectorXd mean(5), stddev(5);
+  mean << 0.1, -0.2, 0.3, 0, 0.5;
+  stddev << 1, 2, 0.5, 1.5, 0.7;
+  g.SetLatentStandardization(mean, stddev);
+  return g;
+}
+
+TEST(PoseGenerator, RejectsBadOptionsNamingTheField) {
+  PoseGenerator::Options o = SmallOptions();
+  o.symmetry_orders.pop_back();
+  std::string error;
+  EXPECT_FALSE(o.IsValid(&error));
+  EXPECT_THAT(error, ::testing::HasSubstr("symmetry_orders"));
+  EXPECT_THROW(PoseGenerator(o, 0), std::invalid_argument);
+  o = SmallOptions();
+  o.tools[1] = "rod";
+  EXPECT_FALSE(o.IsValid(&error));
+  EXPECT_THAT(error, ::testing::HasSubstr("twice"));
+}
+
+TEST(PoseGenerator, IsInvariantUnderTheToolsSymmetryAndDeterministicFromItsSeed) {
+  const PoseGenerator g = Trained();
+  const SE2d a = SE2d::FromXYYaw(1e-3, -2e-3, 0.4);
+  const SE2d b = SE2d::FromXYYaw(1e-3, -2e-3, 0.4 + M_PI);
+  EXPECT_TRUE(g.Generate(0, a, 0.008).isApprox(g.Generate(0, b, 0.008), 1e-12));  // rod, n = 2
+  EXPECT_FALSE(g.Generate(1, a, 0.008).isApprox(g.Generate(1, b, 0.008), 1e-6));  // n = 1
+  EXPECT_TRUE(g.Generate(2, a, 0.008).isApprox(
+      g.Generate(2, SE2d::FromXYYaw(1e-3, -2e-3, -2.0), 0.008), 1e-12));  // hemisphere
+  EXPECT_EQ(PoseGenerator(SmallOptions(), 3).parameters(), g.parameters());
+  EXPECT_NE(PoseGenerator(SmallOptions(), 4).parameters(), g.parameters());
+}
+
+TEST(PoseGenerator, BatchedForwardAndTheJetPathAgreeWithGenerate) {
+  const PoseGenerator g = Trained();
+  const SE2d pose = SE2d::FromXYYaw(2e-3, 1e-3, -1.1);
+  const Eigen::VectorXd z = g.Generate(1, pose, 0.01);
+  const Eigen::MatrixXd batch = g.Forward(g.Features(1, pose, 0.01).transpose());
+  EXPECT_TRUE(batch.row(0).transpose().isApprox(z, 1e-12));
+  double xyyaw[3] = {pose.x(), pose.y(), pose.yaw()};
+  Eigen::VectorXd zt(5);
+  g.GenerateT<double>(1, xyyaw, 0.01, zt.data());
+  EXPECT_TRUE(zt.isApprox(z, 1e-12));
+}
+
+TEST(PoseGenerator, PoseJacobianMatchesAutodiffAndCentralDifferences) {
+  const PoseGenerator g = Trained();
+  for (int tool = 0; tool < 3; ++tool) {
+    const SE2d pose = SE2d::FromXYYaw(-1e-3, 2.5e-3, 2.3);
+    const double depth = 0.007;
+    PoseGenerator::PoseJacobian J;
+    g.Generate(tool, pose, depth, &J);
+    using Jet = ceres::Jet<double, 4>;
+    Jet p[3] = {Jet(pose.x(), 0), Jet(pose.y(), 1), Jet(pose.yaw(), 2)};
+    Jet zj[5];
+    g.GenerateT<Jet>(tool, p, Jet(depth, 3), zj);
+    const double h[4] = {1e-7, 1e-7, 1e-6, 1e-7};
+    for (int k = 0; k < 5; ++k) {
+      for (int c = 0; c < 4; ++c) EXPECT_NEAR(J(k, c), zj[k].v[c], 1e-9 * (1 + std::abs(J(k, c))));
+    }
+    for (int c = 0; c < 4; ++c) {
+      double v[4] = {pose.x(), pose.y(), pose.yaw(), depth};
+      double w[4] = {pose.x(), pose.y(), pose.yaw(), depth};
+      v[c] += h[c];
+      w[c] -= h[c];
+      const Eigen::VectorXd d =
+          (g.Generate(tool, SE2d::FromXYYaw(v[0], v[1], v[2]), v[3]) -
+           g.Generate(tool, SE2d::FromXYYaw(w[0], w[1], w[2]), w[3])) / (2 * h[c]);
+      EXPECT_TRUE(d.isApprox(J.col(c), 1e-5)) << "tool " << tool << " column " << c;
+    }
+  }
+}
+
+TEST(PoseGenerator, BackwardMatchesCentralDifferencesOfTheParameters) {
+  const PoseGenerator g = Trained();
+  Eigen::MatrixXd f(2, g.feature_dim());
+  f.row(0) = g.Features(0, SE2d::FromXYYaw(1e-3, 0, 0.3), 0.01).transpose();
+  f.row(1) = g.Features(1, SE2d::FromXYYaw(0, -1e-3, 2.0), 0.005).transpose();
+  Eigen::MatrixXd w = Eigen::MatrixXd::Random(2, 5);  // L = sum w .* Z
+  Eigen::VectorXd grad;
+  Eigen::MatrixXd dfeat;
+  g.Backward(g.parameters(), f, w, &grad, &dfeat);
+  const Eigen::VectorXd theta = g.parameters();
+  for (int k = 0; k < theta.size(); k += 7) {
+    Eigen::VectorXd a = theta, b = theta;
+    a[k] += 1e-6;
+    b[k] -= 1e-6;
+    const double d = ((g.Forward(a, f).array() * w.array()).sum() -
+                      (g.Forward(b, f).array() * w.array()).sum()) / 2e-6;
+    EXPECT_NEAR(grad[k], d, 1e-6 * (1 + std::abs(d))) << "parameter " << k;
+  }
+  Eigen::MatrixXd fa = f;
+  fa(1, 4) += 1e-6;
+  Eigen::MatrixXd fb = f;
+  fb(1, 4) -= 1e-6;
+  const double d = ((g.Forward(fa).array() * w.array()).sum() -
+                    (g.Forward(fb).array() * w.array()).sum()) / 2e-6;
+  EXPECT_NEAR(dfeat(1, 4), d, 1e-6);
+}
+
+TEST(PoseGenerator, FileRoundTripIsExactAndCorruptFieldsAreNamed) {
+  PoseGenerator g = Trained();
+  g.set_sigma_inflation(4.5);
+  g.set_info_json(R"({"mode": "pixels"})");
+  const std::string bytes = g.Serialize();
+  const PoseGenerator back = PoseGenerator::Parse(bytes, "g.tpg");
+  EXPECT_EQ(back.parameters(), g.parameters());
+  EXPECT_EQ(back.latent_mean(), g.latent_mean());
+  EXPECT_EQ(back.latent_stddev(), g.latent_stddev());
+  EXPECT_EQ(back.sigma_inflation(), 4.5);
+  EXPECT_EQ(back.options().tools, g.options().tools);
+  EXPECT_EQ(back.info_json(), g.info_json());
+
+  const std::string path =
+      (std::filesystem::temp_directory_path() / "pose_generator_test.tpg").string();
+  g.Save(path);
+  EXPECT_EQ(PoseGenerator::Load(path).parameters(), g.parameters());
+  std::filesystem::remove(path);
+
+  // A file with a missing field, and one of another kind.
+  TensorFile file = TensorFile::Parse(bytes, "g.tpg");
+  file.set_meta_json(R"({"format": "tactfunc-pose-generator", "version": 1, "tools": ["rod"]})");
+  try {
+    PoseGenerator::Parse(file.Serialize(), "broken.tpg");
+    FAIL() << "expected TensorFileError";
+  } catch (const TensorFileError& e) {
+    EXPECT_THAT(e.what(), ::testing::HasSubstr("broken.tpg"));
+    EXPECT_THAT(e.what(), ::testing::HasSubstr("symmetry_orders"));
+  }
+  TensorFile other("pose_model");
+  EXPECT_THROW(PoseGenerator::Parse(other.Serialize(), "other.tpm"), TensorFileError);
+}
+
+}  // namespace
+}  // namespace tactfunc
