@@ -715,7 +715,7 @@ void Dataset::ValidateAllFrames() const {
   }
 }
 
-std::uint64_t Dataset::BytesOnDisk() const {
+std::vector<std::string> Dataset::Files() const {
   std::set<std::string> files;
   if (video_frames_) {
     files.insert(root_);
@@ -732,8 +732,12 @@ std::uint64_t Dataset::BytesOnDisk() const {
   }
   if (!metadata_path_.empty()) files.insert(metadata_path_);
   if (!labels_path_.empty()) files.insert(labels_path_);
+  return std::vector<std::string>(files.begin(), files.end());
+}
+
+std::uint64_t Dataset::BytesOnDisk() const {
   std::uint64_t total = 0;
-  for (const std::string& file : files) total += internal::FileSizeOrThrow(file);
+  for (const std::string& file : Files()) total += internal::FileSizeOrThrow(file);
   return total;
 }
 
