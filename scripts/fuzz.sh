@@ -61,6 +61,7 @@ for target in "${targets[@]}"; do
   binary=$build/fuzz/${target}_fuzzer
   [[ -x $binary ]] || { echo "fuzz.sh: no target '$target' (one of: ${all[*]})" >&2; exit 2; }
   corpus=$build/corpus/$target
+  [[ $smoke -eq 1 ]] && corpus=$build/smoke-corpus/$target  # leaves the long runs' corpora alone
   mkdir -p "$corpus" "$build/findings/$target"
   budget=(-runs="$runs")
   [[ -n $seconds ]] && budget=(-max_total_time="$seconds")
