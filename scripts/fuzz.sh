@@ -11,8 +11,9 @@
 # N executions (--runs, default 1000000) or S seconds (--seconds), under `nice -n 15`.
 # Targets: tensor_file model functaset pose_model knn_index labels_csv dataset image
 # (default: all). Corpora grow in build-fuzz/corpus/<target>/; a crash is saved in
-# build-fuzz/findings/<target>/ and ends the script with exit 1. Each run's last libFuzzer
-# line (executions, coverage) goes to build-fuzz/fuzz.log.
+# build-fuzz/findings/<target>/ (with the run's log, last_run.log) and ends the script
+# with exit 1. The smoke keeps its corpora and logs in build-fuzz/smoke/. Each finished
+# run's count and last libFuzzer line (coverage) is appended to build-fuzz/fuzz.log.
 # Exit 77 (a skip for ctest) if clang++ is not installed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -51,7 +52,6 @@ fi
 nice -n 15 cmake --build $build --target tactfunc_fuzzers -j"$(nproc)" 2>&1 |
   { grep -Ev '^\[ *[0-9]+%\]|^-- |warning: unknown warning option|^[0-9]+ warnings? generated' || true; }
 
-mkdir -p $build/corpus $build/findings
 seeds=$build/seeds
 rm -rf $seeds
 ASAN_OPTIONS=detect_leaks=0 $build/fuzz/make_seed_corpora $seeds >/dev/null
@@ -61,22 +61,26 @@ for target in "${targets[@]}"; do
   binary=$build/fuzz/${target}_fuzzer
   [[ -x $binary ]] || { echo "fuzz.sh: no target '$target' (one of: ${all[*]})" >&2; exit 2; }
   corpus=$build/corpus/$target
-  [[ $smoke -eq 1 ]] && corpus=$build/smoke-corpus/$target  # leaves the long runs' corpora alone
-  mkdir -p "$corpus" "$build/findings/$target"
+  findings=$build/findings/$target
+  if [[ $smoke -eq 1 ]]; then  # leaves the long runs' corpora and logs alone
+    corpus=$build/smoke/corpus/$target
+    findings=$build/smoke/findings/$target
+  fi
+  mkdir -p "$corpus" "$findings"
   budget=(-runs="$runs")
   [[ -n $seconds ]] && budget=(-max_total_time="$seconds")
-  log=$build/findings/$target/last_run.log
+  log=$findings/last_run.log
   start=$(date +%s)
   # -rss_limit_mb: a reader that allocates beyond its input is a finding too.
   if ! nice -n 15 "$binary" "$corpus" "$seeds/$target" "${budget[@]}" -rss_limit_mb=2048 \
-      -timeout=30 -max_len=8192 -artifact_prefix="$build/findings/$target/" \
+      -timeout=30 -max_len=8192 -artifact_prefix="$findings/" \
       -print_final_stats=1 >"$log" 2>&1; then
     tail -40 "$log"
-    echo "fuzz.sh: $target: FINDING (input saved in $build/findings/$target/)" >&2
+    echo "fuzz.sh: $target: FINDING (input saved in $findings/)" >&2
     exit 1
   fi
-  executions=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$' || true)
-  line=$(grep -E '^#[0-9]+[[:space:]]+(DONE|INITED)' "$log" | tail -1 || true)
+  executions=$(grep -ao 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$' || true)
+  line=$(grep -aE '^#[0-9]+[[:space:]]+(DONE|INITED)' "$log" | tail -1 || true)
   summary="$(date -u +%FT%TZ) $target: $executions executions in $(( $(date +%s) - start )) s, 0 crashes; $line"
   echo "fuzz.sh: $summary"
   [[ $smoke -eq 1 ]] || echo "$summary" >>$build/fuzz.log
