@@ -19,11 +19,13 @@
 
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
+#include "apps/output_paths.h"
 #include "apps/progress_bar.h"
 #include "estimation/data/dataset.h"
 #include "estimation/functaset/functaset.h"
 #include "estimation/functaset/latent_encoder.h"
 #include "models/trunk/functa_model.h"
+#include "models/core/atomic_file.h"
 #include "models/core/tensor_file.h"
 
 namespace tactfunc::apps {
@@ -91,9 +93,42 @@ std::string ResumeCommand(const EncodeFlags& flags) {
   return command + " --resume";
 }
 
+// After a failed encode: tells on stderr whether --out holds a partial functaset (this
+// run's checkpoint, or an earlier one) and how to continue or discard it.
+void PartialOutputNote(const EncodeFlags& flags, bool existed_before) {
+  std::error_code ec;
+  if (!std::filesystem::exists(flags.out, ec)) {
+    std::cerr << "encode: nothing was written to " << flags.out << "\n";
+    return;
+  }
+  try {
+    const Functaset partial = Functaset::Load(flags.out);
+    if (partial.complete()) {
+      std::cerr << "encode: " << flags.out << " is unchanged (a complete functaset from "
+                << "an earlier run)\n";
+      return;
+    }
+    std::cerr << "encode: " << flags.out << " holds a PARTIAL functaset of " << partial.size()
+              << " frames" << (existed_before ? "" : " written by this run")
+              << "; after fixing the cause, continue it with:\n  " << ResumeCommand(flags)
+              << "\nor delete it to start over\n";
+  } catch (const std::exception&) {
+    if (!existed_before) {
+      std::cerr << "encode: " << flags.out << " exists but is not a readable functaset\n";
+    }
+  }
+}
+
 void RunEncode(const EncodeFlags& flags) {
+  // --out doubles as the checkpoint: it must not be the model or any dataset file.
+  const std::vector<NamedPath> outputs = {{"--out", flags.out}};
+  std::vector<NamedPath> inputs = DatasetPathInputs("--data", flags.data, flags.dataset);
+  inputs.push_back({"--model", flags.model});
+  RefuseOutputsThatAreInputs(outputs, inputs);
+  RemoveStaleTemporaries(flags.out);  // left by an earlier run killed mid-write
   const FunctaModel model = FunctaModel::Load(flags.model);
   const Dataset dataset = OpenDataset(flags.data, flags.dataset);
+  RefuseOutputsThatAreInputs(outputs, DatasetFileInputs("--data", dataset));
 
   LatentEncoder::Options options;
   options.threads = ResolveThreads(flags.threads);
@@ -165,9 +200,14 @@ void RunEncode(const EncodeFlags& flags) {
 
   LatentEncoder::Summary summary;
   Functaset functaset;
-  {
+  try {
     InterruptScope scope;
     functaset = encoder.Encode(dataset, &summary, progress, &g_interrupt);
+  } catch (const std::exception&) {
+    bar.Finish();
+    // Never leave a partial output unannounced: say what --out holds now.
+    PartialOutputNote(flags, out_exists);
+    throw;
   }
   bar.Finish();
 

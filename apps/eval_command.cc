@@ -28,6 +28,7 @@
 #include "apps/bench.h"
 #include "apps/command.h"
 #include "apps/model_inputs.h"
+#include "apps/output_paths.h"
 #include "apps/pictures.h"
 #include "apps/progress_bar.h"
 #include "estimation/evaluation/table_evaluation.h"
@@ -284,11 +285,24 @@ void RunEval(const EvalFlags& flags) {
   if (!fs::is_directory(flags.data)) {
     throw DatasetError("--data '" + flags.data + "': no such dataset folder");
   }
+  std::vector<NamedPath> outputs =
+      FilesIn("--out", flags.out, {"table.md", "table.json", "rate_distortion.png"});
+  outputs.push_back({"--out", flags.out});
+  std::vector<NamedPath> read = DatasetPathInputs("--data", flags.data, DatasetFlags());
+  read.push_back({"--model", flags.model});
+  read.push_back({"--functaset", flags.functaset});
+  read.push_back({"--pose-model", flags.pose_model});
+  for (std::size_t k = 0; k < flags.extra_functasets.size(); ++k) {
+    read.push_back({"--extra-functaset", flags.extra_functasets[k]});
+    read.push_back({"--extra-model", flags.extra_models[k]});
+  }
+  RefuseOutputsThatAreInputs(outputs, read);
   const int threads = ResolveThreads(flags.threads);
   const FunctaModel model = FunctaModel::Load(flags.model);
   const Functaset functaset = Functaset::Load(flags.functaset);
   functaset.CheckModel(model, flags.model, flags.functaset);
   const Dataset dataset = Dataset::Open(flags.data);
+  RefuseOutputsThatAreInputs(outputs, DatasetFileInputs("--data", dataset));
 
   // Sensors: --sensors, else every sensor of the functaset.
   std::vector<SensorKind> sensors;

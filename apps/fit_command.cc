@@ -34,6 +34,7 @@
 
 #include "apps/command.h"
 #include "apps/model_inputs.h"
+#include "apps/output_paths.h"
 #include "apps/pictures.h"
 #include "estimation/data/dataset.h"
 #include "estimation/data/image_io.h"
@@ -191,6 +192,26 @@ void RunFit(const FitFlags& flags) {
     throw UsageError("--jacobian: expected analytic or autodiff, got '" + flags.jacobian + "'");
   }
   if (!problem_options.IsValid(&error) || !options.IsValid(&error)) throw UsageError(error);
+
+  // Nothing fit writes -- --out's files, the k-NN index cached beside the functaset --
+  // may be a file it reads.
+  std::vector<NamedPath> inputs = {{"--model", flags.model},
+                                   {"--functaset", flags.functaset},
+                                   {"--frame", flags.frame},
+                                   {"--reference", flags.reference}};
+  std::vector<NamedPath> knn_files;
+  if (strategy.knn) {
+    for (const char* name : {"bubble", "gelslim"}) {
+      knn_files.push_back({"the k-NN index", flags.functaset + "." + name + ".knn"});
+    }
+    RefuseOutputsThatAreInputs(knn_files, inputs);
+  }
+  if (!flags.out.empty()) {
+    std::vector<NamedPath> outputs = FilesIn("--out", flags.out, {"latent.json", "fit.png"});
+    outputs.push_back({"--out", flags.out});
+    inputs.insert(inputs.end(), knn_files.begin(), knn_files.end());
+    RefuseOutputsThatAreInputs(outputs, inputs);
+  }
 
   SensorKind sensor;
   if (!ParseSensorFlag(flags.sensor, &sensor)) sensor = InferSensor(flags.frame, "--frame");

@@ -128,8 +128,10 @@ nlohmann::json DescribeModel(const std::string& bytes, const std::string& path) 
     const double steps = NumberAt(run, "steps"), seconds = NumberAt(run, "train_seconds");
     const double psnr = NumberAt(run, "train_psnr");
     if (std::isfinite(steps)) {
-      std::cout << "           trained " << FormatFixed(steps, 0) << " steps in "
-                << FormatFixed(seconds, 0) << " s, monitor PSNR after K steps "
+      // Models written before the timing left the file still carry train_seconds.
+      std::cout << "           trained " << FormatFixed(steps, 0) << " steps"
+                << (std::isfinite(seconds) ? " in " + FormatFixed(seconds, 0) + " s" : "")
+                << ", monitor PSNR after K steps "
                 << FormatFixed(psnr, 2) << " dB\n";
     }
     trunk["steps"] = CountOrNull(steps);

@@ -4,12 +4,56 @@
 // `tactfunc <subcommand> --help` describes one.
 #include <malloc.h>
 
+#include <cctype>
+#include <cstdio>
+#include <cstdlib>
 #include <exception>
 #include <iostream>
+#include <string>
 
 #include "CLI/CLI.hpp"
 #include "apps/command.h"
 #include "estimation/data/dataset.h"
+
+namespace {
+
+// "tactfunc" and the subcommand chosen so far, as every error message starts.
+std::string CommandName(const CLI::App& app) {
+  std::string name = "tactfunc";
+  for (const CLI::App* sub : app.get_subcommands()) name += " " + sub->get_name();
+  return name;
+}
+
+// Numbers in CLI11's range messages as people write them: "0.000000" -> "0" and the
+// 309-digit "179769313...368.000000" (the largest double) -> "1.79769e+308".
+std::string ShortNumbers(const std::string& text) {
+  std::string out;
+  for (std::size_t i = 0; i < text.size();) {
+    const bool starts = std::isdigit(static_cast<unsigned char>(text[i])) &&
+                        (i == 0 || !std::isalnum(static_cast<unsigned char>(text[i - 1])));
+    if (!starts) {
+      out += text[i++];
+      continue;
+    }
+    std::size_t end = i;
+    while (end < text.size() &&
+           (std::isdigit(static_cast<unsigned char>(text[end])) || text[end] == '.')) {
+      ++end;
+    }
+    const std::string number = text.substr(i, end - i);
+    if (number.find('.') != std::string::npos || number.size() > 12) {
+      char buffer[32];
+      std::snprintf(buffer, sizeof(buffer), "%.6g", std::strtod(number.c_str(), nullptr));
+      out += buffer;
+    } else {
+      out += number;
+    }
+    i = end;
+  }
+  return out;
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
   using namespace tactfunc::apps;
@@ -26,6 +70,12 @@ int main(int argc, char** argv) {
       "tactfunc"};
   app.require_subcommand(1);
   app.set_version_flag("--version", "tactfunc 0.1.0");
+  // Flag errors (a value out of range, a missing required flag) read like every other
+  // error: "tactfunc <cmd>: error: ...", with short numbers.
+  app.failure_message([](const CLI::App* failed, const CLI::Error& e) {
+    return CommandName(*failed) + ": error: " + ShortNumbers(e.what()) +
+           "\nRun with --help for more information.\n";
+  });
   CommandBody body;
   RegisterSynth(app, &body);
   RegisterShow(app, &body);
@@ -46,8 +96,7 @@ int main(int argc, char** argv) {
     // CLI11 prints the help (exit 0) or the usage error; every usage error exits 2.
     return app.exit(e) == 0 ? 0 : 2;
   }
-  std::string name = "tactfunc";
-  for (const CLI::App* sub : app.get_subcommands()) name += " " + sub->get_name();
+  const std::string name = CommandName(app);
   try {
     if (body) body();
   } catch (const UsageError& e) {

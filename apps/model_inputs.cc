@@ -5,7 +5,6 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <opencv2/imgcodecs.hpp>
 #include <stdexcept>
 
 #include "apps/command.h"
@@ -21,15 +20,21 @@ SensorKind InferSensor(const std::string& path, const std::string& flag) {
   if (!fs::is_regular_file(path)) {
     throw DatasetError(flag + " '" + path + "': no such file");
   }
-  const cv::Mat image = cv::imread(path, cv::IMREAD_UNCHANGED);
-  if (image.empty()) throw DatasetError(flag + " '" + path + "': not an image OpenCV can read");
-  if (image.depth() == CV_16U && image.channels() == 1) return SensorKind::kSoftBubble;
-  if (image.depth() == CV_8U) return SensorKind::kGelSlim;
+  // From the header alone (no pixel decoded): a frame too large is refused here.
+  ImageHeader header;
+  try {
+    header = ReadImageHeader(path);
+  } catch (const DatasetError& e) {
+    throw DatasetError(flag + ": " + e.what());
+  }
+  const bool png = header.format == ImageHeader::Format::kPng;
+  if (png && header.bit_depth == 16 && header.channels == 1) return SensorKind::kSoftBubble;
+  if (!png || header.bit_depth <= 8) return SensorKind::kGelSlim;
   throw DatasetError(flag + " '" + path +
                      "': cannot infer the sensor: expected a 16-bit 1-channel image (bubble "
                      "depth) or an 8-bit one (gelslim rgb), got " +
-                     std::to_string(image.elemSize1() * 8) + "-bit with " +
-                     std::to_string(image.channels()) + " channel(s); give --sensor");
+                     std::to_string(header.bit_depth) + "-bit with " +
+                     std::to_string(header.channels) + " channel(s); give --sensor");
 }
 
 Image ReadInput(const std::string& path, SensorKind sensor, const std::string& flag) {

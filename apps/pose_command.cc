@@ -50,6 +50,7 @@
 
 #include "apps/command.h"
 #include "apps/model_inputs.h"
+#include "apps/output_paths.h"
 #include "apps/pictures.h"
 #include "estimation/data/dataset.h"
 #include "estimation/data/preprocess.h"
@@ -519,6 +520,22 @@ void RunPose(const PoseFlags& flags) {
     throw UsageError("--sampler knn needs --functaset (its labelled latents are the samples)");
   }
 
+  std::vector<NamedPath> outputs;
+  if (!flags.out.empty()) {
+    outputs = FilesIn("--out", flags.out, {"posterior.json", "posterior.png"});
+    outputs.push_back({"--out", flags.out});
+    std::vector<NamedPath> inputs = {{"--model", flags.model},
+                                     {"--pose-model", flags.pose_model},
+                                     {"--functaset", flags.functaset},
+                                     {"--frame", flags.frame},
+                                     {"--reference", flags.reference}};
+    if (from_data) {
+      const std::vector<NamedPath> data = DatasetPathInputs("--data", flags.data, DatasetFlags());
+      inputs.insert(inputs.end(), data.begin(), data.end());
+    }
+    RefuseOutputsThatAreInputs(outputs, inputs);
+  }
+
   const FunctaModel model = FunctaModel::Load(flags.model);
   Input input;
   TrunkTargets targets;
@@ -526,6 +543,7 @@ void RunPose(const PoseFlags& flags) {
   const bool sensor_given = ParseSensorFlag(flags.sensor, &sensor);
   if (from_data) {
     const Dataset dataset = Dataset::Open(flags.data);
+    RefuseOutputsThatAreInputs(outputs, DatasetFileInputs("--data", dataset));
     if (!sensor_given) {
       sensor = dataset.has_sensor(SensorKind::kSoftBubble) ? SensorKind::kSoftBubble
                                                            : dataset.sensors().at(0);

@@ -17,6 +17,7 @@
 
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
+#include "apps/output_paths.h"
 #include "apps/pictures.h"
 #include "estimation/data/dataset.h"
 #include "estimation/functaset/functaset.h"
@@ -207,6 +208,13 @@ void WritePerFrameCsv(const std::string& path, const ReconstructionEvaluator::Su
 }
 
 void RunRecon(const ReconFlags& flags) {
+  std::vector<NamedPath> outputs = FilesIn("--out", flags.out,
+                                           {"frames.csv", "recon_bubble.png", "recon_gelslim.png"});
+  outputs.push_back({"--out", flags.out});
+  std::vector<NamedPath> inputs = DatasetPathInputs("--data", flags.data, flags.dataset);
+  inputs.push_back({"--model", flags.model});
+  inputs.push_back({"--functaset", flags.functaset});
+  RefuseOutputsThatAreInputs(outputs, inputs);
   const FunctaModel model = FunctaModel::Load(flags.model);
   const Functaset functaset = Functaset::Load(flags.functaset);
   functaset.CheckModel(model, flags.model, flags.functaset);
@@ -215,6 +223,7 @@ void RunRecon(const ReconFlags& flags) {
               << functaset.size() << " frames it holds\n";
   }
   const Dataset dataset = OpenDataset(flags.data, flags.dataset);
+  RefuseOutputsThatAreInputs(outputs, DatasetFileInputs("--data", dataset));
   ReconstructionEvaluator::Options options;
   options.threads = ResolveThreads(flags.threads);
   const ReconstructionEvaluator::Summary summary =

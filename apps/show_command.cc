@@ -13,6 +13,7 @@
 
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
+#include "apps/output_paths.h"
 #include "apps/pictures.h"
 #include "estimation/data/dataset.h"
 #include "estimation/data/preprocess.h"
@@ -59,7 +60,10 @@ double DifferenceScale(const SensorInfo& info) {
 }
 
 void RunShow(const ShowFlags& flags) {
+  const std::vector<NamedPath> outputs = {{"--out", flags.out}};
+  RefuseOutputsThatAreInputs(outputs, DatasetPathInputs("DIR", flags.dir, flags.data));
   const Dataset dataset = OpenDataset(flags.dir, flags.data);
+  RefuseOutputsThatAreInputs(outputs, DatasetFileInputs("DIR", dataset));
   std::vector<std::string> ids =
       flags.ids.empty() ? PickIds(dataset, flags.contacts) : SplitList(flags.ids);
   if (ids.empty()) throw UsageError(flags.dir + ": the dataset has no frames to show");

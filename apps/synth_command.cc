@@ -30,9 +30,56 @@ struct SynthFlags {
   double test_fraction = 0.1;
   double marker_darkness = GelSlimOptions().marker_darkness;
   bool overwrite = false;
+  bool force = false;
   bool clean = false;
   bool json = false;
 };
+
+// Beyond this many bytes synth asks for --force even when the disk has room.
+constexpr std::uint64_t kLargeDatasetBytes = std::uint64_t{64} << 30;  // 64 GiB
+
+// Prints the size of the dataset about to be written -- an upper bound: every image's
+// uncompressed pixel bytes (PNG files are smaller) -- and refuses, unless --force,
+// one larger than the free space where it goes or than kLargeDatasetBytes.
+void CheckSize(const SynthFlags& flags, const SynthesisPlan& plan,
+               const ContactSimulator::Options& simulator) {
+  const std::uint64_t contacts =
+      static_cast<std::uint64_t>(plan.tools.size()) * static_cast<std::uint64_t>(plan.frames_per_tool);
+  std::uint64_t per_contact = 0;
+  for (SensorKind kind : plan.sensors) {
+    per_contact += kind == SensorKind::kSoftBubble
+                       ? std::uint64_t{2} * simulator.bubble.rows * simulator.bubble.cols
+                       : std::uint64_t{3} * simulator.gelslim.rows * simulator.gelslim.cols;
+  }
+  if (plan.write_clean) per_contact *= 2;
+  const std::uint64_t images = contacts * plan.sensors.size() * (plan.write_clean ? 2 : 1);
+  const std::uint64_t bound = contacts * per_contact;
+  // Free space on the file system the folder will be on (its nearest existing parent).
+  std::error_code ec;
+  std::filesystem::path where = std::filesystem::absolute(plan.out, ec);
+  while (!where.empty() && !std::filesystem::exists(where, ec) && where != where.root_path()) {
+    where = where.parent_path();
+  }
+  const std::filesystem::space_info space = std::filesystem::space(where, ec);
+  const bool known = !ec;
+  std::cerr << "synth: " << contacts << " contacts, " << images << " images: at most "
+            << FormatBytes(bound) << " on disk (uncompressed pixel bytes; PNG files are smaller)";
+  if (known) std::cerr << ", " << FormatBytes(space.available) << " free at " << where.string();
+  std::cerr << "\n";
+  if (flags.force) return;
+  if (known && bound > space.available) {
+    throw UsageError("--frames-per-tool " + std::to_string(plan.frames_per_tool) + ": " +
+                     std::to_string(images) + " images may take up to " + FormatBytes(bound) +
+                     ", more than the " + FormatBytes(space.available) + " free at " +
+                     where.string() + "; write fewer frames, or pass --force to try anyway");
+  }
+  if (bound > kLargeDatasetBytes) {
+    throw UsageError("--frames-per-tool " + std::to_string(plan.frames_per_tool) + ": " +
+                     std::to_string(images) + " images may take up to " + FormatBytes(bound) +
+                     " (more than " + FormatBytes(kLargeDatasetBytes) +
+                     "); pass --force to write a dataset this large");
+  }
+}
 
 void RunSynth(const SynthFlags& flags) {
   SynthesisPlan plan;
@@ -57,11 +104,13 @@ void RunSynth(const SynthFlags& flags) {
   }
   if (plan.sensors.empty()) throw UsageError("--sensors: expected at least one sensor");
 
+  ContactSimulator::Options simulator_options;
+  simulator_options.gelslim.marker_darkness = flags.marker_darkness;
+  CheckSize(flags, plan, simulator_options);
+
   ProgressBar bar("synth", static_cast<std::int64_t>(plan.tools.size()) *
                                plan.frames_per_tool,
                   "contacts");
-  ContactSimulator::Options simulator_options;
-  simulator_options.gelslim.marker_darkness = flags.marker_darkness;
   const SynthesisReport report = Synthesize(plan, simulator_options,
                                             [&bar](int n) { bar.Tick(n); });
   bar.Finish();
@@ -117,6 +166,9 @@ void RegisterSynth(CLI::App& app, CommandBody* selected) {
                   "markers) to 1 (default 0.7; docs/SIMULATOR.md)")
       ->check(CLI::Range(0.0, 1.0));
   sub->add_flag("--overwrite", flags->overwrite, "Replace an existing dataset at --out");
+  sub->add_flag("--force", flags->force,
+                "Write the dataset even if its size bound (printed first) exceeds the free "
+                "disk space or 68.72 GB (64 GiB)");
   sub->add_flag("--clean", flags->clean,
                 "Also store noise-free copies of every frame (for PSNR against clean "
                 "frames; about 1.6x the time and 1.5x the bytes)");

@@ -20,10 +20,12 @@
 
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
+#include "apps/output_paths.h"
 #include "apps/pictures.h"
 #include "apps/progress_bar.h"
 #include "estimation/data/dataset.h"
 #include "estimation/training/trunk_trainer.h"
+#include "models/core/atomic_file.h"
 #include "models/trunk/functa_model.h"
 
 namespace tactfunc::apps {
@@ -59,10 +61,14 @@ struct TrainFlags {
 };
 
 // SIGINT: the current step finishes, a checkpoint is written, the command exits 1. A
-// second SIGINT aborts at once (default action; the last periodic checkpoint remains).
+// second SIGINT aborts at once (default action; the last periodic checkpoint remains)
+// -- except while the final model is written: then every SIGINT is only noted, the
+// write completes (the model is never lost to a Ctrl-C) and the command exits 130.
 std::atomic<bool> g_interrupted{false};
+std::atomic<bool> g_saving{false};
+static_assert(std::atomic<bool>::is_always_lock_free);
 extern "C" void HandleSigint(int) {
-  if (g_interrupted.exchange(true)) {
+  if (g_interrupted.exchange(true) && !g_saving.load()) {
     std::signal(SIGINT, SIG_DFL);
     std::raise(SIGINT);
   }
@@ -178,7 +184,17 @@ void RunTrain(const TrainFlags& flags) {
     throw UsageError("--out: folder '" + out_dir.string() + "' does not exist");
   }
 
+  // The model, its checkpoints and its curves picture must not be a dataset file.
+  const std::vector<NamedPath> outputs = {
+      {"--out", flags.out},
+      {"--out (checkpoint)", CheckpointPath(flags.out, SensorKind::kSoftBubble)},
+      {"--out (checkpoint)", CheckpointPath(flags.out, SensorKind::kGelSlim)},
+      {"--out (training curves)", TrainingCurvesPath(flags.out)}};
+  RefuseOutputsThatAreInputs(outputs, DatasetPathInputs("--data", flags.data, flags.data_flags));
+  // Temporary files of an earlier run killed mid-write (SIGKILL) are removed.
+  for (const NamedPath& output : outputs) RemoveStaleTemporaries(output.path);
   const Dataset dataset = OpenDataset(flags.data, flags.data_flags);
+  RefuseOutputsThatAreInputs(outputs, DatasetFileInputs("--data", dataset));
   std::vector<SensorKind> sensors;
   if (flags.sensors.empty()) {
     sensors = dataset.sensors();
@@ -276,32 +292,41 @@ void RunTrain(const TrainFlags& flags) {
                             {"residual_sigma", summary.residual_sigma},
                             {"train_frames", summary.num_train_frames},
                             {"parameters", summary.num_parameters}};
+    // No wall-clock figures (seconds, threads) in the model file: the same seed gives
+    // the same bytes and so the same checksum (docs/TRAINING.md). The timing is in
+    // the output above and in --json.
     nlohmann::json history = nlohmann::json::array();
     for (const TrunkTrainer::HistoryPoint& p : summary.history) {
-      history.push_back({p.step, p.loss, p.psnr, p.psnr_at_zero, p.seconds});
+      history.push_back({p.step, p.loss, p.psnr, p.psnr_at_zero});
     }
     curves.push_back({sensor, summary.history});
     info_trunks[name] = {
         {"options", nlohmann::json::parse(trainer.TrajectoryOptionsJson(sensor, summary.format))},
         {"steps", summary.steps_done},
-        {"train_seconds", summary.total_train_seconds},
-        {"seconds_per_step", summary.seconds_per_step},
-        {"threads", sensor_options.threads},
         {"train_frames", summary.num_train_frames},
         {"train_psnr", summary.train_psnr},
         {"train_psnr_at_zero", summary.train_psnr_at_zero},
         {"final_loss", summary.final_loss},
-        {"history_columns", {"step", "loss", "psnr", "psnr_at_zero", "seconds"}},
+        {"history_columns", {"step", "loss", "psnr", "psnr_at_zero"}},
         {"history", history}};
   }
-  std::signal(SIGINT, SIG_DFL);
-
   nlohmann::json info = {{"trainer", "tactfunc train"},
                          {"preset", flags.preset},
                          {"data", flags.data},
                          {"trunks", info_trunks}};
-  model.set_info_json(info.dump());
+  model.set_info_json(info.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
+  // The handler stays installed through the write (a Ctrl-C now would otherwise kill
+  // the process between the temporary file and the rename, losing the model).
+  g_saving.store(true);
   model.Save(flags.out);
+  g_saving.store(false);
+  std::signal(SIGINT, SIG_DFL);
+  if (g_interrupted.load()) {
+    std::cout << "train: interrupted while writing the model; the model was written "
+                 "completely to "
+              << flags.out << " (training curves skipped)" << std::endl;
+    std::exit(130);  // 128 + SIGINT, as shells report an interrupted program
+  }
   const std::uint64_t model_bytes = std::filesystem::file_size(flags.out);
   std::cout << "train: wrote " << flags.out << " (" << FormatBytes(model_bytes) << ", "
             << sensors.size() << " trunk(s), preset " << flags.preset << "); checkpoints "

@@ -34,6 +34,7 @@
 
 #include "apps/command.h"
 #include "apps/model_inputs.h"
+#include "apps/output_paths.h"
 #include "estimation/evaluation/baselines.h"
 #include "estimation/data/dataset.h"
 #include "estimation/functaset/functaset.h"
@@ -174,6 +175,13 @@ void RunTrainPose(const TrainPoseFlags& flags) {
   std::string error;
   if (!training.IsValid(&error)) throw UsageError(error);
 
+  const std::vector<NamedPath> outputs = {{"--out", flags.out}};
+  std::vector<NamedPath> inputs = {{"--functaset", flags.functaset}, {"--model", flags.model}};
+  if (!flags.data.empty()) {
+    const std::vector<NamedPath> data = DatasetPathInputs("--data", flags.data, DatasetFlags());
+    inputs.insert(inputs.end(), data.begin(), data.end());
+  }
+  RefuseOutputsThatAreInputs(outputs, inputs);
   const Functaset functaset = Functaset::Load(flags.functaset);
   SensorKind sensor;
   if (!ParseSensorFlag(flags.sensor, &sensor)) {
@@ -207,6 +215,7 @@ void RunTrainPose(const TrainPoseFlags& flags) {
     const FunctaModel model = FunctaModel::Load(flags.model);
     functaset.CheckModel(model, flags.model, flags.functaset);
     const Dataset dataset = Dataset::Open(flags.data);
+    RefuseOutputsThatAreInputs(outputs, DatasetFileInputs("--data", dataset));
     const PosePosterior::Options posterior_options;
     LatentFitter::Options fit = posterior_options.fit;
     LatentProblem::Options problem_options = posterior_options.problem;

@@ -17,6 +17,7 @@
 #include "estimation/data/internal/path_util.h"
 #include "estimation/data/internal/labels_csv.h"
 #include "estimation/data/internal/opencv_image.h"
+#include "models/core/text_limits.h"
 
 namespace tactfunc {
 namespace {
@@ -72,8 +73,10 @@ class JsonFields {
     return value.get<bool>();
   }
   DatasetError Bad(const std::string& field, const std::string& expected, const json& found) const {
+    // An excerpt: the value may be a 10 MB string or a deep tree.
     return DatasetError(path_ + ": field '" + field + "': expected " + expected + ", got " +
-                        found.dump());
+                        Excerpt(found.is_string() ? "\"" + found.get<std::string>() + "\""
+                                                  : found.dump()));
   }
 
  private:
@@ -94,6 +97,22 @@ std::string ShapeText(int rows, int cols, int channels) {
   return std::to_string(rows) + "x" + std::to_string(cols) + "x" + std::to_string(channels);
 }
 
+// Refuses a frame whose header gives another size than the sensor's, before a pixel
+// is decoded (a mismatched frame costs a header read, not its decoded size).
+void CheckFrameHeader(const std::string& path, const SensorInfo& info, SensorKind sensor) {
+  const ImageHeader header = ReadImageHeader(path);
+  if (header.rows != info.rows || header.cols != info.cols) {
+    // Channels as ReadImage would give them (rgb8 drops alpha and expands palettes).
+    const int channels = info.encoding == PixelEncoding::kRgb8 && header.channels != 1
+                             ? 3
+                             : header.channels;
+    throw DatasetError(path + ": expected a " + ShapeText(info.rows, info.cols, info.channels) +
+                       " frame (the " + ToString(sensor) + " reference's shape), got " +
+                       ShapeText(header.rows, header.cols, channels) +
+                       " (from the file's header, not decoded)");
+  }
+}
+
 bool IsReferenceStem(const std::string& stem) { return internal::ToLower(stem) == "reference"; }
 
 // Frames of one sensor folder: "<subdir>/<name>" per image file except the
@@ -105,6 +124,11 @@ void ListSensorFrames(const std::string& root, const std::string& subdir, Sensor
   std::map<std::string, std::string> by_id;
   for (const internal::ImageFileEntry& entry : internal::ListImageFiles(folder)) {
     if (IsReferenceStem(entry.stem) || entry.name == reference_name) continue;
+    if (!IsValidUtf8(entry.stem)) {
+      // Frame ids are written to functasets and reports as JSON text (UTF-8 only).
+      throw DatasetError(internal::JoinPath(folder, EscapedExcerpt(entry.name)) +
+                         ": frame id: expected a file name in UTF-8, got other bytes");
+    }
     const auto [it, inserted] = by_id.emplace(entry.stem, entry.name);
     if (!inserted) {
       throw DatasetError(internal::JoinPath(folder, entry.name) + ": frame id '" + entry.stem +
@@ -250,10 +274,18 @@ Dataset Dataset::Open(const std::string& dir, const OpenOptions& options) {
     dataset.has_metadata_ = true;
     dataset.metadata_path_ = metadata_path;
     json doc;
+    const std::string text = ReadFile(metadata_path);
+    // Bounded before parsing: a deeply nested value would otherwise recurse in every
+    // later dump or comparison.
+    if (JsonNestingDepth(text) > kMaxJsonDepth) {
+      throw DatasetError(metadata_path + ": expected JSON nested at most " +
+                         std::to_string(kMaxJsonDepth) + " levels deep, got deeper nesting");
+    }
     try {
-      doc = json::parse(ReadFile(metadata_path));
+      doc = json::parse(text);
     } catch (const json::exception& e) {
-      throw DatasetError(metadata_path + ": expected valid JSON, got a parse error: " + e.what());
+      throw DatasetError(metadata_path + ": expected valid JSON, got a parse error: " +
+                         Excerpt(e.what()));
     }
     const JsonFields fields(metadata_path);
     if (!doc.is_object()) throw fields.Bad("(top level)", "a JSON object", doc);
@@ -278,11 +310,11 @@ Dataset Dataset::Open(const std::string& dir, const OpenOptions& options) {
       throw fields.Bad("sensors", "a non-empty object keyed by sensor name", sensors);
     }
     for (const auto& [name, entry] : sensors.items()) {
-      const std::string prefix = "sensors." + name;
+      const std::string prefix = "sensors." + Excerpt(name, 40);
       SensorKind kind;
       if (!SensorKindFromString(name, &kind)) {
         throw DatasetError(metadata_path + ": field '" + prefix +
-                           "': expected a sensor named 'bubble' or 'gelslim', got '" + name + "'");
+                           "': expected a sensor named 'bubble' or 'gelslim', got '" + Excerpt(name) + "'");
       }
       if (dataset.sensors_.count(kind) != 0) {
         throw DatasetError(metadata_path + ": field '" + prefix +
@@ -558,7 +590,8 @@ void Dataset::AttachLabels(const std::string& labels_path, bool ignore_absent_se
     const std::optional<std::size_t> index = FindFrame(row.frame, row.sensor);
     if (!index) {
       throw DatasetError(where + "field 'frame': expected the id of an existing " +
-                         ToString(row.sensor) + " frame, got '" + row.frame + "' (no such image)");
+                         ToString(row.sensor) + " frame, got '" + EscapedExcerpt(row.frame) +
+                         "' (no such image)");
     }
     if (row.label) {
       const SensorInfo& info = sensor->second.info;
@@ -643,6 +676,7 @@ Image Dataset::LoadFrame(std::size_t index) const {
   const FrameRecord& record = frames_[index];
   const SensorInfo& info = sensor_info(record.sensor);
   const std::string path = internal::JoinPath(root_, record.path);
+  CheckFrameHeader(path, info, record.sensor);
   Image image = ReadImage(path, info.encoding);
   if (image.rows != info.rows || image.cols != info.cols || image.channels != info.channels) {
     throw DatasetError(path + ": expected a " + ShapeText(info.rows, info.cols, info.channels) +
@@ -665,6 +699,7 @@ Image Dataset::LoadCleanFrame(std::size_t index) const {
   }
   const SensorInfo& info = sensor_info(record.sensor);
   const std::string path = internal::JoinPath(root_, record.clean_path);
+  CheckFrameHeader(path, info, record.sensor);
   Image image = ReadImage(path, info.encoding);
   if (image.rows != info.rows || image.cols != info.cols || image.channels != info.channels) {
     throw DatasetError(path + ": expected a " + ShapeText(info.rows, info.cols, info.channels) +
@@ -680,7 +715,7 @@ void Dataset::ValidateAllFrames() const {
   }
 }
 
-std::uint64_t Dataset::BytesOnDisk() const {
+std::vector<std::string> Dataset::Files() const {
   std::set<std::string> files;
   if (video_frames_) {
     files.insert(root_);
@@ -697,8 +732,12 @@ std::uint64_t Dataset::BytesOnDisk() const {
   }
   if (!metadata_path_.empty()) files.insert(metadata_path_);
   if (!labels_path_.empty()) files.insert(labels_path_);
+  return std::vector<std::string>(files.begin(), files.end());
+}
+
+std::uint64_t Dataset::BytesOnDisk() const {
   std::uint64_t total = 0;
-  for (const std::string& file : files) total += internal::FileSizeOrThrow(file);
+  for (const std::string& file : Files()) total += internal::FileSizeOrThrow(file);
   return total;
 }
 

@@ -173,6 +173,9 @@ class Dataset {
   // Bytes of every file the dataset consists of: frames, references, clean frames,
   // dataset.json and labels.csv (for a video: the video file and labels file).
   std::uint64_t BytesOnDisk() const;
+  // The paths of those files (joined to root(), sorted): what a command writing
+  // outputs must not overwrite.
+  std::vector<std::string> Files() const;
   // True if any frame has a clean version.
   bool has_clean() const { return has_clean_; }
   // True if the folder had a dataset.json.

@@ -11,6 +11,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <limits>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -135,7 +136,140 @@ const char* DepthName(int depth) {
   }
 }
 
+// Reads `n` bytes at `offset` of an image file; false if the file is shorter.
+using ByteSource = std::function<bool(std::uint64_t offset, std::size_t n, std::uint8_t* out)>;
+
+std::uint32_t BigEndian(const std::uint8_t* p, int n) {
+  std::uint32_t v = 0;
+  for (int i = 0; i < n; ++i) v = (v << 8) | p[i];
+  return v;
+}
+
+ImageHeader CheckedHeader(ImageHeader header, const std::string& name) {
+  if (header.rows <= 0 || header.cols <= 0) {
+    throw DatasetError(name + ": expected an image of at least 1x1 pixels, got a header "
+                              "claiming " + std::to_string(header.cols) + "x" +
+                       std::to_string(header.rows));
+  }
+  const std::int64_t pixels = static_cast<std::int64_t>(header.rows) * header.cols;
+  if (pixels > kMaxFramePixels) {
+    throw DatasetError(name + ": expected a frame of at most " +
+                       std::to_string(kMaxFramePixels) + " pixels (4096x4096), got a header "
+                       "claiming " + std::to_string(header.cols) + "x" +
+                       std::to_string(header.rows) + " (width x height) = " +
+                       std::to_string(pixels) + " pixels; refused before decoding");
+  }
+  return header;
+}
+
+ImageHeader ParseHeader(const ByteSource& read, const std::string& name) {
+  std::uint8_t head[33];
+  static constexpr std::uint8_t kPngSignature[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+  if (read(0, 8, head) && std::memcmp(head, kPngSignature, 8) == 0) {
+    if (!read(0, 33, head) || BigEndian(head + 8, 4) != 13 || std::memcmp(head + 12, "IHDR", 4) != 0) {
+      throw DatasetError(name + ": expected a PNG whose first chunk is a 13-byte IHDR, got a "
+                                "damaged or truncated header");
+    }
+    const std::uint32_t width = BigEndian(head + 16, 4), height = BigEndian(head + 20, 4);
+    if (width > 0x7fffffffu || height > 0x7fffffffu) {
+      throw DatasetError(name + ": PNG header claims " + std::to_string(width) + "x" +
+                         std::to_string(height) + " pixels, beyond the PNG limit of 2^31 - 1");
+    }
+    ImageHeader header;
+    header.format = ImageHeader::Format::kPng;
+    header.cols = static_cast<int>(width);
+    header.rows = static_cast<int>(height);
+    header.bit_depth = head[24];
+    switch (head[25]) {
+      case 0: header.channels = 1; break;
+      case 2: header.channels = 3; break;
+      case 3: header.channels = 3; break;
+      case 4: header.channels = 2; break;
+      case 6: header.channels = 4; break;
+      default:
+        throw DatasetError(name + ": PNG header: expected colour type 0, 2, 3, 4 or 6, got " +
+                           std::to_string(head[25]));
+    }
+    return CheckedHeader(header, name);
+  }
+  if (read(0, 2, head) && head[0] == 0xFF && head[1] == 0xD8) {
+    // JPEG: walk the segments (marker, 2-byte length) to the first start of frame.
+    std::uint64_t at = 2;
+    for (int segment = 0; segment < 100000; ++segment) {
+      std::uint8_t marker[2];
+      if (!read(at, 2, marker)) break;
+      if (marker[0] != 0xFF) break;
+      if (marker[1] == 0xFF) {  // fill byte
+        ++at;
+        continue;
+      }
+      at += 2;
+      const std::uint8_t m = marker[1];
+      if ((m >= 0xD0 && m <= 0xD7) || m == 0x01) continue;  // no length
+      if (m == 0xD9 || m == 0xDA) break;  // end of image or scan before any frame header
+      std::uint8_t length_bytes[2];
+      if (!read(at, 2, length_bytes)) break;
+      const std::uint32_t length = BigEndian(length_bytes, 2);
+      if (length < 2) break;
+      const bool start_of_frame = m >= 0xC0 && m <= 0xCF && m != 0xC4 && m != 0xC8 && m != 0xCC;
+      if (start_of_frame) {
+        std::uint8_t sof[6];
+        if (length < 8 || !read(at + 2, 6, sof)) break;
+        ImageHeader header;
+        header.format = ImageHeader::Format::kJpeg;
+        header.bit_depth = sof[0];
+        header.rows = static_cast<int>(BigEndian(sof + 1, 2));
+        header.cols = static_cast<int>(BigEndian(sof + 3, 2));
+        header.channels = sof[5];
+        if (header.rows == 0) {
+          throw DatasetError(name + ": JPEG header gives the height as 0 (defined later by a "
+                                    "DNL marker), which is not supported");
+        }
+        return CheckedHeader(header, name);
+      }
+      at += length;
+    }
+    throw DatasetError(name + ": expected a JPEG with a frame header (SOF marker), got a "
+                              "damaged or truncated file");
+  }
+  throw DatasetError(name + ": expected a PNG or JPEG image, got a file that is neither "
+                            "(no PNG signature or JPEG start marker)");
+}
+
+// Image files are read whole before decoding; beyond this the file cannot be a frame
+// of kMaxFramePixels (16-bit RGBA, uncompressed, is 8 bytes per pixel) plus metadata.
+constexpr std::uint64_t kMaxImageFileBytes =
+    static_cast<std::uint64_t>(kMaxFramePixels) * 8 + (std::uint64_t{64} << 20);
+
 }  // namespace
+
+ImageHeader ParseImageHeader(const std::string& bytes, const std::string& name) {
+  return ParseHeader(
+      [&](std::uint64_t offset, std::size_t n, std::uint8_t* out) {
+        if (offset > bytes.size() || n > bytes.size() - offset) return false;
+        std::memcpy(out, bytes.data() + offset, n);
+        return true;
+      },
+      name);
+}
+
+ImageHeader ReadImageHeader(const std::string& path) {
+  if (internal::IsDirectory(path)) {
+    throw DatasetError(path + ": expected a file, got a directory");
+  }
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    throw DatasetError(path + ": expected a readable file, got error '" + ErrnoText() + "'");
+  }
+  return ParseHeader(
+      [&](std::uint64_t offset, std::size_t n, std::uint8_t* out) {
+        in.clear();
+        in.seekg(static_cast<std::streamoff>(offset));
+        in.read(reinterpret_cast<char*>(out), static_cast<std::streamsize>(n));
+        return in.good() || (in.eof() && static_cast<std::size_t>(in.gcount()) == n);
+      },
+      path);
+}
 
 std::string ReadFile(const std::string& path) {
   if (internal::IsDirectory(path)) {
@@ -184,6 +318,11 @@ void WritePngAtomically(const std::string& path, const Image& image, PixelEncodi
 }
 
 Image DecodeImage(const std::string& bytes, PixelEncoding encoding, const std::string& name) {
+  ParseImageHeader(bytes, name);  // the format and the size, before any pixel is decoded
+  if (bytes.size() > static_cast<std::uint64_t>(std::numeric_limits<int>::max())) {
+    throw DatasetError(name + ": expected an image file under 2 GB, got " +
+                       std::to_string(bytes.size()) + " bytes");
+  }
   cv::Mat mat;
   try {
     if (!bytes.empty()) {
@@ -226,6 +365,14 @@ Image DecodeImage(const std::string& bytes, PixelEncoding encoding, const std::s
 }
 
 Image ReadImage(const std::string& path, PixelEncoding encoding) {
+  ReadImageHeader(path);  // refuses an oversized frame before the file is read
+  std::error_code ec;
+  const std::uintmax_t size = std::filesystem::file_size(path, ec);
+  if (!ec && size > kMaxImageFileBytes) {
+    throw DatasetError(path + ": expected an image file of at most " +
+                       std::to_string(kMaxImageFileBytes) + " bytes, got " +
+                       std::to_string(size) + " bytes");
+  }
   return DecodeImage(ReadFile(path), encoding, path);
 }
 

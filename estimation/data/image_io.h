@@ -73,10 +73,36 @@ void WritePngAtomically(const std::string& path, const Image& image, PixelEncodi
                         int compression_level = 1,
                         Durability durability = Durability::kSynced);
 
+// The most pixels (rows * cols) a frame may have: 4096 x 4096. Every image's header is
+// read and checked against it before any pixel is decoded, so an oversized or hostile
+// file is refused in a few kilobytes of memory.
+inline constexpr std::int64_t kMaxFramePixels = std::int64_t{4096} * 4096;
+
+// What an image file's header says, read without decoding any pixel.
+struct ImageHeader {
+  enum class Format { kPng, kJpeg };
+  Format format = Format::kPng;
+  int rows = 0;
+  int cols = 0;
+  // Samples per pixel as stored: PNG gray 1, gray+alpha 2, palette/RGB 3, RGBA 4;
+  // JPEG its component count.
+  int channels = 0;
+  int bit_depth = 0;  // bits per sample as stored (PNG 1, 2, 4, 8 or 16; JPEG 8 or 12)
+};
+
+// Reads the header of a PNG or JPEG file: PNG's IHDR chunk, or the JPEG segments up to
+// the first start-of-frame marker (skipped by their lengths, never loaded whole). Throws
+// DatasetError naming `path` for another format, a damaged header, or a size beyond
+// kMaxFramePixels ("... 20000x20000 pixels, more than the 16777216 a frame may have").
+ImageHeader ReadImageHeader(const std::string& path);
+// As ReadImageHeader, from the file's bytes in memory; `name` is used in messages.
+ImageHeader ParseImageHeader(const std::string& bytes, const std::string& name);
+
 // Decodes an image file (PNG, or JPEG for rgb8) into physical units (see above).
 // Throws DatasetError naming `path` if the file is missing, not an image, or of the
 // wrong kind: depth needs a 16-bit one-channel PNG; rgb8 needs 8 bits and 1, 3 or 4
-// channels (an alpha channel is dropped).
+// channels (an alpha channel is dropped). The header is read first (ReadImageHeader):
+// a frame beyond kMaxFramePixels is refused before its file is read.
 Image ReadImage(const std::string& path, PixelEncoding encoding);
 
 // As ReadImage, from bytes already in memory; `name` is used in error messages.

@@ -1,5 +1,6 @@
 // Copyright 2026 The tactfunc Authors.
 #include "estimation/functaset/functaset.h"
+#include "models/core/text_limits.h"
 
 #include <algorithm>
 #include <cinttypes>
@@ -338,7 +339,9 @@ std::string Functaset::Serialize() const {
     file.Add(name + "/psnr", TensorFile::DType::kFloat32, {m}, std::move(psnr));
     file.Add(name + "/poses", TensorFile::DType::kFloat64, {m, 4}, std::move(poses));
   }
-  file.set_meta_json(meta.dump());
+  // A dataset path that is not UTF-8 is written with U+FFFD for its bad bytes rather
+  // than failing the write after every frame was encoded.
+  file.set_meta_json(meta.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
   return file.Serialize();
 }
 
@@ -363,14 +366,14 @@ Functaset Functaset::Parse(const std::string& bytes, const std::string& source) 
     field = "model_checksum";
     const auto& checksum = meta.at("model_checksum");
     if (!checksum.is_number_unsigned() || checksum.get<std::uint64_t>() > 0xffffffffull) {
-      throw fail("expected an unsigned 32-bit integer, got " + checksum.dump());
+      throw fail("expected an unsigned 32-bit integer, got " + Excerpt(checksum.dump()));
     }
     out.model_checksum_ = static_cast<std::uint32_t>(checksum.get<std::uint64_t>());
     field = "dataset";
     out.dataset_ = meta.at("dataset").get<std::string>();
     field = "sensors";
     const auto& sensors = meta.at("sensors");
-    if (!sensors.is_array()) throw fail("expected an array, got " + sensors.dump());
+    if (!sensors.is_array()) throw fail("expected an array, got " + Excerpt(sensors.dump()));
     for (std::size_t s = 0; s < sensors.size(); ++s) {
       const auto& entry = sensors[s];
       const std::string where = "sensors[" + std::to_string(s) + "]";

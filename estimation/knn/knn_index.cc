@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <limits>
 #include <numeric>
 #include <sstream>
@@ -12,7 +13,9 @@
 
 #include "estimation/knn/internal/flann_include.h"  // FLANN, only here
 #include "models/core/atomic_file.h"
+#include "models/core/internal/json_numbers.h"
 #include "models/core/tensor_file.h"
+#include "models/core/text_limits.h"
 #include "nlohmann/json.hpp"
 
 namespace tactfunc {
@@ -129,16 +132,33 @@ void KnnIndex::Save(const std::string& path) const {
 }
 
 std::unique_ptr<KnnIndex> KnnIndex::Load(const std::string& path) {
-  const TensorFile file = TensorFile::Read(path, "knn_index");
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw TensorFileError(path + ": cannot open (does it exist?)");
+  std::ostringstream buffer;
+  buffer << in.rdbuf();
+  return Parse(buffer.str(), path);
+}
+
+std::unique_ptr<KnnIndex> KnnIndex::Parse(const std::string& bytes, const std::string& path) {
+  const TensorFile file = TensorFile::Parse(bytes, path, "knn_index");
   file.CheckFormat(kFormat, kVersion);
   std::string field = "meta";
   try {
     const nlohmann::json meta = nlohmann::json::parse(file.meta_json());
     field = "dim";
-    const int dim = meta.at("dim").get<int>();
-    if (dim < 1) throw TensorFileError(path + ": field 'dim' must be >= 1, got " + std::to_string(dim));
+    int dim = 0;
+    // Bounds far above any index: a hostile file must not make the reader allocate
+    // or build beyond its own payload.
+    if (!internal::JsonInt(meta.at("dim"), 1, 1 << 20, &dim)) {
+      throw TensorFileError(path + ": field 'dim': expected an integer in [1, 2^20], got " +
+                            Excerpt(meta.at("dim").dump()));
+    }
     field = "size";
-    const std::int64_t size = meta.at("size").get<std::int64_t>();
+    std::int64_t size = 0;
+    if (!internal::JsonInteger(meta.at("size"), 0, std::int64_t{1} << 40, &size)) {
+      throw TensorFileError(path + ": field 'size': expected an integer in [0, 2^40], got " +
+                            Excerpt(meta.at("size").dump()));
+    }
     const TensorFile::Tensor& vectors = file.Get("vectors", {size, dim});
     field = "type";
     const std::string type = meta.at("type").get<std::string>();
@@ -150,7 +170,7 @@ std::unique_ptr<KnnIndex> KnnIndex::Load(const std::string& path) {
       index = FlannKnnIndex::FromParamsJson(dim, meta.at("params").dump(), path);
     } else {
       throw TensorFileError(path + ": field 'type': expected \"brute_force\" or \"flann\", got \"" +
-                            type + "\"");
+                            Excerpt(type) + "\"");
     }
     const std::vector<float> values(vectors.values.begin(), vectors.values.end());
     try {
@@ -161,7 +181,7 @@ std::unique_ptr<KnnIndex> KnnIndex::Load(const std::string& path) {
     return index;
   } catch (const nlohmann::json::exception& e) {
     throw TensorFileError(path + ": field '" + field + "' is missing or has the wrong type (" +
-                          e.what() + ")");
+                          Excerpt(e.what()) + ")");
   }
 }
 
@@ -509,26 +529,50 @@ std::unique_ptr<FlannKnnIndex> FlannKnnIndex::FromParamsJson(int dim, const std:
   if (!FlannAlgorithmFromString(algorithm, &options.algorithm) ||
       options.algorithm == Algorithm::kAutotuned) {
     throw TensorFileError(source + ": field 'params.algorithm': expected kd_forest, kmeans or linear, got \"" +
-                          algorithm + "\"");
+                          Excerpt(algorithm) + "\"");
   }
-  options.trees = j.at("trees").get<int>();
-  options.branching = j.at("branching").get<int>();
-  options.kmeans_iterations = j.at("kmeans_iterations").get<int>();
-  options.cb_index = j.at("cb_index").get<float>();
-  options.target_precision = j.at("target_precision").get<float>();
-  options.build_weight = j.at("build_weight").get<float>();
-  options.memory_weight = j.at("memory_weight").get<float>();
-  options.sample_fraction = j.at("sample_fraction").get<float>();
-  options.seed = j.at("seed").get<std::uint32_t>();
+  // Each parameter within bounds before it is converted (no out-of-range casts) and
+  // before FLANN builds anything (no hostile file asks for a billion trees).
+  auto integer = [&](const nlohmann::json& value, const char* name, int lo, int hi) {
+    int out = 0;
+    if (!internal::JsonInt(value, lo, hi, &out)) {
+      throw TensorFileError(source + ": field 'params." + name + "': expected an integer in [" +
+                            std::to_string(lo) + ", " + std::to_string(hi) + "], got " +
+                            Excerpt(value.dump()));
+    }
+    return out;
+  };
+  auto real = [&](const nlohmann::json& value, const char* name) {
+    double out = 0;
+    if (!internal::JsonReal(value, -1e30, 1e30, &out)) {
+      throw TensorFileError(source + ": field 'params." + name +
+                            "': expected a finite number, got " + Excerpt(value.dump()));
+    }
+    return static_cast<float>(out);
+  };
+  options.trees = integer(j.at("trees"), "trees", 1, 1024);
+  options.branching = integer(j.at("branching"), "branching", 2, 1 << 16);
+  options.kmeans_iterations = integer(j.at("kmeans_iterations"), "kmeans_iterations", -1, 1 << 20);
+  options.cb_index = real(j.at("cb_index"), "cb_index");
+  options.target_precision = real(j.at("target_precision"), "target_precision");
+  options.build_weight = real(j.at("build_weight"), "build_weight");
+  options.memory_weight = real(j.at("memory_weight"), "memory_weight");
+  options.sample_fraction = real(j.at("sample_fraction"), "sample_fraction");
+  std::int64_t seed = 0;
+  if (!internal::JsonInteger(j.at("seed"), 0, std::numeric_limits<std::uint32_t>::max(), &seed)) {
+    throw TensorFileError(source + ": field 'params.seed': expected an integer in [0, 2^32), got " +
+                          Excerpt(j.at("seed").dump()));
+  }
+  options.seed = static_cast<std::uint32_t>(seed);
   SearchParams search;
-  search.checks = j.at("search").at("checks").get<int>();
-  search.eps = j.at("search").at("eps").get<float>();
+  search.checks = integer(j.at("search").at("checks"), "search.checks", -2, 1 << 30);
+  search.eps = real(j.at("search").at("eps"), "search.eps");
   std::string error;
   if (!options.IsValid(&error)) throw TensorFileError(source + ": params: " + error);
   if (!search.IsValid(&error)) throw TensorFileError(source + ": params.search: " + error);
   auto index = std::make_unique<FlannKnnIndex>(dim, options, search);
   // An autotuned index reloads as the index the tuning chose, with the tuned checks.
-  index->impl_->tuned_checks = j.at("tuned_checks").get<int>();
+  index->impl_->tuned_checks = integer(j.at("tuned_checks"), "tuned_checks", -2, 1 << 30);
   return index;
 }
 

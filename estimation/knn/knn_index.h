@@ -89,6 +89,8 @@ class KnnIndex {
   void Save(const std::string& path) const;
   // Throws TensorFileError naming the file and what is wrong.
   static std::unique_ptr<KnnIndex> Load(const std::string& path);
+  // Load from the file's bytes; `source` names them in messages (a path).
+  static std::unique_ptr<KnnIndex> Parse(const std::string& bytes, const std::string& source);
 
  protected:
   // Called after vectors were appended to data_ (already validated).

@@ -27,6 +27,11 @@ enum class Durability {
 void WriteFileAtomically(const std::string& path, const std::string& bytes,
                          Durability durability = Durability::kSynced);
 
+// Removes the temporary files WriteFileAtomically left beside `path` when a writer was
+// killed mid-write (".<name>.tmp.<pid>.<n>" whose process no longer runs); files of
+// running processes are left alone. Returns how many were removed; never throws.
+int RemoveStaleTemporaries(const std::string& path);
+
 // Flushes everything written to the file system holding `dir` (syncfs). Throws
 // std::runtime_error naming `dir` on failure.
 void SyncFileSystem(const std::string& dir);

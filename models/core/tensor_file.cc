@@ -2,6 +2,7 @@
 #include "models/core/tensor_file.h"
 
 #include "models/core/atomic_file.h"
+#include "models/core/text_limits.h"
 
 #include <atomic>
 #include <cmath>
@@ -45,6 +46,30 @@ std::uint16_t HalfBits(double v) {
 
 double FromHalfBits(std::uint16_t bits) {
   return static_cast<float>(Eigen::numext::bit_cast<Eigen::half>(bits));
+}
+
+// The largest dimension or element count a tensor may declare: 2^48, far above any
+// real tensor and low enough that products of counts and element sizes cannot overflow.
+constexpr std::uint64_t kMaxCount = std::uint64_t{1} << 48;
+
+// A header field that must be a non-negative integer of at most `max` (JSON integers
+// only: 1.0, -1 or 1e21 are refused rather than cast). Returns false otherwise.
+bool ReadCount(const nlohmann::json& value, std::uint64_t max, std::uint64_t* out) {
+  if (value.is_number_unsigned()) {
+    *out = value.get<std::uint64_t>();
+  } else if (value.is_number_integer()) {
+    const std::int64_t v = value.get<std::int64_t>();
+    if (v < 0) return false;
+    *out = static_cast<std::uint64_t>(v);
+  } else {
+    return false;
+  }
+  return *out <= max;
+}
+
+// A JSON value quoted in an error message: at most kMaxQuotedBytes of its text.
+std::string Quote(const nlohmann::json& value) {
+  return Excerpt(value.is_string() ? "\"" + value.get<std::string>() + "\"" : value.dump());
 }
 
 std::string ShapeString(const std::vector<std::int64_t>& shape) {
@@ -251,26 +276,49 @@ TensorFile TensorFile::Parse(const std::string& bytes, const std::string& source
                   stored, actual);
     throw fail(std::string(text) + ": the file is corrupt or truncated");
   }
+  const std::string_view json_text(bytes.data() + kFixedHeader, json_length);
+  if (JsonNestingDepth(json_text) > kMaxJsonDepth) {
+    throw fail("header: expected JSON nested at most " + std::to_string(kMaxJsonDepth) +
+               " levels deep, got deeper nesting");
+  }
   nlohmann::json header;
   try {
-    header = nlohmann::json::parse(bytes.begin() + kFixedHeader,
-                                   bytes.begin() + kFixedHeader + json_length);
+    header = nlohmann::json::parse(json_text.begin(), json_text.end());
   } catch (const std::exception& e) {
-    throw fail(std::string("header is not valid JSON: ") + e.what());
+    throw fail("header is not valid JSON: " + Excerpt(e.what()));
   }
   TensorFile file;
   file.source_ = source;
   try {
+    if (!header.is_object()) throw fail("header: expected a JSON object, got " + Quote(header));
+    if (!header.at("kind").is_string()) {
+      throw fail("header field 'kind': expected a string, got " + Quote(header.at("kind")));
+    }
     file.kind_ = header.at("kind").get<std::string>();
+    if (!header.at("meta").is_object()) {
+      throw fail("header field 'meta': expected a JSON object, got " + Quote(header.at("meta")));
+    }
     file.meta_json_ = header.at("meta").dump();
     if (!expected_kind.empty() && file.kind_ != expected_kind) {
-      throw fail("is a '" + file.kind_ + "' file, expected a '" + expected_kind + "' file");
+      throw fail("is a '" + Excerpt(file.kind_) + "' file, expected a '" + expected_kind +
+                 "' file");
     }
     const std::size_t payload = kFixedHeader + json_length;
     const std::size_t payload_bytes = bytes.size() - 4 - payload;
+    if (!header.at("tensors").is_array()) {
+      throw fail("header field 'tensors': expected an array, got " + Quote(header.at("tensors")));
+    }
     for (const auto& entry : header.at("tensors")) {
       Tensor t;
+      if (!entry.is_object() || !entry.at("name").is_string()) {
+        throw fail("header field 'tensors': expected objects with a string 'name', got " +
+                   Quote(entry));
+      }
       t.name = entry.at("name").get<std::string>();
+      const std::string where = "tensor '" + Excerpt(t.name) + "'";
+      if (!entry.at("dtype").is_string()) {
+        throw fail(where + ": field 'dtype': expected a string, got " + Quote(entry.at("dtype")));
+      }
       const std::string dtype = entry.at("dtype").get<std::string>();
       if (dtype == "float32") {
         t.dtype = DType::kFloat32;
@@ -281,21 +329,40 @@ TensorFile TensorFile::Parse(const std::string& bytes, const std::string& source
       } else if (dtype == "uint8") {
         t.dtype = DType::kUint8;
       } else {
-        throw fail("tensor '" + t.name + "': dtype '" + dtype +
+        throw fail(where + ": dtype '" + Excerpt(dtype) +
                    "', expected uint8, float16, float32 or float64");
       }
-      t.shape = entry.at("shape").get<std::vector<std::int64_t>>();
-      const auto offset = entry.at("offset").get<std::uint64_t>();
-      for (std::int64_t d : t.shape) {
-        if (d < 0) throw fail("tensor '" + t.name + "': negative dimension");
+      const nlohmann::json& shape = entry.at("shape");
+      if (!shape.is_array() || shape.size() > 32) {
+        throw fail(where + ": field 'shape': expected an array of at most 32 dimensions, got " +
+                   Quote(shape));
       }
-      const std::uint64_t size = t.numel() * ElementBytes(t.dtype);
+      // Every count is checked before it is converted or multiplied: no float-to-integer
+      // cast of an out-of-range value, no overflow.
+      std::uint64_t numel = 1;
+      for (const nlohmann::json& dim : shape) {
+        std::uint64_t d = 0;
+        if (!ReadCount(dim, kMaxCount, &d)) {
+          throw fail(where + ": field 'shape': expected integers in [0, 2^48], got " +
+                     Quote(dim));
+        }
+        if (d != 0 && numel > kMaxCount / d) {
+          throw fail(where + ": field 'shape': " + Quote(shape) + " holds more than 2^48 elements");
+        }
+        numel *= d;
+        t.shape.push_back(static_cast<std::int64_t>(d));
+      }
+      std::uint64_t offset = 0;
+      if (!ReadCount(entry.at("offset"), kMaxCount, &offset)) {
+        throw fail(where + ": field 'offset': expected an integer in [0, 2^48], got " +
+                   Quote(entry.at("offset")));
+      }
+      const std::uint64_t size = numel * ElementBytes(t.dtype);
       if (offset > payload_bytes || size > payload_bytes - offset) {
-        throw fail("tensor '" + t.name + "' (" + std::to_string(size) + " bytes at " +
-                   std::to_string(offset) + ") lies outside the " +
-                   std::to_string(payload_bytes) + "-byte payload");
+        throw fail(where + " (" + std::to_string(size) + " bytes at " + std::to_string(offset) +
+                   ") lies outside the " + std::to_string(payload_bytes) + "-byte payload");
       }
-      t.values.resize(t.numel());
+      t.values.resize(numel);
       const char* src = bytes.data() + payload + offset;
       for (auto& v : t.values) {
         if (t.dtype == DType::kUint8) {
@@ -316,11 +383,11 @@ TensorFile TensorFile::Parse(const std::string& bytes, const std::string& source
           std::memcpy(&v, &bits, 8);
         }
       }
-      if (file.Has(t.name)) throw fail("duplicate tensor '" + t.name + "'");
+      if (file.Has(t.name)) throw fail("duplicate " + where);
       file.tensors_.push_back(std::move(t));
     }
   } catch (const nlohmann::json::exception& e) {
-    throw fail(std::string("header misses a field or has the wrong type: ") + e.what());
+    throw fail(std::string("header misses a field or has the wrong type: ") + Excerpt(e.what()));
   }
   file.checksum_ = actual;
   return file;
@@ -330,11 +397,11 @@ void TensorFile::CheckFormat(const std::string& format, int version) const {
   const std::string where = source_.empty() ? std::string("tensor file") : source_;
   const nlohmann::json meta = nlohmann::json::parse(meta_json_);
   if (!meta.contains("format") || !meta["format"].is_string()) {
-    throw TensorFileError(where + ": field 'format' is missing; expected "" + format + """);
+    throw TensorFileError(where + ": field 'format' is missing; expected \"" + format + "\"");
   }
   if (meta["format"].get<std::string>() != format) {
-    throw TensorFileError(where + ": field 'format': expected "" + format + "", got " +
-                          meta["format"].dump());
+    throw TensorFileError(where + ": field 'format': expected \"" + format + "\", got " +
+                          Quote(meta["format"]));
   }
   if (!meta.contains("version") || !meta["version"].is_number_integer()) {
     throw TensorFileError(where + ": field 'version' is missing; expected " +

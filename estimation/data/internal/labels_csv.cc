@@ -6,6 +6,7 @@
 #include <utility>
 
 #include "estimation/data/internal/path_util.h"
+#include "models/core/text_limits.h"
 
 namespace tactfunc::internal {
 namespace {
@@ -127,7 +128,7 @@ std::vector<LabelRow> ParseLabelsCsv(const std::string& text, const std::string&
     if (!header_seen) {
       if (line != kLabelsHeader) {
         throw DatasetError(Where(path, line_number) + "header: expected '" + kLabelsHeader +
-                           "', got '" + line + "'");
+                           "', got '" + EscapedExcerpt(line) + "'");
       }
       header_seen = true;
       continue;
@@ -138,16 +139,20 @@ std::vector<LabelRow> ParseLabelsCsv(const std::string& text, const std::string&
     if (fields.size() != kNumColumns) {
       throw DatasetError(where + "expected " + std::to_string(kNumColumns) +
                          " comma-separated fields (" + kLabelsHeader + "), got " +
-                         std::to_string(fields.size()) + " in '" + line + "'");
+                         std::to_string(fields.size()) + " in '" + EscapedExcerpt(line) + "'");
     }
     auto bad = [&](int column, const std::string& expected) {
+      // Quoted as an excerpt with unprintable bytes escaped: a line may be megabytes.
       return DatasetError(where + "field '" + kColumnNames[column] + "': " + expected + ", got '" +
-                          fields[column] + "'");
+                          EscapedExcerpt(fields[column]) + "'");
     };
     LabelRow row;
     row.line = line_number;
     row.frame = fields[0];
     if (row.frame.empty()) throw bad(0, "expected a frame id (the image file's stem)");
+    // Frame ids and tool names end up in functasets and reports as JSON text, which
+    // must be UTF-8: checked here, where the file and line can be named.
+    if (!IsValidUtf8(row.frame)) throw bad(0, "expected UTF-8 text");
     if (!SensorKindFromString(fields[1], &row.sensor)) {
       throw bad(1, "expected 'bubble' or 'gelslim'");
     }
@@ -155,6 +160,7 @@ std::vector<LabelRow> ParseLabelsCsv(const std::string& text, const std::string&
     bool all_empty = true;
     for (int c = 2; c <= 6; ++c) all_empty = all_empty && fields[c].empty();
     if (!all_empty) {
+      if (!IsValidUtf8(fields[2])) throw bad(2, "expected a tool name in UTF-8");
       if (fields[2].empty()) {
         throw bad(2,
                   "expected a tool name (or all five pose fields empty for an "
@@ -179,7 +185,7 @@ std::vector<LabelRow> ParseLabelsCsv(const std::string& text, const std::string&
       row.label = std::move(label);
     }
     if (!seen.insert({row.frame, row.sensor}).second) {
-      throw DatasetError(where + "duplicate label for frame '" + row.frame + "', sensor '" +
+      throw DatasetError(where + "duplicate label for frame '" + Excerpt(row.frame) + "', sensor '" +
                          ToString(row.sensor) + "': expected one row per (frame, sensor)");
     }
     rows.push_back(std::move(row));

@@ -72,39 +72,14 @@ std::uint64_t FileSizeOrThrow(const std::string& path) {
 }
 
 ImageProbe ProbeImage(const std::string& path) {
-  const std::string bytes = ReadFile(path);
-  cv::Mat mat;
-  try {
-    mat = cv::imdecode(
-        cv::Mat(1, static_cast<int>(bytes.size()), CV_8U, const_cast<char*>(bytes.data())),
-        cv::IMREAD_UNCHANGED);
-  } catch (const cv::Exception& e) {
-    throw DatasetError(path + ": expected a PNG or JPEG image, got a file OpenCV " +
-                       "cannot decode (" + e.what() + ")");
-  }
-  if (mat.empty()) {
-    throw DatasetError(path + ": expected a PNG or JPEG image, got " +
-                       std::to_string(bytes.size()) +
-                       " bytes that do not decode as one (corrupt or truncated?)");
-  }
+  // The header alone: the sensor kind of a folder is decided without decoding a pixel.
+  const ImageHeader header = ReadImageHeader(path);
   ImageProbe probe;
-  probe.rows = mat.rows;
-  probe.cols = mat.cols;
-  probe.channels = mat.channels();
-  switch (mat.depth()) {
-    case CV_8U:
-    case CV_8S:
-      probe.bit_depth = 8;
-      break;
-    case CV_16U:
-    case CV_16S:
-    case CV_16F:
-      probe.bit_depth = 16;
-      break;
-    default:
-      probe.bit_depth = 32;
-      break;
-  }
+  probe.rows = header.rows;
+  probe.cols = header.cols;
+  probe.channels = header.channels;
+  // OpenCV decodes PNGs of 1, 2 or 4 bits and every JPEG to 8 bits per sample.
+  probe.bit_depth = header.format == ImageHeader::Format::kPng && header.bit_depth == 16 ? 16 : 8;
   return probe;
 }
 

@@ -30,14 +30,14 @@ bool IsRegularFile(const std::string& path);
 // Size of a regular file; throws DatasetError naming it if it cannot be read.
 std::uint64_t FileSizeOrThrow(const std::string& path);
 
-// What an image file holds, decoded without conversion.
+// What an image file holds, read from its header (ReadImageHeader) without decoding.
 struct ImageProbe {
   int rows = 0;
   int cols = 0;
   int channels = 0;
   int bit_depth = 0;  // 8 or 16 (anything else is reported as found)
 };
-// Throws DatasetError naming `path` if it is missing or not a decodable image.
+// Throws DatasetError naming `path` if it is missing, not a PNG/JPEG or too large.
 ImageProbe ProbeImage(const std::string& path);
 
 // Shortest decimal text that parses back to exactly `value` (std::to_chars);

@@ -513,6 +513,99 @@ TEST(Dataset, FrameOfTheWrongSizeChannelsOrBitDepthIsAnError) {
       {"bubble/000003.png", "16-bit", "got 8-bit"});
 }
 
+TEST(Dataset, AFrameOfAnotherSizeIsRefusedFromItsHeaderBeforeDecoding) {
+  TestDir dir;
+  WriteDataset(dir.path());
+  // A valid header of the wrong size followed by garbage: the size is what is
+  // reported, so the pixels were never handed to the decoder.
+  const std::string png = EncodePng(GelFrame(1, 3, 9, 14), PixelEncoding::kRgb8);
+  WriteText(dir / "gelslim/000001.png", png.substr(0, 33) + "not pixel data");
+  const Dataset dataset = Dataset::Open(dir.path());
+  ExpectDatasetError([&] { dataset.LoadFrame(*dataset.FindFrame("000001", SensorKind::kGelSlim)); },
+                     {"gelslim/000001.png", "expected a 10x14x3 frame", "got 9x14x3",
+                      "from the file's header, not decoded"});
+}
+
+TEST(Dataset, DeeplyNestedMetadataIsAnErrorNotACrash) {
+  TestDir dir;
+  WriteDataset(dir.path());
+  // 100000 nested arrays: parsed, then dumped recursively into the error message.
+  WriteText(dir / "dataset.json", std::string(100000, '['));
+  ExpectDatasetError([&] { Dataset::Open(dir.path()); },
+                     {"dataset.json: expected JSON nested at most 64 levels deep"});
+  WriteText(dir / "dataset.json", "{\"format\": " + std::string(100000, '[') +
+                                      std::string(100000, ']') + "}");
+  ExpectDatasetError([&] { Dataset::Open(dir.path()); }, {"dataset.json", "nested at most 64"});
+}
+
+TEST(Dataset, BadMetadataValuesAreQuotedAsShortExcerpts) {
+  TestDir dir;
+  WriteDataset(dir.path());
+  std::string text = ReadFile(dir / "dataset.json");
+  const std::string from = "\"tactfunc-dataset\"";
+  text.replace(text.find(from), from.size(), "\"" + std::string(1 << 20, 'x') + "\"");
+  WriteText(dir / "dataset.json", text);
+  try {
+    Dataset::Open(dir.path());
+    ADD_FAILURE() << "no error";
+  } catch (const DatasetError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("field 'format'"));
+    EXPECT_THAT(e.what(), HasSubstr("xxxx... (1048578 bytes)"));
+    EXPECT_LT(std::string(e.what()).size(), 600u);
+  }
+  // A syntax error deep inside a long string: the parser's own message is cut too.
+  WriteText(dir / "dataset.json", "{\"format\": \"" + std::string(1 << 20, 'y') + "\x01\"}");
+  try {
+    Dataset::Open(dir.path());
+    ADD_FAILURE() << "no error";
+  } catch (const DatasetError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("expected valid JSON"));
+    EXPECT_LT(std::string(e.what()).size(), 600u);
+  }
+}
+
+TEST(Dataset, AHugeBadLabelsLineIsQuotedAsAShortExcerpt) {
+  TestDir dir;
+  WriteDataset(dir.path());
+  ReplaceLabels(dir.path(), "000000,bubble,pen,0,0,0,0.001,train\n" + std::string(10 << 20, 'z') +
+                                "\n");
+  try {
+    Dataset::Open(dir.path());
+    ADD_FAILURE() << "no error";
+  } catch (const DatasetError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("labels.csv:3: expected 8 comma-separated fields"));
+    EXPECT_THAT(e.what(), HasSubstr("... (10485760 bytes)"));
+    EXPECT_LT(std::string(e.what()).size(), 600u);
+  }
+  ReplaceLabels(dir.path(), "000000,bubble,pen,0," + std::string(10 << 20, '7') + ",0,0.001,train\n");
+  try {
+    Dataset::Open(dir.path());
+    ADD_FAILURE() << "no error";
+  } catch (const DatasetError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("labels.csv:2: field 'y_m'"));
+    EXPECT_LT(std::string(e.what()).size(), 600u);
+  }
+}
+
+TEST(Dataset, NonUtf8ToolNamesAndFrameIdsAreRefusedAtOpenNamingFileAndLine) {
+  TestDir dir;
+  WriteDataset(dir.path());
+  ReplaceLabels(dir.path(), "000000,bubble,pen,0,0,0,0.001,train\n"
+                            "000001,bubble,h\xff\xfek,0,0,0,0.001,train\n");
+  ExpectDatasetError([&] { Dataset::Open(dir.path()); },
+                     {"labels.csv:3: field 'tool': expected a tool name in UTF-8, got 'h\\xff\\xfek'"});
+  ReplaceLabels(dir.path(), "0000\xc0\xaf,bubble,pen,0,0,0,0.001,train\n");
+  ExpectDatasetError([&] { Dataset::Open(dir.path()); },
+                     {"labels.csv:2: field 'frame': expected UTF-8 text"});
+  // A user folder whose file name is not UTF-8 (frame ids become JSON text).
+  TestDir flat;
+  WritePngAtomically(flat / "reference.png", GelFrame(1), PixelEncoding::kRgb8);
+  WritePngAtomically(flat / "ok.png", GelFrame(2), PixelEncoding::kRgb8);
+  WritePngAtomically(flat / "bad\xff.png", GelFrame(3), PixelEncoding::kRgb8);
+  ExpectDatasetError([&] { Dataset::Open(flat.path()); },
+                     {"bad\\xff.png: frame id: expected a file name in UTF-8"});
+}
+
 TEST(Dataset, ReferenceOfAnotherSizeThanTheMetadataIsAnError) {
   TestDir dir;
   WriteDataset(dir.path());

@@ -246,6 +246,96 @@ TEST(WriteFileAtomically, MissingDirectoryIsAnErrorNamingThePath) {
   }
 }
 
+// The first 33 bytes of a PNG: signature and an IHDR chunk claiming `width` x `height`
+// (the chunk CRC is not checked by the header reader; OpenCV would check it).
+std::string PngHeaderOnly(std::uint32_t width, std::uint32_t height, int bit_depth, int colour) {
+  std::string out("\x89PNG\r\n\x1a\n\0\0\0\x0dIHDR", 16);
+  for (std::uint32_t v : {width, height}) {
+    for (int shift = 24; shift >= 0; shift -= 8) out.push_back(static_cast<char>(v >> shift));
+  }
+  out.push_back(static_cast<char>(bit_depth));
+  out.push_back(static_cast<char>(colour));
+  out += std::string(3, '\0') + std::string(4, '\0');  // methods, CRC
+  return out;
+}
+
+TEST(ReadImageHeader, ReadsPngAndJpegSizesWithoutDecoding) {
+  TestDir dir;
+  WritePngAtomically(dir / "depth.png", GridDepth(7, 9, 1), PixelEncoding::kDepthU16Micrometres);
+  ImageHeader h = ReadImageHeader(dir / "depth.png");
+  EXPECT_EQ(h.format, ImageHeader::Format::kPng);
+  EXPECT_EQ(h.rows, 7);
+  EXPECT_EQ(h.cols, 9);
+  EXPECT_EQ(h.channels, 1);
+  EXPECT_EQ(h.bit_depth, 16);
+  std::vector<std::uint8_t> jpeg;
+  cv::imencode(".jpg", cv::Mat(30, 50, CV_8UC3, cv::Scalar(10, 200, 30)), jpeg);
+  WriteText(dir / "frame.jpg", std::string(jpeg.begin(), jpeg.end()));
+  h = ReadImageHeader(dir / "frame.jpg");
+  EXPECT_EQ(h.format, ImageHeader::Format::kJpeg);
+  EXPECT_EQ(h.rows, 30);
+  EXPECT_EQ(h.cols, 50);
+  EXPECT_EQ(h.channels, 3);
+  EXPECT_EQ(h.bit_depth, 8);
+  // The same from bytes in memory.
+  EXPECT_EQ(ParseImageHeader(std::string(jpeg.begin(), jpeg.end()), "mem").cols, 50);
+}
+
+TEST(ReadImage, AFrameBeyondThePixelLimitIsRefusedFromItsHeaderNamingTheFile) {
+  TestDir dir;
+  // A header claiming 100000 x 100000 with nothing behind it: refused on the header's
+  // word, before any decoder sees it (OpenCV's own assertion named no file).
+  WriteText(dir / "huge.png", PngHeaderOnly(100000, 100000, 16, 0));
+  for (PixelEncoding encoding : {PixelEncoding::kDepthU16Micrometres, PixelEncoding::kRgb8}) {
+    try {
+      ReadImage(dir / "huge.png", encoding);
+      ADD_FAILURE() << "no error";
+    } catch (const DatasetError& e) {
+      EXPECT_THAT(e.what(), HasSubstr("huge.png: expected a frame of at most 16777216 pixels "
+                                      "(4096x4096), got a header claiming 100000x100000"));
+    }
+  }
+  EXPECT_THROW(ReadImageHeader(dir / "huge.png"), DatasetError);
+  // 4097 x 4096 is one row too many; 4096 x 4096 passes the header check (and then
+  // fails to decode, having no pixel data).
+  WriteText(dir / "over.png", PngHeaderOnly(4097, 4096, 8, 0));
+  EXPECT_THROW(ReadImageHeader(dir / "over.png"), DatasetError);
+  WriteText(dir / "limit.png", PngHeaderOnly(4096, 4096, 8, 0));
+  EXPECT_EQ(ReadImageHeader(dir / "limit.png").rows, 4096);
+  // A JPEG's SOF is read the same way.
+  std::vector<std::uint8_t> jpeg;
+  cv::imencode(".jpg", cv::Mat(8, 8, CV_8UC1, cv::Scalar(1)), jpeg);
+  std::string bytes(jpeg.begin(), jpeg.end());
+  const std::size_t sof = bytes.find("\xff\xc0");
+  ASSERT_NE(sof, std::string::npos);
+  bytes[sof + 5] = bytes[sof + 6] = bytes[sof + 7] = bytes[sof + 8] = '\xff';  // 65535 x 65535
+  WriteText(dir / "huge.jpg", bytes);
+  try {
+    ReadImage(dir / "huge.jpg", PixelEncoding::kRgb8);
+    ADD_FAILURE() << "no error";
+  } catch (const DatasetError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("huge.jpg: expected a frame of at most"));
+    EXPECT_THAT(e.what(), HasSubstr("65535x65535"));
+  }
+}
+
+TEST(ReadImage, DamagedHeadersAndOtherFormatsAreRefusedNamingTheFile) {
+  TestDir dir;
+  WriteText(dir / "short.png", PngHeaderOnly(10, 10, 8, 0).substr(0, 20));
+  WriteText(dir / "zero.png", PngHeaderOnly(0, 10, 8, 0));
+  WriteText(dir / "colour.png", PngHeaderOnly(10, 10, 8, 5));
+  WriteText(dir / "nosof.jpg", std::string("\xff\xd8\xff\xd9", 4));
+  WriteText(dir / "image.bmp", "BM" + std::string(60, '\0'));
+  for (const char* name : {"short.png", "zero.png", "colour.png", "nosof.jpg", "image.bmp"}) {
+    try {
+      ReadImage(dir / name, PixelEncoding::kRgb8);
+      ADD_FAILURE() << "no error for " << name;
+    } catch (const DatasetError& e) {
+      EXPECT_THAT(e.what(), HasSubstr(name));
+    }
+  }
+}
+
 TEST(ReadFile, ReturnsTheBytesAndNamesAMissingFile) {
   TestDir dir;
   const std::string bytes("a\0b\xff", 4);

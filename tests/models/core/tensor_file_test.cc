@@ -202,5 +202,111 @@ TEST(TensorFile, AtomicWriteReplacesTheWholeFileAndLeavesNoTemporaries) {
   EXPECT_THROW(WriteFileAtomically(dir + "/missing_subdir/f", "x"), std::runtime_error);
 }
 
+// A file with the given JSON header and an 8-byte zero payload, with a valid checksum:
+// what a damaged or hostile writer could produce.
+std::string FileWithHeader(const std::string& json) {
+  std::string out = "TACTFUNC";
+  auto put = [&](std::uint64_t value, int bytes) {
+    for (int i = 0; i < bytes; ++i) out.push_back(static_cast<char>((value >> (8 * i)) & 0xff));
+  };
+  put(kTensorFileVersion, 4);
+  put(0, 4);
+  put(json.size(), 8);
+  out += json;
+  out += std::string(8, '\0');
+  put(Crc32(out.data(), out.size()), 4);
+  return out;
+}
+
+std::string ParseError(const std::string& bytes) {
+  try {
+    TensorFile::Parse(bytes, "hostile.tfm");
+  } catch (const TensorFileError& e) {
+    return e.what();
+  }
+  return "(no error)";
+}
+
+TEST(TensorFile, DeeplyNestedHeaderIsRefusedBeforeAnythingRecurses) {
+  // 200000 nested arrays in "meta": the parser would accept them, and dumping or
+  // destroying them recursively overflowed the stack.
+  const std::string deep = std::string(200000, '[') + std::string(200000, ']');
+  const std::string error =
+      ParseError(FileWithHeader(R"({"kind": "model", "meta": )" + deep + R"(, "tensors": []})"));
+  EXPECT_THAT(error, HasSubstr("hostile.tfm: header: expected JSON nested at most 64 levels"));
+  // 64 levels are fine (a user's meta object may nest).
+  const std::string ok = std::string(62, '[') + std::string(62, ']');
+  TensorFile::Parse(FileWithHeader(R"({"kind": "model", "meta": {"x": )" + ok + R"(}, "tensors": []})"),
+                    "ok.tfm");
+}
+
+TEST(TensorFile, ShapesAndOffsetsMustBeIntegersInRangeNotCastFloats) {
+  const std::string head = R"({"kind": "model", "meta": {}, "tensors": [{"name": "w", "dtype": "uint8", )";
+  struct Case {
+    std::string tensor;
+    const char* piece;
+  };
+  const Case cases[] = {
+      {R"("shape": [2], "offset": -1.0, "bytes": 2)", "tensor 'w': field 'offset': expected an integer in [0, 2^48], got -1.0"},
+      {R"("shape": [2], "offset": -1, "bytes": 2)", "field 'offset': expected an integer"},
+      {R"("shape": [2], "offset": 1e300, "bytes": 2)", "field 'offset': expected an integer"},
+      {R"("shape": [1e21, 64], "offset": 0, "bytes": 2)", "field 'shape': expected integers in [0, 2^48], got 1e+21"},
+      {R"("shape": [1.5], "offset": 0, "bytes": 2)", "field 'shape': expected integers"},
+      {R"("shape": [-3], "offset": 0, "bytes": 2)", "field 'shape': expected integers"},
+      {R"("shape": [18446744073709551615], "offset": 0, "bytes": 2)", "field 'shape': expected integers"},
+      {R"("shape": [16777216, 16777216, 16777216], "offset": 0, "bytes": 2)", "holds more than 2^48 elements"},
+      {R"("shape": "2", "offset": 0, "bytes": 2)", "field 'shape': expected an array"},
+      {R"("shape": [9], "offset": 0, "bytes": 9)", "lies outside the 8-byte payload"},
+  };
+  for (const Case& c : cases) {
+    EXPECT_THAT(ParseError(FileWithHeader(head + c.tensor + "}]}")), HasSubstr(c.piece)) << c.tensor;
+  }
+  // The largest well-formed tensor still reads.
+  const TensorFile read = TensorFile::Parse(
+      FileWithHeader(head + R"("shape": [2, 4], "offset": 0, "bytes": 8}]})"), "ok.tfm");
+  EXPECT_EQ(read.Get("w", {2, 4}).values.size(), 8u);
+}
+
+TEST(TensorFile, ErrorMessagesQuoteAtMost200BytesOfAValue) {
+  const std::string huge(10 << 20, 'k');  // a 10 MB "kind"
+  const std::string error = ParseError(
+      FileWithHeader(R"({"kind": ")" + huge + R"(", "meta": {}, "tensors": []})"));
+  (void)error;  // no expected kind: accepted
+  try {
+    TensorFile::Parse(FileWithHeader(R"({"kind": ")" + huge + R"(", "meta": {}, "tensors": []})"),
+                      "big.tfm", "model");
+    FAIL();
+  } catch (const TensorFileError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("big.tfm: is a 'kkkk"));
+    EXPECT_THAT(e.what(), HasSubstr("... (10485760 bytes)"));
+    EXPECT_LT(std::string(e.what()).size(), 400u);
+  }
+  const std::string bad_meta =
+      ParseError(FileWithHeader(R"({"kind": "model", "meta": [")" + huge + R"("], "tensors": []})"));
+  EXPECT_THAT(bad_meta, HasSubstr("field 'meta': expected a JSON object"));
+  EXPECT_LT(bad_meta.size(), 400u);
+  const std::string bad_dtype = ParseError(FileWithHeader(
+      R"({"kind": "model", "meta": {}, "tensors": [{"name": "w", "dtype": ")" + huge +
+      R"(", "shape": [1], "offset": 0}]})"));
+  EXPECT_THAT(bad_dtype, HasSubstr("expected uint8, float16, float32 or float64"));
+  EXPECT_LT(bad_dtype.size(), 400u);
+  // A JSON syntax error deep in a long string: the parser's message is cut too.
+  const std::string bad_json = ParseError(FileWithHeader(R"({"kind": ")" + huge + "\x01\"}"));
+  EXPECT_THAT(bad_json, HasSubstr("header is not valid JSON"));
+  EXPECT_LT(bad_json.size(), 400u);
+}
+
+TEST(TensorFile, CheckFormatQuotesTheExpectedFormat) {
+  TensorFile file("model");
+  file.set_meta_json(R"({"version": 1})");
+  const TensorFile read = TensorFile::Parse(file.Serialize(), "m.tfm");
+  try {
+    read.CheckFormat("tactfunc-model", 1);
+    FAIL();
+  } catch (const TensorFileError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("field 'format' is missing; expected \"tactfunc-model\""));
+  }
+}
+
 }  // namespace
 }  // namespace tactfunc
