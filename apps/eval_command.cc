@@ -230,7 +230,8 @@ nlohmann::json DetailsJson(const TableEvaluation::Details& d) {
   }
   j["pca"] = {{"components", d.pca_components},
               {"explained_variance", d.pca.explained_variance},
-              {"fit_seconds", d.pca.seconds}};
+              {"fit_seconds", d.pca.seconds},
+              {"method", d.pca.method}};
   j["jpeg"] = {{"quality", d.jpeg_search.quality},
                {"target_bytes", d.jpeg_search.target_bytes},
                {"mean_train_bytes", d.jpeg_search.mean_bytes},

@@ -7,7 +7,7 @@
 // With Lines::kWhenNotDrawn, where no bar is drawn (a log file, a pipe, CI) it writes
 // plain progress lines instead, one per 10 % of the work or per 10 s, whichever comes
 // first, and a last one at Finish:
-//   "encode: 120/240 frames (50%), 53.1 frames/s, ETA 0:02"
+//   "encode: DONE/TOTAL frames (P%), R frames/s, ETA T"
 // (`tactfunc encode` and `tactfunc eval` use them: minutes without a word otherwise).
 #ifndef TACTFUNC_APPS_PROGRESS_BAR_H_
 #define TACTFUNC_APPS_PROGRESS_BAR_H_

@@ -120,8 +120,10 @@ class PcaCodec {
   // P x P covariance Xc^T Xc (basis rows its top eigenvectors). The top n eigenpairs of
   // that K x K matrix: Eigen's SelfAdjointEigenSolver for K <= 600 or n > K / 4, else
   // block subspace iteration with Rayleigh-Ritz until every kept pair's residual
-  // |G v - s v| <= 1e-9 s_1 (the backward error of a dense solver; the dense solver if
-  // that has not happened after 300 steps). Each basis row's largest-magnitude entry is
+  // |G v - s v| <= 1e-9 s_1 (the backward error of a dense solver) and the variance the
+  // n components keep has stopped rising (its last rise <= 1e-6 of the variance left
+  // out), so reconstructions match the exact fit's; the dense solver if that has not
+  // happened after 300 steps. Each basis row's largest-magnitude entry is
   // positive. eigenvalues() are those of the covariance Xc^T Xc / M (descending).
   // 3,991 frames of 8,560 floats: docs/BENCHMARKS.md (`tactfunc bench pca`).
   // Throws std::invalid_argument for bad options or frames.
