@@ -2,7 +2,10 @@
 #include "apps/dataset_flags.h"
 
 #include <algorithm>
+#include <cmath>
+#include <cstdio>
 #include <filesystem>
+#include <iostream>
 
 #include "apps/command.h"
 
@@ -44,6 +47,25 @@ Dataset OpenDataset(const std::string& path, const DatasetFlags& flags) {
                      (extension == ".avi" || extension == ".mp4" || extension == ".mov" ||
                       extension == ".mkv" || extension == ".m4v");
   return video ? Dataset::OpenVideo(path, options) : Dataset::Open(path, options);
+}
+
+bool WarnIfStretched(const Dataset& dataset, const std::string& path, SensorKind sensor,
+                     int rows, int cols, const std::string& command) {
+  if (!dataset.has_sensor(sensor) || rows <= 0 || cols <= 0) return false;
+  const SensorInfo& info = dataset.sensor_info(sensor);
+  if (info.rows <= 0 || info.cols <= 0) return false;
+  const double native = static_cast<double>(info.cols) / info.rows;
+  const double working = static_cast<double>(cols) / rows;
+  if (std::abs(native / working - 1.0) <= 0.02) return false;
+  char aspects[96];
+  std::snprintf(aspects, sizeof(aspects), "%.2f", native);
+  const std::string native_text = aspects;
+  std::snprintf(aspects, sizeof(aspects), "%.2f", working);
+  std::cerr << command << ": warning: " << path << ": " << ToString(sensor) << " frames are "
+            << info.rows << "x" << info.cols << " (rows x cols, aspect " << native_text
+            << ") but are resized to " << rows << "x" << cols << " (aspect " << aspects
+            << "): stretched, a round contact becomes an ellipse\n";
+  return true;
 }
 
 }  // namespace tactfunc::apps

@@ -27,6 +27,15 @@ void AddDatasetFlags(CLI::App* sub, DatasetFlags* flags);
 // with a video extension: .avi .mp4 .mov .mkv .m4v), with the flags' options.
 Dataset OpenDataset(const std::string& path, const DatasetFlags& flags);
 
+// When `sensor`'s frames of `dataset` (read from `path`) have another aspect ratio than
+// the working resolution rows x cols they are resized to (more than 2 % apart), writes
+// one warning line to stderr naming the path and both sizes, e.g.
+//   "encode: warning: DIR: gelslim frames are 320x320 (aspect 1.00) but are resized to
+//    80x107 (aspect 1.34): stretched, a round contact becomes an ellipse"
+// and returns true; else writes nothing and returns false. `command` starts the line.
+bool WarnIfStretched(const Dataset& dataset, const std::string& path, SensorKind sensor,
+                     int rows, int cols, const std::string& command);
+
 }  // namespace tactfunc::apps
 
 #endif  // TACTFUNC_APPS_DATASET_FLAGS_H_

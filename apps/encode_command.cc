@@ -20,6 +20,7 @@
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
 #include "apps/output_paths.h"
+#include "apps/model_inputs.h"
 #include "apps/progress_bar.h"
 #include "estimation/data/dataset.h"
 #include "estimation/functaset/functaset.h"
@@ -43,6 +44,7 @@ struct EncodeFlags {
   std::string latent_precision = "float16";
   std::string strategy;  // "" = each trunk's meta_sgd:K
   bool json = false;
+  bool allow_other_frames = false;
   DatasetFlags dataset;
 };
 
@@ -79,6 +81,7 @@ std::string ResumeCommand(const EncodeFlags& flags) {
   if (!flags.split.empty()) command += " --split " + flags.split;
   if (!flags.strategy.empty()) command += " --strategy " + flags.strategy;
   if (flags.threads > 0) command += " --threads " + std::to_string(flags.threads);
+  if (flags.allow_other_frames) command += " --allow-other-frames";
   if (!flags.dataset.sensor.empty()) command += " --sensor " + flags.dataset.sensor;
   if (!flags.dataset.reference.empty()) command += " --reference " + flags.dataset.reference;
   if (!flags.dataset.labels.empty()) command += " --labels " + flags.dataset.labels;
@@ -181,6 +184,17 @@ void RunEncode(const EncodeFlags& flags) {
   const std::filesystem::path parent = std::filesystem::path(flags.out).parent_path();
   if (!parent.empty()) std::filesystem::create_directories(parent);
 
+  // The model against the data: frames of another size or channel count than the
+  // trunk was trained on are refused (--allow-other-frames: a warning), another pixel
+  // pitch or a stretch to the working resolution is said.
+  for (SensorKind sensor : options.sensors.empty() ? dataset.sensors() : options.sensors) {
+    if (!model.HasSensor(sensor) || !dataset.has_sensor(sensor)) continue;
+    CheckModelMatchesData(model, flags.model, dataset, flags.data, sensor, "encode",
+                          "--allow-other-frames", flags.allow_other_frames);
+    const FrameFormat& format = model.Trunk(sensor).format;
+    WarnIfStretched(dataset, flags.data, sensor, format.rows, format.cols, "encode");
+  }
+
   const LatentEncoder encoder(model, options);
   std::int64_t total = 0;
   for (SensorKind sensor : options.sensors.empty() ? dataset.sensors() : options.sensors) {
@@ -188,7 +202,7 @@ void RunEncode(const EncodeFlags& flags) {
       total += static_cast<std::int64_t>(dataset.FrameIndices(sensor, options.split).size());
     }
   }
-  ProgressBar bar("encode", total, "frames");
+  ProgressBar bar("encode", total, "frames", ProgressBar::Lines::kWhenNotDrawn);
   std::int64_t shown = 0;
   auto progress = [&](const EncodeProgress& p) {
     if (p.done > shown) {
@@ -289,6 +303,9 @@ void RegisterEncode(CLI::App& app, CommandBody* selected) {
                   "How each frame's latent is fitted: meta_sgd:K or ceres:N (default: the "
                   "trunk's own meta_sgd:K, what it was trained for; ceres:N fits the latent "
                   "problem to convergence, docs/FITTING.md)");
+  sub->add_flag("--allow-other-frames", flags->allow_other_frames,
+                "Encode even when the data's frames have another size or channel count "
+                "than the model's trunk was trained on (a warning instead of an error)");
   sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
   AddDatasetFlags(sub, &flags->dataset);
   sub->callback([flags, selected]() { *selected = [flags]() { RunEncode(*flags); }; });

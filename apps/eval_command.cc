@@ -4,8 +4,13 @@
 // PSNR and pose error of TactFunc against baselines, on train and test, plus a
 // rate-distortion picture:
 //
-//   tactfunc eval --data D --model M --functaset F --pose-model P --out DIR [--json]
+//   tactfunc eval --data D --model M --functaset F [--pose-model P] --out DIR [--json]
 //       [--sensors LIST] [--threads N] [--extra-functaset F2 --extra-model M2]...
+//       [--sensor KIND --reference IMG --reference-index K --pixel-pitch-mm MM --labels CSV]
+//
+// Without --pose-model (data without pose labels) the table holds the reconstruction
+// columns alone: no pose columns, pose targets null in table.json, said once on stderr
+// and in table.md.
 //
 // The evaluation itself (rows, baselines, targets) is TableEvaluation
 // (estimation/evaluation/table_evaluation.h); this command checks the flags, loads the
@@ -20,6 +25,7 @@
 #include <limits>
 #include <map>
 #include <memory>
+#include <optional>
 #include <set>
 #include <sstream>
 
@@ -27,6 +33,7 @@
 
 #include "apps/bench.h"
 #include "apps/command.h"
+#include "apps/dataset_flags.h"
 #include "apps/model_inputs.h"
 #include "apps/output_paths.h"
 #include "apps/pictures.h"
@@ -54,6 +61,7 @@ struct EvalFlags {
   int raw_downsample = 2;
   int knn_k = 5;
   bool json = false;
+  DatasetFlags dataset;           // --sensor, --reference, --pixel-pitch-mm, --labels, ...
   std::vector<std::string> argv;  // for the report
 };
 
@@ -155,7 +163,8 @@ cv::Mat RateDistortionPlot(SensorKind sensor, const RdCurves& curves, const std:
 }
 
 // The targets of one sensor as table.json holds them.
-nlohmann::json TargetsJson(const TableEvaluation::Targets& targets) {
+// Without a pose model (has_pose_model false) the pose targets are null.
+nlohmann::json TargetsJson(const TableEvaluation::Targets& targets, bool has_pose_model) {
   nlohmann::json t;
   const auto& a = targets.psnr_above_pca;
   auto above_pca = [](const TableEvaluation::Targets::PsnrAbovePca& a) {
@@ -191,6 +200,9 @@ nlohmann::json TargetsJson(const TableEvaluation::Targets& targets) {
                                     {"raw_best_pose_mse", NumberOrNull(e.raw_best_pose_mse)},
                                     {"ridge_pose_mse", NumberOrNull(e.ridge_pose_mse)},
                                     {"knn_pose_mse", NumberOrNull(e.knn_pose_mse)}};
+  } else if (!has_pose_model) {
+    t["pose_beats_pca_codes"] = nullptr;
+    t["pose_not_worse_than_raw"] = nullptr;
   }
   return t;
 }
@@ -214,7 +226,8 @@ nlohmann::json DetailsJson(const TableEvaluation::Details& d) {
   }
   j["pca"] = {{"components", d.pca_components},
               {"explained_variance", d.pca.explained_variance},
-              {"fit_seconds", d.pca.seconds}};
+              {"fit_seconds", d.pca.seconds},
+              {"method", d.pca.method}};
   j["jpeg"] = {{"quality", d.jpeg_search.quality},
                {"target_bytes", d.jpeg_search.target_bytes},
                {"mean_train_bytes", d.jpeg_search.mean_bytes},
@@ -233,7 +246,7 @@ class ConsoleObserver : public TableEvaluation::Observer {
   void Message(const std::string& line) override { std::cout << line << std::flush; }
   void Warning(const std::string& line) override { std::cerr << line; }
   void BeginTask(const std::string& label, std::int64_t total, const std::string& unit) override {
-    bar_ = std::make_unique<ProgressBar>(label, total, unit);
+    bar_ = std::make_unique<ProgressBar>(label, total, unit, ProgressBar::Lines::kWhenNotDrawn);
   }
   void Tick() override {
     if (bar_) bar_->Tick();
@@ -272,6 +285,7 @@ void RunEval(const EvalFlags& flags) {
        std::vector<std::pair<std::string, std::string>>{{"--model", flags.model},
                                                         {"--functaset", flags.functaset},
                                                         {"--pose-model", flags.pose_model}}) {
+    if (flag == "--pose-model" && path.empty()) continue;  // optional
     if (!fs::is_regular_file(path)) throw DatasetError(flag + " '" + path + "': no such file");
   }
   for (std::size_t k = 0; k < flags.extra_functasets.size(); ++k) {
@@ -282,8 +296,8 @@ void RunEval(const EvalFlags& flags) {
       throw DatasetError("--extra-model '" + flags.extra_models[k] + "': no such file");
     }
   }
-  if (!fs::is_directory(flags.data)) {
-    throw DatasetError("--data '" + flags.data + "': no such dataset folder");
+  if (!fs::exists(flags.data)) {
+    throw DatasetError("--data '" + flags.data + "': no such dataset folder or video");
   }
   std::vector<NamedPath> outputs =
       FilesIn("--out", flags.out, {"table.md", "table.json", "rate_distortion.png"});
@@ -301,7 +315,7 @@ void RunEval(const EvalFlags& flags) {
   const FunctaModel model = FunctaModel::Load(flags.model);
   const Functaset functaset = Functaset::Load(flags.functaset);
   functaset.CheckModel(model, flags.model, flags.functaset);
-  const Dataset dataset = Dataset::Open(flags.data);
+  const Dataset dataset = OpenDataset(flags.data, flags.dataset);
   RefuseOutputsThatAreInputs(outputs, DatasetFileInputs("--data", dataset));
 
   // Sensors: --sensors, else every sensor of the functaset.
@@ -323,11 +337,14 @@ void RunEval(const EvalFlags& flags) {
     if (!dataset.has_sensor(s)) {
       throw DatasetError("--data '" + flags.data + "' has no " + ToString(s) + " frames");
     }
+    const FrameFormat& format = model.Trunk(s).format;
+    WarnIfStretched(dataset, flags.data, s, format.rows, format.cols, "eval");
   }
 
   // The pose model's sensor (from its provenance, as train-pose writes it; else the first).
+  const bool has_pose = !flags.pose_model.empty();
   SensorKind pose_sensor = sensors[0];
-  {
+  if (has_pose) {
     const PoseModelProvenance provenance =
         ReadPoseModelProvenance(PoseMlp::Load(flags.pose_model), flags.pose_model);
     if (!provenance.sensor.empty()) {
@@ -343,7 +360,13 @@ void RunEval(const EvalFlags& flags) {
                          ToString(pose_sensor) + " latents, which are not evaluated (--sensors)");
     }
   }
-  const PoseMlp pose_model = LoadPoseModelFor(flags.pose_model, model, pose_sensor, flags.model);
+  std::optional<PoseMlp> pose_model;
+  if (has_pose) {
+    pose_model = LoadPoseModelFor(flags.pose_model, model, pose_sensor, flags.model);
+  } else {
+    std::cerr << "eval: no --pose-model: the table holds the reconstruction columns only "
+                 "(no pose columns, pose targets null)\n";
+  }
 
   // Extra functasets for the rate-distortion picture.
   struct Extra {
@@ -366,7 +389,7 @@ void RunEval(const EvalFlags& flags) {
   inputs.model = &model;
   inputs.functaset = &functaset;
   inputs.functaset_name = flags.functaset;
-  inputs.pose_model = &pose_model;
+  inputs.pose_model = pose_model ? &*pose_model : nullptr;
   inputs.pose_sensor = pose_sensor;
   inputs.sensors = sensors;
   for (const Extra& e : extras) inputs.extras.push_back({&e.model, &e.functaset, e.functaset_path});
@@ -383,7 +406,7 @@ void RunEval(const EvalFlags& flags) {
   nlohmann::json details = nlohmann::json::object();
   for (const TableEvaluation::SensorResult& r : evaluation.sensors) {
     curves[r.sensor] = r.curves;
-    targets[ToString(r.sensor)] = TargetsJson(r.targets);
+    targets[ToString(r.sensor)] = TargetsJson(r.targets, has_pose);
     details[ToString(r.sensor)] = DetailsJson(r.details);
     const std::string& strategy = functaset.fit_strategy(r.sensor);
     details[ToString(r.sensor)]["fit_strategy"] =
@@ -399,21 +422,29 @@ void RunEval(const EvalFlags& flags) {
   // The clean-PSNR column only for data with noise-free frames (simulated, synth --clean).
   const bool any_clean = std::any_of(rows.begin(), rows.end(),
                                      [](const Row& r) { return std::isfinite(r.psnr_clean); });
+  // Without a pose model the pose columns are left out.
   std::ostringstream md;
-  md << "| approach | pose from | sensor | split | rep. size (MB) | bytes/frame | PSNR (dB) | "
-     << (any_clean ? "PSNR clean (dB) | " : "") << "pose MSE | RMSE (mm) | RMSE (deg) |\n"
-     << "|---|---|---|---|---:|---:|---:|" << (any_clean ? "---:|" : "") << "---:|---:|---:|\n";
+  md << "| approach |" << (has_pose ? " pose from |" : "")
+     << " sensor | split | rep. size (MB) | bytes/frame | PSNR (dB) |"
+     << (any_clean ? " PSNR clean (dB) |" : "")
+     << (has_pose ? " pose MSE | RMSE (mm) | RMSE (deg) |" : "") << "\n"
+     << "|---|" << (has_pose ? "---|" : "") << "---|---|---:|---:|---:|"
+     << (any_clean ? "---:|" : "") << (has_pose ? "---:|---:|---:|" : "") << "\n";
   for (const Row& r : rows) {
-    const bool has_pose = r.pose.count > 0;
-    md << "| " << r.approach << (r.note.empty() ? "" : " (" + r.note + ")") << " | "
-       << (r.pose_from.empty() ? "-" : r.pose_from) << " | " << ToString(r.sensor) << " | "
-       << ToString(r.split) << " | " << FormatFixed(r.rep_bytes / 1e6, 3, "-") << " | "
-       << FormatFixed(r.bytes_per_frame, 0, "-") << " | "
-       << (r.psnr_applicable ? FormatFixed(r.psnr, 2, "-") : std::string("n/a (lossless)")) << " | "
-       << (any_clean ? FormatFixed(r.psnr_clean, 2, "-") + " | " : std::string())
-       << (has_pose ? Sci(r.pose.PoseMse()) : "-") << " | "
-       << (has_pose ? FormatFixed(r.pose.RmseMm(), 3, "-") : "-") << " | "
-       << (has_pose ? FormatFixed(r.pose.RmseDeg(), 2, "-") : "-") << " |\n";
+    const bool row_pose = r.pose.count > 0;
+    md << "| " << r.approach << (r.note.empty() ? "" : " (" + r.note + ")") << " | ";
+    if (has_pose) md << (r.pose_from.empty() ? "-" : r.pose_from) << " | ";
+    md << ToString(r.sensor) << " | " << ToString(r.split) << " | "
+       << FormatFixed(r.rep_bytes / 1e6, 3, "-") << " | " << FormatFixed(r.bytes_per_frame, 0, "-")
+       << " | "
+       << (r.psnr_applicable ? FormatFixed(r.psnr, 2, "-") : std::string("n/a (lossless)")) << " |"
+       << (any_clean ? " " + FormatFixed(r.psnr_clean, 2, "-") + " |" : std::string());
+    if (has_pose) {
+      md << " " << (row_pose ? Sci(r.pose.PoseMse()) : "-") << " | "
+         << (row_pose ? FormatFixed(r.pose.RmseMm(), 3, "-") : "-") << " | "
+         << (row_pose ? FormatFixed(r.pose.RmseDeg(), 2, "-") : "-") << " |";
+    }
+    md << "\n";
   }
   std::ostringstream targets_md;
   for (const auto& [sensor, t] : targets.items()) {
@@ -443,7 +474,7 @@ void RunEval(const EvalFlags& flags) {
                << " B, quality " << b["jpeg_quality"]
                << (b["jpeg_target_reachable"].get<bool>() ? "" : "; even quality 1 is larger")
                << ")\n";
-    if (t.contains("pose_beats_pca_codes")) {
+    if (t.contains("pose_beats_pca_codes") && !t["pose_beats_pca_codes"].is_null()) {
       const nlohmann::json& c = t["pose_beats_pca_codes"];
       targets_md << "- " << sensor << ": pose from latents better than from PCA codes (test): "
                  << yes(c) << " (pose MSE " << sci(c["tactfunc_pose_mse"]) << " vs "
@@ -462,6 +493,9 @@ void RunEval(const EvalFlags& flags) {
        << machine.value("cpu", std::string("?")) << ", " << machine.value("cores", 0)
        << " cores.\n\n"
        << md.str()
+       << (has_pose ? ""
+                    : "\nNo pose model was given (--pose-model): the table holds the "
+                      "reconstruction columns only; pose columns and pose targets are left out.\n")
        << "\nrep. size: model + per-frame data for every frame of the sensor (train + test). "
           "bytes/frame: codes as stored (TactFunc latents as encode --latent-precision stored them, "
           "float16 by default, b-bit codes without their per-dimension offset/step tables "
@@ -469,8 +503,11 @@ void RunEval(const EvalFlags& flags) {
           "(counted once in rep. size); raw: rows x cols x channels x bytes per sample at the "
           "native resolution. PSNR: mean over the split's frames of THE PSNR of "
           "estimation/data/trunk_targets.h at the model's working resolution (n/a for raw frames: "
-          "lossless). pose MSE: mean over frames of (dx^2 + dy^2 + dyaw^2) / 3 in m and rad, "
-          "yaw modulo the tool's symmetry.\n\nTargets:\n\n"
+          "lossless)."
+       << (has_pose ? " pose MSE: mean over frames of (dx^2 + dy^2 + dyaw^2) / 3 in m and rad, "
+                      "yaw modulo the tool's symmetry."
+                    : "")
+       << "\n\nTargets:\n\n"
        << targets_md.str();
   WriteTextFile((fs::path(flags.out) / "table.md").string(), file.str());
 
@@ -499,7 +536,8 @@ void RunEval(const EvalFlags& flags) {
                            {"all_targets_met", all_met},
                            {"rate_distortion", rd},
                            {"details", details},
-                           {"pose_sensor", ToString(pose_sensor)},
+                           {"pose_sensor", has_pose ? nlohmann::json(ToString(pose_sensor))
+                                                    : nlohmann::json(nullptr)},
                            {"command", command},
                            {"machine", machine},
                            {"files",
@@ -525,8 +563,9 @@ void RegisterEval(CLI::App& app, CommandBody* selected) {
   sub->add_option("--functaset", flags->functaset, "Functaset (.tfs) from `tactfunc encode`")
       ->required();
   sub->add_option("--pose-model", flags->pose_model,
-                  "Pose model (.tpm) from `tactfunc train-pose` on this functaset")
-      ->required();
+                  "Pose model (.tpm) from `tactfunc train-pose` on this functaset; without "
+                  "it the table holds the reconstruction columns only (no pose columns, "
+                  "pose targets null)");
   sub->add_option("--out", flags->out, "Folder for table.md, table.json, rate_distortion.png")
       ->required();
   sub->add_option("--sensors", flags->sensors,
@@ -545,11 +584,25 @@ void RegisterEval(CLI::App& app, CommandBody* selected) {
   sub->add_option("--knn-k", flags->knn_k, "Neighbours of the raw-pixel k-NN pose baseline (5)")
       ->check(CLI::Range(1, 1000));
   sub->add_flag("--json", flags->json, "Print {rows, targets, rate_distortion, ...} as one JSON line");
+  AddDatasetFlags(sub, &flags->dataset);
   sub->callback([flags, selected]() {
     flags->argv = {"tactfunc eval", "--data " + flags->data, "--model " + flags->model,
-                   "--functaset " + flags->functaset, "--pose-model " + flags->pose_model,
+                   "--functaset " + flags->functaset,
+                   flags->pose_model.empty() ? "" : "--pose-model " + flags->pose_model,
                    "--out " + flags->out,
                    flags->sensors.empty() ? "" : "--sensors " + flags->sensors};
+    const DatasetFlags& d = flags->dataset;
+    if (!d.sensor.empty()) flags->argv.push_back("--sensor " + d.sensor);
+    if (!d.reference.empty()) flags->argv.push_back("--reference " + d.reference);
+    if (d.reference_index != 0) {
+      flags->argv.push_back("--reference-index " + std::to_string(d.reference_index));
+    }
+    if (d.pixel_pitch_mm != 0) {
+      std::ostringstream pitch;
+      pitch << d.pixel_pitch_mm;
+      flags->argv.push_back("--pixel-pitch-mm " + pitch.str());
+    }
+    if (!d.labels.empty()) flags->argv.push_back("--labels " + d.labels);
     for (std::size_t k = 0; k < flags->extra_functasets.size(); ++k) {
       flags->argv.push_back("--extra-functaset " + flags->extra_functasets[k]);
       if (k < flags->extra_models.size()) {

@@ -5,6 +5,8 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <iostream>
+#include <opencv2/imgcodecs.hpp>
 #include <stdexcept>
 
 #include "apps/command.h"
@@ -132,6 +134,62 @@ PoseMlp LoadPoseModelFor(const std::string& path, const FunctaModel& model, Sens
                        buffer + " ('" + model_path + "'): its latent space is another");
   }
   return pose;
+}
+
+nlohmann::json DataFramesJson(const SensorInfo& info) {
+  return {{"rows", info.rows},
+          {"cols", info.cols},
+          {"channels", info.channels},
+          {"pixel_pitch_m", info.pixel_pitch_m}};
+}
+
+void CheckModelMatchesData(const FunctaModel& model, const std::string& model_path,
+                           const Dataset& dataset, const std::string& data_path,
+                           SensorKind sensor, const std::string& command,
+                           const std::string& override_flag, bool override_given) {
+  if (!dataset.has_sensor(sensor)) return;
+  nlohmann::json info;
+  try {
+    info = nlohmann::json::parse(model.info_json());
+  } catch (const nlohmann::json::exception&) {
+    return;  // set_info_json keeps info a JSON object; nothing recorded otherwise
+  }
+  const std::string name = ToString(sensor);
+  if (!info.is_object() || !info.contains("trunks") || !info["trunks"].is_object() ||
+      !info["trunks"].contains(name) || !info["trunks"][name].is_object() ||
+      !info["trunks"][name].contains("data_frames")) {
+    return;
+  }
+  const nlohmann::json& trained = info["trunks"][name]["data_frames"];
+  const SensorInfo& data = dataset.sensor_info(sensor);
+  auto number = [&](const char* key) {
+    return trained.contains(key) && trained[key].is_number() ? trained[key].get<double>() : 0.0;
+  };
+  const int rows = static_cast<int>(number("rows")), cols = static_cast<int>(number("cols"));
+  const int channels = static_cast<int>(number("channels"));
+  const double pitch = number("pixel_pitch_m");
+  auto shape = [](int r, int c, int ch) {
+    return std::to_string(r) + "x" + std::to_string(c) + "x" + std::to_string(ch);
+  };
+  if (rows > 0 && cols > 0 && channels > 0 &&
+      (rows != data.rows || cols != data.cols || channels != data.channels)) {
+    const std::string message =
+        "model '" + model_path + "' was trained on " + name + " frames of " +
+        shape(rows, cols, channels) + " (rows x cols x channels, its info's trunks." + name +
+        ".data_frames), but --data '" + data_path + "' has " + name + " frames of " +
+        shape(data.rows, data.cols, data.channels) +
+        ": another sensor or resolution. Train a model on this data (tactfunc train), or pass " +
+        override_flag + " to use this model anyway";
+    if (!override_given) throw DatasetError(message);
+    std::cerr << command << ": warning (" << override_flag << "): " << message << "\n";
+  }
+  if (pitch > 0 && data.pixel_pitch_m > 0 &&
+      std::abs(pitch / data.pixel_pitch_m - 1.0) > 0.01) {
+    std::cerr << command << ": warning: model '" << model_path << "' was trained on " << name
+              << " frames of pixel pitch " << pitch * 1e3 << " mm, --data '" << data_path
+              << "' has " << data.pixel_pitch_m * 1e3
+              << " mm: contacts appear at another scale than the trunk learned\n";
+  }
 }
 
 }  // namespace tactfunc::apps

@@ -8,6 +8,8 @@
 #define TACTFUNC_APPS_MODEL_INPUTS_H_
 
 #include <memory>
+
+#include "nlohmann/json.hpp"
 #include <string>
 
 #include "estimation/data/dataset.h"
@@ -56,6 +58,22 @@ FunctasetKnn MakeFunctasetKnn(const Functaset& functaset, SensorKind sensor, boo
 // dimension, when its info is not a PoseModelProvenance (written by train-pose), or
 // when that names another sensor or a functaset of another model checksum (a latent
 // space it was not trained on).
+// The frames a trunk was trained on, as `tactfunc train` records them in the model's
+// info: {"trunks": {"<sensor>": {"data_frames": {"rows", "cols", "channels",
+// "pixel_pitch_m"}}}}. DataFramesJson makes that record from a dataset's SensorInfo.
+nlohmann::json DataFramesJson(const SensorInfo& info);
+
+// Checks `dataset`'s `sensor` frames (from `data_path`) against the frames the model's
+// trunk was trained on (the record above; a model without one -- hand-built or older --
+// passes). Another frame size or channel count: throws DatasetError naming both files,
+// both sizes and `override_flag` (which skips the throw, leaving a warning). Another
+// pixel pitch (both known, more than 1 % apart): a warning on stderr naming both.
+// Warnings start with `command`.
+void CheckModelMatchesData(const FunctaModel& model, const std::string& model_path,
+                           const Dataset& dataset, const std::string& data_path,
+                           SensorKind sensor, const std::string& command,
+                           const std::string& override_flag, bool override_given);
+
 PoseMlp LoadPoseModelFor(const std::string& path, const FunctaModel& model, SensorKind sensor,
                          const std::string& model_path);
 

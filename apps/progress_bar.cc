@@ -3,6 +3,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -15,13 +16,15 @@ bool ProgressBar::Enabled() {
   return isatty(fileno(stderr)) != 0;
 }
 
-ProgressBar::ProgressBar(std::string label, std::int64_t total, std::string unit)
+ProgressBar::ProgressBar(std::string label, std::int64_t total, std::string unit, Lines lines)
     : label_(std::move(label)),
       total_(total),
       unit_(std::move(unit)),
       start_(std::chrono::steady_clock::now()),
       last_draw_(start_),
-      enabled_(Enabled()) {}
+      enabled_(Enabled()),
+      lines_(!enabled_ && lines == Lines::kWhenNotDrawn),
+      last_line_(start_) {}
 
 ProgressBar::~ProgressBar() { Finish(); }
 
@@ -33,6 +36,40 @@ double ProgressBar::ElapsedSeconds() const {
 void ProgressBar::Tick(std::int64_t n) {
   done_.fetch_add(n);
   if (enabled_) Draw(false);
+  if (lines_) Line(false);
+}
+
+void ProgressBar::Line(bool last) {
+  std::unique_lock<std::mutex> lock(mutex_, std::defer_lock);
+  if (last) {
+    lock.lock();
+  } else if (!lock.try_lock()) {
+    return;
+  }
+  if (finished_) return;
+  const auto now = std::chrono::steady_clock::now();
+  const std::int64_t done = done_.load();
+  const std::int64_t tenth = total_ > 0 ? std::min<std::int64_t>(10, done * 10 / total_) : 0;
+  if (!last && tenth <= last_line_tenth_ && now - last_line_ < std::chrono::seconds(10)) return;
+  last_line_tenth_ = std::max(last_line_tenth_, tenth);
+  last_line_ = now;
+  const double elapsed = std::chrono::duration<double>(now - start_).count();
+  const double rate = elapsed > 0 ? done / elapsed : 0.0;
+  const double percent = total_ > 0 ? std::min(100.0, 100.0 * done / total_) : 0.0;
+  if (last) {
+    std::fprintf(stderr, "%s: %lld/%lld %s (%.0f%%) in %s, %.1f %s/s%s%s\n", label_.c_str(),
+                 static_cast<long long>(done), static_cast<long long>(total_), unit_.c_str(),
+                 percent, FormatDuration(elapsed).c_str(), rate, unit_.c_str(),
+                 status_.empty() ? "" : ", ", status_.c_str());
+    finished_ = true;
+  } else {
+    const double eta = rate > 0 ? (total_ - done) / rate : 0.0;
+    std::fprintf(stderr, "%s: %lld/%lld %s (%.0f%%), %.1f %s/s, ETA %s%s%s\n", label_.c_str(),
+                 static_cast<long long>(done), static_cast<long long>(total_), unit_.c_str(),
+                 percent, rate, unit_.c_str(), FormatDuration(eta).c_str(),
+                 status_.empty() ? "" : ", ", status_.c_str());
+  }
+  std::fflush(stderr);
 }
 
 void ProgressBar::SetStatus(const std::string& status) {
@@ -41,6 +78,10 @@ void ProgressBar::SetStatus(const std::string& status) {
 }
 
 void ProgressBar::Finish() {
+  if (lines_) {
+    Line(true);
+    return;
+  }
   if (!enabled_ || finished_) return;
   Draw(true);
   std::lock_guard<std::mutex> lock(mutex_);

@@ -3,6 +3,12 @@
 // A progress bar for long work: "label [#######     ] 120/240  53.1/s  ETA 0:02".
 // Drawn on stderr only when stderr is a terminal and CI is not set (so logs and CI stay
 // quiet); redrawn at most 10 times a second. Tick() is thread-safe.
+//
+// With Lines::kWhenNotDrawn, where no bar is drawn (a log file, a pipe, CI) it writes
+// plain progress lines instead, one per 10 % of the work or per 10 s, whichever comes
+// first, and a last one at Finish:
+//   "encode: DONE/TOTAL frames (P%), R frames/s, ETA T"
+// (`tactfunc encode` and `tactfunc eval` use them: minutes without a word otherwise).
 #ifndef TACTFUNC_APPS_PROGRESS_BAR_H_
 #define TACTFUNC_APPS_PROGRESS_BAR_H_
 
@@ -16,8 +22,10 @@ namespace tactfunc::apps {
 
 class ProgressBar {
  public:
+  enum class Lines { kNever, kWhenNotDrawn };
   // `total` units of work; `unit` names them in the rate ("frames").
-  ProgressBar(std::string label, std::int64_t total, std::string unit = "it");
+  ProgressBar(std::string label, std::int64_t total, std::string unit = "it",
+              Lines lines = Lines::kNever);
   ~ProgressBar();
   ProgressBar(const ProgressBar&) = delete;
   ProgressBar& operator=(const ProgressBar&) = delete;
@@ -35,6 +43,8 @@ class ProgressBar {
 
  private:
   void Draw(bool force);
+  // A progress line when a new tenth of the work is done, 10 s have passed, or `last`.
+  void Line(bool last);
 
   std::string label_;
   std::int64_t total_;
@@ -45,7 +55,10 @@ class ProgressBar {
   std::string status_;
   std::mutex mutex_;
   bool enabled_;
+  bool lines_;  // progress lines instead of the bar (Lines::kWhenNotDrawn, no bar)
   bool finished_ = false;
+  std::int64_t last_line_tenth_ = 0;
+  std::chrono::steady_clock::time_point last_line_;
 };
 
 // "1:02:03" or "2:03".

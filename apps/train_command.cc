@@ -4,6 +4,7 @@
 // (estimation/training/trunk_trainer.h, docs/TRAINING.md) and writes one model file.
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <csignal>
 #include <cstdio>
@@ -21,6 +22,7 @@
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
 #include "apps/output_paths.h"
+#include "apps/model_inputs.h"
 #include "apps/pictures.h"
 #include "apps/progress_bar.h"
 #include "estimation/data/dataset.h"
@@ -221,6 +223,27 @@ void RunTrain(const TrainFlags& flags) {
     }
   }
 
+  // What the run will do, before it starts: steps per sensor and the working resolution
+  // (a stretch of the frames to it is warned about); a time estimate follows from the
+  // first steps.
+  for (SensorKind sensor : sensors) {
+    const TrunkTrainer::Options o = OptionsFor(flags, sensor);
+    std::string resolution;
+    try {
+      // Only rows and cols are used here; the scale is the trainer's business.
+      const double scale = dataset.sensor_info(sensor).normalization_scale;
+      const FrameFormat format = TrunkTrainer(o).ResolveFormat(sensor, scale > 0 ? scale : 1.0);
+      resolution = " at " + std::to_string(format.rows) + "x" + std::to_string(format.cols);
+      WarnIfStretched(dataset, flags.data, sensor, format.rows, format.cols, "train");
+    } catch (const std::exception&) {
+      // The trainer reports a format it cannot resolve when it starts.
+    }
+    std::cout << "train " << ToString(sensor) << ": " << o.steps << " steps (preset "
+              << flags.preset << (flags.steps_option->count() ? ", --steps" : "") << ")"
+              << resolution << ", batch " << o.batch_size << " on " << o.threads
+              << " thread(s); a time estimate follows the first steps" << std::endl;
+  }
+
   g_interrupted.store(false);
   std::signal(SIGINT, HandleSigint);
   const bool bar_enabled = ProgressBar::Enabled();
@@ -245,10 +268,30 @@ void RunTrain(const TrainFlags& flags) {
     auto bar =
         std::make_unique<ProgressBar>(std::string("train ") + name, sensor_options.steps, "steps");
     bool first = true;
+    // The estimate: wall time from the first step's report over at least 5 more steps
+    // and 2 s (or 10 s), said once.
+    bool estimated = false;
+    int first_step = 0;
+    std::chrono::steady_clock::time_point first_time;
     const auto callback = [&](const TrunkTrainer::StepReport& report) {
       if (first) {  // a resumed run starts with the bar part-way
         bar->Tick(report.step - 1);
         first = false;
+        first_step = report.step;
+        first_time = std::chrono::steady_clock::now();
+      } else if (!estimated && report.step < report.total_steps) {
+        const double seconds =
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - first_time).count();
+        const int steps = report.step - first_step;
+        if ((steps >= 5 && seconds >= 2) || seconds >= 10) {
+          const double per_step = seconds / steps;
+          std::cout << "train " << name << ": " << FormatFixed(per_step, 3)
+                    << " s per step over steps " << first_step + 1 << "-" << report.step
+                    << ": about " << FormatDuration(per_step * (report.total_steps - report.step))
+                    << " (h:mm:ss / m:ss) for the remaining "
+                    << report.total_steps - report.step << " steps" << std::endl;
+          estimated = true;
+        }
       }
       bar->Tick(1);
       bar->SetStatus(Status(report));
@@ -301,6 +344,7 @@ void RunTrain(const TrainFlags& flags) {
     }
     curves.push_back({sensor, summary.history});
     info_trunks[name] = {
+        {"data_frames", DataFramesJson(dataset.sensor_info(sensor))},
         {"options", nlohmann::json::parse(trainer.TrajectoryOptionsJson(sensor, summary.format))},
         {"steps", summary.steps_done},
         {"train_frames", summary.num_train_frames},

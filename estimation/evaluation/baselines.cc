@@ -145,8 +145,96 @@ std::string PcaCodec::Summary::BriefReport() const {
   std::snprintf(buffer, sizeof(buffer),
                 "PCA: %d components of %d floats from %d frames, %.1f%% of the variance, %.2f s",
                 components, dim, frames, 100 * explained_variance, seconds);
-  return buffer;
+  return method.empty() ? std::string(buffer) : std::string(buffer) + " (" + method + ")";
 }
+
+namespace {
+
+// The top n eigenpairs (descending) of the symmetric positive semi-definite matrix A
+// (K x K, only its lower triangle is read). `method` says how they were found.
+//
+// K <= kDenseLimit or n > K / 4: Eigen's SelfAdjointEigenSolver on A (exact).
+// Else block subspace iteration with Rayleigh-Ritz (k = n + max(16, n / 2) vectors,
+// a fixed deterministic start): each step Z = A Q, T = Q^T Z, T = W Theta W^T,
+// Q <- orth(Z W), until (a) every kept Ritz pair has ||A v - theta v|| <= 1e-9 theta_1
+// (an exact eigenpair of a matrix within 1e-9 ||A|| of A, the backward error of a dense
+// solver) and (b) the variance the n pairs keep, sum theta_i (which rises to its exact
+// value from below), rose in the last step by at most 1e-6 of the variance they leave
+// out (trace A - sum theta_i): so the reconstruction error, and PSNR, are the exact
+// fit's (b matters where the spectrum is flat around n, e.g. a sensor-noise floor).
+// Not converged after kMaxIterations steps: the dense solver after all.
+constexpr int kDenseLimit = 600;
+constexpr int kMaxIterations = 300;
+constexpr double kResidualTolerance = 1e-9;
+constexpr double kKeptTolerance = 1e-6;
+
+void TopEigenpairs(const Eigen::MatrixXd& a_lower, int n, Eigen::VectorXd* values,
+                   Eigen::MatrixXd* vectors, std::string* method) {
+  const Eigen::Index K = a_lower.rows();
+  auto dense = [&](const std::string& why) {
+    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> solver(a_lower);  // lower triangle
+    // Ascending: the last n columns, reversed.
+    *values = solver.eigenvalues().tail(n).reverse();
+    *vectors = solver.eigenvectors().rightCols(n).rowwise().reverse();
+    *method = "dense eigensolver on " + std::to_string(K) + " x " + std::to_string(K) + why;
+  };
+  if (K <= kDenseLimit || n > K / 4) {
+    dense("");
+    return;
+  }
+  const Eigen::MatrixXd a = a_lower.selfadjointView<Eigen::Lower>();
+  const Eigen::Index k = std::min<Eigen::Index>(K, n + std::max(16, n / 2));
+  // Deterministic start: std::mt19937's sequence is fixed by the standard.
+  std::mt19937 rng(20260101u);
+  Eigen::MatrixXd q(K, k);
+  for (Eigen::Index i = 0; i < q.size(); ++i) q.data()[i] = rng() / 4294967296.0 - 0.5;
+  auto orthonormalise = [&](const Eigen::MatrixXd& y) {
+    Eigen::HouseholderQR<Eigen::MatrixXd> qr(y);
+    return Eigen::MatrixXd(qr.householderQ() * Eigen::MatrixXd::Identity(K, k));
+  };
+  q = orthonormalise(q);
+  const double trace = a.trace();
+  double previous_sum = -1;
+  for (int iteration = 1; iteration <= kMaxIterations; ++iteration) {
+    const Eigen::MatrixXd z = a * q;
+    const Eigen::MatrixXd t = q.transpose() * z;
+    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> small(0.5 * (t + t.transpose()));
+    const Eigen::MatrixXd w = small.eigenvectors().rowwise().reverse();  // descending
+    const Eigen::VectorXd theta = small.eigenvalues().reverse();
+    const Eigen::MatrixXd v = q * w.leftCols(n);
+    const Eigen::MatrixXd zw = z * w;
+    const double scale = std::max(theta[0], 0.0);
+    const Eigen::VectorXd residual =
+        (zw.leftCols(n) - v * theta.head(n).asDiagonal()).colwise().norm();
+    // The variance the n pairs keep, sum theta_i, rises to its exact value from below;
+    // its last rise must be a negligible part of the variance they leave out.
+    const double kept = theta.head(n).sum();
+    const double left_out = std::max(trace - kept, 0.0);
+    const bool kept_converged =
+        previous_sum >= 0 && kept - previous_sum <= kKeptTolerance * left_out;
+    previous_sum = kept;
+    if ((residual.maxCoeff() <= kResidualTolerance * scale && kept_converged) || scale == 0) {
+      *values = theta.head(n);
+      *vectors = v;
+      *method = "subspace iteration on " + std::to_string(K) + " x " + std::to_string(K) +
+                " (" + std::to_string(iteration) + " steps)";
+      return;
+    }
+    q = orthonormalise(zw);
+  }
+  dense(" (subspace iteration did not converge)");
+}
+
+// A fixed sign per basis vector: its entry of largest magnitude is positive.
+void FixSigns(Eigen::MatrixXd* basis_rows) {
+  for (Eigen::Index i = 0; i < basis_rows->rows(); ++i) {
+    Eigen::Index j = 0;
+    basis_rows->row(i).cwiseAbs().maxCoeff(&j);
+    if ((*basis_rows)(i, j) < 0) basis_rows->row(i) *= -1;
+  }
+}
+
+}  // namespace
 
 PcaCodec PcaCodec::Fit(const Eigen::MatrixXf& frames, const Options& options, Summary* summary) {
   std::string error;
@@ -157,29 +245,68 @@ PcaCodec PcaCodec::Fit(const Eigen::MatrixXf& frames, const Options& options, Su
   }
   if (!frames.allFinite()) throw std::invalid_argument("PcaCodec::Fit: non-finite frame values");
   const auto start = Clock::now();
-  const int m = static_cast<int>(frames.rows()), p = static_cast<int>(frames.cols());
-  const int n = std::min({options.components, m, p});
-  // cv::PCA wants one sample per row of a continuous row-major matrix.
-  const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> rows = frames;
-  const cv::Mat data(m, p, CV_32F, const_cast<float*>(rows.data()));
-  const cv::PCA pca(data, cv::Mat(), cv::PCA::DATA_AS_ROW, n);
-  PcaCodec codec;
-  const int kept = pca.eigenvectors.rows;
-  codec.mean_.resize(p);
-  for (int j = 0; j < p; ++j) codec.mean_[j] = pca.mean.at<float>(0, j);
-  codec.basis_.resize(kept, p);
-  codec.eigenvalues_.resize(kept);
-  for (int i = 0; i < kept; ++i) {
-    for (int j = 0; j < p; ++j) codec.basis_(i, j) = pca.eigenvectors.at<float>(i, j);
-    codec.eigenvalues_[i] = pca.eigenvalues.at<float>(i, 0);
+  const Eigen::Index m = frames.rows(), p = frames.cols();
+  const int n = static_cast<int>(std::min<Eigen::Index>({options.components, m, p}));
+  const Eigen::RowVectorXd mean = frames.cast<double>().colwise().mean();
+  // Centred frames in double, a block at a time (the whole of them would double the
+  // memory of `frames` four times over).
+  constexpr Eigen::Index kBlock = 256;
+  Eigen::MatrixXd basis;  // n x P
+  Eigen::VectorXd values;
+  std::string method;
+  if (m <= p) {
+    // Gram matrix G = Xc Xc^T (M x M): G u = s u gives the basis row Xc^T u / sqrt(s).
+    Eigen::MatrixXd gram = Eigen::MatrixXd::Zero(m, m);
+    for (Eigen::Index c = 0; c < p; c += kBlock) {
+      const Eigen::Index w = std::min(kBlock, p - c);
+      const Eigen::MatrixXd block =
+          frames.middleCols(c, w).cast<double>().rowwise() - mean.segment(c, w);
+      gram.triangularView<Eigen::Lower>() += block * block.transpose();
+    }
+    Eigen::MatrixXd u;
+    TopEigenpairs(gram, n, &values, &u, &method);
+    basis.resize(n, p);
+    for (Eigen::Index c = 0; c < p; c += kBlock) {
+      const Eigen::Index w = std::min(kBlock, p - c);
+      const Eigen::MatrixXd block =
+          frames.middleCols(c, w).cast<double>().rowwise() - mean.segment(c, w);
+      basis.middleCols(c, w) = u.transpose() * block;
+    }
+    // Orthonormal rows: a thin QR of basis^T (rows with s ~ 0 have no direction of their
+    // own; QR completes them), signs kept from the Gram vectors (R's diagonal positive).
+    Eigen::HouseholderQR<Eigen::MatrixXd> qr(basis.transpose());
+    Eigen::MatrixXd q = qr.householderQ() * Eigen::MatrixXd::Identity(p, n);
+    const Eigen::MatrixXd r = qr.matrixQR().topLeftCorner(n, n);
+    for (int i = 0; i < n; ++i) {
+      if (r(i, i) < 0) q.col(i) *= -1;
+    }
+    basis = q.transpose();
+  } else {
+    // Covariance C = Xc^T Xc (P x P): its eigenvectors are the basis rows.
+    Eigen::MatrixXd covariance = Eigen::MatrixXd::Zero(p, p);
+    for (Eigen::Index r = 0; r < m; r += kBlock) {
+      const Eigen::Index h = std::min(kBlock, m - r);
+      const Eigen::MatrixXd block = frames.middleRows(r, h).cast<double>().rowwise() - mean;
+      covariance.triangularView<Eigen::Lower>() += block.transpose() * block;
+    }
+    Eigen::MatrixXd vectors;
+    TopEigenpairs(covariance, n, &values, &vectors, &method);
+    basis = vectors.transpose();
   }
+  FixSigns(&basis);
+  PcaCodec codec;
+  codec.mean_ = mean.cast<float>();
+  codec.basis_ = basis.cast<float>();
+  // Eigenvalues of the covariance Xc^T Xc / M (cv::PCA's scaling), never negative.
+  codec.eigenvalues_ = (values.cwiseMax(0.0) / static_cast<double>(m)).cast<float>();
   if (summary) {
-    const double total = (frames.rowwise() - codec.mean_).cast<double>().squaredNorm() / m;
-    summary->frames = m;
-    summary->dim = p;
-    summary->components = kept;
+    const double total = (frames.cast<double>().rowwise() - mean).squaredNorm() / m;
+    summary->frames = static_cast<int>(m);
+    summary->dim = static_cast<int>(p);
+    summary->components = n;
     summary->explained_variance =
         total > 0 ? std::min(1.0, codec.eigenvalues_.cast<double>().sum() / total) : 1.0;
+    summary->method = method;
     summary->seconds = SecondsSince(start);
   }
   return codec;

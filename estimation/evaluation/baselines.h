@@ -14,7 +14,9 @@
 // and are left out of every PSNR.
 //
 // Reconstruction baselines
-//   PcaCodec   principal components (OpenCV cv::PCA) fitted on the train split:
+//   PcaCodec   principal components fitted on the train split (exact, in double: the
+//              M x M Gram matrix Xc Xc^T of the centred frames when M <= P, else the
+//              P x P covariance Xc^T Xc; its top n eigenpairs, PcaCodec::Fit):
 //                code  = B (x - mu)          n floats   (B: n x P orthonormal rows)
 //                x_hat = mu + B^T code
 //              bytes per frame = 4 n (float32 codes); model bytes = 4 (P + n P) (mean and
@@ -107,12 +109,24 @@ class PcaCodec {
     // Fraction of the training frames' total variance the kept components explain.
     double explained_variance = 0;
     double seconds = 0;  // wall time of the fit
+    std::string method;  // how the eigenpairs were found (Fit's comment)
     std::string BriefReport() const;
   };
 
   PcaCodec() = default;
-  // Fits on `frames` (M x P, one frame per row; M >= 1, all finite) with cv::PCA
-  // (rows as samples). Throws std::invalid_argument for bad options or frames.
+  // Fits on `frames` (M x P, one frame per row; M >= 1, all finite), deterministic.
+  // Mean and products in double; for M <= P the M x M Gram matrix G = Xc Xc^T of the
+  // centred frames Xc (basis rows Xc^T u / |Xc^T u| for G's top eigenvectors u), else the
+  // P x P covariance Xc^T Xc (basis rows its top eigenvectors). The top n eigenpairs of
+  // that K x K matrix: Eigen's SelfAdjointEigenSolver for K <= 600 or n > K / 4, else
+  // block subspace iteration with Rayleigh-Ritz until every kept pair's residual
+  // |G v - s v| <= 1e-9 s_1 (the backward error of a dense solver) and the variance the
+  // n components keep has stopped rising (its last rise <= 1e-6 of the variance left
+  // out), so reconstructions match the exact fit's; the dense solver if that has not
+  // happened after 300 steps. Each basis row's largest-magnitude entry is
+  // positive. eigenvalues() are those of the covariance Xc^T Xc / M (descending).
+  // 3,991 frames of 8,560 floats: docs/BENCHMARKS.md (`tactfunc bench pca`).
+  // Throws std::invalid_argument for bad options or frames.
   static PcaCodec Fit(const Eigen::MatrixXf& frames, const Options& options,
                       Summary* summary = nullptr);
 

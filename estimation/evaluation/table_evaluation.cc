@@ -151,13 +151,13 @@ Eigen::MatrixXf Rows(const Eigen::MatrixXf& source, const std::vector<std::size_
 void CheckInputs(const TableEvaluation::Inputs& in, const TableEvaluation::Options& options) {
   std::string error;
   if (!options.IsValid(&error)) throw std::invalid_argument(error);
-  if (in.dataset == nullptr || in.model == nullptr || in.functaset == nullptr ||
-      in.pose_model == nullptr) {
+  if (in.dataset == nullptr || in.model == nullptr || in.functaset == nullptr) {
     throw std::invalid_argument(
-        "TableEvaluation::Inputs: dataset, model, functaset and pose_model must be set");
+        "TableEvaluation::Inputs: dataset, model and functaset must be set");
   }
   if (in.sensors.empty()) throw std::invalid_argument("TableEvaluation::Inputs: no sensor");
-  if (std::find(in.sensors.begin(), in.sensors.end(), in.pose_sensor) == in.sensors.end()) {
+  if (in.pose_model != nullptr &&
+      std::find(in.sensors.begin(), in.sensors.end(), in.pose_sensor) == in.sensors.end()) {
     throw std::invalid_argument(std::string("TableEvaluation::Inputs: pose_sensor ") +
                                 ToString(in.pose_sensor) + " is not among the sensors");
   }
@@ -198,15 +198,21 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
   const FunctaModel& model = *in.model;
   const Functaset& functaset = *in.functaset;
   const Dataset& dataset = *in.dataset;
-  const PoseMlp& pose_model = *in.pose_model;
+  // Without a pose model: the reconstruction columns alone (no sensor is the pose sensor).
+  const bool has_pose_model = in.pose_model != nullptr;
   const PoseModelProvenance provenance =
-      PoseModelProvenance::FromJson(pose_model.info_json(), "pose model");
+      has_pose_model ? PoseModelProvenance::FromJson(in.pose_model->info_json(), "pose model")
+                     : PoseModelProvenance();
+  auto is_pose_sensor = [&](SensorKind sensor) {
+    return has_pose_model && sensor == in.pose_sensor;
+  };
   auto message = [&](const std::string& line) {
     if (observer) observer->Message(line);
   };
 
   Result result;
   result.pose_sensor = in.pose_sensor;
+  result.has_pose = has_pose_model;
   for (SensorKind sensor : in.sensors) {
     SensorResult sensor_result;
     sensor_result.sensor = sensor;
@@ -252,7 +258,7 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
     PcaCodec::Options pca_options;
     pca_options.components = *sweep.rbegin();
     PcaCodec::Summary pca_summary;
-    message("eval: fitting PCA (cv::PCA) on " + std::to_string(s.train.size()) + " frames of " +
+    message("eval: fitting PCA on " + std::to_string(s.train.size()) + " frames of " +
             std::to_string(train_matrix.cols()) + " floats...\n");
     const PcaCodec pca_full = PcaCodec::Fit(train_matrix, pca_options, &pca_summary);
     message(pca_summary.BriefReport() + "\n");
@@ -368,7 +374,8 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
     // -- Poses ---------------------------------------------------------------------------
     std::map<std::pair<std::string, Split>, PoseErrors> pose;
     std::string tf_pose_latents;  // the latent map the TactFunc pose rows used
-    if (sensor == in.pose_sensor) {
+    if (is_pose_sensor(sensor)) {
+      const PoseMlp& pose_model = *in.pose_model;
       const PoseSamples train = LabelledSamples(s, Split::kTrain);
       const PoseSamples test = LabelledSamples(s, Split::kTest);
       if (train.frames.empty()) {
@@ -492,7 +499,7 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
         const auto it = pose.find({key, split});
         return it == pose.end() ? PoseErrors() : it->second;
       };
-      const bool posed = sensor == in.pose_sensor;
+      const bool posed = is_pose_sensor(sensor);
       Row tf{"TactFunc", posed ? "pose MLP on " + tf_pose_latents + " latents" : "", sensor, split,
              tf_rep, tf_frame_bytes,
              MeanPsnr(Pick(tf_psnr, idx)), true, static_cast<int>(idx.size()),
@@ -567,7 +574,7 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
     t.psnr_above_jpeg.jpeg_target_reachable = search.target_reachable;
     result.all_targets_met =
         result.all_targets_met && t.psnr_above_pca.met && t.psnr_above_jpeg.met;
-    if (sensor == in.pose_sensor) {
+    if (is_pose_sensor(sensor)) {
       const auto mse = [&](const std::string& key) {
         const auto it = pose.find({key, Split::kTest});
         return it == pose.end() ? kNan : it->second.PoseMse();

@@ -12,7 +12,7 @@
 //               model on latents of the kind it was trained on (LatentMapOfPoseModel):
 //               the functaset's if its fit strategy is that map, else every frame
 //               re-fitted with the map (the row's pose_from names it)
-//   PCA         cv::PCA fitted on the train frames, as many components as the latent has
+//   PCA         PcaCodec fitted on the train frames, as many components as the latent has
 //               floats; pose: the same MLP architecture, trained as the pose model was
 //               (its PoseModelProvenance: epochs, batch, learning rate, seed; train-pose's
 //               defaults where it says nothing), on PCA codes
@@ -35,9 +35,15 @@
 //   pose_beats_pca_codes    (pose sensor) pose MSE from latents below that from PCA codes
 //   pose_not_worse_than_raw (pose sensor) pose MSE from latents <= the best raw-pixel one
 //
+// Without a pose model (Inputs::pose_model null: data without pose labels, or no
+// pose model at hand) the table holds the reconstruction columns alone: every row's
+// pose is empty (count 0, pose_from ""), no k-NN raw row, no pose targets
+// (Targets::has_pose false, Details::pose empty) and Result::has_pose false.
+//
 // Errors: invalid Options or Inputs throw std::invalid_argument; data that cannot be
 // evaluated (a functaset frame missing from the dataset, no train-split frames, no
-// labelled train-split frames of the pose sensor) throws DatasetError naming the files.
+// labelled train-split frames of the pose sensor, with a pose model) throws DatasetError
+// naming the files.
 #ifndef TACTFUNC_ESTIMATION_EVALUATION_TABLE_EVALUATION_H_
 #define TACTFUNC_ESTIMATION_EVALUATION_TABLE_EVALUATION_H_
 
@@ -88,11 +94,12 @@ class TableEvaluation {
     const FunctaModel* model = nullptr;
     const Functaset* functaset = nullptr;  // checked against model by the caller
     std::string functaset_name;
-    // The pose model of pose_sensor's latents (LoadPoseModelFor-checked by the caller).
+    // The pose model of pose_sensor's latents (LoadPoseModelFor-checked by the caller),
+    // or null: no pose columns or targets (header comment); pose_sensor is then unused.
     const PoseMlp* pose_model = nullptr;
     SensorKind pose_sensor = SensorKind::kSoftBubble;
     // The sensors to evaluate, in table order; each in the functaset and the dataset,
-    // pose_sensor among them.
+    // pose_sensor among them when there is a pose model.
     std::vector<SensorKind> sensors;
     std::vector<Extra> extras;
   };
@@ -203,7 +210,8 @@ class TableEvaluation {
   struct Result {
     std::vector<Row> rows;               // in table order
     std::vector<SensorResult> sensors;   // in Inputs::sensors order
-    bool all_targets_met = true;
+    bool all_targets_met = true;  // the reconstruction targets alone without a pose model
+    bool has_pose = false;        // a pose model was given: pose_sensor has pose columns
     SensorKind pose_sensor = SensorKind::kSoftBubble;
   };
 

@@ -189,6 +189,68 @@ TEST_F(EvalCliTest, WritesTheTableJsonAndTheRateDistortionPicture) {
   EXPECT_EQ(png.substr(1, 3), "PNG");
 }
 
+TEST_F(EvalCliTest, WithoutAPoseModelTheTableHoldsTheReconstructionColumnsAlone) {
+  const Result r = Run("eval --data " + Root("d") + " --model " + Root("m.tfm") +
+                       " --functaset " + Root("f.tfs") + " --out " + Root("table_nopose") +
+                       " --threads 1 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err << r.out;
+  // Said once on stderr and in table.md.
+  const std::string said = "no --pose-model";
+  ASSERT_NE(r.err.find(said), std::string::npos) << r.err;
+  EXPECT_EQ(r.err.find(said, r.err.find(said) + 1), std::string::npos) << r.err;
+  const std::string md = testing_util::Slurp(Root("table_nopose/table.md"));
+  EXPECT_THAT(md, HasSubstr("No pose model was given"));
+  EXPECT_THAT(md, HasSubstr("| TactFunc |"));
+  EXPECT_THAT(md, ::testing::Not(HasSubstr("pose MSE")));
+  EXPECT_THAT(md, ::testing::Not(HasSubstr("pose from")));
+  const nlohmann::json j = r.LastJson();
+  std::set<std::string> approaches;
+  for (const nlohmann::json& row : j["rows"]) {
+    approaches.insert(row["approach"].get<std::string>());
+    EXPECT_TRUE(row["pose_mse"].is_null()) << row.dump();
+    EXPECT_TRUE(row["rmse_mm"].is_null()) << row.dump();
+    EXPECT_TRUE(row["pose_from"].is_null()) << row.dump();
+    if (row["approach"] != "Raw frames") EXPECT_TRUE(row["psnr"].is_number()) << row.dump();
+  }
+  EXPECT_EQ(approaches, (std::set<std::string>{"TactFunc", "PCA", "JPEG", "Raw frames"}));
+  EXPECT_TRUE(j["pose_sensor"].is_null());
+  for (const char* sensor : {"bubble", "gelslim"}) {
+    const nlohmann::json& t = j["targets"][sensor];
+    EXPECT_TRUE(t["psnr_3db_above_pca"]["pca_db"].is_number()) << sensor;
+    EXPECT_TRUE(t["psnr_above_jpeg"]["met"].is_boolean()) << sensor;
+    ASSERT_TRUE(t.contains("pose_beats_pca_codes")) << sensor;
+    EXPECT_TRUE(t["pose_beats_pca_codes"].is_null()) << sensor;
+    EXPECT_TRUE(t["pose_not_worse_than_raw"].is_null()) << sensor;
+  }
+  EXPECT_TRUE(fs::is_regular_file(Root("table_nopose/rate_distortion.png")));
+  // Progress lines (stderr is a file here), not a carriage-return bar.
+  EXPECT_THAT(r.err, HasSubstr("eval: TactFunc bubble: "));
+  EXPECT_THAT(r.err, HasSubstr(" frames (100%) in "));
+  EXPECT_EQ(r.err.find('\r'), std::string::npos);
+  // The same reconstruction figures as the run with a pose model.
+  const nlohmann::json with_pose = eval_->LastJson();
+  for (const nlohmann::json& row : j["rows"]) {
+    for (const nlohmann::json& other : with_pose["rows"]) {
+      if (other["approach"] == row["approach"] && other["sensor"] == row["sensor"] &&
+          other["split"] == row["split"] && other["approach"] != "Raw frames") {
+        EXPECT_EQ(other["psnr"], row["psnr"]) << row.dump();
+      }
+    }
+  }
+}
+
+TEST_F(EvalCliTest, TakesTheDataFlagsOfTheOtherCommands) {
+  const Result help = Run("eval --help");
+  for (const char* flag : {"--sensor ", "--sensors", "--labels", "--pixel-pitch-mm", "--reference"}) {
+    EXPECT_THAT(help.out, HasSubstr(flag)) << flag;
+  }
+  // A --labels file that does not exist is named.
+  const Result r = Run("eval --data " + Root("d") + " --model " + Root("m.tfm") + " --functaset " +
+                       Root("f.tfs") + " --out " + Root("x") + " --labels " + Root("none.csv"));
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.err, HasSubstr("none.csv"));
+}
+
 TEST_F(EvalCliTest, MissingOrMismatchedFilesFailWithAMessageNamingThem) {
   Result r = Run("eval --data " + Root("d") + " --model " + Root("m.tfm") + " --functaset " +
                  Root("none.tfs") + " --pose-model " + Root("p.tpm") + " --out " + Root("x"));

@@ -26,6 +26,7 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "models/trunk/functa_model.h"
+#include "nlohmann/json.hpp"
 #include "tests/apps/cli_test_util.h"
 
 namespace tactfunc {
@@ -236,6 +237,68 @@ TEST_F(TrainCliTest, EncodeWritesEightBitLatentsThatInfoAndReconReport) {
   EXPECT_NE(bad.exit_code, 0);
   EXPECT_THAT(bad.err, HasSubstr("--latent-precision"));
   EXPECT_FALSE(fs::exists(Root("q2.tfs")));
+}
+
+// A user folder of 16-bit one-channel PNGs (read as bubble frames) of rows x cols:
+// reference.png and a few frames with a bump.
+void WriteUserBubbleFolder(const fs::path& dir, int rows, int cols) {
+  fs::create_directories(dir);
+  cv::Mat reference(rows, cols, CV_16UC1, cv::Scalar(50000));
+  ASSERT_TRUE(cv::imwrite((dir / "reference.png").string(), reference));
+  for (int k = 0; k < 3; ++k) {
+    cv::Mat frame = reference.clone();
+    for (int r = 0; r < rows; ++r) {
+      for (int c = 0; c < cols; ++c) {
+        const double d2 = std::pow(r - rows / 2.0, 2) + std::pow(c - cols / (2.0 + k), 2);
+        frame.at<std::uint16_t>(r, c) =
+            static_cast<std::uint16_t>(50000 - 3000 * std::exp(-d2 / (0.02 * rows * cols)));
+      }
+    }
+    ASSERT_TRUE(cv::imwrite((dir / ("f" + std::to_string(k) + ".png")).string(), frame));
+  }
+}
+
+TEST_F(TrainCliTest, TrainSaysWhatItWillRunAndEncodeRefusesFramesOfAnotherSensor) {
+  const Result train = Run("train --data " + Root("d") + " --out " + Root("s.tfm") +
+                           " --preset tiny --steps 3 --seed 2 --json");
+  ASSERT_EQ(train.exit_code, 0) << train.err;
+  // Before the first step: how many steps, of which preset, at which resolution.
+  EXPECT_THAT(train.out, HasSubstr("train bubble: 3 steps (preset tiny, --steps) at 16x20"));
+  EXPECT_EQ(train.out.find("train bubble: 3 steps (preset tiny"), train.out.find("train bubble:"));
+  // The model records the frames its trunk was trained on (synth: 140 x 175 depth).
+  const FunctaModel model = FunctaModel::Load(Root("s.tfm"));
+  const nlohmann::json info = nlohmann::json::parse(model.info_json());
+  const nlohmann::json& frames = info["trunks"]["bubble"]["data_frames"];
+  EXPECT_EQ(frames["rows"], 140) << frames.dump();
+  EXPECT_EQ(frames["cols"], 175) << frames.dump();
+  EXPECT_EQ(frames["channels"], 1) << frames.dump();
+
+  // Square 48 x 48 frames: another size than the trunk's (refused, naming both files
+  // and both sizes), and another aspect than its 16 x 20 working resolution.
+  WriteUserBubbleFolder(*root_ / "square", 48, 48);
+  const std::string encode = "encode --model " + Root("s.tfm") + " --data " + Root("square") +
+                             " --out " + Root("square.tfs") + " --threads 1";
+  Result r = Run(encode);
+  EXPECT_EQ(r.exit_code, 1) << r.err;
+  EXPECT_THAT(r.err, HasSubstr(Root("s.tfm")));
+  EXPECT_THAT(r.err, HasSubstr(Root("square")));
+  EXPECT_THAT(r.err, HasSubstr("140x175x1"));
+  EXPECT_THAT(r.err, HasSubstr("48x48x1"));
+  EXPECT_THAT(r.err, HasSubstr("--allow-other-frames"));
+  EXPECT_FALSE(fs::exists(Root("square.tfs")));
+  r = Run(encode + " --allow-other-frames");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.err, HasSubstr("warning (--allow-other-frames)"));
+  EXPECT_THAT(r.err, HasSubstr("48x48 (rows x cols, aspect 1.00) but are resized to 16x20 "
+                               "(aspect 1.25): stretched"));
+  // Progress lines, not a bar, when stderr is not a terminal.
+  EXPECT_THAT(r.err, HasSubstr("encode: 3/3 frames (100%)"));
+  EXPECT_EQ(r.err.find('\r'), std::string::npos);
+  // The training data itself: no warning at all.
+  r = Run("encode --model " + Root("s.tfm") + " --data " + Root("d") + " --out " +
+          Root("s.tfs") + " --threads 1");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.err, ::testing::Not(HasSubstr("warning")));
 }
 
 TEST_F(TrainCliTest, ADivergingRunFailsNamingTheLearningRateAndWritesNoModel) {

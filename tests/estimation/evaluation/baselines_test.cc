@@ -129,6 +129,72 @@ TEST(Baselines, PcaReconstructsRankKDataExactlyWithKComponents) {
             1e-4f);
 }
 
+// A brute-force reference: the SVD of the centred frames. The eigenvalues are s^2 / M,
+// the basis rows the right singular vectors (up to sign); the Gram path (M <= P), the
+// covariance path (P < M) and the iterative path (K > 600, n <= K / 4) each agree.
+void ExpectPcaMatchesSvd(const Eigen::MatrixXf& data, int n) {
+  SCOPED_TRACE(std::to_string(data.rows()) + " x " + std::to_string(data.cols()) + ", n " +
+               std::to_string(n));
+  PcaCodec::Options options;
+  options.components = n;
+  PcaCodec::Summary summary;
+  const PcaCodec pca = PcaCodec::Fit(data, options, &summary);
+  ASSERT_EQ(pca.components(), n);
+  const Eigen::MatrixXd x = data.cast<double>();
+  const Eigen::RowVectorXd mean = x.colwise().mean();
+  const Eigen::MatrixXd centred = x.rowwise() - mean;
+  const Eigen::BDCSVD<Eigen::MatrixXd> svd(centred, Eigen::ComputeThinV);
+  const Eigen::VectorXd s = svd.singularValues();
+  EXPECT_LT((pca.mean().cast<double>() - mean).cwiseAbs().maxCoeff(), 1e-5);
+  for (int i = 0; i < n; ++i) {
+    const double expected = s[i] * s[i] / data.rows();
+    EXPECT_NEAR(pca.eigenvalues()[i], expected, 1e-4 * expected + 1e-9) << "eigenvalue " << i;
+    // Directions of well-separated eigenvalues are defined up to sign.
+    const double gap = std::min(i > 0 ? s[i - 1] - s[i] : 1e9, s[i] - s[i + 1]);
+    if (gap > 1e-2 * s[0]) {
+      const double cosine = std::abs(pca.basis().row(i).cast<double>().dot(svd.matrixV().col(i)));
+      EXPECT_NEAR(cosine, 1.0, 1e-4) << "basis row " << i;
+    }
+    // The fixed sign: the largest-magnitude entry is positive.
+    Eigen::Index j = 0;
+    pca.basis().row(i).cwiseAbs().maxCoeff(&j);
+    EXPECT_GT(pca.basis()(i, j), 0) << "basis row " << i;
+  }
+  EXPECT_LT((pca.basis() * pca.basis().transpose() - Eigen::MatrixXf::Identity(n, n))
+                .cwiseAbs()
+                .maxCoeff(),
+            1e-4f);
+  // Deterministic: a second fit is the same to the bit.
+  const PcaCodec again = PcaCodec::Fit(data, options);
+  EXPECT_EQ(again.basis(), pca.basis());
+  EXPECT_EQ(again.eigenvalues(), pca.eigenvalues());
+}
+
+// Frames with a decaying spectrum: rank-r signal with scales 1 / (1 + i), plus noise.
+Eigen::MatrixXf DecayingFrames(int m, int p, int r, unsigned seed) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<float> normal(0, 1);
+  Eigen::MatrixXf basis(r, p), codes(m, r), noise(m, p);
+  for (int i = 0; i < basis.size(); ++i) basis.data()[i] = normal(rng);
+  for (int k = 0; k < m; ++k) {
+    for (int i = 0; i < r; ++i) codes(k, i) = normal(rng) * 10.0f / (1.0f + i);
+  }
+  for (int i = 0; i < noise.size(); ++i) noise.data()[i] = 0.01f * normal(rng);
+  return (codes * basis + noise).array() + 3.0f;
+}
+
+TEST(Baselines, PcaMatchesABruteForceSvdOnEveryPath) {
+  ExpectPcaMatchesSvd(DecayingFrames(30, 50, 8, 1), 6);     // Gram, dense
+  ExpectPcaMatchesSvd(DecayingFrames(60, 20, 8, 2), 6);     // covariance, dense
+  ExpectPcaMatchesSvd(DecayingFrames(20, 20, 30, 3), 19);   // every component but the null one
+  ExpectPcaMatchesSvd(DecayingFrames(700, 760, 40, 4), 24); // Gram, subspace iteration
+  PcaCodec::Options options;
+  options.components = 24;
+  PcaCodec::Summary summary;
+  PcaCodec::Fit(DecayingFrames(700, 760, 40, 4), options, &summary);
+  EXPECT_NE(summary.method.find("subspace iteration"), std::string::npos) << summary.method;
+}
+
 TEST(Baselines, PcaErrorFallsAsComponentsGrow) {
   const std::vector<TrunkTargets> frames = BumpFrames(80, 12, 14, 5);
   const Eigen::MatrixXf data = StackFrames(Pointers(frames));
