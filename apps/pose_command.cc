@@ -66,6 +66,24 @@
 namespace tactfunc::apps {
 namespace {
 
+// The covariance of a pose estimate in the tangent space at `at` (right perturbations) and
+// as ROS PoseWithCovariance's 6x6 (x-y rotated by `yaw_of`), as `pose` prints them;
+// returns the ROS covariance.
+std::array<double, 36> PrintCovariance(const SE2d& mean, const Eigen::Matrix3d& cov, const char* at,
+                     const char* yaw_of) {
+  std::printf("pose: covariance, tangent space at the %s (right perturbations), "
+              "order x [m], y [m], yaw [rad]:\n", at);
+  for (int r = 0; r < 3; ++r) {
+    std::printf("  [% .4e  % .4e  % .4e]\n", cov(r, 0), cov(r, 1), cov(r, 2));
+  }
+  const std::array<double, 36> ros = ToRosPoseCovariance(mean, cov);
+  std::printf("pose: ROS PoseWithCovariance.covariance (6x6 row-major over x, y, z, roll, pitch, "
+              "yaw; parent frame, x-y rotated by %s; others 0):\n ", yaw_of);
+  for (int i : {0, 1, 5, 6, 7, 11, 30, 31, 35}) std::printf(" [%d] %.4e", i, ros[i]);
+  std::printf("\n");
+  return ros;
+}
+
 namespace fs = std::filesystem;
 
 struct PoseFlags {
@@ -409,16 +427,7 @@ void RunGeneratorPose(const PoseFlags& flags, const FunctaModel& model, const In
                 input.label->tool.c_str(), truth.x() * 1e3, truth.y() * 1e3, truth.yaw() * kDeg,
                 e_mm, YawErrorModuloSymmetry(mean.yaw(), truth.yaw(), n) * kDeg);
   }
-  std::printf("pose: covariance, tangent space at the mode (right perturbations), "
-              "order x [m], y [m], yaw [rad]:\n");
-  for (int r = 0; r < 3; ++r) {
-    std::printf("  [% .4e  % .4e  % .4e]\n", cov(r, 0), cov(r, 1), cov(r, 2));
-  }
-  const std::array<double, 36> ros = ToRosPoseCovariance(mean, cov);
-  std::printf("pose: ROS PoseWithCovariance.covariance (6x6 row-major over x, y, z, roll, pitch, "
-              "yaw; parent frame, x-y rotated by the mode's yaw; others 0):\n ");
-  for (int i : {0, 1, 5, 6, 7, 11, 30, 31, 35}) std::printf(" [%d] %.4e", i, ros[i]);
-  std::printf("\n");
+  const std::array<double, 36> ros = PrintCovariance(mean, cov, "mode", "the mode's yaw");
   nlohmann::json components = nlohmann::json::array();
   for (const LaplaceComponent& c : mixture.components()) {
     components.push_back({{"tool", c.tool},
@@ -641,16 +650,7 @@ void RunPose(const PoseFlags& flags) {
                 truth.x() * 1e3, truth.y() * 1e3, truth.yaw() * kDeg, e_mm,
                 YawErrorModuloSymmetry(mean.yaw(), truth.yaw(), n) * kDeg);
   }
-  std::printf("pose: covariance, tangent space at the mean (right perturbations), "
-              "order x [m], y [m], yaw [rad]:\n");
-  for (int r = 0; r < 3; ++r) {
-    std::printf("  [% .4e  % .4e  % .4e]\n", cov(r, 0), cov(r, 1), cov(r, 2));
-  }
-  const std::array<double, 36> ros = ToRosPoseCovariance(mean, cov);
-  std::printf("pose: ROS PoseWithCovariance.covariance (6x6 row-major over x, y, z, roll, pitch, "
-              "yaw; parent frame, x-y rotated by the mean yaw; others 0):\n ");
-  for (int i : {0, 1, 5, 6, 7, 11, 30, 31, 35}) std::printf(" [%d] %.4e", i, ros[i]);
-  std::printf("\n");
+  const std::array<double, 36> ros = PrintCovariance(mean, cov, "mean", "the mean yaw");
 
   const std::vector<PoseMode> modes = distribution->Modes();
   if (!flags.out.empty()) {

@@ -70,20 +70,10 @@ bool PoseGenerator::Options::IsValid(std::string* error) const {
 PoseGenerator::PoseGenerator(const Options& options, std::uint64_t seed) : options_(options) {
   std::string error;
   if (!options_.IsValid(&error)) throw std::invalid_argument(error);
-  int in = feature_dim(), offset = 0;
   std::vector<int> outs = options_.hidden_sizes;
   outs.push_back(options_.latent_dim);
-  for (int out : outs) {
-    Layer layer;
-    layer.in = in;
-    layer.out = out;
-    layer.weight_offset = offset;
-    offset += in * out;
-    layer.bias_offset = offset;
-    offset += out;
-    layers_.push_back(layer);
-    in = out;
-  }
+  int offset = 0;
+  layers_ = DenseLayerLayout(feature_dim(), outs, &offset);
   parameters_ = Eigen::VectorXd::Zero(offset);
   latent_mean_ = Eigen::VectorXd::Zero(options_.latent_dim);
   latent_stddev_ = Eigen::VectorXd::Ones(options_.latent_dim);

@@ -46,6 +46,8 @@
 #include <string>
 #include <vector>
 
+#include "models/pose/dense_layers.h"
+
 #include "Eigen/Core"
 #include "models/core/se2.h"
 
@@ -133,9 +135,7 @@ class PoseGenerator {
   static PoseGenerator Parse(const std::string& bytes, const std::string& source);
 
  private:
-  struct Layer {
-    int in = 0, out = 0, weight_offset = 0, bias_offset = 0;
-  };
+  using Layer = DenseLayer;
   void CheckToolIndex(int tool_index) const;
 
   Options options_;

@@ -99,21 +99,10 @@ bool PoseMlpTrainingOptions::IsValid(std::string* error) const {
 PoseMlp::PoseMlp(const Options& options, std::uint64_t seed) : options_(options) {
   std::string error;
   Check(options_.IsValid(&error), error);
-  int offset = 0;
-  int in = options_.input_dim;
   std::vector<int> outs = options_.hidden_sizes;
   outs.push_back(kOutputDim);
-  for (int out : outs) {
-    Layer layer;
-    layer.in = in;
-    layer.out = out;
-    layer.weight_offset = offset;
-    offset += in * out;
-    layer.bias_offset = offset;
-    offset += out;
-    layers_.push_back(layer);
-    in = out;
-  }
+  int offset = 0;
+  layers_ = DenseLayerLayout(options_.input_dim, outs, &offset);
   parameters_ = Eigen::VectorXf::Zero(offset);
   input_mean_ = Eigen::VectorXf::Zero(options_.input_dim);
   input_stddev_ = Eigen::VectorXf::Ones(options_.input_dim);

@@ -63,6 +63,8 @@
 #include <string>
 #include <vector>
 
+#include "models/pose/dense_layers.h"
+
 #include "Eigen/Core"
 #include "models/core/se2.h"
 
@@ -188,10 +190,7 @@ class PoseMlp {
   static PoseMlp Parse(const std::string& bytes, const std::string& source);
 
  private:
-  struct Layer {
-    int in = 0, out = 0;
-    int weight_offset = 0, bias_offset = 0;
-  };
+  using Layer = DenseLayer;
   template <typename Scalar>
   MatrixX<Scalar> Standardize(const MatrixX<Scalar>& inputs) const;
   // Forward keeping every layer's input h_l (activations[0] = standardised inputs).
