@@ -370,6 +370,21 @@ nlohmann::json MatrixJson(const Eigen::Matrix3d& m) {
   return rows;
 }
 
+// OUT/posterior.json (the record) and OUT/posterior.png, written atomically, and the line
+// that names them.
+void WritePosteriorFiles(const std::string& out, const nlohmann::json& record, const Input& input,
+                         const PoseDistribution& d, const PosePosterior::Summary& summary,
+                         const std::vector<PoseMode>& modes, int height, const std::string& method) {
+  const std::string json_path = (fs::path(out) / "posterior.json").string();
+  const std::string png_path = (fs::path(out) / "posterior.png").string();
+  WriteFileAtomically(json_path, record.dump(1) + "\n");
+  WritePosteriorPicture(png_path, input, d, summary, modes, height, method);
+  std::cout << "pose: wrote " << json_path << " and " << png_path
+            << (input.pitch_m > 0 ? "" : " (pixel pitch unknown: no image panel; give "
+                                         "--pixel-pitch-mm)")
+            << "\n";
+}
+
 void RunGeneratorPose(const PoseFlags& flags, const FunctaModel& model, const Input& input,
                       const TrunkTargets& targets, const std::string& tool) {
   if (input.sensor != SensorKind::kSoftBubble) {
@@ -479,15 +494,8 @@ void RunGeneratorPose(const PoseFlags& flags, const FunctaModel& model, const In
     ps.mean = mean;
     ps.covariance = cov;
     ps.total_time_ms = gs.total_time_ms;
-    const std::string json_path = (fs::path(flags.out) / "posterior.json").string();
-    const std::string png_path = (fs::path(flags.out) / "posterior.png").string();
-    WriteFileAtomically(json_path, record.dump(1) + "\n");
-    WritePosteriorPicture(png_path, input, distribution, ps, distribution.Modes(), flags.height,
-                          "generator");
-    std::cout << "pose: wrote " << json_path << " and " << png_path
-              << (input.pitch_m > 0 ? "" : " (pixel pitch unknown: no image panel; give "
-                                           "--pixel-pitch-mm)")
-              << "\n";
+    WritePosteriorFiles(flags.out, record, input, distribution, ps, distribution.Modes(),
+                        flags.height, "generator");
   }
   if (flags.json) {
     nlohmann::json j = {{"mean", PoseJson(mean)},
@@ -687,15 +695,8 @@ void RunPose(const PoseFlags& flags) {
       record["truth"] = PoseJson(input.label->sensor_T_object);
       record["truth"]["tool"] = input.label->tool;
     }
-    const std::string json_path = (fs::path(flags.out) / "posterior.json").string();
-    const std::string png_path = (fs::path(flags.out) / "posterior.png").string();
-    WriteFileAtomically(json_path, record.dump(1) + "\n");
-    WritePosteriorPicture(png_path, input, *distribution, summary, modes, flags.height,
-                          ToString(sampler));
-    std::cout << "pose: wrote " << json_path << " and " << png_path
-              << (input.pitch_m > 0 ? "" : " (pixel pitch unknown: no image panel; give "
-                                           "--pixel-pitch-mm)")
-              << "\n";
+    WritePosteriorFiles(flags.out, record, input, *distribution, summary, modes, flags.height,
+                        ToString(sampler));
   }
   if (flags.json) {
     nlohmann::json j = {{"mean", PoseJson(mean)},
