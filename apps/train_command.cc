@@ -50,6 +50,7 @@ struct TrainFlags {
   std::uint64_t seed = 0;
   int checkpoint_every = 0;
   bool first_order = false;
+  bool readout = false;
   bool resume = false;
   bool json = false;
   // Set after parsing: which overrides were given.
@@ -103,6 +104,7 @@ TrunkTrainer::Options OptionsFor(const TrainFlags& flags, SensorKind sensor) {
   if (flags.seed_option->count()) options.seed = flags.seed;
   if (flags.checkpoint_every_option->count()) options.checkpoint_every = flags.checkpoint_every;
   if (flags.first_order) options.meta_sgd.first_order = true;
+  if (flags.readout) options.readout = true;
   if (flags.learning_rate_option->count()) options.learning_rate = flags.learning_rate;
   if (flags.omega_0_option->count()) options.siren.omega_0 = flags.omega_0;
   if (flags.lr_final_fraction_option->count()) {
@@ -467,6 +469,9 @@ void RegisterTrain(CLI::App& app, CommandBody* selected) {
           ->check(CLI::NonNegativeNumber);
   sub->add_flag("--first-order", flags->first_order,
                 "First-order meta-gradients (cheaper, biased; default exact)");
+  sub->add_flag("--readout", flags->readout,
+                "Add the linear readout branch: a per-pixel basis started from the training "
+                "frames' PCA, so the trunk contains PCA (docs/REPRESENTATION.md)");
   sub->add_option("--threads", flags->threads, "Worker threads (default: all cores)")
       ->check(CLI::Range(0, 256));
   flags->seed_option =
