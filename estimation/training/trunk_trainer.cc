@@ -327,6 +327,9 @@ bool TrunkTrainer::Options::IsValid(std::string* error) const {
                alpha_init_max <= alpha_max)) {
     message << "alpha_init_min and alpha_init_max must satisfy 0 <= min <= max <= alpha_max ("
             << alpha_max << "), found " << alpha_init_min << " and " << alpha_init_max;
+  } else if (!(readout_learning_rate_scale >= 0 && readout_learning_rate_scale <= 1)) {
+    message << "readout_learning_rate_scale must be in [0, 1], found "
+            << readout_learning_rate_scale;
   } else if (readout_pca_frames < 1) {
     message << "readout_pca_frames must be >= 1, found " << readout_pca_frames;
   } else if (batch_size < 1) {
@@ -535,6 +538,7 @@ std::string TrunkTrainer::TrajectoryOptionsJson(SensorKind sensor,
   if (o.readout) {  // absent = no readout branch (older files)
     json["readout"] = true;
     json["readout_pca_frames"] = o.readout_pca_frames;
+    json["readout_learning_rate_scale"] = o.readout_learning_rate_scale;
   }
   json["format.rows"] = format.rows;
   json["format.cols"] = format.cols;
@@ -628,6 +632,7 @@ TrunkTrainer::Summary TrunkTrainer::Train(const std::vector<TrunkTargets>& frame
   siren_options.readout_cols = o.readout ? format.cols : 0;
   LatentModulatedSiren siren(siren_options, StreamSeed(o.seed, kThetaStream));
   if (o.readout) StartReadoutFromPca(frames, o.readout_pca_frames, &siren);
+  siren.set_readout_frozen(o.readout && o.readout_learning_rate_scale == 0);
   const MetaSgd meta(o.meta_sgd);
   const int d = siren.latent_dim();
   const int num_parameters = siren.NumParameters();
@@ -785,7 +790,19 @@ TrunkTrainer::Summary TrunkTrainer::Train(const std::vector<TrunkTargets>& frame
       const double sqrt_c2 = std::sqrt(correction2);
       x->array() -= step_size * m->array() / (v->array().sqrt() / sqrt_c2 + o.adam_epsilon);
     };
+    // The readout branch moves by readout_learning_rate_scale of Adam's step (the step
+    // is linear in the rate), 0 = kept at its PCA start.
+    Eigen::VectorXd readout_before;
+    long readout_offset = 0;
+    if (o.readout) {
+      readout_offset = siren.Block(ParameterGroup::kReadoutBasis).offset;
+      readout_before = state.theta.tail(num_parameters - readout_offset);
+    }
     adam(&state.theta, &state.m_theta, &state.v_theta, g_theta, LearningRateAt(o, t));
+    if (o.readout) {
+      auto readout = state.theta.tail(num_parameters - readout_offset);
+      readout = readout_before + o.readout_learning_rate_scale * (readout - readout_before);
+    }
     adam(&state.alpha, &state.m_alpha, &state.v_alpha, g_alpha, o.alpha_learning_rate);
     state.alpha = state.alpha.cwiseMax(0.0).cwiseMin(o.alpha_max);
     siren.SetParameters(state.theta);
@@ -885,6 +902,7 @@ TrunkTrainer::Summary TrunkTrainer::Train(const std::vector<TrunkTargets>& frame
     trunk->sensor = sensor;
     trunk->format = format;
     trunk->siren = siren;
+    trunk->siren.set_readout_frozen(false);  // a training choice, not part of the model
     trunk->alpha = state.alpha;
     trunk->meta_sgd = o.meta_sgd;
     trunk->residual_sigma = residual_sigma;

@@ -93,6 +93,10 @@ class TrunkTrainer {
     // split; fewer if it is smaller). >= 1. The PCA is one Gram matrix of that many
     // frames: 1500 frames of 6160 pixels take about a second.
     int readout_pca_frames = 1500;
+    // The readout branch's Adam step size as a fraction of the trunk's (the schedule
+    // applies to both). In [0, 1]; 0 keeps the branch at its PCA start (the SIREN then
+    // learns the PCA's residual).
+    double readout_learning_rate_scale = 0.0;
 
     // ---- Frame format (models/trunk/functa_model.h FrameFormat) -----------------------------
     // Working resolution in pixels (area interpolation). 0 x 0 (default) = the sensor's

@@ -651,7 +651,8 @@ void LatentModulatedSiren::Backward(const MatrixX<Scalar>& coords,
   if (has_readout()) {
     const ReadoutMaps<Scalar> readout(ParameterData<Scalar>(), blocks_,
                                       options_.num_hidden_layers);
-    FinishReadoutGradient(readout, blocks_, options_.num_hidden_layers, s, z, dL_dz, dL_dtheta);
+    FinishReadoutGradient(readout, blocks_, options_.num_hidden_layers, s, z, dL_dz,
+                          readout_frozen_ ? nullptr : dL_dtheta);
   }
 }
 
@@ -844,7 +845,7 @@ Scalar LatentModulatedSiren::LossGradientAndHessianProduct(
     if (reverse) scatter.setZero(u.size());
     if (hvp) {
       u_dot = readout->R.transpose() * v_z;
-      if (v_theta != nullptr) {
+      if (v_theta != nullptr && !readout_frozen_) {
         dreadout = std::make_unique<ReadoutMaps<Scalar>>(v_theta->data(), blocks_, num_layers);
         u_dot += dreadout->R.transpose() * z + dreadout->m;
       }
@@ -933,7 +934,8 @@ Scalar LatentModulatedSiren::LossGradientAndHessianProduct(
   if (gradient) {
     FinishGradient(net, blocks_, grad_dgamma, z, dL_dz, dL_dtheta);
     if (readout) {
-      FinishReadoutGradient(*readout, blocks_, num_layers, scatter, z, dL_dz, dL_dtheta);
+      FinishReadoutGradient(*readout, blocks_, num_layers, scatter, z, dL_dz,
+                            readout_frozen_ ? nullptr : dL_dtheta);
     }
   }
   if (hvp) {
@@ -953,9 +955,11 @@ Scalar LatentModulatedSiren::LossGradientAndHessianProduct(
         Hv_z->noalias() += readout->R * scatter_dot;
         if (dreadout) Hv_z->noalias() += dreadout->R * scatter;
       }
-      hv_block(2 * num_layers + 4).noalias() =
-          v_z * scatter.transpose() + z * scatter_dot.transpose();
-      hv_block(2 * num_layers + 5) = scatter_dot;
+      if (!readout_frozen_) {
+        hv_block(2 * num_layers + 4).noalias() =
+            v_z * scatter.transpose() + z * scatter_dot.transpose();
+        hv_block(2 * num_layers + 5) = scatter_dot;
+      }
     }
   }
   return static_cast<Scalar>(loss * inverse_normaliser);

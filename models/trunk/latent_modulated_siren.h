@@ -186,6 +186,12 @@ class LatentModulatedSiren {
   void Initialize(std::uint64_t seed);
 
   bool has_readout() const { return options_.has_readout(); }
+  // A frozen readout branch still adds to every output and to dL/dz, Jacobians and
+  // latent Hessian products, but the passes skip its parameter gradients and report
+  // them as 0 (they cost as much as the rest of a small trunk's gradient). For training
+  // with the branch fixed; default false.
+  void set_readout_frozen(bool frozen) { readout_frozen_ = frozen; }
+  bool readout_frozen() const { return readout_frozen_; }
 
   // Bilinear weights of coordinate (x0, x1) on the readout grid: node[i] (row-major
   // grid index) with weight[i], i < 4, weights summing to 1 (coordinates outside the
@@ -312,6 +318,7 @@ class LatentModulatedSiren {
   std::vector<ParameterBlock> blocks_;
   Eigen::VectorXd parameters_;
   Eigen::VectorXf parameters_float_;
+  bool readout_frozen_ = false;
 };
 
 // ---- Implementation of the one-pixel template ------------------------------------
