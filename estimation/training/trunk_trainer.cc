@@ -197,7 +197,9 @@ void ReadCheckpoint(const std::string& path, SensorKind sensor, const std::strin
   for (auto it = saved.begin(); it != saved.end(); ++it) {
     if (!current.contains(it.key())) {
       throw std::runtime_error(where + "option '" + it.key() +
-                               "' is unknown to this version of tactfunc");
+                               "' is set in the checkpoint but not in this run (or unknown to this version of "
+                               "tactfunc). Resume with the same options, or start anew without "
+                               "resume.");
     }
   }
   const Json& frames = meta.at("frames");
@@ -514,9 +516,11 @@ void TrunkTrainer::StartReadoutFromPca(const std::vector<TrunkTargets>& frames, 
   R.setZero();
   mean_block = mean.transpose();
   const double largest = std::max(eigen.eigenvalues()[m - 1], 0.0);
-  for (int k = 0; k < d && k < m; ++k) {
+  // Centred frames span at most m - 1 directions; the Gram matrix squares the condition
+  // number, so eigenvalues below 1e-9 of the largest are rounding, not directions.
+  for (int k = 0; k < d && k < m - 1; ++k) {
     const double lambda = eigen.eigenvalues()[m - 1 - k];  // ascending order
-    if (!(lambda > 1e-12 * largest) || lambda <= 0) break;  // no more directions
+    if (!(lambda > 1e-9 * largest)) break;  // no more directions
     R.row(k) = scale * (X.transpose() * eigen.eigenvectors().col(m - 1 - k)).transpose() /
                std::sqrt(lambda);
   }
