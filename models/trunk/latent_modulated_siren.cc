@@ -609,9 +609,11 @@ LatentModulatedSiren::MatrixX<Scalar> LatentModulatedSiren::Forward(
   for (long begin = 0; begin < n; begin += kPixelBlock) {
     const long m = std::min(kPixelBlock, n - begin);
     RunForward(net, options_.omega_0, coords.middleRows(begin, m), gamma, &trace);
-    auto y = trace.y.leftCols(m);
-    if (has_readout()) AddReadout(*this, coords.middleRows(begin, m), u, y);
-    outputs.middleRows(begin, m) = y.transpose();
+    if (has_readout()) {
+      auto y = trace.y.leftCols(m);
+      AddReadout(*this, coords.middleRows(begin, m), u, y);
+    }
+    outputs.middleRows(begin, m) = trace.y.leftCols(m).transpose();
   }
   return outputs;
 }
@@ -965,6 +967,47 @@ Scalar LatentModulatedSiren::LossGradientAndHessianProduct(
   return static_cast<Scalar>(loss * inverse_normaliser);
 }
 
+template <typename Scalar>
+LatentModulatedSiren::VectorX<Scalar> LatentModulatedSiren::StartLatent(
+    const MatrixX<Scalar>& coords, const MatrixX<Scalar>& targets,
+    const VectorX<Scalar>& weights) const {
+  const long n = coords.rows();
+  const long channels = options_.output_channels;
+  CheckShape("coords", n, coords.cols(), n, 2);
+  CheckShape("targets", targets.rows(), targets.cols(), n, channels);
+  if (weights.size() != 0) CheckShape("weights", weights.rows(), 1, n, 1);
+  VectorX<Scalar> z = VectorX<Scalar>::Zero(options_.latent_dim);
+  if (!has_readout()) return z;
+  const ReadoutMaps<Scalar> readout(ParameterData<Scalar>(), blocks_,
+                                    options_.num_hidden_layers);
+  VectorX<Scalar> scatter = VectorX<Scalar>::Zero(readout.m.rows());
+  double weight_sum = 0;
+  for (long j = 0; j < n; ++j) {
+    const Scalar w = weights.size() == 0 ? Scalar(1) : weights[j];
+    if (w == Scalar(0)) continue;
+    weight_sum += w;
+    const ReadoutCorners corners = LocateReadout(static_cast<double>(coords(j, 0)),
+                                                 static_cast<double>(coords(j, 1)));
+    for (long ch = 0; ch < channels; ++ch) {
+      Scalar mean = 0;
+      for (int i = 0; i < 4; ++i) {
+        if (corners.weight[i] != 0.0) {
+          mean += static_cast<Scalar>(corners.weight[i]) * readout.m(corners.node[i] * channels + ch, 0);
+        }
+      }
+      const Scalar r = w * (targets(j, ch) - mean);
+      for (int i = 0; i < 4; ++i) {
+        if (corners.weight[i] != 0.0) {
+          scatter[corners.node[i] * channels + ch] += static_cast<Scalar>(corners.weight[i]) * r;
+        }
+      }
+    }
+  }
+  if (!(weight_sum > 0)) return z;
+  z.noalias() = static_cast<Scalar>(2.0 / (channels * weight_sum)) * (readout.R * scatter);
+  return z;
+}
+
 // ---- Explicit instantiations -------------------------------------------------------
 
 #define TACTFUNC_INSTANTIATE_SIREN(S)                                                    \
@@ -977,6 +1020,8 @@ Scalar LatentModulatedSiren::LossGradientAndHessianProduct(
       const;                                                                             \
   template void LatentModulatedSiren::ForwardAndLatentJacobian<S>(                       \
       const MatrixX<S>&, const VectorX<S>&, MatrixX<S>*, MatrixX<S>*) const;             \
+  template LatentModulatedSiren::VectorX<S> LatentModulatedSiren::StartLatent<S>(        \
+      const MatrixX<S>&, const MatrixX<S>&, const VectorX<S>&) const;                    \
   template S LatentModulatedSiren::Loss<S>(const MatrixX<S>&, const VectorX<S>&,         \
                                            const MatrixX<S>&, const VectorX<S>&) const;  \
   template S LatentModulatedSiren::LossAndGradient<S>(                                   \

@@ -281,6 +281,17 @@ class LatentModulatedSiren {
       const VectorX<Scalar>* v_theta, const VectorX<Scalar>& v_z, VectorX<Scalar>* dL_dz,
       VectorX<Scalar>* dL_dtheta, VectorX<Scalar>* Hv_z, VectorX<Scalar>* Hv_theta) const;
 
+  // The latent every fit of a frame starts from: z = 0 without the readout branch (the
+  // paper's start); with it, the branch's projection of the targets,
+  //   z_0 = 2 / (C sum_j w_j) sum_j w_j sum_c R_c(x_j) (t_jc - m_c(x_j)),
+  // one full-frame gradient step of the branch's own weighted MSE at rate 1 from z = 0,
+  // which is exactly the PCA code when the branch holds a PCA basis scaled as the
+  // trainer scales it (estimation/training/trunk_trainer.h, Options::readout) and every
+  // pixel is valid. Pixels with w_j = 0 are skipped (their targets may be NaN).
+  template <typename Scalar>
+  VectorX<Scalar> StartLatent(const MatrixX<Scalar>& coords, const MatrixX<Scalar>& targets,
+                              const VectorX<Scalar>& weights) const;
+
   // ---- One pixel, any scalar type (ceres::Jet) -------------------------------------
   // out[0 .. C) = f_theta(coord2; z) with theta = parameters(). T must support
   // +, *, and sin found by argument-dependent lookup or std:: (double, float,
