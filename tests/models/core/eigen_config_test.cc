@@ -1,35 +1,40 @@
 // Copyright 2026 The tactfunc Authors.
-// The Eigen configuration every tactfunc object must share with the static Ceres library
-// (docs/BUILD.md): 16-byte alignment, and heap arrays from plain malloc/free, so that a
-// buffer allocated by Ceres' copy of Eigen's inline allocator and freed by ours (or the
-// reverse) is the same kind of pointer.
+// The Eigen configuration tactfunc shares with Ceres (docs/BUILD.md): 16-byte alignment
+// for the Eigen types that cross Ceres' interface, and Ceres linked as the shared library,
+// whose own copies of Eigen's inline allocation code stay private to it.
+#include <dlfcn.h>
+
 #include <cstdint>
+#include <string>
 
 #include "Eigen/Core"
+#include "ceres/ceres.h"
 #include "gtest/gtest.h"
 
 static_assert(EIGEN_MAX_ALIGN_BYTES == 16,
               "tactfunc objects must compile with -DEIGEN_MAX_ALIGN_BYTES=16 (docs/BUILD.md)");
-static_assert(EIGEN_MALLOC_ALREADY_ALIGNED == 1,
-              "tactfunc objects must compile with -DEIGEN_MALLOC_ALREADY_ALIGNED=1: otherwise "
-              "Eigen's inline aligned_malloc/aligned_free differ from the static Ceres' copies "
-              "(docs/BUILD.md)");
 
 namespace tactfunc {
 namespace {
 
-// aligned_malloc's pointer goes to plain free (what Ceres' copy of aligned_free does), and
-// plain malloc's to aligned_free (what ours does): both must be valid, whichever copy of
-// the inline functions the linker kept.
-TEST(EigenConfig, AlignedAllocationsAreMallocPointers) {
-  for (std::size_t bytes : {16u, 4096u, 1u << 20}) {
-    void* p = Eigen::internal::aligned_malloc(bytes);
-    ASSERT_NE(p, nullptr);
-    EXPECT_EQ(reinterpret_cast<std::uintptr_t>(p) % 16, 0u);
-    std::free(p);
-    void* q = std::malloc(bytes);
-    ASSERT_NE(q, nullptr);
-    Eigen::internal::aligned_free(q);
+TEST(EigenConfig, CeresIsTheSharedLibrary) {
+  // Where the code of a Ceres entry point lives: in libceres.so, not in this program.
+  void (*solve)(const ceres::Solver::Options&, ceres::Problem*, ceres::Solver::Summary*) =
+      &ceres::Solve;
+  Dl_info info{};
+  ASSERT_NE(dladdr(reinterpret_cast<void*>(solve), &info), 0);
+  ASSERT_NE(info.dli_fname, nullptr);
+  EXPECT_NE(std::string(info.dli_fname).find("libceres.so"), std::string::npos)
+      << "ceres::Solve is in " << info.dli_fname
+      << ": Ceres is linked statically (cmake/TactfuncSharedCeres.cmake)";
+}
+
+// A heap array from Eigen's allocator goes back to Eigen's free, with the alignment the
+// vectorised kernels were compiled for.
+TEST(EigenConfig, HeapArraysAreAlignedForThePacketSize) {
+  for (Eigen::Index n : {3, 256, 1 << 16}) {
+    Eigen::MatrixXd m(n, 2);
+    EXPECT_EQ(reinterpret_cast<std::uintptr_t>(m.data()) % EIGEN_DEFAULT_ALIGN_BYTES, 0u);
   }
 }
 
