@@ -161,6 +161,36 @@ TEST(LatentEncoder, EncodeTargetsRunsExactlyTheMetaSgdInnerLoop) {
           .all());
 }
 
+// With the readout branch the inner loop starts from the branch's projection of the
+// frame (LatentModulatedSiren::StartLatent), in encoding as in training (MetaSgd::FitLatent).
+TEST(LatentEncoder, MetaSgdStartsFromTheReadoutProjectionAsInTraining) {
+  FunctaModel model = MakeModel(/*inner_steps=*/2, /*alpha=*/0.3);
+  SensorTrunk& trunk = model.MutableTrunk(SensorKind::kSoftBubble);
+  LatentModulatedSiren::Options options = trunk.siren.options();
+  options.readout_rows = 5;
+  options.readout_cols = 6;
+  trunk.siren = LatentModulatedSiren(options, 11);
+  Eigen::VectorXd theta = trunk.siren.parameters();
+  for (ParameterGroup group : {ParameterGroup::kReadoutBasis, ParameterGroup::kReadoutMean}) {
+    const ParameterBlock& block = trunk.siren.Block(group);
+    theta.segment(block.offset, block.size()) = 0.3 * RandomLatent(block.size(), 1.0, 9).cast<double>();
+  }
+  trunk.siren.SetParameters(theta);
+  const Eigen::MatrixXf grid = trunk.siren.Grid<float>(kBubbleRows, kBubbleCols);
+  const TrunkTargets targets =
+      TargetsFrom(trunk.siren.Forward<float>(grid, RandomLatent(8, 1.0, 4)));
+  const Eigen::VectorXf start = trunk.siren.StartLatent<float>(grid, targets.values, targets.weights);
+  ASSERT_GT(start.norm(), 0.0f);  // a start other than zero, or the test shows nothing
+  const Eigen::VectorXf expected =
+      MetaSgd(trunk.meta_sgd)
+          .FitLatent<float>(trunk.siren, grid, targets.values, targets.weights,
+                            trunk.alpha.cast<float>());
+  const LatentEncoder encoder(model, LatentEncoder::Options());
+  EXPECT_TRUE(
+      (encoder.EncodeTargets(SensorKind::kSoftBubble, targets).latent.array() == expected.array())
+          .all());
+}
+
 TEST(LatentEncoder, StrategiesAreValidatedByName) {
   std::string error;
   LatentEncoder::Options options;
