@@ -336,13 +336,43 @@ Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
     group.Broadcast(&finished.bytes());
     if (group.rank() != 0) {
       ByteReader reader(finished.bytes());
-      s.frames_resumed = static_cast<std::int64_t>(UnpackJobs(reader, &jobs).size());
+      for (std::size_t j : UnpackJobs(reader, &jobs)) {
+        jobs[j].done = true;
+        ++s.frames_resumed;
+      }
     }
   }
 
   std::vector<std::size_t> pending;
   for (std::size_t j = 0; j < jobs.size(); ++j) {
     if (!jobs[j].done) pending.push_back(j);
+  }
+  if (group.size() > 1) {
+    // The rounds below are collectives: every process must list the same frames and the
+    // same pending ones, or one would wait for the others forever.
+    ByteWriter work;
+    work.Put<std::uint64_t>(jobs.size());
+    work.Put<std::uint64_t>(pending.size());
+    std::uint64_t fingerprint = 1469598103934665603ull;  // FNV-1a of the ids and sensors
+    for (const Job& job : jobs) {
+      for (char ch : job.entry.id + ToString(job.sensor) + "\n") {
+        fingerprint = (fingerprint ^ static_cast<unsigned char>(ch)) * 1099511628211ull;
+      }
+    }
+    work.Put(fingerprint);
+    const std::vector<Bytes> all = group.AllGather(work.bytes());
+    for (int rank = 1; rank < group.size(); ++rank) {
+      if (all[rank] == all[0]) continue;
+      ByteReader theirs(all[rank]), first(all[0]);
+      const auto frames = theirs.Get<std::uint64_t>(), pending_there = theirs.Get<std::uint64_t>();
+      const auto frames_0 = first.Get<std::uint64_t>(), pending_0 = first.Get<std::uint64_t>();
+      throw std::runtime_error(
+          "LatentEncoder: process " + std::to_string(rank) + " selected " +
+          std::to_string(frames) + " frames (" + std::to_string(pending_there) +
+          " to encode), process 0 " + std::to_string(frames_0) + " (" +
+          std::to_string(pending_0) + ")" + (frames == frames_0 ? " with other ids" : "") +
+          ": every process must read the same dataset " + dataset.root() + " and options");
+    }
   }
 
   // Builds the functaset of the finished jobs (called with every worker joined).
