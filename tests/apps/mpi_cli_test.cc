@@ -22,7 +22,6 @@ namespace {
 
 namespace fs = std::filesystem;
 using ::testing::HasSubstr;
-using ::testing::Not;
 using Result = testing_util::CliResult;
 
 #ifdef TACTFUNC_WITH_MPI
@@ -164,7 +163,7 @@ TEST_F(MpiCliTest, AnEncodeWhoseProcessDiesLeavesACheckpointThatResumesToTheSame
   EXPECT_EQ(resumed.LastJson()["frames_resumed"], partial.size());
   EXPECT_TRUE(SameBytes(Root("dead.tfs"), Root("one.tfs")));
   for (const fs::directory_entry& entry : fs::directory_iterator(*root_)) {
-    EXPECT_THAT(entry.path().filename().string(), Not(HasSubstr(".tmp."))) << "left behind";
+    EXPECT_THAT(entry.path().filename().string(), ::testing::Not(HasSubstr(".tmp."))) << "left behind";
   }
 }
 
