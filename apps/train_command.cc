@@ -48,9 +48,11 @@ struct TrainFlags {
   int inner_steps = 0;
   double alpha_init = 0, alpha_max = 0;
   double divergence_drop_db = 0;
+  double readout_rate = 0;
   std::uint64_t seed = 0;
   int checkpoint_every = 0;
   bool first_order = false;
+  bool readout = false;
   bool resume = false;
   bool json = false;
   // Set after parsing: which overrides were given.
@@ -60,7 +62,7 @@ struct TrainFlags {
               *learning_rate_option = nullptr, *omega_0_option = nullptr,
               *lr_final_fraction_option = nullptr, *inner_steps_option = nullptr,
               *alpha_init_option = nullptr, *alpha_max_option = nullptr,
-              *divergence_drop_db_option = nullptr;
+              *divergence_drop_db_option = nullptr, *readout_rate_option = nullptr;
 };
 
 // SIGINT: the current step finishes, a checkpoint is written, the command exits 1. A
@@ -104,6 +106,11 @@ TrunkTrainer::Options OptionsFor(const TrainFlags& flags, SensorKind sensor) {
   if (flags.seed_option->count()) options.seed = flags.seed;
   if (flags.checkpoint_every_option->count()) options.checkpoint_every = flags.checkpoint_every;
   if (flags.first_order) options.meta_sgd.first_order = true;
+  if (flags.readout) options.readout = true;
+  if (flags.readout_rate_option->count()) {
+    if (!flags.readout) throw UsageError("--readout-rate needs --readout");
+    options.readout_learning_rate_scale = flags.readout_rate;
+  }
   if (flags.learning_rate_option->count()) options.learning_rate = flags.learning_rate;
   if (flags.omega_0_option->count()) options.siren.omega_0 = flags.omega_0;
   if (flags.lr_final_fraction_option->count()) {
@@ -480,6 +487,14 @@ void RegisterTrain(CLI::App& app, CommandBody* selected) {
           ->check(CLI::NonNegativeNumber);
   sub->add_flag("--first-order", flags->first_order,
                 "First-order meta-gradients (cheaper, biased; default exact)");
+  sub->add_flag("--readout", flags->readout,
+                "Add the linear readout branch: a per-pixel basis started from the training "
+                "frames' PCA, so the trunk contains PCA (docs/REPRESENTATION.md)");
+  flags->readout_rate_option =
+      sub->add_option("--readout-rate", flags->readout_rate,
+                      "The readout branch's step size as a fraction of the trunk's, in [0, 1] "
+                      "(default 0: kept at its PCA start)")
+          ->check(CLI::Range(0.0, 1.0));
   sub->add_option("--threads", flags->threads, "Worker threads (default: all cores)")
       ->check(CLI::Range(0, 256));
   flags->seed_option =

@@ -1,6 +1,7 @@
 # Every dependency comes from Debian 12's packages (see scripts/install_deps.sh).
 find_package(Eigen3 3.3 REQUIRED NO_MODULE)
 find_package(Ceres 2.1 REQUIRED)
+include(TactfuncSharedCeres)
 # flann's own config (brings lz4); pkg-config flann would drag HDF5 and MPI flags in.
 find_package(flann CONFIG REQUIRED)
 find_package(OpenCV 4 REQUIRED COMPONENTS core imgproc imgcodecs videoio)

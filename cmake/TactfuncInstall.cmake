@@ -23,4 +23,5 @@ write_basic_package_version_file(${PROJECT_BINARY_DIR}/tactfuncConfigVersion.cma
   COMPATIBILITY SameMinorVersion)
 install(FILES ${PROJECT_BINARY_DIR}/tactfuncConfig.cmake
               ${PROJECT_BINARY_DIR}/tactfuncConfigVersion.cmake
+              ${PROJECT_SOURCE_DIR}/cmake/TactfuncSharedCeres.cmake
         DESTINATION ${TACTFUNC_CMAKE_DIR})

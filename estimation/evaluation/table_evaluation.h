@@ -31,6 +31,12 @@
 //                           the same against the noise-free frames, where the dataset has
 //                           them (simulated data, `synth --clean`): the simulated sensor
 //                           noise caps PSNR against noisy frames and would hide the gap
+//   psnr_3db_above_pca_same_bits, psnr_3db_above_pca_same_bits_clean
+//                           the same against PCA codes stored as the latents are (as many
+//                           components as the latent has values, at the functaset's
+//                           precision: float16 rounding or b-bit codes on the same kind
+//                           of per-dimension grid), so both spend the same bits the same
+//                           way: the fair baseline for a functaset with quantised latents
 //   psnr_above_jpeg         TactFunc above JPEG at matched bytes
 //   pose_beats_pca_codes    (pose sensor) pose MSE from latents below that from PCA codes
 //   pose_not_worse_than_raw (pose sensor) pose MSE from latents <= the best raw-pixel one
@@ -159,6 +165,10 @@ class TableEvaluation {
     // Against the noise-free frames; filled (has_clean) only where the test frames have them.
     bool has_clean = false;
     PsnrAbovePca psnr_above_pca_clean;
+    // Against PCA codes stored at the latents' precision (header comment); the clean
+    // one only where has_clean.
+    PsnrAbovePca psnr_above_pca_same_bits;
+    PsnrAbovePca psnr_above_pca_same_bits_clean;
     struct PsnrAboveJpeg {
       bool met = false;
       double tactfunc_db = 0, jpeg_db = 0, margin_db = 0;

@@ -291,7 +291,7 @@ LatentFitter::Summary LatentFitter::FitImpl(const LatentProblem& problem,
   summary.num_pixels_used = problem.num_pixels();
   summary.num_residuals = problem.num_residuals() + d;
 
-  Eigen::VectorXd z = initial != nullptr ? *initial : Eigen::VectorXd::Zero(d);
+  Eigen::VectorXd z = initial != nullptr ? *initial : problem.StartLatent();
   if (problem.num_pixels() == 0) {
     latent->setZero(d);
     summary.termination_type = FitTermination::kNoValidPixels;
@@ -343,7 +343,7 @@ LatentFitter::Summary LatentFitter::FitImpl(const LatentProblem& problem,
     Eigen::VectorXd query =
         initial != nullptr
             ? *initial
-            : problem.MetaSgdSteps(Eigen::VectorXd::Zero(d), problem.trunk().meta_sgd.inner_steps);
+            : problem.MetaSgdSteps(problem.StartLatent(), problem.trunk().meta_sgd.inner_steps);
     if (!query.allFinite()) query.setZero();
     const Eigen::VectorXf query_float = query.cast<float>();
     const int k = options_.knn_k;

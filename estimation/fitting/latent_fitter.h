@@ -12,10 +12,11 @@
 // Strategies (FitStrategy; strings as the CLI takes them):
 //   meta_sgd:K      K steps of the trunk's meta-SGD inner loop (LatentProblem::MetaSgdSteps,
 //                   models/trunk/meta_sgd.h), the paper's Eq. 6 with the learned
-//                   per-dimension rates alpha, from z = 0 (or the warm start). K = the
+//                   per-dimension rates alpha, from the problem's StartLatent (z = 0,
+//                   or a readout branch's projection) or the warm start. K = the
 //                   trunk's inner_steps is what it was trained for. It descends the
 //                   trunk's own weighted MSE (+ its latent_l2_weight), not U.
-//   ceres:N         at most N Ceres iterations from z = 0 (or the warm start).
+//   ceres:N         at most N Ceres iterations from the StartLatent (or the warm start).
 //   knn             the paper's k-NN estimate: z = sum_i w_i z_i over the k nearest
 //                   functaset latents z_i of a query latent, w_i proportional to
 //                   1 / ||q - z_i|| (normalised; an exact match takes all the weight).

@@ -395,6 +395,11 @@ Eigen::VectorXd LatentProblem::MetaSgdSteps(const Eigen::VectorXd& z0, int steps
                                     weights_float_.cast<double>(), trunk_->alpha, z0, steps);
 }
 
+Eigen::VectorXd LatentProblem::StartLatent() const {
+  return trunk_->siren.StartLatent<double>(coords_, pixel_targets_,
+                                           weights_float_.cast<double>());
+}
+
 double LatentProblem::Psnr(const Eigen::VectorXd& z) const {
   CheckLatent(z, "Psnr");
   const LatentModulatedSiren& siren = trunk_->siren;

@@ -146,6 +146,11 @@ class LatentProblem {
   // and the robust loss do not enter.
   Eigen::VectorXd MetaSgdSteps(const Eigen::VectorXd& z0, int steps) const;
 
+  // Where every fit of this frame starts without a warm start: the trunk's StartLatent
+  // over the selected pixels (z = 0, or the readout branch's projection;
+  // models/trunk/latent_modulated_siren.h).
+  Eigen::VectorXd StartLatent() const;
+
   // PSNR (estimation/data/trunk_targets.h, THE definition) of f_theta(.; z) over all valid
   // pixels of the frame, in the problem's precision. +inf for an exact fit; 0 when the
   // frame has no valid pixel.

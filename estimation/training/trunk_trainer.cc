@@ -20,6 +20,7 @@
 #include "models/core/parallel_for.h"
 #include "models/core/seed.h"
 #include "models/core/tensor_file.h"
+#include "Eigen/Eigenvalues"
 #include "nlohmann/json.hpp"
 
 namespace tactfunc {
@@ -236,7 +237,9 @@ void ReadCheckpoint(const std::string& path, SensorKind sensor, const std::strin
   for (auto it = saved.begin(); it != saved.end(); ++it) {
     if (!current.contains(it.key())) {
       throw std::runtime_error(where + "option '" + it.key() +
-                               "' is unknown to this version of tactfunc");
+                               "' is set in the checkpoint but not in this run (or unknown to this version of "
+                               "tactfunc). Resume with the same options, or start anew without "
+                               "resume.");
     }
   }
   const Json& frames = meta.at("frames");
@@ -366,6 +369,11 @@ bool TrunkTrainer::Options::IsValid(std::string* error) const {
                alpha_init_max <= alpha_max)) {
     message << "alpha_init_min and alpha_init_max must satisfy 0 <= min <= max <= alpha_max ("
             << alpha_max << "), found " << alpha_init_min << " and " << alpha_init_max;
+  } else if (!(readout_learning_rate_scale >= 0 && readout_learning_rate_scale <= 1)) {
+    message << "readout_learning_rate_scale must be in [0, 1], found "
+            << readout_learning_rate_scale;
+  } else if (readout_pca_frames < 1) {
+    message << "readout_pca_frames must be >= 1, found " << readout_pca_frames;
   } else if (batch_size < 1) {
     message << "batch_size must be >= 1, found " << batch_size;
   } else if (pixels_per_frame < 0) {
@@ -505,6 +513,62 @@ FrameFormat TrunkTrainer::ResolveFormat(SensorKind sensor, double sensor_scale) 
   return format;
 }
 
+void TrunkTrainer::StartReadoutFromPca(const std::vector<TrunkTargets>& frames, int max_frames,
+                                       LatentModulatedSiren* siren) {
+  const LatentModulatedSiren::Options& so = siren->options();
+  const long channels = so.output_channels;
+  const long nodes = static_cast<long>(so.readout_rows) * so.readout_cols;
+  if (!so.has_readout() || frames.empty() || frames[0].values.rows() != nodes ||
+      frames[0].values.cols() != channels) {
+    throw std::invalid_argument(
+        "TrunkTrainer::StartReadoutFromPca: the trunk's readout grid (" +
+        std::to_string(so.readout_rows) + " x " + std::to_string(so.readout_cols) + " x " +
+        std::to_string(channels) + ") must match the frames' pixels and channels");
+  }
+  const long p = nodes * channels;
+  const int total = static_cast<int>(frames.size());
+  const int m = std::max(1, std::min(total, max_frames));
+  // Frames M x P, pixel-major rows (entry j C + c = values(j, c), invalid pixels 0), centred.
+  Eigen::MatrixXd X(m, p);
+  for (int i = 0; i < m; ++i) {
+    const TrunkTargets& t = frames[static_cast<std::size_t>(
+        (static_cast<long long>(i) * total) / m)];
+    for (long j = 0; j < nodes; ++j) {
+      const bool valid = t.weights.size() == 0 || t.weights[j] > 0;
+      for (long c = 0; c < channels; ++c) {
+        X(i, j * channels + c) = valid ? static_cast<double>(t.values(j, c)) : 0.0;
+      }
+    }
+  }
+  const Eigen::RowVectorXd mean = X.colwise().mean();
+  X.rowwise() -= mean;
+  // PCA by the M x M Gram matrix: its eigenvectors v_k with eigenvalues lambda_k give
+  // the unit principal directions u_k = X^T v_k / sqrt(lambda_k).
+  const Eigen::MatrixXd gram = X * X.transpose();
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(gram);
+  const int d = so.latent_dim;
+  // Scale sqrt(P / 2): the weighted MSE's latent Hessian of the branch is then
+  // (2 / P) R R^T = I over a full frame (header comment of Options::readout).
+  const double scale = std::sqrt(static_cast<double>(p) / 2.0);
+  Eigen::VectorXd theta = siren->parameters();
+  auto R = LatentModulatedSiren::View(&theta, siren->Block(ParameterGroup::kReadoutBasis));
+  auto mean_block = LatentModulatedSiren::View(&theta, siren->Block(ParameterGroup::kReadoutMean));
+  R.setZero();
+  mean_block = mean.transpose();
+  const double largest = std::max(eigen.eigenvalues()[m - 1], 0.0);
+  // Centred frames span at most m - 1 directions; the Gram matrix squares the condition
+  // number, so eigenvalues below 1e-9 of the largest are rounding, not directions.
+  for (int k = 0; k < d && k < m - 1; ++k) {
+    const double lambda = eigen.eigenvalues()[m - 1 - k];  // ascending order
+    if (!(lambda > 1e-9 * largest)) break;  // no more directions
+    R.row(k) = scale * (X.transpose() * eigen.eigenvectors().col(m - 1 - k)).transpose() /
+               std::sqrt(lambda);
+  }
+  LatentModulatedSiren::View(&theta, siren->Block(ParameterGroup::kOutputWeight)).setZero();
+  LatentModulatedSiren::View(&theta, siren->Block(ParameterGroup::kOutputBias)).setZero();
+  siren->SetParameters(theta);
+}
+
 std::string TrunkTrainer::TrajectoryOptionsJson(SensorKind sensor,
                                                 const FrameFormat& format) const {
   const Options& o = options_;
@@ -515,6 +579,11 @@ std::string TrunkTrainer::TrajectoryOptionsJson(SensorKind sensor,
   json["siren.latent_dim"] = o.siren.latent_dim;
   json["siren.omega_0"] = o.siren.omega_0;
   json["siren.coordinates"] = ToString(o.siren.coordinates);
+  if (o.readout) {  // absent = no readout branch (older files)
+    json["readout"] = true;
+    json["readout_pca_frames"] = o.readout_pca_frames;
+    json["readout_learning_rate_scale"] = o.readout_learning_rate_scale;
+  }
   json["format.rows"] = format.rows;
   json["format.cols"] = format.cols;
   json["format.grayscale"] = format.grayscale;
@@ -603,7 +672,11 @@ TrunkTrainer::Summary TrunkTrainer::Train(const std::vector<TrunkTargets>& frame
 
   LatentModulatedSiren::Options siren_options = o.siren;
   siren_options.output_channels = channels;
+  siren_options.readout_rows = o.readout ? format.rows : 0;
+  siren_options.readout_cols = o.readout ? format.cols : 0;
   LatentModulatedSiren siren(siren_options, StreamSeed(o.seed, kThetaStream));
+  if (o.readout) StartReadoutFromPca(frames, o.readout_pca_frames, &siren);
+  siren.set_readout_frozen(o.readout && o.readout_learning_rate_scale == 0);
   const MetaSgd meta(o.meta_sgd);
   const int d = siren.latent_dim();
   const int num_parameters = siren.NumParameters();
@@ -767,7 +840,19 @@ TrunkTrainer::Summary TrunkTrainer::Train(const std::vector<TrunkTargets>& frame
       const double sqrt_c2 = std::sqrt(correction2);
       x->array() -= step_size * m->array() / (v->array().sqrt() / sqrt_c2 + o.adam_epsilon);
     };
+    // The readout branch moves by readout_learning_rate_scale of Adam's step (the step
+    // is linear in the rate), 0 = kept at its PCA start.
+    Eigen::VectorXd readout_before;
+    long readout_offset = 0;
+    if (o.readout) {
+      readout_offset = siren.Block(ParameterGroup::kReadoutBasis).offset;
+      readout_before = state.theta.tail(num_parameters - readout_offset);
+    }
     adam(&state.theta, &state.m_theta, &state.v_theta, g_theta, LearningRateAt(o, t));
+    if (o.readout) {
+      auto readout = state.theta.tail(num_parameters - readout_offset);
+      readout = readout_before + o.readout_learning_rate_scale * (readout - readout_before);
+    }
     adam(&state.alpha, &state.m_alpha, &state.v_alpha, g_alpha, o.alpha_learning_rate);
     state.alpha = state.alpha.cwiseMax(0.0).cwiseMin(o.alpha_max);
     siren.SetParameters(state.theta);
@@ -867,6 +952,7 @@ TrunkTrainer::Summary TrunkTrainer::Train(const std::vector<TrunkTargets>& frame
     trunk->sensor = sensor;
     trunk->format = format;
     trunk->siren = siren;
+    trunk->siren.set_readout_frozen(false);  // a training choice, not part of the model
     trunk->alpha = state.alpha;
     trunk->meta_sgd = o.meta_sgd;
     trunk->residual_sigma = residual_sigma;

@@ -84,6 +84,22 @@ class TrunkTrainer {
     // output_channels is ignored and set from the frame format (1 for the bubble or
     // grayscale, 3 for RGB GelSlim). Defaults: the "default" preset (see Preset()).
     LatentModulatedSiren::Options siren = DefaultSirenOptions();
+    // The linear readout branch (models/trunk/latent_modulated_siren.h): a per-pixel
+    // basis and mean at the working resolution, added to the SIREN's output. When set,
+    // siren.readout_rows/cols are taken from the frame format, the branch starts as the
+    // PCA of the training frames (d components, scaled so that one full-frame meta-SGD
+    // step at alpha = 1 from z = 0 lands on the PCA code) and the SIREN's output layer
+    // starts at zero, so training starts from exactly that PCA and the SIREN learns
+    // what a linear basis cannot. Default false (the trunk of the paper).
+    bool readout = false;
+    // Training frames the readout's PCA start is computed from (evenly spaced over the
+    // split; fewer if it is smaller). >= 1. The PCA is one Gram matrix of that many
+    // frames: 1500 frames of 6160 pixels take about a second.
+    int readout_pca_frames = 1500;
+    // The readout branch's Adam step size as a fraction of the trunk's (the schedule
+    // applies to both). In [0, 1]; 0 keeps the branch at its PCA start (the SIREN then
+    // learns the PCA's residual).
+    double readout_learning_rate_scale = 0.0;
 
     // ---- Frame format (models/trunk/functa_model.h FrameFormat) -----------------------------
     // Working resolution in pixels (area interpolation). 0 x 0 (default) = the sensor's
@@ -319,6 +335,13 @@ class TrunkTrainer {
   // object {"siren.width": 64, ..., "format.rows": 70, ...}: what a checkpoint must
   // match and what a model's info records.
   std::string TrajectoryOptionsJson(SensorKind sensor, const FrameFormat& format) const;
+
+  // Starts `siren`'s readout branch (it must have one, with rows x cols nodes = the
+  // frames' pixels) from the PCA of `frames` as Options::readout describes, and zeroes
+  // the SIREN's output layer. Uses at most `max_frames` frames, evenly spaced. Throws
+  // std::invalid_argument if the branch's grid does not match the frames.
+  static void StartReadoutFromPca(const std::vector<TrunkTargets>& frames, int max_frames,
+                                  LatentModulatedSiren* siren);
 
  private:
   Options options_;

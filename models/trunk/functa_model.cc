@@ -92,15 +92,17 @@ std::string FunctaModel::Serialize() const {
   for (const SensorTrunk& t : trunks_) {
     const auto& o = t.siren.options();
     const std::string name = ToString(t.sensor);
+    nlohmann::json siren = {{"width", o.width},
+                            {"num_hidden_layers", o.num_hidden_layers},
+                            {"omega_0", o.omega_0},
+                            {"latent_dim", o.latent_dim},
+                            {"output_channels", o.output_channels},
+                            {"coordinates", ToString(o.coordinates)}};
+    // Written only when present, so a trunk without the branch keeps the bytes it had.
+    if (o.has_readout()) siren["readout"] = {{"rows", o.readout_rows}, {"cols", o.readout_cols}};
     meta["trunks"].push_back(
         {{"sensor", name},
-         {"siren",
-          {{"width", o.width},
-           {"num_hidden_layers", o.num_hidden_layers},
-           {"omega_0", o.omega_0},
-           {"latent_dim", o.latent_dim},
-           {"output_channels", o.output_channels},
-           {"coordinates", ToString(o.coordinates)}}},
+         {"siren", siren},
          {"frame_format",
           {{"rows", t.format.rows},
            {"cols", t.format.cols},
@@ -155,6 +157,12 @@ FunctaModel FunctaModel::FromTensorFile(const TensorFile& file, const std::strin
       if (!CoordinateConventionFromString(s.at("coordinates").get<std::string>(),
                                           &options.coordinates)) {
         throw TensorFileError(source + ": field '" + field + ".coordinates': unknown convention");
+      }
+      if (s.contains("readout")) {  // absent in files written before the readout branch
+        field = name + ".siren.readout";
+        options.readout_rows = s.at("readout").at("rows").get<int>();
+        options.readout_cols = s.at("readout").at("cols").get<int>();
+        field = name + ".siren";
       }
       std::string error;
       if (!options.IsValid(&error)) throw TensorFileError(source + ": " + field + ": " + error);

@@ -14,8 +14,11 @@
 // {"format": "tactfunc-model", "version": 1, "trunks": [{"sensor", "siren": {...},
 // "frame_format": {...}, "meta_sgd": {...}, "residual_sigma"}], "info": {...}} and
 // the tensors "<sensor>/theta" (float32, the trunk's flat parameters in
-// LatentModulatedSiren's layout) and "<sensor>/alpha" (float32, latent_dim). Loading
-// checks every field and shape and names the file and field on error.
+// LatentModulatedSiren's layout) and "<sensor>/alpha" (float32, latent_dim). A trunk with
+// the linear readout branch records its grid as "siren": {..., "readout": {"rows",
+// "cols"}} (its theta then ends with the branch's basis and mean); files without the key
+// load as trunks without the branch. Loading checks every field and shape and names the
+// file and field on error.
 #ifndef TACTFUNC_MODELS_TRUNK_FUNCTA_MODEL_H_
 #define TACTFUNC_MODELS_TRUNK_FUNCTA_MODEL_H_
 

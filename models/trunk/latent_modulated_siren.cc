@@ -180,6 +180,68 @@ void FinishGradient(const Net<S>& net, const std::vector<ParameterBlock>& blocks
   if (dL_dz != nullptr) *dL_dz = net.A.transpose() * dgamma;
 }
 
+// ---- The linear readout branch (header comment): y += R(x) z + m(x) ------------------
+// Every batched pass computes the per-node values u = R^T z + m once (G C numbers),
+// interpolates them per pixel, and scatters a block's dL/dY back onto the nodes
+// (s = sum over pixels of the bilinear weight times dL/dy); the pixel-independent parts
+// follow from s: dL/dz += R s, dL/dR = z s^T, dL/dm = s.
+template <typename S>
+struct ReadoutMaps {
+  ConstMap<S> R;  // d x (G C)
+  ConstMap<S> m;  // (G C) x 1
+  ReadoutMaps(const S* theta, const std::vector<ParameterBlock>& blocks, int num_layers)
+      : R(Net<S>::At(theta, blocks[2 * num_layers + 4])),
+        m(Net<S>::At(theta, blocks[2 * num_layers + 5])) {}
+};
+
+// Adds the interpolated node values u (G C) to Y (C x m, one pixel per column) for the
+// pixels `coords` (m x 2).
+template <typename S, typename Coords, typename Out>
+void AddReadout(const LatentModulatedSiren& siren, const Eigen::MatrixBase<Coords>& coords,
+                const VectorX<S>& u, Eigen::MatrixBase<Out>& Y) {
+  const long channels = Y.rows();
+  for (long j = 0; j < coords.rows(); ++j) {
+    const auto corners = siren.LocateReadout(static_cast<double>(coords(j, 0)),
+                                             static_cast<double>(coords(j, 1)));
+    for (int i = 0; i < 4; ++i) {
+      const S w = static_cast<S>(corners.weight[i]);
+      if (w == S(0)) continue;
+      for (long ch = 0; ch < channels; ++ch) Y(ch, j) += w * u[corners.node[i] * channels + ch];
+    }
+  }
+}
+
+// s (G C) += the bilinear scatter of G (C x m) for the pixels `coords` (m x 2).
+template <typename S, typename Coords, typename Grad>
+void ScatterReadout(const LatentModulatedSiren& siren, const Eigen::MatrixBase<Coords>& coords,
+                    const Eigen::MatrixBase<Grad>& G, VectorX<S>* s) {
+  const long channels = G.rows();
+  for (long j = 0; j < coords.rows(); ++j) {
+    const auto corners = siren.LocateReadout(static_cast<double>(coords(j, 0)),
+                                             static_cast<double>(coords(j, 1)));
+    for (int i = 0; i < 4; ++i) {
+      const S w = static_cast<S>(corners.weight[i]);
+      if (w == S(0)) continue;
+      for (long ch = 0; ch < channels; ++ch) (*s)[corners.node[i] * channels + ch] += w * G(ch, j);
+    }
+  }
+}
+
+// The readout's share of the gradient from the scattered s: dL/dz += R s, and the
+// blocks dL/dR = z s^T, dL/dm = s of *dL_dtheta (if not null).
+template <typename S>
+void FinishReadoutGradient(const ReadoutMaps<S>& readout,
+                           const std::vector<ParameterBlock>& blocks, int num_layers,
+                           const VectorX<S>& s, const VectorX<S>& z, VectorX<S>* dL_dz,
+                           VectorX<S>* dL_dtheta) {
+  if (dL_dtheta != nullptr) {
+    LatentModulatedSiren::View(dL_dtheta, blocks[2 * num_layers + 4]).noalias() =
+        z * s.transpose();
+    LatentModulatedSiren::View(dL_dtheta, blocks[2 * num_layers + 5]) = s;
+  }
+  if (dL_dz != nullptr) dL_dz->noalias() += readout.R * s;
+}
+
 // The weighted MSE's normaliser over ALL pixels: *scale = 2 / (C sum_j w_j) and the
 // returned 1 / (C sum_j w_j) (both 0 when sum_j w_j <= 0).
 template <typename S>
@@ -271,6 +333,10 @@ const char* ToString(ParameterGroup group) {
       return "output_weight";
     case ParameterGroup::kOutputBias:
       return "output_bias";
+    case ParameterGroup::kReadoutBasis:
+      return "readout_basis";
+    case ParameterGroup::kReadoutMean:
+      return "readout_mean";
   }
   return "unknown";
 }
@@ -301,6 +367,17 @@ bool LatentModulatedSiren::Options::IsValid(std::string* error) const {
              coordinates != CoordinateConvention::kPixelCorners) {
     message << "coordinates is not a CoordinateConvention, found "
             << static_cast<int>(coordinates);
+  } else if (readout_rows < 0 || readout_cols < 0 ||
+             (readout_rows == 0) != (readout_cols == 0)) {
+    message << "readout_rows and readout_cols must be both 0 (no readout branch) or both "
+               ">= 1, found "
+            << readout_rows << " x " << readout_cols;
+  } else if (static_cast<double>(readout_rows) * readout_cols * output_channels *
+                 (latent_dim + 1) >
+             1.0e9) {
+    message << "the readout branch would have more than 1e9 parameters (" << readout_rows
+            << " x " << readout_cols << " nodes, " << output_channels << " channels, latent_dim "
+            << latent_dim << ")";
   } else if (static_cast<double>(width) * (width + latent_dim) * num_hidden_layers >
              2.0e9) {
     message << "width, num_hidden_layers and latent_dim give more than 2e9 "
@@ -339,6 +416,11 @@ void LatentModulatedSiren::BuildLayout() {
   add(ParameterGroup::kModulationBias, 0, num_layers * width, 1);
   add(ParameterGroup::kOutputWeight, 0, options_.output_channels, width);
   add(ParameterGroup::kOutputBias, 0, options_.output_channels, 1);
+  if (options_.has_readout()) {
+    const int nodes = options_.readout_rows * options_.readout_cols * options_.output_channels;
+    add(ParameterGroup::kReadoutBasis, 0, options_.latent_dim, nodes);
+    add(ParameterGroup::kReadoutMean, 0, nodes, 1);
+  }
   num_parameters_ = offset;
 }
 
@@ -361,6 +443,13 @@ const ParameterBlock& LatentModulatedSiren::Block(ParameterGroup group, int laye
       return blocks_[2 * num_layers + 2];
     case ParameterGroup::kOutputBias:
       return blocks_[2 * num_layers + 3];
+    case ParameterGroup::kReadoutBasis:
+    case ParameterGroup::kReadoutMean:
+      if (!has_readout()) {
+        throw std::out_of_range(
+            "LatentModulatedSiren::Block: this trunk has no readout branch");
+      }
+      return blocks_[2 * num_layers + (group == ParameterGroup::kReadoutMean ? 5 : 4)];
   }
   throw std::out_of_range("LatentModulatedSiren::Block: unknown group");
 }
@@ -387,6 +476,10 @@ void LatentModulatedSiren::Initialize(std::uint64_t seed) {
       case ParameterGroup::kOutputBias:
         bound = hidden_bound;
         break;
+      case ParameterGroup::kReadoutBasis:
+      case ParameterGroup::kReadoutMean:
+        bound = 0.0;  // the branch starts at zero (or from a PCA, set by the trainer)
+        break;
     }
     if (bound == 0.0) continue;
     boost::random::uniform_real_distribution<double> uniform(-bound, bound);
@@ -403,6 +496,41 @@ void LatentModulatedSiren::SetParameters(const Eigen::VectorXd& parameters) {
   }
   parameters_ = parameters;
   parameters_float_ = parameters_.cast<float>();
+}
+
+LatentModulatedSiren::ReadoutCorners LatentModulatedSiren::LocateReadout(double x0,
+                                                                         double x1) const {
+  // Grid position of a coordinate along an axis of `count` nodes, the inverse of
+  // MakeGrid's mapping, clamped to [0, count - 1].
+  auto position = [this](double x, int count) {
+    double p = options_.coordinates == CoordinateConvention::kPixelCenters
+                   ? (x + 1.0) * 0.5 * count - 0.5
+                   : (count == 1 ? 0.0 : (x + 1.0) * 0.5 * (count - 1));
+    if (!(p >= 0.0)) p = std::isnan(p) ? p : 0.0;  // NaN stays NaN (a NaN output)
+    return std::min(p, static_cast<double>(count - 1));
+  };
+  const int rows = options_.readout_rows, cols = options_.readout_cols;
+  const double pc = position(x0, cols), pr = position(x1, rows);
+  ReadoutCorners corners;
+  if (std::isnan(pc) || std::isnan(pr)) {
+    for (int i = 0; i < 4; ++i) {
+      corners.node[i] = 0;
+      corners.weight[i] = std::nan("");
+    }
+    return corners;
+  }
+  const int c0 = static_cast<int>(pc), r0 = static_cast<int>(pr);
+  const int c1 = std::min(c0 + 1, cols - 1), r1 = std::min(r0 + 1, rows - 1);
+  const double fc = pc - c0, fr = pr - r0;
+  corners.node[0] = static_cast<long>(r0) * cols + c0;
+  corners.node[1] = static_cast<long>(r0) * cols + c1;
+  corners.node[2] = static_cast<long>(r1) * cols + c0;
+  corners.node[3] = static_cast<long>(r1) * cols + c1;
+  corners.weight[0] = (1 - fr) * (1 - fc);
+  corners.weight[1] = (1 - fr) * fc;
+  corners.weight[2] = fr * (1 - fc);
+  corners.weight[3] = fr * fc;
+  return corners;
 }
 
 template <>
@@ -472,9 +600,19 @@ LatentModulatedSiren::MatrixX<Scalar> LatentModulatedSiren::Forward(
   Trace<Scalar> trace(options_.num_hidden_layers, options_.width, options_.output_channels,
                       BlockCapacity(n), /*keep_cosine=*/false);
   MatrixX<Scalar> outputs(n, options_.output_channels);
+  VectorX<Scalar> u;
+  if (has_readout()) {
+    const ReadoutMaps<Scalar> readout(ParameterData<Scalar>(), blocks_,
+                                      options_.num_hidden_layers);
+    u = readout.R.transpose() * z + readout.m;
+  }
   for (long begin = 0; begin < n; begin += kPixelBlock) {
     const long m = std::min(kPixelBlock, n - begin);
     RunForward(net, options_.omega_0, coords.middleRows(begin, m), gamma, &trace);
+    if (has_readout()) {
+      auto y = trace.y.leftCols(m);
+      AddReadout(*this, coords.middleRows(begin, m), u, y);
+    }
     outputs.middleRows(begin, m) = trace.y.leftCols(m).transpose();
   }
   return outputs;
@@ -498,13 +636,26 @@ void LatentModulatedSiren::Backward(const MatrixX<Scalar>& coords,
   ReverseBuffers<Scalar> buffers(options_.width, capacity);
   VectorX<Scalar> dgamma = VectorX<Scalar>::Zero(net.A.rows());
   if (dL_dtheta != nullptr) dL_dtheta->setZero(num_parameters_);
+  VectorX<Scalar> s;  // the readout's scattered dL/dY
+  if (has_readout()) s.setZero(blocks_[2 * options_.num_hidden_layers + 5].rows);
   for (long begin = 0; begin < n; begin += kPixelBlock) {
     const long m = std::min(kPixelBlock, n - begin);
+    // The readout adds to y but not to the SIREN's reverse pass (y is linear in both).
     RunForward(net, options_.omega_0, coords.middleRows(begin, m), gamma, &trace);
     RunBackwardBlock(net, blocks_, options_.omega_0, trace,
                      dL_dY.middleRows(begin, m).transpose(), &buffers, &dgamma, dL_dtheta);
+    if (has_readout()) {
+      ScatterReadout(*this, coords.middleRows(begin, m), dL_dY.middleRows(begin, m).transpose(),
+                     &s);
+    }
   }
   FinishGradient(net, blocks_, dgamma, z, dL_dz, dL_dtheta);
+  if (has_readout()) {
+    const ReadoutMaps<Scalar> readout(ParameterData<Scalar>(), blocks_,
+                                      options_.num_hidden_layers);
+    FinishReadoutGradient(readout, blocks_, options_.num_hidden_layers, s, z, dL_dz,
+                          readout_frozen_ ? nullptr : dL_dtheta);
+  }
 }
 
 template <typename Scalar>
@@ -533,11 +684,37 @@ void LatentModulatedSiren::ForwardAndLatentJacobian(const MatrixX<Scalar>& coord
     g_below.resize(width, capacity);
     J_channel.resize(d, capacity);
   }
+  std::unique_ptr<ReadoutMaps<Scalar>> readout;
+  VectorX<Scalar> u;
+  if (has_readout()) {
+    readout = std::make_unique<ReadoutMaps<Scalar>>(ParameterData<Scalar>(), blocks_, num_layers);
+    u = readout->R.transpose() * z + readout->m;
+  }
   for (long begin = 0; begin < n; begin += kPixelBlock) {
     const long m = std::min(kPixelBlock, n - begin);
     RunForward(net, options_.omega_0, coords.middleRows(begin, m), gamma, &trace);
-    if (outputs != nullptr) outputs->middleRows(begin, m) = trace.y.leftCols(m).transpose();
+    if (outputs != nullptr) {
+      auto y = trace.y.leftCols(m);
+      if (readout) AddReadout(*this, coords.middleRows(begin, m), u, y);
+      outputs->middleRows(begin, m) = y.transpose();
+    }
     if (J_y_z == nullptr) continue;
+    if (readout) {
+      // d y_{j,ch} / d z of the readout: the bilinear mix of the nodes' basis columns.
+      for (long j = 0; j < m; ++j) {
+        const ReadoutCorners corners = LocateReadout(static_cast<double>(coords(begin + j, 0)),
+                                                     static_cast<double>(coords(begin + j, 1)));
+        for (int ch = 0; ch < channels; ++ch) {
+          auto row = J_y_z->row((begin + j) * channels + ch);
+          row.setZero();
+          for (int i = 0; i < 4; ++i) {
+            if (corners.weight[i] == 0.0) continue;
+            row += static_cast<Scalar>(corners.weight[i]) *
+                   readout->R.col(corners.node[i] * channels + ch).transpose();
+          }
+        }
+      }
+    }
     for (int ch = 0; ch < channels; ++ch) {
       // Seeding dL/dy = 1 for channel ch at every pixel: since pixels are independent,
       // column j of each delta is then d y_{j,ch} / d pre_l(j) = d y_{j,ch} / d gamma_l.
@@ -556,7 +733,14 @@ void LatentModulatedSiren::ForwardAndLatentJacobian(const MatrixX<Scalar>& coord
         }
       }
       if (channels == 1) {
-        J_y_z->middleRows(begin, m) = J.transpose();
+        if (readout) {
+          J_y_z->middleRows(begin, m) += J.transpose();
+        } else {
+          J_y_z->middleRows(begin, m) = J.transpose();
+        }
+      } else if (readout) {
+        J_y_z->operator()(Eigen::seqN(begin * channels + ch, m, channels), Eigen::all) +=
+            J.transpose();
       } else {
         J_y_z->operator()(Eigen::seqN(begin * channels + ch, m, channels), Eigen::all) =
             J.transpose();
@@ -653,13 +837,37 @@ Scalar LatentModulatedSiren::LossGradientAndHessianProduct(
   }
   auto hv_block = [&](int index) { return View(hv, blocks_[index]); };
 
+  // The readout branch: node values u and their tangent u_dot; s and s_dot, the
+  // scattered G and G' (scatter, scatter_dot; see the helpers above).
+  std::unique_ptr<ReadoutMaps<Scalar>> readout, dreadout;
+  VectorX<Scalar> u, u_dot, scatter, scatter_dot;
+  if (has_readout()) {
+    readout = std::make_unique<ReadoutMaps<Scalar>>(ParameterData<Scalar>(), blocks_, num_layers);
+    u = readout->R.transpose() * z + readout->m;
+    if (reverse) scatter.setZero(u.size());
+    if (hvp) {
+      u_dot = readout->R.transpose() * v_z;
+      if (v_theta != nullptr && !readout_frozen_) {
+        dreadout = std::make_unique<ReadoutMaps<Scalar>>(v_theta->data(), blocks_, num_layers);
+        u_dot += dreadout->R.transpose() * z + dreadout->m;
+      }
+      scatter_dot.setZero(u.size());
+    }
+  }
+
   double loss = 0.0;
   for (long begin = 0; begin < n; begin += kPixelBlock) {
     const long m = std::min(kPixelBlock, n - begin);
-    RunForward(net, options_.omega_0, coords.middleRows(begin, m), gamma, &trace);
+    const auto block_coords = coords.middleRows(begin, m);
+    RunForward(net, options_.omega_0, block_coords, gamma, &trace);
+    if (readout) {
+      auto y = trace.y.leftCols(m);
+      AddReadout(*this, block_coords, u, y);
+    }
     loss += BlockResidualGradient(trace, targets, weights, begin, scale, &G);
     if (!reverse) continue;
     const auto Gm = G.leftCols(m);
+    if (readout) ScatterReadout(*this, block_coords, Gm, &scatter);
     if (gradient) {
       RunBackwardBlock(net, blocks_, options_.omega_0, trace, Gm, buffers.get(),
                        &grad_dgamma, dL_dtheta);
@@ -688,10 +896,12 @@ Scalar LatentModulatedSiren::LossGradientAndHessianProduct(
       yd.noalias() += dnet->W_out * trace.h[num_layers].leftCols(m);
       yd.colwise() += dnet->b_out.col(0);
     }
+    if (readout) AddReadout(*this, block_coords, u_dot, yd);
     // G' = scale * w * y' (zero where w = 0).
     auto Gd = G_dot.leftCols(m);
     Gd = scale * yd;
     if (weights.size() != 0) Gd *= weights.segment(begin, m).asDiagonal();
+    if (readout) ScatterReadout(*this, block_coords, Gd, &scatter_dot);
 
     // Reverse pass and its tangent.
     const auto h_top = trace.h[num_layers].leftCols(m);
@@ -723,7 +933,13 @@ Scalar LatentModulatedSiren::LossGradientAndHessianProduct(
       }
     }
   }
-  if (gradient) FinishGradient(net, blocks_, grad_dgamma, z, dL_dz, dL_dtheta);
+  if (gradient) {
+    FinishGradient(net, blocks_, grad_dgamma, z, dL_dz, dL_dtheta);
+    if (readout) {
+      FinishReadoutGradient(*readout, blocks_, num_layers, scatter, z, dL_dz,
+                            readout_frozen_ ? nullptr : dL_dtheta);
+    }
+  }
   if (hvp) {
     for (int l = 0; l < num_layers; ++l) {
       hv_block(2 * l + 1) = ddgamma.segment(l * width, width);
@@ -734,8 +950,62 @@ Scalar LatentModulatedSiren::LossGradientAndHessianProduct(
       *Hv_z = net.A.transpose() * ddgamma;
       if (dnet) Hv_z->noalias() += dnet->A.transpose() * dgamma;
     }
+    if (readout) {
+      // g_z's readout term R s has the tangent R s' + R' s; g_R = z s^T has v_z s^T +
+      // z s'^T; g_m = s has s'.
+      if (Hv_z != nullptr) {
+        Hv_z->noalias() += readout->R * scatter_dot;
+        if (dreadout) Hv_z->noalias() += dreadout->R * scatter;
+      }
+      if (!readout_frozen_) {
+        hv_block(2 * num_layers + 4).noalias() =
+            v_z * scatter.transpose() + z * scatter_dot.transpose();
+        hv_block(2 * num_layers + 5) = scatter_dot;
+      }
+    }
   }
   return static_cast<Scalar>(loss * inverse_normaliser);
+}
+
+template <typename Scalar>
+LatentModulatedSiren::VectorX<Scalar> LatentModulatedSiren::StartLatent(
+    const MatrixX<Scalar>& coords, const MatrixX<Scalar>& targets,
+    const VectorX<Scalar>& weights) const {
+  const long n = coords.rows();
+  const long channels = options_.output_channels;
+  CheckShape("coords", n, coords.cols(), n, 2);
+  CheckShape("targets", targets.rows(), targets.cols(), n, channels);
+  if (weights.size() != 0) CheckShape("weights", weights.rows(), 1, n, 1);
+  VectorX<Scalar> z = VectorX<Scalar>::Zero(options_.latent_dim);
+  if (!has_readout()) return z;
+  const ReadoutMaps<Scalar> readout(ParameterData<Scalar>(), blocks_,
+                                    options_.num_hidden_layers);
+  VectorX<Scalar> scatter = VectorX<Scalar>::Zero(readout.m.rows());
+  double weight_sum = 0;
+  for (long j = 0; j < n; ++j) {
+    const Scalar w = weights.size() == 0 ? Scalar(1) : weights[j];
+    if (w == Scalar(0)) continue;
+    weight_sum += w;
+    const ReadoutCorners corners = LocateReadout(static_cast<double>(coords(j, 0)),
+                                                 static_cast<double>(coords(j, 1)));
+    for (long ch = 0; ch < channels; ++ch) {
+      Scalar mean = 0;
+      for (int i = 0; i < 4; ++i) {
+        if (corners.weight[i] != 0.0) {
+          mean += static_cast<Scalar>(corners.weight[i]) * readout.m(corners.node[i] * channels + ch, 0);
+        }
+      }
+      const Scalar r = w * (targets(j, ch) - mean);
+      for (int i = 0; i < 4; ++i) {
+        if (corners.weight[i] != 0.0) {
+          scatter[corners.node[i] * channels + ch] += static_cast<Scalar>(corners.weight[i]) * r;
+        }
+      }
+    }
+  }
+  if (!(weight_sum > 0)) return z;
+  z.noalias() = static_cast<Scalar>(2.0 / (channels * weight_sum)) * (readout.R * scatter);
+  return z;
 }
 
 // ---- Explicit instantiations -------------------------------------------------------
@@ -750,6 +1020,8 @@ Scalar LatentModulatedSiren::LossGradientAndHessianProduct(
       const;                                                                             \
   template void LatentModulatedSiren::ForwardAndLatentJacobian<S>(                       \
       const MatrixX<S>&, const VectorX<S>&, MatrixX<S>*, MatrixX<S>*) const;             \
+  template LatentModulatedSiren::VectorX<S> LatentModulatedSiren::StartLatent<S>(        \
+      const MatrixX<S>&, const MatrixX<S>&, const VectorX<S>&) const;                    \
   template S LatentModulatedSiren::Loss<S>(const MatrixX<S>&, const VectorX<S>&,         \
                                            const MatrixX<S>&, const VectorX<S>&) const;  \
   template S LatentModulatedSiren::LossAndGradient<S>(                                   \

@@ -11,10 +11,17 @@
 //   gamma_l = gamma[l*width, (l+1)*width)                  (the l-th block of width)
 //   h_0     = x                                            (2 values)
 //   h_{l+1} = sin(omega_0 * (W_l h_l + b_l + gamma_l)),    l = 0 .. L-1
-//   y       = W_out h_L + b_out                            (C values, linear)
+//   y       = W_out h_L + b_out + R(x) z + m(x)            (C values, linear)
 //
 // with L = num_hidden_layers, W_0: width x 2, W_l: width x width for l >= 1,
-// W_out: C x width. theta = {W_l, b_l, A, c, W_out, b_out} is shared across the
+// W_out: C x width. R(x) z + m(x) is the optional LINEAR READOUT BRANCH (absent, i.e.
+// zero, unless Options::readout_rows/cols are set): a per-pixel basis R (C x d per grid
+// node) and mean m (C per node) stored on a readout_rows x readout_cols grid and
+// interpolated bilinearly at x (nodes placed as the pixels of a grid of that size in the
+// trunk's coordinate convention, so at the working resolution every pixel sits on its
+// own node). With the SIREN's output at zero and R, m = a PCA basis and mean the trunk
+// IS that PCA, so a trunk with the branch contains PCA at the same d as a special case;
+// the SIREN then models what a linear basis cannot (docs/REPRESENTATION.md). theta = {W_l, b_l, A, c, W_out, b_out} is shared across the
 // dataset and meta-learned; z starts at zero for every new frame and a few gradient
 // steps fit it (Eq. 6). At z = 0 the trunk computes the "initial image" of Fig. 3.
 //
@@ -23,6 +30,9 @@
 // array. Its layout, in this order, every matrix column-major:
 //   for l = 0 .. L-1:  W_l (width x fan_in_l), b_l (width)
 //   A ((L*width) x d), c (L*width), W_out (C x width), b_out (C)
+//   and, with the readout branch, R (d x (G*C)) and m (G*C), G = readout_rows *
+//   readout_cols, column / entry g*C + c for node g (row-major over the grid), channel c
+//   (so a trunk without the branch has exactly the layout it always had)
 // parameter_blocks() lists (group, layer, offset, rows, cols) for each block, and
 // View() maps a block of any flat vector (parameters or a gradient) as a matrix.
 //
@@ -33,7 +43,7 @@
 //   W_out, b_out        ~ U(-sqrt(6/width)/omega_0, +...)
 //   A                   ~ U(-sqrt(6/d)/omega_0, +...)      (a unit change of one z_k
 //                                                           moves phases by O(1) rad)
-//   c = 0, latents start at zero.
+//   c = 0, R = 0, m = 0 (the trainer may start R, m from a PCA), latents start at zero.
 // Biases take the range of their layer's weights: the first layer's then spreads the
 // phases of the first sines over +-omega_0/2 rad, as PyTorch SIREN's default bias does.
 //
@@ -77,6 +87,7 @@
 #include <cmath>
 #include <cstdint>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "Eigen/Core"
@@ -101,9 +112,11 @@ enum class ParameterGroup {
   kModulationBias,    // c, (L*width) x 1
   kOutputWeight,      // W_out, C x width
   kOutputBias,        // b_out, C x 1
+  kReadoutBasis,      // R, d x (G*C)   (only with the readout branch)
+  kReadoutMean,       // m, (G*C) x 1   (only with the readout branch)
 };
 // "hidden_weight", "hidden_bias", "modulation_matrix", "modulation_bias",
-// "output_weight", "output_bias".
+// "output_weight", "output_bias", "readout_basis", "readout_mean".
 const char* ToString(ParameterGroup group);
 
 // One block of the flat parameter vector: flat[offset .. offset + rows * cols),
@@ -141,6 +154,11 @@ class LatentModulatedSiren {
     int output_channels = 1;
     // Pixel-to-coordinate mapping used by Grid().
     CoordinateConvention coordinates = CoordinateConvention::kPixelCenters;
+    // The linear readout branch's grid (header comment): both 0 (default: no branch)
+    // or both >= 1; the trainer sets them to the working resolution.
+    int readout_rows = 0;
+    int readout_cols = 0;
+    bool has_readout() const { return readout_rows > 0 && readout_cols > 0; }
 
     // True if every field is in range; otherwise false and *error (if not null)
     // names the bad field and its value.
@@ -167,7 +185,24 @@ class LatentModulatedSiren {
   // Re-draws theta from `seed` as the constructor does.
   void Initialize(std::uint64_t seed);
 
-  // All blocks, in flat order (2 L + 4 of them).
+  bool has_readout() const { return options_.has_readout(); }
+  // A frozen readout branch still adds to every output and to dL/dz, Jacobians and
+  // latent Hessian products, but the passes skip its parameter gradients and report
+  // them as 0 (they cost as much as the rest of a small trunk's gradient). For training
+  // with the branch fixed; default false.
+  void set_readout_frozen(bool frozen) { readout_frozen_ = frozen; }
+  bool readout_frozen() const { return readout_frozen_; }
+
+  // Bilinear weights of coordinate (x0, x1) on the readout grid: node[i] (row-major
+  // grid index) with weight[i], i < 4, weights summing to 1 (coordinates outside the
+  // grid are clamped to its edge nodes). Requires has_readout().
+  struct ReadoutCorners {
+    long node[4];
+    double weight[4];
+  };
+  ReadoutCorners LocateReadout(double x0, double x1) const;
+
+  // All blocks, in flat order (2 L + 4 of them, 2 L + 6 with the readout branch).
   const std::vector<ParameterBlock>& parameter_blocks() const { return blocks_; }
   // The block of `group` (and hidden layer `layer` for kHidden*). Throws
   // std::out_of_range for a layer outside [0, L).
@@ -246,6 +281,17 @@ class LatentModulatedSiren {
       const VectorX<Scalar>* v_theta, const VectorX<Scalar>& v_z, VectorX<Scalar>* dL_dz,
       VectorX<Scalar>* dL_dtheta, VectorX<Scalar>* Hv_z, VectorX<Scalar>* Hv_theta) const;
 
+  // The latent every fit of a frame starts from: z = 0 without the readout branch (the
+  // paper's start); with it, the branch's projection of the targets,
+  //   z_0 = 2 / (C sum_j w_j) sum_j w_j sum_c R_c(x_j) (t_jc - m_c(x_j)),
+  // one full-frame gradient step of the branch's own weighted MSE at rate 1 from z = 0,
+  // which is exactly the PCA code when the branch holds a PCA basis scaled as the
+  // trainer scales it (estimation/training/trunk_trainer.h, Options::readout) and every
+  // pixel is valid. Pixels with w_j = 0 are skipped (their targets may be NaN).
+  template <typename Scalar>
+  VectorX<Scalar> StartLatent(const MatrixX<Scalar>& coords, const MatrixX<Scalar>& targets,
+                              const VectorX<Scalar>& weights) const;
+
   // ---- One pixel, any scalar type (ceres::Jet) -------------------------------------
   // out[0 .. C) = f_theta(coord2; z) with theta = parameters(). T must support
   // +, *, and sin found by argument-dependent lookup or std:: (double, float,
@@ -263,6 +309,15 @@ class LatentModulatedSiren {
   }
 
  private:
+  // The value of a scalar, of a ceres::Jet (its .a) or of a Jet of Jets.
+  template <typename T>
+  static double PlainValue(const T& value) {
+    if constexpr (std::is_arithmetic_v<T>) {
+      return static_cast<double>(value);
+    } else {
+      return PlainValue(value.a);
+    }
+  }
   template <typename P, typename T>
   void EvaluateImpl(const P* theta, const T* coord2, const T* z, T* out) const;
   template <typename Scalar>
@@ -274,6 +329,7 @@ class LatentModulatedSiren {
   std::vector<ParameterBlock> blocks_;
   Eigen::VectorXd parameters_;
   Eigen::VectorXf parameters_float_;
+  bool readout_frozen_ = false;
 };
 
 // ---- Implementation of the one-pixel template ------------------------------------
@@ -312,6 +368,22 @@ void LatentModulatedSiren::EvaluateImpl(const P* theta, const T* coord2, const T
     T y = T(b_out[ch]);
     for (int i = 0; i < width; ++i) y += W_out[ch + i * channels] * h[i];
     out[ch] = y;
+  }
+  if (!has_readout()) return;
+  // The readout branch: the grid position depends on the coordinate's value only (a
+  // coordinate is data, never differentiated).
+  const P* R = theta + blocks_[2 * num_layers + 4].offset;
+  const P* m = theta + blocks_[2 * num_layers + 5].offset;
+  const ReadoutCorners corners = LocateReadout(PlainValue(coord2[0]), PlainValue(coord2[1]));
+  for (int i = 0; i < 4; ++i) {
+    if (corners.weight[i] == 0.0) continue;
+    const T w(corners.weight[i]);
+    for (int ch = 0; ch < channels; ++ch) {
+      const long column = corners.node[i] * channels + ch;
+      T value = T(m[column]);
+      for (int k = 0; k < d; ++k) value += R[k + column * d] * z[k];
+      out[ch] += w * value;
+    }
   }
 }
 

@@ -48,7 +48,7 @@ MetaSgd::VectorX<Scalar> MetaSgd::FitLatent(const LatentModulatedSiren& siren,
                                             const VectorX<Scalar>& alpha,
                                             Scalar* loss) const {
   const VectorX<Scalar> z = InnerLoop<Scalar>(siren, coords, targets, weights, alpha,
-                                              VectorX<Scalar>::Zero(siren.latent_dim()),
+                                              siren.StartLatent<Scalar>(coords, targets, weights),
                                               options_.inner_steps);
   if (loss != nullptr) *loss = siren.Loss<Scalar>(coords, z, targets, weights);
   return z;
@@ -91,7 +91,9 @@ MetaSgd::Result<Scalar> MetaSgd::OuterLossAndGradient(
 
   // Inner loop, keeping every z_k and g_k for the reverse pass.
   std::vector<VectorX<Scalar>> z(steps + 1), g(steps);
-  z[0] = VectorX<Scalar>::Zero(siren.latent_dim());
+  // The start (zero, or the readout branch's projection; a frozen branch makes it
+  // independent of the trained parameters, else its dependence is not differentiated).
+  z[0] = siren.StartLatent<Scalar>(coords, targets, weights);
   for (int k = 0; k < steps; ++k) {
     const Scalar loss =
         siren.LossAndGradient<Scalar>(coords, z[k], targets, weights, &g[k], nullptr);

@@ -7,7 +7,8 @@
 // the latent from zero with K steps of gradient descent with per-dimension rates
 // alpha (the paper's Eq. 6 with a learned, per-coordinate eta):
 //
-//   z_0     = 0
+//   z_0     = 0   (LatentModulatedSiren::StartLatent: the readout branch's projection
+//                  for a trunk with that branch)
 //   g_k     = d/dz [ L(theta, z_k) + lambda ||z_k||^2 ]
 //   z_{k+1} = z_k - alpha (*) g_k                       ((*): element-wise)
 //

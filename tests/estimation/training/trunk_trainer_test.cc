@@ -18,6 +18,9 @@
 
 #include "estimation/data/dataset.h"
 #include "estimation/data/synthetic_dataset.h"
+#include "estimation/data/trunk_targets.h"
+#include "estimation/evaluation/baselines.h"
+#include "models/trunk/meta_sgd.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "models/core/tensor_file.h"
@@ -265,6 +268,80 @@ TEST_F(TrunkTrainerTest, AFarTooLargeLearningRateStopsAsDivergedAtTheFirstMonito
       << unchecked.message;
   EXPECT_EQ(unchecked.steps_done, options.steps);
   EXPECT_LT(unchecked.train_psnr, summary.history.front().psnr - drop);
+}
+
+TEST_F(TrunkTrainerTest, TheReadoutBranchStartsAsThePcaOfTheTrainingFrames) {
+  // Zero steps: the trunk is its start. One full-frame meta-SGD step at alpha = 1 from
+  // z = 0 must then reconstruct every training frame as PCA with d components does.
+  TrunkTrainer::Options options = TrunkTrainer::Preset("tiny");
+  options.readout = true;
+  options.steps = 0;
+  options.threads = 2;
+  options.siren.latent_dim = 4;  // fewer components than the 12 frames span
+  SensorTrunk trunk;
+  const TrunkTrainer::Summary summary = Train(options, &trunk);
+  ASSERT_EQ(summary.termination_type, TrunkTrainer::TerminationType::kCompleted) << summary.message;
+  ASSERT_TRUE(trunk.siren.has_readout());
+  EXPECT_FALSE(trunk.siren.readout_frozen());
+  EXPECT_EQ(trunk.siren.options().readout_rows, trunk.format.rows);
+  EXPECT_EQ(trunk.siren.options().readout_cols, trunk.format.cols);
+  std::vector<TrunkTargets> frames;
+  std::vector<const TrunkTargets*> pointers;
+  for (std::size_t i = 0; i < dataset_->frames().size(); ++i) {
+    frames.push_back(LoadTrunkTargets(*dataset_, i, trunk.format));
+  }
+  for (const TrunkTargets& t : frames) pointers.push_back(&t);
+  const int d = trunk.siren.latent_dim();
+  PcaCodec::Options pca_options;
+  pca_options.components = d;
+  const Eigen::MatrixXf stacked = StackFrames(pointers);
+  const PcaCodec pca = PcaCodec::Fit(stacked, pca_options);
+  const Eigen::MatrixXf pca_frames = pca.Decode(pca.Encode(stacked));
+  MetaSgd::Options one_step;
+  one_step.inner_steps = 1;
+  const MetaSgd meta(one_step);
+  const Eigen::MatrixXf grid = trunk.siren.Grid<float>(trunk.format.rows, trunk.format.cols);
+  const Eigen::VectorXf alpha = Eigen::VectorXf::Ones(d);
+  const Eigen::VectorXf all_pixels;  // every pixel weighs 1, as the PCA sees them
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    const Eigen::VectorXf z = meta.FitLatent<float>(trunk.siren, grid, frames[i].values,
+                                                    all_pixels, alpha);
+    const Eigen::MatrixXf y = trunk.siren.Forward<float>(grid, z);
+    const Eigen::MatrixXf expected = UnflattenFrame(pca_frames.row(i), 1);
+    const float scale = std::max(1e-3f, expected.cwiseAbs().maxCoeff());
+    EXPECT_LE((y - expected).cwiseAbs().maxCoeff(), 1e-3f * scale)
+        << "frame " << i << ": PCA misses the frame by "
+        << (expected - frames[i].values).cwiseAbs().maxCoeff();
+  }
+  // The model file records the branch and reads back the same trunk.
+  FunctaModel model;
+  model.SetTrunk(trunk);
+  const FunctaModel read = FunctaModel::Parse(model.Serialize(), "readout.tfm");
+  const SensorTrunk& back = read.Trunk(SensorKind::kSoftBubble);
+  EXPECT_EQ(back.siren.options().readout_rows, trunk.format.rows);
+  EXPECT_EQ(back.siren.NumParameters(), trunk.siren.NumParameters());
+  EXPECT_LE((back.siren.parameters() - trunk.siren.parameters()).cwiseAbs().maxCoeff(), 1e-6);
+}
+
+TEST_F(TrunkTrainerTest, ResumingAReadoutRunIsBitIdentical) {
+  TrunkTrainer::Options options = ShortOptions();
+  options.readout = true;
+  options.checkpoint_path = dir_.path() + "/readout.ckpt";
+  SensorTrunk whole;
+  TrunkTrainer::Options uninterrupted = options;
+  uninterrupted.checkpoint_path.clear();
+  Train(uninterrupted, &whole);
+  SensorTrunk first, resumed;
+  Train(options, &first, [](const TrunkTrainer::StepReport& r) { return r.step < 11; });
+  options.resume = true;
+  Train(options, &resumed);
+  EXPECT_TRUE(SameParameters(whole, resumed));
+  // A checkpoint of a run without the branch is refused, naming the field.
+  TrunkTrainer::Options plain = options;
+  plain.readout = false;
+  SensorTrunk refused;
+  EXPECT_THAT([&] { Train(plain, &refused); },
+              ::testing::ThrowsMessage<std::runtime_error>(HasSubstr("readout")));
 }
 
 TEST_F(TrunkTrainerTest, TinyRunLowersTheOuterLossAndRaisesPsnrAfterKSteps) {

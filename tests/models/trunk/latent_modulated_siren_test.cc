@@ -51,6 +51,15 @@ Siren::Options DeeperOptions() {
   return options;
 }
 
+// SmallOptions with the linear readout branch on a 3 x 4 grid: the frames' random
+// coordinates fall between nodes, so the bilinear weights are generic.
+Siren::Options ReadoutOptions(int channels = 2) {
+  Siren::Options options = SmallOptions(channels);
+  options.readout_rows = 3;
+  options.readout_cols = 4;
+  return options;
+}
+
 // Deterministic pseudo-random numbers in [-1, 1] (Eigen's Random uses rand()).
 MatrixXd Uniform(int rows, int cols, unsigned seed) {
   MatrixXd m(rows, cols);
@@ -321,7 +330,8 @@ TEST(LatentModulatedSiren, PixelCornersReachMinusOneAndOne) {
 // ---- Forward -----------------------------------------------------------------------
 
 TEST(LatentModulatedSiren, BatchedForwardMatchesTheOnePixelTemplate) {
-  const Siren siren = PerturbedSiren(SmallOptions(), 11);
+  for (const Siren::Options& options : {SmallOptions(), ReadoutOptions()}) {
+  const Siren siren = PerturbedSiren(options, 11);
   for (const Frame& frame : Frames(siren)) {
     const MatrixXd y = siren.Forward<double>(frame.coords, frame.z);
     ASSERT_EQ(y.rows(), frame.coords.rows());
@@ -334,6 +344,57 @@ TEST(LatentModulatedSiren, BatchedForwardMatchesTheOnePixelTemplate) {
       EXPECT_NEAR(y(j, 1), out[1], 1e-13) << frame.name;
     }
   }
+  }
+}
+
+TEST(LatentModulatedSiren, ReadoutNodesSitOnThePixelsOfTheirGrid) {
+  for (CoordinateConvention convention :
+       {CoordinateConvention::kPixelCenters, CoordinateConvention::kPixelCorners}) {
+    Siren::Options options = ReadoutOptions(1);
+    options.coordinates = convention;
+    const Siren siren(options, 1);
+    const MatrixXd grid = Siren::GridCoordinatesD(3, 4, convention);
+    for (int j = 0; j < grid.rows(); ++j) {
+      const Siren::ReadoutCorners corners = siren.LocateReadout(grid(j, 0), grid(j, 1));
+      double on_node = 0, sum = 0;
+      for (int i = 0; i < 4; ++i) {
+        sum += corners.weight[i];
+        if (corners.node[i] == j) on_node += corners.weight[i];
+      }
+      EXPECT_NEAR(sum, 1.0, 1e-12);
+      EXPECT_NEAR(on_node, 1.0, 1e-12) << "pixel " << j << " " << ToString(convention);
+    }
+    // Outside the grid: clamped to the edge nodes; a NaN coordinate gives NaN weights.
+    const Siren::ReadoutCorners outside = siren.LocateReadout(-5.0, 5.0);
+    double weight_on_corner = 0;
+    for (int i = 0; i < 4; ++i) weight_on_corner += outside.node[i] == 8 ? outside.weight[i] : 0;
+    EXPECT_NEAR(weight_on_corner, 1.0, 1e-12);  // bottom-left node (row 2, col 0)
+    EXPECT_TRUE(std::isnan(siren.LocateReadout(std::nan(""), 0.0).weight[0]));
+  }
+}
+
+TEST(LatentModulatedSiren, ReadoutAloneIsTheLinearMapOfItsBasis) {
+  // SIREN output layer at zero: y = R(x) z + m(x) exactly, linear in z.
+  Siren siren = PerturbedSiren(ReadoutOptions(1), 12);
+  VectorXd theta = siren.parameters();
+  Siren::View(&theta, siren.Block(ParameterGroup::kOutputWeight)).setZero();
+  Siren::View(&theta, siren.Block(ParameterGroup::kOutputBias)).setZero();
+  siren.SetParameters(theta);
+  const MatrixXd grid = Siren::GridCoordinatesD(3, 4);
+  const VectorXd z = Uniform(4, 1, 13);
+  const MatrixXd y = siren.Forward<double>(grid, z);
+  const auto R = Siren::View(theta, siren.Block(ParameterGroup::kReadoutBasis));
+  const auto m = Siren::View(theta, siren.Block(ParameterGroup::kReadoutMean));
+  for (int j = 0; j < 12; ++j) {
+    EXPECT_NEAR(y(j, 0), R.col(j).dot(z) + m(j, 0), 1e-12) << "pixel " << j;
+  }
+  EXPECT_THROW(Siren(SmallOptions(), 1).Block(ParameterGroup::kReadoutBasis),
+               std::out_of_range);
+  Siren::Options bad = SmallOptions();
+  bad.readout_rows = 3;
+  std::string error;
+  EXPECT_FALSE(bad.IsValid(&error));
+  EXPECT_NE(error.find("readout_rows"), std::string::npos) << error;
 }
 
 TEST(LatentModulatedSiren, AtZeroLatentWithZeroModulationBiasTheTrunkIgnoresA) {
@@ -413,7 +474,7 @@ TEST(LatentModulatedSiren, WrongShapesThrowAndQuoteTheShapes) {
 // ---- Gradients -----------------------------------------------------------------------
 
 TEST(LatentModulatedSiren, LossGradientMatchesFiniteDifferencesForEveryGroup) {
-  for (const Siren::Options& options : {SmallOptions(), DeeperOptions()}) {
+  for (const Siren::Options& options : {SmallOptions(), DeeperOptions(), ReadoutOptions()}) {
     const Siren siren = PerturbedSiren(options, 21);
     for (const Frame& frame : Frames(siren)) {
       VectorXd dz, dtheta;
@@ -428,7 +489,7 @@ TEST(LatentModulatedSiren, LossGradientMatchesFiniteDifferencesForEveryGroup) {
 }
 
 TEST(LatentModulatedSiren, LossGradientMatchesJetAutodiffForEveryGroup) {
-  for (const Siren::Options& options : {SmallOptions(), DeeperOptions()}) {
+  for (const Siren::Options& options : {SmallOptions(), DeeperOptions(), ReadoutOptions()}) {
     const Siren siren = PerturbedSiren(options, 22);
     for (const Frame& frame : Frames(siren)) {
       VectorXd dz, dtheta, jet_dz, jet_dtheta;
@@ -442,7 +503,8 @@ TEST(LatentModulatedSiren, LossGradientMatchesJetAutodiffForEveryGroup) {
 }
 
 TEST(LatentModulatedSiren, BackwardOfAnyOutputGradientMatchesJetAutodiff) {
-  const Siren siren = PerturbedSiren(SmallOptions(), 23);
+  for (const Siren::Options& options : {SmallOptions(), ReadoutOptions()}) {
+  const Siren siren = PerturbedSiren(options, 23);
   const Frame frame = Frames(siren)[2];
   const MatrixXd dL_dY = Uniform(frame.coords.rows(), 2, 24);
   VectorXd dz, dtheta;
@@ -460,6 +522,7 @@ TEST(LatentModulatedSiren, BackwardOfAnyOutputGradientMatchesJetAutodiff) {
   VectorXd dz_only;
   siren.Backward<double>(frame.coords, frame.z, dL_dY, &dz_only, nullptr);
   EXPECT_EQ(dz_only, dz);
+  }
 }
 
 TEST(LatentModulatedSiren, MaskedPixelsContributeNothingEvenWithNanTargets) {
@@ -494,7 +557,7 @@ TEST(LatentModulatedSiren, MaskedPixelsContributeNothingEvenWithNanTargets) {
 // -------------------------------------------------------------------
 
 TEST(LatentModulatedSiren, LatentJacobianEqualsTheBackwardPassPerOutput) {
-  for (const Siren::Options& options : {SmallOptions(3), DeeperOptions()}) {
+  for (const Siren::Options& options : {SmallOptions(3), DeeperOptions(), ReadoutOptions(3)}) {
     const Siren siren = PerturbedSiren(options, 31);
     const int channels = options.output_channels;
     for (const Frame& frame : Frames(siren)) {
@@ -519,7 +582,8 @@ TEST(LatentModulatedSiren, LatentJacobianEqualsTheBackwardPassPerOutput) {
 }
 
 TEST(LatentModulatedSiren, LatentJacobianMatchesJetAutodiff) {
-  const Siren siren = PerturbedSiren(SmallOptions(), 32);
+  for (const Siren::Options& options : {SmallOptions(), ReadoutOptions()}) {
+  const Siren siren = PerturbedSiren(options, 32);
   for (const Frame& frame : Frames(siren)) {
     MatrixXd J;
     siren.ForwardAndLatentJacobian<double>(frame.coords, frame.z, nullptr, &J);
@@ -533,6 +597,7 @@ TEST(LatentModulatedSiren, LatentJacobianMatchesJetAutodiff) {
                     frame.name);
       }
     }
+  }
   }
 }
 
@@ -580,14 +645,14 @@ void CheckHessianProduct(const Siren& siren, const Frame& frame, bool with_theta
 }
 
 TEST(LatentModulatedSiren, HessianProductAlongTheLatentMatchesFiniteDifferences) {
-  for (const Siren::Options& options : {SmallOptions(), DeeperOptions()}) {
+  for (const Siren::Options& options : {SmallOptions(), DeeperOptions(), ReadoutOptions()}) {
     const Siren siren = PerturbedSiren(options, 43);
     for (const Frame& frame : Frames(siren)) CheckHessianProduct(siren, frame, false);
   }
 }
 
 TEST(LatentModulatedSiren, HessianProductAlongThetaAndLatentMatchesFiniteDifferences) {
-  for (const Siren::Options& options : {SmallOptions(), DeeperOptions()}) {
+  for (const Siren::Options& options : {SmallOptions(), DeeperOptions(), ReadoutOptions()}) {
     const Siren siren = PerturbedSiren(options, 44);
     for (const Frame& frame : Frames(siren)) CheckHessianProduct(siren, frame, true);
   }
