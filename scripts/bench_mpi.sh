@@ -32,7 +32,7 @@ export OMP_NUM_THREADS=1 CI=true
 # Open MPI refuses root unless told (containers, CI).
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 mkdir -p "$WORK"
-echo "bench_mpi: $(nproc) cores, $(uname -m), $ROUNDS rounds, work in $WORK"
+echo "bench_mpi: $(getconf _NPROCESSORS_ONLN) cores, $(uname -m), $ROUNDS rounds, work in $WORK"
 # Other work on the machine takes cores from the processes measured: say how much.
 echo "bench_mpi: load average at the start: $(cut -d' ' -f1-3 /proc/loadavg)"
 
