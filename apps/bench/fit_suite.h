@@ -6,6 +6,7 @@
 #ifndef TACTFUNC_APPS_BENCH_FIT_SUITE_H_
 #define TACTFUNC_APPS_BENCH_FIT_SUITE_H_
 
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -41,6 +42,12 @@ struct VariantResult {
   std::vector<double> ms, psnr, psnr_clean, iterations;
   double ms_median = 0, ms_p90 = 0, psnr_mean = 0, psnr_clean_mean = 0, iterations_mean = 0;
   double delta_db = 0;                      // psnr_mean - converged PSNR of the same frames
+  // meta_sgd:K from the start latent only: the median time of the K steps alone
+  // (LatentProblem::MetaSgdSteps) and what a whole Fit pays on top of them -- building the
+  // problem, the start latent, the costs and the PSNR -- as a fraction of the steps
+  // (median over frames of (fit - steps) / steps). NaN for other strategies.
+  double steps_ms_median = std::numeric_limits<double>::quiet_NaN();
+  double fixed_cost_share = std::numeric_limits<double>::quiet_NaN();
   std::vector<double> converged_of_frames;  // converged PSNR of the frames this variant ran
 };
 

@@ -300,8 +300,8 @@ LatentFitter::Summary LatentFitter::FitImpl(const LatentProblem& problem,
     return summary;
   }
 
-  // The objective's pieces, shared by the cost reports and the Ceres stage: U as Ceres
-  // sees it (the robust loss is inside the data residuals, LatentProblem).
+  // The Ceres stage's data residuals: U as Ceres sees it (the robust loss is inside the
+  // data residuals, LatentProblem).
   std::unique_ptr<ceres::CostFunction> data_cost;
   if (options_.jacobian == JacobianMode::kAutoDiff) {
     data_cost = MakeAutoDiffLatentCost(&problem);
@@ -309,23 +309,26 @@ LatentFitter::Summary LatentFitter::FitImpl(const LatentProblem& problem,
     data_cost = std::make_unique<AnalyticLatentCost>(&problem);
   }
   LatentPriorCost prior_cost(d, problem.sigma_z());
-  auto objective = [&](const Eigen::VectorXd& at) {
-    return HalfSquaredNorm(*data_cost, at.data()) +
-           HalfSquaredNorm(prior_cost, at.data());
+  // U at a latent and, in the same trunk pass over the whole frame, its PSNR: every
+  // latent the fit accepts is evaluated once, and the last one's PSNR is the fit's.
+  auto objective = [&](const Eigen::VectorXd& at, double* psnr) {
+    return problem.DataCostAndPsnr(at, psnr) + HalfSquaredNorm(prior_cost, at.data());
   };
 
   auto add_stage = [&](const char* name, double cost, Clock::time_point began, int iterations) {
     summary.stages.push_back(Stage{name, cost, MsSince(began), iterations});
     summary.iterations += iterations;
   };
-  double cost = objective(z);
+  double psnr = 0;
+  double cost = objective(z, &psnr);
   summary.initial_cost = cost;
   add_stage("start", cost, start_time, 0);
   summary.termination_type = FitTermination::kCompleted;
 
   // A stage whose result is not finite is undone: the fit keeps the last finite latent.
   auto accept = [&](const Eigen::VectorXd& candidate, const char* stage) {
-    const double candidate_cost = candidate.allFinite() ? objective(candidate)
+    double candidate_psnr = 0;
+    const double candidate_cost = candidate.allFinite() ? objective(candidate, &candidate_psnr)
                                                         : std::numeric_limits<double>::quiet_NaN();
     if (!std::isfinite(candidate_cost)) {
       summary.termination_type = FitTermination::kFailure;
@@ -335,6 +338,7 @@ LatentFitter::Summary LatentFitter::FitImpl(const LatentProblem& problem,
     }
     z = candidate;
     cost = candidate_cost;
+    psnr = candidate_psnr;
     return true;
   };
 
@@ -418,13 +422,14 @@ LatentFitter::Summary LatentFitter::FitImpl(const LatentProblem& problem,
         break;
     }
     const Eigen::VectorXd before = z;
-    const double cost_before = cost;
+    const double cost_before = cost, psnr_before = psnr;
     if (accept(parameters, "ceres")) {
       // Ceres keeps the best point it accepted, so the cost cannot rise; if rounding in
       // a float evaluation made it, the previous latent is kept.
       if (cost > cost_before) {
         z = before;
         cost = cost_before;
+        psnr = psnr_before;
       }
       if (summary.termination_type != FitTermination::kFailure && summary.message.empty() &&
           summary.termination_type == FitTermination::kNoConvergence) {
@@ -435,8 +440,8 @@ LatentFitter::Summary LatentFitter::FitImpl(const LatentProblem& problem,
   }
 
   summary.final_cost = cost;
-  // PSNR over every valid pixel of the frame, not only the subsample.
-  summary.psnr = problem.Psnr(z);
+  // PSNR over every valid pixel of the frame, not only the subsample (objective above).
+  summary.psnr = psnr;
   *latent = z;
   summary.total_time_ms = MsSince(start_time);
   return summary;

@@ -7,6 +7,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <type_traits>
+#include <utility>
 
 #include "ceres/loss_function.h"
 #include "models/trunk/meta_sgd.h"
@@ -161,6 +162,7 @@ LatentProblem::LatentProblem(const SensorTrunk& trunk, const TrunkTargets& targe
   }
   coords_float_ = coords_.cast<float>();
   targets_float_ = pixel_targets_.cast<float>();
+  pixel_index_ = std::move(chosen);
 }
 
 int LatentProblem::dim() const { return trunk_->siren.latent_dim(); }
@@ -400,16 +402,46 @@ Eigen::VectorXd LatentProblem::StartLatent() const {
                                            weights_float_.cast<double>());
 }
 
+// The trunk's output over the whole frame at the problem's precision, as floats (the
+// PSNR's convention) and, if `outputs` is not null, at the precision itself.
+Eigen::MatrixXf LatentProblem::FramePrediction(const Eigen::VectorXd& z,
+                                               Eigen::MatrixXd* outputs) const {
+  const LatentModulatedSiren& siren = trunk_->siren;
+  if (options_.precision == Precision::kFloat) {
+    Eigen::MatrixXf prediction =
+        siren.Forward<float>(siren.Grid<float>(frame_->rows, frame_->cols), z.cast<float>());
+    if (outputs != nullptr) *outputs = prediction.cast<double>();
+    return prediction;
+  }
+  Eigen::MatrixXd prediction =
+      siren.Forward<double>(siren.Grid<double>(frame_->rows, frame_->cols), z);
+  Eigen::MatrixXf as_float = prediction.cast<float>();
+  if (outputs != nullptr) *outputs = std::move(prediction);
+  return as_float;
+}
+
 double LatentProblem::Psnr(const Eigen::VectorXd& z) const {
   CheckLatent(z, "Psnr");
-  const LatentModulatedSiren& siren = trunk_->siren;
-  const Eigen::MatrixXf prediction =
-      options_.precision == Precision::kFloat
-          ? siren.Forward<float>(siren.Grid<float>(frame_->rows, frame_->cols), z.cast<float>())
-          : siren.Forward<double>(siren.Grid<double>(frame_->rows, frame_->cols), z)
-                .cast<float>();
-  const double psnr = tactfunc::Psnr(prediction, *frame_);  // +inf for an exact fit
+  const double psnr = tactfunc::Psnr(FramePrediction(z, nullptr), *frame_);  // +inf if exact
   return std::isnan(psnr) ? 0.0 : psnr;
+}
+
+double LatentProblem::DataCostAndPsnr(const Eigen::VectorXd& z, double* psnr) const {
+  CheckLatent(z, "DataCostAndPsnr");
+  Eigen::MatrixXd outputs;
+  const double frame_psnr = tactfunc::Psnr(FramePrediction(z, &outputs), *frame_);
+  *psnr = std::isnan(frame_psnr) ? 0.0 : frame_psnr;
+  const int c_count = channels();
+  const long n = num_pixels();
+  Eigen::VectorXd residuals(n * c_count);
+  for (long i = 0; i < n; ++i) {
+    for (int c = 0; c < c_count; ++c) {
+      const long k = i * c_count + c;
+      residuals[k] = residual_scale_[k] * (outputs(pixel_index_[i], c) - pixel_targets_(i, c));
+    }
+  }
+  Robustify(static_cast<int>(residuals.size()), residuals.data(), nullptr, 0);
+  return 0.5 * residuals.squaredNorm();
 }
 
 }  // namespace tactfunc

@@ -155,11 +155,17 @@ class LatentProblem {
   // pixels of the frame, in the problem's precision. +inf for an exact fit; 0 when the
   // frame has no valid pixel.
   double Psnr(const Eigen::VectorXd& z) const;
+  // Half the squared norm of the (robustified) whitened data residuals at z -- the data
+  // part of U as Ceres sees it, ResidualsAndJacobian's residuals -- and *psnr = Psnr(z),
+  // from one trunk pass over the whole frame instead of two passes: what a fit reports
+  // for each latent it accepts. psnr must not be null.
+  double DataCostAndPsnr(const Eigen::VectorXd& z, double* psnr) const;
 
  private:
   // U over the selected pixels (rows == nullptr) or the minibatch `rows` (scaled by N / n).
   double EvaluateRows(const Eigen::VectorXd& z, const std::vector<int>* rows,
                       Eigen::VectorXd* gradient) const;
+  Eigen::MatrixXf FramePrediction(const Eigen::VectorXd& z, Eigen::MatrixXd* outputs) const;
   template <typename Scalar>
   double DataTermAndGradient(const Eigen::VectorXd& z, const std::vector<int>* rows,
                              double scale, Eigen::VectorXd* gradient) const;
@@ -170,6 +176,7 @@ class LatentProblem {
   Options options_;
   double sigma_ = 0.01;
   int num_valid_pixels_ = 0;
+  std::vector<int> pixel_index_;  // N: each selected pixel's row in the frame (targets)
   Eigen::MatrixXd coords_;
   Eigen::MatrixXd pixel_targets_;
   Eigen::VectorXd weights_;

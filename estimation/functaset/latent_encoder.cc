@@ -147,10 +147,11 @@ LatentEncoder::EncodedFrame LatentEncoder::EncodeTargets(SensorKind sensor,
     out.latent = latent.cast<float>();
     return out;
   }
-  // meta_sgd:K over every pixel (invalid ones weigh 0), as in training.
-  out.latent = state.meta_sgd.InnerLoop<float>(siren, state.grid, targets.values, targets.weights,
-                                               state.alpha, Eigen::VectorXf::Zero(siren.latent_dim()),
-                                               state.strategy.steps);
+  // meta_sgd:K over every pixel (invalid ones weigh 0) from the trunk's StartLatent
+  // (zero, or the readout branch's projection), as in training.
+  out.latent = state.meta_sgd.InnerLoop<float>(
+      siren, state.grid, targets.values, targets.weights, state.alpha,
+      siren.StartLatent<float>(state.grid, targets.values, targets.weights), state.strategy.steps);
   out.psnr = Psnr(siren.Forward<float>(state.grid, out.latent), targets);
   return out;
 }

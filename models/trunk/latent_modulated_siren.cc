@@ -194,37 +194,38 @@ struct ReadoutMaps {
         m(Net<S>::At(theta, blocks[2 * num_layers + 5])) {}
 };
 
-// Adds the interpolated node values u (G C) to Y (C x m, one pixel per column) for the
-// pixels `coords` (m x 2).
-template <typename S, typename Coords, typename Out>
-void AddReadout(const LatentModulatedSiren& siren, const Eigen::MatrixBase<Coords>& coords,
-                const VectorX<S>& u, Eigen::MatrixBase<Out>& Y) {
-  const long channels = Y.rows();
+// Calls visit(j, ch, k, w) for every pixel j of `coords` (m x 2), every channel ch < channels
+// and every grid corner of the pixel with a non-zero bilinear weight w, k = node * C + ch
+// the corner's entry in a node-major (G C) vector.
+template <typename S, typename Coords, typename Visit>
+void ForEachReadoutCorner(const LatentModulatedSiren& siren, const Eigen::MatrixBase<Coords>& coords,
+                          long channels, Visit&& visit) {
   for (long j = 0; j < coords.rows(); ++j) {
     const auto corners = siren.LocateReadout(static_cast<double>(coords(j, 0)),
                                              static_cast<double>(coords(j, 1)));
     for (int i = 0; i < 4; ++i) {
       const S w = static_cast<S>(corners.weight[i]);
       if (w == S(0)) continue;
-      for (long ch = 0; ch < channels; ++ch) Y(ch, j) += w * u[corners.node[i] * channels + ch];
+      for (long ch = 0; ch < channels; ++ch) visit(j, ch, corners.node[i] * channels + ch, w);
     }
   }
+}
+
+// Adds the interpolated node values u (G C) to Y (C x m, one pixel per column) for the
+// pixels `coords` (m x 2).
+template <typename S, typename Coords, typename Out>
+void AddReadout(const LatentModulatedSiren& siren, const Eigen::MatrixBase<Coords>& coords,
+                const VectorX<S>& u, Eigen::MatrixBase<Out>& Y) {
+  ForEachReadoutCorner<S>(siren, coords, Y.rows(),
+                          [&](long j, long ch, long k, S w) { Y(ch, j) += w * u[k]; });
 }
 
 // s (G C) += the bilinear scatter of G (C x m) for the pixels `coords` (m x 2).
 template <typename S, typename Coords, typename Grad>
 void ScatterReadout(const LatentModulatedSiren& siren, const Eigen::MatrixBase<Coords>& coords,
                     const Eigen::MatrixBase<Grad>& G, VectorX<S>* s) {
-  const long channels = G.rows();
-  for (long j = 0; j < coords.rows(); ++j) {
-    const auto corners = siren.LocateReadout(static_cast<double>(coords(j, 0)),
-                                             static_cast<double>(coords(j, 1)));
-    for (int i = 0; i < 4; ++i) {
-      const S w = static_cast<S>(corners.weight[i]);
-      if (w == S(0)) continue;
-      for (long ch = 0; ch < channels; ++ch) (*s)[corners.node[i] * channels + ch] += w * G(ch, j);
-    }
-  }
+  ForEachReadoutCorner<S>(siren, coords, G.rows(),
+                          [&](long j, long ch, long k, S w) { (*s)[k] += w * G(ch, j); });
 }
 
 // The readout's share of the gradient from the scattered s: dL/dz += R s, and the

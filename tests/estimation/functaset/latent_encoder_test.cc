@@ -145,8 +145,9 @@ TEST(LatentEncoder, EncodingAFrameTheModelGeneratedRecoversIt) {
   }
 }
 
-TEST(LatentEncoder, EncodeTargetsRunsExactlyTheMetaSgdInnerLoop) {
-  const FunctaModel model = MakeModel(/*inner_steps=*/3, /*alpha=*/0.7);
+// Encodes a frame the Soft Bubble trunk of `model` generates and checks that the default
+// encoding is exactly the meta-SGD fit training runs (MetaSgd::FitLatent).
+void ExpectEncodingIsTheTrainingFit(const FunctaModel& model) {
   const SensorTrunk& trunk = model.Trunk(SensorKind::kSoftBubble);
   const Eigen::MatrixXf grid = trunk.siren.Grid<float>(kBubbleRows, kBubbleCols);
   const TrunkTargets targets =
@@ -159,6 +160,33 @@ TEST(LatentEncoder, EncodeTargetsRunsExactlyTheMetaSgdInnerLoop) {
   EXPECT_TRUE(
       (encoder.EncodeTargets(SensorKind::kSoftBubble, targets).latent.array() == expected.array())
           .all());
+}
+
+TEST(LatentEncoder, EncodeTargetsRunsExactlyTheMetaSgdInnerLoop) {
+  ExpectEncodingIsTheTrainingFit(MakeModel(/*inner_steps=*/3, /*alpha=*/0.7));
+}
+
+// With the readout branch the inner loop starts from the branch's projection of the
+// frame (LatentModulatedSiren::StartLatent), in encoding as in training (MetaSgd::FitLatent).
+TEST(LatentEncoder, MetaSgdStartsFromTheReadoutProjectionAsInTraining) {
+  FunctaModel model = MakeModel(/*inner_steps=*/2, /*alpha=*/0.3);
+  SensorTrunk& trunk = model.MutableTrunk(SensorKind::kSoftBubble);
+  LatentModulatedSiren::Options options = trunk.siren.options();
+  options.readout_rows = 5;
+  options.readout_cols = 6;
+  trunk.siren = LatentModulatedSiren(options, 11);
+  Eigen::VectorXd theta = trunk.siren.parameters();
+  for (ParameterGroup group : {ParameterGroup::kReadoutBasis, ParameterGroup::kReadoutMean}) {
+    const ParameterBlock& block = trunk.siren.Block(group);
+    theta.segment(block.offset, block.size()) = 0.3 * RandomLatent(block.size(), 1.0, 9).cast<double>();
+  }
+  trunk.siren.SetParameters(theta);
+  const Eigen::MatrixXf grid = trunk.siren.Grid<float>(kBubbleRows, kBubbleCols);
+  const TrunkTargets targets =
+      TargetsFrom(trunk.siren.Forward<float>(grid, RandomLatent(8, 1.0, 4)));
+  // A start other than zero, or the check below shows nothing.
+  ASSERT_GT(trunk.siren.StartLatent<float>(grid, targets.values, targets.weights).norm(), 0.0f);
+  ExpectEncodingIsTheTrainingFit(model);
 }
 
 TEST(LatentEncoder, StrategiesAreValidatedByName) {
