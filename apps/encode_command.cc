@@ -19,6 +19,7 @@
 
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
+#include "apps/distributed.h"
 #include "apps/output_paths.h"
 #include "apps/model_inputs.h"
 #include "apps/progress_bar.h"
@@ -128,7 +129,9 @@ void RunEncode(const EncodeFlags& flags) {
   std::vector<NamedPath> inputs = DatasetPathInputs("--data", flags.data, flags.dataset);
   inputs.push_back({"--model", flags.model});
   RefuseOutputsThatAreInputs(outputs, inputs);
-  RemoveStaleTemporaries(flags.out);  // left by an earlier run killed mid-write
+  const ProcessGroup& processes = Processes();
+  // Left by an earlier run killed mid-write; rank 0 is the one process that writes.
+  if (processes.rank() == 0) RemoveStaleTemporaries(flags.out);
   const FunctaModel model = FunctaModel::Load(flags.model);
   const Dataset dataset = OpenDataset(flags.data, flags.dataset);
   RefuseOutputsThatAreInputs(outputs, DatasetFileInputs("--data", dataset));
@@ -138,6 +141,7 @@ void RunEncode(const EncodeFlags& flags) {
   options.checkpoint_path = flags.out;
   options.checkpoint_every = flags.checkpoint_every;
   options.resume = flags.resume;
+  options.processes = &processes;
   for (const std::string& name : SplitList(flags.sensors)) {
     SensorKind kind;
     if (!SensorKindFromString(name, &kind)) {
@@ -228,8 +232,9 @@ void RunEncode(const EncodeFlags& flags) {
   std::cout << "encode: " << (functaset.complete() ? "wrote " : "wrote a PARTIAL functaset of ")
             << functaset.size() << " frames to " << flags.out << " (" << summary.frames_encoded
             << " encoded in " << FormatFixed(summary.seconds, 2) << " s, "
-            << FormatFixed(summary.frames_per_second, 1) << " frames/s on " << options.threads
-            << " thread(s)";
+            << FormatFixed(summary.frames_per_second, 1) << " frames/s on "
+            << (processes.size() > 1 ? std::to_string(processes.size()) + " processes x " : "")
+            << options.threads << " thread(s)";
   if (summary.frames_resumed > 0) std::cout << ", " << summary.frames_resumed << " resumed";
   std::cout << ")\n";
   for (const auto& [sensor, psnr] : summary.mean_psnr) {
@@ -252,6 +257,7 @@ void RunEncode(const EncodeFlags& flags) {
               {"seconds", summary.seconds},
               {"frames_per_s", summary.frames_per_second},
               {"threads", options.threads},
+              {"processes", processes.size()},
               {"psnr_mean", psnr},
               {"fit_strategy", strategy},
               {"model_checksum", model.checksum()},

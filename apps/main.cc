@@ -13,6 +13,7 @@
 
 #include "CLI/CLI.hpp"
 #include "apps/command.h"
+#include "apps/distributed.h"
 #include "estimation/data/dataset.h"
 
 namespace {
@@ -97,14 +98,26 @@ int main(int argc, char** argv) {
     return app.exit(e) == 0 ? 0 : 2;
   }
   const std::string name = CommandName(app);
+  // Started by mpirun: train and encode join the other processes (apps/distributed.h);
+  // anything else is refused, said once (by rank 0).
+  try {
+    StartProcesses(app.get_subcommands().front()->get_name());
+  } catch (const std::exception& e) {
+    if (LaunchedRank() == 0) std::cerr << name << ": error: " << e.what() << "\n";
+    return 2;
+  }
+  int code = 0;
   try {
     if (body) body();
   } catch (const UsageError& e) {
-    std::cerr << name << ": error: " << e.what() << "\n";
-    return 2;
+    ReportError(name + ": error: " + e.what());
+    code = 2;
   } catch (const std::exception& e) {
-    std::cerr << name << ": error: " << e.what() << "\n";
-    return 1;
+    ReportError(name + ": error: " + e.what());
+    code = 1;
   }
-  return 0;
+  // A process of several that failed ends them all: the others may be waiting for it.
+  if (code != 0) AbortProcesses(code);
+  FinishProcesses();
+  return code;
 }

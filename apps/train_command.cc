@@ -21,6 +21,7 @@
 
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
+#include "apps/distributed.h"
 #include "apps/output_paths.h"
 #include "apps/model_inputs.h"
 #include "apps/pictures.h"
@@ -200,8 +201,12 @@ void RunTrain(const TrainFlags& flags) {
       {"--out (checkpoint)", CheckpointPath(flags.out, SensorKind::kGelSlim)},
       {"--out (training curves)", TrainingCurvesPath(flags.out)}};
   RefuseOutputsThatAreInputs(outputs, DatasetPathInputs("--data", flags.data, flags.data_flags));
-  // Temporary files of an earlier run killed mid-write (SIGKILL) are removed.
-  for (const NamedPath& output : outputs) RemoveStaleTemporaries(output.path);
+  // Temporary files of an earlier run killed mid-write (SIGKILL) are removed (by the
+  // one process that writes).
+  const ProcessGroup& processes = Processes();
+  if (processes.rank() == 0) {
+    for (const NamedPath& output : outputs) RemoveStaleTemporaries(output.path);
+  }
   const Dataset dataset = OpenDataset(flags.data, flags.data_flags);
   RefuseOutputsThatAreInputs(outputs, DatasetFileInputs("--data", dataset));
   std::vector<SensorKind> sensors;
@@ -228,6 +233,8 @@ void RunTrain(const TrainFlags& flags) {
       throw UsageError("--resume: no checkpoint found (looked for " +
                        CheckpointPath(flags.out, sensors[0]) + ")");
     }
+    // Every process reads the checkpoints (rank 0 writes them): they must see the same.
+    for (SensorKind s : sensors) RefuseUnsharedFile(processes, CheckpointPath(flags.out, s));
   }
 
   // What the run will do, before it starts: steps per sensor and the working resolution
@@ -247,8 +254,9 @@ void RunTrain(const TrainFlags& flags) {
     }
     std::cout << "train " << ToString(sensor) << ": " << o.steps << " steps (preset "
               << flags.preset << (flags.steps_option->count() ? ", --steps" : "") << ")"
-              << resolution << ", batch " << o.batch_size << " on " << o.threads
-              << " thread(s); a time estimate follows the first steps" << std::endl;
+              << resolution << ", batch " << o.batch_size << " on "
+              << (processes.size() > 1 ? std::to_string(processes.size()) + " processes x " : "")
+              << o.threads << " thread(s); a time estimate follows the first steps" << std::endl;
   }
 
   g_interrupted.store(false);
@@ -263,6 +271,7 @@ void RunTrain(const TrainFlags& flags) {
     TrunkTrainer::Options sensor_options = OptionsFor(flags, sensor);
     sensor_options.checkpoint_path = CheckpointPath(flags.out, sensor);
     sensor_options.resume = flags.resume;
+    sensor_options.processes = &processes;
     const TrunkTrainer trainer(sensor_options);
     const char* name = ToString(sensor);
     if (flags.resume) {
@@ -307,7 +316,8 @@ void RunTrain(const TrainFlags& flags) {
                   << "  " << Status(report) << "  " << static_cast<int>(report.latest.seconds)
                   << " s" << std::endl;
       }
-      return !g_interrupted.load();
+      // Every process stops after the same step when any was interrupted.
+      return !processes.AnyOf(g_interrupted.load());
     };
     SensorTrunk trunk;
     const TrunkTrainer::Summary summary = trainer.Train(dataset, sensor, &trunk, callback);
@@ -361,6 +371,7 @@ void RunTrain(const TrainFlags& flags) {
         {"history_columns", {"step", "loss", "psnr", "psnr_at_zero"}},
         {"history", history}};
   }
+  if (processes.rank() != 0) return;  // rank 0 writes the model and speaks
   nlohmann::json info = {{"trainer", "tactfunc train"},
                          {"preset", flags.preset},
                          {"data", flags.data},
@@ -399,6 +410,8 @@ void RunTrain(const TrainFlags& flags) {
   if (flags.json) {
     EmitJson({{"out", flags.out},
               {"sensors", sensor_figures},
+              {"processes", processes.size()},
+              {"threads", OptionsFor(flags, sensors.front()).threads},
               {"model_bytes", model_bytes},
               {"curves", wrote_curves ? nlohmann::json(curves_path) : nlohmann::json(nullptr)}});
   }

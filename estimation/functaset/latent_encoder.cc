@@ -177,6 +177,46 @@ double MeanFinite(const std::vector<double>& values) {
   return count > 0 ? sum / count : 0.0;
 }
 
+// Appends the count and, per job index of `indices`, the index, the PSNR and the latent.
+void PackJobs(const std::vector<Job>& jobs, const std::vector<std::size_t>& indices,
+              ByteWriter* out) {
+  out->Put<std::uint64_t>(indices.size());
+  for (std::size_t j : indices) {
+    out->Put<std::uint64_t>(j);
+    out->Put<float>(jobs[j].entry.psnr);
+    out->PutFloats(jobs[j].entry.latent.data(), jobs[j].entry.latent.size());
+  }
+}
+
+// Reads what PackJobs wrote into `jobs` (which must list the same frames) and returns
+// the job indices read. Their `done` flags are left to the caller.
+std::vector<std::size_t> UnpackJobs(ByteReader& in, std::vector<Job>* jobs) {
+  std::vector<std::size_t> indices(static_cast<std::size_t>(in.Get<std::uint64_t>()));
+  for (std::size_t& j : indices) {
+    j = static_cast<std::size_t>(in.Get<std::uint64_t>());
+    if (j >= jobs->size()) {
+      throw std::runtime_error("LatentEncoder: another process sent frame " + std::to_string(j) +
+                               " of " + std::to_string(jobs->size()) +
+                               " (do all processes read the same data and options?)");
+    }
+    FunctasetEntry& entry = (*jobs)[j].entry;
+    entry.psnr = in.Get<float>();
+    entry.latent.resize(static_cast<Eigen::Index>(in.FloatCount()));
+    in.GetFloats(entry.latent.data(), static_cast<std::size_t>(entry.latent.size()));
+  }
+  return indices;
+}
+
+std::string ExceptionText(const std::exception_ptr& error) {
+  try {
+    std::rethrow_exception(error);
+  } catch (const std::exception& e) {
+    return e.what();
+  } catch (...) {
+    return "unknown error";
+  }
+}
+
 }  // namespace
 
 Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
@@ -233,7 +273,8 @@ Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
   }
   s.frames_total = static_cast<std::int64_t>(jobs.size());
 
-  if (options_.resume && std::filesystem::exists(options_.checkpoint_path)) {
+  const ProcessGroup& group = options_.processes != nullptr ? *options_.processes : SingleProcess();
+  if (options_.resume && group.rank() == 0 && std::filesystem::exists(options_.checkpoint_path)) {
     const Functaset checkpoint = Functaset::Load(options_.checkpoint_path);
     checkpoint.CheckModel(model_, "in use", options_.checkpoint_path);
     for (SensorKind sensor : checkpoint.sensors()) {
@@ -283,14 +324,59 @@ Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
     }
   }
 
+  if (options_.resume && group.size() > 1) {
+    // Rank 0 read the checkpoint; the other processes take its finished frames from it.
+    ByteWriter finished;
+    if (group.rank() == 0) {
+      std::vector<std::size_t> indices;
+      for (std::size_t j = 0; j < jobs.size(); ++j) {
+        if (jobs[j].done) indices.push_back(j);
+      }
+      PackJobs(jobs, indices, &finished);
+    }
+    group.Broadcast(&finished.bytes());
+    if (group.rank() != 0) {
+      ByteReader reader(finished.bytes());
+      for (std::size_t j : UnpackJobs(reader, &jobs)) {
+        jobs[j].done = true;
+        ++s.frames_resumed;
+      }
+    }
+  }
+
   std::vector<std::size_t> pending;
   for (std::size_t j = 0; j < jobs.size(); ++j) {
     if (!jobs[j].done) pending.push_back(j);
   }
+  if (group.size() > 1) {
+    // The rounds below are collectives: every process must list the same frames and the
+    // same pending ones, or one would wait for the others forever.
+    ByteWriter work;
+    work.Put<std::uint64_t>(jobs.size());
+    work.Put<std::uint64_t>(pending.size());
+    std::uint64_t fingerprint = 1469598103934665603ull;  // FNV-1a of the ids and sensors
+    for (const Job& job : jobs) {
+      for (char ch : job.entry.id + ToString(job.sensor) + "\n") {
+        fingerprint = (fingerprint ^ static_cast<unsigned char>(ch)) * 1099511628211ull;
+      }
+    }
+    work.Put(fingerprint);
+    const std::vector<Bytes> all = group.AllGather(work.bytes());
+    for (int rank = 1; rank < group.size(); ++rank) {
+      if (all[rank] == all[0]) continue;
+      ByteReader theirs(all[rank]), first(all[0]);
+      const auto frames = theirs.Get<std::uint64_t>(), pending_there = theirs.Get<std::uint64_t>();
+      const auto frames_0 = first.Get<std::uint64_t>(), pending_0 = first.Get<std::uint64_t>();
+      throw std::runtime_error(
+          "LatentEncoder: process " + std::to_string(rank) + " selected " +
+          std::to_string(frames) + " frames (" + std::to_string(pending_there) +
+          " to encode), process 0 " + std::to_string(frames_0) + " (" +
+          std::to_string(pending_0) + ")" + (frames == frames_0 ? " with other ids" : "") +
+          ": every process must read the same dataset " + dataset.root() + " and options");
+    }
+  }
 
-  // Builds the functaset of the finished jobs. Callers hold `mutex` or have joined the
-  // workers: a job's entry is written before its `done` flag is set under the mutex
-  // and never changes afterwards.
+  // Builds the functaset of the finished jobs (called with every worker joined).
   auto collect = [&](bool complete) {
     Functaset out(model_.checksum(), dataset.root());
     out.set_complete(complete);
@@ -314,96 +400,141 @@ Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
     ++s.checkpoints_written;
   };
 
-  // ---- Workers -------------------------------------------------------------------------
+  // ---- Rounds of workers ---------------------------------------------------------------
+  // The pending frames are encoded in rounds of checkpoint_every frames (one round
+  // without checkpoints). In a round, process r of n encodes every n-th frame from the
+  // r-th on `threads` workers; at its end the processes exchange what they encoded and
+  // whether one was interrupted or failed, so every process holds the same entries, and
+  // rank 0 writes the checkpoint.
+  const bool periodic = options_.checkpoint_every > 0 && !options_.checkpoint_path.empty();
+  const std::size_t round_size =
+      periodic ? static_cast<std::size_t>(options_.checkpoint_every) : pending.size();
   std::mutex mutex;
   std::condition_variable wake;
-  std::atomic<std::size_t> next{0};
-  std::atomic<bool> stop{false};
   std::exception_ptr failure;
+  std::string remote_failure;  // another process's error
   std::int64_t done = s.frames_resumed;
   std::int64_t encoded = 0;
   double psnr_sum = 0;
   std::int64_t psnr_count = 0;
+  // Counts a finished job (callers hold `mutex` or have joined the workers).
+  auto finish = [&](Job& job) {
+    job.done = true;
+    ++done;
+    ++encoded;
+    if (std::isfinite(job.entry.psnr)) {
+      psnr_sum += job.entry.psnr;
+      ++psnr_count;
+    }
+  };
   for (const Job& job : jobs) {
     if (job.done && std::isfinite(job.entry.psnr)) {
       psnr_sum += job.entry.psnr;
       ++psnr_count;
     }
   }
-  int running = 0;
-
   auto interrupted = [&]() { return interrupt != nullptr && interrupt->load(); };
-  auto work = [&]() {
-    for (;;) {
-      if (stop.load() || interrupted()) break;
-      const std::size_t p = next.fetch_add(1);
-      if (p >= pending.size()) break;
-      Job& job = jobs[pending[p]];
-      try {
-        const TrunkTargets targets =
-            LoadTrunkTargets(dataset, job.frame, model_.Trunk(job.sensor).format);
-        EncodedFrame frame = EncodeTargets(job.sensor, targets);
-        job.entry.latent = std::move(frame.latent);
-        job.entry.psnr = static_cast<float>(frame.psnr);
-      } catch (...) {
+  auto last_report = std::chrono::steady_clock::now() - std::chrono::seconds(1);
+
+  for (std::size_t round_begin = 0; round_begin < pending.size(); round_begin += round_size) {
+    const std::size_t round_end = std::min(pending.size(), round_begin + round_size);
+    std::vector<std::size_t> mine;  // job indices
+    for (std::size_t p = round_begin + group.rank(); p < round_end; p += group.size()) {
+      mine.push_back(pending[p]);
+    }
+    const std::int64_t done_before = done;
+    std::int64_t mine_done = 0;
+    std::atomic<std::size_t> next{0};
+    std::atomic<bool> stop{false};
+    int running = 0;
+    auto work = [&]() {
+      for (;;) {
+        if (stop.load() || interrupted()) break;
+        const std::size_t p = next.fetch_add(1);
+        if (p >= mine.size()) break;
+        Job& job = jobs[mine[p]];
+        try {
+          const TrunkTargets targets =
+              LoadTrunkTargets(dataset, job.frame, model_.Trunk(job.sensor).format);
+          EncodedFrame frame = EncodeTargets(job.sensor, targets);
+          job.entry.latent = std::move(frame.latent);
+          job.entry.psnr = static_cast<float>(frame.psnr);
+        } catch (...) {
+          std::lock_guard<std::mutex> lock(mutex);
+          if (!failure) failure = std::current_exception();
+          stop = true;
+          break;
+        }
         std::lock_guard<std::mutex> lock(mutex);
-        if (!failure) failure = std::current_exception();
-        stop = true;
-        break;
+        finish(job);
+        ++mine_done;
+        wake.notify_one();
       }
       std::lock_guard<std::mutex> lock(mutex);
-      job.done = true;
-      ++done;
-      ++encoded;
-      if (std::isfinite(job.entry.psnr)) {
-        psnr_sum += job.entry.psnr;
-        ++psnr_count;
-      }
+      --running;
       wake.notify_one();
-    }
-    std::lock_guard<std::mutex> lock(mutex);
-    --running;
-    wake.notify_one();
-  };
+    };
 
-  const int num_threads = static_cast<int>(
-      std::min<std::size_t>(options_.threads, std::max<std::size_t>(pending.size(), 1)));
-  std::vector<std::thread> workers;
-  running = num_threads;
-  for (int t = 0; t < num_threads; ++t) workers.emplace_back(work);
-
-  {
-    std::unique_lock<std::mutex> lock(mutex);
-    std::int64_t last_checkpoint = encoded;
-    auto last_report = std::chrono::steady_clock::now() - std::chrono::seconds(1);
-    while (running > 0) {
-      wake.wait_for(lock, std::chrono::milliseconds(100));
-      const auto now = std::chrono::steady_clock::now();
-      if (progress && now - last_report >= std::chrono::milliseconds(100)) {
-        const EncodeProgress report{done, s.frames_total,
-                                    psnr_count > 0 ? psnr_sum / psnr_count : 0.0};
-        lock.unlock();
-        progress(report);
-        lock.lock();
-        last_report = now;
-      }
-      if (options_.checkpoint_every > 0 && !options_.checkpoint_path.empty() &&
-          encoded - last_checkpoint >= options_.checkpoint_every && running > 0) {
-        last_checkpoint = encoded;
-        Functaset partial = collect(false);
-        lock.unlock();
-        write_checkpoint(partial);  // I/O outside the lock: workers keep going
-        lock.lock();
+    const int num_threads = static_cast<int>(
+        std::min<std::size_t>(options_.threads, std::max<std::size_t>(mine.size(), 1)));
+    std::vector<std::thread> workers;
+    running = num_threads;
+    for (int t = 0; t < num_threads; ++t) workers.emplace_back(work);
+    {
+      std::unique_lock<std::mutex> lock(mutex);
+      while (running > 0) {
+        wake.wait_for(lock, std::chrono::milliseconds(100));
+        const auto now = std::chrono::steady_clock::now();
+        if (progress && now - last_report >= std::chrono::milliseconds(100)) {
+          // The other processes' frames of this round are known only at its end; until
+          // then they are taken to go as fast as this process's.
+          const std::int64_t estimate =
+              done_before + std::min<std::int64_t>(mine_done * group.size(),
+                                                   static_cast<std::int64_t>(round_end - round_begin));
+          const EncodeProgress report{estimate, s.frames_total,
+                                      psnr_count > 0 ? psnr_sum / psnr_count : 0.0};
+          lock.unlock();
+          progress(report);
+          lock.lock();
+          last_report = now;
+        }
       }
     }
+    for (std::thread& worker : workers) worker.join();
+
+    bool stopped = interrupted();
+    if (group.size() > 1) {
+      ByteWriter message;
+      message.Put<std::uint8_t>(stopped ? 1 : 0);
+      message.PutString(failure ? ExceptionText(failure) : std::string());
+      std::vector<std::size_t> finished;
+      for (std::size_t j : mine) {
+        if (jobs[j].done) finished.push_back(j);
+      }
+      PackJobs(jobs, finished, &message);
+      const std::vector<Bytes> all = group.AllGather(message.bytes());
+      for (int rank = 0; rank < group.size(); ++rank) {
+        if (rank == group.rank()) continue;
+        ByteReader reader(all[rank]);
+        stopped = reader.Get<std::uint8_t>() != 0 || stopped;
+        const std::string error = reader.GetString();
+        if (!error.empty() && !failure && remote_failure.empty()) {
+          remote_failure = error + " (in process " + std::to_string(rank) + " of " +
+                           std::to_string(group.size()) + ")";
+        }
+        for (std::size_t j : UnpackJobs(reader, &jobs)) finish(jobs[j]);
+      }
+    }
+    if (failure || !remote_failure.empty() || stopped) break;
+    if (periodic && round_end < pending.size()) write_checkpoint(collect(false));
   }
-  for (std::thread& worker : workers) worker.join();
 
   const bool complete = done == s.frames_total;
   Functaset result = collect(complete);
-  if (failure) {
+  if (failure || !remote_failure.empty()) {
     if (encoded > 0) write_checkpoint(result);
-    std::rethrow_exception(failure);
+    if (failure) std::rethrow_exception(failure);
+    throw std::runtime_error(remote_failure);
   }
   write_checkpoint(result);
 

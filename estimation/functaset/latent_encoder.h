@@ -24,6 +24,17 @@
 // the functaset is bit-identical whatever the thread count, and entries are stored in
 // the dataset's order (grouped by sensor) whatever the completion order.
 //
+// Several processes (Options::processes; `mpirun ... tactfunc encode`, docs/SCALING.md).
+// The pending frames are encoded in rounds of `checkpoint_every` frames (one round
+// without checkpoints); in each round process r of n encodes every n-th frame from the
+// r-th, and at its end the processes exchange their latents, so that every process
+// returns the same functaset, bit-identical to a single process's. Only rank 0 writes
+// (the checkpoints and the final file) and reads the checkpoint to resume, sending the
+// finished frames to the others. An interrupt or a failure in one process stops all of
+// them at the end of the round (a failure is rethrown in every process, naming the one
+// it happened in). Each process reads the frames it encodes: the dataset must be at the
+// same path for all.
+//
 // Checkpoints and resume. With a checkpoint path the encoder writes the functaset of
 // the frames finished so far (meta "complete": false) every `checkpoint_every`
 // frames, atomically, and once more when it stops: the complete functaset when done,
@@ -56,6 +67,7 @@
 #include "estimation/fitting/latent_fitter.h"
 #include "estimation/functaset/functaset.h"
 #include "estimation/data/trunk_targets.h"
+#include "models/core/process_group.h"
 #include "models/trunk/functa_model.h"
 
 namespace tactfunc {
@@ -107,6 +119,10 @@ class LatentEncoder {
     // The latent problem of the ceres strategy (unused by meta_sgd): sigma (0 = the
     // trunk's residual_sigma), sigma_z, robust loss, pixel selection, precision.
     LatentProblem::Options problem;
+    // The processes sharing the run (models/core/process_group.h); null = this process
+    // alone. Every process calls Encode with the same dataset and options; see
+    // "Several processes" above. Does not change the result.
+    const ProcessGroup* processes = nullptr;
 
     // True if every field is in range; otherwise false and *error (if not null) names
     // the bad field and its value.

@@ -91,6 +91,46 @@ std::string FormatDouble(double value, int precision = 4) {
   return out.str();
 }
 
+// Completes `results` (one per batch slot) in every process of `group`: each process
+// computed the slots of its Share, the others' are copied in bit for bit.
+void GatherSlots(const ProcessGroup& group, int num_parameters, int latent_dim,
+                 std::vector<MetaSgd::Result<float>>* results) {
+  const auto batch = static_cast<std::int64_t>(results->size());
+  std::int64_t begin, end;
+  group.Share(batch, group.rank(), &begin, &end);
+  ByteWriter writer;
+  for (std::int64_t b = begin; b < end; ++b) {
+    const MetaSgd::Result<float>& r = (*results)[b];
+    writer.Put(r.loss);
+    writer.Put(r.loss_at_zero);
+    writer.PutFloats(r.dL_dtheta.data(), r.dL_dtheta.size());
+    writer.PutFloats(r.dL_dalpha.data(), r.dL_dalpha.size());
+  }
+  const std::vector<Bytes> all = group.AllGather(writer.bytes());
+  auto read = [](ByteReader& reader, int expected, Eigen::VectorXf* v) {
+    const std::size_t count = reader.FloatCount();
+    if (count != static_cast<std::size_t>(expected)) {
+      throw std::runtime_error("TrunkTrainer: another process sent a gradient of " +
+                               std::to_string(count) + " values, expected " +
+                               std::to_string(expected) + " (do all run the same options?)");
+    }
+    v->resize(expected);
+    reader.GetFloats(v->data(), count);
+  };
+  for (int rank = 0; rank < group.size(); ++rank) {
+    if (rank == group.rank()) continue;
+    group.Share(batch, rank, &begin, &end);
+    ByteReader reader(all[rank]);
+    for (std::int64_t b = begin; b < end; ++b) {
+      MetaSgd::Result<float>& r = (*results)[b];
+      r.loss = reader.Get<float>();
+      r.loss_at_zero = reader.Get<float>();
+      read(reader, num_parameters, &r.dL_dtheta);
+      read(reader, latent_dim, &r.dL_dalpha);
+    }
+  }
+}
+
 // Everything the optimiser carries from step to step.
 struct TrainingState {
   int step = 0;
@@ -700,8 +740,9 @@ TrunkTrainer::Summary TrunkTrainer::Train(const std::vector<TrunkTargets>& frame
     state.history.push_back(p);
     return p;
   };
+  const ProcessGroup& group = o.processes != nullptr ? *o.processes : SingleProcess();
   auto checkpoint = [&]() {
-    if (o.checkpoint_path.empty()) return;
+    if (o.checkpoint_path.empty() || group.rank() != 0) return;
     WriteCheckpoint(o.checkpoint_path, state, sensor, options_json, fingerprint, num_frames);
   };
 
@@ -737,7 +778,11 @@ TrunkTrainer::Summary TrunkTrainer::Train(const std::vector<TrunkTargets>& frame
     const std::uint64_t pixel_seed =
         DeriveSeed(StreamSeed(o.seed, kPixelStream), static_cast<std::uint64_t>(state.step));
     const Eigen::VectorXf alpha = state.alpha.cast<float>();
-    internal::ParallelFor(batch, o.threads, [&](int b) {
+    // This process's slots; the other processes' are gathered after.
+    std::int64_t first_slot, end_slot;
+    group.Share(batch, group.rank(), &first_slot, &end_slot);
+    internal::ParallelFor(static_cast<int>(end_slot - first_slot), o.threads, [&](int i) {
+      const int b = static_cast<int>(first_slot) + i;
       const TrunkTargets& t = frames[batch_frames[b]];
       if (!subset) {
         results[b] = meta.OuterLossAndGradient<float>(siren, grid, t.values, t.weights, alpha);
@@ -755,7 +800,8 @@ TrunkTrainer::Summary TrunkTrainer::Train(const std::vector<TrunkTargets>& frame
       }
       results[b] = meta.OuterLossAndGradient<float>(siren, coords, targets, weights, alpha);
     });
-    // Reduce in slot order (thread-count independent), in double.
+    if (group.size() > 1) GatherSlots(group, num_parameters, d, &results);
+    // Reduce in slot order (thread- and process-count independent), in double.
     Eigen::VectorXd g_theta = Eigen::VectorXd::Zero(num_parameters);
     Eigen::VectorXd g_alpha = Eigen::VectorXd::Zero(d);
     double loss = 0, loss_at_zero = 0;

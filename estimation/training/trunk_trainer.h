@@ -33,9 +33,11 @@
 // alpha, the order in which frames are visited (one seeded permutation of the training
 // frames per epoch; a step takes the next batch_size positions), each batch slot's
 // random pixel subset, the monitor and residual subsets. The frames of a batch are
-// processed by Options::threads workers, each writing its own slot; the slots are
-// summed in slot order. So a run is bit-identical for any thread count, and a run that
-// is stopped, checkpointed and resumed is bit-identical to one that never stopped.
+// processed by Options::threads workers, each writing its own slot (with
+// Options::processes, by several processes, which exchange the slots); the slots are
+// summed in slot order. So a run is bit-identical for any thread and process count, and
+// a run that is stopped, checkpointed and resumed is bit-identical to one that never
+// stopped.
 //
 // Checkpoints. With Options::checkpoint_path set, a TensorFile (models/core/tensor_file.h)
 // of kind "checkpoint" is written atomically every checkpoint_every steps, when the
@@ -67,6 +69,7 @@
 #include "models/trunk/functa_model.h"
 #include "models/trunk/latent_modulated_siren.h"
 #include "models/trunk/meta_sgd.h"
+#include "models/core/process_group.h"
 #include "models/core/sensor.h"
 
 namespace tactfunc {
@@ -185,6 +188,17 @@ class TrunkTrainer {
     int checkpoint_every = 500;
     // Continue from checkpoint_path if it exists (see Checkpoints above).
     bool resume = false;
+
+    // ---- Processes (data parallelism; docs/SCALING.md) -------------------------------
+    // The processes sharing this run (models/core/process_group.h); null = this process
+    // alone. Every process calls Train with the same frames and options; each computes
+    // a contiguous share of every batch's slots (ProcessGroup::Share), the slots' float
+    // results are gathered to every process, and each sums them in slot order as one
+    // process does: the trajectory and the model are bit-identical for any process and
+    // thread count (on processors that compute floats alike). Only rank 0 writes
+    // checkpoints; with resume every process reads the one at checkpoint_path, which
+    // must therefore be on a file system they share. Does not change the result.
+    const ProcessGroup* processes = nullptr;
 
     // ---- Monitoring -----------------------------------------------------------------
     // Evaluate the monitor subset every N steps (and at the start and end): mean PSNR

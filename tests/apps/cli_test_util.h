@@ -43,21 +43,28 @@ struct CliResult {
   }
 };
 
-// Runs `build/bin/tactfunc ARGS` with CI=true (no progress bars) and no standard input;
-// stdout and stderr go through files in `dir`.
-inline CliResult RunTactfunc(const std::filesystem::path& dir, const std::string& args) {
+// The built program, build/bin/tactfunc.
+inline std::string TactfuncPath() { return std::string(TACTFUNC_BINARY_DIR) + "/bin/tactfunc"; }
+
+// Runs the shell command `command` with CI=true (no progress bars) and no standard
+// input; stdout and stderr go through files in `dir`.
+inline CliResult RunShell(const std::filesystem::path& dir, const std::string& command) {
   static std::atomic<int> counter{0};
   const int n = counter++;
   const std::string out = (dir / ("stdout" + std::to_string(n) + ".txt")).string();
   const std::string err = (dir / ("stderr" + std::to_string(n) + ".txt")).string();
-  const std::string command = "CI=true " + std::string(TACTFUNC_BINARY_DIR) + "/bin/tactfunc " +
-                              args + " >" + out + " 2>" + err + " </dev/null";
-  const int status = std::system(command.c_str());
+  const std::string line = "CI=true " + command + " >" + out + " 2>" + err + " </dev/null";
+  const int status = std::system(line.c_str());
   CliResult result;
   result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
   result.out = Slurp(out);
   result.err = Slurp(err);
   return result;
+}
+
+// Runs `build/bin/tactfunc ARGS` as RunShell does.
+inline CliResult RunTactfunc(const std::filesystem::path& dir, const std::string& args) {
+  return RunShell(dir, TactfuncPath() + " " + args);
 }
 
 // A suite's shared inputs in a fresh per-process folder (ctest -j runs a suite's tests in
