@@ -4,7 +4,8 @@
 // correlated 4-d Gaussian sampled with a mismatched preconditioner, a banana (whose x2
 // mean and variance a wrong proposal-density ratio biases), a von Mises angle centred
 // next to the wrap, and the seed contract. Tolerances are Monte Carlo errors from the
-// sampler's own ESS (5 standard errors).
+// sampler's own ESS (5 standard errors). With MALA's proposal-density ratio left out, or
+// inverted, the Gaussian and banana tests fail (checked when they were written).
 #include "samplers/metropolis.h"
 
 #include <cmath>
