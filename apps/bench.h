@@ -37,6 +37,9 @@ void RegisterSynthBenchmarks();
 void RegisterFitBenchmarks(CLI::App* bench, CommandBody* selected);
 // `bench posterior` (apps/bench_posterior.cc): calibration and speed of the pose posteriors.
 void RegisterPosteriorBenchmark(CLI::App* bench, CommandBody* selected);
+// `bench pose-mcmc` (apps/bench_pose_mcmc.cc): which MCMC kernel mixes better over the
+// generator path's pose.
+void RegisterPoseMcmcBenchmark(CLI::App* bench, CommandBody* selected);
 // `bench pca` (apps/bench_pca.cc): the wall time of eval's PCA fit.
 void RegisterPcaBenchmark(CLI::App* bench, CommandBody* selected);
 

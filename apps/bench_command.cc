@@ -139,6 +139,7 @@ void RegisterBench(CLI::App& app, CommandBody* selected) {
   });
   RegisterFitBenchmarks(bench, selected);
   RegisterPosteriorBenchmark(bench, selected);
+  RegisterPoseMcmcBenchmark(bench, selected);
   RegisterPcaBenchmark(bench, selected);
 }
 

@@ -29,10 +29,14 @@
 // --method generator (docs/POSES.md, "The generator path"): the pose itself is fitted by
 // analysis-by-synthesis through --generator G.tpg (`tactfunc train-generator`) and the
 // frozen trunk, and the posterior is the Laplace mixture over the modes
-// (estimation/synthesis/generator_posterior.h); --sampler does not apply. Starts: the pose
-// MLP, and the k nearest labelled train latents of --functaset when given. --tool names
-// the tool; without it every tool of the generator is fitted and the tool probabilities
-// are printed. --samples draws from the mixture go into posterior.json / .png.
+// (estimation/synthesis/generator_posterior.h). Starts: the pose MLP, and the k nearest
+// labelled train latents of --functaset when given. --tool names the tool; without it
+// every tool of the generator is fitted and the tool probabilities are printed. --samples
+// draws from the mixture go into posterior.json / .png; with --sampler mala or rwm they
+// are MCMC draws of (x, y, yaw, depth) instead (estimation/synthesis/pose_sampler.h: 4
+// chains from the chosen tool's heaviest Laplace component, 200 burn-in iterations each,
+// --samples / 4 kept per chain), their acceptance and split R-hat printed. Other
+// --sampler values do not apply to the generator path.
 //   tactfunc pose --method generator --generator G.tpg --model M.tfm --pose-model P.tpm
 //       --data D --id 000010 [--functaset F.tfs] [--tool NAME] [--out DIR] [--json]
 #include <algorithm>
@@ -61,6 +65,7 @@
 #include "models/simulator/tool.h"
 #include "estimation/posterior/pose_posterior.h"
 #include "estimation/synthesis/generator_posterior.h"
+#include "estimation/synthesis/pose_sampler.h"
 #include "models/pose/pose_generator.h"
 
 namespace tactfunc::apps {
@@ -419,13 +424,59 @@ void RunGeneratorPose(const PoseFlags& flags, const FunctaModel& model, const In
   if (!gs.usable) throw std::runtime_error("the generator posterior failed: " + gs.message);
   const std::string chosen = gs.tool;
   const int n = generator.SymmetryOrder(generator.ToolIndex(chosen));
-  const PoseDistribution distribution = mixture.Sample(flags.samples, flags.seed, chosen);
+  MetropolisKernel kernel = MetropolisKernel::kMala;
+  const bool mcmc = ParseMetropolisKernel(flags.sampler, &kernel);
+  nlohmann::json mcmc_record;
+  double sampling_ms = 0;  // MCMC: the chains' wall time, after the posterior's fit
+  std::optional<PoseDistribution> drawn;
+  if (mcmc) {
+    const LaplaceComponent* start = nullptr;
+    for (const LaplaceComponent& c : mixture.components()) {
+      if (c.tool == chosen) {
+        start = &c;
+        break;
+      }
+    }
+    PoseSamplerOptions so;
+    so.chain.kernel = kernel;
+    so.chain.burn_in = 200;
+    so.chain.num_samples_per_chain = std::max(4, (flags.samples + 3) / 4);
+    so.chain.seed = flags.seed;
+    so.depth_min_m = options.fit.depth_min_m;
+    so.depth_max_m = options.fit.depth_max_m;
+    const LatentProblem problem(trunk, targets, options.problem);
+    const PoseSamples ps = SamplePosePosterior(problem, generator, generator.ToolIndex(chosen),
+                                               gs.sigma, *start, so);
+    const MetropolisResult& r = ps.chains;
+    std::printf("pose: %s, %d chains x %d samples, acceptance %.3f, split R-hat x %.3f y %.3f "
+                "yaw %.3f depth %.3f, ESS %.0f %.0f %.0f %.0f, %ld trunk evaluations, %.1f ms\n",
+                ToString(kernel), so.chain.num_chains, so.chain.num_samples_per_chain,
+                r.MeanAcceptance(), r.split_rhat[0], r.split_rhat[1], r.split_rhat[2],
+                r.split_rhat[3], r.effective_sample_size[0], r.effective_sample_size[1],
+                r.effective_sample_size[2], r.effective_sample_size[3], ps.trunk_evaluations,
+                r.time_ms);
+    mcmc_record = {{"kernel", ToString(kernel)},
+                   {"chains", so.chain.num_chains},
+                   {"burn_in", so.chain.burn_in},
+                   {"acceptance", r.MeanAcceptance()},
+                   {"split_rhat", {r.split_rhat[0], r.split_rhat[1], r.split_rhat[2], r.split_rhat[3]}},
+                   {"ess", {r.effective_sample_size[0], r.effective_sample_size[1],
+                            r.effective_sample_size[2], r.effective_sample_size[3]}},
+                   {"coordinates", {"x_m", "y_m", "yaw_rad", "depth_m"}},
+                   {"trunk_evaluations", ps.trunk_evaluations},
+                   {"ms", r.time_ms}};
+    sampling_ms = r.time_ms;
+    drawn.emplace(ps.Poses());
+  } else {
+    drawn.emplace(mixture.Sample(flags.samples, flags.seed, chosen));
+  }
+  const PoseDistribution& distribution = *drawn;
   const SE2d& mean = gs.mean;
   const Eigen::Matrix3d& cov = gs.covariance;
   std::printf("pose: %s %s, tool %s%s (n = %d), %d modes, %d samples in %.1f ms\n",
               ToString(input.sensor), input.name.c_str(), chosen.c_str(),
               tool.empty() ? " (most probable)" : "", n, gs.num_modes, distribution.size(),
-              gs.total_time_ms);
+              gs.total_time_ms + sampling_ms);
   if (tool.empty()) {
     for (const auto& [name, p] : gs.tool_probabilities) {
       if (p >= 1e-4) std::printf("pose: P(tool = %s) = %.4f\n", name.c_str(), p);
@@ -477,8 +528,9 @@ void RunGeneratorPose(const PoseFlags& flags, const FunctaModel& model, const In
         {"components", components},
         {"samples_columns", {"x_m", "y_m", "yaw_rad", "weight"}},
         {"samples", samples},
-        {"ms", gs.total_time_ms},
+        {"ms", gs.total_time_ms + sampling_ms},
         {"pixel_sigma", gs.sigma},
+        {"sampler", mcmc ? ToString(kernel) : "laplace_mixture"},
         {"model", flags.model},
         {"generator", flags.generator},
         {"pose_model", flags.pose_model}};
@@ -486,6 +538,7 @@ void RunGeneratorPose(const PoseFlags& flags, const FunctaModel& model, const In
       record["truth"] = PoseJson(input.label->sensor_T_object);
       record["truth"]["tool"] = input.label->tool;
     }
+    if (mcmc) record["mcmc"] = mcmc_record;
     // The picture takes the latent path's summary: fill what it draws.
     PosePosterior::Summary ps;
     ps.termination_type = PosePosteriorTermination::kSuccess;
@@ -493,14 +546,14 @@ void RunGeneratorPose(const PoseFlags& flags, const FunctaModel& model, const In
     ps.num_samples = distribution.size();
     ps.mean = mean;
     ps.covariance = cov;
-    ps.total_time_ms = gs.total_time_ms;
+    ps.total_time_ms = gs.total_time_ms + sampling_ms;
     WritePosteriorFiles(flags.out, record, input, distribution, ps, distribution.Modes(),
-                        flags.height, "generator");
+                        flags.height, mcmc ? std::string("generator ") + ToString(kernel) : "generator");
   }
   if (flags.json) {
     nlohmann::json j = {{"mean", PoseJson(mean)},
                         {"covariance", MatrixJson(cov)},
-                        {"ms", gs.total_time_ms},
+                        {"ms", gs.total_time_ms + sampling_ms},
                         {"method", "generator"},
                         {"tool", chosen},
                         {"tool_probabilities", probabilities},
@@ -518,9 +571,16 @@ void RunPose(const PoseFlags& flags) {
   if (flags.method != "latent" && flags.method != "generator") {
     throw UsageError("--method: expected latent or generator, got '" + flags.method + "'");
   }
-  PosteriorSampler sampler;
+  PosteriorSampler sampler = PosteriorSampler::kSgld;
   if (!PosteriorSamplerFromString(flags.sampler, &sampler)) {
-    throw UsageError("--sampler: expected sgld, laplace or knn, got '" + flags.sampler + "'");
+    MetropolisKernel kernel;
+    if (!ParseMetropolisKernel(flags.sampler, &kernel)) {
+      throw UsageError("--sampler: expected sgld, laplace or knn (--method latent) or mala, rwm "
+                       "(--method generator), got '" + flags.sampler + "'");
+    }
+    if (flags.method != "generator") {
+      throw UsageError("--sampler " + flags.sampler + ": MCMC over the pose needs --method generator");
+    }
   }
   const bool from_data = !flags.data.empty() || !flags.id.empty();
   const bool from_files = !flags.frame.empty() || !flags.reference.empty();
@@ -745,7 +805,9 @@ void RegisterPose(CLI::App& app, CommandBody* selected) {
   sub->add_flag("--unknown-tool", flags->unknown_tool,
                 "--method generator: ignore the label's tool and fit every tool");
   sub->add_option("--sampler", flags->sampler,
-                  "sgld (default, the paper's), laplace or knn (--method latent)");
+                  "sgld (default, the paper's), laplace or knn (--method latent); mala or rwm "
+                  "(--method generator: MCMC over the pose instead of draws from the Laplace "
+                  "mixture)");
   sub->add_option("--samples", flags->samples,
                   "Pose samples (default 100; knn gives at most --knn-k)")
       ->check(CLI::Range(1, 1000000));

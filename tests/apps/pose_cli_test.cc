@@ -181,6 +181,18 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
   const nlohmann::json record = nlohmann::json::parse(Slurp(out + "/posterior.json"));
   EXPECT_GE(record["components"].size(), 1u);
   EXPECT_EQ(record["samples"].size(), 20u);
+  // MCMC over the pose: 4 chains of 5 kept samples, their diagnostics in the record.
+  r = Run(args + " --generator " + Root("g.tpg") + " --sampler rwm --out " + out + " --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("split R-hat"));
+  const nlohmann::json mcmc = nlohmann::json::parse(Slurp(out + "/posterior.json"));
+  EXPECT_EQ(mcmc["sampler"], "rwm");
+  EXPECT_EQ(mcmc["samples"].size(), 20u);
+  EXPECT_EQ(mcmc["mcmc"]["split_rhat"].size(), 4u);
+  r = Run("pose --model " + Root("m.tfm") + " --pose-model " + Root("p.tpm") + " --data " +
+          Root("gd") + " --id 000003 --sampler mala");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("--method generator"));
   // Every tool fitted: probabilities over the generator's tools sum to 1.
   r = Run(args + " --generator " + Root("g.tpg") + " --unknown-tool --json");
   ASSERT_EQ(r.exit_code, 0) << r.err;

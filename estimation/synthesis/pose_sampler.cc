@@ -1,0 +1,90 @@
+// Copyright 2026 The tactfunc Authors.
+#include "estimation/synthesis/pose_sampler.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+namespace tactfunc {
+
+bool PoseSamplerOptions::IsValid(std::string* error) const {
+  if (!(depth_min_m >= 0 && depth_max_m > depth_min_m) || !std::isfinite(depth_max_m)) {
+    if (error != nullptr) *error = "PoseSamplerOptions: expected 0 <= depth_min_m < depth_max_m";
+    return false;
+  }
+  return chain.IsValid(4, error);
+}
+
+std::vector<SE2d> PoseSamples::Poses() const {
+  const Eigen::MatrixXd all = chains.Stacked();
+  std::vector<SE2d> poses;
+  poses.reserve(all.rows());
+  for (Eigen::Index i = 0; i < all.rows(); ++i) {
+    poses.push_back(SE2d::FromXYYaw(all(i, 0), all(i, 1), all(i, 2)));
+  }
+  return poses;
+}
+
+Eigen::Matrix4d CoordinateCovariance(const LaplaceComponent& component) {
+  Eigen::Matrix4d P = Eigen::Matrix4d::Identity();
+  P.topLeftCorner<3, 3>() = PoseCoordinatesFromTangent(component.mean);
+  Eigen::Matrix4d c = P * component.covariance * P.transpose();
+  c = 0.5 * (c + c.transpose()).eval();
+  if (component.symmetry_order == 0) {
+    c.row(2).setZero();
+    c.col(2).setZero();
+    c(2, 2) = M_PI * M_PI / 4;
+  }
+  return c;
+}
+
+PoseSamples SamplePosePosterior(const LatentProblem& problem, const PoseGenerator& generator,
+                                int tool_index, double sigma, const LaplaceComponent& start,
+                                const PoseSamplerOptions& options) {
+  std::string error;
+  if (!options.IsValid(&error)) throw std::invalid_argument(error);
+  if (!(sigma > 0) || !std::isfinite(sigma)) {
+    throw std::invalid_argument("SamplePosePosterior: sigma must be finite and > 0, got " +
+                                std::to_string(sigma));
+  }
+  const GeneratorPoseCost cost(problem, generator, tool_index);  // throws for a bad tool
+  const int n = generator.SymmetryOrder(tool_index);
+  const double scale = problem.sigma() / sigma;  // r_s = r * scale
+  const int m = problem.num_residuals();
+  PoseSamples out;
+  out.sigma = sigma;
+  LogDensityFunction log_density = [&](const Eigen::VectorXd& x, Eigen::VectorXd* gradient) {
+    if (!(x[3] >= options.depth_min_m && x[3] <= options.depth_max_m)) {
+      return -std::numeric_limits<double>::infinity();
+    }
+    ++out.trunk_evaluations;
+    Eigen::VectorXd r(m);
+    const double pose[3] = {x[0], x[1], x[2]};
+    const double depth = x[3];
+    const double* parameters[2] = {pose, &depth};
+    Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> J_pose(m, 3);
+    Eigen::VectorXd J_depth(m);
+    double* jacobians[2] = {J_pose.data(), J_depth.data()};
+    if (!cost.Evaluate(parameters, r.data(), gradient != nullptr ? jacobians : nullptr)) {
+      return -std::numeric_limits<double>::infinity();
+    }
+    r *= scale;
+    if (gradient != nullptr) {
+      gradient->head<3>() = -scale * (J_pose.transpose() * r);
+      (*gradient)[3] = -scale * J_depth.dot(r);
+    }
+    return -0.5 * r.squaredNorm();
+  };
+  MetropolisOptions chain = options.chain;
+  chain.angles = {2};
+  chain.angle_fold = n > 0 ? 2 * M_PI / n : 2 * M_PI;
+  Eigen::VectorXd x0(4);
+  x0 << start.mean.x(), start.mean.y(), start.mean.yaw(),
+      std::clamp(start.depth_m, options.depth_min_m, options.depth_max_m);
+  out.chains = SampleMetropolis(log_density, x0, CoordinateCovariance(start), chain);
+  return out;
+}
+
+}  // namespace tactfunc
