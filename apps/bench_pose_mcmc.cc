@@ -24,6 +24,7 @@
 #include <memory>
 
 #include "apps/bench.h"
+#include "apps/bench/fit_common.h"
 #include "apps/command.h"
 #include "apps/progress_bar.h"
 #include "estimation/data/image_io.h"
@@ -38,6 +39,8 @@
 namespace tactfunc::apps {
 namespace {
 
+using bench::Median;
+
 struct PoseMcmcFlags {
   std::string model;
   std::string generator;
@@ -49,13 +52,6 @@ struct PoseMcmcFlags {
   std::uint64_t seed = 0;
   bool json = false;
 };
-
-double Median(std::vector<double> v) {
-  if (v.empty()) return std::nan("");
-  std::sort(v.begin(), v.end());
-  const std::size_t n = v.size();
-  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
 
 struct KernelTally {
   MetropolisKernel kernel;

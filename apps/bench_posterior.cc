@@ -38,6 +38,7 @@
 #include <optional>
 
 #include "apps/bench.h"
+#include "apps/bench/fit_common.h"
 #include "apps/command.h"
 #include "apps/model_inputs.h"
 #include "apps/progress_bar.h"
@@ -53,6 +54,9 @@
 
 namespace tactfunc::apps {
 namespace {
+
+using bench::Median;
+using bench::Quantile;
 
 constexpr double kDeg = 180.0 / M_PI;
 
@@ -73,20 +77,6 @@ struct PosteriorBenchFlags {
   double sigma = 0;
   std::string generator;  // adds the generator path's row (bubble)
 };
-
-double Median(std::vector<double> v) {
-  if (v.empty()) return std::numeric_limits<double>::quiet_NaN();
-  std::sort(v.begin(), v.end());
-  const std::size_t n = v.size();
-  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
-double Quantile(std::vector<double> v, double q) {
-  if (v.empty()) return std::numeric_limits<double>::quiet_NaN();
-  std::sort(v.begin(), v.end());
-  const double rank = std::ceil(q * v.size());
-  return v[static_cast<std::size_t>(std::clamp(rank - 1.0, 0.0, v.size() - 1.0))];
-}
 
 struct Tally {
   PosteriorSampler sampler;
