@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 #include <utility>
@@ -309,17 +310,18 @@ LatentFitter::Summary LatentFitter::FitImpl(const LatentProblem& problem,
     data_cost = std::make_unique<AnalyticLatentCost>(&problem);
   }
   LatentPriorCost prior_cost(d, problem.sigma_z());
-  // U at a latent and, in the same trunk pass over the whole frame, its PSNR: every
-  // latent the fit accepts is evaluated once, and the last one's PSNR is the fit's.
-  auto objective = [&](const Eigen::VectorXd& at, double* psnr) {
-    return problem.DataCostAndPsnr(at, psnr) + HalfSquaredNorm(prior_cost, at.data());
+  // U at a latent and, when the problem covers the whole frame, its PSNR from the same
+  // trunk pass (LatentProblem::DataCost): every latent the fit accepts is evaluated
+  // once, and the last one's PSNR is the fit's.
+  auto objective = [&](const Eigen::VectorXd& at, std::optional<double>* psnr) {
+    return problem.DataCost(at, psnr) + HalfSquaredNorm(prior_cost, at.data());
   };
 
   auto add_stage = [&](const char* name, double cost, Clock::time_point began, int iterations) {
     summary.stages.push_back(Stage{name, cost, MsSince(began), iterations});
     summary.iterations += iterations;
   };
-  double psnr = 0;
+  std::optional<double> psnr;
   double cost = objective(z, &psnr);
   summary.initial_cost = cost;
   add_stage("start", cost, start_time, 0);
@@ -327,7 +329,7 @@ LatentFitter::Summary LatentFitter::FitImpl(const LatentProblem& problem,
 
   // A stage whose result is not finite is undone: the fit keeps the last finite latent.
   auto accept = [&](const Eigen::VectorXd& candidate, const char* stage) {
-    double candidate_psnr = 0;
+    std::optional<double> candidate_psnr;
     const double candidate_cost = candidate.allFinite() ? objective(candidate, &candidate_psnr)
                                                         : std::numeric_limits<double>::quiet_NaN();
     if (!std::isfinite(candidate_cost)) {
@@ -422,7 +424,8 @@ LatentFitter::Summary LatentFitter::FitImpl(const LatentProblem& problem,
         break;
     }
     const Eigen::VectorXd before = z;
-    const double cost_before = cost, psnr_before = psnr;
+    const double cost_before = cost;
+    const std::optional<double> psnr_before = psnr;
     if (accept(parameters, "ceres")) {
       // Ceres keeps the best point it accepted, so the cost cannot rise; if rounding in
       // a float evaluation made it, the previous latent is kept.
@@ -441,7 +444,7 @@ LatentFitter::Summary LatentFitter::FitImpl(const LatentProblem& problem,
 
   summary.final_cost = cost;
   // PSNR over every valid pixel of the frame, not only the subsample (objective above).
-  summary.psnr = psnr;
+  summary.psnr = psnr ? *psnr : problem.Psnr(z);
   *latent = z;
   summary.total_time_ms = MsSince(start_time);
   return summary;

@@ -426,14 +426,19 @@ double LatentProblem::Psnr(const Eigen::VectorXd& z) const {
   return std::isnan(psnr) ? 0.0 : psnr;
 }
 
-double LatentProblem::DataCostAndPsnr(const Eigen::VectorXd& z, double* psnr) const {
-  CheckLatent(z, "DataCostAndPsnr");
-  Eigen::MatrixXd outputs;
-  const double frame_psnr = tactfunc::Psnr(FramePrediction(z, &outputs), *frame_);
-  *psnr = std::isnan(frame_psnr) ? 0.0 : frame_psnr;
+double LatentProblem::DataCost(const Eigen::VectorXd& z, std::optional<double>* psnr) const {
+  CheckLatent(z, "DataCost");
   const int c_count = channels();
   const long n = num_pixels();
   Eigen::VectorXd residuals(n * c_count);
+  if (n < num_valid_pixels_) {
+    psnr->reset();
+    ResidualsAndJacobian(z.data(), residuals.data(), nullptr);
+    return 0.5 * residuals.squaredNorm();
+  }
+  Eigen::MatrixXd outputs;
+  const double frame_psnr = tactfunc::Psnr(FramePrediction(z, &outputs), *frame_);
+  *psnr = std::isnan(frame_psnr) ? 0.0 : frame_psnr;
   for (long i = 0; i < n; ++i) {
     for (int c = 0; c < c_count; ++c) {
       const long k = i * c_count + c;

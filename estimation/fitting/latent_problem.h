@@ -46,6 +46,7 @@
 #define TACTFUNC_ESTIMATION_FITTING_LATENT_PROBLEM_H_
 
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -156,10 +157,12 @@ class LatentProblem {
   // frame has no valid pixel.
   double Psnr(const Eigen::VectorXd& z) const;
   // Half the squared norm of the (robustified) whitened data residuals at z -- the data
-  // part of U as Ceres sees it, ResidualsAndJacobian's residuals -- and *psnr = Psnr(z),
-  // from one trunk pass over the whole frame instead of two passes: what a fit reports
-  // for each latent it accepts. psnr must not be null.
-  double DataCostAndPsnr(const Eigen::VectorXd& z, double* psnr) const;
+  // part of U as Ceres sees it, ResidualsAndJacobian's residuals -- in one trunk pass.
+  // When the selected pixels are every valid pixel of the frame (no pixel_stride or
+  // max_pixels thinning), that pass runs over the whole frame and also gives
+  // *psnr = Psnr(z); otherwise it runs over the selected pixels only and *psnr is
+  // reset (Psnr needs its own whole-frame pass). psnr must not be null.
+  double DataCost(const Eigen::VectorXd& z, std::optional<double>* psnr) const;
 
  private:
   // U over the selected pixels (rows == nullptr) or the minibatch `rows` (scaled by N / n).

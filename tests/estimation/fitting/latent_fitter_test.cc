@@ -16,6 +16,7 @@
 #include <cstdint>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -416,6 +417,13 @@ TEST(LatentFitter, SubsamplingUsesTheRequestedPixels) {
   EXPECT_EQ(summary.num_pixels_used, 100);
   EXPECT_EQ(summary.num_valid_pixels, kRows * kCols);
   EXPECT_GT(summary.psnr, 60.0) << summary.FullReport();  // PSNR over all pixels
+  // The fit's costs are over its 100 pixels; its PSNR over the whole frame.
+  const LatentProblem thinned(trunk, targets, problem);
+  std::optional<double> no_psnr;
+  const double data_cost = thinned.DataCost(z, &no_psnr);
+  EXPECT_NEAR(summary.final_cost, data_cost + 0.5 * (z / 1e4).squaredNorm(),
+              1e-9 * summary.final_cost + 1e-300);
+  EXPECT_EQ(summary.psnr, thinned.Psnr(z));
 }
 
 class KnnFitTest : public ::testing::Test {

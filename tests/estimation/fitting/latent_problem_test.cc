@@ -8,6 +8,7 @@
 #include "estimation/fitting/latent_problem.h"
 
 #include <cmath>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -126,6 +127,34 @@ TEST(LatentProblem, CeresViewAndSamplerViewAreTheSameFunction) {
     ASSERT_TRUE(problem.ResidualsAndJacobian(z.data(), r.data(), nullptr));
     const double ceres_view = 0.5 * r.squaredNorm() + 0.5 * (z / 0.7).squaredNorm();
     EXPECT_NEAR(problem.Evaluate(z), ceres_view, 1e-10 * ceres_view) << ToString(loss);
+  }
+}
+
+// DataCost is the data part of the Ceres view. Over the whole frame it also gives the
+// frame's PSNR from the same pass; over thinned pixels it gives no PSNR (that needs its
+// own whole-frame pass), and its cost is over the selected pixels only.
+TEST(LatentProblem, DataCostIsTheCeresDataCostAndGivesThePsnrOnlyOverTheWholeFrame) {
+  const SensorTrunk trunk = Trunk();
+  TrunkTargets targets = testing_util::MakeTargets(trunk, kTrue, 0.05, 2);
+  targets.weights[4] = 0;
+  const VectorXd z = Eigen::Vector4d(0.2, -0.1, 0.0, 0.3);
+  for (const int stride : {1, 3}) {
+    LatentProblem::Options options = DoubleOptions();
+    options.robust_loss = LatentProblem::RobustLoss::kHuber;
+    options.pixel_stride = stride;
+    const LatentProblem problem(trunk, targets, options);
+    VectorXd r(problem.num_residuals());
+    ASSERT_TRUE(problem.ResidualsAndJacobian(z.data(), r.data(), nullptr));
+    std::optional<double> psnr = 123.0;
+    const double cost = problem.DataCost(z, &psnr);
+    EXPECT_NEAR(cost, 0.5 * r.squaredNorm(), 1e-12 * cost) << "stride " << stride;
+    if (stride == 1) {
+      ASSERT_TRUE(psnr.has_value());
+      EXPECT_DOUBLE_EQ(*psnr, problem.Psnr(z));
+    } else {
+      EXPECT_LT(problem.num_pixels(), problem.num_valid_pixels());
+      EXPECT_FALSE(psnr.has_value()) << "a thinned problem has no whole-frame pass";
+    }
   }
 }
 
