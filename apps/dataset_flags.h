@@ -1,7 +1,8 @@
 // Copyright 2026 The tactfunc Authors.
 //
 // The flags every data-reading subcommand shares, for data without metadata: a user's
-// own folder of PNG/JPG frames, or a video file (docs/DATASET_FORMAT.md).
+// own folder of PNG/JPG frames, a video file, or a folder of such recordings ("clips")
+// (docs/DATASET_FORMAT.md).
 #ifndef TACTFUNC_APPS_DATASET_FLAGS_H_
 #define TACTFUNC_APPS_DATASET_FLAGS_H_
 
@@ -23,8 +24,8 @@ struct DatasetFlags {
 // Adds --sensor, --reference, --reference-index, --pixel-pitch-mm, --labels to `sub`.
 void AddDatasetFlags(CLI::App* sub, DatasetFlags* flags);
 
-// Opens `path`: a dataset folder (ours or a user's), or a video file (a regular file
-// with a video extension: .avi .mp4 .mov .mkv .m4v), with the flags' options.
+// Opens `path`: a dataset folder (ours or a user's, a set of clips included), or a video
+// file (a regular file with a video extension, IsVideoFileName), with the flags' options.
 Dataset OpenDataset(const std::string& path, const DatasetFlags& flags);
 
 // When `sensor`'s frames of `dataset` (read from `path`) have another aspect ratio than

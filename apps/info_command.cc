@@ -292,6 +292,18 @@ void RunInfo(const InfoFlags& flags) {
                                  {"pixel_pitch_m", info.pixel_pitch_m},
                                  {"tools", tool_counts}};
   }
+  if (!dataset.clips().empty()) {
+    int train = 0, test = 0;
+    for (const ClipInfo& clip : dataset.clips()) {
+      if (clip.split) ++(*clip.split == Split::kTest ? test : train);
+    }
+    int videos = 0;
+    for (const ClipInfo& clip : dataset.clips()) videos += clip.video ? 1 : 0;
+    std::printf("  clips: %zu (%d videos, %zu folders)", dataset.clips().size(), videos,
+                dataset.clips().size() - videos);
+    if (train + test > 0) std::printf(", clips.csv: %d train, %d test", train, test);
+    std::printf("\n");
+  }
   const std::uint64_t bytes = dataset.BytesOnDisk();
   std::cout << "  tools: ";
   std::map<std::string, int> all_tools;
@@ -309,6 +321,7 @@ void RunInfo(const InfoFlags& flags) {
   if (flags.json) {
     EmitJson({{"dir", dataset.root()},
               {"sensors", sensors},
+              {"clips", dataset.clips().size()},
               {"tools", all_tools.size()},
               {"bytes", bytes},
               {"has_clean", dataset.has_clean()}});

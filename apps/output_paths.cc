@@ -78,7 +78,8 @@ std::vector<NamedPath> DatasetPathInputs(const std::string& flag, const std::str
                                          const DatasetFlags& flags) {
   std::vector<NamedPath> inputs = {{flag, path},
                                    {flag + " (dataset.json)", (fs::path(path) / "dataset.json").string()},
-                                   {flag + " (labels.csv)", (fs::path(path) / "labels.csv").string()}};
+                                   {flag + " (labels.csv)", (fs::path(path) / "labels.csv").string()},
+                                   {flag + " (clips.csv)", (fs::path(path) / "clips.csv").string()}};
   if (!flags.labels.empty()) inputs.push_back({"--labels", flags.labels});
   if (!flags.reference.empty()) {
     inputs.push_back({"--reference", flags.reference});

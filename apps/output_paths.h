@@ -32,7 +32,8 @@ void RefuseOutputsThatAreInputs(const std::vector<NamedPath>& outputs,
                                 const std::vector<NamedPath>& inputs);
 
 // The inputs a dataset argument names before it is opened: the folder (or video file),
-// its dataset.json and labels.csv, and the --labels and --reference files if given.
+// its dataset.json, labels.csv and clips.csv, and the --labels and --reference files if
+// given.
 std::vector<NamedPath> DatasetPathInputs(const std::string& flag, const std::string& path,
                                          const DatasetFlags& flags);
 // Every file an opened dataset consists of (Dataset::Files) and its folder, each named

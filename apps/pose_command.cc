@@ -636,7 +636,7 @@ void RunPose(const PoseFlags& flags) {
     }
     targets = LoadTrunkTargets(dataset, *index, model.Trunk(sensor).format);
     input.difference =
-        Difference(dataset.LoadFrame(*index), dataset.Reference(sensor), sensor);
+        Difference(dataset.LoadFrame(*index), dataset.FrameReference(*index), sensor);
     input.pitch_m = dataset.sensor_info(sensor).pixel_pitch_m;
     input.label = dataset.frames()[*index].label;
     input.name = "frame " + flags.id;

@@ -108,7 +108,7 @@ void RunShow(const ShowFlags& flags) {
       any = true;
       const FrameRecord& record = dataset.frames()[it->second];
       const Image frame = dataset.LoadFrame(it->second);
-      const Image& reference = dataset.Reference(sensor);
+      const Image& reference = dataset.FrameReference(it->second);
       cv::Mat tiles[3] = {FitHeight(RawTile(frame, sensor, reference), h),
                           FitHeight(RawTile(reference, sensor, reference), h),
                           FitHeight(DifferenceTile(Difference(frame, reference, sensor),

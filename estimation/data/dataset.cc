@@ -14,9 +14,10 @@
 #include <system_error>
 #include <utility>
 
-#include "estimation/data/internal/path_util.h"
 #include "estimation/data/internal/labels_csv.h"
 #include "estimation/data/internal/opencv_image.h"
+#include "estimation/data/internal/path_util.h"
+#include "estimation/data/internal/video_reader.h"
 #include "models/core/text_limits.h"
 
 namespace tactfunc {
@@ -27,10 +28,14 @@ using nlohmann::json;
 
 constexpr const char* kMetadataFile = "dataset.json";
 constexpr const char* kLabelsFile = "labels.csv";
+constexpr const char* kClipsFile = "clips.csv";
 constexpr const char* kFormatName = "tactfunc-dataset";
 constexpr int kFormatVersion = 1;
 constexpr const char* kCleanFolder = "clean";
 constexpr std::size_t kMaxIdLength = 64;
+// Video clips of a clip set that keep a decoder open at once (the least recently read
+// one is closed beyond this): memory stays bounded however many clips there are.
+constexpr std::size_t kMaxOpenVideoClips = 4;
 
 // Reads typed fields of dataset.json with messages naming the dotted field path.
 class JsonFields {
@@ -177,6 +182,173 @@ void CheckReferenceShape(const Image& reference, const SensorInfo& info, const s
   }
 }
 
+// The reference of a sensor folder without metadata (`folder`, `files` its images,
+// `folder_name` for messages): reference.<ext>, else `named` looked up in the folder
+// and, if `anywhere`, as a path. Sets *in_folder to its name if it lies in the folder.
+std::string FindFolderReference(const std::string& folder, const std::string& folder_name,
+                                const std::vector<internal::ImageFileEntry>& files,
+                                const std::string& named, bool anywhere,
+                                std::string* in_folder) {
+  std::string reference_path;
+  in_folder->clear();
+  for (const internal::ImageFileEntry& entry : files) {
+    if (!IsReferenceStem(entry.stem)) continue;
+    if (!reference_path.empty()) {
+      throw DatasetError(folder_name + ": expected one reference image, got both '" +
+                         internal::BaseName(reference_path) + "' and '" + entry.name + "'");
+    }
+    reference_path = internal::JoinPath(folder, entry.name);
+    *in_folder = entry.name;
+  }
+  if (!reference_path.empty()) return reference_path;
+  if (named.empty()) {
+    throw DatasetError(folder_name +
+                       ": expected a reference image "
+                       "'reference.png' (or .jpg/.jpeg) or OpenOptions::reference "
+                       "naming one, got neither (no dataset.json either)");
+  }
+  const std::string named_in_folder = internal::JoinPath(folder, named);
+  if (internal::IsRegularFile(named_in_folder)) {
+    reference_path = named_in_folder;
+  } else if (anywhere && internal::IsRegularFile(named)) {
+    reference_path = named;
+  } else {
+    throw DatasetError(folder_name + ": reference '" + named + "': expected an image file " +
+                       (anywhere ? "in the folder or at that path" : "in the clip's folder") +
+                       ", got no such file");
+  }
+  for (const internal::ImageFileEntry& entry : files) {
+    std::error_code ec;
+    if (fs::equivalent(internal::JoinPath(folder, entry.name), reference_path, ec)) {
+      *in_folder = entry.name;
+    }
+  }
+  return reference_path;
+}
+
+// The sensor kind of a user folder whose reference is `reference_path`: `given`, else
+// inferred from the reference's header (16-bit 1-channel -> bubble, 8-bit -> gelslim).
+SensorKind FolderSensorKind(const std::optional<SensorKind>& given,
+                            const std::string& reference_path) {
+  if (given) return *given;
+  const internal::ImageProbe probe = internal::ProbeImage(reference_path);
+  if (probe.bit_depth == 16 && probe.channels == 1) return SensorKind::kSoftBubble;
+  if (probe.bit_depth == 8) return SensorKind::kGelSlim;
+  throw DatasetError(reference_path +
+                     ": cannot infer the sensor: expected a "
+                     "16-bit 1-channel image (bubble depth) or an 8-bit one "
+                     "(gelslim rgb), got " +
+                     std::to_string(probe.bit_depth) + "-bit with " +
+                     std::to_string(probe.channels) + " channel(s); set OpenOptions::sensor");
+}
+
+// The SensorInfo of data without metadata, from its reference and the options.
+SensorInfo UserSensorInfo(SensorKind kind, const Image& reference,
+                          const Dataset::OpenOptions& options) {
+  SensorInfo info;
+  info.kind = kind;
+  info.encoding = SensorEncoding(kind);
+  info.rows = reference.rows;
+  info.cols = reference.cols;
+  info.channels = reference.channels;
+  info.pixel_pitch_m = options.pixel_pitch_m;
+  info.normalization_scale = DefaultNormalizationScale(kind);
+  return info;
+}
+
+// A video frame's index as it appears in ids and paths: 6 digits, zero-padded.
+std::string VideoFrameId(std::size_t index) {
+  char id[32];
+  std::snprintf(id, sizeof(id), "%06zu", index);
+  return id;
+}
+
+// One record per frame of a video of `count` frames except `reference_index`: id
+// `id_prefix` + VideoFrameId(i), path "<file_name>#<VideoFrameId(i)>".
+void AppendVideoFrames(const std::string& file_name, const std::string& id_prefix, int clip,
+                       std::size_t count, std::size_t reference_index,
+                       std::vector<FrameRecord>* frames) {
+  for (std::size_t i = 0; i < count; ++i) {
+    if (i == reference_index) continue;
+    FrameRecord record;
+    record.id = id_prefix + VideoFrameId(i);
+    record.sensor = SensorKind::kGelSlim;
+    record.path = file_name + "#" + VideoFrameId(i);
+    record.clip = clip;
+    record.video_frame = static_cast<std::int64_t>(i);
+    frames->push_back(std::move(record));
+  }
+}
+
+// Refuses options.sensor other than gelslim for a video (`path`).
+void CheckVideoSensor(const Dataset::OpenOptions& options, const std::string& path) {
+  if (options.sensor && *options.sensor != SensorKind::kGelSlim) {
+    throw DatasetError(path +
+                       ": a video holds 8-bit colour frames: expected sensor "
+                       "'gelslim', got '" +
+                       ToString(*options.sensor) + "'");
+  }
+}
+
+// An entry of a clip set folder: a subfolder holding images, or a video file.
+struct ClipEntry {
+  std::string name;       // the clip name: the subfolder's name or the video's stem
+  std::string file_name;  // the entry's name in the folder
+  bool video = false;
+};
+
+// The clip entries of `dir`, sorted by clip name; subfolders without images, hidden
+// entries and other files are left out. Throws DatasetError for two entries of one
+// name and for names that cannot be a clip name.
+std::vector<ClipEntry> ListClipEntries(const std::string& dir) {
+  std::error_code ec;
+  fs::directory_iterator it(dir, ec);
+  if (ec) {
+    throw DatasetError(dir + ": expected a readable directory, got error '" + ec.message() + "'");
+  }
+  std::map<std::string, ClipEntry> by_name;
+  for (const fs::directory_entry& entry : it) {
+    const std::string file_name = entry.path().filename().string();
+    if (file_name.empty() || file_name[0] == '.') continue;
+    std::error_code type_ec;
+    ClipEntry clip;
+    clip.file_name = file_name;
+    if (entry.is_directory(type_ec)) {
+      if (internal::ListImageFiles(entry.path().string()).empty()) continue;
+      clip.name = file_name;
+    } else if (entry.is_regular_file(type_ec) && IsVideoFileName(file_name)) {
+      clip.name = entry.path().stem().string();
+      clip.video = true;
+    } else {
+      continue;
+    }
+    const std::string where = internal::JoinPath(dir, EscapedExcerpt(file_name));
+    // Clip names start frame ids, which go to functasets as JSON text and to CSV files
+    // unquoted (labels.csv, clips.csv).
+    if (!IsValidUtf8(clip.name)) {
+      throw DatasetError(where + ": clip name: expected a name in UTF-8, got other bytes");
+    }
+    if (clip.name.empty() || !internal::IsCsvSafe(clip.name)) {
+      throw DatasetError(where + ": clip name: expected a non-empty name without ',', '\"' or "
+                         "line breaks, got '" + EscapedExcerpt(clip.name) + "'");
+    }
+    const auto [existing, inserted] = by_name.emplace(clip.name, clip);
+    if (!inserted) {
+      throw DatasetError(where + ": clip '" + clip.name + "': expected one folder or video per " +
+                         "clip name, got also '" + existing->second.file_name + "'");
+    }
+  }
+  std::vector<ClipEntry> entries;
+  for (auto& [name, clip] : by_name) entries.push_back(std::move(clip));
+  return entries;
+}
+
+// True if `dir` (without dataset.json, bubble/ or gelslim/) is a clip set: no images
+// of its own and at least one clip entry.
+bool IsClipSetFolder(const std::string& dir) {
+  return internal::ListImageFiles(dir).empty() && !ListClipEntries(dir).empty();
+}
+
 }  // namespace
 
 // ---------------------------------------------------------------------------------
@@ -227,6 +399,14 @@ double DefaultNormalizationScale(SensorKind kind) {
 PixelEncoding SensorEncoding(SensorKind kind) {
   return kind == SensorKind::kSoftBubble ? PixelEncoding::kDepthU16Micrometres
                                          : PixelEncoding::kRgb8;
+}
+
+bool IsVideoFileName(const std::string& path) {
+  const std::string extension = internal::ToLower(fs::path(path).extension().string());
+  for (const char* known : {".avi", ".mp4", ".mkv", ".mov", ".m4v"}) {
+    if (extension == known) return true;
+  }
+  return false;
 }
 
 bool DatasetOpenOptions::IsValid(std::string* error) const {
@@ -392,75 +572,21 @@ Dataset Dataset::Open(const std::string& dir, const OpenOptions& options) {
       }
     }
     filter_sensor = !folders.empty() && options.sensor.has_value();
-    if (folders.empty()) folders.emplace_back("", options.sensor);
+    const bool clip_set = folders.empty() && IsClipSetFolder(dir);
+    if (clip_set) dataset.OpenClips(options);
+    if (folders.empty() && !clip_set) folders.emplace_back("", options.sensor);
     for (const auto& [subdir, known_kind] : folders) {
       const std::string folder = internal::JoinPath(dir, subdir);
       const std::string folder_name = subdir.empty() ? dir : folder;
       const std::vector<internal::ImageFileEntry> files = internal::ListImageFiles(folder);
       // The reference: reference.<ext>, else options.reference.
-      std::string reference_path;
       std::string reference_in_folder;  // its name if it lies in `folder`
-      for (const internal::ImageFileEntry& entry : files) {
-        if (!IsReferenceStem(entry.stem)) continue;
-        if (!reference_path.empty()) {
-          throw DatasetError(folder_name + ": expected one reference image, got both '" +
-                             internal::BaseName(reference_path) + "' and '" + entry.name + "'");
-        }
-        reference_path = internal::JoinPath(folder, entry.name);
-        reference_in_folder = entry.name;
-      }
-      if (reference_path.empty()) {
-        if (options.reference.empty()) {
-          throw DatasetError(folder_name +
-                             ": expected a reference image "
-                             "'reference.png' (or .jpg/.jpeg) or OpenOptions::reference "
-                             "naming one, got neither (no dataset.json either)");
-        }
-        const std::string in_folder = internal::JoinPath(folder, options.reference);
-        if (internal::IsRegularFile(in_folder)) {
-          reference_path = in_folder;
-        } else if (internal::IsRegularFile(options.reference)) {
-          reference_path = options.reference;
-        } else {
-          throw DatasetError(folder_name + ": reference '" + options.reference +
-                             "': expected an image file in the folder or at that path, "
-                             "got no such file");
-        }
-        for (const internal::ImageFileEntry& entry : files) {
-          std::error_code ec;
-          if (fs::equivalent(internal::JoinPath(folder, entry.name), reference_path, ec)) {
-            reference_in_folder = entry.name;
-          }
-        }
-      }
-      SensorKind kind;
-      if (known_kind) {
-        kind = *known_kind;
-      } else {
-        const internal::ImageProbe probe = internal::ProbeImage(reference_path);
-        if (probe.bit_depth == 16 && probe.channels == 1) {
-          kind = SensorKind::kSoftBubble;
-        } else if (probe.bit_depth == 8) {
-          kind = SensorKind::kGelSlim;
-        } else {
-          throw DatasetError(reference_path +
-                             ": cannot infer the sensor: expected a "
-                             "16-bit 1-channel image (bubble depth) or an 8-bit one "
-                             "(gelslim rgb), got " +
-                             std::to_string(probe.bit_depth) + "-bit with " +
-                             std::to_string(probe.channels) +
-                             " channel(s); set OpenOptions::sensor");
-        }
-      }
-      SensorInfo info;
-      info.kind = kind;
-      info.encoding = SensorEncoding(kind);
-      Image reference = ReadImage(reference_path, info.encoding);
-      info.rows = reference.rows;
-      info.cols = reference.cols;
-      info.channels = reference.channels;
-      info.pixel_pitch_m = options.pixel_pitch_m;
-      info.normalization_scale = DefaultNormalizationScale(kind);
+      const std::string reference_path =
+          FindFolderReference(folder, folder_name, files, options.reference,
+                              /*anywhere=*/true, &reference_in_folder);
+      const SensorKind kind = FolderSensorKind(known_kind, reference_path);
+      Image reference = ReadImage(reference_path, SensorEncoding(kind));
+      SensorInfo info = UserSensorInfo(kind, reference, options);
       info.reference = reference_in_folder.empty()
                            ? fs::absolute(reference_path).string()
                            : internal::JoinPath(subdir, reference_in_folder);
@@ -478,6 +604,10 @@ Dataset Dataset::Open(const std::string& dir, const OpenOptions& options) {
     }
   }
   dataset.SortAndIndexFrames();
+  if (!dataset.clips_.empty()) {
+    const std::string clips_path = internal::JoinPath(dir, kClipsFile);
+    if (internal::IsRegularFile(clips_path)) dataset.AttachClipSplits(clips_path);
+  }
   std::string labels_path = options.labels;
   if (labels_path.empty()) {
     const std::string default_path = internal::JoinPath(dir, kLabelsFile);
@@ -490,79 +620,109 @@ Dataset Dataset::Open(const std::string& dir, const OpenOptions& options) {
 
 Dataset Dataset::OpenVideo(const std::string& path, const OpenOptions& options) {
   CheckOpenOptions(options);
-  if (options.sensor && *options.sensor != SensorKind::kGelSlim) {
-    throw DatasetError(path +
-                       ": a video holds 8-bit colour frames: expected sensor "
-                       "'gelslim', got '" +
-                       ToString(*options.sensor) + "'");
-  }
+  CheckVideoSensor(options, path);
   if (!internal::IsRegularFile(path)) {
     throw DatasetError(path + ": expected a video file, got no such file");
   }
-  // FFmpeg first: it reads AVI and MP4 without the other backends' noisy attempts
-  // (GStreamer, image sequences) on files they cannot open.
-  cv::VideoCapture capture;
-  try {
-    if (!capture.open(path, cv::CAP_FFMPEG)) capture.open(path, cv::CAP_ANY);
-  } catch (const cv::Exception& e) {
-    throw DatasetError(path + ": expected a video OpenCV can open, got an error: " + e.what());
-  }
-  if (!capture.isOpened()) {
-    throw DatasetError(path +
-                       ": expected a video OpenCV can open (AVI/MP4 with a "
-                       "codec this OpenCV build decodes), got one it cannot open");
-  }
-  std::vector<Image> decoded;
-  cv::Mat mat;
-  const std::string name = internal::BaseName(path);
-  while (capture.read(mat)) {
-    if (mat.empty()) break;
-    const std::string frame_name = path + "#" + std::to_string(decoded.size());
-    decoded.push_back(internal::ImageFromRgb8Mat(mat, frame_name));
-    if (!decoded.back().SameShape(decoded.front())) {
-      throw DatasetError(frame_name + ": expected " + decoded.front().ShapeString() +
-                         " like frame 0, got " + decoded.back().ShapeString());
-    }
-  }
-  if (decoded.empty()) {
-    throw DatasetError(path + ": expected at least one decodable frame, got none");
-  }
   const std::size_t reference_index = static_cast<std::size_t>(options.reference_index);
-  if (reference_index >= decoded.size()) {
-    throw DatasetError(path + ": OpenOptions::reference_index: expected a frame index < " +
-                       std::to_string(decoded.size()) + " (the number of frames), got " +
-                       std::to_string(options.reference_index));
-  }
+  Image reference;
+  auto video = std::make_shared<internal::VideoReader>(path, reference_index, &reference,
+                                                       internal::VideoReader::Options());
   Dataset dataset;
   dataset.root_ = path;
   dataset.source_ = path;
-  SensorInfo info;
-  info.kind = SensorKind::kGelSlim;
-  info.encoding = PixelEncoding::kRgb8;
-  info.rows = decoded.front().rows;
-  info.cols = decoded.front().cols;
-  info.channels = decoded.front().channels;
-  info.pixel_pitch_m = options.pixel_pitch_m;
-  info.normalization_scale = DefaultNormalizationScale(info.kind);
-  char id[32];
-  std::snprintf(id, sizeof(id), "%06zu", reference_index);
-  info.reference = name + "#" + id;
-  dataset.sensors_[info.kind] = SensorData{info, decoded[reference_index]};
-  auto frames = std::make_shared<std::vector<Image>>();
-  for (std::size_t i = 0; i < decoded.size(); ++i) {
-    if (i == reference_index) continue;
-    std::snprintf(id, sizeof(id), "%06zu", i);
-    FrameRecord record;
-    record.id = id;
-    record.sensor = info.kind;
-    record.path = name + "#" + id;
-    dataset.frames_.push_back(std::move(record));
-    frames->push_back(std::move(decoded[i]));
-  }
-  dataset.video_frames_ = std::move(frames);
-  // Ids are zero-padded, so frames_ is already sorted and aligned with video_frames_.
+  const std::string name = internal::BaseName(path);
+  SensorInfo info = UserSensorInfo(SensorKind::kGelSlim, reference, options);
+  info.reference = name + "#" + VideoFrameId(reference_index);
+  dataset.sensors_[info.kind] = SensorData{info, std::move(reference)};
+  // Ids are zero-padded, so the frames come out sorted.
+  AppendVideoFrames(name, "", -1, video->num_frames(), reference_index, &dataset.frames_);
+  dataset.video_ = std::move(video);
   if (!options.labels.empty()) dataset.AttachLabels(options.labels, false);
   return dataset;
+}
+
+void Dataset::OpenClips(const OpenOptions& options) {
+  const std::vector<ClipEntry> entries = ListClipEntries(root_);
+  const auto budget = std::make_shared<internal::VideoDecoderBudget>(kMaxOpenVideoClips);
+  std::optional<SensorInfo> shared;  // the first clip's kind and shape, which all share
+  for (const ClipEntry& entry : entries) {
+    const int clip_index = static_cast<int>(clips_.size());
+    const std::string clip_path = internal::JoinPath(root_, entry.file_name);
+    ClipInfo clip;
+    clip.name = entry.name;
+    clip.path = entry.file_name;
+    clip.video = entry.video;
+    Image reference;
+    SensorKind kind = SensorKind::kGelSlim;
+    std::shared_ptr<internal::VideoReader> video;
+    std::vector<FrameRecord> frames;
+    if (entry.video) {
+      CheckVideoSensor(options, clip_path);
+      const std::size_t reference_index = static_cast<std::size_t>(options.reference_index);
+      internal::VideoReader::Options video_options;
+      video_options.budget = budget;
+      video = std::make_shared<internal::VideoReader>(clip_path, reference_index, &reference,
+                                                      video_options);
+      clip.reference = entry.file_name + "#" + VideoFrameId(reference_index);
+      AppendVideoFrames(entry.file_name, entry.name + "/", clip_index, video->num_frames(),
+                        reference_index, &frames);
+    } else {
+      std::string in_folder;
+      const std::string reference_path =
+          FindFolderReference(clip_path, clip_path, internal::ListImageFiles(clip_path),
+                              options.reference, /*anywhere=*/false, &in_folder);
+      kind = FolderSensorKind(options.sensor, reference_path);
+      reference = ReadImage(reference_path, SensorEncoding(kind));
+      clip.reference = internal::JoinPath(entry.file_name, in_folder);
+      bool found_clean = false;
+      ListSensorFrames(root_, entry.file_name, kind, in_folder, /*with_clean=*/true, &frames,
+                       &found_clean);
+      has_clean_ = has_clean_ || found_clean;
+      for (FrameRecord& record : frames) {
+        record.id = entry.name + "/" + record.id;
+        record.clip = clip_index;
+      }
+    }
+    const SensorInfo info = UserSensorInfo(kind, reference, options);
+    if (!shared) {
+      shared = info;
+    } else if (info.kind != shared->kind || info.rows != shared->rows ||
+               info.cols != shared->cols || info.channels != shared->channels) {
+      throw DatasetError(clip_path + ": clip '" + entry.name + "': expected " +
+                         ToString(shared->kind) + " frames of " +
+                         ShapeText(shared->rows, shared->cols, shared->channels) +
+                         " (rows x cols x channels, like clip '" + clips_.front().name +
+                         "'), got " + ToString(info.kind) + " frames of " +
+                         ShapeText(info.rows, info.cols, info.channels));
+    }
+    frames_.insert(frames_.end(), std::make_move_iterator(frames.begin()),
+                   std::make_move_iterator(frames.end()));
+    clips_.push_back(std::move(clip));
+    clip_references_.push_back(std::move(reference));
+    clip_videos_.push_back(std::move(video));
+  }
+  // The sensor's own reference stays empty: each clip has its own (FrameReference).
+  sensors_[shared->kind] = SensorData{*shared, Image()};
+}
+
+void Dataset::AttachClipSplits(const std::string& clips_path) {
+  clips_path_ = clips_path;
+  std::map<std::string, std::size_t> by_name;
+  for (std::size_t k = 0; k < clips_.size(); ++k) by_name[clips_[k].name] = k;
+  for (const internal::ClipSplitRow& row :
+       internal::ParseClipsCsv(ReadFile(clips_path), clips_path)) {
+    const auto it = by_name.find(row.clip);
+    if (it == by_name.end()) {
+      throw DatasetError(clips_path + ":" + std::to_string(row.line) +
+                         ": field 'clip': expected the name of a clip of " + root_ + ", got '" +
+                         EscapedExcerpt(row.clip) + "' (no such subfolder or video)");
+    }
+    clips_[it->second].split = row.split;
+  }
+  for (FrameRecord& record : frames_) {
+    if (record.clip >= 0 && clips_[record.clip].split) record.split = *clips_[record.clip].split;
+  }
 }
 
 void Dataset::SortAndIndexFrames() {
@@ -603,6 +763,12 @@ void Dataset::AttachLabels(const std::string& labels_path, bool ignore_absent_se
       }
     }
     FrameRecord& record = frames_[*index];
+    if (record.clip >= 0 && clips_[record.clip].split && *clips_[record.clip].split != row.split) {
+      const ClipInfo& clip = clips_[record.clip];
+      throw DatasetError(where + "field 'split': expected '" + ToString(*clip.split) +
+                         "' (clip '" + clip.name + "' is " + ToString(*clip.split) + " in " +
+                         clips_path_ + "), got '" + ToString(row.split) + "'");
+    }
     record.label = row.label;
     record.split = row.split;
   }
@@ -644,7 +810,26 @@ const Dataset::SensorData& Dataset::sensor_data(SensorKind kind) const {
 
 const SensorInfo& Dataset::sensor_info(SensorKind kind) const { return sensor_data(kind).info; }
 
-const Image& Dataset::Reference(SensorKind kind) const { return sensor_data(kind).reference; }
+const Image& Dataset::Reference(SensorKind kind) const {
+  const SensorData& data = sensor_data(kind);
+  if (!clips_.empty()) {
+    throw DatasetError(root_ + ": a set of " + std::to_string(clips_.size()) +
+                       " clips has one reference per clip: expected the reference of a frame "
+                       "(Dataset::FrameReference), got a request for the " + ToString(kind) +
+                       " sensor's");
+  }
+  return data.reference;
+}
+
+const Image& Dataset::FrameReference(std::size_t index) const {
+  if (index >= frames_.size()) {
+    throw std::out_of_range("Dataset::FrameReference: index " + std::to_string(index) +
+                            " >= number of frames " + std::to_string(frames_.size()));
+  }
+  const FrameRecord& record = frames_[index];
+  if (record.clip >= 0) return clip_references_[static_cast<std::size_t>(record.clip)];
+  return sensor_data(record.sensor).reference;
+}
 
 std::vector<std::size_t> Dataset::FrameIndices(SensorKind sensor,
                                                std::optional<Split> split) const {
@@ -672,8 +857,12 @@ Image Dataset::LoadFrame(std::size_t index) const {
     throw std::out_of_range("Dataset::LoadFrame: index " + std::to_string(index) +
                             " >= number of frames " + std::to_string(frames_.size()));
   }
-  if (video_frames_) return (*video_frames_)[index];
   const FrameRecord& record = frames_[index];
+  if (record.video_frame >= 0) {
+    internal::VideoReader& video =
+        record.clip >= 0 ? *clip_videos_[static_cast<std::size_t>(record.clip)] : *video_;
+    return video.Frame(static_cast<std::size_t>(record.video_frame));
+  }
   const SensorInfo& info = sensor_info(record.sensor);
   const std::string path = internal::JoinPath(root_, record.path);
   CheckFrameHeader(path, info, record.sensor);
@@ -717,13 +906,19 @@ void Dataset::ValidateAllFrames() const {
 
 std::vector<std::string> Dataset::Files() const {
   std::set<std::string> files;
-  if (video_frames_) {
+  if (video_) {
     files.insert(root_);
   } else {
     for (const auto& entry : sensors_) {
-      files.insert(internal::JoinPath(root_, entry.second.info.reference));
+      if (!entry.second.info.reference.empty()) {
+        files.insert(internal::JoinPath(root_, entry.second.info.reference));
+      }
+    }
+    for (const ClipInfo& clip : clips_) {
+      files.insert(internal::JoinPath(root_, clip.video ? clip.path : clip.reference));
     }
     for (const FrameRecord& record : frames_) {
+      if (record.video_frame >= 0) continue;  // its video is listed with its clip
       files.insert(internal::JoinPath(root_, record.path));
       if (!record.clean_path.empty()) {
         files.insert(internal::JoinPath(root_, record.clean_path));
@@ -731,6 +926,7 @@ std::vector<std::string> Dataset::Files() const {
     }
   }
   if (!metadata_path_.empty()) files.insert(metadata_path_);
+  if (!clips_path_.empty()) files.insert(clips_path_);
   if (!labels_path_.empty()) files.insert(labels_path_);
   return std::vector<std::string>(files.begin(), files.end());
 }

@@ -1,7 +1,8 @@
 // Copyright 2026 The tactfunc Authors.
 //
 // Tactile datasets: a folder (or a video) of sensor frames, one reference frame per
-// sensor (the undeformed sensor), and optional pose labels.
+// sensor (the undeformed sensor) -- or, for a set of recordings ("clips"), one per
+// clip -- and optional pose labels.
 //
 // The folder format is specified in docs/DATASET_FORMAT.md; in short:
 //
@@ -16,14 +17,17 @@
 //
 // Frames of the two sensors taken at the same time share their id (the file stem).
 // Dataset::Open also reads folders that users bring without metadata (a flat folder
-// of images, or bubble/ and gelslim/ subfolders) and Dataset::OpenVideo reads a
+// of images, bubble/ and gelslim/ subfolders, or a set of clips: subfolders of images
+// and/or video files, each with its own reference) and Dataset::OpenVideo reads a
 // video; see Dataset::Open for the rules.
 //
-// Frames are decoded lazily from disk by LoadFrame (videos are decoded once, in
-// Open, and kept in memory). Open validates the metadata, the references and every
-// labels.csv line; a frame's own size and bit depth are validated when it is loaded
-// (call ValidateAllFrames to check them all up front). A Dataset is immutable after
-// Open: its const methods, LoadFrame included, may be called from several threads.
+// Frames are decoded lazily by LoadFrame: images from disk, video frames from the
+// video, which is read through once when opened and then decoded on demand, so the
+// memory a dataset takes does not grow with the length of its videos. Open validates
+// the metadata, the references and every labels.csv line; a frame's own size and bit
+// depth are validated when it is loaded (call ValidateAllFrames to check them all up
+// front). A Dataset is immutable after Open: its const methods, LoadFrame included,
+// may be called from several threads.
 //
 // Every bad input raises DatasetError (estimation/data/image_io.h) with a message naming
 // the file, the line and/or field, what was expected and what was found, e.g.
@@ -46,6 +50,10 @@
 #include "models/simulator/contact.h"
 
 namespace tactfunc {
+
+namespace internal {
+class VideoReader;
+}  // namespace internal
 
 enum class Split { kTrain, kTest };
 // "train" / "test", as in labels.csv.
@@ -87,17 +95,37 @@ struct SensorInfo {
   double pixel_pitch_m = 0;        // metres per pixel on the sensing surface; 0 = unknown
   double normalization_scale = 0;  // physical units mapping to 1.0 (metres of depth or
                                    // intensity); 0 = unknown (see preprocess.h)
-  std::string reference;           // reference image path, relative to Dataset::root()
+  std::string reference;           // reference image path, relative to Dataset::root();
+                                   // "" for a clip set (see ClipInfo::reference)
 };
 
 struct FrameRecord {
-  std::string id;  // frame id = file stem; frames of both sensors taken together share it
+  // Frame id = file stem (frames of both sensors taken together share it); in a clip
+  // set "<clip>/<stem>" for a folder clip and "<clip>/<index, 6 digits>" for a video
+  // clip -- the only ids holding a '/'.
+  std::string id;
   SensorKind sensor = SensorKind::kSoftBubble;
   std::string path;                // relative to Dataset::root(); for a video "<file>#<index>"
   std::string clean_path;          // noise-free frame relative to root(), "" if none
   std::optional<PoseLabel> label;  // absent for unlabelled frames
-  Split split = Split::kTrain;     // from labels.csv; kTrain when there is no row
+  Split split = Split::kTrain;     // from labels.csv or clips.csv; kTrain when neither says
+  int clip = -1;                   // index into Dataset::clips(); -1 outside a clip set
+  std::int64_t video_frame = -1;   // a video frame's index in its video (counting every
+                                   // frame, the reference included); -1 for images
 };
+
+// One recording of a clip set (Dataset::Open): a subfolder of images or a video file.
+struct ClipInfo {
+  std::string name;       // subfolder name or video file stem; its frame ids start "<name>/"
+  std::string path;       // relative to Dataset::root(): the subfolder or the video file
+  std::string reference;  // its reference, relative to root(): "<name>/reference.png" or
+                          // "<file>#<index, 6 digits>" for a video
+  bool video = false;
+  std::optional<Split> split;  // from DIR/clips.csv, if the clip is listed there
+};
+
+// True if `path` ends in a video extension: .avi .mp4 .mkv .mov .m4v (any case).
+bool IsVideoFileName(const std::string& path);
 
 // How Dataset::Open and Dataset::OpenVideo read data without metadata.
 struct DatasetOpenOptions {
@@ -109,9 +137,11 @@ struct DatasetOpenOptions {
   // Reference image for a sensor folder without metadata and without a
   // "reference.<ext>" file: a path relative to the sensor folder (tried first) or
   // to the working directory, or absolute. If the file lies inside the sensor folder
-  // it is not also a frame. Ignored when dataset.json exists and for videos.
+  // it is not also a frame. In a clip set: the file of that name inside each folder
+  // clip (only there). Ignored when dataset.json exists and for videos.
   std::string reference;
-  // Video only: the frame used as reference (and left out of the frames). >= 0.
+  // Videos and video clips: the frame used as reference (and left out of the
+  // frames). >= 0.
   int reference_index = 0;
   // Pixel pitch in metres for data without metadata; 0 = unknown. >= 0. With a
   // known pitch, label positions are checked against the sensor's extent.
@@ -134,13 +164,24 @@ class Dataset {
   // id = stem; the reference is "reference.<ext>" if present, else
   // options.reference, else DatasetError. Pixel pitch and normalisation scale come
   // from the options / DefaultNormalizationScale. labels.csv is optional.
+  //
+  // A clip set: a folder without dataset.json, without bubble/ or gelslim/ and
+  // without images of its own, whose subfolders holding images and video files
+  // (IsVideoFileName) are recordings ("clips"), each with its own reference: a
+  // folder clip's reference.<ext> (or options.reference inside it), a video clip's
+  // frame options.reference_index. Clip name = subfolder name or video stem; frame
+  // id = "<clip>/<stem>" or "<clip>/<index, 6 digits>". Every clip must be of the
+  // same sensor kind and frame shape. DIR/clips.csv ("clip,split") optionally gives
+  // each listed clip's frames their split; a labels.csv row of such a frame must
+  // agree. See docs/DATASET_FORMAT.md, "A set of recordings (clips)".
   // Throws DatasetError for any bad input and std::invalid_argument for bad options.
   static Dataset Open(const std::string& dir, const OpenOptions& options = OpenOptions());
-  // Opens an AVI/MP4 (anything cv::VideoCapture reads) as a GelSlim rgb8 dataset.
-  // Frame ids are "000000", "000001", ... counting every frame of the video; frame
-  // options.reference_index is the reference and not a frame. All frames are decoded
-  // here and kept in memory (tactile videos are small: 1000 frames of 320x240 RGB
-  // take 900 MB as float -- decode a part with a tool first if yours is larger).
+  // Opens an AVI/MP4/MKV/MOV (anything cv::VideoCapture reads) as a GelSlim rgb8
+  // dataset. Frame ids are "000000", "000001", ... counting every frame of the video;
+  // frame options.reference_index is the reference and not a frame. The video is read
+  // through once here (counting the frames, checking their size, keeping the
+  // reference); LoadFrame decodes frames on demand, so memory does not grow with the
+  // video's length.
   static Dataset OpenVideo(const std::string& path, const OpenOptions& options = OpenOptions());
 
   // The dataset folder (or the video file), as given to Open.
@@ -167,11 +208,19 @@ class Dataset {
   // Loads every frame (and clean frame) once; throws on the first bad one.
   void ValidateAllFrames() const;
   // The reference (undeformed) frame of a sensor, in physical units. Throws
-  // DatasetError if the sensor is absent.
+  // DatasetError if the sensor is absent, and for a clip set, whose clips each have
+  // their own reference (use FrameReference).
   const Image& Reference(SensorKind sensor) const;
+  // The reference frame `index` is differenced against: its clip's reference in a
+  // clip set, else its sensor's reference. Throws std::out_of_range for a bad index.
+  const Image& FrameReference(std::size_t index) const;
+  // The clips of a clip set, sorted by name (FrameRecord::clip indexes them); empty
+  // for any other dataset.
+  const std::vector<ClipInfo>& clips() const { return clips_; }
 
   // Bytes of every file the dataset consists of: frames, references, clean frames,
-  // dataset.json and labels.csv (for a video: the video file and labels file).
+  // dataset.json, labels.csv and clips.csv (for a video: the video file and labels
+  // file; for a video clip: its video file).
   std::uint64_t BytesOnDisk() const;
   // The paths of those files (joined to root(), sorted): what a command writing
   // outputs must not overwrite.
@@ -195,6 +244,8 @@ class Dataset {
   void SortAndIndexFrames();
   void AttachLabels(const std::string& labels_path, bool ignore_absent_sensors);
   void KeepOnlySensor(SensorKind kind);
+  void OpenClips(const OpenOptions& options);
+  void AttachClipSplits(const std::string& clips_path);
 
   std::string root_;
   std::map<SensorKind, SensorData> sensors_;
@@ -205,8 +256,13 @@ class Dataset {
   std::string meta_json_ = "{}";
   std::string labels_path_;  // absolute or relative-to-cwd path of labels.csv, "" if none
   std::string metadata_path_;
-  // Video datasets: decoded frames, indexed like frames_ (shared so copies are cheap).
-  std::shared_ptr<const std::vector<Image>> video_frames_;
+  std::string clips_path_;  // DIR/clips.csv of a clip set, "" if none
+  // A video dataset's decoder (shared by copies; thread-safe), null otherwise.
+  std::shared_ptr<internal::VideoReader> video_;
+  // A clip set: clips_[k]'s reference and, for a video clip, its decoder.
+  std::vector<ClipInfo> clips_;
+  std::vector<Image> clip_references_;
+  std::vector<std::shared_ptr<internal::VideoReader>> clip_videos_;
 };
 
 // Writes a dataset in the folder format above. Frames are encoded and written as they

@@ -254,7 +254,7 @@ PreprocessedFrame PreprocessFrame(const Dataset& dataset, std::size_t index,
   const SensorInfo& info = dataset.sensor_info(sensor);
   const double scale =
       info.normalization_scale > 0 ? info.normalization_scale : DefaultNormalizationScale(sensor);
-  return Preprocess(frame, dataset.Reference(sensor), sensor, options, scale);
+  return Preprocess(frame, dataset.FrameReference(index), sensor, options, scale);
 }
 
 }  // namespace tactfunc

@@ -48,7 +48,7 @@ TrunkTargets LoadTrunkTargets(const Dataset& dataset, std::size_t index,
                               const FrameFormat& format, bool clean) {
   const FrameRecord& record = dataset.frames().at(index);
   const Image frame = clean ? dataset.LoadCleanFrame(index) : dataset.LoadFrame(index);
-  return MakeTrunkTargets(frame, dataset.Reference(record.sensor), record.sensor, format);
+  return MakeTrunkTargets(frame, dataset.FrameReference(index), record.sensor, format);
 }
 
 namespace {

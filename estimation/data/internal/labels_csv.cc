@@ -40,6 +40,39 @@ std::string Where(const std::string& path, int line) {
   return path + ":" + std::to_string(line) + ": ";
 }
 
+// The lines of a CSV text after a UTF-8 byte order mark, each without its '\r', with
+// their 1-based numbers. The first is the header; blank lines after it are left out.
+// Throws DatasetError if the text has no line or the header is not `header`.
+std::vector<std::pair<int, std::string>> CsvRows(const std::string& text, const std::string& path,
+                                                 const char* header) {
+  std::vector<std::pair<int, std::string>> rows;
+  std::size_t pos = text.compare(0, 3, "\xEF\xBB\xBF") == 0 ? 3 : 0;
+  int line_number = 0;
+  bool header_seen = false;
+  while (pos < text.size()) {
+    std::size_t end = text.find('\n', pos);
+    if (end == std::string::npos) end = text.size();
+    std::string line = text.substr(pos, end - pos);
+    pos = end + 1;
+    ++line_number;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (!header_seen) {
+      if (line != header) {
+        throw DatasetError(Where(path, line_number) + "header: expected '" + header + "', got '" +
+                           EscapedExcerpt(line) + "'");
+      }
+      header_seen = true;
+      continue;
+    }
+    if (line.find_first_not_of(" \t") == std::string::npos) continue;
+    rows.emplace_back(line_number, std::move(line));
+  }
+  if (!header_seen) {
+    throw DatasetError(Where(path, 1) + "header: expected '" + header + "', got an empty file");
+  }
+  return rows;
+}
+
 std::string RangeText(double lo, double hi) {
   return "[" + FormatDoubleShort(lo) + ", " + FormatDoubleShort(hi) + "]";
 }
@@ -114,26 +147,7 @@ bool IsCsvSafe(const std::string& text) {
 std::vector<LabelRow> ParseLabelsCsv(const std::string& text, const std::string& path) {
   std::vector<LabelRow> rows;
   std::set<std::pair<std::string, SensorKind>> seen;
-  std::size_t pos = 0;
-  int line_number = 0;
-  bool header_seen = false;
-  if (text.compare(0, 3, "\xEF\xBB\xBF") == 0) pos = 3;
-  while (pos < text.size()) {
-    std::size_t end = text.find('\n', pos);
-    if (end == std::string::npos) end = text.size();
-    std::string line = text.substr(pos, end - pos);
-    pos = end + 1;
-    ++line_number;
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    if (!header_seen) {
-      if (line != kLabelsHeader) {
-        throw DatasetError(Where(path, line_number) + "header: expected '" + kLabelsHeader +
-                           "', got '" + EscapedExcerpt(line) + "'");
-      }
-      header_seen = true;
-      continue;
-    }
-    if (line.find_first_not_of(" \t") == std::string::npos) continue;
+  for (const auto& [line_number, line] : CsvRows(text, path, kLabelsHeader)) {
     const std::vector<std::string> fields = SplitCommas(line);
     const std::string where = Where(path, line_number);
     if (fields.size() != kNumColumns) {
@@ -190,9 +204,35 @@ std::vector<LabelRow> ParseLabelsCsv(const std::string& text, const std::string&
     }
     rows.push_back(std::move(row));
   }
-  if (!header_seen) {
-    throw DatasetError(Where(path, 1) + "header: expected '" + kLabelsHeader +
-                       "', got an empty file");
+  return rows;
+}
+
+std::vector<ClipSplitRow> ParseClipsCsv(const std::string& text, const std::string& path) {
+  std::vector<ClipSplitRow> rows;
+  std::set<std::string> seen;
+  for (const auto& [line_number, line] : CsvRows(text, path, kClipsHeader)) {
+    const std::string where = Where(path, line_number);
+    const std::vector<std::string> fields = SplitCommas(line);
+    if (fields.size() != 2) {
+      throw DatasetError(where + "expected 2 comma-separated fields (" + kClipsHeader + "), got " +
+                         std::to_string(fields.size()) + " in '" + EscapedExcerpt(line) + "'");
+    }
+    ClipSplitRow row;
+    row.line = line_number;
+    row.clip = fields[0];
+    if (row.clip.empty() || !IsValidUtf8(row.clip)) {
+      throw DatasetError(where + "field 'clip': expected a clip name in UTF-8, got '" +
+                         EscapedExcerpt(row.clip) + "'");
+    }
+    if (!SplitFromString(fields[1], &row.split)) {
+      throw DatasetError(where + "field 'split': expected 'train' or 'test', got '" +
+                         EscapedExcerpt(fields[1]) + "'");
+    }
+    if (!seen.insert(row.clip).second) {
+      throw DatasetError(where + "field 'clip': expected one row per clip, got a second for '" +
+                         EscapedExcerpt(row.clip) + "'");
+    }
+    rows.push_back(std::move(row));
   }
   return rows;
 }

@@ -33,6 +33,20 @@ struct LabelRow {
 // Skips blank lines, a UTF-8 byte order mark and '\r' line ends.
 std::vector<LabelRow> ParseLabelsCsv(const std::string& text, const std::string& path);
 
+// clips.csv of a clip set (docs/DATASET_FORMAT.md): the header, then one row per clip
+// giving the split of all its frames.
+inline constexpr const char* kClipsHeader = "clip,split";
+struct ClipSplitRow {
+  int line = 0;  // 1-based line number in the file
+  std::string clip;
+  Split split = Split::kTrain;
+};
+// Parses the text of a clips.csv. Checks the syntax of every line, the split and
+// duplicate clips; whether a clip exists is checked by the caller. Throws DatasetError
+// "<path>:<line>: ..." naming the field. Skips blank lines, a UTF-8 byte order mark
+// and '\r' line ends, as ParseLabelsCsv does.
+std::vector<ClipSplitRow> ParseClipsCsv(const std::string& text, const std::string& path);
+
 // The text of a labels.csv holding `rows` in the given order.
 std::string FormatLabelsCsv(const std::vector<LabelRow>& rows);
 

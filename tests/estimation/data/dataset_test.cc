@@ -3,8 +3,6 @@
 
 #include <cmath>
 #include <filesystem>
-#include <functional>
-#include <initializer_list>
 #include <limits>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -16,6 +14,7 @@
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "tests/support/dataset_test_util.h"
 #include "tests/support/test_dir.h"
 
 namespace tactfunc {
@@ -35,17 +34,7 @@ constexpr int kGelCols = 14;
 constexpr int kNumIds = 5;
 
 using testing_util::BitIdentical;
-
-// Runs `body` and checks it raises DatasetError whose message holds every piece.
-void ExpectDatasetError(const std::function<void()>& body,
-                        std::initializer_list<const char*> pieces) {
-  try {
-    body();
-    ADD_FAILURE() << "expected a DatasetError, got none";
-  } catch (const DatasetError& e) {
-    for (const char* piece : pieces) EXPECT_THAT(e.what(), HasSubstr(piece));
-  }
-}
+using testing_util::ExpectDatasetError;
 
 std::string Id(int i) {
   char id[16];
