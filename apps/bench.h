@@ -42,6 +42,8 @@ void RegisterPosteriorBenchmark(CLI::App* bench, CommandBody* selected);
 void RegisterPoseMcmcBenchmark(CLI::App* bench, CommandBody* selected);
 // `bench pca` (apps/bench_pca.cc): the wall time of eval's PCA fit.
 void RegisterPcaBenchmark(CLI::App* bench, CommandBody* selected);
+// `bench video-memory` (apps/bench_video_memory.cc): peak memory of reading long videos.
+void RegisterVideoMemoryBenchmark(CLI::App* bench, CommandBody* selected);
 
 }  // namespace tactfunc::apps
 
