@@ -16,6 +16,7 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tests/apps/cli_test_util.h"
+#include "tests/support/dataset_test_util.h"
 #include "nlohmann/json.hpp"
 
 namespace tactfunc {
@@ -241,6 +242,44 @@ TEST_F(CliTest, AUsersOwnFolderOfFramesLoadsLikeADataset) {
   const Result wrong = Run("info " + Path("mine") + " --sensor bubble");
   EXPECT_NE(wrong.exit_code, 0);
   EXPECT_THAT(wrong.err, HasSubstr("mine"));
+}
+
+TEST_F(CliTest, ASetOfClipsEncodesAndReconstructsUnderClipQualifiedIds) {
+  // Two folder clips with references of their own and, where MJPG can be written here,
+  // a video clip whose frame 0 is its reference; clip b is a test clip.
+  testing_util::MakeModel().Save(Path("m.tfm"));
+  for (const std::string clip : {"a", "b"}) {
+    fs::create_directories(Path("set/" + clip));
+    const Image reference(24, 32, 3, clip == "a" ? 0.4f : 0.6f);
+    WritePngAtomically(Path("set/" + clip + "/reference.png"), reference, PixelEncoding::kRgb8);
+    for (int i = 0; i < 2; ++i) {
+      Image frame = reference;
+      frame.at(10, 10 + i, 0) = 1.0f;
+      WritePngAtomically(Path("set/" + clip + "/f" + std::to_string(i) + ".png"), frame,
+                         PixelEncoding::kRgb8);
+    }
+  }
+  const bool video = testing_util::WriteMjpgVideo(
+      Path("set/c.avi"), {testing_util::PatternFrame(0), testing_util::PatternFrame(1),
+                          testing_util::PatternFrame(2)});
+  std::ofstream(Path("set/clips.csv")) << "clip,split\nb,test\n";
+  const Result info = Run("info " + Path("set") + " --json");
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  EXPECT_EQ(info.LastJson()["clips"], video ? 3 : 2);
+  EXPECT_EQ(info.LastJson()["sensors"]["gelslim"]["frames"], video ? 6 : 4);
+  EXPECT_EQ(info.LastJson()["sensors"]["gelslim"]["test"], 2);
+  EXPECT_THAT(info.out, HasSubstr("clips: " + std::string(video ? "3" : "2")));
+  const Result encode = Run("encode --model " + Path("m.tfm") + " --data " + Path("set") +
+                            " --out " + Path("f.tfs") + " --threads 2");
+  ASSERT_EQ(encode.exit_code, 0) << encode.err;
+  const Result recon = Run("recon --model " + Path("m.tfm") + " --functaset " + Path("f.tfs") +
+                           " --data " + Path("set") + " --out " + Path("r") + " --threads 1");
+  ASSERT_EQ(recon.exit_code, 0) << recon.err;
+  const std::string frames = Slurp(Path("r/frames.csv"));
+  EXPECT_THAT(frames, HasSubstr("\na/f0,gelslim,train,"));
+  EXPECT_THAT(frames, HasSubstr("\nb/f1,gelslim,test,"));
+  if (video) EXPECT_THAT(frames, HasSubstr("\nc/000002,gelslim,train,"));
+  EXPECT_TRUE(fs::exists(Path("r/recon_gelslim.png")));
 }
 
 }  // namespace
