@@ -6,6 +6,9 @@
 #include <stdexcept>
 #include <vector>
 
+#include "estimation/data/dataset.h"
+#include "estimation/data/preprocess.h"
+
 namespace tactfunc {
 namespace {
 
@@ -168,6 +171,15 @@ ContactReport DetectContact(const Image& difference, const ContactOptions& optio
   report.contact = report.score >= options.threshold;
   CentreOf(m, box.count, difference.cols, &report.centre_row, &report.centre_col);
   return report;
+}
+
+ContactReport DetectFrameContact(const Dataset& dataset, std::size_t index,
+                                 ContactOptions options) {
+  const FrameRecord& record = dataset.frames().at(index);
+  options.encoding = dataset.sensor_info(record.sensor).encoding;
+  return DetectContact(
+      Difference(dataset.LoadFrame(index), dataset.Reference(record.sensor), record.sensor),
+      options);
 }
 
 void ContactCentre(const Image& difference, int window, double* row, double* col) {

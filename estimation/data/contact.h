@@ -35,6 +35,7 @@
 #ifndef TACTFUNC_ESTIMATION_DATA_CONTACT_H_
 #define TACTFUNC_ESTIMATION_DATA_CONTACT_H_
 
+#include <cstddef>
 #include <limits>
 #include <string>
 
@@ -42,6 +43,8 @@
 #include "models/core/image.h"
 
 namespace tactfunc {
+
+class Dataset;
 
 struct ContactOptions {
   // Score (peak local change in units of its noise) at which a frame is a contact. > 0.
@@ -76,6 +79,11 @@ double QuantisationNoise(PixelEncoding encoding);
 // Steps 1-4 on a difference image. Throws std::invalid_argument for invalid options or
 // an empty image.
 ContactReport DetectContact(const Image& difference, const ContactOptions& options = {});
+
+// DetectContact of frame `index` of `dataset` against its reference, with the encoding
+// of its sensor. Throws like Dataset::LoadFrame.
+ContactReport DetectFrameContact(const Dataset& dataset, std::size_t index,
+                                 ContactOptions options = {});
 
 // Step 4 alone with the box `window` (1 = no smoothing): the centre of the strongest
 // change of an image, e.g. a reconstruction, whose noise is not the question. NaN,

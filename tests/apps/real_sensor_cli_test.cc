@@ -3,7 +3,8 @@
 // Real sensor frames through the whole pipeline, as a user brings them: 49 GelSight ball
 // presses (tests/data/taxim_ballpress, MIT, LICENSE beside the frames) plus one frame at
 // rest (the reference with one level of 8-bit noise) in a user folder without metadata.
-// `info` reads it, a small trunk is trained, `encode` fits every frame, `recon` scores
+// `info` reads it, a small trunk is trained on the presses alone (--skip-rest) at a working
+// size of the frames' aspect ratio, `encode` fits every frame, `recon` scores
 // them with contact and no-contact frames apart, and the contact centres recon reports
 // for the raw frames agree with the hand-placed labels in contacts.csv.
 #include <algorithm>
@@ -83,7 +84,8 @@ class RealSensorCliTest : public ::testing::Test {
     info_ = new Result(Run("info " + Root("d")));
     train_ = new Result(Run("train --data " + Root("d") + " --out " + Root("m.tfm") +
                             " --preset small --latent-dim 8 --width 32 --layers 2 --steps 150"
-                            " --batch 8 --readout --threads 2 --seed 3"));
+                            " --batch 8 --readout --threads 2 --seed 3 --skip-rest"
+                            " --working-size 60x80 --json"));
     encode_ = new Result(Run("encode --data " + Root("d") + " --model " + Root("m.tfm") +
                              " --out " + Root("f.tfs") + " --threads 2"));
     recon_ = new Result(Run("recon --data " + Root("d") + " --model " + Root("m.tfm") +
@@ -116,6 +118,13 @@ TEST_F(RealSensorCliTest, AUserFolderOfGelSightFramesTrainsEncodesAndReconstruct
   EXPECT_THAT(info_->out, HasSubstr("50 frames (38 train, 12 test"));
   EXPECT_THAT(info_->out, HasSubstr("120x160x3 rgb8"));
   ASSERT_EQ(train_->exit_code, 0) << train_->err;
+  // The frame at rest is left out of training; 60 x 80 keeps the frames' aspect ratio, so
+  // nothing is stretched.
+  const nlohmann::json trained = train_->LastJson()["sensors"]["gelslim"];
+  EXPECT_EQ(trained["train_frames"], 37) << trained.dump();
+  EXPECT_EQ(trained["frames_at_rest_skipped"], 1) << trained.dump();
+  EXPECT_THAT(train_->out, HasSubstr("at 60x80"));
+  EXPECT_THAT(train_->err, ::testing::Not(HasSubstr("stretched")));
   ASSERT_EQ(encode_->exit_code, 0) << encode_->err;
   ASSERT_EQ(recon_->exit_code, 0) << recon_->err;
   const nlohmann::json j = recon_->LastJson();
