@@ -91,6 +91,9 @@ class RealSensorCliTest : public ::testing::Test {
     recon_ = new Result(Run("recon --data " + Root("d") + " --model " + Root("m.tfm") +
                             " --functaset " + Root("f.tfs") + " --out " + Root("r") +
                             " --examples 4 --json"));
+    eval_ = new Result(Run("eval --data " + Root("d") + " --model " + Root("m.tfm") +
+                           " --functaset " + Root("f.tfs") + " --out " + Root("e") +
+                           " --threads 2 --json"));
   }
   static void TearDownTestSuite() {
     fs::remove_all(*root_);
@@ -99,12 +102,13 @@ class RealSensorCliTest : public ::testing::Test {
     delete train_;
     delete encode_;
     delete recon_;
+    delete eval_;
   }
   static std::string Root(const std::string& name) { return (*root_ / name).string(); }
   static Result Run(const std::string& args) { return testing_util::RunTactfunc(*root_, args); }
 
   static fs::path* root_;
-  static Result *info_, *train_, *encode_, *recon_;
+  static Result *info_, *train_, *encode_, *recon_, *eval_;
 };
 
 fs::path* RealSensorCliTest::root_ = nullptr;
@@ -112,6 +116,7 @@ Result* RealSensorCliTest::info_ = nullptr;
 Result* RealSensorCliTest::train_ = nullptr;
 Result* RealSensorCliTest::encode_ = nullptr;
 Result* RealSensorCliTest::recon_ = nullptr;
+Result* RealSensorCliTest::eval_ = nullptr;
 
 TEST_F(RealSensorCliTest, AUserFolderOfGelSightFramesTrainsEncodesAndReconstructs) {
   ASSERT_EQ(info_->exit_code, 0) << info_->err;
@@ -151,6 +156,30 @@ TEST_F(RealSensorCliTest, PressesAreContactsTheFrameAtRestIsNot) {
         << id << " score " << frames.Get(id, "contact_score");
   }
   EXPECT_LT(std::stod(frames.Get("rest", "contact_score")), 6.0);
+}
+
+// eval without pose labels or pose model: the reconstruction table, with the contact
+// frames and the frame at rest apart for every approach.
+TEST_F(RealSensorCliTest, EvalScoresContactAndRestApartForEveryApproach) {
+  ASSERT_EQ(eval_->exit_code, 0) << eval_->err;
+  const nlohmann::json j = eval_->LastJson();
+  int checked = 0;
+  for (const auto& row : j["rows"]) {
+    if (!row["psnr_applicable"].get<bool>()) continue;
+    SCOPED_TRACE(row.dump());
+    if (row["split"] == "train") {
+      EXPECT_EQ(row["frames"], 38);
+      EXPECT_EQ(row["contact_frames"], 37);
+      EXPECT_TRUE(row["psnr_no_contact"].is_number());
+    } else {
+      EXPECT_EQ(row["contact_frames"], row["frames"]);
+      EXPECT_TRUE(row["psnr_no_contact"].is_null());
+      EXPECT_NEAR(row["psnr_contact"].get<double>(), row["psnr"].get<double>(), 1e-9);
+    }
+    ++checked;
+  }
+  EXPECT_EQ(checked, 6);  // TactFunc, PCA, JPEG x train, test
+  EXPECT_THAT(testing_util::Slurp(Root("e/table.md")), HasSubstr("PSNR at rest (dB)"));
 }
 
 // The centres recon reports for the raw frames, in the frame's own pixels, against the
