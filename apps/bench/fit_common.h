@@ -28,11 +28,14 @@
 #define TACTFUNC_APPS_BENCH_FIT_COMMON_H_
 
 #include <chrono>
+#include <cstdint>
 #include <string>
 #include <vector>
 
 #include "apps/command.h"
+#include "estimation/data/trunk_targets.h"
 #include "models/core/sensor.h"
+#include "models/trunk/latent_modulated_siren.h"
 #include "nlohmann/json.hpp"
 
 namespace tactfunc::apps::bench {
@@ -55,10 +58,18 @@ std::string CommandLine(const std::vector<std::string>& parts);
 // --sensors: a comma-separated list of bubble / gelslim; throws UsageError otherwise.
 std::vector<SensorKind> ParseSensors(const std::string& text);
 
+// A rows x cols frame that `siren` generates from a random latent (each entry 0.3 N(0, 1))
+// plus Gaussian noise of standard deviation 0.01, every pixel valid, drawn from `seed`:
+// what the kernel and trunk benchmarks fit (no dataset needed; their cost does not depend
+// on the values).
+TrunkTargets TrunkGeneratedFrame(const LatentModulatedSiren& siren, int rows, int cols,
+                                 std::uint64_t seed);
+
 // The suites (registered by RegisterFitBenchmarks, apps/bench.h).
 void RegisterFitSuite(CLI::App* bench, CommandBody* selected);      // fit_suite.cc
 void RegisterKernelSuite(CLI::App* bench, CommandBody* selected);   // fit_kernels.cc
 void RegisterKnnSuite(CLI::App* bench, CommandBody* selected);      // knn_suite.cc
+void RegisterTrunkSuite(CLI::App* bench, CommandBody* selected);    // trunk_suite.cc
 
 }  // namespace tactfunc::apps::bench
 
