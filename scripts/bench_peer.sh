@@ -90,6 +90,7 @@ common=(--rows 70 --cols 88 --steps 3 --batch 32 --pixels 512)
 
 echo "bench_peer: $rounds rounds; fits x $repeats, meta steps x $meta_repeats per run; sizes $sizes"
 echo "bench_peer: python $python; LD_LIBRARY_PATH=${LD_LIBRARY_PATH:-}"
+echo "bench_peer: load average at the start: $(cut -d' ' -f1-3 /proc/loadavg 2>/dev/null || echo n/a)"
 IFS=',' read -r -a size_list <<<"$sizes"
 for size in "${size_list[@]}"; do
   IFS=':' read -r width layers latent <<<"$size"
@@ -114,6 +115,7 @@ for round in $(seq 1 "$rounds"); do
   done
 done
 
+echo "bench_peer: load average at the end: $(cut -d' ' -f1-3 /proc/loadavg 2>/dev/null || echo n/a)"
 "$python" - "$out" "$rounds" "$sizes" <<'EOF'
 import json, statistics, sys
 out, rounds, sizes = sys.argv[1], int(sys.argv[2]), sys.argv[3].split(",")
