@@ -166,12 +166,16 @@ def full_fit(trunk, rows, cols, targets, weights, alpha, steps, sigma=0.01):
     return z, psnr
 
 
-def run_fit(args):
+def fit_setup(args):
+    """The frozen trunk, the frame's grid, a generated frame, its weights and alpha = 1."""
     trunk = make_trunk(args).requires_grad_(False)
     coords = grid(args.rows, args.cols)
     targets = generated_frame(trunk, coords, torch.Generator().manual_seed(5))
-    weights = torch.ones(coords.shape[0])
-    alpha = torch.ones(args.latent)
+    return trunk, coords, targets, torch.ones(coords.shape[0]), torch.ones(args.latent)
+
+
+def run_fit(args):
+    trunk, coords, targets, weights, alpha = fit_setup(args)
     full_fit(trunk, args.rows, args.cols, targets, weights, alpha, args.steps)  # warm-up
     core_ms, full_ms, psnr = [], [], math.nan
     for _ in range(args.repeats):
@@ -263,11 +267,7 @@ def profiled_gemm_flops(fn):
 
 
 def run_flops(args):
-    trunk = make_trunk(args).requires_grad_(False)
-    coords = grid(args.rows, args.cols)
-    targets = generated_frame(trunk, coords, torch.Generator().manual_seed(5))
-    weights = torch.ones(coords.shape[0])
-    alpha = torch.ones(args.latent)
+    trunk, coords, targets, weights, alpha = fit_setup(args)
     trainer = MetaTrainer(args)
     out = {"workload": "flops"}
     out["profiled_fit_core_gemm_gflop"] = profiled_gemm_flops(
