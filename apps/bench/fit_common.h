@@ -13,6 +13,10 @@
 //                           Eigen float GEMM (GFLOP/s, to re-measure -march=native).
 //   tactfunc bench knn      FLANN kd-forest / k-means at several checks against brute force:
 //                           recall@8, median ms per query, build time.
+//   tactfunc bench trunk    the trunk's two workloads at any size on generated frames: a
+//                           meta_sgd:K fit (its steps and the whole fit) and one second-order
+//                           meta-training step, median/min/max over repeats, GEMM FLOPs
+//                           (scripts/bench_peer.sh runs it beside PyTorch).
 //
 // `bench fit` and `bench knn` time with std::chrono, one measurement per frame (query),
 // and report the distribution (median, p90): they measure what a user waits per frame,
@@ -22,8 +26,8 @@
 // repetitions).
 //
 // Files: fit_suite.cc (bench fit; its plot and table in fit_report.cc), fit_kernels.cc
-// (bench kernels), knn_suite.cc (bench knn); this header holds what they share: timing,
-// sample statistics and report helpers.
+// (bench kernels), knn_suite.cc (bench knn), trunk_suite.cc (bench trunk); this header
+// holds what they share: timing, sample statistics and report helpers.
 #ifndef TACTFUNC_APPS_BENCH_FIT_COMMON_H_
 #define TACTFUNC_APPS_BENCH_FIT_COMMON_H_
 
