@@ -46,12 +46,6 @@ while [[ $# -gt 0 ]]; do
   esac
 done
 
-tactfunc="${TACTFUNC:-build/bin/tactfunc}"
-if [[ ! -x "$tactfunc" ]]; then
-  echo "bench_peer: $tactfunc not found; build first (scripts/build.sh)" >&2
-  exit 1
-fi
-
 openblas_dir=/usr/lib/x86_64-linux-gnu/openblas-pthread
 if [[ -d "$openblas_dir" ]]; then
   export LD_LIBRARY_PATH="$openblas_dir${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
@@ -78,6 +72,12 @@ bench_peer: PyTorch is not importable (tried $PYTHON, python3, /usr/bin/python3)
 bench_peer: skipped
 EOF
   exit 0
+fi
+
+tactfunc="${TACTFUNC:-build/bin/tactfunc}"
+if [[ ! -x "$tactfunc" ]]; then
+  echo "bench_peer: $tactfunc not found; build first (scripts/build.sh)" >&2
+  exit 1
 fi
 
 if [[ -z "$out" ]]; then
