@@ -89,6 +89,9 @@ nlohmann::json RowJson(const Row& r) {
           {"psnr_applicable", r.psnr_applicable},
           {"psnr_clean", NumberOrNull(r.psnr_clean)},
           {"frames", r.frames},
+          {"contact_frames", r.contact_frames},
+          {"psnr_contact", NumberOrNull(r.psnr_contact)},
+          {"psnr_no_contact", NumberOrNull(r.psnr_no_contact)},
           {"pose_frames", r.pose.count},
           {"pose_mse", has_pose ? NumberOrNull(r.pose.PoseMse()) : nlohmann::json(nullptr)},
           {"rmse_mm", has_pose ? NumberOrNull(r.pose.RmseMm()) : nlohmann::json(nullptr)},
@@ -427,14 +430,20 @@ void RunEval(const EvalFlags& flags) {
   // The clean-PSNR column only for data with noise-free frames (simulated, synth --clean).
   const bool any_clean = std::any_of(rows.begin(), rows.end(),
                                      [](const Row& r) { return std::isfinite(r.psnr_clean); });
+  // Contact and rest columns only when some frame is at rest (else they repeat PSNR).
+  const bool any_rest = std::any_of(rows.begin(), rows.end(), [](const Row& r) {
+    return r.psnr_applicable && r.contact_frames < r.frames;
+  });
   // Without a pose model the pose columns are left out.
   std::ostringstream md;
   md << "| approach |" << (has_pose ? " pose from |" : "")
      << " sensor | split | rep. size (MB) | bytes/frame | PSNR (dB) |"
      << (any_clean ? " PSNR clean (dB) |" : "")
+     << (any_rest ? " contact frames | PSNR contact (dB) | PSNR at rest (dB) |" : "")
      << (has_pose ? " pose MSE | RMSE (mm) | RMSE (deg) |" : "") << "\n"
      << "|---|" << (has_pose ? "---|" : "") << "---|---|---:|---:|---:|"
-     << (any_clean ? "---:|" : "") << (has_pose ? "---:|---:|---:|" : "") << "\n";
+     << (any_clean ? "---:|" : "") << (any_rest ? "---:|---:|---:|" : "")
+     << (has_pose ? "---:|---:|---:|" : "") << "\n";
   for (const Row& r : rows) {
     const bool row_pose = r.pose.count > 0;
     md << "| " << r.approach << (r.note.empty() ? "" : " (" + r.note + ")") << " | ";
@@ -444,6 +453,13 @@ void RunEval(const EvalFlags& flags) {
        << " | "
        << (r.psnr_applicable ? FormatFixed(r.psnr, 2, "-") : std::string("n/a (lossless)")) << " |"
        << (any_clean ? " " + FormatFixed(r.psnr_clean, 2, "-") + " |" : std::string());
+    if (any_rest) {
+      md << " " << (r.psnr_applicable ? std::to_string(r.contact_frames) + "/" +
+                                            std::to_string(r.frames)
+                                      : std::string("-"))
+         << " | " << FormatFixed(r.psnr_contact, 2, "-") << " | "
+         << FormatFixed(r.psnr_no_contact, 2, "-") << " |";
+    }
     if (has_pose) {
       md << " " << (row_pose ? Sci(r.pose.PoseMse()) : "-") << " | "
          << (row_pose ? FormatFixed(r.pose.RmseMm(), 3, "-") : "-") << " | "

@@ -194,7 +194,8 @@ void WritePerFrameCsv(const std::string& path, const ReconstructionEvaluator::Su
                       const Dataset& dataset) {
   std::string text =
       "frame,sensor,split,tool,depth_m,target_range,source_range,rmse,psnr,psnr_clean,"
-      "psnr_zero,psnr_source_peak\n";
+      "psnr_zero,psnr_source_peak,contact,contact_score,contact_row,contact_col,"
+      "recon_contact_row,recon_contact_col\n";
   for (const auto& r : summary.frames) {
     const auto& label = dataset.frames()[r.dataset_index].label;
     text += CsvField(r.id) + "," + ToString(r.sensor) + "," + ToString(r.split) + "," +
@@ -202,7 +203,10 @@ void WritePerFrameCsv(const std::string& path, const ReconstructionEvaluator::Su
             (label ? CsvNumber(label->depth_m) : std::string()) + "," +
             CsvNumber(r.target_range) + "," + CsvNumber(r.source_range) + "," +
             CsvNumber(r.rmse) + "," + CsvNumber(r.psnr) + "," + CsvNumber(r.psnr_clean) + "," +
-            CsvNumber(r.psnr_zero) + "," + CsvNumber(r.psnr_source_peak) + "\n";
+            CsvNumber(r.psnr_zero) + "," + CsvNumber(r.psnr_source_peak) + "," +
+            (r.contact ? "1" : "0") + "," + CsvNumber(r.contact_score) + "," +
+            CsvNumber(r.contact_row) + "," + CsvNumber(r.contact_col) + "," +
+            CsvNumber(r.recon_contact_row) + "," + CsvNumber(r.recon_contact_col) + "\n";
   }
   WriteFileAtomically(path, text);
 }
@@ -284,6 +288,11 @@ void RunRecon(const ReconFlags& flags) {
     // The paper release's PSNR convention (peak = the source-resolution range).
     figures["psnr_test_source_peak"] = per_sensor(Split::kTest, &Group::source_peak);
     figures["psnr_train_source_peak"] = per_sensor(Split::kTrain, &Group::source_peak);
+    // Contact and no-contact frames apart (estimation/data/contact.h).
+    figures["psnr_test_contact"] = per_sensor(Split::kTest, &Group::contact);
+    figures["psnr_test_no_contact"] = per_sensor(Split::kTest, &Group::no_contact);
+    figures["psnr_train_contact"] = per_sensor(Split::kTrain, &Group::contact);
+    figures["psnr_train_no_contact"] = per_sensor(Split::kTrain, &Group::no_contact);
     nlohmann::json groups = nlohmann::json::array();
     for (const auto& g : summary.groups) {
       auto stats = [](const PsnrStats& s) {
@@ -297,7 +306,9 @@ void RunRecon(const ReconFlags& flags) {
                         {"noisy", stats(g.noisy)},
                         {"clean", summary.has_clean ? stats(g.clean) : nlohmann::json(nullptr)},
                         {"zero", stats(g.zero)},
-                        {"source_peak", stats(g.source_peak)}});
+                        {"source_peak", stats(g.source_peak)},
+                        {"contact", stats(g.contact)},
+                        {"no_contact", stats(g.no_contact)}});
     }
     figures["groups"] = groups;
     figures["compression_ratio"] = summary.size.compression_ratio;

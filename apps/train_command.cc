@@ -53,6 +53,8 @@ struct TrainFlags {
   int checkpoint_every = 0;
   bool first_order = false;
   bool readout = false;
+  bool skip_rest = false;
+  std::string working_size;  // "ROWSxCOLS", empty = the preset's
   bool resume = false;
   bool json = false;
   // Set after parsing: which overrides were given.
@@ -123,6 +125,19 @@ TrunkTrainer::Options OptionsFor(const TrainFlags& flags, SensorKind sensor) {
   }
   if (flags.divergence_drop_db_option->count()) {
     options.divergence_drop_db = flags.divergence_drop_db;
+  }
+  if (flags.skip_rest) options.skip_frames_at_rest = true;
+  if (!flags.working_size.empty()) {
+    int rows = 0, cols = 0;
+    char x = 0, extra = 0;
+    std::istringstream in(flags.working_size);
+    if (!(in >> rows >> x >> cols) || (x != 'x' && x != 'X') || (in >> extra) || rows < 1 ||
+        cols < 1 || rows > 4096 || cols > 4096) {
+      throw UsageError("--working-size: expected ROWSxCOLS with each in [1, 4096], got '" +
+                       flags.working_size + "'");
+    }
+    options.rows = rows;
+    options.cols = cols;
   }
   options.threads = ResolveThreads(flags.threads);
   std::string error;
@@ -322,6 +337,11 @@ void RunTrain(const TrainFlags& flags) {
     SensorTrunk trunk;
     const TrunkTrainer::Summary summary = trainer.Train(dataset, sensor, &trunk, callback);
     bar->Finish();
+    if (sensor_options.skip_frames_at_rest) {
+      std::cout << "train " << name << ": left out " << summary.num_frames_at_rest_skipped
+                << " train-split frame(s) at rest; trained on " << summary.num_train_frames
+                << "\n";
+    }
     std::cout << summary.BriefReport() << "\n";
     if (summary.termination_type == TrunkTrainer::TerminationType::kUserStopped) {
       std::signal(SIGINT, SIG_DFL);
@@ -351,6 +371,7 @@ void RunTrain(const TrainFlags& flags) {
                             {"loss", summary.final_loss},
                             {"residual_sigma", summary.residual_sigma},
                             {"train_frames", summary.num_train_frames},
+                            {"frames_at_rest_skipped", summary.num_frames_at_rest_skipped},
                             {"parameters", summary.num_parameters}};
     // No wall-clock figures (seconds, threads) in the model file: the same seed gives
     // the same bytes and so the same checksum (docs/TRAINING.md). The timing is in
@@ -495,6 +516,12 @@ void RegisterTrain(CLI::App& app, CommandBody* selected) {
                       "The readout branch's step size as a fraction of the trunk's, in [0, 1] "
                       "(default 0: kept at its PCA start)")
           ->check(CLI::Range(0.0, 1.0));
+  sub->add_flag("--skip-rest", flags->skip_rest,
+                "Leave train-split frames at rest (no contact above the sensor's noise; "
+                "docs/REAL_DATA.md) out of training");
+  sub->add_option("--working-size", flags->working_size,
+                  "Working resolution ROWSxCOLS the frames are resized to (default: the "
+                  "preset's; keep your frames' aspect ratio)");
   sub->add_option("--threads", flags->threads, "Worker threads (default: all cores)")
       ->check(CLI::Range(0, 256));
   flags->seed_option =

@@ -18,14 +18,15 @@ case "$split" in
 esac
 test -r "$csv" || { echo "$0: cannot read $csv" >&2; exit 1; }
 header='frame,sensor,split,tool,depth_m,target_range,source_range,rmse,psnr,psnr_clean,'
-header+='psnr_zero,psnr_source_peak'
+header+='psnr_zero,psnr_source_peak,contact,contact_score,contact_row,contact_col,'
+header+='recon_contact_row,recon_contact_col'
 [ "$(head -1 "$csv")" = "$header" ] ||
   { echo "$0: $csv: the header is not that of tactfunc recon's frames.csv" >&2; exit 1; }
 # The columns below are split on plain commas; recon quotes a field holding a comma
 # (a frame id or tool name), which this script does not parse: refuse such rows.
-bad=$(awk -F, 'NR > 1 && NF != 12 { print NR; exit }' "$csv")
+bad=$(awk -F, 'NR > 1 && NF != 18 { print NR; exit }' "$csv")
 [ -z "$bad" ] ||
-  { echo "$0: $csv:$bad: not 12 plain fields (a quoted id or tool?)" >&2; exit 1; }
+  { echo "$0: $csv:$bad: not 18 plain fields (a quoted id or tool?)" >&2; exit 1; }
 
 for sensor in $(awk -F, 'NR > 1 { print $2 }' "$csv" | sort -u); do
   echo "$sensor ($split split): quintiles of the target's range"

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <random>
 
 namespace tactfunc::apps::bench {
 
@@ -80,6 +81,23 @@ std::vector<SensorKind> ParseSensors(const std::string& text) {
     sensors.push_back(kind);
   }
   return sensors;
+}
+
+TrunkTargets TrunkGeneratedFrame(const LatentModulatedSiren& siren, int rows, int cols,
+                                 std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  Eigen::VectorXf truth(siren.latent_dim());
+  for (int k = 0; k < truth.size(); ++k) truth[k] = static_cast<float>(0.3 * normal(rng));
+  TrunkTargets targets;
+  targets.rows = rows;
+  targets.cols = cols;
+  targets.values = siren.Forward<float>(siren.Grid<float>(rows, cols), truth);
+  for (int i = 0; i < targets.values.size(); ++i) {
+    targets.values.data()[i] += static_cast<float>(0.01 * normal(rng));
+  }
+  targets.weights = Eigen::VectorXf::Ones(static_cast<long>(rows) * cols);
+  return targets;
 }
 
 }  // namespace tactfunc::apps::bench

@@ -13,6 +13,10 @@
 //                           Eigen float GEMM (GFLOP/s, to re-measure -march=native).
 //   tactfunc bench knn      FLANN kd-forest / k-means at several checks against brute force:
 //                           recall@8, median ms per query, build time.
+//   tactfunc bench trunk    the trunk's two workloads at any size on generated frames: a
+//                           meta_sgd:K fit (its steps and the whole fit) and one second-order
+//                           meta-training step, median/min/max over repeats, GEMM FLOPs
+//                           (scripts/bench_peer.sh runs it beside PyTorch).
 //
 // `bench fit` and `bench knn` time with std::chrono, one measurement per frame (query),
 // and report the distribution (median, p90): they measure what a user waits per frame,
@@ -22,17 +26,20 @@
 // repetitions).
 //
 // Files: fit_suite.cc (bench fit; its plot and table in fit_report.cc), fit_kernels.cc
-// (bench kernels), knn_suite.cc (bench knn); this header holds what they share: timing,
-// sample statistics and report helpers.
+// (bench kernels), knn_suite.cc (bench knn), trunk_suite.cc (bench trunk); this header
+// holds what they share: timing, sample statistics and report helpers.
 #ifndef TACTFUNC_APPS_BENCH_FIT_COMMON_H_
 #define TACTFUNC_APPS_BENCH_FIT_COMMON_H_
 
 #include <chrono>
+#include <cstdint>
 #include <string>
 #include <vector>
 
 #include "apps/command.h"
+#include "estimation/data/trunk_targets.h"
 #include "models/core/sensor.h"
+#include "models/trunk/latent_modulated_siren.h"
 #include "nlohmann/json.hpp"
 
 namespace tactfunc::apps::bench {
@@ -55,10 +62,18 @@ std::string CommandLine(const std::vector<std::string>& parts);
 // --sensors: a comma-separated list of bubble / gelslim; throws UsageError otherwise.
 std::vector<SensorKind> ParseSensors(const std::string& text);
 
+// A rows x cols frame that `siren` generates from a random latent (each entry 0.3 N(0, 1))
+// plus Gaussian noise of standard deviation 0.01, every pixel valid, drawn from `seed`:
+// what the kernel and trunk benchmarks fit (no dataset needed; their cost does not depend
+// on the values).
+TrunkTargets TrunkGeneratedFrame(const LatentModulatedSiren& siren, int rows, int cols,
+                                 std::uint64_t seed);
+
 // The suites (registered by RegisterFitBenchmarks, apps/bench.h).
 void RegisterFitSuite(CLI::App* bench, CommandBody* selected);      // fit_suite.cc
 void RegisterKernelSuite(CLI::App* bench, CommandBody* selected);   // fit_kernels.cc
 void RegisterKnnSuite(CLI::App* bench, CommandBody* selected);      // knn_suite.cc
+void RegisterTrunkSuite(CLI::App* bench, CommandBody* selected);    // trunk_suite.cc
 
 }  // namespace tactfunc::apps::bench
 

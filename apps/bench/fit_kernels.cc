@@ -71,8 +71,7 @@ struct KernelFlags {
   std::vector<std::string> extra;
 };
 
-// What one trunk's kernels run on: a frame the trunk generates from a random latent plus
-// 0.01 noise (no dataset needed; the kernels' cost does not depend on the values).
+// What one trunk's kernels run on: a frame the trunk generates (TrunkGeneratedFrame).
 struct KernelSetup {
   std::string label;
   SensorTrunk trunk;
@@ -86,23 +85,15 @@ std::shared_ptr<KernelSetup> MakeKernelSetup(const std::string& label, const Sen
   auto s = std::make_shared<KernelSetup>();
   s->label = label;
   s->trunk = trunk;
-  const int rows = trunk.format.rows, cols = trunk.format.cols, d = trunk.siren.latent_dim();
-  std::mt19937_64 rng(5);
-  std::normal_distribution<double> normal(0.0, 1.0);
-  Eigen::VectorXf truth(d);
-  for (int k = 0; k < d; ++k) truth[k] = static_cast<float>(0.3 * normal(rng));
-  s->targets.rows = rows;
-  s->targets.cols = cols;
-  s->targets.values = s->trunk.siren.Forward<float>(s->trunk.siren.Grid<float>(rows, cols), truth);
-  for (int i = 0; i < s->targets.values.size(); ++i) {
-    s->targets.values.data()[i] += static_cast<float>(0.01 * normal(rng));
-  }
-  s->targets.weights = Eigen::VectorXf::Ones(rows * cols);
+  const int d = trunk.siren.latent_dim();
+  s->targets = TrunkGeneratedFrame(s->trunk.siren, trunk.format.rows, trunk.format.cols, 5);
   LatentProblem::Options options;
   options.sigma = 0.01;
   s->problem_float = std::make_unique<LatentProblem>(s->trunk, s->targets, options);
   options.precision = LatentProblem::Precision::kDouble;
   s->problem_double = std::make_unique<LatentProblem>(s->trunk, s->targets, options);
+  std::mt19937_64 rng(6);
+  std::normal_distribution<double> normal(0.0, 1.0);
   s->z = Eigen::VectorXd::Zero(d);
   for (int k = 0; k < d; ++k) s->z[k] = 0.1 * normal(rng);
   return s;

@@ -407,6 +407,7 @@ void RegisterFitBenchmarks(CLI::App* bench, CommandBody* selected) {
   bench::RegisterFitSuite(bench, selected);
   bench::RegisterKernelSuite(bench, selected);
   bench::RegisterKnnSuite(bench, selected);
+  bench::RegisterTrunkSuite(bench, selected);
 }
 
 }  // namespace tactfunc::apps

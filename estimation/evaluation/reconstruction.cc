@@ -10,6 +10,7 @@
 #include <stdexcept>
 
 #include "models/core/parallel_for.h"
+#include "estimation/data/preprocess.h"
 #include "estimation/data/trunk_targets.h"
 
 namespace tactfunc {
@@ -123,6 +124,26 @@ std::string Db(double value) {
 
 }  // namespace
 
+namespace {
+
+// The centre of a reconstruction's change (ContactCentre, no smoothing: the trunk's output
+// is smooth) at the working resolution, mapped to source pixels: working pixel centres
+// sit at (i + 0.5) source_size / working_size - 0.5.
+void ReconstructionCentre(const Eigen::MatrixXf& prediction, const FrameFormat& format,
+                          int source_rows, int source_cols, double* row, double* col) {
+  Image image(format.rows, format.cols, static_cast<int>(prediction.cols()));
+  for (int i = 0; i < format.rows * format.cols; ++i) {
+    for (int c = 0; c < image.channels; ++c) {
+      image.data[static_cast<std::size_t>(i) * image.channels + c] = prediction(i, c);
+    }
+  }
+  ContactCentre(image, 1, row, col);
+  *row = (*row + 0.5) * source_rows / format.rows - 0.5;
+  *col = (*col + 0.5) * source_cols / format.cols - 0.5;
+}
+
+}  // namespace
+
 std::string ReconstructionEvaluator::Summary::BriefReport() const {
   std::ostringstream out;
   out << "recon: " << frames.size() << " frames";
@@ -163,6 +184,18 @@ std::string ReconstructionEvaluator::Summary::FullReport() const {
                 static_cast<unsigned long long>(size.latent_bytes),
                 static_cast<unsigned long long>(size.raw_bytes), size.compression_ratio);
   out << line;
+  std::snprintf(line, sizeof(line), "%-8s %-6s %8s  %-23s %11s  %-23s\n", "sensor", "split",
+                "contact", "PSNR noisy mean/med/p5", "no contact", "PSNR noisy mean/med/p5");
+  out << line;
+  for (const GroupSummary& g : groups) {
+    std::snprintf(line, sizeof(line), "%-8s %-6s %8lld  %-23s %11lld  %-23s\n",
+                  ToString(g.sensor), ToString(g.split),
+                  static_cast<long long>(g.contact.count + g.contact.excluded),
+                  g.contact.count > 0 ? triple(g.contact).c_str() : "-",
+                  static_cast<long long>(g.no_contact.count + g.no_contact.excluded),
+                  g.no_contact.count > 0 ? triple(g.no_contact).c_str() : "-");
+    out << line;
+  }
   return out.str();
 }
 
@@ -227,7 +260,19 @@ ReconstructionEvaluator::Summary ReconstructionEvaluator::Evaluate(const FunctaM
     const FrameFormat& format = state.trunk->format;
     const Eigen::MatrixXf prediction =
         state.trunk->siren.Forward<float>(state.grid, entries[i]->latent);
-    const TrunkTargets targets = LoadTrunkTargets(dataset, r.dataset_index, format);
+    const Image frame = dataset.LoadFrame(r.dataset_index);
+    const Image& reference = dataset.Reference(r.sensor);
+    const TrunkTargets targets = MakeTrunkTargets(frame, reference, r.sensor, format);
+    ContactOptions contact_options = options_.contact;
+    contact_options.encoding = dataset.sensor_info(r.sensor).encoding;
+    const ContactReport contact =
+        DetectContact(Difference(frame, reference, r.sensor), contact_options);
+    r.contact = contact.contact;
+    r.contact_score = contact.score;
+    r.contact_row = contact.centre_row;
+    r.contact_col = contact.centre_col;
+    ReconstructionCentre(prediction, format, frame.rows, frame.cols, &r.recon_contact_row,
+                         &r.recon_contact_col);
     r.psnr = Psnr(prediction, targets);
     r.psnr_source_peak = PsnrSourcePeak(prediction, targets);
     r.target_range = TargetRange(targets);
@@ -241,10 +286,11 @@ ReconstructionEvaluator::Summary ReconstructionEvaluator::Evaluate(const FunctaM
 
   for (const auto& [sensor, state] : states) {
     for (Split split : {Split::kTrain, Split::kTest}) {
-      std::vector<double> noisy, clean, zero, source_peak;
+      std::vector<double> noisy, clean, zero, source_peak, contact, no_contact;
       for (const FrameResult& r : summary.frames) {
         if (r.sensor != sensor || r.split != split) continue;
         noisy.push_back(r.psnr);
+        (r.contact ? contact : no_contact).push_back(r.psnr);
         source_peak.push_back(r.psnr_source_peak);
         zero.push_back(r.psnr_zero);
         if (summary.has_clean) clean.push_back(r.psnr_clean);
@@ -257,6 +303,8 @@ ReconstructionEvaluator::Summary ReconstructionEvaluator::Evaluate(const FunctaM
       g.clean = ComputePsnrStats(clean);
       g.zero = ComputePsnrStats(zero);
       g.source_peak = ComputePsnrStats(source_peak);
+      g.contact = ComputePsnrStats(contact);
+      g.no_contact = ComputePsnrStats(no_contact);
       summary.groups.push_back(g);
     }
   }

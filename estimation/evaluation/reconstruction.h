@@ -16,6 +16,13 @@
 // with Psnr the one definition of estimation/data/trunk_targets.h. Per sensor and split the
 // evaluator reports mean, median and 5th percentile of each (PsnrStats).
 //
+// Contact (estimation/data/contact.h): every entry's raw difference with its reference, at
+// the source resolution, is tested for contact (`contact`, `contact_score`, and the
+// centre of the change in source pixels), and the centre of its reconstruction's change
+// is mapped to the same pixels (`recon_contact_row/col`). Each group's PSNRs are also
+// summarised over its contact and its no-contact frames apart: frames at rest are mostly
+// sensor noise and say little about how well contacts are kept.
+//
 // Representation size (Tab. I's "Rep. size"):
 //   representation_bytes = model bytes (the trunks of the functaset's sensors: theta
 //                          and alpha as stored, float32) + latents (sum_s M_s d_s 4)
@@ -34,6 +41,7 @@
 
 #include <Eigen/Core>
 
+#include "estimation/data/contact.h"
 #include "estimation/data/dataset.h"
 #include "estimation/functaset/functaset.h"
 #include "models/trunk/functa_model.h"
@@ -84,6 +92,8 @@ class ReconstructionEvaluator {
     int threads = 1;
     // Also compare with the noise-free frames when the dataset has them.
     bool clean = true;
+    // The contact test; its encoding is set per sensor from the dataset.
+    ContactOptions contact;
     bool IsValid(std::string* error) const;
   };
 
@@ -103,6 +113,15 @@ class ReconstructionEvaluator {
     double target_range = 0;
     double source_range = 0;
     double rmse = std::numeric_limits<double>::quiet_NaN();
+    // The contact test of the raw frame against its reference (DetectContact), and the
+    // centres of the change in the frame and in the reconstruction, in source pixels
+    // (row, col; NaN when the image holds no change).
+    bool contact = false;
+    double contact_score = 0;
+    double contact_row = std::numeric_limits<double>::quiet_NaN();
+    double contact_col = std::numeric_limits<double>::quiet_NaN();
+    double recon_contact_row = std::numeric_limits<double>::quiet_NaN();
+    double recon_contact_col = std::numeric_limits<double>::quiet_NaN();
   };
 
   struct GroupSummary {
@@ -112,6 +131,8 @@ class ReconstructionEvaluator {
     PsnrStats clean;  // psnr_clean (count 0 without clean frames)
     PsnrStats zero;   // psnr_zero
     PsnrStats source_peak;  // psnr_source_peak
+    PsnrStats contact;      // psnr of the group's contact frames
+    PsnrStats no_contact;   // psnr of the group's frames without contact
   };
 
   // Evaluation has no algorithmic outcome to report (no iteration, nothing to

@@ -8,6 +8,7 @@
 #include <stdexcept>
 #include <utility>
 
+#include "estimation/data/contact.h"
 #include "estimation/data/image_io.h"
 #include "estimation/data/trunk_targets.h"
 #include "estimation/evaluation/reconstruction.h"
@@ -47,8 +48,18 @@ struct SensorFrames {
   // Their noise-free versions, where the dataset has them (simulated data).
   std::vector<std::optional<TrunkTargets>> clean;
   std::vector<std::size_t> train, test;        // indices into entries
+  // Whether each entry's raw frame is a contact (DetectFrameContact).
+  std::vector<char> contact;
   const std::vector<std::size_t>& Of(Split split) const {
     return split == Split::kTrain ? train : test;
+  }
+  // The indices of `indices` whose frames are (or are not) contacts.
+  std::vector<std::size_t> WithContact(const std::vector<std::size_t>& indices, bool is) const {
+    std::vector<std::size_t> out;
+    for (std::size_t i : indices) {
+      if ((contact[i] != 0) == is) out.push_back(i);
+    }
+    return out;
   }
   std::vector<const TrunkTargets*> Targets(const std::vector<std::size_t>& indices) const {
     std::vector<const TrunkTargets*> out;
@@ -76,12 +87,14 @@ SensorFrames LoadSensorFrames(const TableEvaluation::Inputs& in, const SensorTru
   }
   s.targets.resize(s.entries.size());
   s.clean.resize(s.entries.size());
+  s.contact.assign(s.entries.size(), 0);
   if (observer) {
     observer->BeginTask(std::string("eval: loading ") + ToString(trunk.sensor),
                         static_cast<std::int64_t>(s.entries.size()), "frames");
   }
   ParallelForWithTicks(s.entries.size(), threads, observer, [&](std::size_t i) {
     s.targets[i] = LoadTrunkTargets(*in.dataset, dataset_index[i], trunk.format);
+    s.contact[i] = DetectFrameContact(*in.dataset, dataset_index[i]).contact ? 1 : 0;
     if (in.dataset->has_clean() && !in.dataset->frames()[dataset_index[i]].clean_path.empty()) {
       s.clean[i] = LoadTrunkTargets(*in.dataset, dataset_index[i], trunk.format, /*clean=*/true);
     }
@@ -519,6 +532,17 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
       Row raw_ridge{"Raw frames", posed ? "ridge on pixels /" + down : "", sensor, split,
                     m * raw_frame, static_cast<double>(raw_frame), kNan, false,
                     static_cast<int>(idx.size()), find_pose("ridge"), ""};
+      // Contact and rest apart: frames at rest are mostly sensor noise.
+      const std::vector<std::size_t> touching = s.WithContact(idx, true);
+      const std::vector<std::size_t> resting = s.WithContact(idx, false);
+      auto split_by_contact = [&](Row* row, const std::vector<double>& psnr) {
+        row->contact_frames = static_cast<int>(touching.size());
+        row->psnr_contact = MeanPsnr(Pick(psnr, touching));
+        row->psnr_no_contact = MeanPsnr(Pick(psnr, resting));
+      };
+      split_by_contact(&tf, tf_psnr);
+      split_by_contact(&pc, pca_psnr);
+      split_by_contact(&jp, jpeg_psnr);
       result.rows.push_back(tf);
       result.rows.push_back(pc);
       result.rows.push_back(jp);

@@ -140,6 +140,11 @@ class TableEvaluation {
     std::string note;
     // The same PSNR against the noise-free frames (NaN: the dataset has none, or n/a).
     double psnr_clean = std::numeric_limits<double>::quiet_NaN();
+    // The PSNR over the split's contact frames and over its frames at rest apart
+    // (estimation/data/contact.h; NaN where none or n/a), and the number of contacts.
+    int contact_frames = 0;
+    double psnr_contact = std::numeric_limits<double>::quiet_NaN();
+    double psnr_no_contact = std::numeric_limits<double>::quiet_NaN();
   };
 
   // A point of the rate-distortion curves (test split).

@@ -346,6 +346,8 @@ bool TrunkTrainer::Options::IsValid(std::string* error) const {
   } else if (rows < 0 || cols < 0 || (rows == 0) != (cols == 0)) {
     message << "rows and cols must both be 0 (the sensor's default) or both > 0, found " << rows
             << " x " << cols;
+  } else if (skip_frames_at_rest && !contact.IsValid(&inner)) {
+    message << "contact: " << inner;
   } else if (!(normalization_scale >= 0) || !std::isfinite(normalization_scale)) {
     message << "normalization_scale must be finite and >= 0, found " << normalization_scale;
   } else if (!meta_sgd.IsValid(&inner)) {
@@ -584,6 +586,11 @@ std::string TrunkTrainer::TrajectoryOptionsJson(SensorKind sensor,
     json["readout_pca_frames"] = o.readout_pca_frames;
     json["readout_learning_rate_scale"] = o.readout_learning_rate_scale;
   }
+  if (o.skip_frames_at_rest) {  // absent = every train-split frame (older files)
+    json["skip_frames_at_rest"] = true;
+    json["contact.threshold"] = o.contact.threshold;
+    json["contact.window"] = o.contact.window;
+  }
   json["format.rows"] = format.rows;
   json["format.cols"] = format.cols;
   json["format.grayscale"] = format.grayscale;
@@ -625,10 +632,29 @@ TrunkTrainer::Summary TrunkTrainer::Train(const Dataset& dataset, SensorKind sen
   const double sensor_scale =
       info.normalization_scale > 0 ? info.normalization_scale : DefaultNormalizationScale(sensor);
   const FrameFormat format = ResolveFormat(sensor, sensor_scale);
-  const std::vector<std::size_t> indices = dataset.FrameIndices(sensor, Split::kTrain);
+  std::vector<std::size_t> indices = dataset.FrameIndices(sensor, Split::kTrain);
   if (indices.empty()) {
     throw std::runtime_error("TrunkTrainer: dataset " + dataset.root() +
                              " has no train-split frames of sensor '" + ToString(sensor) + "'");
+  }
+  int skipped = 0;
+  if (options_.skip_frames_at_rest) {
+    std::vector<char> contact(indices.size(), 0);
+    internal::ParallelFor(static_cast<int>(indices.size()), options_.threads, [&](int i) {
+      contact[i] = DetectFrameContact(dataset, indices[i], options_.contact).contact ? 1 : 0;
+    });
+    std::vector<std::size_t> kept;
+    for (std::size_t i = 0; i < indices.size(); ++i) {
+      if (contact[i]) kept.push_back(indices[i]);
+    }
+    skipped = static_cast<int>(indices.size() - kept.size());
+    if (kept.empty()) {
+      throw std::runtime_error("TrunkTrainer: every one of the " + std::to_string(indices.size()) +
+                               " train-split " + ToString(sensor) + " frames of " +
+                               dataset.root() +
+                               " is at rest (no contact above the noise); nothing to train on");
+    }
+    indices = std::move(kept);
   }
   std::vector<TrunkTargets> frames(indices.size());
   internal::ParallelFor(static_cast<int>(indices.size()), options_.threads,
@@ -643,6 +669,7 @@ TrunkTrainer::Summary TrunkTrainer::Train(const Dataset& dataset, SensorKind sen
   const double load_seconds = SecondsSince(start);
   Summary summary = Train(frames, sensor, format, fingerprint, trunk, callback);
   summary.load_seconds = load_seconds;
+  summary.num_frames_at_rest_skipped = skipped;
   return summary;
 }
 

@@ -65,6 +65,7 @@
 
 #include <Eigen/Core>
 
+#include "estimation/data/contact.h"
 #include "estimation/data/trunk_targets.h"
 #include "models/trunk/functa_model.h"
 #include "models/trunk/latent_modulated_siren.h"
@@ -100,6 +101,13 @@ class TrunkTrainer {
     // applies to both). In [0, 1]; 0 keeps the branch at its PCA start (the SIREN then
     // learns the PCA's residual).
     double readout_learning_rate_scale = 0.0;
+
+    // ---- Training frames ----------------------------------------------------------------
+    // Leave the train split's frames at rest (no contact by DetectContact with `contact`,
+    // estimation/data/contact.h) out of training: the trunk's capacity goes to contacts,
+    // not to the sensor's noise. At least one contact frame must remain.
+    bool skip_frames_at_rest = false;
+    ContactOptions contact;
 
     // ---- Frame format (models/trunk/functa_model.h FrameFormat) -----------------------------
     // Working resolution in pixels (area interpolation). 0 x 0 (default) = the sensor's
@@ -290,6 +298,7 @@ class TrunkTrainer {
     SensorKind sensor = SensorKind::kSoftBubble;
     FrameFormat format;            // as resolved (rows, cols, scale)
     int num_train_frames = 0;
+    int num_frames_at_rest_skipped = 0;  // with Options::skip_frames_at_rest
     int num_parameters = 0;        // theta's size (alpha not counted)
     int start_step = 0;            // > 0 when resumed from a checkpoint
     int steps_done = 0;            // total steps completed (all runs)

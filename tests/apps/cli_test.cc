@@ -152,6 +152,39 @@ TEST_F(CliTest, EverySubcommandHasHelp) {
   }
 }
 
+// `bench trunk` times both workloads at any size without a model or dataset, and its
+// GEMM FLOP counts are the trunk's matrix products: per pixel, with first = 2 w,
+// hidden = (L - 1) w^2 and out = w C multiply-adds, a latent gradient costs
+// first + 2 hidden + 2 out, a gradient w.r.t. theta too 2 first + 3 hidden + 3 out and a
+// Hessian-vector product 2 first + 6 hidden + 6 out (models/trunk/latent_modulated_siren.cc).
+TEST_F(CliTest, BenchTrunkTimesTheFitAndTheMetaStepAndCountsTheirFlops) {
+  const Result r = Run("bench trunk --width 8 --layers 2 --latent 4 --rows 6 --cols 7 --steps 2 "
+                       "--batch 3 --pixels 10 --repeats 2 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json j = r.LastJson();
+  EXPECT_EQ(j["bench"], "trunk");
+  EXPECT_GT(j["gemm_gflops"].get<double>(), 0.0);
+  // first 16, hidden 64, out 8: a gradient w.r.t. z 160, w.r.t. theta 248, an HVP 464.
+  const nlohmann::json& fit = j["fit"];
+  EXPECT_EQ(fit["pixels"], 42);
+  EXPECT_NEAR(fit["core_gemm_gflop"].get<double>(), 2.0 * 2 * 42 * 160 / 1e9, 1e-15);
+  EXPECT_NEAR(fit["full_gemm_gflop"].get<double>(), (2.0 * 2 * 42 * 160 + 4.0 * 42 * 88) / 1e9,
+              1e-15);
+  EXPECT_EQ(fit["core_ms"].size(), 2u);
+  EXPECT_EQ(fit["full_ms"].size(), 2u);
+  EXPECT_LE(fit["full_ms_min"].get<double>(), fit["full_ms_median"].get<double>());
+  EXPECT_GT(fit["psnr"].get<double>(), 0.0);
+  const nlohmann::json& step = j["meta_step"];
+  EXPECT_EQ(step["pixels"], 10);
+  EXPECT_NEAR(step["gemm_gflop"].get<double>(), 2.0 * 3 * 10 * (2 * 160 + 248 + 2 * 464) / 1e9,
+              1e-15);
+  EXPECT_EQ(step["ms"].size(), 2u);  // repeats + 1 steps, the first untimed
+
+  const Result bad = Run("bench trunk --workloads fit,train");
+  EXPECT_NE(bad.exit_code, 0);
+  EXPECT_THAT(bad.err, HasSubstr("--workloads"));
+}
+
 TEST_F(CliTest, SynthWritesThePairedFramesItReports) {
   const Result r = Run("synth --out " + Path("d") +
                        " --frames-per-tool 2 --seed 7 --tools rod,square,l_shape --json");

@@ -120,12 +120,18 @@ TEST_F(TrainCliTest, ReconWritesOneCsvRowPerFrameThatAgreesWithItsSummary) {
   ASSERT_TRUE(std::getline(csv, line));
   EXPECT_EQ(line,
             "frame,sensor,split,tool,depth_m,target_range,source_range,rmse,psnr,psnr_clean,"
-            "psnr_zero,psnr_source_peak");
+            "psnr_zero,psnr_source_peak,contact,contact_score,contact_row,contact_col,"
+            "recon_contact_row,recon_contact_col");
   int rows = 0, train_rows = 0;
   double train_psnr_sum = 0;
   while (std::getline(csv, line)) {
     const std::vector<std::string> f = CsvFields(line);
-    ASSERT_EQ(f.size(), 12u) << line;
+    ASSERT_EQ(f.size(), 18u) << line;
+    // Every simulated frame is a press, its centre inside the 140 x 175 frame.
+    EXPECT_EQ(f[12], "1") << line;
+    EXPECT_GE(std::stod(f[13]), 6.0) << line;
+    EXPECT_TRUE(std::stod(f[14]) >= 0 && std::stod(f[14]) < 140) << line;
+    EXPECT_TRUE(std::stod(f[15]) >= 0 && std::stod(f[15]) < 175) << line;
     ++rows;
     EXPECT_EQ(f[1], "bubble");
     EXPECT_THAT(f[3], ::testing::AnyOf("rod", "square"));

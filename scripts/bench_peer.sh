@@ -1,0 +1,165 @@
+#!/usr/bin/env bash
+# tactfunc against PyTorch on the CPU, side by side: the same trunk workloads timed by
+# `tactfunc bench trunk` and by scripts/peer/torch_trunk.py (a PyTorch implementation
+# of the same latent-modulated SIREN, meta-SGD fit and second-order meta-training step),
+# one thread each, run INTERLEAVED (tactfunc, PyTorch, tactfunc, PyTorch, ... one pair
+# per round and trunk size) so that a shared, noisy machine slows both alike. For each
+# size it prints the median over rounds of the ratio PyTorch time / tactfunc time, and
+# its min-max range, for: the fit's K steps ("fit core"), the whole fit ("full fit") and
+# one meta-training step. Ratios above 1 mean tactfunc is faster. docs/BENCHMARKS.md
+# ("Against PyTorch on the CPU") quotes its output.
+#
+# Usage: scripts/bench_peer.sh [--rounds N] [--repeats N] [--meta-repeats N]
+#                              [--sizes W:L:D,...] [--out DIR]
+#   --rounds        interleaved rounds (default 5)
+#   --repeats       timed fits per program run (default 10)
+#   --meta-repeats  timed meta-training steps per program run (default 3)
+#   --sizes         trunk sizes width:layers:latent (default 64:3:64,128:4:128,256:6:256)
+#   --out           keep every JSON line here (default: a temporary folder)
+# The frame is 70x88 (the bubble's working resolution), K = 3, and a meta-training step
+# is 32 frames x 512 random pixels (the presets' batch), float32 everywhere.
+#
+# PyTorch is not a dependency of tactfunc: without an importable torch this prints how
+# to install it and exits 0 ("skipped"). Debian: apt-get install -y python3-torch, and
+# for a fast BLAS apt-get install -y libopenblas0-pthread (then update-alternatives
+# --config libblas.so.3-x86_64-linux-gnu, or LD_LIBRARY_PATH as below). When OpenBLAS is
+# installed this script puts /usr/lib/x86_64-linux-gnu/openblas-pthread first on
+# LD_LIBRARY_PATH and reports the BLAS libraries the PyTorch process mapped.
+# PYTHON=/path/to/python picks the interpreter; TACTFUNC the tactfunc binary.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+rounds=5
+repeats=10
+meta_repeats=3
+sizes="64:3:64,128:4:128,256:6:256"
+out=""
+while [[ $# -gt 0 ]]; do
+  case "$1" in
+    --rounds) rounds="$2"; shift 2 ;;
+    --repeats) repeats="$2"; shift 2 ;;
+    --meta-repeats) meta_repeats="$2"; shift 2 ;;
+    --sizes) sizes="$2"; shift 2 ;;
+    --out) out="$2"; shift 2 ;;
+    -h|--help) sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'; exit 0 ;;
+    *) echo "bench_peer: unknown argument '$1' (see --help)" >&2; exit 2 ;;
+  esac
+done
+
+openblas_dir=/usr/lib/x86_64-linux-gnu/openblas-pthread
+if [[ -d "$openblas_dir" ]]; then
+  export LD_LIBRARY_PATH="$openblas_dir${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+fi
+export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
+
+python=""
+for candidate in "${PYTHON:-}" python3 /usr/bin/python3; do
+  [[ -n "$candidate" ]] || continue
+  if "$candidate" -c 'import torch' >/dev/null 2>&1; then
+    python="$candidate"
+    break
+  fi
+done
+if [[ -z "$python" ]]; then
+  cat <<'EOF'
+bench_peer: PyTorch is not importable (tried $PYTHON, python3, /usr/bin/python3).
+  Install it to run this comparison (Debian/Ubuntu, as root):
+    apt-get install -y python3-torch
+  and OpenBLAS, the BLAS a PyTorch user on the CPU would pick:
+    apt-get install -y libopenblas0-pthread
+  (this script then sets LD_LIBRARY_PATH=/usr/lib/x86_64-linux-gnu/openblas-pthread;
+  or select it system-wide: update-alternatives --config libblas.so.3-x86_64-linux-gnu).
+bench_peer: skipped
+EOF
+  exit 0
+fi
+
+tactfunc="${TACTFUNC:-build/bin/tactfunc}"
+if [[ ! -x "$tactfunc" ]]; then
+  echo "bench_peer: $tactfunc not found; build first (scripts/build.sh)" >&2
+  exit 1
+fi
+
+if [[ -z "$out" ]]; then
+  out="$(mktemp -d)"
+  trap 'rm -rf "$out"' EXIT
+fi
+mkdir -p "$out"
+peer="scripts/peer/torch_trunk.py"
+common=(--rows 70 --cols 88 --steps 3 --batch 32 --pixels 512)
+
+echo "bench_peer: $rounds rounds; fits x $repeats, meta steps x $meta_repeats per run; sizes $sizes"
+echo "bench_peer: python $python; LD_LIBRARY_PATH=${LD_LIBRARY_PATH:-}"
+echo "bench_peer: load average at the start: $(cut -d' ' -f1-3 /proc/loadavg 2>/dev/null || echo n/a)"
+IFS=',' read -r -a size_list <<<"$sizes"
+for size in "${size_list[@]}"; do
+  IFS=':' read -r width layers latent <<<"$size"
+  shape=(--width "$width" --layers "$layers" --latent "$latent" "${common[@]}")
+  # The FLOPs PyTorch's profiler counts, once per size (not timed).
+  "$python" "$peer" flops "${shape[@]}" >"$out/flops_$size.json"
+done
+for round in $(seq 1 "$rounds"); do
+  for size in "${size_list[@]}"; do
+    IFS=':' read -r width layers latent <<<"$size"
+    shape=(--width "$width" --layers "$layers" --latent "$latent" "${common[@]}")
+    echo "bench_peer: round $round/$rounds, size $size: tactfunc ..."
+    "$tactfunc" bench trunk "${shape[@]}" --threads 1 --repeats "$repeats" \
+      --workloads fit --json | tail -n 1 >"$out/tactfunc_fit_${size}_$round.json"
+    echo "bench_peer: round $round/$rounds, size $size: pytorch ..."
+    "$python" "$peer" fit "${shape[@]}" --threads 1 --repeats "$repeats" \
+      >"$out/pytorch_fit_${size}_$round.json"
+    "$tactfunc" bench trunk "${shape[@]}" --threads 1 --repeats "$meta_repeats" \
+      --workloads meta-step --json | tail -n 1 >"$out/tactfunc_meta_${size}_$round.json"
+    "$python" "$peer" meta-step "${shape[@]}" --threads 1 --repeats "$meta_repeats" \
+      >"$out/pytorch_meta_${size}_$round.json"
+  done
+done
+
+echo "bench_peer: load average at the end: $(cut -d' ' -f1-3 /proc/loadavg 2>/dev/null || echo n/a)"
+"$python" - "$out" "$rounds" "$sizes" <<'EOF'
+import json, statistics, sys
+out, rounds, sizes = sys.argv[1], int(sys.argv[2]), sys.argv[3].split(",")
+def load(name):
+    with open(f"{out}/{name}.json") as f:
+        return json.loads(f.read().strip().splitlines()[-1])
+rows, blas, torch_version, summary = [], set(), "", []
+print()
+print("| trunk | workload | tactfunc ms (median of rounds) | PyTorch ms | PyTorch / tactfunc, median | range | GEMM GFLOP tactfunc | GEMM GFLOP PyTorch (profiled) |")
+print("|---|---|---:|---:|---:|---|---:|---:|")
+for size in sizes:
+    w, l, d = size.split(":")
+    flops = load(f"flops_{size}")
+    per = {"fit core": [], "full fit": [], "meta step": []}
+    times = {k: ([], []) for k in per}
+    tf_flops = {}
+    for r in range(1, rounds + 1):
+        tf, pt = load(f"tactfunc_fit_{size}_{r}"), load(f"pytorch_fit_{size}_{r}")
+        tfm, ptm = load(f"tactfunc_meta_{size}_{r}"), load(f"pytorch_meta_{size}_{r}")
+        blas.update(pt["blas"]); torch_version = pt["torch"]
+        pairs = {"fit core": (tf["fit"]["core_ms_median"], pt["core_ms_median"]),
+                 "full fit": (tf["fit"]["full_ms_median"], pt["full_ms_median"]),
+                 "meta step": (tfm["meta_step"]["ms_median"], ptm["ms_median"])}
+        for k, (a, b) in pairs.items():
+            per[k].append(b / a)
+            times[k][0].append(a); times[k][1].append(b)
+        tf_flops = {"fit core": tf["fit"]["core_gemm_gflop"], "full fit": tf["fit"]["full_gemm_gflop"],
+                    "meta step": tfm["meta_step"]["gemm_gflop"]}
+    pt_flops = {"fit core": flops["profiled_fit_core_gemm_gflop"],
+                "full fit": flops["profiled_fit_full_gemm_gflop"],
+                "meta step": flops["profiled_meta_step_gemm_gflop"]}
+    for k, ratios in per.items():
+        med = statistics.median(ratios)
+        print(f"| width {w}, {l} layers, d {d} | {k} | {statistics.median(times[k][0]):.4g} | "
+              f"{statistics.median(times[k][1]):.4g} | {med:.2f} | {min(ratios):.2f}-{max(ratios):.2f} | "
+              f"{tf_flops[k]:.3g} | {pt_flops[k]:.3g} |")
+        summary.append({"width": int(w), "layers": int(l), "latent": int(d), "workload": k,
+                        "ratio_median": med, "ratio_min": min(ratios), "ratio_max": max(ratios),
+                        "tactfunc_ms_median": statistics.median(times[k][0]),
+                        "pytorch_ms_median": statistics.median(times[k][1]),
+                        "tactfunc_gemm_gflop": tf_flops[k], "pytorch_gemm_gflop": pt_flops[k]})
+print()
+print(f"PyTorch {torch_version}; BLAS mapped by the PyTorch process: {', '.join(sorted(blas)) or 'none found'}")
+print(f"rounds: {rounds}; ratio = PyTorch time / tactfunc time per round (each time a median over its run's repeats)")
+print(json.dumps({"bench": "peer", "torch": torch_version, "blas": sorted(blas), "rounds": rounds,
+                  "results": summary}))
+EOF

@@ -1,0 +1,43 @@
+#!/usr/bin/env bash
+# The real GelSight ball presses (tests/data/taxim_ballpress) through train, encode, recon
+# and eval: PSNR of the functaset against PCA at equal bytes on the unseen presses, and
+# how far the contact centres of the raw frames and of the reconstructions fall from the
+# hand-placed ones (median and 90th percentile, pixels).
+#   usage: scripts/real_ballpress.sh OUT [LATENT_DIM] [STEPS] [STRATEGY]
+# Defaults: d = 16, 2000 steps, meta_sgd:3. Trunk: --preset small --readout.
+set -euo pipefail
+export LC_ALL=C
+cd "$(dirname "$0")/.."
+out=${1:?usage: $0 OUT [LATENT_DIM] [STEPS] [STRATEGY]}
+dim=${2:-16}
+steps=${3:-2000}
+strategy=${4:-meta_sgd:3}
+bin=build/bin/tactfunc
+data=tests/data/taxim_ballpress
+rm -rf "$out"
+mkdir -p "$out"
+$bin train --data "$data" --out "$out/m.tfm" --preset small --readout --latent-dim "$dim" \
+  --steps "$steps" --seed 1 >"$out/train.log" 2>&1 || { cat "$out/train.log"; exit 1; }
+$bin encode --data "$data" --model "$out/m.tfm" --out "$out/f.tfs" --strategy "$strategy" >"$out/encode.log" 2>&1 || { cat "$out/encode.log"; exit 1; }
+$bin recon --data "$data" --model "$out/m.tfm" --functaset "$out/f.tfs" --out "$out/recon" \
+  --examples 6 >"$out/recon.log"
+$bin eval --data "$data" --model "$out/m.tfm" --functaset "$out/f.tfs" --out "$out/eval" \
+  --json >"$out/eval.log" 2>&1
+echo "real GelSight presses: d = $dim, $steps steps, $strategy"
+grep -A3 '^sensor   split   contact' "$out/recon.log"
+# Centre errors: frames.csv columns 15-18 (contact_row/col, recon_contact_row/col) against
+# contacts.csv (x = column, y = row), per split.
+errors=$(join -t, <(tail -n +2 "$out/recon/frames.csv" | sort) \
+  <(tail -n +2 "$data/contacts.csv" | sort) |
+  awk -F, '{ print $3, sqrt(($16-$19)^2 + ($15-$20)^2), sqrt(($18-$19)^2 + ($17-$20)^2) }')
+percentiles() {  # stdin: numbers; prints the median and the 90th percentile
+  sort -g | awk '{ v[NR] = $1 } END { printf "median %.1f p90 %.1f", v[int((NR - 1) * 0.5) + 1], v[int((NR - 1) * 0.9) + 1] }'
+}
+for split in train test; do
+  n=$(awk -v s="$split" '$1 == s' <<<"$errors" | wc -l)
+  raw=$(awk -v s="$split" '$1 == s { print $2 }' <<<"$errors" | percentiles)
+  rec=$(awk -v s="$split" '$1 == s { print $3 }' <<<"$errors" | percentiles)
+  echo "$split: $n presses, contact centre error (px): raw frame $raw; reconstruction $rec"
+done
+grep -E '^\| (TactFunc|PCA)' "$out/eval/table.md" | head -8 || true
+echo "pictures: $out/recon/recon_gelslim.png, $out/eval/rate_distortion.png"
