@@ -178,7 +178,7 @@ ContactReport DetectFrameContact(const Dataset& dataset, std::size_t index,
   const FrameRecord& record = dataset.frames().at(index);
   options.encoding = dataset.sensor_info(record.sensor).encoding;
   return DetectContact(
-      Difference(dataset.LoadFrame(index), dataset.Reference(record.sensor), record.sensor),
+      Difference(dataset.LoadFrame(index), dataset.FrameReference(index), record.sensor),
       options);
 }
 

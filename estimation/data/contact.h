@@ -80,8 +80,9 @@ double QuantisationNoise(PixelEncoding encoding);
 // an empty image.
 ContactReport DetectContact(const Image& difference, const ContactOptions& options = {});
 
-// DetectContact of frame `index` of `dataset` against its reference, with the encoding
-// of its sensor. Throws like Dataset::LoadFrame.
+// DetectContact of frame `index` of `dataset` against its reference (FrameReference:
+// its clip's in a clip set), with the encoding of its sensor. Throws like
+// Dataset::LoadFrame.
 ContactReport DetectFrameContact(const Dataset& dataset, std::size_t index,
                                  ContactOptions options = {});
 

@@ -261,7 +261,7 @@ ReconstructionEvaluator::Summary ReconstructionEvaluator::Evaluate(const FunctaM
     const Eigen::MatrixXf prediction =
         state.trunk->siren.Forward<float>(state.grid, entries[i]->latent);
     const Image frame = dataset.LoadFrame(r.dataset_index);
-    const Image& reference = dataset.Reference(r.sensor);
+    const Image& reference = dataset.FrameReference(r.dataset_index);
     const TrunkTargets targets = MakeTrunkTargets(frame, reference, r.sensor, format);
     ContactOptions contact_options = options_.contact;
     contact_options.encoding = dataset.sensor_info(r.sensor).encoding;

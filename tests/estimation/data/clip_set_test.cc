@@ -13,6 +13,7 @@
 #include <thread>
 #include <vector>
 
+#include "estimation/data/contact.h"
 #include "estimation/data/dataset.h"
 #include "estimation/data/preprocess.h"
 #include "estimation/data/trunk_targets.h"
@@ -125,6 +126,8 @@ TEST(ClipSet, AFrameEqualToItsOwnReferencePreprocessesToExactlyZero) {
                  PreprocessOptions(), DefaultNormalizationScale(SensorKind::kGelSlim));
   EXPECT_TRUE(std::any_of(against_other.values.data.begin(), against_other.values.data.end(),
                           [](float v) { return v != 0.0f; }));
+  // Contact detection compares with the same reference: nothing changed, no contact.
+  EXPECT_EQ(DetectFrameContact(dataset, own).score, 0.0);
   // The model's targets take the same reference.
   FrameFormat format;
   format.rows = 12;
