@@ -46,6 +46,7 @@ struct EncodeFlags {
   std::string strategy;  // "" = each trunk's meta_sgd:K
   bool json = false;
   bool allow_other_frames = false;
+  bool share_rest = false;
   DatasetFlags dataset;
 };
 
@@ -83,6 +84,7 @@ std::string ResumeCommand(const EncodeFlags& flags) {
   if (!flags.strategy.empty()) command += " --strategy " + flags.strategy;
   if (flags.threads > 0) command += " --threads " + std::to_string(flags.threads);
   if (flags.allow_other_frames) command += " --allow-other-frames";
+  if (flags.share_rest) command += " --share-rest";
   if (!flags.dataset.sensor.empty()) command += " --sensor " + flags.dataset.sensor;
   if (!flags.dataset.reference.empty()) command += " --reference " + flags.dataset.reference;
   if (!flags.dataset.labels.empty()) command += " --labels " + flags.dataset.labels;
@@ -163,6 +165,7 @@ void RunEncode(const EncodeFlags& flags) {
                      flags.latent_precision + "'");
   }
   options.strategy = flags.strategy;
+  options.share_rest_latent = flags.share_rest;
   if (std::string error; !options.IsValid(&error)) throw UsageError("--strategy: " + error);
 
   // Never silently throw away a partial run.
@@ -237,10 +240,21 @@ void RunEncode(const EncodeFlags& flags) {
             << options.threads << " thread(s)";
   if (summary.frames_resumed > 0) std::cout << ", " << summary.frames_resumed << " resumed";
   std::cout << ")\n";
+  nlohmann::json at_rest = nlohmann::json::object();
+  for (SensorKind sensor : functaset.sensors()) {
+    const std::int64_t rest = static_cast<std::int64_t>(functaset.entries(sensor).size()) -
+                              functaset.NumStoredLatents(sensor);
+    at_rest[ToString(sensor)] = rest;
+  }
   for (const auto& [sensor, psnr] : summary.mean_psnr) {
     std::cout << "  " << ToString(sensor) << ": " << summary.frames.at(sensor)
               << " frames, mean PSNR " << FormatFixed(psnr, 2)
-              << " dB (against the noisy frames), fit " << functaset.fit_strategy(sensor) << "\n";
+              << " dB (against the noisy frames), fit " << functaset.fit_strategy(sensor);
+    if (flags.share_rest) {
+      std::cout << "; " << at_rest[ToString(sensor)].get<std::int64_t>()
+                << " at rest share one latent";
+    }
+    std::cout << "\n";
   }
   if (summary.non_finite_latents > 0) std::cout << "  warning: " << summary.message << "\n";
 
@@ -260,6 +274,7 @@ void RunEncode(const EncodeFlags& flags) {
               {"processes", processes.size()},
               {"psnr_mean", psnr},
               {"fit_strategy", strategy},
+              {"frames_at_rest", at_rest},
               {"model_checksum", model.checksum()},
               {"out", flags.out}});
   }
@@ -312,6 +327,10 @@ void RegisterEncode(CLI::App& app, CommandBody* selected) {
   sub->add_flag("--allow-other-frames", flags->allow_other_frames,
                 "Encode even when the data's frames have another size or channel count "
                 "than the model's trunk was trained on (a warning instead of an error)");
+  sub->add_flag("--share-rest", flags->share_rest,
+                "Frames at rest (no contact above the sensor's noise; docs/REAL_DATA.md) are "
+                "not fitted: they share one latent per sensor, stored once, and cost no latent "
+                "bytes");
   sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
   AddDatasetFlags(sub, &flags->dataset);
   sub->callback([flags, selected]() { *selected = [flags]() { RunEncode(*flags); }; });

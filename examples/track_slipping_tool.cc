@@ -9,9 +9,12 @@
 //      from (x, y, yaw) = (-1.5 mm, 1 mm, 10 deg) to (1.5 mm, -1 mm, 30 deg): 3.6 mm and
 //      20 deg in total, starting and stopping gently as a slip does. The frame is stored
 //      and read back in the dataset's 16-bit micrometre encoding, as training frames are.
-//   2. PosePosterior (estimation/posterior/pose_posterior.h) turns the frame into a PoseDistribution:
-//      a Ceres fit of the latent z*, N(z*, H^-1) (laplace, default) or SGLD latents,
-//      pushed through the pose MLP; folded by the tool's symmetry order.
+//   2. A per-frame posterior turns the frame into a PoseDistribution. laplace (default)
+//      and sgld: PosePosterior (estimation/posterior/pose_posterior.h), a Ceres fit of the
+//      latent z*, N(z*, H^-1) or SGLD latents, pushed through the pose MLP. generator:
+//      GeneratorPosterior (estimation/synthesis/generator_posterior.h), the pose itself
+//      fitted through the pose generator and the trunk on SE(2), draws from the Laplace
+//      mixture over its modes for the scene's tool. Folded by the tool's symmetry order.
 //   3. SE2ParticleFilter: x_i <- x_i Exp(w_i), w_i ~ N(0, Q) (a slip of ~0.2 mm and ~1 deg
 //      per frame), then w_i <- w_i * sum_j w_j N(Log(s_j^-1 x_i); 0, h^2 Sigma_z + K_floor).
 // It prints, per frame, the error of the per-frame posterior mean and of the filtered
@@ -25,10 +28,15 @@
 //                          models/pretrained/pose_bubble.tpm in the sources)
 //   --tool NAME            default l_shape (asymmetric); any name of `tactfunc info --tools`
 //   --frames N             default 30
-//   --sampler laplace|sgld default laplace (fast: ~10-50 ms per frame)
+//   --sampler laplace|sgld|generator  default laplace (fast: ~10-50 ms per frame);
+//                          generator fits the pose through the trunk (slower, sharper)
+//   --generator G.tpg      pose generator for --sampler generator (default:
+//                          models/pretrained/pose_generator_bubble.tpg in the sources)
 //   --samples N            pose samples per frame, default 100
 //   --particles N          default 1000
 //   --seed S               default 1 (frames' noise, posteriors and the filter)
+//   --constant-velocity    the filter's constant-velocity motion model (default: random
+//                          walk; pose_filter.h)
 //   --skip-if-no-pose-model  exit 77 (ctest's SKIP) with a message when the pose model
 //                          file does not exist, instead of failing
 #include <cmath>
@@ -50,6 +58,8 @@
 #include "models/core/seed.h"
 #include "models/simulator/tool.h"
 #include "estimation/posterior/pose_posterior.h"
+#include "estimation/synthesis/generator_posterior.h"
+#include "models/pose/pose_generator.h"
 
 #ifndef TACTFUNC_SOURCE_DIR
 #define TACTFUNC_SOURCE_DIR "."
@@ -70,19 +80,21 @@ struct Flags {
   std::string pose_model = TACTFUNC_EXAMPLE_POSE_MODEL;
   std::string tool = "l_shape";
   std::string sampler = "laplace";
+  std::string generator = TACTFUNC_SOURCE_DIR "/models/pretrained/pose_generator_bubble.tpg";
   int frames = 30;
   int samples = 100;
   int particles = 1000;
   std::uint64_t seed = 1;
   bool skip_if_no_pose_model = false;
+  bool constant_velocity = false;
 };
 
 void Usage(std::FILE* out) {
   std::fprintf(out,
                "usage: example_track_slipping_tool [--model M.tfm] [--pose-model P.tpm] "
                "[--tool NAME] [--frames N]\n"
-               "       [--sampler laplace|sgld] [--samples N] [--particles N] [--seed S] "
-               "[--skip-if-no-pose-model]\n");
+               "       [--sampler laplace|sgld|generator] [--generator G.tpg] [--samples N] "
+               "[--particles N] [--seed S] [--constant-velocity] [--skip-if-no-pose-model]\n");
 }
 
 Flags ParseFlags(int argc, char** argv) {
@@ -111,6 +123,8 @@ Flags ParseFlags(int argc, char** argv) {
       f.tool = value();
     } else if (a == "--sampler") {
       f.sampler = value();
+    } else if (a == "--generator") {
+      f.generator = value();
     } else if (a == "--frames") {
       f.frames = integer(2);
     } else if (a == "--samples") {
@@ -121,6 +135,8 @@ Flags ParseFlags(int argc, char** argv) {
       f.seed = static_cast<std::uint64_t>(integer(0));
     } else if (a == "--skip-if-no-pose-model") {
       f.skip_if_no_pose_model = true;
+    } else if (a == "--constant-velocity") {
+      f.constant_velocity = true;
     } else if (a == "--help" || a == "-h") {
       Usage(stdout);
       std::exit(0);
@@ -143,6 +159,15 @@ tactfunc::Image AsStored(const tactfunc::Image& depth, const std::string& name) 
   return tactfunc::DecodeImage(tactfunc::EncodePng(depth, PixelEncoding::kDepthU16Micrometres),
                                PixelEncoding::kDepthU16Micrometres, name);
 }
+
+// What the filter takes from either posterior.
+struct FrameSummary {
+  bool usable = false;
+  std::string message;
+  SE2d mean;
+  Eigen::Matrix3d covariance = Eigen::Matrix3d::Identity();
+  double total_time_ms = 0;
+};
 
 struct Errors {
   double sq_mm = 0, sq_deg = 0;
@@ -169,9 +194,12 @@ int Run(const Flags& flags) {
     }
     throw std::invalid_argument(why);
   }
-  PosteriorSampler sampler;
-  if (!PosteriorSamplerFromString(flags.sampler, &sampler) || sampler == PosteriorSampler::kKnn) {
-    throw std::invalid_argument("--sampler must be laplace or sgld, got '" + flags.sampler + "'");
+  const bool by_generator = flags.sampler == "generator";
+  PosteriorSampler sampler = PosteriorSampler::kLaplace;
+  if (!by_generator &&
+      (!PosteriorSamplerFromString(flags.sampler, &sampler) || sampler == PosteriorSampler::kKnn)) {
+    throw std::invalid_argument("--sampler must be laplace, sgld or generator, got '" +
+                                flags.sampler + "'");
   }
   const int n = GetTool(flags.tool).symmetry_order();  // throws for an unknown tool
   const FunctaModel model = FunctaModel::Load(flags.model);
@@ -187,11 +215,20 @@ int Run(const Flags& flags) {
   PosePosterior::Options posterior_options;
   posterior_options.sampler = sampler;
   posterior_options.num_samples = flags.samples;
+  std::optional<PoseGenerator> generator;
+  if (by_generator) {
+    generator.emplace(PoseGenerator::Load(flags.generator));
+    if (generator->ToolIndex(flags.tool) < 0) {
+      throw std::invalid_argument("--tool '" + flags.tool + "': the generator '" +
+                                  flags.generator + "' does not know it");
+    }
+  }
 
   SE2ParticleFilter::Options filter_options;
   filter_options.num_particles = flags.particles;
   filter_options.symmetry_order = n;
   filter_options.seed = DeriveSeed(flags.seed, 2);
+  filter_options.constant_velocity = flags.constant_velocity;
   SE2ParticleFilter filter(filter_options);
 
   const ContactSimulator simulator;
@@ -199,7 +236,8 @@ int Run(const Flags& flags) {
   std::printf(
       "track_slipping_tool: %s (n = %d), %d Soft Bubble frames, %s posteriors of %d "
       "samples, %d particles\n",
-      flags.tool.c_str(), n, flags.frames, ToString(sampler), flags.samples, flags.particles);
+      flags.tool.c_str(), n, flags.frames, by_generator ? "generator" : ToString(sampler),
+      flags.samples, flags.particles);
   // Per frame: the truth; the per-frame posterior's error and its own standard deviation
   // (sqrt of the x + y variances, and of the yaw variance); the filtered mean's error.
   std::printf("%5s | %7s %7s %6s | %-16s | %-16s | %-16s | %6s  %s\n", "frame", "x mm", "y mm",
@@ -220,11 +258,25 @@ int Run(const Flags& flags) {
 
     // Each frame its own sampler seed: one seed for all would give every frame the same
     // standard-normal draws, i.e. errors the filter cannot average out.
-    PosePosterior::Options options = posterior_options;
-    options.seed = DeriveSeed(flags.seed, 3 * t + 1);
-    const PosePosterior frame_posterior(trunk, pose_mlp, options);
+    const std::uint64_t frame_seed = DeriveSeed(flags.seed, 3 * t + 1);
     std::optional<PoseDistribution> distribution;
-    const PosePosterior::Summary summary = frame_posterior.Estimate(targets, n, &distribution);
+    FrameSummary summary;
+    if (by_generator) {
+      // The scene names its tool: only that tool is modelled.
+      GeneratorPosterior::Options options;
+      options.seed = frame_seed;
+      const GeneratorPosterior frame_posterior(trunk, *generator, options, nullptr, &pose_mlp);
+      PoseMixture mixture;
+      const GeneratorPosterior::Summary g = frame_posterior.Estimate(targets, flags.tool, &mixture);
+      summary = {g.usable, g.message, g.mean, g.covariance, g.total_time_ms};
+      if (g.usable) distribution.emplace(mixture.Sample(flags.samples, frame_seed, g.tool));
+    } else {
+      PosePosterior::Options options = posterior_options;
+      options.seed = frame_seed;
+      const PosePosterior frame_posterior(trunk, pose_mlp, options);
+      const PosePosterior::Summary p = frame_posterior.Estimate(targets, n, &distribution);
+      summary = {p.IsSolutionUsable(), p.message, p.mean, p.covariance, p.total_time_ms};
+    }
     posterior_ms += summary.total_time_ms;
 
     filter.Predict();
@@ -232,7 +284,7 @@ int Run(const Flags& flags) {
     char frame_text[40], sd_text[40];
     std::snprintf(frame_text, sizeof(frame_text), "%16s", "failed");
     std::snprintf(sd_text, sizeof(sd_text), "%16s", "");
-    if (summary.IsSolutionUsable() && distribution) {
+    if (summary.usable && distribution) {
       const SE2ParticleFilter::UpdateSummary u = filter.Update(*distribution);
       filter_ms += u.time_ms;
       update = ToString(u.type);

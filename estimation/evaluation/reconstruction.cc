@@ -64,8 +64,10 @@ RepresentationSize ComputeRepresentationSize(const FunctaModel& model, const Fun
     const std::uint64_t m = functaset.entries(sensor).size();
     size.frames += static_cast<std::int64_t>(m);
     size.model_bytes += 4ull * (trunk.siren.NumParameters() + trunk.alpha.size());
-    // As on disk: per-frame codes plus the sensor's shared tables (b-bit latents).
-    size.latent_bytes += static_cast<std::uint64_t>(functaset.BytesPerFrame(sensor)) * m +
+    // As on disk: per-frame codes (none for frames at rest) plus the sensor's shared
+    // tables (b-bit latents) and shared rest latent.
+    size.latent_bytes += static_cast<std::uint64_t>(functaset.BytesPerFrame(sensor)) *
+                             static_cast<std::uint64_t>(functaset.NumStoredLatents(sensor)) +
                          functaset.SharedLatentBytes(sensor);
     size.raw_bytes += m * RawFrameBytes(*info);
   }

@@ -65,7 +65,8 @@ PsnrStats ComputePsnrStats(const std::vector<double>& values);
 struct RepresentationSize {
   std::int64_t frames = 0;                 // functaset entries counted
   std::uint64_t model_bytes = 0;           // trunks of the functaset's sensors, float32
-  // sum_s M_s x Functaset::BytesPerFrame(s) + SharedLatentBytes(s): bytes on disk.
+  // sum_s NumStoredLatents(s) x Functaset::BytesPerFrame(s) + SharedLatentBytes(s):
+  // bytes on disk (frames at rest share one latent).
   std::uint64_t latent_bytes = 0;
   std::uint64_t representation_bytes = 0;  // model_bytes + latent_bytes
   std::uint64_t raw_bytes = 0;             // the entries' frames, uncompressed, native size

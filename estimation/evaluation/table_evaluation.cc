@@ -255,10 +255,14 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
                     &tf_psnr_clean);
     const std::uint64_t trunk_bytes = 4ull * (trunk.siren.NumParameters() + trunk.alpha.size());
     // Bytes per frame as stored (encode --latent-precision); the representation also
-    // counts the b-bit codes' shared tables.
+    // counts the b-bit codes' shared tables and stores no latent for frames at rest
+    // (encode --share-rest) but their one shared latent.
     const double tf_frame_bytes = functaset.BytesPerFrame(sensor);
-    const std::uint64_t tf_rep = trunk_bytes + m * static_cast<std::uint64_t>(tf_frame_bytes) +
-                                 functaset.SharedLatentBytes(sensor);
+    const std::uint64_t tf_rep =
+        trunk_bytes +
+        static_cast<std::uint64_t>(functaset.NumStoredLatents(sensor)) *
+            static_cast<std::uint64_t>(tf_frame_bytes) +
+        functaset.SharedLatentBytes(sensor);
     curves.tactfunc.push_back(
         {tf_frame_bytes, MeanPsnr(Pick(tf_psnr, s.test)), "d=" + std::to_string(d)});
 

@@ -107,8 +107,33 @@ double Functaset::BytesPerFrame(SensorKind sensor) const {
 }
 
 std::uint64_t Functaset::SharedLatentBytes(SensorKind sensor) const {
-  const int d = latent_dim(sensor);
-  return IsQuantised(latent_precision_) ? 8ull * static_cast<std::uint64_t>(d) : 0;
+  const std::uint64_t d = static_cast<std::uint64_t>(latent_dim(sensor));
+  return (IsQuantised(latent_precision_) ? 8 * d : 0) + (rest_latent(sensor) ? 4 * d : 0);
+}
+
+std::int64_t Functaset::NumStoredLatents(SensorKind sensor) const {
+  std::int64_t n = 0;
+  for (const FunctasetEntry& e : Block(sensor).entries) n += e.at_rest ? 0 : 1;
+  return n;
+}
+
+const Eigen::VectorXf* Functaset::rest_latent(SensorKind sensor) const {
+  const SensorBlock& block = Block(sensor);
+  return block.rest_latent ? &*block.rest_latent : nullptr;
+}
+
+void Functaset::set_rest_latent(SensorKind sensor, const Eigen::VectorXf& latent) {
+  Block(sensor);  // throws for an undeclared sensor
+  SensorBlock& block = blocks_[sensor];
+  if (latent.size() != block.latent_dim) {
+    throw std::invalid_argument(std::string("Functaset::set_rest_latent: ") + ToString(sensor) +
+                                ": expected latent_dim = " + std::to_string(block.latent_dim) +
+                                " values, got " + std::to_string(latent.size()));
+  }
+  block.rest_latent = latent;
+  for (FunctasetEntry& e : block.entries) {
+    if (e.at_rest) e.latent = latent;
+  }
 }
 
 void Functaset::AddSensor(SensorKind sensor, int latent_dim) {
@@ -165,7 +190,14 @@ void Functaset::Add(SensorKind sensor, FunctasetEntry entry) {
   }
   SensorBlock& block = it->second;
   if (entry.id.empty()) throw std::invalid_argument("Functaset::Add: empty frame id");
-  if (entry.latent.size() != block.latent_dim) {
+  if (entry.at_rest) {
+    if (!block.rest_latent) {
+      throw std::invalid_argument("Functaset::Add: frame '" + entry.id + "' (" +
+                                  ToString(sensor) +
+                                  ") is at rest but the sensor has no rest latent");
+    }
+    entry.latent = *block.rest_latent;
+  } else if (entry.latent.size() != block.latent_dim) {
     throw std::invalid_argument(
         "Functaset::Add: frame '" + entry.id + "' (" + ToString(sensor) + ") has a latent of " +
         std::to_string(entry.latent.size()) +
@@ -242,6 +274,7 @@ Functaset::CodeTable Functaset::Codes(const SensorBlock& block, int bits) {
     const CodeTable& t = *block.codes;
     bool on_grid = true;
     for (const FunctasetEntry& e : block.entries) {
+      if (e.at_rest) continue;  // the rest latent is stored apart, as float32
       for (int k = 0; k < d && on_grid; ++k) {
         const float z = e.latent[k];
         on_grid = Dequantise(Quantise(z, t.offset[k], t.step[k], levels), t.offset[k],
@@ -255,10 +288,13 @@ Functaset::CodeTable Functaset::Codes(const SensorBlock& block, int bits) {
   table.bits = bits;
   table.offset = Eigen::VectorXf::Zero(d);
   table.step = Eigen::VectorXf::Zero(d);
+  const auto first = std::find_if(block.entries.begin(), block.entries.end(),
+                                  [](const FunctasetEntry& e) { return !e.at_rest; });
   for (int k = 0; k < d; ++k) {
-    if (block.entries.empty()) break;
-    float lo = block.entries.front().latent[k], hi = lo;
+    if (first == block.entries.end()) break;
+    float lo = first->latent[k], hi = lo;
     for (const FunctasetEntry& e : block.entries) {
+      if (e.at_rest) continue;
       lo = std::min(lo, e.latent[k]);
       hi = std::max(hi, e.latent[k]);
     }
@@ -281,8 +317,9 @@ std::string Functaset::Serialize() const {
     const std::string name = ToString(sensor);
     const std::int64_t m = static_cast<std::int64_t>(block.entries.size());
     const std::int64_t d = block.latent_dim;
+    const std::int64_t stored = NumStoredLatents(sensor);  // latent rows in the file
     nlohmann::json ids = nlohmann::json::array(), splits = nlohmann::json::array(),
-                   tools = nlohmann::json::array();
+                   tools = nlohmann::json::array(), at_rest = nlohmann::json::array();
     std::vector<double> latents, psnr, poses;
     latents.reserve(m * d);
     psnr.reserve(m);
@@ -298,9 +335,10 @@ std::string Functaset::Serialize() const {
         tools.push_back(nullptr);
         poses.insert(poses.end(), {kNaN, kNaN, kNaN, kNaN});
       }
-      if (!IsQuantised(latent_precision_)) {
+      if (!IsQuantised(latent_precision_) && !e.at_rest) {
         for (Eigen::Index k = 0; k < d; ++k) latents.push_back(e.latent[k]);
       }
+      if (e.at_rest) at_rest.push_back(ids.size() - 1);
       psnr.push_back(e.psnr);
     }
     meta["sensors"].push_back({{"sensor", name},
@@ -310,21 +348,31 @@ std::string Functaset::Serialize() const {
                                {"ids", std::move(ids)},
                                {"splits", std::move(splits)},
                                {"tools", std::move(tools)}});
+    if (block.rest_latent) {
+      // The entries at rest, by index, ascending. Absent in files without a rest latent
+      // (and in files older than the field).
+      meta["sensors"].back()["at_rest"] = std::move(at_rest);
+      file.Add(name + "/rest_latent", TensorFile::DType::kFloat32, {d},
+               std::vector<double>(block.rest_latent->data(), block.rest_latent->data() + d));
+    }
     if (IsQuantised(latent_precision_)) {
       const int bits = LatentBits(latent_precision_);
       meta["sensors"].back()["latent_bits"] = bits;
       const CodeTable table = Codes(block, bits);
       const std::uint32_t levels = (1u << bits) - 1;
       const std::int64_t row_bytes = CodeBytes(block.latent_dim, bits);
-      std::vector<double> codes(m * row_bytes, 0.0);
+      std::vector<double> codes(stored * row_bytes, 0.0);
       std::vector<std::uint32_t> q(d);
+      std::int64_t row = 0;
       for (std::int64_t i = 0; i < m; ++i) {
+        if (block.entries[i].at_rest) continue;
         for (std::int64_t k = 0; k < d; ++k) {
           q[k] = Quantise(block.entries[i].latent[k], table.offset[k], table.step[k], levels);
         }
-        PackCodes(q, bits, codes.data() + i * row_bytes);
+        PackCodes(q, bits, codes.data() + row * row_bytes);
+        ++row;
       }
-      file.Add(name + "/latent_codes", TensorFile::DType::kUint8, {m, row_bytes},
+      file.Add(name + "/latent_codes", TensorFile::DType::kUint8, {stored, row_bytes},
                std::move(codes));
       file.Add(name + "/latent_offset", TensorFile::DType::kFloat32, {d},
                std::vector<double>(table.offset.data(), table.offset.data() + d));
@@ -334,7 +382,7 @@ std::string Functaset::Serialize() const {
       file.Add(name + "/latents",
                latent_precision_ == LatentPrecision::kFloat16 ? TensorFile::DType::kFloat16
                                                               : TensorFile::DType::kFloat32,
-               {m, d}, std::move(latents));
+               {stored, d}, std::move(latents));
     }
     file.Add(name + "/psnr", TensorFile::DType::kFloat32, {m}, std::move(psnr));
     file.Add(name + "/poses", TensorFile::DType::kFloat64, {m, 4}, std::move(poses));
@@ -403,6 +451,35 @@ Functaset Functaset::Parse(const std::string& bytes, const std::string& source) 
       const auto& id_array = array("ids");
       const auto& split_array = array("splits");
       const auto& tool_array = array("tools");
+      // Frames at rest share the rest latent and have no row of their own.
+      std::vector<bool> at_rest(static_cast<std::size_t>(m), false);
+      std::optional<Eigen::VectorXf> rest;
+      if (file.Has(name + "/rest_latent")) {
+        const auto& rest_tensor = file.Get(name + "/rest_latent", {d});
+        if (rest_tensor.dtype != TensorFile::DType::kFloat32) {
+          field = name + "/rest_latent";
+          throw fail(std::string("expected float32, got ") + ToString(rest_tensor.dtype));
+        }
+        rest = Eigen::VectorXf(d);
+        for (int k = 0; k < d; ++k) (*rest)[k] = static_cast<float>(rest_tensor.values[k]);
+        field = where + ".at_rest";
+        const auto& indices = entry.at("at_rest");
+        if (!indices.is_array()) throw fail("expected an array, got " + Excerpt(indices.dump()));
+        std::int64_t previous = -1;
+        for (std::size_t j = 0; j < indices.size(); ++j) {
+          field = where + ".at_rest[" + std::to_string(j) + "]";
+          const auto& index = indices[j];
+          if (!index.is_number_integer() || index.get<std::int64_t>() <= previous ||
+              index.get<std::int64_t>() >= m) {
+            throw fail("expected an entry index in (" + std::to_string(previous) + ", " +
+                       std::to_string(m) + "), ascending, got " + Excerpt(index.dump()));
+          }
+          previous = index.get<std::int64_t>();
+          at_rest[static_cast<std::size_t>(previous)] = true;
+        }
+      }
+      const std::int64_t stored =
+          m - static_cast<std::int64_t>(std::count(at_rest.begin(), at_rest.end(), true));
       const auto& psnr = file.Get(name + "/psnr", {m});
       const auto& poses = file.Get(name + "/poses", {m, 4});
       if (psnr.dtype != TensorFile::DType::kFloat32 || poses.dtype != TensorFile::DType::kFloat64) {
@@ -415,7 +492,7 @@ Functaset Functaset::Parse(const std::string& bytes, const std::string& source) 
       const TensorFile::Tensor* codes = nullptr;
       CodeTable table;
       if (file.Has(name + "/latents")) {
-        latents = &file.Get(name + "/latents", {m, d});
+        latents = &file.Get(name + "/latents", {stored, d});
         if (latents->dtype != TensorFile::DType::kFloat32 &&
             latents->dtype != TensorFile::DType::kFloat16) {
           field = name + "/latents";
@@ -435,7 +512,7 @@ Functaset Functaset::Parse(const std::string& bytes, const std::string& source) 
         precision = table.bits == 8   ? LatentPrecision::kUint8
                     : table.bits == 6 ? LatentPrecision::kUint6
                                       : LatentPrecision::kUint4;
-        codes = &file.Get(name + "/latent_codes", {m, CodeBytes(d, table.bits)});
+        codes = &file.Get(name + "/latent_codes", {stored, CodeBytes(d, table.bits)});
         const auto& offset = file.Get(name + "/latent_offset", {d});
         const auto& step = file.Get(name + "/latent_step", {d});
         field = name + "/latent_*";
@@ -468,6 +545,8 @@ Functaset Functaset::Parse(const std::string& bytes, const std::string& source) 
         field = where + ".fit_strategy";
         out.set_fit_strategy(sensor, entry.at("fit_strategy").get<std::string>());
       }
+      if (rest) out.set_rest_latent(sensor, *rest);
+      std::int64_t row = 0;  // latent row of the next entry not at rest
       for (std::int64_t i = 0; i < m; ++i) {
         const std::string item = "[" + std::to_string(i) + "]";
         FunctasetEntry e;
@@ -495,18 +574,22 @@ Functaset Functaset::Parse(const std::string& bytes, const std::string& source) 
           label.depth_m = p[3];
           e.label = std::move(label);
         }
-        e.latent.resize(d);
-        if (latents != nullptr) {
-          for (int k = 0; k < d; ++k) {
-            e.latent[k] =
-                static_cast<float>(latents->values[static_cast<std::size_t>(i) * d + k]);
+        e.at_rest = at_rest[i];
+        if (!e.at_rest) {
+          e.latent.resize(d);
+          if (latents != nullptr) {
+            for (int k = 0; k < d; ++k) {
+              e.latent[k] =
+                  static_cast<float>(latents->values[static_cast<std::size_t>(row) * d + k]);
+            }
+          } else {
+            const double* codes_row = codes->values.data() + row * codes->shape[1];
+            for (int k = 0; k < d; ++k) {
+              e.latent[k] =
+                  Dequantise(UnpackCode(codes_row, k, table.bits), table.offset[k], table.step[k]);
+            }
           }
-        } else {
-          const double* row = codes->values.data() + i * codes->shape[1];
-          for (int k = 0; k < d; ++k) {
-            e.latent[k] =
-                Dequantise(UnpackCode(row, k, table.bits), table.offset[k], table.step[k]);
-          }
+          ++row;
         }
         e.psnr = static_cast<float>(psnr.values[i]);
         out.Add(sensor, std::move(e));

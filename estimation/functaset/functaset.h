@@ -84,6 +84,10 @@ struct FunctasetEntry {
   // PSNR (dB) of f(x; latent) against the noisy frame, as Psnr() defines it. NaN when
   // the frame has no valid pixel, +inf for an exact fit.
   float psnr = 0;
+  // A frame at rest (no contact above the sensor's noise, estimation/data/contact.h)
+  // whose latent is the sensor's shared rest latent (Functaset::rest_latent): stored
+  // once per sensor, so such a frame costs no latent bytes.
+  bool at_rest = false;
 };
 
 class Functaset {
@@ -117,8 +121,18 @@ class Functaset {
   // of a frame are padded to whole bytes). Throws like latent_dim().
   double BytesPerFrame(SensorKind sensor) const;
   // Bytes on disk shared by all of the sensor's frames for their latents: the b-bit
-  // codes' offset and step tables (2 x d float32), 0 for float latents.
+  // codes' offset and step tables (2 x d float32, 0 for float latents) and the shared
+  // rest latent (d float32) if the sensor has one.
   std::uint64_t SharedLatentBytes(SensorKind sensor) const;
+  // Entries whose latents are stored one per frame: those not at rest.
+  std::int64_t NumStoredLatents(SensorKind sensor) const;
+
+  // The latent every frame at rest of `sensor` shares (a fit to the frame with no
+  // change), or null if the sensor has none. Set it before adding entries at rest;
+  // entries already at rest take the new value. Throws std::invalid_argument for an
+  // undeclared sensor or a latent of another dimension.
+  const Eigen::VectorXf* rest_latent(SensorKind sensor) const;
+  void set_rest_latent(SensorKind sensor, const Eigen::VectorXf& latent);
 
   // False for a partial functaset (an interrupted or running encoder's checkpoint).
   bool complete() const { return complete_; }
@@ -139,9 +153,11 @@ class Functaset {
   const std::string& fit_strategy(SensorKind sensor) const;
   void set_fit_strategy(SensorKind sensor, const std::string& strategy);
 
-  // Appends an entry to a declared sensor. Throws std::invalid_argument if the sensor
-  // is not declared, the latent does not have latent_dim(sensor) entries, the id is
-  // empty or (sensor, id) is already present.
+  // Appends an entry to a declared sensor. An entry at rest takes the sensor's rest
+  // latent (its own latent is ignored). Throws std::invalid_argument if the sensor is
+  // not declared, the latent does not have latent_dim(sensor) entries (not checked at
+  // rest), an entry is at rest but the sensor has no rest latent, the id is empty or
+  // (sensor, id) is already present.
   void Add(SensorKind sensor, FunctasetEntry entry);
   // The entries of one sensor, in the order added. Throws like latent_dim().
   const std::vector<FunctasetEntry>& entries(SensorKind sensor) const;
@@ -183,6 +199,7 @@ class Functaset {
     // while every latent still lies on it, so a second save writes the same codes.
     std::optional<CodeTable> codes;
     std::string fit_strategy;
+    std::optional<Eigen::VectorXf> rest_latent;
     std::vector<FunctasetEntry> entries;
     std::unordered_map<std::string, std::size_t> index;  // id -> entries position
   };

@@ -41,6 +41,8 @@ bool LatentEncoder::Options::IsValid(std::string* error) const {
             << "': the k-NN strategies need a functaset to search; use meta_sgd:K or ceres:N";
   } else if (!problem.IsValid(&why)) {
     message << "problem: " << why;
+  } else if (share_rest_latent && !contact.IsValid(&why)) {
+    message << "contact: " << why;
   } else {
     std::vector<SensorKind> sorted = sensors;
     std::sort(sorted.begin(), sorted.end());
@@ -113,6 +115,17 @@ LatentEncoder::LatentEncoder(const FunctaModel& model, const Options& options)
     }
     states_.push_back(std::move(state));
   }
+  if (options_.share_rest_latent) {
+    for (SensorState& state : states_) {
+      // The frame with no change: zero targets on every pixel.
+      TrunkTargets rest;
+      rest.rows = state.trunk->format.rows;
+      rest.cols = state.trunk->format.cols;
+      rest.values = Eigen::MatrixXf::Zero(state.grid.rows(), state.trunk->siren.output_channels());
+      rest.weights = Eigen::VectorXf::Ones(state.grid.rows());
+      state.rest_latent = EncodeTargets(state.sensor, rest).latent;
+    }
+  }
 }
 
 const LatentEncoder::SensorState& LatentEncoder::State(SensorKind sensor) const {
@@ -184,6 +197,7 @@ void PackJobs(const std::vector<Job>& jobs, const std::vector<std::size_t>& indi
   for (std::size_t j : indices) {
     out->Put<std::uint64_t>(j);
     out->Put<float>(jobs[j].entry.psnr);
+    out->Put<std::uint8_t>(jobs[j].entry.at_rest ? 1 : 0);
     out->PutFloats(jobs[j].entry.latent.data(), jobs[j].entry.latent.size());
   }
 }
@@ -201,6 +215,7 @@ std::vector<std::size_t> UnpackJobs(ByteReader& in, std::vector<Job>* jobs) {
     }
     FunctasetEntry& entry = (*jobs)[j].entry;
     entry.psnr = in.Get<float>();
+    entry.at_rest = in.Get<std::uint8_t>() != 0;
     entry.latent.resize(static_cast<Eigen::Index>(in.FloatCount()));
     in.GetFloats(entry.latent.data(), static_cast<std::size_t>(entry.latent.size()));
   }
@@ -292,6 +307,13 @@ Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
             ToString(sensor) + " latents with strategy '" + theirs + "', this run with '" + ours +
             "'; resume with the strategy of the interrupted run (or another output)");
       }
+      if ((checkpoint.rest_latent(sensor) != nullptr) != options_.share_rest_latent) {
+        throw std::invalid_argument(
+            "LatentEncoder: the checkpoint " + options_.checkpoint_path + " was written " +
+            (options_.share_rest_latent ? "without" : "with") + " a shared rest latent for " +
+            ToString(sensor) + ", this run " + (options_.share_rest_latent ? "with" : "without") +
+            " one; resume with the choice of the interrupted run (or another output)");
+      }
     }
     std::size_t matched = 0;
     for (Job& job : jobs) {
@@ -301,6 +323,7 @@ Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
       const FunctasetEntry& stored = checkpoint.entries(job.sensor)[*found];
       job.entry.latent = stored.latent;
       job.entry.psnr = stored.psnr;
+      job.entry.at_rest = stored.at_rest;
       job.done = true;
       ++s.frames_resumed;
     }
@@ -388,6 +411,7 @@ Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
     for (SensorKind sensor : sensors) {
       out.AddSensor(sensor, model_.Trunk(sensor).siren.latent_dim());
       out.set_fit_strategy(sensor, State(sensor).strategy.ToString());
+      if (options_.share_rest_latent) out.set_rest_latent(sensor, State(sensor).rest_latent);
     }
     for (const Job& job : jobs) {
       if (job.done) out.Add(job.sensor, job.entry);
@@ -456,9 +480,18 @@ Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
         try {
           const TrunkTargets targets =
               LoadTrunkTargets(dataset, job.frame, model_.Trunk(job.sensor).format);
-          EncodedFrame frame = EncodeTargets(job.sensor, targets);
-          job.entry.latent = std::move(frame.latent);
-          job.entry.psnr = static_cast<float>(frame.psnr);
+          if (options_.share_rest_latent &&
+              !DetectFrameContact(dataset, job.frame, options_.contact).contact) {
+            const SensorState& state = State(job.sensor);
+            job.entry.at_rest = true;
+            job.entry.latent = state.rest_latent;
+            job.entry.psnr = static_cast<float>(
+                Psnr(state.trunk->siren.Forward<float>(state.grid, state.rest_latent), targets));
+          } else {
+            EncodedFrame frame = EncodeTargets(job.sensor, targets);
+            job.entry.latent = std::move(frame.latent);
+            job.entry.psnr = static_cast<float>(frame.psnr);
+          }
         } catch (...) {
           std::lock_guard<std::mutex> lock(mutex);
           if (!failure) failure = std::current_exception();

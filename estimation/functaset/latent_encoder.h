@@ -63,6 +63,7 @@
 
 #include <Eigen/Core>
 
+#include "estimation/data/contact.h"
 #include "estimation/data/dataset.h"
 #include "estimation/fitting/latent_fitter.h"
 #include "estimation/functaset/functaset.h"
@@ -119,6 +120,13 @@ class LatentEncoder {
     // The latent problem of the ceres strategy (unused by meta_sgd): sigma (0 = the
     // trunk's residual_sigma), sigma_z, robust loss, pixel selection, precision.
     LatentProblem::Options problem;
+    // Frames at rest (no contact above the sensor's noise by DetectFrameContact with
+    // `contact`, estimation/data/contact.h) are not fitted: they share one latent per
+    // sensor, the fit of a frame with no change (all-zero targets), stored once
+    // (FunctasetEntry::at_rest). A resumed checkpoint must have been written with the
+    // same choice.
+    bool share_rest_latent = false;
+    ContactOptions contact;
     // The processes sharing the run (models/core/process_group.h); null = this process
     // alone. Every process calls Encode with the same dataset and options; see
     // "Several processes" above. Does not change the result.
@@ -181,6 +189,7 @@ class LatentEncoder {
     MetaSgd meta_sgd{MetaSgd::Options()};
     FitStrategy strategy;   // resolved: the trunk's meta_sgd:K when Options::strategy is ""
     std::optional<LatentFitter> fitter;  // for ceres:N
+    Eigen::VectorXf rest_latent;  // with Options::share_rest_latent: the fit of no change
   };
   const SensorState& State(SensorKind sensor) const;
 

@@ -4,7 +4,8 @@
 // presses (tests/data/taxim_ballpress, MIT, LICENSE beside the frames) plus one frame at
 // rest (the reference with one level of 8-bit noise) in a user folder without metadata.
 // `info` reads it, a small trunk is trained on the presses alone (--skip-rest) at a working
-// size of the frames' aspect ratio, `encode` fits every frame, `recon` scores
+// size of the frames' aspect ratio, `encode` fits every press and gives the frame at
+// rest the shared rest latent (--share-rest), `recon` scores
 // them with contact and no-contact frames apart, and the contact centres recon reports
 // for the raw frames agree with the hand-placed labels in contacts.csv.
 #include <algorithm>
@@ -87,7 +88,7 @@ class RealSensorCliTest : public ::testing::Test {
                             " --batch 8 --readout --threads 2 --seed 3 --skip-rest"
                             " --working-size 60x80 --json"));
     encode_ = new Result(Run("encode --data " + Root("d") + " --model " + Root("m.tfm") +
-                             " --out " + Root("f.tfs") + " --threads 2"));
+                             " --out " + Root("f.tfs") + " --threads 2 --share-rest --json"));
     recon_ = new Result(Run("recon --data " + Root("d") + " --model " + Root("m.tfm") +
                             " --functaset " + Root("f.tfs") + " --out " + Root("r") +
                             " --examples 4 --json"));
@@ -156,6 +157,12 @@ TEST_F(RealSensorCliTest, PressesAreContactsTheFrameAtRestIsNot) {
         << id << " score " << frames.Get(id, "contact_score");
   }
   EXPECT_LT(std::stod(frames.Get("rest", "contact_score")), 6.0);
+  // encode --share-rest: the frame at rest is not fitted and stores no latent of its own;
+  // 49 presses x 8 float16 values plus the shared rest latent in float32.
+  ASSERT_EQ(encode_->exit_code, 0) << encode_->err;
+  EXPECT_EQ(encode_->LastJson()["frames_at_rest"]["gelslim"], 1);
+  EXPECT_EQ(j["latent_bytes"], 49 * 8 * 2 + 8 * 4);
+  EXPECT_TRUE(std::isfinite(std::stod(frames.Get("rest", "psnr"))));
 }
 
 // eval without pose labels or pose model: the reconstruction table, with the contact

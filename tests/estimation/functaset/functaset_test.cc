@@ -418,6 +418,68 @@ TEST(Functaset, BadCodeFieldsAreRejectedNamingThem) {
                   {"bad.tfs", "bubble/latent_codes", "shape [40, 6], expected [40, 7]"});
 }
 
+// Frames at rest share the sensor's rest latent, stored once: the file holds a latent row
+// only for the others, at every precision, and reads back what was written.
+TEST(Functaset, FramesAtRestShareOneStoredLatentAtEveryPrecision) {
+  for (Functaset::LatentPrecision precision :
+       {Functaset::LatentPrecision::kFloat32, Functaset::LatentPrecision::kFloat16,
+        Functaset::LatentPrecision::kUint8, Functaset::LatentPrecision::kUint4}) {
+    SCOPED_TRACE(ToString(precision));
+    Functaset all = MakeCodeFunctaset(precision);
+    Functaset shared = MakeCodeFunctaset(precision);
+    const Eigen::VectorXf rest = Latent(7, 99) * 10.0f;  // outside the others' code range
+    shared.set_rest_latent(SensorKind::kSoftBubble, rest);
+    FunctasetEntry e;
+    for (int i = 0; i < 10; ++i) {
+      e.id = "rest_" + std::to_string(i);
+      e.at_rest = true;
+      e.psnr = 12.5f;
+      shared.Add(SensorKind::kSoftBubble, e);
+    }
+    EXPECT_EQ(shared.NumStoredLatents(SensorKind::kSoftBubble), 40);
+    EXPECT_EQ(shared.SharedLatentBytes(SensorKind::kSoftBubble),
+              all.SharedLatentBytes(SensorKind::kSoftBubble) + 4 * 7);
+    const Functaset loaded = Functaset::Parse(shared.Serialize(), "mem");
+    const Functaset reference = Functaset::Parse(all.Serialize(), "mem");
+    ASSERT_EQ(loaded.entries(SensorKind::kSoftBubble).size(), 50u);
+    ASSERT_NE(loaded.rest_latent(SensorKind::kSoftBubble), nullptr);
+    EXPECT_EQ(*loaded.rest_latent(SensorKind::kSoftBubble), rest);
+    for (std::size_t i = 0; i < 50; ++i) {
+      const FunctasetEntry& got = loaded.entries(SensorKind::kSoftBubble)[i];
+      EXPECT_EQ(got.at_rest, i >= 40) << i;
+      // The others read back exactly as without frames at rest (same codes' grid).
+      EXPECT_EQ(got.latent, i < 40 ? reference.entries(SensorKind::kSoftBubble)[i].latent : rest)
+          << i;
+    }
+    // Frames at rest cost d float32 once (a tensor with its header) and an index each
+    // (at most 5 characters here), not a latent each.
+    Functaset fitted = all;
+    for (int i = 0; i < 10; ++i) {
+      e.id = "rest_" + std::to_string(i);
+      e.at_rest = false;
+      e.latent = rest;
+      fitted.Add(SensorKind::kSoftBubble, e);
+    }
+    const double saved = 10 * (all.BytesPerFrame(SensorKind::kSoftBubble) - 5) - 4 * 7 - 160;
+    EXPECT_LE(static_cast<double>(shared.Serialize().size()),
+              static_cast<double>(fitted.Serialize().size()) - saved);
+  }
+  // An entry at rest needs the rest latent first; a bad at_rest array names the field.
+  Functaset f(1, "d");
+  f.AddSensor(SensorKind::kGelSlim, 3);
+  FunctasetEntry e;
+  e.id = "a";
+  e.at_rest = true;
+  EXPECT_THROW(f.Add(SensorKind::kGelSlim, e), std::invalid_argument);
+  f.set_rest_latent(SensorKind::kGelSlim, Latent(3, 1));
+  f.Add(SensorKind::kGelSlim, e);
+  EXPECT_THROW(f.set_rest_latent(SensorKind::kGelSlim, Latent(4, 1)), std::invalid_argument);
+  const std::string bytes =
+      WithMeta(f, [](nlohmann::json& m) { m["sensors"][0]["at_rest"][0] = 1; });
+  ExpectFileError([&] { Functaset::Parse(bytes, "edited.tfs"); },
+                  {"edited.tfs", "sensors[0].at_rest[0]"});
+}
+
 TEST(Functaset, LatentPrecisionNamesRoundTrip) {
   for (const char* name : {"float32", "float16", "uint8", "uint6", "uint4"}) {
     Functaset::LatentPrecision p;

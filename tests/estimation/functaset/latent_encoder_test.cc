@@ -261,6 +261,57 @@ TEST(LatentEncoder, TheFunctasetRecordsTheStrategyAndResumeInsistsOnIt) {
   }
 }
 
+// share_rest_latent: frames at rest take the fit of a frame with no change, frames in
+// contact are fitted as without it, and a resume must make the same choice.
+TEST(LatentEncoder, FramesAtRestShareTheFitOfNoChangeAndResumeInsistsOnTheChoice) {
+  TestDir dir;
+  WriteTinyDataset(dir / "data", kFrames);
+  const Dataset dataset = Dataset::Open(dir / "data");
+  const FunctaModel model = MakeModel(/*inner_steps=*/3);
+  LatentEncoder::Options options;
+  const Functaset plain = LatentEncoder(model, options).Encode(dataset, nullptr);
+  options.share_rest_latent = true;
+  // Every simulated frame is a press: none is at rest at the default threshold ...
+  const Functaset shared = LatentEncoder(model, options).Encode(dataset, nullptr);
+  for (SensorKind sensor : plain.sensors()) {
+    ASSERT_NE(shared.rest_latent(sensor), nullptr);
+    EXPECT_EQ(shared.NumStoredLatents(sensor),
+              static_cast<std::int64_t>(plain.entries(sensor).size()));
+    for (std::size_t i = 0; i < plain.entries(sensor).size(); ++i) {
+      EXPECT_EQ(shared.entries(sensor)[i].latent, plain.entries(sensor)[i].latent);
+    }
+  }
+  // ... and every frame is at rest at an unreachable one: each carries the rest latent,
+  // the fit of all-zero targets.
+  options.contact.threshold = 1e12;
+  options.checkpoint_path = dir / "rest.tfs";
+  const Functaset resting = LatentEncoder(model, options).Encode(dataset, nullptr);
+  for (SensorKind sensor : resting.sensors()) {
+    const SensorTrunk& trunk = model.Trunk(sensor);
+    TrunkTargets zero;
+    zero.rows = trunk.format.rows;
+    zero.cols = trunk.format.cols;
+    zero.values = Eigen::MatrixXf::Zero(zero.rows * zero.cols, trunk.siren.output_channels());
+    zero.weights = Eigen::VectorXf::Ones(zero.rows * zero.cols);
+    const Eigen::VectorXf expected =
+        LatentEncoder(model, LatentEncoder::Options()).EncodeTargets(sensor, zero).latent;
+    EXPECT_EQ(*resting.rest_latent(sensor), expected);
+    EXPECT_EQ(resting.NumStoredLatents(sensor), 0);
+    for (const FunctasetEntry& e : resting.entries(sensor)) {
+      EXPECT_TRUE(e.at_rest);
+      EXPECT_EQ(e.latent, expected);
+    }
+  }
+  options.resume = true;
+  options.share_rest_latent = false;
+  try {
+    LatentEncoder(model, options).Encode(dataset, nullptr);
+    FAIL() << "resumed a shared-rest checkpoint without sharing";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_THAT(e.what(), HasSubstr("rest latent"));
+  }
+}
+
 TEST(LatentEncoder, FramesTheModelGeneratedAreRecoveredThroughTheDataset) {
   // Frames written as depth PNGs: reference - scale * f(grid; z_i), at the trunk's
   // working resolution, so only the 1 um depth quantisation separates them from the
