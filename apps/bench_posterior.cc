@@ -206,7 +206,7 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
   for (std::size_t index : frames) {
     const PoseLabel& label = *dataset.frames()[index].label;
     const SE2d& label_pose = label.sensor_T_object;
-    const int n = SymmetryOrderOfTool(label.tool);
+    const int n = dataset.ToolSymmetryOrder(label.tool);
     const TrunkTargets targets = LoadTrunkTargets(dataset, index, trunk.format);
     const LatentProblem problem(trunk, targets, resolved.problem);
     Eigen::VectorXd latent;

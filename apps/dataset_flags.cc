@@ -26,6 +26,9 @@ void AddDatasetFlags(CLI::App* sub, DatasetFlags* flags) {
                   "label range checks)")
       ->check(CLI::NonNegativeNumber);
   sub->add_option("--labels", flags->labels, "A labels.csv to use instead of DIR/labels.csv");
+  sub->add_option("--tool-symmetry", flags->tools,
+                  "A tools.csv (tool,symmetry_order) declaring your tools' rotational symmetry, "
+                  "instead of DIR/tools.csv");
 }
 
 Dataset OpenDataset(const std::string& path, const DatasetFlags& flags) {
@@ -41,6 +44,7 @@ Dataset OpenDataset(const std::string& path, const DatasetFlags& flags) {
   options.reference_index = flags.reference_index;
   options.pixel_pitch_m = flags.pixel_pitch_mm * 1e-3;
   options.labels = flags.labels;
+  options.tools = flags.tools;
   const bool video = std::filesystem::is_regular_file(path) && IsVideoFileName(path);
   return video ? Dataset::OpenVideo(path, options) : Dataset::Open(path, options);
 }

@@ -19,9 +19,11 @@ struct DatasetFlags {
   int reference_index = 0;    // video: the frame that is the reference
   double pixel_pitch_mm = 0;  // pixel pitch for data without metadata, millimetres
   std::string labels;         // labels.csv to read instead of DIR/labels.csv
+  std::string tools;          // tools.csv to read instead of DIR/tools.csv
 };
 
-// Adds --sensor, --reference, --reference-index, --pixel-pitch-mm, --labels to `sub`.
+// Adds --sensor, --reference, --reference-index, --pixel-pitch-mm, --labels, --tool-symmetry to
+// `sub`.
 void AddDatasetFlags(CLI::App* sub, DatasetFlags* flags);
 
 // Opens `path`: a dataset folder (ours or a user's, a set of clips included), or a video

@@ -88,6 +88,7 @@ std::string ResumeCommand(const EncodeFlags& flags) {
   if (!flags.dataset.sensor.empty()) command += " --sensor " + flags.dataset.sensor;
   if (!flags.dataset.reference.empty()) command += " --reference " + flags.dataset.reference;
   if (!flags.dataset.labels.empty()) command += " --labels " + flags.dataset.labels;
+  if (!flags.dataset.tools.empty()) command += " --tool-symmetry " + flags.dataset.tools;
   if (flags.dataset.reference_index != 0) {
     command += " --reference-index " + std::to_string(flags.dataset.reference_index);
   }

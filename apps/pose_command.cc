@@ -45,6 +45,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <map>
 #include <memory>
 #include <opencv2/imgproc.hpp>
 #include <optional>
@@ -113,6 +114,7 @@ struct PoseFlags {
   bool json = false;
   bool no_model_error = false;
   bool unknown_tool = false;
+  int symmetry_order = -1;  // -1 = from the tool
 };
 
 constexpr double kDeg = 180.0 / M_PI;
@@ -129,6 +131,7 @@ struct Input {
   double pitch_m = 0;   // 0 = unknown
   std::optional<PoseLabel> label;
   std::string name;     // for titles
+  std::map<std::string, int> tool_symmetries;  // the dataset's tools.csv (--data)
 };
 
 // ---- The picture -------------------------------------------------------------------------
@@ -640,6 +643,7 @@ void RunPose(const PoseFlags& flags) {
     input.pitch_m = dataset.sensor_info(sensor).pixel_pitch_m;
     input.label = dataset.frames()[*index].label;
     input.name = "frame " + flags.id;
+    input.tool_symmetries = dataset.tool_symmetries();
   } else {
     if (!sensor_given) sensor = InferSensor(flags.frame, "--frame");
     const Image frame = ReadInput(flags.frame, sensor, "--frame");
@@ -671,8 +675,19 @@ void RunPose(const PoseFlags& flags) {
 
   std::string tool = flags.tool;
   if (tool.empty() && input.label) tool = input.label->tool;
+  // The symmetry order: --symmetry-order, else the dataset's tools.csv, else the built-in
+  // tool's, else 1.
   bool known = false;
-  const int n = SymmetryOrderOfTool(tool, &known);
+  int n = 1;
+  if (flags.symmetry_order >= 0) {
+    n = flags.symmetry_order;
+    known = true;
+  } else if (const auto it = input.tool_symmetries.find(tool); it != input.tool_symmetries.end()) {
+    n = it->second;
+    known = true;
+  } else {
+    n = SymmetryOrderOfTool(tool, &known);
+  }
   if (!tool.empty() && !known) {
     std::cerr << "pose: warning: unknown tool '" << tool
               << "': symmetry order 1 assumed (nothing folded)\n";
@@ -796,6 +811,11 @@ void RegisterPose(CLI::App& app, CommandBody* selected) {
                   "bubble or gelslim; default: inferred from --frame, or bubble for --data");
   sub->add_option("--tool", flags->tool,
                   "Tool name (sets the symmetry order; default: the frame's label, else none)");
+  sub->add_option("--symmetry-order", flags->symmetry_order,
+                  "Rotational symmetry order n of the tool (yaw folded modulo 360/n deg; 0 = no "
+                  "observable yaw), for a tool of your own (default: the dataset's tools.csv with "
+                  "--data, else the built-in tool's, else 1)")
+      ->check(CLI::Range(0, 360));
   sub->add_option("--method", flags->method,
                   "latent (default: the pose MLP on the frame's latent posterior, --sampler) or "
                   "generator (the pose fitted through --generator and the trunk; a Laplace "

@@ -96,7 +96,7 @@ Samples Collect(const Functaset& functaset, SensorKind sensor, Split split,
     const SE2d& pose = e.label->sensor_T_object;
     s.targets.poses.row(i) << pose.x(), pose.y(), pose.yaw();
     bool known = false;
-    s.targets.symmetry_orders[i] = SymmetryOrderOfTool(e.label->tool, &known);
+    s.targets.symmetry_orders[i] = functaset.ToolSymmetryOrder(e.label->tool, &known);
     if (!known) unknown_tools->insert(e.label->tool);
     s.tools.push_back(e.label->tool);
   }
@@ -376,7 +376,7 @@ void RunTrainPose(const TrainPoseFlags& flags) {
   };
   for (const std::string& tool : tools) {
     bool known = false;
-    const int n = SymmetryOrderOfTool(tool, &known);
+    const int n = source->ToolSymmetryOrder(tool, &known);
     row(tool, tool, known ? std::to_string(n) : "?");
     const ErrorSums a = get(train_errors, tool), b = get(test_errors, tool);
     per_tool[tool] = {

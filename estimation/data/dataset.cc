@@ -4,12 +4,14 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/videoio.hpp>
 #include <set>
+#include <sstream>
 #include <stdexcept>
 #include <system_error>
 #include <utility>
@@ -19,6 +21,7 @@
 #include "estimation/data/internal/path_util.h"
 #include "estimation/data/internal/video_reader.h"
 #include "models/core/text_limits.h"
+#include "models/simulator/tool.h"
 
 namespace tactfunc {
 namespace {
@@ -29,6 +32,7 @@ using nlohmann::json;
 constexpr const char* kMetadataFile = "dataset.json";
 constexpr const char* kLabelsFile = "labels.csv";
 constexpr const char* kClipsFile = "clips.csv";
+constexpr const char* kToolsFile = "tools.csv";
 constexpr const char* kFormatName = "tactfunc-dataset";
 constexpr int kFormatVersion = 1;
 constexpr const char* kCleanFolder = "clean";
@@ -614,6 +618,12 @@ Dataset Dataset::Open(const std::string& dir, const OpenOptions& options) {
     if (internal::IsRegularFile(default_path)) labels_path = default_path;
   }
   if (!labels_path.empty()) dataset.AttachLabels(labels_path, false);
+  std::string tools_path = options.tools;
+  if (tools_path.empty()) {
+    const std::string default_path = internal::JoinPath(dir, kToolsFile);
+    if (internal::IsRegularFile(default_path)) tools_path = default_path;
+  }
+  if (!tools_path.empty()) dataset.AttachTools(tools_path);
   if (filter_sensor) dataset.KeepOnlySensor(*options.sensor);
   return dataset;
 }
@@ -639,6 +649,7 @@ Dataset Dataset::OpenVideo(const std::string& path, const OpenOptions& options) 
   AppendVideoFrames(name, "", -1, video->num_frames(), reference_index, &dataset.frames_);
   dataset.video_ = std::move(video);
   if (!options.labels.empty()) dataset.AttachLabels(options.labels, false);
+  if (!options.tools.empty()) dataset.AttachTools(options.tools);
   return dataset;
 }
 
@@ -772,6 +783,66 @@ void Dataset::AttachLabels(const std::string& labels_path, bool ignore_absent_se
     record.label = row.label;
     record.split = row.split;
   }
+}
+
+void Dataset::AttachTools(const std::string& tools_path) {
+  tools_path_ = tools_path;
+  std::istringstream in(ReadFile(tools_path));
+  std::string line;
+  int number = 0;
+  bool header = true;
+  while (std::getline(in, line)) {
+    ++number;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (number == 1 && line.rfind("\xEF\xBB\xBF", 0) == 0) line.erase(0, 3);  // UTF-8 BOM
+    const std::string where = tools_path + ":" + std::to_string(number) + ": ";
+    if (header) {
+      if (line != "tool,symmetry_order") {
+        throw DatasetError(where + "header: expected 'tool,symmetry_order', got '" +
+                           EscapedExcerpt(line) + "'");
+      }
+      header = false;
+      continue;
+    }
+    if (line.empty()) continue;
+    const std::size_t comma = line.find(',');
+    if (comma == std::string::npos || line.find(',', comma + 1) != std::string::npos) {
+      throw DatasetError(where + "expected 2 fields 'tool,symmetry_order', got '" +
+                         EscapedExcerpt(line) + "'");
+    }
+    const std::string tool = line.substr(0, comma), order = line.substr(comma + 1);
+    if (tool.empty() || tool.find('"') != std::string::npos) {
+      throw DatasetError(where + "field 'tool': expected a tool name without '\"', got '" +
+                         EscapedExcerpt(tool) + "'");
+    }
+    char* end = nullptr;
+    const long n = std::strtol(order.c_str(), &end, 10);
+    if (order.empty() || *end != '\0' || n < 0 || n > 360) {
+      throw DatasetError(where + "field 'symmetry_order': expected an integer in [0, 360] (0 = no " +
+                         "observable yaw, 1 = asymmetric), got '" + EscapedExcerpt(order) + "'");
+    }
+    bool built_in = false;
+    const int builtin_order = SymmetryOrderOfTool(tool, &built_in);
+    if (built_in && builtin_order != n) {
+      throw DatasetError(where + "field 'symmetry_order': tool '" + tool +
+                         "' is a built-in tool of symmetry order " + std::to_string(builtin_order) +
+                         ", got " + order);
+    }
+    if (!tool_symmetries_.emplace(tool, static_cast<int>(n)).second) {
+      throw DatasetError(where + "field 'tool': expected each tool once, got '" +
+                         EscapedExcerpt(tool) + "' again");
+    }
+  }
+  if (header) throw DatasetError(tools_path + ": expected the header 'tool,symmetry_order', got an empty file");
+}
+
+int Dataset::ToolSymmetryOrder(const std::string& tool, bool* known) const {
+  const auto it = tool_symmetries_.find(tool);
+  if (it != tool_symmetries_.end()) {
+    if (known != nullptr) *known = true;
+    return it->second;
+  }
+  return SymmetryOrderOfTool(tool, known);
 }
 
 void Dataset::KeepOnlySensor(SensorKind kind) {
@@ -928,6 +999,7 @@ std::vector<std::string> Dataset::Files() const {
   if (!metadata_path_.empty()) files.insert(metadata_path_);
   if (!clips_path_.empty()) files.insert(clips_path_);
   if (!labels_path_.empty()) files.insert(labels_path_);
+  if (!tools_path_.empty()) files.insert(tools_path_);
   return std::vector<std::string>(files.begin(), files.end());
 }
 

@@ -148,6 +148,9 @@ struct DatasetOpenOptions {
   double pixel_pitch_m = 0;
   // labels.csv to read; "" = DIR/labels.csv if present for folders, none for videos.
   std::string labels;
+  // tools.csv declaring the rotational symmetry of the dataset's own tools (header
+  // `tool,symmetry_order`); "" = DIR/tools.csv if present for folders, none for videos.
+  std::string tools;
   bool IsValid(std::string* error) const;
 };
 
@@ -222,6 +225,13 @@ class Dataset {
   // dataset.json, labels.csv and clips.csv (for a video: the video file and labels
   // file; for a video clip: its video file).
   std::uint64_t BytesOnDisk() const;
+  // The rotational symmetry order n of `tool` (the tool looks the same at yaw and yaw +
+  // 2 pi / n; 0 = no observable yaw): as tools.csv declares it, else the built-in tool's
+  // (SymmetryOrderOfTool), else 1. *known (optional): declared or built in.
+  int ToolSymmetryOrder(const std::string& tool, bool* known = nullptr) const;
+  // The symmetry orders tools.csv declares (empty without one).
+  const std::map<std::string, int>& tool_symmetries() const { return tool_symmetries_; }
+
   // The paths of those files (joined to root(), sorted): what a command writing
   // outputs must not overwrite.
   std::vector<std::string> Files() const;
@@ -243,6 +253,7 @@ class Dataset {
   const SensorData& sensor_data(SensorKind kind) const;
   void SortAndIndexFrames();
   void AttachLabels(const std::string& labels_path, bool ignore_absent_sensors);
+  void AttachTools(const std::string& tools_path);
   void KeepOnlySensor(SensorKind kind);
   void OpenClips(const OpenOptions& options);
   void AttachClipSplits(const std::string& clips_path);
@@ -255,6 +266,8 @@ class Dataset {
   std::string source_;
   std::string meta_json_ = "{}";
   std::string labels_path_;  // absolute or relative-to-cwd path of labels.csv, "" if none
+  std::string tools_path_;   // tools.csv, "" if none
+  std::map<std::string, int> tool_symmetries_;
   std::string metadata_path_;
   std::string clips_path_;  // DIR/clips.csv of a clip set, "" if none
   // A video dataset's decoder (shared by copies; thread-safe), null otherwise.

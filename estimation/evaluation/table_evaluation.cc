@@ -137,7 +137,7 @@ struct PoseSamples {
   PoseTargets targets;
 };
 
-PoseSamples LabelledSamples(const SensorFrames& s, Split split) {
+PoseSamples LabelledSamples(const SensorFrames& s, const Dataset& dataset, Split split) {
   PoseSamples p;
   for (std::size_t i : s.Of(split)) {
     if (s.entries[i]->label.has_value()) p.frames.push_back(i);
@@ -149,7 +149,7 @@ PoseSamples LabelledSamples(const SensorFrames& s, Split split) {
     const PoseLabel& label = *s.entries[p.frames[k]]->label;
     const SE2d& pose = label.sensor_T_object;
     p.targets.poses.row(k) << pose.x(), pose.y(), pose.yaw();
-    p.targets.symmetry_orders[k] = SymmetryOrderOfTool(label.tool);
+    p.targets.symmetry_orders[k] = dataset.ToolSymmetryOrder(label.tool);
   }
   return p;
 }
@@ -396,8 +396,8 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
     std::string tf_pose_latents;  // the latent map the TactFunc pose rows used
     if (is_pose_sensor(sensor)) {
       const PoseMlp& pose_model = *in.pose_model;
-      const PoseSamples train = LabelledSamples(s, Split::kTrain);
-      const PoseSamples test = LabelledSamples(s, Split::kTest);
+      const PoseSamples train = LabelledSamples(s, *in.dataset, Split::kTrain);
+      const PoseSamples test = LabelledSamples(s, *in.dataset, Split::kTest);
       if (train.frames.empty()) {
         throw DatasetError("functaset '" + in.functaset_name + "' has no labelled train-split " +
                            ToString(sensor) + " entries: the pose baselines are trained on those");

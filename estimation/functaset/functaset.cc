@@ -13,6 +13,7 @@
 
 #include "models/core/atomic_file.h"
 #include "models/core/tensor_file.h"
+#include "models/simulator/tool.h"
 #include "nlohmann/json.hpp"
 
 namespace tactfunc {
@@ -109,6 +110,15 @@ double Functaset::BytesPerFrame(SensorKind sensor) const {
 std::uint64_t Functaset::SharedLatentBytes(SensorKind sensor) const {
   const std::uint64_t d = static_cast<std::uint64_t>(latent_dim(sensor));
   return (IsQuantised(latent_precision_) ? 8 * d : 0) + (rest_latent(sensor) ? 4 * d : 0);
+}
+
+int Functaset::ToolSymmetryOrder(const std::string& tool, bool* known) const {
+  const auto it = tool_symmetries_.find(tool);
+  if (it != tool_symmetries_.end()) {
+    if (known != nullptr) *known = true;
+    return it->second;
+  }
+  return SymmetryOrderOfTool(tool, known);
 }
 
 std::int64_t Functaset::NumStoredLatents(SensorKind sensor) const {
@@ -312,6 +322,9 @@ std::string Functaset::Serialize() const {
   meta["complete"] = complete_;
   meta["model_checksum"] = model_checksum_;
   meta["dataset"] = dataset_;
+  if (!tool_symmetries_.empty()) {  // absent = no declared tools (and older files)
+    meta["tool_symmetry"] = tool_symmetries_;
+  }
   meta["sensors"] = nlohmann::json::array();
   for (const auto& [sensor, block] : blocks_) {
     const std::string name = ToString(sensor);
@@ -419,6 +432,18 @@ Functaset Functaset::Parse(const std::string& bytes, const std::string& source) 
     out.model_checksum_ = static_cast<std::uint32_t>(checksum.get<std::uint64_t>());
     field = "dataset";
     out.dataset_ = meta.at("dataset").get<std::string>();
+    if (meta.contains("tool_symmetry")) {
+      field = "tool_symmetry";
+      const auto& orders = meta.at("tool_symmetry");
+      if (!orders.is_object()) throw fail("expected an object, got " + Excerpt(orders.dump()));
+      for (const auto& [tool, order] : orders.items()) {
+        field = "tool_symmetry." + tool;
+        if (!order.is_number_integer() || order.get<int>() < 0 || order.get<int>() > 360) {
+          throw fail("expected an integer in [0, 360], got " + Excerpt(order.dump()));
+        }
+        out.tool_symmetries_[tool] = order.get<int>();
+      }
+    }
     field = "sensors";
     const auto& sensors = meta.at("sensors");
     if (!sensors.is_array()) throw fail("expected an array, got " + Excerpt(sensors.dump()));

@@ -134,6 +134,16 @@ class Functaset {
   const Eigen::VectorXf* rest_latent(SensorKind sensor) const;
   void set_rest_latent(SensorKind sensor, const Eigen::VectorXf& latent);
 
+  // The rotational symmetry orders the dataset declared for its own tools (its
+  // tools.csv, Dataset::tool_symmetries), carried so that pose training and evaluation
+  // on the functaset fold yaw as the data says. Empty for files without them.
+  const std::map<std::string, int>& tool_symmetries() const { return tool_symmetries_; }
+  void set_tool_symmetries(std::map<std::string, int> orders) {
+    tool_symmetries_ = std::move(orders);
+  }
+  // Declared here, else the built-in tool's (SymmetryOrderOfTool), else 1.
+  int ToolSymmetryOrder(const std::string& tool, bool* known = nullptr) const;
+
   // False for a partial functaset (an interrupted or running encoder's checkpoint).
   bool complete() const { return complete_; }
   void set_complete(bool complete) { complete_ = complete; }
@@ -212,6 +222,7 @@ class Functaset {
   bool complete_ = true;
   LatentPrecision latent_precision_ = LatentPrecision::kFloat32;
   std::map<SensorKind, SensorBlock> blocks_;
+  std::map<std::string, int> tool_symmetries_;
   std::string source_;
 };
 

@@ -403,6 +403,7 @@ Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
   auto collect = [&](bool complete) {
     Functaset out(model_.checksum(), dataset.root());
     out.set_complete(complete);
+    out.set_tool_symmetries(dataset.tool_symmetries());
     // A partial file keeps b-bit latents as float32: resuming re-quantises nothing (the
     // grid depends on all of the sensor's entries).
     out.set_latent_precision(!complete && IsQuantised(options_.latent_precision)

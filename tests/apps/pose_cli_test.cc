@@ -230,6 +230,14 @@ TEST_F(PoseCliTest, PoseReadsAFrameAndReferenceFromFiles) {
   EXPECT_EQ(j["symmetry_order"], 2);  // the rod
   EXPECT_FALSE(j.contains("truth"));
   EXPECT_TRUE(fs::exists(Root("pose_files/posterior.png")));
+  // A tool of the user's own, its symmetry given on the command line.
+  const Result own = Run("pose --model " + Root("m.tfm") + " --pose-model " + Root("p.tpm") +
+                         " --frame " + Root("d/bubble/000007.png") + " --reference " +
+                         Root("d/bubble/reference.png") +
+                         " --sampler laplace --samples 10 --tool edge --symmetry-order 4 --json");
+  ASSERT_EQ(own.exit_code, 0) << own.err;
+  EXPECT_EQ(own.LastJson()["symmetry_order"], 4);
+  EXPECT_THAT(own.err, ::testing::Not(HasSubstr("unknown tool")));
 }
 
 TEST_F(PoseCliTest, BenchPosteriorReportsCoverageErrorsAndTimes) {

@@ -1,6 +1,7 @@
 // Copyright 2026 The tactfunc Authors.
 #include "estimation/data/dataset.h"
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <limits>
@@ -444,6 +445,57 @@ TEST(Dataset, MalformedLabelsAreErrorsNamingTheLineAndField) {
       for (const char* piece : c.pieces) {
         EXPECT_THAT(e.what(), HasSubstr(piece)) << "rows:\n" << c.rows;
       }
+    }
+  }
+}
+
+// tools.csv declares the symmetry of the data's own tools; built-in tools keep theirs.
+TEST(Dataset, ToolsCsvDeclaresTheSymmetryOfUserToolsAndBadRowsNameLineAndField) {
+  TestDir dir;
+  WriteDataset(dir.path());
+  EXPECT_TRUE(Dataset::Open(dir.path()).tool_symmetries().empty());
+  WriteText(dir / "tools.csv", "\xEF\xBB\xBFtool,symmetry_order\r\nedge,2\r\n\nball,0\nrod,2\n");
+  const Dataset dataset = Dataset::Open(dir.path());
+  bool known = false;
+  EXPECT_EQ(dataset.ToolSymmetryOrder("edge", &known), 2);
+  EXPECT_TRUE(known);
+  EXPECT_EQ(dataset.ToolSymmetryOrder("ball"), 0);
+  EXPECT_EQ(dataset.ToolSymmetryOrder("rod"), 2);             // built in, declared alike
+  EXPECT_EQ(dataset.ToolSymmetryOrder("l_shape", &known), 1);  // built in
+  EXPECT_TRUE(known);
+  EXPECT_EQ(dataset.ToolSymmetryOrder("mystery", &known), 1);
+  EXPECT_FALSE(known);
+  EXPECT_EQ(dataset.tool_symmetries().size(), 3u);
+  const std::vector<std::string> files = dataset.Files();
+  EXPECT_NE(std::find(files.begin(), files.end(), dir / "tools.csv"), files.end());
+  // The same file named by the option, from elsewhere.
+  std::filesystem::rename(dir / "tools.csv", dir / "my_tools.csv");
+  Dataset::OpenOptions options;
+  options.tools = dir / "my_tools.csv";
+  EXPECT_EQ(Dataset::Open(dir.path(), options).ToolSymmetryOrder("edge"), 2);
+  std::filesystem::remove(dir / "my_tools.csv");
+
+  const struct {
+    const char* text;
+    std::vector<const char*> pieces;
+  } cases[] = {
+      {"tool,order\n", {"tools.csv:1:", "header", "tool,symmetry_order"}},
+      {"tool,symmetry_order\nedge,two\n", {"tools.csv:2:", "field 'symmetry_order'", "'two'"}},
+      {"tool,symmetry_order\nedge,-1\n", {"tools.csv:2:", "field 'symmetry_order'"}},
+      {"tool,symmetry_order\nrod,3\n", {"tools.csv:2:", "built-in", "order 2", "got 3"}},
+      {"tool,symmetry_order\nedge,2\nedge,2\n", {"tools.csv:3:", "field 'tool'", "edge"}},
+      {"tool,symmetry_order\n,2\n", {"tools.csv:2:", "field 'tool'"}},
+      {"tool,symmetry_order\nedge,2,1\n", {"tools.csv:2:", "2 fields"}},
+      {"", {"tools.csv", "empty file"}},
+  };
+  for (const auto& c : cases) {
+    SCOPED_TRACE(c.text);
+    WriteText(dir / "tools.csv", c.text);
+    try {
+      Dataset::Open(dir.path());
+      ADD_FAILURE() << "no error";
+    } catch (const DatasetError& e) {
+      for (const char* piece : c.pieces) EXPECT_THAT(e.what(), HasSubstr(piece));
     }
   }
 }

@@ -480,6 +480,26 @@ TEST(Functaset, FramesAtRestShareOneStoredLatentAtEveryPrecision) {
                   {"edited.tfs", "sensors[0].at_rest[0]"});
 }
 
+// The dataset's declared tool symmetries travel with the functaset.
+TEST(Functaset, DeclaredToolSymmetriesRoundTripAndComeBeforeTheBuiltInOnes) {
+  Functaset f = MakeFunctaset();
+  EXPECT_EQ(f.ToolSymmetryOrder("edge"), 1);
+  f.set_tool_symmetries({{"edge", 2}, {"ball", 0}});
+  const Functaset loaded = Functaset::Parse(f.Serialize(), "mem");
+  EXPECT_EQ(loaded.tool_symmetries(), f.tool_symmetries());
+  bool known = false;
+  EXPECT_EQ(loaded.ToolSymmetryOrder("edge", &known), 2);
+  EXPECT_TRUE(known);
+  EXPECT_EQ(loaded.ToolSymmetryOrder("ball"), 0);
+  EXPECT_EQ(loaded.ToolSymmetryOrder("rod"), 2);  // built in
+  EXPECT_EQ(loaded.ToolSymmetryOrder("mystery", &known), 1);
+  EXPECT_FALSE(known);
+  const std::string bytes =
+      WithMeta(f, [](nlohmann::json& m) { m["tool_symmetry"]["edge"] = -2; });
+  ExpectFileError([&] { Functaset::Parse(bytes, "edited.tfs"); },
+                  {"edited.tfs", "tool_symmetry.edge"});
+}
+
 TEST(Functaset, LatentPrecisionNamesRoundTrip) {
   for (const char* name : {"float32", "float16", "uint8", "uint6", "uint4"}) {
     Functaset::LatentPrecision p;

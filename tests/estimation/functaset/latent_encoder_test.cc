@@ -7,6 +7,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <iterator>
 #include <limits>
 #include <random>
@@ -266,6 +267,7 @@ TEST(LatentEncoder, TheFunctasetRecordsTheStrategyAndResumeInsistsOnIt) {
 TEST(LatentEncoder, FramesAtRestShareTheFitOfNoChangeAndResumeInsistsOnTheChoice) {
   TestDir dir;
   WriteTinyDataset(dir / "data", kFrames);
+  std::ofstream(std::string(dir / "data") + "/tools.csv") << "tool,symmetry_order\nedge,4\n";
   const Dataset dataset = Dataset::Open(dir / "data");
   const FunctaModel model = MakeModel(/*inner_steps=*/3);
   LatentEncoder::Options options;
@@ -281,6 +283,8 @@ TEST(LatentEncoder, FramesAtRestShareTheFitOfNoChangeAndResumeInsistsOnTheChoice
       EXPECT_EQ(shared.entries(sensor)[i].latent, plain.entries(sensor)[i].latent);
     }
   }
+  // The functaset carries the dataset's declared tool symmetries.
+  EXPECT_EQ(shared.tool_symmetries(), (std::map<std::string, int>{{"edge", 4}}));
   // ... and every frame is at rest at an unreachable one: each carries the rest latent,
   // the fit of all-zero targets.
   options.contact.threshold = 1e12;
