@@ -4,14 +4,12 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <filesystem>
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/videoio.hpp>
 #include <set>
-#include <sstream>
 #include <stdexcept>
 #include <system_error>
 #include <utility>
@@ -787,53 +785,18 @@ void Dataset::AttachLabels(const std::string& labels_path, bool ignore_absent_se
 
 void Dataset::AttachTools(const std::string& tools_path) {
   tools_path_ = tools_path;
-  std::istringstream in(ReadFile(tools_path));
-  std::string line;
-  int number = 0;
-  bool header = true;
-  while (std::getline(in, line)) {
-    ++number;
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    if (number == 1 && line.rfind("\xEF\xBB\xBF", 0) == 0) line.erase(0, 3);  // UTF-8 BOM
-    const std::string where = tools_path + ":" + std::to_string(number) + ": ";
-    if (header) {
-      if (line != "tool,symmetry_order") {
-        throw DatasetError(where + "header: expected 'tool,symmetry_order', got '" +
-                           EscapedExcerpt(line) + "'");
-      }
-      header = false;
-      continue;
-    }
-    if (line.empty()) continue;
-    const std::size_t comma = line.find(',');
-    if (comma == std::string::npos || line.find(',', comma + 1) != std::string::npos) {
-      throw DatasetError(where + "expected 2 fields 'tool,symmetry_order', got '" +
-                         EscapedExcerpt(line) + "'");
-    }
-    const std::string tool = line.substr(0, comma), order = line.substr(comma + 1);
-    if (tool.empty() || tool.find('"') != std::string::npos) {
-      throw DatasetError(where + "field 'tool': expected a tool name without '\"', got '" +
-                         EscapedExcerpt(tool) + "'");
-    }
-    char* end = nullptr;
-    const long n = std::strtol(order.c_str(), &end, 10);
-    if (order.empty() || *end != '\0' || n < 0 || n > 360) {
-      throw DatasetError(where + "field 'symmetry_order': expected an integer in [0, 360] (0 = no " +
-                         "observable yaw, 1 = asymmetric), got '" + EscapedExcerpt(order) + "'");
-    }
+  for (const internal::ToolSymmetryRow& row :
+       internal::ParseToolsCsv(ReadFile(tools_path), tools_path)) {
     bool built_in = false;
-    const int builtin_order = SymmetryOrderOfTool(tool, &built_in);
-    if (built_in && builtin_order != n) {
-      throw DatasetError(where + "field 'symmetry_order': tool '" + tool +
+    const int builtin_order = SymmetryOrderOfTool(row.tool, &built_in);
+    if (built_in && builtin_order != row.symmetry_order) {
+      throw DatasetError(tools_path + ":" + std::to_string(row.line) +
+                         ": field 'symmetry_order': tool '" + row.tool +
                          "' is a built-in tool of symmetry order " + std::to_string(builtin_order) +
-                         ", got " + order);
+                         ", got " + std::to_string(row.symmetry_order));
     }
-    if (!tool_symmetries_.emplace(tool, static_cast<int>(n)).second) {
-      throw DatasetError(where + "field 'tool': expected each tool once, got '" +
-                         EscapedExcerpt(tool) + "' again");
-    }
+    tool_symmetries_[row.tool] = row.symmetry_order;
   }
-  if (header) throw DatasetError(tools_path + ": expected the header 'tool,symmetry_order', got an empty file");
 }
 
 int Dataset::ToolSymmetryOrder(const std::string& tool, bool* known) const {

@@ -2,6 +2,7 @@
 #include "estimation/data/internal/labels_csv.h"
 
 #include <cmath>
+#include <cstdlib>
 #include <set>
 #include <utility>
 
@@ -231,6 +232,40 @@ std::vector<ClipSplitRow> ParseClipsCsv(const std::string& text, const std::stri
     if (!seen.insert(row.clip).second) {
       throw DatasetError(where + "field 'clip': expected one row per clip, got a second for '" +
                          EscapedExcerpt(row.clip) + "'");
+    }
+    rows.push_back(std::move(row));
+  }
+  return rows;
+}
+
+std::vector<ToolSymmetryRow> ParseToolsCsv(const std::string& text, const std::string& path) {
+  std::vector<ToolSymmetryRow> rows;
+  std::set<std::string> seen;
+  for (const auto& [line_number, line] : CsvRows(text, path, kToolsHeader)) {
+    const std::string where = Where(path, line_number);
+    const std::vector<std::string> fields = SplitCommas(line);
+    if (fields.size() != 2) {
+      throw DatasetError(where + "expected 2 fields (" + kToolsHeader + "), got " +
+                         std::to_string(fields.size()) + " in '" + EscapedExcerpt(line) + "'");
+    }
+    ToolSymmetryRow row;
+    row.line = line_number;
+    row.tool = fields[0];
+    if (row.tool.empty() || !IsCsvSafe(row.tool)) {
+      throw DatasetError(where + "field 'tool': expected a tool name without '\"', got '" +
+                         EscapedExcerpt(row.tool) + "'");
+    }
+    const std::string& order = fields[1];
+    char* end = nullptr;
+    const long n = std::strtol(order.c_str(), &end, 10);
+    if (order.empty() || *end != '\0' || n < 0 || n > 360) {
+      throw DatasetError(where + "field 'symmetry_order': expected an integer in [0, 360] (0 = no " +
+                         "observable yaw, 1 = asymmetric), got '" + EscapedExcerpt(order) + "'");
+    }
+    row.symmetry_order = static_cast<int>(n);
+    if (!seen.insert(row.tool).second) {
+      throw DatasetError(where + "field 'tool': expected each tool once, got '" +
+                         EscapedExcerpt(row.tool) + "' again");
     }
     rows.push_back(std::move(row));
   }

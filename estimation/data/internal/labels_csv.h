@@ -47,6 +47,20 @@ struct ClipSplitRow {
 // and '\r' line ends, as ParseLabelsCsv does.
 std::vector<ClipSplitRow> ParseClipsCsv(const std::string& text, const std::string& path);
 
+// tools.csv of a dataset (docs/DATASET_FORMAT.md): the header, then one row per tool of
+// the user's own giving its rotational symmetry order.
+inline constexpr const char* kToolsHeader = "tool,symmetry_order";
+struct ToolSymmetryRow {
+  int line = 0;  // 1-based line number in the file
+  std::string tool;
+  int symmetry_order = 1;
+};
+// Parses the text of a tools.csv. Checks the syntax of every line, the order (an integer
+// in [0, 360]) and duplicate tools; whether a built-in tool keeps its own order is checked
+// by the caller. Throws DatasetError "<path>:<line>: ..." naming the field. Skips blank
+// lines, a UTF-8 byte order mark and '\r' line ends, as ParseLabelsCsv does.
+std::vector<ToolSymmetryRow> ParseToolsCsv(const std::string& text, const std::string& path);
+
 // The text of a labels.csv holding `rows` in the given order.
 std::string FormatLabelsCsv(const std::vector<LabelRow>& rows);
 
