@@ -175,11 +175,14 @@ ContactReport DetectContact(const Image& difference, const ContactOptions& optio
 
 ContactReport DetectFrameContact(const Dataset& dataset, std::size_t index,
                                  ContactOptions options) {
+  return DetectFrameContact(dataset, index, dataset.LoadFrame(index), options);
+}
+
+ContactReport DetectFrameContact(const Dataset& dataset, std::size_t index, const Image& frame,
+                                 ContactOptions options) {
   const FrameRecord& record = dataset.frames().at(index);
   options.encoding = dataset.sensor_info(record.sensor).encoding;
-  return DetectContact(
-      Difference(dataset.LoadFrame(index), dataset.FrameReference(index), record.sensor),
-      options);
+  return DetectContact(Difference(frame, dataset.FrameReference(index), record.sensor), options);
 }
 
 void ContactCentre(const Image& difference, int window, double* row, double* col) {

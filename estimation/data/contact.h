@@ -85,6 +85,10 @@ ContactReport DetectContact(const Image& difference, const ContactOptions& optio
 // Dataset::LoadFrame.
 ContactReport DetectFrameContact(const Dataset& dataset, std::size_t index,
                                  ContactOptions options = {});
+// The same from `frame`, frame `index` as already decoded (Dataset::LoadFrame), so that a
+// caller building the frame's targets too decodes it once.
+ContactReport DetectFrameContact(const Dataset& dataset, std::size_t index, const Image& frame,
+                                 ContactOptions options = {});
 
 // Step 4 alone with the box `window` (1 = no smoothing): the centre of the strongest
 // change of an image, e.g. a reconstruction, whose noise is not the question. NaN,

@@ -46,8 +46,13 @@ TrunkTargets MakeTrunkTargets(const Image& frame, const Image& reference, Sensor
 
 TrunkTargets LoadTrunkTargets(const Dataset& dataset, std::size_t index,
                               const FrameFormat& format, bool clean) {
+  return DatasetFrameTargets(
+      dataset, index, clean ? dataset.LoadCleanFrame(index) : dataset.LoadFrame(index), format);
+}
+
+TrunkTargets DatasetFrameTargets(const Dataset& dataset, std::size_t index, const Image& frame,
+                                 const FrameFormat& format) {
   const FrameRecord& record = dataset.frames().at(index);
-  const Image frame = clean ? dataset.LoadCleanFrame(index) : dataset.LoadFrame(index);
   return MakeTrunkTargets(frame, dataset.FrameReference(index), record.sensor, format);
 }
 

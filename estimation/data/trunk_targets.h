@@ -56,6 +56,11 @@ TrunkTargets MakeTrunkTargets(const Image& frame, const Image& reference, Sensor
 // Frame `index` of `dataset` (its noisy frame, or its noise-free copy if `clean`).
 TrunkTargets LoadTrunkTargets(const Dataset& dataset, std::size_t index,
                               const FrameFormat& format, bool clean = false);
+// The same from `frame`, frame `index` as already decoded (Dataset::LoadFrame or
+// LoadCleanFrame), against its own reference: for callers that also look at the raw frame
+// (contact detection) and decode it once.
+TrunkTargets DatasetFrameTargets(const Dataset& dataset, std::size_t index, const Image& frame,
+                                 const FrameFormat& format);
 
 // PSNR in dB of `prediction` (N x C) against `target`, as defined above. +inf for a
 // perfect fit; NaN if the target has no valid pixel.

@@ -10,7 +10,6 @@
 #include <stdexcept>
 
 #include "models/core/parallel_for.h"
-#include "estimation/data/preprocess.h"
 #include "estimation/data/trunk_targets.h"
 
 namespace tactfunc {
@@ -263,12 +262,9 @@ ReconstructionEvaluator::Summary ReconstructionEvaluator::Evaluate(const FunctaM
     const Eigen::MatrixXf prediction =
         state.trunk->siren.Forward<float>(state.grid, entries[i]->latent);
     const Image frame = dataset.LoadFrame(r.dataset_index);
-    const Image& reference = dataset.FrameReference(r.dataset_index);
-    const TrunkTargets targets = MakeTrunkTargets(frame, reference, r.sensor, format);
-    ContactOptions contact_options = options_.contact;
-    contact_options.encoding = dataset.sensor_info(r.sensor).encoding;
+    const TrunkTargets targets = DatasetFrameTargets(dataset, r.dataset_index, frame, format);
     const ContactReport contact =
-        DetectContact(Difference(frame, reference, r.sensor), contact_options);
+        DetectFrameContact(dataset, r.dataset_index, frame, options_.contact);
     r.contact = contact.contact;
     r.contact_score = contact.score;
     r.contact_row = contact.centre_row;

@@ -93,8 +93,9 @@ SensorFrames LoadSensorFrames(const TableEvaluation::Inputs& in, const SensorTru
                         static_cast<std::int64_t>(s.entries.size()), "frames");
   }
   ParallelForWithTicks(s.entries.size(), threads, observer, [&](std::size_t i) {
-    s.targets[i] = LoadTrunkTargets(*in.dataset, dataset_index[i], trunk.format);
-    s.contact[i] = DetectFrameContact(*in.dataset, dataset_index[i]).contact ? 1 : 0;
+    const Image frame = in.dataset->LoadFrame(dataset_index[i]);
+    s.targets[i] = DatasetFrameTargets(*in.dataset, dataset_index[i], frame, trunk.format);
+    s.contact[i] = DetectFrameContact(*in.dataset, dataset_index[i], frame).contact ? 1 : 0;
     if (in.dataset->has_clean() && !in.dataset->frames()[dataset_index[i]].clean_path.empty()) {
       s.clean[i] = LoadTrunkTargets(*in.dataset, dataset_index[i], trunk.format, /*clean=*/true);
     }

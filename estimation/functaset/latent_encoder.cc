@@ -479,10 +479,12 @@ Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
         if (p >= mine.size()) break;
         Job& job = jobs[mine[p]];
         try {
+          // With share_rest_latent the raw frame is also tested for contact: decoded once.
+          const Image frame = dataset.LoadFrame(job.frame);
           const TrunkTargets targets =
-              LoadTrunkTargets(dataset, job.frame, model_.Trunk(job.sensor).format);
+              DatasetFrameTargets(dataset, job.frame, frame, model_.Trunk(job.sensor).format);
           if (options_.share_rest_latent &&
-              !DetectFrameContact(dataset, job.frame, options_.contact).contact) {
+              !DetectFrameContact(dataset, job.frame, frame, options_.contact).contact) {
             const SensorState& state = State(job.sensor);
             job.entry.at_rest = true;
             job.entry.latent = state.rest_latent;

@@ -637,15 +637,24 @@ TrunkTrainer::Summary TrunkTrainer::Train(const Dataset& dataset, SensorKind sen
     throw std::runtime_error("TrunkTrainer: dataset " + dataset.root() +
                              " has no train-split frames of sensor '" + ToString(sensor) + "'");
   }
+  // Each frame decoded once: its targets and, with skip_frames_at_rest, its contact test.
+  std::vector<TrunkTargets> frames(indices.size());
+  std::vector<char> contact(indices.size(), 1);
+  internal::ParallelFor(static_cast<int>(indices.size()), options_.threads, [&](int i) {
+    const Image frame = dataset.LoadFrame(indices[i]);
+    frames[i] = DatasetFrameTargets(dataset, indices[i], frame, format);
+    if (options_.skip_frames_at_rest) {
+      contact[i] = DetectFrameContact(dataset, indices[i], frame, options_.contact).contact;
+    }
+  });
   int skipped = 0;
   if (options_.skip_frames_at_rest) {
-    std::vector<char> contact(indices.size(), 0);
-    internal::ParallelFor(static_cast<int>(indices.size()), options_.threads, [&](int i) {
-      contact[i] = DetectFrameContact(dataset, indices[i], options_.contact).contact ? 1 : 0;
-    });
     std::vector<std::size_t> kept;
+    std::vector<TrunkTargets> kept_frames;
     for (std::size_t i = 0; i < indices.size(); ++i) {
-      if (contact[i]) kept.push_back(indices[i]);
+      if (!contact[i]) continue;
+      kept.push_back(indices[i]);
+      kept_frames.push_back(std::move(frames[i]));
     }
     skipped = static_cast<int>(indices.size() - kept.size());
     if (kept.empty()) {
@@ -655,10 +664,8 @@ TrunkTrainer::Summary TrunkTrainer::Train(const Dataset& dataset, SensorKind sen
                                " is at rest (no contact above the noise); nothing to train on");
     }
     indices = std::move(kept);
+    frames = std::move(kept_frames);
   }
-  std::vector<TrunkTargets> frames(indices.size());
-  internal::ParallelFor(static_cast<int>(indices.size()), options_.threads,
-                        [&](int i) { frames[i] = LoadTrunkTargets(dataset, indices[i], format); });
   // FNV-1a over the frame ids: resuming on another training set is refused.
   std::uint64_t fingerprint = 1469598103934665603ull;
   for (std::size_t index : indices) {
