@@ -132,13 +132,7 @@ namespace {
 // sit at (i + 0.5) source_size / working_size - 0.5.
 void ReconstructionCentre(const Eigen::MatrixXf& prediction, const FrameFormat& format,
                           int source_rows, int source_cols, double* row, double* col) {
-  Image image(format.rows, format.cols, static_cast<int>(prediction.cols()));
-  for (int i = 0; i < format.rows * format.cols; ++i) {
-    for (int c = 0; c < image.channels; ++c) {
-      image.data[static_cast<std::size_t>(i) * image.channels + c] = prediction(i, c);
-    }
-  }
-  ContactCentre(image, 1, row, col);
+  ContactCentre(TargetsToImage(prediction, format.rows, format.cols), 1, row, col);
   *row = (*row + 0.5) * source_rows / format.rows - 0.5;
   *col = (*col + 0.5) * source_cols / format.cols - 0.5;
 }
