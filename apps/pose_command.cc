@@ -677,17 +677,10 @@ void RunPose(const PoseFlags& flags) {
   if (tool.empty() && input.label) tool = input.label->tool;
   // The symmetry order: --symmetry-order, else the dataset's tools.csv, else the built-in
   // tool's, else 1.
-  bool known = false;
-  int n = 1;
-  if (flags.symmetry_order >= 0) {
-    n = flags.symmetry_order;
-    known = true;
-  } else if (const auto it = input.tool_symmetries.find(tool); it != input.tool_symmetries.end()) {
-    n = it->second;
-    known = true;
-  } else {
-    n = SymmetryOrderOfTool(tool, &known);
-  }
+  bool known = true;
+  const int n = flags.symmetry_order >= 0
+                    ? flags.symmetry_order
+                    : SymmetryOrderOfTool(tool, input.tool_symmetries, &known);
   if (!tool.empty() && !known) {
     std::cerr << "pose: warning: unknown tool '" << tool
               << "': symmetry order 1 assumed (nothing folded)\n";

@@ -800,12 +800,7 @@ void Dataset::AttachTools(const std::string& tools_path) {
 }
 
 int Dataset::ToolSymmetryOrder(const std::string& tool, bool* known) const {
-  const auto it = tool_symmetries_.find(tool);
-  if (it != tool_symmetries_.end()) {
-    if (known != nullptr) *known = true;
-    return it->second;
-  }
-  return SymmetryOrderOfTool(tool, known);
+  return SymmetryOrderOfTool(tool, tool_symmetries_, known);
 }
 
 void Dataset::KeepOnlySensor(SensorKind kind) {

@@ -113,12 +113,7 @@ std::uint64_t Functaset::SharedLatentBytes(SensorKind sensor) const {
 }
 
 int Functaset::ToolSymmetryOrder(const std::string& tool, bool* known) const {
-  const auto it = tool_symmetries_.find(tool);
-  if (it != tool_symmetries_.end()) {
-    if (known != nullptr) *known = true;
-    return it->second;
-  }
-  return SymmetryOrderOfTool(tool, known);
+  return SymmetryOrderOfTool(tool, tool_symmetries_, known);
 }
 
 std::int64_t Functaset::NumStoredLatents(SensorKind sensor) const {

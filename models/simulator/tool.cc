@@ -264,6 +264,14 @@ int SymmetryOrderOfTool(const std::string& name, bool* known) {
   return 1;
 }
 
+int SymmetryOrderOfTool(const std::string& name, const std::map<std::string, int>& declared,
+                        bool* known) {
+  const auto it = declared.find(name);
+  if (it == declared.end()) return SymmetryOrderOfTool(name, known);
+  if (known != nullptr) *known = true;
+  return it->second;
+}
+
 std::vector<std::string> ToolNames() {
   std::vector<std::string> names;
   for (const Tool& tool : ToolSet()) names.push_back(tool.name());

@@ -32,6 +32,7 @@
 #define TACTFUNC_MODELS_SIMULATOR_TOOL_H_
 
 #include <functional>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -79,6 +80,10 @@ std::vector<std::string> ToolNames();
 // The symmetry order n of tool `name`; 1 for an unknown or empty name (nothing is
 // folded). *known (optional) says whether the name was a known tool.
 int SymmetryOrderOfTool(const std::string& name, bool* known = nullptr);
+// The same with the orders a dataset declares for tools of its own (tools.csv) looked up
+// first: declared, else built in, else 1.
+int SymmetryOrderOfTool(const std::string& name, const std::map<std::string, int>& declared,
+                        bool* known = nullptr);
 
 // Smallest absolute yaw difference modulo the symmetry, in [0, pi/n] (n >= 1); 0 for
 // n == 0. E.g. for the rod (n = 2) yaws 0.1 and 0.1 + pi are 0 apart. Throws
