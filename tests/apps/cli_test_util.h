@@ -13,6 +13,7 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include <unistd.h>
 
@@ -26,6 +27,20 @@ inline std::string Slurp(const std::string& path) {
   std::stringstream buffer;
   buffer << in.rdbuf();
   return buffer.str();
+}
+
+// Parses one line of a CSV without quoted fields (recon's frames.csv), keeping empty
+// fields.
+inline std::vector<std::string> CsvFields(const std::string& line) {
+  std::vector<std::string> f(1);
+  for (char c : line) {
+    if (c == ',') {
+      f.emplace_back();
+    } else {
+      f.back().push_back(c);
+    }
+  }
+  return f;
 }
 
 struct CliResult {

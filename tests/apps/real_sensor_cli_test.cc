@@ -14,7 +14,6 @@
 #include <fstream>
 #include <map>
 #include <random>
-#include <sstream>
 #include <string>
 #include <vector>
 
@@ -49,11 +48,7 @@ Csv ReadCsv(const std::string& path) {
   Csv csv;
   std::string line;
   for (int n = 0; std::getline(in, line); ++n) {
-    std::vector<std::string> fields;
-    std::istringstream split(line);
-    std::string field;
-    while (std::getline(split, field, ',')) fields.push_back(field);
-    if (!line.empty() && line.back() == ',') fields.push_back("");
+    std::vector<std::string> fields = testing_util::CsvFields(line);
     if (n == 0) {
       csv.header = fields;
     } else {

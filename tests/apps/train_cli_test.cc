@@ -95,18 +95,6 @@ TEST_F(TrainCliTest, TheInnerLoopKnobsReachTheModelAndEncodeUsesIt) {
   EXPECT_EQ(encode.exit_code, 0) << encode.err;
 }
 
-// Parses one line of recon's frames.csv (no quoted fields), keeping empty fields.
-std::vector<std::string> CsvFields(const std::string& line) {
-  std::vector<std::string> f(1);
-  for (char c : line) {
-    if (c == ',') {
-      f.emplace_back();
-    } else {
-      f.back().push_back(c);
-    }
-  }
-  return f;
-}
 
 TEST_F(TrainCliTest, ReconWritesOneCsvRowPerFrameThatAgreesWithItsSummary) {
   ASSERT_NO_FATAL_FAILURE(TrainAndEncode("r"));
@@ -125,7 +113,7 @@ TEST_F(TrainCliTest, ReconWritesOneCsvRowPerFrameThatAgreesWithItsSummary) {
   int rows = 0, train_rows = 0;
   double train_psnr_sum = 0;
   while (std::getline(csv, line)) {
-    const std::vector<std::string> f = CsvFields(line);
+    const std::vector<std::string> f = testing_util::CsvFields(line);
     ASSERT_EQ(f.size(), 18u) << line;
     // Every simulated frame is a press, its centre inside the 140 x 175 frame.
     EXPECT_EQ(f[12], "1") << line;
@@ -166,7 +154,7 @@ TEST_F(TrainCliTest, ReconWorstPicturesTheLowestPsnrFrames) {
   std::getline(csv, line);
   std::vector<std::pair<double, std::string>> by_psnr;
   while (std::getline(csv, line)) {
-    const std::vector<std::string> f = CsvFields(line);
+    const std::vector<std::string> f = testing_util::CsvFields(line);
     ASSERT_EQ(f[2], "train");
     by_psnr.emplace_back(std::stod(f[8]), f[0]);
   }
