@@ -17,8 +17,11 @@
 // LatentModulatedSiren's layout) and "<sensor>/alpha" (float32, latent_dim). A trunk with
 // the linear readout branch records its grid as "siren": {..., "readout": {"rows",
 // "cols"}} (its theta then ends with the branch's basis and mean); files without the key
-// load as trunks without the branch. Loading checks every field and shape and names the
-// file and field on error.
+// load as trunks without the branch. A trunk with spatial latents records its grid as
+// "siren": {..., "spatial": {"rows", "cols", "channels", "global_latent_dim", "layout"}}
+// (layout: how z and the modulation matrix split, one fixed string today); files without
+// the key load as trunks with one global latent. Loading checks every field and shape and
+// names the file and field on error.
 #ifndef TACTFUNC_MODELS_TRUNK_FUNCTA_MODEL_H_
 #define TACTFUNC_MODELS_TRUNK_FUNCTA_MODEL_H_
 
