@@ -433,12 +433,9 @@ void RunGeneratorPose(const PoseFlags& flags, const FunctaModel& model, const In
   double sampling_ms = 0;  // MCMC: the chains' wall time, after the posterior's fit
   std::optional<PoseDistribution> drawn;
   if (mcmc) {
-    const LaplaceComponent* start = nullptr;
+    std::vector<LaplaceComponent> modes;  // the chosen tool's modes, heaviest first
     for (const LaplaceComponent& c : mixture.components()) {
-      if (c.tool == chosen) {
-        start = &c;
-        break;
-      }
+      if (c.tool == chosen) modes.push_back(c);
     }
     PoseSamplerOptions so;
     so.chain.kernel = kernel;
@@ -449,7 +446,7 @@ void RunGeneratorPose(const PoseFlags& flags, const FunctaModel& model, const In
     so.depth_max_m = options.fit.depth_max_m;
     const LatentProblem problem(trunk, targets, options.problem);
     const PoseSamples ps = SamplePosePosterior(problem, generator, generator.ToolIndex(chosen),
-                                               gs.sigma, *start, so);
+                                               gs.sigma, modes, so);
     const MetropolisResult& r = ps.chains;
     std::printf("pose: %s, %d chains x %d samples, acceptance %.3f, split R-hat x %.3f y %.3f "
                 "yaw %.3f depth %.3f, ESS %.0f %.0f %.0f %.0f, %ld trunk evaluations, %.1f ms\n",
@@ -466,6 +463,8 @@ void RunGeneratorPose(const PoseFlags& flags, const FunctaModel& model, const In
                    {"ess", {r.effective_sample_size[0], r.effective_sample_size[1],
                             r.effective_sample_size[2], r.effective_sample_size[3]}},
                    {"coordinates", {"x_m", "y_m", "yaw_rad", "depth_m"}},
+                   {"modes", modes.size()},
+                   {"jump_acceptance", NumberOrNull(r.JumpAcceptance())},
                    {"trunk_evaluations", ps.trunk_evaluations},
                    {"ms", r.time_ms}};
     sampling_ms = r.time_ms;
