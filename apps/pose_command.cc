@@ -34,11 +34,16 @@
 // every tool of the generator is fitted and the tool probabilities are printed. --samples
 // draws from the mixture go into posterior.json / .png; with --sampler mala or rwm they
 // are MCMC draws of (x, y, yaw, depth) instead (estimation/synthesis/pose_sampler.h: 4
-// chains from the chosen tool's heaviest Laplace component, 200 burn-in iterations each,
-// --samples / 4 kept per chain), their acceptance and split R-hat printed. Other
-// --sampler values do not apply to the generator path.
+// chains from the chosen tool's Laplace components, 200 burn-in iterations each,
+// --samples / 4 kept per chain, mode jumps between the tool's Laplace components), their
+// acceptance and split R-hat printed. Other --sampler values do not apply to the
+// generator path.
 //   tactfunc pose --method generator --generator G.tpg --model M.tfm --pose-model P.tpm
 //       --data D --id 000010 [--functaset F.tfs] [--tool NAME] [--out DIR] [--json]
+//
+// --method both runs the latent path (--sampler) and then the generator path on the same
+// frame, each into its own subfolder of --out (latent/, generator/), and stacks their
+// pictures into DIR/posterior.png, latent above generator.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -47,6 +52,7 @@
 #include <iostream>
 #include <map>
 #include <memory>
+#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <optional>
 
@@ -569,9 +575,15 @@ void RunGeneratorPose(const PoseFlags& flags, const FunctaModel& model, const In
   }
 }
 
+void RunLatentPose(const PoseFlags& flags, PosteriorSampler sampler, const FunctaModel& model,
+                   const Input& input, const TrunkTargets& targets);
+
 void RunPose(const PoseFlags& flags) {
-  if (flags.method != "latent" && flags.method != "generator") {
-    throw UsageError("--method: expected latent or generator, got '" + flags.method + "'");
+  if (flags.method != "latent" && flags.method != "generator" && flags.method != "both") {
+    throw UsageError("--method: expected latent, generator or both, got '" + flags.method + "'");
+  }
+  if (flags.method == "both" && flags.generator.empty()) {
+    throw UsageError("--method both: give --generator (the generator path's model)");
   }
   PosteriorSampler sampler = PosteriorSampler::kSgld;
   if (!PosteriorSamplerFromString(flags.sampler, &sampler)) {
@@ -579,6 +591,10 @@ void RunPose(const PoseFlags& flags) {
     if (!ParseMetropolisKernel(flags.sampler, &kernel)) {
       throw UsageError("--sampler: expected sgld, laplace or knn (--method latent) or mala, rwm "
                        "(--method generator), got '" + flags.sampler + "'");
+    }
+    if (flags.method == "both") {
+      throw UsageError("--method both: --sampler picks the latent path's sampler (sgld, laplace "
+                       "or knn); the generator path draws from its Laplace mixture");
     }
     if (flags.method != "generator") {
       throw UsageError("--sampler " + flags.sampler + ": MCMC over the pose needs --method generator");
@@ -595,13 +611,17 @@ void RunPose(const PoseFlags& flags) {
   if (from_files && (flags.frame.empty() || flags.reference.empty())) {
     throw UsageError("--frame and --reference go together");
   }
-  if (sampler == PosteriorSampler::kKnn && flags.functaset.empty() && flags.method == "latent") {
+  if (sampler == PosteriorSampler::kKnn && flags.functaset.empty() && flags.method != "generator") {
     throw UsageError("--sampler knn needs --functaset (its labelled latents are the samples)");
   }
 
   std::vector<NamedPath> outputs;
   if (!flags.out.empty()) {
-    outputs = FilesIn("--out", flags.out, {"posterior.json", "posterior.png"});
+    outputs = flags.method == "both"
+                  ? FilesIn("--out", flags.out,
+                            {"posterior.png", "latent/posterior.json", "latent/posterior.png",
+                             "generator/posterior.json", "generator/posterior.png"})
+                  : FilesIn("--out", flags.out, {"posterior.json", "posterior.png"});
     outputs.push_back({"--out", flags.out});
     std::vector<NamedPath> inputs = {{"--model", flags.model},
                                      {"--pose-model", flags.pose_model},
@@ -664,12 +684,46 @@ void RunPose(const PoseFlags& flags) {
   }
   if (flags.pixel_pitch_mm > 0) input.pitch_m = flags.pixel_pitch_mm * 1e-3;
   input.sensor = sensor;
+  std::string generator_tool = flags.tool;
+  if (generator_tool.empty() && input.label && !flags.unknown_tool) {
+    generator_tool = input.label->tool;
+  }
   if (flags.method == "generator") {
-    std::string tool = flags.tool;
-    if (tool.empty() && input.label && !flags.unknown_tool) tool = input.label->tool;
-    RunGeneratorPose(flags, model, input, targets, tool);
+    RunGeneratorPose(flags, model, input, targets, generator_tool);
     return;
   }
+  if (flags.method == "latent") {
+    RunLatentPose(flags, sampler, model, input, targets);
+    return;
+  }
+  // Both paths on the same frame: each writes into its own subfolder, then one picture
+  // stacks the two.
+  PoseFlags latent = flags, generator = flags;
+  if (!flags.out.empty()) {
+    latent.out = (fs::path(flags.out) / "latent").string();
+    generator.out = (fs::path(flags.out) / "generator").string();
+  }
+  std::cout << "pose: --- latent path (" << ToString(sampler) << ") ---\n";
+  RunLatentPose(latent, sampler, model, input, targets);
+  std::cout << "pose: --- generator path ---\n";
+  RunGeneratorPose(generator, model, input, targets, generator_tool);
+  if (!flags.out.empty()) {
+    const std::string path = (fs::path(flags.out) / "posterior.png").string();
+    std::vector<std::vector<cv::Mat>> rows;
+    for (const std::string& part : {latent.out, generator.out}) {
+      const std::string png = (fs::path(part) / "posterior.png").string();
+      const cv::Mat picture = cv::imread(png, cv::IMREAD_COLOR);
+      if (picture.empty()) throw std::runtime_error(png + ": could not read the picture back");
+      rows.push_back({picture});
+    }
+    WritePicture(path, TileGrid(rows));
+    std::cout << "pose: wrote " << path << " (latent path above, generator path below)\n";
+  }
+}
+
+void RunLatentPose(const PoseFlags& flags, PosteriorSampler sampler, const FunctaModel& model,
+                   const Input& input, const TrunkTargets& targets) {
+  const SensorKind sensor = input.sensor;
   const PoseMlp pose_model = LoadPoseModelFor(flags.pose_model, model, sensor, flags.model);
 
   std::string tool = flags.tool;
@@ -811,7 +865,9 @@ void RegisterPose(CLI::App& app, CommandBody* selected) {
   sub->add_option("--method", flags->method,
                   "latent (default: the pose MLP on the frame's latent posterior, --sampler) or "
                   "generator (the pose fitted through --generator and the trunk; a Laplace "
-                  "mixture over its modes, tools identified when --tool is not given)");
+                  "mixture over its modes, tools identified when --tool is not given) or both "
+                  "(each into its own subfolder of --out, and one posterior.png with the latent "
+                  "path above the generator path)");
   sub->add_option("--generator", flags->generator,
                   "Generator (.tpg) from `tactfunc train-generator`, for --method generator");
   sub->add_flag("--unknown-tool", flags->unknown_tool,

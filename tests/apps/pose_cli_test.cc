@@ -193,6 +193,31 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
           Root("gd") + " --id 000003 --sampler mala");
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_THAT(r.err, HasSubstr("--method generator"));
+  // Both paths on the same frame: each record in its subfolder, one stacked picture.
+  const std::string both = Root("pose_both");
+  r = Run("pose --method both --sampler laplace --model " + Root("m.tfm") + " --pose-model " +
+          Root("p.tpm") + " --data " + Root("gd") + " --id 000003 --samples 20 --generator " +
+          Root("g.tpg") + " --out " + both);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("latent path"));
+  EXPECT_THAT(r.out, HasSubstr("generator path"));
+  EXPECT_EQ(nlohmann::json::parse(Slurp(both + "/latent/posterior.json"))["sampler"], "laplace");
+  EXPECT_EQ(nlohmann::json::parse(Slurp(both + "/generator/posterior.json"))["method"],
+            "generator");
+  const Image upper = ReadImage(both + "/latent/posterior.png", PixelEncoding::kRgb8);
+  const Image lower = ReadImage(both + "/generator/posterior.png", PixelEncoding::kRgb8);
+  const Image stacked = ReadImage(both + "/posterior.png", PixelEncoding::kRgb8);
+  EXPECT_GT(stacked.rows, upper.rows + lower.rows);  // one above the other
+  EXPECT_GE(stacked.cols, std::max(upper.cols, lower.cols));
+  r = Run("pose --method both --model " + Root("m.tfm") + " --pose-model " + Root("p.tpm") +
+          " --data " + Root("gd") + " --id 000003");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("--generator"));
+  r = Run("pose --method both --sampler mala --generator " + Root("g.tpg") + " --model " +
+          Root("m.tfm") + " --pose-model " + Root("p.tpm") + " --data " + Root("gd") +
+          " --id 000003");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("latent path's sampler"));
   // Every tool fitted: probabilities over the generator's tools sum to 1.
   r = Run(args + " --generator " + Root("g.tpg") + " --unknown-tool --json");
   ASSERT_EQ(r.exit_code, 0) << r.err;
