@@ -263,7 +263,6 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
         record.Put(gs.total_time_ms);
         record.Put(gs.total_time_ms - gs.fit_time_ms);
       }
-      record.Put<std::uint8_t>(usable);
       if (!usable) {
         record.PutString(known ? gs.message : "the generator does not know tool " + label.tool);
       } else {
@@ -328,10 +327,10 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
         ++y.second;
       }
     };
-    // One sampler's record of this frame into its tally.
-    auto tally = [&](Tally& t, const std::string& failed_as) {
+    // One sampler's outcome on this frame (after its times) into its tally.
+    auto tally = [&](Tally& t, bool usable, const std::string& failed_as) {
       ++t.frames;
-      if (record.Get<std::uint8_t>() == 0) {
+      if (!usable) {
         ++t.failures;
         std::cerr << "bench posterior: " << failed_as << " failed on frame "
                   << dataset.frames()[index].id << ": " << record.GetString() << "\n";
@@ -350,17 +349,18 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
     };
     if (generator_posterior) {
       Tally& t = tallies.back();
-      if (record.Get<std::uint8_t>() != 0) {
+      const bool usable = record.Get<std::uint8_t>() != 0;
+      if (usable) {
         t.ms.push_back(record.Get<double>());
         t.ms_after_fit.push_back(record.Get<double>());
       }
-      tally(t, "generator");
+      tally(t, usable, "generator");
     }
     for (std::size_t s = 0; s < num_latent; ++s) {
       Tally& t = tallies[s];
       t.ms.push_back(record.Get<double>());
       t.ms_after_fit.push_back(record.Get<double>());
-      tally(t, ToString(t.sampler));
+      tally(t, record.Get<std::uint8_t>() != 0, ToString(t.sampler));
     }
   }
 
