@@ -15,8 +15,12 @@
 # tool, all twelve tools, both sensors, 40% of each tool's contacts in the test split
 # (24 FRAMES_PER_TOOL frames), and its functaset (encoded once, not timed). The pose
 # model reads ceres:10 latents and the functaset holds meta_sgd:3 ones, so eval re-fits
-# every bubble frame: the per-frame fits are most of its work. The figure is the wall
-# time of the whole command (loading the inputs, mpirun's start and the writes included).
+# every bubble frame: the per-frame fits are most of its work. The figures are the wall
+# time of the whole command (loading the inputs, mpirun's start and the writes included)
+# and the CPU time all its processes used (user + system; at np = 2 it includes the work
+# every process repeats and the waits in the exchanges): with two free cores the wall
+# time at np = 2 approaches half that CPU time, and on a busy machine the CPU time still
+# says what the second process costs.
 # Needs a build with MPI (scripts/build.sh finds Open MPI when installed).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -57,13 +61,17 @@ run() {
 HZ=$(getconf CLK_TCK)
 busy_ticks() { awk '/^cpu / { print $2 + $3 + $4 + $7 + $8 + $9 }' /proc/stat; }
 our_ticks() { awk '{ print $16 + $17 }' "/proc/$$/stat"; }
-# measure NP ARGS...: runs the command; sets WALL (s) and OTHER (cores used by others).
+# measure NP ARGS...: runs the command; sets WALL (s), CPU (s, all its processes) and
+# OTHER (cores used by others).
 measure() {
   local busy0 ours0 start
   busy0=$(busy_ticks); ours0=$(our_ticks); start=$(date +%s.%N)
   run "$@" >"$WORK/last.txt" 2>>"$WORK/log.txt"
   WALL=$(echo "$start $(date +%s.%N)" | awk '{ printf "%.3f", $2 - $1 }')
-  OTHER=$(awk -v b0="$busy0" -v b1="$(busy_ticks)" -v o0="$ours0" -v o1="$(our_ticks)" \
+  local busy1 ours1
+  busy1=$(busy_ticks); ours1=$(our_ticks)
+  CPU=$(awk -v o0="$ours0" -v o1="$ours1" -v hz="$HZ" 'BEGIN { printf "%.2f", (o1 - o0) / hz }')
+  OTHER=$(awk -v b0="$busy0" -v b1="$busy1" -v o0="$ours0" -v o1="$ours1" \
             -v hz="$HZ" -v wall="$WALL" \
             'BEGIN { x = ((b1 - b0) - (o1 - o0)) / hz / wall; printf "%.2f", x < 0 ? 0 : x }')
 }
@@ -90,12 +98,14 @@ for round in $(seq 1 "$ROUNDS"); do
     measure "$np" eval --data "$DATA" --model "$MODEL" --functaset "$FUNCTASET" \
       --pose-model "$POSE" --out "$WORK/eval" --threads 1
     echo "$round $np eval $WALL $OTHER" >>"$WORK/results.txt"
-    eval_wall=$WALL eval_other=$OTHER
+    echo "$round $np eval_cpu $CPU $OTHER" >>"$WORK/results.txt"
+    eval_wall=$WALL eval_other=$OTHER eval_cpu=$CPU
     measure "$np" recon --model "$MODEL" --functaset "$FUNCTASET" --data "$DATA" \
       --out "$WORK/recon" --threads 1
     echo "$round $np recon $WALL $OTHER" >>"$WORK/results.txt"
-    echo "round $round np=$np: eval $eval_wall s (other load $eval_other cores)," \
-         "recon $WALL s (other load $OTHER cores), $FRAMES frames"
+    echo "$round $np recon_cpu $CPU $OTHER" >>"$WORK/results.txt"
+    echo "round $round np=$np: eval $eval_wall s, $eval_cpu CPU-s (other load $eval_other cores)," \
+         "recon $WALL s, $CPU CPU-s (other load $OTHER cores), $FRAMES frames"
     rm -rf "$WORK/eval$np" "$WORK/recon$np"
     mv "$WORK/eval" "$WORK/eval$np"
     mv "$WORK/recon" "$WORK/recon$np"
@@ -119,13 +129,17 @@ other() {
 }
 echo
 echo "bench_mpi_eval: load average at the end: $(cut -d' ' -f1-3 /proc/loadavg)"
-echo "medians over all $ROUNDS rounds (range min-max), command wall time:"
-for what in eval recon; do
+echo "medians over all $ROUNDS rounds (range min-max); wall: the command's wall time," \
+     "cpu: the CPU time of all its processes (np=2 / np=1 = what sharing costs):"
+for what in eval eval_cpu recon recon_cpu; do
   read -r m1 lo1 hi1 n1 <<<"$(stats 1 "$what")"
   read -r m2 lo2 hi2 _ <<<"$(stats 2 "$what")"
-  printf "%-6s np=1 %7s s (%s-%s)   np=2 %7s s (%s-%s)   speed-up %sx   [%s rounds; other load median %s / %s cores]\n" \
-    "$what" "$m1" "$lo1" "$hi1" "$m2" "$lo2" "$hi2" \
-    "$(awk -v a="$m1" -v b="$m2" 'BEGIN { printf "%.2f", a / b }')" "$n1" \
+  case $what in
+    *_cpu) ratio="cpu ratio $(awk -v a="$m1" -v b="$m2" 'BEGIN { printf "%.2f", b / a }')" ;;
+    *) ratio="speed-up $(awk -v a="$m1" -v b="$m2" 'BEGIN { printf "%.2f", a / b }')x" ;;
+  esac
+  printf "%-9s np=1 %7s s (%s-%s)   np=2 %7s s (%s-%s)   %s   [%s rounds; other load median %s / %s cores]\n" \
+    "$what" "$m1" "$lo1" "$hi1" "$m2" "$lo2" "$hi2" "$ratio" "$n1" \
     "$(other 1 "$what")" "$(other 2 "$what")"
 done
 echo "eval and recon outputs identical at np=1 and np=2 in every round"
