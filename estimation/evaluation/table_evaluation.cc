@@ -75,14 +75,27 @@ void PutTargets(const TrunkTargets& t, ByteWriter* out) {
   out->Put(t.cols);
 }
 
+// Reads what PutTargets wrote; throws std::runtime_error on arrays of inconsistent sizes.
 TrunkTargets GetTargets(ByteReader& in) {
   TrunkTargets t;
   const auto rows = in.Get<std::int64_t>();
   const auto cols = in.Get<std::int64_t>();
+  const std::size_t values = in.FloatCount();
+  if (rows < 0 || cols < 0 || values != static_cast<std::size_t>(rows * cols)) {
+    throw std::runtime_error("eval: frame targets of " + std::to_string(values) +
+                             " values for " + std::to_string(rows) + " x " +
+                             std::to_string(cols) + " came from another process");
+  }
   t.values.resize(rows, cols);
-  in.GetFloats(t.values.data(), in.FloatCount());
-  t.weights.resize(static_cast<Eigen::Index>(in.FloatCount()));
-  in.GetFloats(t.weights.data(), static_cast<std::size_t>(t.weights.size()));
+  in.GetFloats(t.values.data(), values);
+  const std::size_t weights = in.FloatCount();
+  if (weights != static_cast<std::size_t>(rows)) {
+    throw std::runtime_error("eval: frame targets of " + std::to_string(weights) +
+                             " weights for " + std::to_string(rows) +
+                             " pixels came from another process");
+  }
+  t.weights.resize(rows);
+  in.GetFloats(t.weights.data(), weights);
   t.flat = in.Get<std::uint8_t>() != 0;
   t.scale = in.Get<double>();
   t.offset = in.Get<double>();
