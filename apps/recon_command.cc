@@ -4,6 +4,8 @@
 // split against the noisy and, for simulated data, the clean frames; the z = 0
 // "initial image"), its size against the raw frames, and a picture per sensor of
 // examples: target | z = 0 | reconstruction | error (estimation/evaluation/reconstruction.h).
+// Runs as several processes under mpirun (docs/SCALING.md): the frames are shared out,
+// rank 0 writes the files, which are those of one process.
 
 #include <algorithm>
 #include <cmath>
@@ -17,6 +19,7 @@
 
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
+#include "apps/distributed.h"
 #include "apps/output_paths.h"
 #include "apps/pictures.h"
 #include "estimation/data/dataset.h"
@@ -228,10 +231,16 @@ void RunRecon(const ReconFlags& flags) {
   }
   const Dataset dataset = OpenDataset(flags.data, flags.dataset);
   RefuseOutputsThatAreInputs(outputs, DatasetFileInputs("--data", dataset));
+  // Under mpirun every process evaluates its share of the frames and receives the
+  // others' figures (docs/SCALING.md); rank 0 alone draws the examples (a handful of
+  // frames) and writes the files.
+  const ProcessGroup& processes = Processes();
   ReconstructionEvaluator::Options options;
   options.threads = ResolveThreads(flags.threads);
+  options.processes = &processes;
   const ReconstructionEvaluator::Summary summary =
       ReconstructionEvaluator(options).Evaluate(model, functaset, dataset);
+  if (processes.rank() != 0) return;
 
   std::filesystem::create_directories(flags.out);
   std::vector<std::string> pictures;
