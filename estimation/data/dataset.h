@@ -14,6 +14,8 @@
 //   DIR/bubble/clean/000000.png optional noise-free frames (simulated data)
 //   DIR/gelslim/reference.png   8-bit RGB PNG
 //   DIR/gelslim/000000.png ...
+//   DIR/sensor.json             optional: a sensor description (models/core/
+//                               sensor_description.h) cropping / warping one sensor's frames
 //
 // Frames of the two sensors taken at the same time share their id (the file stem).
 // Dataset::Open also reads folders that users bring without metadata (a flat folder

@@ -63,6 +63,11 @@ SensorDescription TrunkSensorDescription(const SensorTrunk& trunk) {
   // Without grayscale the trunk outputs the frames' channels; with it they are unknown
   // and the kind's are assumed.
   if (!trunk.format.grayscale) d.channels = trunk.siren.options().output_channels;
+  // A fixed-scale trunk normalised by its format's scale, the data's unless a preset
+  // overrode it: the best statement of the scale the model has.
+  if (!trunk.format.per_image_min_max && trunk.format.scale > 0) {
+    d.normalization_scale = trunk.format.scale;
+  }
   return d;
 }
 

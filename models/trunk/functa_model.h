@@ -69,8 +69,8 @@ struct SensorTrunk {
 
 // The trunk's description, or for a trunk without one the built-in description of its
 // kind with the format's working size (aspect "stretch": such trunks resized whatever
-// they got) and the trunk's output channels (unless grayscale). Its pitch is unknown
-// and its scale the kind's default, which need not be what the trunk was trained with.
+// they got), the trunk's output channels (unless grayscale) and a fixed-scale format's
+// scale. Its pitch is unknown.
 SensorDescription TrunkSensorDescription(const SensorTrunk& trunk);
 
 class FunctaModel {
