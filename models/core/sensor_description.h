@@ -34,7 +34,7 @@
 //      corner of the top-left pixel, (cols, rows) the bottom-right corner of the image)
 //      warped onto a rows x cols rectangle (cv::getPerspectiveTransform and
 //      cv::warpPerspective, bilinear). A quadrilateral that is an axis-aligned rectangle
-//      of those sizes gives the crop of that rectangle. Depth frames are warped
+//      of those sizes gives the crop of that rectangle (to float rounding). Depth frames are warped
 //      mask-aware: value * valid and valid are warped apart, a pixel is valid where at
 //      least half its interpolation weight was, and holds their ratio; else NaN.
 //   2. aspect (only with working_size): "crop" cuts the centred largest window of the
