@@ -244,5 +244,37 @@ TEST_F(SensorDescriptionDatasetTest, ADescriptionThatDoesNotFitTheDataIsRefusedN
   EXPECT_NO_THROW(Dataset::Open(Dir("optical"), options));
 }
 
+TEST_F(SensorDescriptionDatasetTest, EachClipOfAClipSetAndItsReferenceIsCropped) {
+  // Two recordings, each with its own reference; one sensor.json for the set.
+  for (const char* clip : {"a", "b"}) {
+    fs::create_directories(dir_ / "clips" / clip);
+    WritePngAtomically((dir_ / "clips" / clip / "reference.png").string(),
+                       RandomRgb(30, 40, clip[0]), PixelEncoding::kRgb8);
+    WritePngAtomically((dir_ / "clips" / clip / "f0.png").string(), RandomRgb(30, 40, clip[0] + 7),
+                       PixelEncoding::kRgb8);
+  }
+  WriteDescription(dir_ / "clips/sensor.json",
+                   R"({"name": "clip_sensor", "kind": "optical", "crop": {"x": 4, "y": 2,
+                       "width": 32, "height": 24}, "pixel_pitch_mm": 0.1,
+                       "normalization_scale": 0.5})");
+  const Dataset data = Dataset::Open(Dir("clips"));
+  ASSERT_EQ(data.clips().size(), 2u);
+  EXPECT_EQ(data.sensor_info(SensorKind::kGelSlim).rows, 24);
+  EXPECT_EQ(data.sensor_info(SensorKind::kGelSlim).cols, 32);
+  for (std::size_t i = 0; i < data.frames().size(); ++i) {
+    const std::string clip = data.clips()[data.frames()[i].clip].name;
+    const Image raw_reference =
+        ReadImage(Dir("clips/" + clip + "/reference.png"), PixelEncoding::kRgb8);
+    const Image raw = ReadImage(Dir("clips/" + clip + "/f0.png"), PixelEncoding::kRgb8);
+    const Image& reference = data.FrameReference(i);
+    const Image frame = data.LoadFrame(i);
+    ASSERT_EQ(reference.rows, 24);
+    ASSERT_EQ(frame.cols, 32);
+    EXPECT_EQ(reference.at(0, 0, 2), raw_reference.at(2, 4, 2));
+    EXPECT_EQ(reference.at(23, 31, 0), raw_reference.at(25, 35, 0));
+    EXPECT_EQ(frame.at(10, 20, 1), raw.at(12, 24, 1));
+  }
+}
+
 }  // namespace
 }  // namespace tactfunc
