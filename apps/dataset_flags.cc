@@ -29,6 +29,10 @@ void AddDatasetFlags(CLI::App* sub, DatasetFlags* flags) {
   sub->add_option("--tool-symmetry", flags->tools,
                   "A tools.csv (tool,symmetry_order) declaring your tools' rotational symmetry, "
                   "instead of DIR/tools.csv");
+  sub->add_option("--sensor-file", flags->sensor_file,
+                  "A sensor description (JSON: kind, channels, crop or perspective corners, "
+                  "working size, pixel pitch, scale; docs/DATASET_FORMAT.md) to read instead "
+                  "of DIR/sensor.json");
 }
 
 Dataset OpenDataset(const std::string& path, const DatasetFlags& flags) {
@@ -45,6 +49,7 @@ Dataset OpenDataset(const std::string& path, const DatasetFlags& flags) {
   options.pixel_pitch_m = flags.pixel_pitch_mm * 1e-3;
   options.labels = flags.labels;
   options.tools = flags.tools;
+  options.sensor_file = flags.sensor_file;
   const bool video = std::filesystem::is_regular_file(path) && IsVideoFileName(path);
   return video ? Dataset::OpenVideo(path, options) : Dataset::Open(path, options);
 }

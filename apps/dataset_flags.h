@@ -20,10 +20,11 @@ struct DatasetFlags {
   double pixel_pitch_mm = 0;  // pixel pitch for data without metadata, millimetres
   std::string labels;         // labels.csv to read instead of DIR/labels.csv
   std::string tools;          // tools.csv to read instead of DIR/tools.csv
+  std::string sensor_file;    // sensor description to read instead of DIR/sensor.json
 };
 
-// Adds --sensor, --reference, --reference-index, --pixel-pitch-mm, --labels, --tool-symmetry to
-// `sub`.
+// Adds --sensor, --reference, --reference-index, --pixel-pitch-mm, --labels, --tool-symmetry,
+// --sensor-file to `sub`.
 void AddDatasetFlags(CLI::App* sub, DatasetFlags* flags);
 
 // Opens `path`: a dataset folder (ours or a user's, a set of clips included), or a video

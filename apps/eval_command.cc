@@ -64,6 +64,7 @@ struct EvalFlags {
   int raw_downsample = 2;
   int knn_k = 5;
   bool json = false;
+  bool allow_other_frames = false;
   DatasetFlags dataset;           // --sensor, --reference, --pixel-pitch-mm, --labels, ...
   std::vector<std::string> argv;  // for the report
 };
@@ -348,6 +349,8 @@ void RunEval(const EvalFlags& flags) {
     if (!dataset.has_sensor(s)) {
       throw DatasetError("--data '" + flags.data + "' has no " + ToString(s) + " frames");
     }
+    CheckModelMatchesData(model, flags.model, dataset, flags.data, s, "eval",
+                          "--allow-other-frames", flags.allow_other_frames);
     const FrameFormat& format = model.Trunk(s).format;
     WarnIfStretched(dataset, flags.data, s, format.rows, format.cols, "eval");
   }
@@ -622,6 +625,9 @@ void RegisterEval(CLI::App& app, CommandBody* selected) {
       ->check(CLI::Range(1, 64));
   sub->add_option("--knn-k", flags->knn_k, "Neighbours of the raw-pixel k-NN pose baseline (5)")
       ->check(CLI::Range(1, 1000));
+  sub->add_flag("--allow-other-frames", flags->allow_other_frames,
+                "Run even when the data's frames (size, channels, sensor description) are not "
+                "those the model's trunk was trained on (a warning instead of an error)");
   sub->add_flag("--json", flags->json, "Print {rows, targets, rate_distortion, ...} as one JSON line");
   AddDatasetFlags(sub, &flags->dataset);
   sub->callback([flags, selected]() {

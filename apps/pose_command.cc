@@ -99,6 +99,7 @@ std::array<double, 36> PrintCovariance(const SE2d& mean, const Eigen::Matrix3d& 
 namespace fs = std::filesystem;
 
 struct PoseFlags {
+  bool allow_other_frames = false;
   std::string model;
   std::string pose_model;
   std::string functaset;
@@ -656,6 +657,8 @@ void RunPose(const PoseFlags& flags) {
       throw DatasetError("--model '" + flags.model + "' has no trunk for sensor " +
                          ToString(sensor));
     }
+    CheckModelMatchesData(model, flags.model, dataset, flags.data, sensor, "pose",
+                          "--allow-other-frames", flags.allow_other_frames);
     targets = LoadTrunkTargets(dataset, *index, model.Trunk(sensor).format);
     input.difference =
         Difference(dataset.LoadFrame(*index), dataset.FrameReference(*index), sensor);
@@ -891,6 +894,9 @@ void RegisterPose(CLI::App& app, CommandBody* selected) {
   sub->add_flag("--no-model-error", flags->no_model_error,
                 "Leave the pose MLP's calibrated error out of the sgld/laplace samples (the "
                 "latent posterior alone; docs/POSES.md, Calibration)");
+  sub->add_flag("--allow-other-frames", flags->allow_other_frames,
+                "With --data: run even when its frames (size, channels, sensor description) "
+                "are not those the model's trunk was trained on (a warning instead of an error)");
   sub->add_flag("--json", flags->json,
                 "Print {mean, covariance, ms, sampler, samples} as one JSON line");
   sub->callback([flags, selected]() { *selected = [flags]() { RunPose(*flags); }; });

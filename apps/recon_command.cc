@@ -20,6 +20,7 @@
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
 #include "apps/distributed.h"
+#include "apps/model_inputs.h"
 #include "apps/output_paths.h"
 #include "apps/pictures.h"
 #include "estimation/data/dataset.h"
@@ -42,6 +43,7 @@ struct ReconFlags {
   int tile_height = 140;
   bool worst = false;
   bool json = false;
+  bool allow_other_frames = false;
   DatasetFlags dataset;
 };
 
@@ -231,6 +233,11 @@ void RunRecon(const ReconFlags& flags) {
   }
   const Dataset dataset = OpenDataset(flags.data, flags.dataset);
   RefuseOutputsThatAreInputs(outputs, DatasetFileInputs("--data", dataset));
+  // Frames of another sensor description or size than the trunk was trained on.
+  for (SensorKind sensor : functaset.sensors()) {
+    CheckModelMatchesData(model, flags.model, dataset, flags.data, sensor, "recon",
+                          "--allow-other-frames", flags.allow_other_frames);
+  }
   // Under mpirun every process evaluates its share of the frames and receives the
   // others' figures (docs/SCALING.md); rank 0 alone draws the examples (a handful of
   // frames) and writes the files.
@@ -360,6 +367,9 @@ void RegisterRecon(CLI::App& app, CommandBody* selected) {
       ->check(CLI::Range(0, 256));
   sub->add_option("--tile-height", flags->tile_height, "Tile height in pixels")
       ->check(CLI::Range(16, 2000));
+  sub->add_flag("--allow-other-frames", flags->allow_other_frames,
+                "Run even when the data's frames (size, channels, sensor description) are not "
+                "those the model's trunk was trained on (a warning instead of an error)");
   sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
   AddDatasetFlags(sub, &flags->dataset);
   sub->callback([flags, selected]() { *selected = [flags]() { RunRecon(*flags); }; });
