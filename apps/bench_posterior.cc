@@ -44,6 +44,7 @@
 #include "apps/bench.h"
 #include "apps/bench/fit_common.h"
 #include "apps/command.h"
+#include "apps/dataset_flags.h"
 #include "apps/distributed.h"
 #include "apps/model_inputs.h"
 #include "apps/progress_bar.h"
@@ -70,6 +71,7 @@ struct PosteriorBenchFlags {
   std::string pose_model;
   std::string functaset;
   std::string data;
+  DatasetFlags dataset;  // data without metadata (a video, a user's folder)
   std::string sensor;
   int frames = 60;
   std::string samplers = "sgld,laplace,knn";
@@ -129,7 +131,7 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
   const FunctaModel model = FunctaModel::Load(flags.model);
   const Functaset functaset = Functaset::Load(flags.functaset);
   functaset.CheckModel(model, flags.model, flags.functaset);
-  const Dataset dataset = Dataset::Open(flags.data);
+  const Dataset dataset = OpenDataset(flags.data, flags.dataset);
   SensorKind sensor;
   if (!ParseSensorFlag(flags.sensor, &sensor)) {
     sensor = dataset.has_sensor(SensorKind::kSoftBubble) ? SensorKind::kSoftBubble
@@ -465,6 +467,7 @@ void RegisterPosteriorBenchmark(CLI::App* bench, CommandBody* selected) {
                   "Functaset (.tfs) of the model (knn sampler: its train latents)")
       ->required();
   sub->add_option("--data", flags->data, "Dataset folder with labelled test frames")->required();
+  AddDatasetFlags(sub, &flags->dataset, {"--sensor"});
   sub->add_option("--sensor", flags->sensor, "bubble or gelslim (default bubble if present)");
   sub->add_option("--frames", flags->frames, "First N labelled test frames (default 60)")
       ->check(CLI::Range(1, 1000000));

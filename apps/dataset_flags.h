@@ -7,6 +7,7 @@
 #define TACTFUNC_APPS_DATASET_FLAGS_H_
 
 #include <string>
+#include <vector>
 
 #include "CLI/CLI.hpp"
 #include "estimation/data/dataset.h"
@@ -24,8 +25,11 @@ struct DatasetFlags {
 };
 
 // Adds --sensor, --reference, --reference-index, --pixel-pitch-mm, --labels, --tool-symmetry,
-// --sensor-file to `sub`.
-void AddDatasetFlags(CLI::App* sub, DatasetFlags* flags);
+// --sensor-file to `sub`, but for the names in `skip`: flags the command already has with
+// its own meaning (e.g. pose's --reference for --frame); the command then fills those
+// fields of `flags` itself if they apply.
+void AddDatasetFlags(CLI::App* sub, DatasetFlags* flags,
+                     const std::vector<std::string>& skip = {});
 
 // Opens `path`: a dataset folder (ours or a user's, a set of clips included), or a video
 // file (a regular file with a video extension, IsVideoFileName), with the flags' options.

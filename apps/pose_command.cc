@@ -60,6 +60,7 @@
 #include <Eigen/Geometry>
 
 #include "apps/command.h"
+#include "apps/dataset_flags.h"
 #include "apps/model_inputs.h"
 #include "apps/output_paths.h"
 #include "apps/pictures.h"
@@ -106,6 +107,9 @@ struct PoseFlags {
   std::string frame;
   std::string reference;
   std::string data;
+  // Data without metadata (a video, a user's folder); pose's own --sensor, --reference
+  // and --pixel-pitch-mm keep their meanings.
+  DatasetFlags dataset;
   std::string id;
   std::string sensor;
   std::string tool;
@@ -630,7 +634,7 @@ void RunPose(const PoseFlags& flags) {
                                      {"--frame", flags.frame},
                                      {"--reference", flags.reference}};
     if (from_data) {
-      const std::vector<NamedPath> data = DatasetPathInputs("--data", flags.data, DatasetFlags());
+      const std::vector<NamedPath> data = DatasetPathInputs("--data", flags.data, flags.dataset);
       inputs.insert(inputs.end(), data.begin(), data.end());
     }
     RefuseOutputsThatAreInputs(outputs, inputs);
@@ -642,7 +646,7 @@ void RunPose(const PoseFlags& flags) {
   SensorKind sensor;
   const bool sensor_given = ParseSensorFlag(flags.sensor, &sensor);
   if (from_data) {
-    const Dataset dataset = Dataset::Open(flags.data);
+    const Dataset dataset = OpenDataset(flags.data, flags.dataset);
     RefuseOutputsThatAreInputs(outputs, DatasetFileInputs("--data", dataset));
     if (!sensor_given) {
       sensor = dataset.has_sensor(SensorKind::kSoftBubble) ? SensorKind::kSoftBubble
@@ -854,7 +858,9 @@ void RegisterPose(CLI::App& app, CommandBody* selected) {
                   "Functaset (.tfs) of the model: the knn sampler's labelled train latents");
   sub->add_option("--frame", flags->frame, "The frame (PNG/JPG in the sensor's encoding)");
   sub->add_option("--reference", flags->reference, "The sensor's no-contact reference image");
-  sub->add_option("--data", flags->data, "A dataset folder (instead of --frame/--reference)");
+  sub->add_option("--data", flags->data,
+                  "A dataset folder or video (instead of --frame/--reference)");
+  AddDatasetFlags(sub, &flags->dataset, {"--sensor", "--reference", "--pixel-pitch-mm"});
   sub->add_option("--id", flags->id, "Frame id in --data (its label is the truth)");
   sub->add_option("--sensor", flags->sensor,
                   "bubble or gelslim; default: inferred from --frame, or bubble for --data");

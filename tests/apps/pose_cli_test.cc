@@ -20,6 +20,7 @@
 #include "tests/apps/cli_test_util.h"
 #include "models/pose/pose_mlp.h"
 #include "nlohmann/json.hpp"
+#include "tests/support/dataset_test_util.h"
 #include "tests/support/functa_test_util.h"
 
 namespace tactfunc {
@@ -149,6 +150,30 @@ TEST_F(PoseCliTest, PoseWithEachSamplerPrintsMeanCovarianceAndWritesFiles) {
     const Image picture = ReadImage(out + "/posterior.png", PixelEncoding::kRgb8);
     EXPECT_GT(picture.cols, 400);  // image panel + zoom panel side by side
   }
+}
+
+// A single video is a dataset too: --data names the file, --reference-index its
+// no-contact frame; the frame ids are the other frames' indices.
+TEST_F(PoseCliTest, PoseReadsAFrameOfAVideo) {
+  std::vector<cv::Mat> frames;
+  for (int i = 0; i < 4; ++i) frames.push_back(testing_util::PatternFrame(i));
+  const std::string video = Root("clip.avi");
+  if (!testing_util::WriteMjpgVideo(video, frames)) GTEST_SKIP() << "no MJPG writer in this OpenCV";
+  const Result info = Run("info " + video + " --reference-index 1 --json");
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  const Result train = Run("train-pose --functaset " + Root("f.tfs") + " --sensor gelslim --out " +
+                           Root("pg.tpm") + " --hidden 8 --epochs 3 --batch 4");
+  ASSERT_EQ(train.exit_code, 0) << train.err;
+  const std::string args = "pose --model " + Root("m.tfm") + " --pose-model " + Root("pg.tpm") +
+                           " --data " + video + " --sensor gelslim --sampler laplace --samples 10 "
+                           "--allow-other-frames --json";
+  Result r = Run(args + " --reference-index 1 --id 000002");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(r.LastJson().contains("mean"));
+  // Frame 1 is the reference there, not a frame.
+  r = Run(args + " --reference-index 1 --id 000001");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.err, HasSubstr("000001"));
 }
 
 TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities) {
