@@ -50,6 +50,7 @@ struct PoseMcmcFlags {
   int evaluations = 1600;
   int chains = 4;
   std::uint64_t seed = 0;
+  double jump_probability = PoseSamplerOptions().jump_probability;
   bool json = false;
 };
 
@@ -58,6 +59,8 @@ struct KernelTally {
   std::vector<double> ess_per_s[4], ess_per_k[4];
   std::vector<double> max_rhat, acceptance, ms, evaluations;
   int mixed = 0;
+  long jumps_proposed = 0, jumps_accepted = 0;
+  std::vector<std::string> unmixed;  // one line per frame with a split R-hat >= 1.1
 };
 
 void RunPoseMcmcBench(const PoseMcmcFlags& flags) {
@@ -99,7 +102,9 @@ void RunPoseMcmcBench(const PoseMcmcFlags& flags) {
   options.chain.num_samples_per_chain = per_chain - options.chain.burn_in;
   options.depth_min_m = posterior.options().fit.depth_min_m;
   options.depth_max_m = posterior.options().fit.depth_max_m;
+  options.jump_probability = flags.jump_probability;
   int failures = 0;
+  int multimodal = 0;  // frames whose tool has two or more modes
   ProgressBar bar("pose-mcmc", flags.contacts, "frames");
   for (int k = 0; k < flags.contacts; ++k) {
     const int tool = tools[k % tools.size()];
@@ -119,11 +124,16 @@ void RunPoseMcmcBench(const PoseMcmcFlags& flags) {
       continue;
     }
     const LatentProblem problem(trunk, targets, posterior.options().problem);
+    std::vector<LaplaceComponent> modes;  // the tool's modes, heaviest first
+    for (const LaplaceComponent& c : mixture.components()) {
+      if (c.tool == name) modes.push_back(c);
+    }
+    if (modes.empty()) modes.push_back(mixture.components().front());
+    multimodal += modes.size() > 1;
     for (KernelTally& t : tallies) {
       options.chain.kernel = t.kernel;
       options.chain.seed = seed;
-      const PoseSamples p = SamplePosePosterior(problem, generator, tool, s.sigma,
-                                                mixture.components().front(), options);
+      const PoseSamples p = SamplePosePosterior(problem, generator, tool, s.sigma, modes, options);
       const MetropolisResult& r = p.chains;
       for (int c = 0; c < 4; ++c) {
         t.ess_per_s[c].push_back(r.effective_sample_size[c] / (1e-3 * r.time_ms));
@@ -131,18 +141,32 @@ void RunPoseMcmcBench(const PoseMcmcFlags& flags) {
       }
       t.max_rhat.push_back(r.MaxSplitRhat());
       t.mixed += r.MaxSplitRhat() < 1.1;
+      if (!(r.MaxSplitRhat() < 1.1)) {
+        char line[256];
+        std::snprintf(line, sizeof line,
+                      "contact %d (%s, %zu mode%s): split R-hat x %.3f y %.3f yaw %.3f depth %.3f",
+                      k, name.c_str(), modes.size(), modes.size() == 1 ? "" : "s", r.split_rhat[0],
+                      r.split_rhat[1], r.split_rhat[2], r.split_rhat[3]);
+        t.unmixed.push_back(line);
+      }
       t.acceptance.push_back(r.MeanAcceptance());
       t.ms.push_back(r.time_ms);
       t.evaluations.push_back(static_cast<double>(p.trunk_evaluations));
+      for (std::size_t c = 0; c < r.jumps_proposed.size(); ++c) {
+        t.jumps_proposed += r.jumps_proposed[c];
+        t.jumps_accepted += r.jumps_accepted[c];
+      }
     }
     bar.Tick();
   }
   bar.Finish();
   const int frames = flags.contacts - failures;
   std::printf("%d fresh contacts (%d failed), %d chains x %d iterations (%d burn-in), budget %d "
-              "trunk evaluations per frame\n",
+              "trunk evaluations per frame; %d frames with several modes of the tool (mode "
+              "jumps %s)\n",
               flags.contacts, failures, flags.chains, per_chain, options.chain.burn_in,
-              flags.chains * per_chain);
+              flags.chains * per_chain, multimodal,
+              options.jump_probability > 0 ? "on" : "off");
   std::printf("%-6s | %-31s | %-31s | %-13s | %7s | %6s | %8s | %6s\n", "kernel",
               "ESS/s x, y, yaw, depth", "ESS/1000 evals x, y, yaw, depth", "R-hat med max",
               "<1.1", "accept", "ms/frame", "evals");
@@ -176,7 +200,16 @@ void RunPoseMcmcBench(const PoseMcmcFlags& flags) {
                     {"frames_rhat_below_1_1", t.mixed},
                     {"acceptance_mean", acceptance},
                     {"ms_per_frame_median", NumberOrNull(Median(t.ms))},
-                    {"evaluations_median", NumberOrNull(Median(t.evaluations))}});
+                    {"evaluations_median", NumberOrNull(Median(t.evaluations))},
+                    {"jumps_proposed", t.jumps_proposed},
+                    {"jumps_accepted", t.jumps_accepted}});
+    for (const std::string& line : t.unmixed) {
+      std::printf("%-6s   not mixed: %s\n", ToString(t.kernel), line.c_str());
+    }
+    if (t.jumps_proposed > 0) {
+      std::printf("%-6s   mode jumps: %ld proposed, %ld accepted (kept iterations)\n",
+                  ToString(t.kernel), t.jumps_proposed, t.jumps_accepted);
+    }
   }
   if (flags.json) {
     EmitJson({{"bench", "pose-mcmc"},
@@ -211,6 +244,10 @@ void RegisterPoseMcmcBenchmark(CLI::App* bench, CommandBody* selected) {
   sub->add_option("--chains", flags->chains, "Chains per frame (default 4)")
       ->check(CLI::Range(2, 1000));
   sub->add_option("--seed", flags->seed, "Seed of the contacts and the chains (default 0)");
+  sub->add_option("--jump-probability", flags->jump_probability,
+                  "Probability of a mode-jump proposal per iteration when the tool has several "
+                  "modes (default 0.1; 0 = local moves only)")
+      ->check(CLI::Range(0.0, 0.99));
   sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
   sub->callback([flags, selected]() { *selected = [flags]() { RunPoseMcmcBench(*flags); }; });
 }

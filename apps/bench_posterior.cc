@@ -27,6 +27,10 @@
 // The knn sampler searches the functaset's TRAIN-split latents only (the test frames'
 // own entries would otherwise be found at distance ~0 and make the coverage trivial).
 // Timing is serial on one thread, one measurement per frame (as bench fit).
+//
+// Under mpirun (docs/SCALING.md) the frames are shared out over the processes and their
+// per-frame records gathered: the figures are those of one process, the times each
+// frame's own (still one thread per process), and rank 0 alone prints.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -40,6 +44,8 @@
 #include "apps/bench.h"
 #include "apps/bench/fit_common.h"
 #include "apps/command.h"
+#include "apps/dataset_flags.h"
+#include "apps/distributed.h"
 #include "apps/model_inputs.h"
 #include "apps/progress_bar.h"
 #include "estimation/data/dataset.h"
@@ -65,6 +71,7 @@ struct PosteriorBenchFlags {
   std::string pose_model;
   std::string functaset;
   std::string data;
+  DatasetFlags dataset;  // data without metadata (a video, a user's folder)
   std::string sensor;
   int frames = 60;
   std::string samplers = "sgld,laplace,knn";
@@ -89,6 +96,20 @@ struct Tally {
   std::vector<double> ms_after_fit;  // sampler + pose MLP + moments, given the latent fit
 };
 
+// A pose in a frame's record (x, y, yaw as doubles, bit for bit).
+void PutPose(const SE2d& pose, ByteWriter* out) {
+  out->Put(pose.x());
+  out->Put(pose.y());
+  out->Put(pose.yaw());
+}
+
+SE2d GetPose(ByteReader& in) {
+  const double x = in.Get<double>();
+  const double y = in.Get<double>();
+  const double yaw = in.Get<double>();
+  return SE2d::FromXYYaw(x, y, yaw);
+}
+
 void RunPosteriorBench(const PosteriorBenchFlags& flags) {
   std::vector<Tally> tallies;
   for (const std::string& name : SplitList(flags.samplers)) {
@@ -110,7 +131,7 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
   const FunctaModel model = FunctaModel::Load(flags.model);
   const Functaset functaset = Functaset::Load(flags.functaset);
   functaset.CheckModel(model, flags.model, flags.functaset);
-  const Dataset dataset = Dataset::Open(flags.data);
+  const Dataset dataset = OpenDataset(flags.data, flags.dataset);
   SensorKind sensor;
   if (!ParseSensorFlag(flags.sensor, &sensor)) {
     sensor = dataset.has_sensor(SensorKind::kSoftBubble) ? SensorKind::kSoftBubble
@@ -200,23 +221,97 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
                                                  " train latents"
                                            : "")
             << "\n";
-  double point_position_sq = 0, point_yaw_sq = 0, meta_position_sq = 0, meta_yaw_sq = 0;
-  int point_yaw_count = 0;
+  // Under mpirun (docs/SCALING.md) each process takes its share of the frames
+  // (ProcessGroup::OwnItems) and packs what it measured per frame; every frame's record
+  // is gathered (GatherItems) and tallied in frame order, so the figures are those of one
+  // process -- but for the times, each measured on the process that ran the frame.
+  const ProcessGroup& processes = Processes();
+  const std::vector<std::int64_t> own = processes.OwnItems(num_frames);
   ProgressBar bar("posterior", static_cast<std::int64_t>(num_frames) * tallies.size(), "posteriors");
-  for (std::size_t index : frames) {
+  const std::int64_t ticks_per_frame = static_cast<std::int64_t>(tallies.size());
+  std::int64_t ticked = 0;
+  // The others advance alike: each own frame stands for size() frames on the bar.
+  auto tick_frames = [&](std::int64_t count) {
+    const std::int64_t n = std::min(count * ticks_per_frame, num_frames * ticks_per_frame - ticked);
+    if (n > 0) {
+      bar.Tick(n);
+      ticked += n;
+    }
+  };
+  std::vector<Bytes> measured;
+  for (const std::int64_t k : own) {
+    const std::size_t index = frames[static_cast<std::size_t>(k)];
     const PoseLabel& label = *dataset.frames()[index].label;
-    const SE2d& label_pose = label.sensor_T_object;
     const int n = dataset.ToolSymmetryOrder(label.tool);
     const TrunkTargets targets = LoadTrunkTargets(dataset, index, trunk.format);
     const LatentProblem problem(trunk, targets, resolved.problem);
+    ByteWriter record;
     Eigen::VectorXd latent;
     fitter.Fit(problem, &latent);
-    const SE2d point = pose_model.Predict(latent, n);
-    point_position_sq +=
-        std::pow(point.x() - label_pose.x(), 2) + std::pow(point.y() - label_pose.y(), 2);
+    PutPose(pose_model.Predict(latent, n), &record);
     Eigen::VectorXd meta_latent;
     meta_fitter.Fit(problem, &meta_latent);
-    const SE2d meta_point = pose_model.Predict(meta_latent, n);
+    PutPose(pose_model.Predict(meta_latent, n), &record);
+    if (generator_posterior) {
+      const SE2d& label_pose = label.sensor_T_object;
+      PoseMixture mixture;
+      const bool known = generator->ToolIndex(label.tool) >= 0;
+      GeneratorPosterior::Summary gs;
+      if (known) gs = generator_posterior->Estimate(targets, label.tool, &mixture);
+      const bool usable = known && gs.usable;
+      // The generator's times count for usable estimates only.
+      record.Put<std::uint8_t>(usable);
+      if (usable) {
+        record.Put(gs.total_time_ms);
+        record.Put(gs.total_time_ms - gs.fit_time_ms);
+      }
+      if (!usable) {
+        record.PutString(known ? gs.message : "the generator does not know tool " + label.tool);
+      } else {
+        record.Put<std::uint8_t>(mixture.Contains(label_pose, 0.5, 400, flags.seed, label.tool));
+        record.Put<std::uint8_t>(mixture.Contains(label_pose, 0.9, 400, flags.seed, label.tool));
+        PutPose(gs.mean, &record);
+      }
+    }
+    for (std::size_t s = 0; s < num_latent; ++s) {
+      std::optional<PoseDistribution> distribution;
+      const PosePosterior::Summary summary = posteriors[s]->Estimate(targets, n, &distribution);
+      record.Put(summary.total_time_ms);
+      record.Put(summary.total_time_ms - summary.fit_time_ms);
+      const bool usable = summary.IsSolutionUsable() && distribution.has_value();
+      record.Put<std::uint8_t>(usable);
+      if (!usable) {
+        record.PutString(summary.message);
+        continue;
+      }
+      const SE2d& mean = summary.mean;
+      const SE2d& label_pose = label.sensor_T_object;
+      const SE2d truth = SE2d::FromXYYaw(label_pose.x(), label_pose.y(),
+                                         FoldYawNear(label_pose.yaw(), mean.yaw(), n));
+      record.Put<std::uint8_t>(distribution->Region(0.5).Contains(truth));
+      record.Put<std::uint8_t>(distribution->Region(0.9).Contains(truth));
+      PutPose(mean, &record);
+    }
+    measured.push_back(std::move(record.bytes()));
+    tick_frames(processes.size());
+  }
+  const std::vector<Bytes> records = processes.GatherItems(num_frames, measured);
+  tick_frames(num_frames);
+  bar.Finish();
+
+  // The tally, in frame order.
+  double point_position_sq = 0, point_yaw_sq = 0, meta_position_sq = 0, meta_yaw_sq = 0;
+  int point_yaw_count = 0;
+  for (int k = 0; k < num_frames; ++k) {
+    const std::size_t index = frames[static_cast<std::size_t>(k)];
+    const PoseLabel& label = *dataset.frames()[index].label;
+    const SE2d& label_pose = label.sensor_T_object;
+    const int n = dataset.ToolSymmetryOrder(label.tool);
+    ByteReader record(records[static_cast<std::size_t>(k)]);
+    const SE2d point = GetPose(record);
+    point_position_sq +=
+        std::pow(point.x() - label_pose.x(), 2) + std::pow(point.y() - label_pose.y(), 2);
+    const SE2d meta_point = GetPose(record);
     meta_position_sq +=
         std::pow(meta_point.x() - label_pose.x(), 2) + std::pow(meta_point.y() - label_pose.y(), 2);
     if (n != 0) {
@@ -234,52 +329,18 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
         ++y.second;
       }
     };
-    if (generator_posterior) {
-      Tally& t = tallies.back();
+    // One sampler's outcome on this frame (after its times) into its tally.
+    auto tally = [&](Tally& t, bool usable, const std::string& failed_as) {
       ++t.frames;
-      PoseMixture mixture;
-      const bool known = generator->ToolIndex(label.tool) >= 0;
-      GeneratorPosterior::Summary gs;
-      if (known) gs = generator_posterior->Estimate(targets, label.tool, &mixture);
-      bar.Tick();
-      if (!known || !gs.usable) {
+      if (!usable) {
         ++t.failures;
-        std::cerr << "bench posterior: generator failed on frame " << dataset.frames()[index].id
-                  << ": " << (known ? gs.message : "the generator does not know tool " + label.tool)
-                  << "\n";
-      } else {
-        t.ms.push_back(gs.total_time_ms);
-        t.ms_after_fit.push_back(gs.total_time_ms - gs.fit_time_ms);
-        t.covered_50 += mixture.Contains(label_pose, 0.5, 400, flags.seed, label.tool);
-        t.covered_90 += mixture.Contains(label_pose, 0.9, 400, flags.seed, label.tool);
-        t.position_sq += std::pow(gs.mean.x() - label_pose.x(), 2) +
-                         std::pow(gs.mean.y() - label_pose.y(), 2);
-        if (n != 0) {
-          t.yaw_sq += std::pow(YawErrorModuloSymmetry(gs.mean.yaw(), label_pose.yaw(), n), 2);
-          ++t.yaw_count;
-        }
-        per_tool(t, gs.mean);
+        std::cerr << "bench posterior: " << failed_as << " failed on frame "
+                  << dataset.frames()[index].id << ": " << record.GetString() << "\n";
+        return;
       }
-    }
-    for (std::size_t s = 0; s < num_latent; ++s) {
-      Tally& t = tallies[s];
-      ++t.frames;
-      std::optional<PoseDistribution> distribution;
-      const PosePosterior::Summary summary = posteriors[s]->Estimate(targets, n, &distribution);
-      t.ms.push_back(summary.total_time_ms);
-      t.ms_after_fit.push_back(summary.total_time_ms - summary.fit_time_ms);
-      bar.Tick();
-      if (!summary.IsSolutionUsable() || !distribution) {
-        ++t.failures;
-        std::cerr << "bench posterior: " << ToString(t.sampler) << " failed on frame "
-                  << dataset.frames()[index].id << ": " << summary.message << "\n";
-        continue;
-      }
-      const SE2d& mean = summary.mean;
-      const SE2d truth = SE2d::FromXYYaw(label_pose.x(), label_pose.y(),
-                                         FoldYawNear(label_pose.yaw(), mean.yaw(), n));
-      t.covered_50 += distribution->Region(0.5).Contains(truth);
-      t.covered_90 += distribution->Region(0.9).Contains(truth);
+      t.covered_50 += record.Get<std::uint8_t>() != 0;
+      t.covered_90 += record.Get<std::uint8_t>() != 0;
+      const SE2d mean = GetPose(record);
       t.position_sq +=
           std::pow(mean.x() - label_pose.x(), 2) + std::pow(mean.y() - label_pose.y(), 2);
       if (n != 0) {
@@ -287,9 +348,23 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
         ++t.yaw_count;
       }
       per_tool(t, mean);
+    };
+    if (generator_posterior) {
+      Tally& t = tallies.back();
+      const bool usable = record.Get<std::uint8_t>() != 0;
+      if (usable) {
+        t.ms.push_back(record.Get<double>());
+        t.ms_after_fit.push_back(record.Get<double>());
+      }
+      tally(t, usable, "generator");
+    }
+    for (std::size_t s = 0; s < num_latent; ++s) {
+      Tally& t = tallies[s];
+      t.ms.push_back(record.Get<double>());
+      t.ms_after_fit.push_back(record.Get<double>());
+      tally(t, record.Get<std::uint8_t>() != 0, ToString(t.sampler));
     }
   }
-  bar.Finish();
 
   const double point_mm = 1e3 * std::sqrt(point_position_sq / num_frames);
   const double point_deg =
@@ -392,6 +467,7 @@ void RegisterPosteriorBenchmark(CLI::App* bench, CommandBody* selected) {
                   "Functaset (.tfs) of the model (knn sampler: its train latents)")
       ->required();
   sub->add_option("--data", flags->data, "Dataset folder with labelled test frames")->required();
+  AddDatasetFlags(sub, &flags->dataset, {"--sensor"});
   sub->add_option("--sensor", flags->sensor, "bubble or gelslim (default bubble if present)");
   sub->add_option("--frames", flags->frames, "First N labelled test frames (default 60)")
       ->check(CLI::Range(1, 1000000));

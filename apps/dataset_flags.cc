@@ -1,6 +1,7 @@
 // Copyright 2026 The tactfunc Authors.
 #include "apps/dataset_flags.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -10,25 +11,46 @@
 
 namespace tactfunc::apps {
 
-void AddDatasetFlags(CLI::App* sub, DatasetFlags* flags) {
-  sub->add_option("--sensor", flags->sensor,
-                  "For your own data: the sensor kind (bubble or gelslim); default: "
-                  "inferred from the images (16-bit one-channel = bubble)");
-  sub->add_option("--reference", flags->reference,
-                  "For your own folder (or each folder of a set of clips): the no-contact "
-                  "reference image, if it is not named reference.png/.jpg");
-  sub->add_option("--reference-index", flags->reference_index,
-                  "For a video (or each video of a set of clips): the frame that is the "
-                  "reference (default 0)")
-      ->check(CLI::NonNegativeNumber);
-  sub->add_option("--pixel-pitch-mm", flags->pixel_pitch_mm,
-                  "For your own data: millimetres per pixel (enables pose arrows and "
-                  "label range checks)")
-      ->check(CLI::NonNegativeNumber);
-  sub->add_option("--labels", flags->labels, "A labels.csv to use instead of DIR/labels.csv");
-  sub->add_option("--tool-symmetry", flags->tools,
-                  "A tools.csv (tool,symmetry_order) declaring your tools' rotational symmetry, "
-                  "instead of DIR/tools.csv");
+void AddDatasetFlags(CLI::App* sub, DatasetFlags* flags, const std::vector<std::string>& skip) {
+  auto wanted = [&](const char* name) {
+    return std::find(skip.begin(), skip.end(), name) == skip.end();
+  };
+  if (wanted("--sensor")) {
+    sub->add_option("--sensor", flags->sensor,
+                    "For your own data: the sensor kind (bubble or gelslim); default: "
+                    "inferred from the images (16-bit one-channel = bubble)");
+  }
+  if (wanted("--reference")) {
+    sub->add_option("--reference", flags->reference,
+                    "For your own folder (or each folder of a set of clips): the no-contact "
+                    "reference image, if it is not named reference.png/.jpg");
+  }
+  if (wanted("--reference-index")) {
+    sub->add_option("--reference-index", flags->reference_index,
+                    "For a video (or each video of a set of clips): the frame that is the "
+                    "reference (default 0)")
+        ->check(CLI::NonNegativeNumber);
+  }
+  if (wanted("--pixel-pitch-mm")) {
+    sub->add_option("--pixel-pitch-mm", flags->pixel_pitch_mm,
+                    "For your own data: millimetres per pixel (enables pose arrows and "
+                    "label range checks)")
+        ->check(CLI::NonNegativeNumber);
+  }
+  if (wanted("--labels")) {
+    sub->add_option("--labels", flags->labels, "A labels.csv to use instead of DIR/labels.csv");
+  }
+  if (wanted("--tool-symmetry")) {
+    sub->add_option("--tool-symmetry", flags->tools,
+                    "A tools.csv (tool,symmetry_order) declaring your tools' rotational "
+                    "symmetry, instead of DIR/tools.csv");
+  }
+  if (wanted("--sensor-file")) {
+    sub->add_option("--sensor-file", flags->sensor_file,
+                    "A sensor description (JSON: kind, channels, crop or perspective corners, "
+                    "working size, pixel pitch, scale; docs/DATASET_FORMAT.md) to read instead "
+                    "of DIR/sensor.json");
+  }
 }
 
 Dataset OpenDataset(const std::string& path, const DatasetFlags& flags) {
@@ -45,6 +67,7 @@ Dataset OpenDataset(const std::string& path, const DatasetFlags& flags) {
   options.pixel_pitch_m = flags.pixel_pitch_mm * 1e-3;
   options.labels = flags.labels;
   options.tools = flags.tools;
+  options.sensor_file = flags.sensor_file;
   const bool video = std::filesystem::is_regular_file(path) && IsVideoFileName(path);
   return video ? Dataset::OpenVideo(path, options) : Dataset::Open(path, options);
 }

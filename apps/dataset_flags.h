@@ -7,6 +7,7 @@
 #define TACTFUNC_APPS_DATASET_FLAGS_H_
 
 #include <string>
+#include <vector>
 
 #include "CLI/CLI.hpp"
 #include "estimation/data/dataset.h"
@@ -20,11 +21,15 @@ struct DatasetFlags {
   double pixel_pitch_mm = 0;  // pixel pitch for data without metadata, millimetres
   std::string labels;         // labels.csv to read instead of DIR/labels.csv
   std::string tools;          // tools.csv to read instead of DIR/tools.csv
+  std::string sensor_file;    // sensor description to read instead of DIR/sensor.json
 };
 
-// Adds --sensor, --reference, --reference-index, --pixel-pitch-mm, --labels, --tool-symmetry to
-// `sub`.
-void AddDatasetFlags(CLI::App* sub, DatasetFlags* flags);
+// Adds --sensor, --reference, --reference-index, --pixel-pitch-mm, --labels, --tool-symmetry,
+// --sensor-file to `sub`, but for the names in `skip`: flags the command already has with
+// its own meaning (e.g. pose's --reference for --frame); the command then fills those
+// fields of `flags` itself if they apply.
+void AddDatasetFlags(CLI::App* sub, DatasetFlags* flags,
+                     const std::vector<std::string>& skip = {});
 
 // Opens `path`: a dataset folder (ours or a user's, a set of clips included), or a video
 // file (a regular file with a video extension, IsVideoFileName), with the flags' options.

@@ -24,8 +24,16 @@
 namespace tactfunc::apps {
 namespace {
 
-// The commands that run as several processes.
-bool Distributes(const std::string& command) { return command == "train" || command == "encode"; }
+// The commands that run as several processes (`command`: the subcommand path, e.g.
+// "bench posterior").
+constexpr const char* kDistributed[] = {"train", "encode", "recon", "eval", "bench posterior"};
+
+bool Distributes(const std::string& command) {
+  for (const char* name : kDistributed) {
+    if (command == name) return true;
+  }
+  return false;
+}
 
 int EnvInt(const char* name) {
   const char* value = std::getenv(name);
@@ -159,8 +167,9 @@ void StartProcesses(const std::string& command) {
   }
   if (!Distributes(command)) {
     throw UsageError("started as " + std::to_string(launched) +
-                     " processes (mpirun), but only train and encode run as several "
-                     "processes; run " + command + " without mpirun (docs/SCALING.md)");
+                     " processes (mpirun), but only train, encode, recon, eval and bench "
+                     "posterior run as several processes; run " + command +
+                     " without mpirun (docs/SCALING.md)");
   }
 #ifdef TACTFUNC_WITH_MPI
   int provided = 0;

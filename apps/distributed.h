@@ -1,10 +1,11 @@
 // Copyright 2026 The tactfunc Authors.
 //
 // The processes of one run of the program (docs/SCALING.md). `mpirun -np N tactfunc
-// train|encode ...` starts N processes; in a build with MPI (CMake found it:
-// TACTFUNC_WITH_MPI) they join one ProcessGroup over MPI_COMM_WORLD, which the
-// commands hand to TrunkTrainer and LatentEncoder. Everything else sees the group of
-// this process alone, so the commands hold no #ifdef:
+// train|encode|recon|eval|bench posterior ...` starts N processes; in a build with MPI
+// (CMake found it: TACTFUNC_WITH_MPI) they join one ProcessGroup over MPI_COMM_WORLD,
+// which the commands hand to TrunkTrainer, LatentEncoder, ReconstructionEvaluator and
+// TableEvaluation (bench posterior shares out its frames itself). Everything else sees
+// the group of this process alone, so the commands hold no #ifdef:
 //
 //   StartProcesses(command)  main(), after the flags are parsed
 //   Processes()              the group (MPI or SingleProcess())
@@ -35,8 +36,9 @@ bool BuiltWithMpi();
 int LaunchedProcessCount();
 int LaunchedRank();
 
-// Joins the processes of the run for `command` (a subcommand name). Launched as several
-// processes, `train` and `encode` join the MPI group; any other command, or any command
+// Joins the processes of the run for `command` (the subcommand path: "encode", "bench
+// posterior"). Launched as several processes, `train`, `encode`, `recon`, `eval` and
+// `bench posterior` join the MPI group; any other command, or any command
 // of a build without MPI, throws UsageError (every process throws; only rank 0 should
 // print it, see ReportError). Launched as one process it does nothing.
 void StartProcesses(const std::string& command);

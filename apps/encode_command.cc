@@ -192,9 +192,9 @@ void RunEncode(const EncodeFlags& flags) {
   const std::filesystem::path parent = std::filesystem::path(flags.out).parent_path();
   if (!parent.empty()) std::filesystem::create_directories(parent);
 
-  // The model against the data: frames of another size or channel count than the
-  // trunk was trained on are refused (--allow-other-frames: a warning), another pixel
-  // pitch or a stretch to the working resolution is said.
+  // The model against the data: frames of another sensor description, size or channel
+  // count than the trunk was trained on are refused (--allow-other-frames: a warning); a
+  // stretch to the working resolution is said.
   for (SensorKind sensor : options.sensors.empty() ? dataset.sensors() : options.sensors) {
     if (!model.HasSensor(sensor) || !dataset.has_sensor(sensor)) continue;
     CheckModelMatchesData(model, flags.model, dataset, flags.data, sensor, "encode",
@@ -326,8 +326,8 @@ void RegisterEncode(CLI::App& app, CommandBody* selected) {
                   "trunk's own meta_sgd:K, what it was trained for; ceres:N fits the latent "
                   "problem to convergence, docs/FITTING.md)");
   sub->add_flag("--allow-other-frames", flags->allow_other_frames,
-                "Encode even when the data's frames have another size or channel count "
-                "than the model's trunk was trained on (a warning instead of an error)");
+                "Encode even when the data's frames (size, channels, sensor description) are "
+                "not those the model's trunk was trained on (a warning instead of an error)");
   sub->add_flag("--share-rest", flags->share_rest,
                 "Frames at rest (no contact above the sensor's noise; docs/REAL_DATA.md) are "
                 "not fitted: they share one latent per sensor, stored once, and cost no latent "

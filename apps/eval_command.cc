@@ -15,7 +15,9 @@
 // The evaluation itself (rows, baselines, targets) is TableEvaluation
 // (estimation/evaluation/table_evaluation.h); this command checks the flags, loads the
 // files, and prints the table, writes table.md and table.json and draws
-// rate_distortion.png.
+// rate_distortion.png. Runs as several processes under mpirun (docs/SCALING.md): the
+// per-frame work is shared out, rank 0 writes the files, which are those of one process
+// (but for the PCA fit's seconds in table.json).
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -34,6 +36,7 @@
 #include "apps/bench.h"
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
+#include "apps/distributed.h"
 #include "apps/model_inputs.h"
 #include "apps/output_paths.h"
 #include "apps/pictures.h"
@@ -61,6 +64,7 @@ struct EvalFlags {
   int raw_downsample = 2;
   int knn_k = 5;
   bool json = false;
+  bool allow_other_frames = false;
   DatasetFlags dataset;           // --sensor, --reference, --pixel-pitch-mm, --labels, ...
   std::vector<std::string> argv;  // for the report
 };
@@ -345,6 +349,8 @@ void RunEval(const EvalFlags& flags) {
     if (!dataset.has_sensor(s)) {
       throw DatasetError("--data '" + flags.data + "' has no " + ToString(s) + " frames");
     }
+    CheckModelMatchesData(model, flags.model, dataset, flags.data, s, "eval",
+                          "--allow-other-frames", flags.allow_other_frames);
     const FrameFormat& format = model.Trunk(s).format;
     WarnIfStretched(dataset, flags.data, s, format.rows, format.cols, "eval");
   }
@@ -390,7 +396,10 @@ void RunEval(const EvalFlags& flags) {
     extras.push_back(std::move(e));
   }
 
-  fs::create_directories(flags.out);
+  // Under mpirun every process evaluates its share of the frames and receives the
+  // others' results (docs/SCALING.md); rank 0 alone writes the files.
+  const ProcessGroup& processes = Processes();
+  if (processes.rank() == 0) fs::create_directories(flags.out);
   TableEvaluation::Inputs inputs;
   inputs.dataset = &dataset;
   inputs.dataset_name = flags.data;
@@ -405,8 +414,10 @@ void RunEval(const EvalFlags& flags) {
   options.threads = threads;
   options.raw_downsample = flags.raw_downsample;
   options.knn_k = flags.knn_k;
+  options.processes = &processes;
   ConsoleObserver observer;
   const TableEvaluation::Result evaluation = TableEvaluation::Evaluate(inputs, options, &observer);
+  if (processes.rank() != 0) return;
   const std::vector<Row>& rows = evaluation.rows;
   const bool all_met = evaluation.all_targets_met;
   std::map<SensorKind, RdCurves> curves;
@@ -614,6 +625,9 @@ void RegisterEval(CLI::App& app, CommandBody* selected) {
       ->check(CLI::Range(1, 64));
   sub->add_option("--knn-k", flags->knn_k, "Neighbours of the raw-pixel k-NN pose baseline (5)")
       ->check(CLI::Range(1, 1000));
+  sub->add_flag("--allow-other-frames", flags->allow_other_frames,
+                "Run even when the data's frames (size, channels, sensor description) are not "
+                "those the model's trunk was trained on (a warning instead of an error)");
   sub->add_flag("--json", flags->json, "Print {rows, targets, rate_distortion, ...} as one JSON line");
   AddDatasetFlags(sub, &flags->dataset);
   sub->callback([flags, selected]() {

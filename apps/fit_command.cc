@@ -29,6 +29,7 @@
 #include <iostream>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -58,6 +59,8 @@ struct FitFlags {
   std::string frame;
   std::string reference;
   std::string sensor;
+  std::string sensor_file;
+  bool allow_other_frames = false;
   std::string strategy = "ceres:10";
   std::string out;
   std::string precision = "float";
@@ -199,6 +202,7 @@ void RunFit(const FitFlags& flags) {
                                    {"--functaset", flags.functaset},
                                    {"--frame", flags.frame},
                                    {"--reference", flags.reference}};
+  if (!flags.sensor_file.empty()) inputs.push_back({"--sensor-file", flags.sensor_file});
   std::vector<NamedPath> knn_files;
   if (strategy.knn) {
     for (const char* name : {"bubble", "gelslim"}) {
@@ -213,10 +217,34 @@ void RunFit(const FitFlags& flags) {
     RefuseOutputsThatAreInputs(outputs, inputs);
   }
 
+  // --sensor-file: the frames are raw camera frames of that sensor; its kind is the
+  // sensor and its geometry is applied to both before they are compared.
+  std::optional<SensorDescription> description;
+  if (!flags.sensor_file.empty()) {
+    try {
+      description = ReadSensorDescriptionFile(flags.sensor_file);
+    } catch (const SensorDescriptionError& e) {
+      throw DatasetError(std::string("--sensor-file: ") + e.what());
+    }
+  }
   SensorKind sensor;
-  if (!ParseSensorFlag(flags.sensor, &sensor)) sensor = InferSensor(flags.frame, "--frame");
-  const Image frame = ReadInput(flags.frame, sensor, "--frame");
-  const Image reference = ReadInput(flags.reference, sensor, "--reference");
+  if (!ParseSensorFlag(flags.sensor, &sensor)) {
+    sensor = description ? description->kind : InferSensor(flags.frame, "--frame");
+  } else if (description && description->kind != sensor) {
+    throw UsageError("--sensor " + flags.sensor + ": --sensor-file '" + flags.sensor_file +
+                     "' describes a " + SensorKindDescriptionName(description->kind) +
+                     " sensor");
+  }
+  Image frame = ReadInput(flags.frame, sensor, "--frame");
+  Image reference = ReadInput(flags.reference, sensor, "--reference");
+  if (description) {
+    try {
+      frame = ApplySensorGeometry(frame, *description, flags.sensor_file);
+      reference = ApplySensorGeometry(reference, *description, flags.sensor_file);
+    } catch (const SensorDescriptionError& e) {
+      throw DatasetError("--frame '" + flags.frame + "': " + e.what());
+    }
+  }
   if (!frame.SameShape(reference)) {
     throw DatasetError("--reference '" + flags.reference + "' is " + Shape(reference) +
                        " (rows x cols x channels) but --frame '" + flags.frame + "' is " +
@@ -231,6 +259,11 @@ void RunFit(const FitFlags& flags) {
     throw DatasetError("--model '" + flags.model + "' has no trunk for sensor " + ToString(sensor) +
                        " (it has: " + have + "); the frame '" + flags.frame + "' was read as " +
                        ToString(sensor) + (flags.sensor.empty() ? " (inferred)" : ""));
+  }
+  if (description) {
+    CheckModelDescription(model, flags.model, *description,
+                          "--sensor-file '" + flags.sensor_file + "'", sensor, "fit",
+                          "--allow-other-frames", flags.allow_other_frames);
   }
   const SensorTrunk& trunk = model.Trunk(sensor);
   const TrunkTargets targets = MakeTrunkTargets(frame, reference, sensor, trunk.format);
@@ -338,6 +371,13 @@ void RegisterFit(CLI::App& app, CommandBody* selected) {
   sub->add_option("--sensor", flags->sensor,
                   "bubble or gelslim; default: inferred from the frame (16-bit one-channel = "
                   "bubble, 8-bit = gelslim)");
+  sub->add_option("--sensor-file", flags->sensor_file,
+                  "The sensor description (docs/DATASET_FORMAT.md) of the raw frames: its crop "
+                  "or perspective warp is applied to --frame and --reference, and it must be "
+                  "the one the model was trained on");
+  sub->add_flag("--allow-other-frames", flags->allow_other_frames,
+                "Fit even when --sensor-file is not the description the model's trunk was "
+                "trained on (a warning instead of an error)");
   sub->add_option("--strategy", flags->strategy,
                   "knn, meta_sgd:K, ceres:N, knn+meta_sgd:K or knn+ceres:N (default ceres:10)");
   sub->add_option("--out", flags->out, "Folder for latent.json and fit.png (created)");

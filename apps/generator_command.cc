@@ -34,6 +34,7 @@
 #include <numeric>
 
 #include "apps/command.h"
+#include "apps/dataset_flags.h"
 #include "apps/model_inputs.h"
 #include "estimation/data/dataset.h"
 #include "estimation/data/image_io.h"
@@ -56,6 +57,7 @@ constexpr double kDeg = 180.0 / M_PI;
 
 struct TrainGeneratorFlags {
   std::string model, functaset, data, out;
+  DatasetFlags dataset;  // data without metadata (a video, a user's folder)
   std::string mode = "pixels";
   std::string hidden = "256,256";
   int harmonics = 4;
@@ -118,7 +120,7 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
   const SensorTrunk& trunk = model.Trunk(SensorKind::kSoftBubble);
   const Functaset functaset = Functaset::Load(flags.functaset);
   functaset.CheckModel(model, flags.model, flags.functaset);
-  const Dataset dataset = Dataset::Open(flags.data);
+  const Dataset dataset = OpenDataset(flags.data, flags.dataset);
   PoseGenerator::Options options;
   for (const Tool& t : ToolSet()) {
     options.tools.push_back(t.name());
@@ -421,6 +423,7 @@ void RegisterTrainGenerator(CLI::App& app, CommandBody* selected) {
   sub->add_option("--model", flags->model, "Model file (.tfm) of the functaset")->required();
   sub->add_option("--functaset", flags->functaset, "Labelled functaset (.tfs)")->required();
   sub->add_option("--data", flags->data, "The functaset's dataset (frames)")->required();
+  AddDatasetFlags(sub, &flags->dataset);
   sub->add_option("--out", flags->out, "Generator file to write (atomically)")->required();
   sub->add_option("--mode", flags->mode,
                   "latents (regress the functaset's latents) or pixels (then fine-tune through "

@@ -140,6 +140,11 @@ nlohmann::json DescribeModel(const std::string& bytes, const std::string& path) 
                           {"global_latent_dim", o.global_latent_dim()}};
     }
     if (o.has_readout()) trunk["readout"] = {{"rows", o.readout_rows}, {"cols", o.readout_cols}};
+    const SensorDescription described = TrunkSensorDescription(t);
+    std::cout << "           sensor " << DescribeSensor(described)
+              << (t.description ? "" : " (built in: the model records none)") << "\n";
+    trunk["sensor_description"] = nlohmann::json::parse(SensorDescriptionToJson(described));
+    trunk["sensor_description_recorded"] = t.description.has_value();
     const nlohmann::json run = ObjectAt(trunks_info, ToString(sensor));
     const double steps = NumberAt(run, "steps"), seconds = NumberAt(run, "train_seconds");
     const double psnr = NumberAt(run, "train_psnr");
@@ -295,6 +300,9 @@ void RunInfo(const InfoFlags& flags) {
                   info.cols * info.pixel_pitch_m * 1e3, info.rows * info.pixel_pitch_m * 1e3);
     }
     std::printf("\n");
+    const SensorDescription described = DataSensorDescription(info);
+    std::cout << "           sensor " << DescribeSensor(described) << " ("
+              << (info.description ? info.description_path : std::string("built in")) << ")\n";
     nlohmann::json tool_counts = nlohmann::json::object();
     for (const auto& [tool, count] : tools) tool_counts[tool] = count;
     sensors[ToString(sensor)] = {{"frames", all.size()},
@@ -306,6 +314,9 @@ void RunInfo(const InfoFlags& flags) {
                                  {"channels", info.channels},
                                  {"encoding", ToString(info.encoding)},
                                  {"pixel_pitch_m", info.pixel_pitch_m},
+                                 {"sensor_description",
+                                  nlohmann::json::parse(SensorDescriptionToJson(described))},
+                                 {"sensor_description_file", info.description_path},
                                  {"tools", tool_counts}};
   }
   if (!dataset.clips().empty()) {

@@ -25,6 +25,16 @@ std::string CommandName(const CLI::App& app) {
   return name;
 }
 
+// The subcommands chosen, down to the last: "bench posterior".
+std::string CommandPath(const CLI::App& app) {
+  std::string path;
+  for (const CLI::App* sub = &app; !sub->get_subcommands().empty();) {
+    sub = sub->get_subcommands().front();
+    path += (path.empty() ? "" : " ") + sub->get_name();
+  }
+  return path;
+}
+
 // Numbers in CLI11's range messages as people write them: "0.000000" -> "0" and the
 // 309-digit "179769313...368.000000" (the largest double) -> "1.79769e+308".
 std::string ShortNumbers(const std::string& text) {
@@ -97,11 +107,11 @@ int main(int argc, char** argv) {
     // CLI11 prints the help (exit 0) or the usage error; every usage error exits 2.
     return app.exit(e) == 0 ? 0 : 2;
   }
-  const std::string name = CommandName(app);
-  // Started by mpirun: train and encode join the other processes (apps/distributed.h);
-  // anything else is refused, said once (by rank 0).
+  const std::string name = "tactfunc " + CommandPath(app);
+  // Started by mpirun: train, encode, recon, eval and bench posterior join the other
+  // processes (apps/distributed.h); anything else is refused, said once (by rank 0).
   try {
-    StartProcesses(app.get_subcommands().front()->get_name());
+    StartProcesses(CommandPath(app));
   } catch (const std::exception& e) {
     if (LaunchedRank() == 0) std::cerr << name << ": error: " << e.what() << "\n";
     return 2;

@@ -143,11 +143,81 @@ nlohmann::json DataFramesJson(const SensorInfo& info) {
           {"pixel_pitch_m", info.pixel_pitch_m}};
 }
 
+std::string DataDescriptionWhere(const Dataset& dataset, const std::string& data_path,
+                                 SensorKind sensor) {
+  const SensorInfo& info = dataset.sensor_info(sensor);
+  return "--data '" + data_path + "' (" +
+         (info.description ? info.description_path
+                           : std::string("built-in ") + ToString(sensor) + " description") +
+         ")";
+}
+
+void CheckModelDescription(const FunctaModel& model, const std::string& model_path,
+                           const SensorDescription& data, const std::string& data_where,
+                           SensorKind sensor, const std::string& command,
+                           const std::string& override_flag, bool override_given,
+                           bool data_described) {
+  if (!model.HasSensor(sensor)) return;
+  const SensorTrunk& trunk = model.Trunk(sensor);
+  const SensorDescription trained = TrunkSensorDescription(trunk);
+  SensorDescription compared = data;
+  if (compared.working_rows <= 0) {
+    compared.working_rows = trained.working_rows;
+    compared.working_cols = trained.working_cols;
+    compared.aspect = trained.aspect;
+  }
+  if (compared.pixel_pitch_m <= 0 || trained.pixel_pitch_m <= 0 || !trunk.description) {
+    compared.pixel_pitch_m = trained.pixel_pitch_m;
+  }
+  // The preprocessing normalises by the model's own scale; the data's is a statement only
+  // when a description file makes it (else it is the kind's default), and a model
+  // without a description never recorded one.
+  if (!trunk.description || !data_described) {
+    compared.normalization_scale = trained.normalization_scale;
+  }
+  const std::vector<std::string> differences = FrameDifferences(trained, compared);
+  if (differences.empty()) return;
+  std::string list;
+  for (const std::string& d : differences) list += (list.empty() ? "" : "; ") + d;
+  const std::string message =
+      "model '" + model_path + "' was trained on " + ToString(sensor) + " frames described as \"" +
+      trained.name + "\"" + (trunk.description ? "" : " (built in: the model records none)") +
+      ", but " + data_where + " describes them as \"" + data.name + "\"; they differ in " + list +
+      " (model vs data). Train a model on this data (tactfunc train), or pass " + override_flag +
+      " to use this model anyway";
+  if (!override_given) throw DatasetError(message);
+  std::cerr << command << ": warning (" << override_flag << "): " << message << "\n";
+}
+
+namespace {
+// The size / channel / pitch check against the model info's data_frames record.
+void CheckModelFrames(const FunctaModel& model, const std::string& model_path,
+                      const Dataset& dataset, const std::string& data_path, SensorKind sensor,
+                      const std::string& command, const std::string& override_flag,
+                      bool override_given);
+}  // namespace
+
 void CheckModelMatchesData(const FunctaModel& model, const std::string& model_path,
                            const Dataset& dataset, const std::string& data_path,
                            SensorKind sensor, const std::string& command,
                            const std::string& override_flag, bool override_given) {
   if (!dataset.has_sensor(sensor)) return;
+  // The description first: its message says what differs (a crop, a pitch), where the
+  // sizes below would only say that they do.
+  const SensorInfo& data = dataset.sensor_info(sensor);
+  CheckModelDescription(model, model_path, DataSensorDescription(data),
+                        DataDescriptionWhere(dataset, data_path, sensor), sensor, command,
+                        override_flag, override_given, data.description.has_value());
+  CheckModelFrames(model, model_path, dataset, data_path, sensor, command, override_flag,
+                   override_given);
+}
+
+namespace {
+
+void CheckModelFrames(const FunctaModel& model, const std::string& model_path,
+                      const Dataset& dataset, const std::string& data_path, SensorKind sensor,
+                      const std::string& command, const std::string& override_flag,
+                      bool override_given) {
   nlohmann::json info;
   try {
     info = nlohmann::json::parse(model.info_json());
@@ -183,7 +253,8 @@ void CheckModelMatchesData(const FunctaModel& model, const std::string& model_pa
     if (!override_given) throw DatasetError(message);
     std::cerr << command << ": warning (" << override_flag << "): " << message << "\n";
   }
-  if (pitch > 0 && data.pixel_pitch_m > 0 &&
+  // A trunk with a description had its pitch compared above.
+  if (!model.Trunk(sensor).description && pitch > 0 && data.pixel_pitch_m > 0 &&
       std::abs(pitch / data.pixel_pitch_m - 1.0) > 0.01) {
     std::cerr << command << ": warning: model '" << model_path << "' was trained on " << name
               << " frames of pixel pitch " << pitch * 1e3 << " mm, --data '" << data_path
@@ -191,5 +262,7 @@ void CheckModelMatchesData(const FunctaModel& model, const std::string& model_pa
               << " mm: contacts appear at another scale than the trunk learned\n";
   }
 }
+
+}  // namespace
 
 }  // namespace tactfunc::apps

@@ -64,15 +64,37 @@ FunctasetKnn MakeFunctasetKnn(const Functaset& functaset, SensorKind sensor, boo
 nlohmann::json DataFramesJson(const SensorInfo& info);
 
 // Checks `dataset`'s `sensor` frames (from `data_path`) against the frames the model's
-// trunk was trained on (the record above; a model without one -- hand-built or older --
-// passes). Another frame size or channel count: throws DatasetError naming both files,
-// both sizes and `override_flag` (which skips the throw, leaving a warning). Another
-// pixel pitch (both known, more than 1 % apart): a warning on stderr naming both.
-// Warnings start with `command`.
+// trunk was trained on: their sensor descriptions (CheckModelDescription), then the record
+// above (a model without one -- hand-built or older -- passes that part). Another frame
+// size or channel count: throws DatasetError naming both files, both sizes and
+// `override_flag` (which skips the throw, leaving a warning). Another pixel pitch (both
+// known, more than 1 % apart) in a model without a description: a warning on stderr
+// naming both. Warnings start with `command`.
 void CheckModelMatchesData(const FunctaModel& model, const std::string& model_path,
                            const Dataset& dataset, const std::string& data_path,
                            SensorKind sensor, const std::string& command,
                            const std::string& override_flag, bool override_given);
+
+// Checks the sensor description of the data (`data` from `data_where`, e.g. "--data 'DIR'
+// (DIR/sensor.json)") against the one the model's `sensor` trunk was trained on
+// (TrunkSensorDescription). What one side leaves open is not a difference: a data
+// working size that is not set, a pitch either side does not know, the scale of data
+// without a description file (`data_described` false: the kind's default, while
+// preprocessing uses the model's scale anyway), and for a trunk without a recorded
+// description (older files) the pitch and scale, which it never recorded. Any other difference in kind, channels, geometry (crop / perspective),
+// working size, pitch or scale: throws DatasetError naming both sides and each
+// differing field, or with `override_given` writes it as a warning starting with
+// `command`.
+void CheckModelDescription(const FunctaModel& model, const std::string& model_path,
+                           const SensorDescription& data, const std::string& data_where,
+                           SensorKind sensor, const std::string& command,
+                           const std::string& override_flag, bool override_given,
+                           bool data_described = true);
+
+// Where a dataset's description of `sensor` came from, for messages:
+// "--data 'DIR' (DIR/sensor.json)" or "--data 'DIR' (built-in gelslim description)".
+std::string DataDescriptionWhere(const Dataset& dataset, const std::string& data_path,
+                                 SensorKind sensor);
 
 PoseMlp LoadPoseModelFor(const std::string& path, const FunctaModel& model, SensorKind sensor,
                          const std::string& model_path);

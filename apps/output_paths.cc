@@ -79,8 +79,10 @@ std::vector<NamedPath> DatasetPathInputs(const std::string& flag, const std::str
   std::vector<NamedPath> inputs = {{flag, path},
                                    {flag + " (dataset.json)", (fs::path(path) / "dataset.json").string()},
                                    {flag + " (labels.csv)", (fs::path(path) / "labels.csv").string()},
-                                   {flag + " (clips.csv)", (fs::path(path) / "clips.csv").string()}};
+                                   {flag + " (clips.csv)", (fs::path(path) / "clips.csv").string()},
+                                   {flag + " (sensor.json)", (fs::path(path) / "sensor.json").string()}};
   if (!flags.labels.empty()) inputs.push_back({"--labels", flags.labels});
+  if (!flags.sensor_file.empty()) inputs.push_back({"--sensor-file", flags.sensor_file});
   if (!flags.reference.empty()) {
     inputs.push_back({"--reference", flags.reference});
     inputs.push_back({"--reference", (fs::path(path) / flags.reference).string()});

@@ -34,11 +34,16 @@
 // every tool of the generator is fitted and the tool probabilities are printed. --samples
 // draws from the mixture go into posterior.json / .png; with --sampler mala or rwm they
 // are MCMC draws of (x, y, yaw, depth) instead (estimation/synthesis/pose_sampler.h: 4
-// chains from the chosen tool's heaviest Laplace component, 200 burn-in iterations each,
-// --samples / 4 kept per chain), their acceptance and split R-hat printed. Other
-// --sampler values do not apply to the generator path.
+// chains from the chosen tool's Laplace components, 200 burn-in iterations each,
+// --samples / 4 kept per chain, mode jumps between the tool's Laplace components), their
+// acceptance and split R-hat printed. Other --sampler values do not apply to the
+// generator path.
 //   tactfunc pose --method generator --generator G.tpg --model M.tfm --pose-model P.tpm
 //       --data D --id 000010 [--functaset F.tfs] [--tool NAME] [--out DIR] [--json]
+//
+// --method both runs the latent path (--sampler) and then the generator path on the same
+// frame, each into its own subfolder of --out (latent/, generator/), and stacks their
+// pictures into DIR/posterior.png, latent above generator.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -47,6 +52,7 @@
 #include <iostream>
 #include <map>
 #include <memory>
+#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <optional>
 
@@ -54,6 +60,7 @@
 #include <Eigen/Geometry>
 
 #include "apps/command.h"
+#include "apps/dataset_flags.h"
 #include "apps/model_inputs.h"
 #include "apps/output_paths.h"
 #include "apps/pictures.h"
@@ -93,12 +100,16 @@ std::array<double, 36> PrintCovariance(const SE2d& mean, const Eigen::Matrix3d& 
 namespace fs = std::filesystem;
 
 struct PoseFlags {
+  bool allow_other_frames = false;
   std::string model;
   std::string pose_model;
   std::string functaset;
   std::string frame;
   std::string reference;
   std::string data;
+  // Data without metadata (a video, a user's folder); pose's own --sensor, --reference
+  // and --pixel-pitch-mm keep their meanings.
+  DatasetFlags dataset;
   std::string id;
   std::string sensor;
   std::string tool;
@@ -433,12 +444,9 @@ void RunGeneratorPose(const PoseFlags& flags, const FunctaModel& model, const In
   double sampling_ms = 0;  // MCMC: the chains' wall time, after the posterior's fit
   std::optional<PoseDistribution> drawn;
   if (mcmc) {
-    const LaplaceComponent* start = nullptr;
+    std::vector<LaplaceComponent> modes;  // the chosen tool's modes, heaviest first
     for (const LaplaceComponent& c : mixture.components()) {
-      if (c.tool == chosen) {
-        start = &c;
-        break;
-      }
+      if (c.tool == chosen) modes.push_back(c);
     }
     PoseSamplerOptions so;
     so.chain.kernel = kernel;
@@ -449,7 +457,7 @@ void RunGeneratorPose(const PoseFlags& flags, const FunctaModel& model, const In
     so.depth_max_m = options.fit.depth_max_m;
     const LatentProblem problem(trunk, targets, options.problem);
     const PoseSamples ps = SamplePosePosterior(problem, generator, generator.ToolIndex(chosen),
-                                               gs.sigma, *start, so);
+                                               gs.sigma, modes, so);
     const MetropolisResult& r = ps.chains;
     std::printf("pose: %s, %d chains x %d samples, acceptance %.3f, split R-hat x %.3f y %.3f "
                 "yaw %.3f depth %.3f, ESS %.0f %.0f %.0f %.0f, %ld trunk evaluations, %.1f ms\n",
@@ -466,6 +474,8 @@ void RunGeneratorPose(const PoseFlags& flags, const FunctaModel& model, const In
                    {"ess", {r.effective_sample_size[0], r.effective_sample_size[1],
                             r.effective_sample_size[2], r.effective_sample_size[3]}},
                    {"coordinates", {"x_m", "y_m", "yaw_rad", "depth_m"}},
+                   {"modes", modes.size()},
+                   {"jump_acceptance", NumberOrNull(r.JumpAcceptance())},
                    {"trunk_evaluations", ps.trunk_evaluations},
                    {"ms", r.time_ms}};
     sampling_ms = r.time_ms;
@@ -570,9 +580,15 @@ void RunGeneratorPose(const PoseFlags& flags, const FunctaModel& model, const In
   }
 }
 
+void RunLatentPose(const PoseFlags& flags, PosteriorSampler sampler, const FunctaModel& model,
+                   const Input& input, const TrunkTargets& targets);
+
 void RunPose(const PoseFlags& flags) {
-  if (flags.method != "latent" && flags.method != "generator") {
-    throw UsageError("--method: expected latent or generator, got '" + flags.method + "'");
+  if (flags.method != "latent" && flags.method != "generator" && flags.method != "both") {
+    throw UsageError("--method: expected latent, generator or both, got '" + flags.method + "'");
+  }
+  if (flags.method == "both" && flags.generator.empty()) {
+    throw UsageError("--method both: give --generator (the generator path's model)");
   }
   PosteriorSampler sampler = PosteriorSampler::kSgld;
   if (!PosteriorSamplerFromString(flags.sampler, &sampler)) {
@@ -580,6 +596,10 @@ void RunPose(const PoseFlags& flags) {
     if (!ParseMetropolisKernel(flags.sampler, &kernel)) {
       throw UsageError("--sampler: expected sgld, laplace or knn (--method latent) or mala, rwm "
                        "(--method generator), got '" + flags.sampler + "'");
+    }
+    if (flags.method == "both") {
+      throw UsageError("--method both: --sampler picks the latent path's sampler (sgld, laplace "
+                       "or knn); the generator path draws from its Laplace mixture");
     }
     if (flags.method != "generator") {
       throw UsageError("--sampler " + flags.sampler + ": MCMC over the pose needs --method generator");
@@ -596,13 +616,17 @@ void RunPose(const PoseFlags& flags) {
   if (from_files && (flags.frame.empty() || flags.reference.empty())) {
     throw UsageError("--frame and --reference go together");
   }
-  if (sampler == PosteriorSampler::kKnn && flags.functaset.empty() && flags.method == "latent") {
+  if (sampler == PosteriorSampler::kKnn && flags.functaset.empty() && flags.method != "generator") {
     throw UsageError("--sampler knn needs --functaset (its labelled latents are the samples)");
   }
 
   std::vector<NamedPath> outputs;
   if (!flags.out.empty()) {
-    outputs = FilesIn("--out", flags.out, {"posterior.json", "posterior.png"});
+    outputs = flags.method == "both"
+                  ? FilesIn("--out", flags.out,
+                            {"posterior.png", "latent/posterior.json", "latent/posterior.png",
+                             "generator/posterior.json", "generator/posterior.png"})
+                  : FilesIn("--out", flags.out, {"posterior.json", "posterior.png"});
     outputs.push_back({"--out", flags.out});
     std::vector<NamedPath> inputs = {{"--model", flags.model},
                                      {"--pose-model", flags.pose_model},
@@ -610,7 +634,7 @@ void RunPose(const PoseFlags& flags) {
                                      {"--frame", flags.frame},
                                      {"--reference", flags.reference}};
     if (from_data) {
-      const std::vector<NamedPath> data = DatasetPathInputs("--data", flags.data, DatasetFlags());
+      const std::vector<NamedPath> data = DatasetPathInputs("--data", flags.data, flags.dataset);
       inputs.insert(inputs.end(), data.begin(), data.end());
     }
     RefuseOutputsThatAreInputs(outputs, inputs);
@@ -622,7 +646,7 @@ void RunPose(const PoseFlags& flags) {
   SensorKind sensor;
   const bool sensor_given = ParseSensorFlag(flags.sensor, &sensor);
   if (from_data) {
-    const Dataset dataset = Dataset::Open(flags.data);
+    const Dataset dataset = OpenDataset(flags.data, flags.dataset);
     RefuseOutputsThatAreInputs(outputs, DatasetFileInputs("--data", dataset));
     if (!sensor_given) {
       sensor = dataset.has_sensor(SensorKind::kSoftBubble) ? SensorKind::kSoftBubble
@@ -637,6 +661,8 @@ void RunPose(const PoseFlags& flags) {
       throw DatasetError("--model '" + flags.model + "' has no trunk for sensor " +
                          ToString(sensor));
     }
+    CheckModelMatchesData(model, flags.model, dataset, flags.data, sensor, "pose",
+                          "--allow-other-frames", flags.allow_other_frames);
     targets = LoadTrunkTargets(dataset, *index, model.Trunk(sensor).format);
     input.difference =
         Difference(dataset.LoadFrame(*index), dataset.FrameReference(*index), sensor);
@@ -665,12 +691,46 @@ void RunPose(const PoseFlags& flags) {
   }
   if (flags.pixel_pitch_mm > 0) input.pitch_m = flags.pixel_pitch_mm * 1e-3;
   input.sensor = sensor;
+  std::string generator_tool = flags.tool;
+  if (generator_tool.empty() && input.label && !flags.unknown_tool) {
+    generator_tool = input.label->tool;
+  }
   if (flags.method == "generator") {
-    std::string tool = flags.tool;
-    if (tool.empty() && input.label && !flags.unknown_tool) tool = input.label->tool;
-    RunGeneratorPose(flags, model, input, targets, tool);
+    RunGeneratorPose(flags, model, input, targets, generator_tool);
     return;
   }
+  if (flags.method == "latent") {
+    RunLatentPose(flags, sampler, model, input, targets);
+    return;
+  }
+  // Both paths on the same frame: each writes into its own subfolder, then one picture
+  // stacks the two.
+  PoseFlags latent = flags, generator = flags;
+  if (!flags.out.empty()) {
+    latent.out = (fs::path(flags.out) / "latent").string();
+    generator.out = (fs::path(flags.out) / "generator").string();
+  }
+  std::cout << "pose: --- latent path (" << ToString(sampler) << ") ---\n";
+  RunLatentPose(latent, sampler, model, input, targets);
+  std::cout << "pose: --- generator path ---\n";
+  RunGeneratorPose(generator, model, input, targets, generator_tool);
+  if (!flags.out.empty()) {
+    const std::string path = (fs::path(flags.out) / "posterior.png").string();
+    std::vector<std::vector<cv::Mat>> rows;
+    for (const std::string& part : {latent.out, generator.out}) {
+      const std::string png = (fs::path(part) / "posterior.png").string();
+      const cv::Mat picture = cv::imread(png, cv::IMREAD_COLOR);
+      if (picture.empty()) throw std::runtime_error(png + ": could not read the picture back");
+      rows.push_back({picture});
+    }
+    WritePicture(path, TileGrid(rows));
+    std::cout << "pose: wrote " << path << " (latent path above, generator path below)\n";
+  }
+}
+
+void RunLatentPose(const PoseFlags& flags, PosteriorSampler sampler, const FunctaModel& model,
+                   const Input& input, const TrunkTargets& targets) {
+  const SensorKind sensor = input.sensor;
   const PoseMlp pose_model = LoadPoseModelFor(flags.pose_model, model, sensor, flags.model);
 
   std::string tool = flags.tool;
@@ -798,7 +858,9 @@ void RegisterPose(CLI::App& app, CommandBody* selected) {
                   "Functaset (.tfs) of the model: the knn sampler's labelled train latents");
   sub->add_option("--frame", flags->frame, "The frame (PNG/JPG in the sensor's encoding)");
   sub->add_option("--reference", flags->reference, "The sensor's no-contact reference image");
-  sub->add_option("--data", flags->data, "A dataset folder (instead of --frame/--reference)");
+  sub->add_option("--data", flags->data,
+                  "A dataset folder or video (instead of --frame/--reference)");
+  AddDatasetFlags(sub, &flags->dataset, {"--sensor", "--reference", "--pixel-pitch-mm"});
   sub->add_option("--id", flags->id, "Frame id in --data (its label is the truth)");
   sub->add_option("--sensor", flags->sensor,
                   "bubble or gelslim; default: inferred from --frame, or bubble for --data");
@@ -812,7 +874,9 @@ void RegisterPose(CLI::App& app, CommandBody* selected) {
   sub->add_option("--method", flags->method,
                   "latent (default: the pose MLP on the frame's latent posterior, --sampler) or "
                   "generator (the pose fitted through --generator and the trunk; a Laplace "
-                  "mixture over its modes, tools identified when --tool is not given)");
+                  "mixture over its modes, tools identified when --tool is not given) or both "
+                  "(each into its own subfolder of --out, and one posterior.png with the latent "
+                  "path above the generator path)");
   sub->add_option("--generator", flags->generator,
                   "Generator (.tpg) from `tactfunc train-generator`, for --method generator");
   sub->add_flag("--unknown-tool", flags->unknown_tool,
@@ -836,6 +900,9 @@ void RegisterPose(CLI::App& app, CommandBody* selected) {
   sub->add_flag("--no-model-error", flags->no_model_error,
                 "Leave the pose MLP's calibrated error out of the sgld/laplace samples (the "
                 "latent posterior alone; docs/POSES.md, Calibration)");
+  sub->add_flag("--allow-other-frames", flags->allow_other_frames,
+                "With --data: run even when its frames (size, channels, sensor description) "
+                "are not those the model's trunk was trained on (a warning instead of an error)");
   sub->add_flag("--json", flags->json,
                 "Print {mean, covariance, ms, sampler, samples} as one JSON line");
   sub->callback([flags, selected]() { *selected = [flags]() { RunPose(*flags); }; });

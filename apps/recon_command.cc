@@ -4,6 +4,8 @@
 // split against the noisy and, for simulated data, the clean frames; the z = 0
 // "initial image"), its size against the raw frames, and a picture per sensor of
 // examples: target | z = 0 | reconstruction | error (estimation/evaluation/reconstruction.h).
+// Runs as several processes under mpirun (docs/SCALING.md): the frames are shared out,
+// rank 0 writes the files, which are those of one process.
 
 #include <algorithm>
 #include <cmath>
@@ -17,6 +19,8 @@
 
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
+#include "apps/distributed.h"
+#include "apps/model_inputs.h"
 #include "apps/output_paths.h"
 #include "apps/pictures.h"
 #include "estimation/data/dataset.h"
@@ -39,6 +43,7 @@ struct ReconFlags {
   int tile_height = 140;
   bool worst = false;
   bool json = false;
+  bool allow_other_frames = false;
   DatasetFlags dataset;
 };
 
@@ -228,10 +233,21 @@ void RunRecon(const ReconFlags& flags) {
   }
   const Dataset dataset = OpenDataset(flags.data, flags.dataset);
   RefuseOutputsThatAreInputs(outputs, DatasetFileInputs("--data", dataset));
+  // Frames of another sensor description or size than the trunk was trained on.
+  for (SensorKind sensor : functaset.sensors()) {
+    CheckModelMatchesData(model, flags.model, dataset, flags.data, sensor, "recon",
+                          "--allow-other-frames", flags.allow_other_frames);
+  }
+  // Under mpirun every process evaluates its share of the frames and receives the
+  // others' figures (docs/SCALING.md); rank 0 alone draws the examples (a handful of
+  // frames) and writes the files.
+  const ProcessGroup& processes = Processes();
   ReconstructionEvaluator::Options options;
   options.threads = ResolveThreads(flags.threads);
+  options.processes = &processes;
   const ReconstructionEvaluator::Summary summary =
       ReconstructionEvaluator(options).Evaluate(model, functaset, dataset);
+  if (processes.rank() != 0) return;
 
   std::filesystem::create_directories(flags.out);
   std::vector<std::string> pictures;
@@ -351,6 +367,9 @@ void RegisterRecon(CLI::App& app, CommandBody* selected) {
       ->check(CLI::Range(0, 256));
   sub->add_option("--tile-height", flags->tile_height, "Tile height in pixels")
       ->check(CLI::Range(16, 2000));
+  sub->add_flag("--allow-other-frames", flags->allow_other_frames,
+                "Run even when the data's frames (size, channels, sensor description) are not "
+                "those the model's trunk was trained on (a warning instead of an error)");
   sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
   AddDatasetFlags(sub, &flags->dataset);
   sub->callback([flags, selected]() { *selected = [flags]() { RunRecon(*flags); }; });

@@ -172,6 +172,37 @@ TrunkTrainer::Options OptionsFor(const TrainFlags& flags, SensorKind sensor) {
   return options;
 }
 
+// OptionsFor, with the working size of the data's sensor description when it sets one
+// (--working-size must then agree: the description's aspect handling was made for it).
+TrunkTrainer::Options OptionsForData(const TrainFlags& flags, const Dataset& dataset,
+                                     SensorKind sensor) {
+  TrunkTrainer::Options options = OptionsFor(flags, sensor);
+  const SensorInfo& info = dataset.sensor_info(sensor);
+  if (!info.description || info.description->working_rows <= 0) return options;
+  const SensorDescription& d = *info.description;
+  if (!flags.working_size.empty() && (options.rows != d.working_rows || options.cols != d.working_cols)) {
+    throw UsageError("--working-size " + flags.working_size + ": " + info.description_path +
+                     " sets working_size " + std::to_string(d.working_rows) + "x" +
+                     std::to_string(d.working_cols) + " for the " + ToString(sensor) +
+                     " frames; give one of them");
+  }
+  options.rows = d.working_rows;
+  options.cols = d.working_cols;
+  return options;
+}
+
+// The description a trunk trained on `dataset`'s `sensor` frames records: the data's, at
+// the working size it was trained at (aspect "stretch" when the data's description set
+// none: the frames were resized to it as they were).
+SensorDescription TrainedDescription(const Dataset& dataset, SensorKind sensor,
+                                     const FrameFormat& format) {
+  SensorDescription d = DataSensorDescription(dataset.sensor_info(sensor));
+  if (d.working_rows <= 0) d.aspect = SensorDescription::Aspect::kStretch;
+  d.working_rows = format.rows;
+  d.working_cols = format.cols;
+  return d;
+}
+
 // The training curves of every sensor trained: the monitor PSNR after K steps (thick)
 // and at z = 0 (thin) at every history point, against step + 1 on a log scale (so the
 // start, step 0, is drawn too). Empty if no history point has a finite PSNR.
@@ -283,7 +314,7 @@ void RunTrain(const TrainFlags& flags) {
   // (a stretch of the frames to it is warned about); a time estimate follows from the
   // first steps.
   for (SensorKind sensor : sensors) {
-    const TrunkTrainer::Options o = OptionsFor(flags, sensor);
+    const TrunkTrainer::Options o = OptionsForData(flags, dataset, sensor);
     std::string resolution;
     try {
       // Only rows and cols are used here; the scale is the trainer's business.
@@ -317,7 +348,7 @@ void RunTrain(const TrainFlags& flags) {
   nlohmann::json sensor_figures = nlohmann::json::object();
   nlohmann::json info_trunks = nlohmann::json::object();
   for (SensorKind sensor : sensors) {
-    TrunkTrainer::Options sensor_options = OptionsFor(flags, sensor);
+    TrunkTrainer::Options sensor_options = OptionsForData(flags, dataset, sensor);
     sensor_options.checkpoint_path = CheckpointPath(flags.out, sensor);
     sensor_options.resume = flags.resume;
     sensor_options.processes = &processes;
@@ -371,6 +402,7 @@ void RunTrain(const TrainFlags& flags) {
     SensorTrunk trunk;
     const TrunkTrainer::Summary summary = trainer.Train(dataset, sensor, &trunk, callback);
     bar->Finish();
+    trunk.description = TrainedDescription(dataset, sensor, trunk.format);
     if (sensor_options.skip_frames_at_rest) {
       std::cout << "train " << name << ": left out " << summary.num_frames_at_rest_skipped
                 << " train-split frame(s) at rest; trained on " << summary.num_train_frames

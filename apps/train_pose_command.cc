@@ -33,6 +33,7 @@
 #include <set>
 
 #include "apps/command.h"
+#include "apps/dataset_flags.h"
 #include "apps/model_inputs.h"
 #include "apps/output_paths.h"
 #include "estimation/evaluation/baselines.h"
@@ -63,6 +64,7 @@ struct TrainPoseFlags {
   std::string refit;  // "" or a LatentFitter strategy: re-fit every latent from --data
   std::string model;
   std::string data;
+  DatasetFlags dataset;  // data without metadata (a video, a user's folder), for --refit
   double calibration_fraction = 0.1;
   std::string exclude_tools;      // left out of training and calibration (held-out tools)
   std::string calibration_tools;  // calibrate on these tools instead of a random fraction
@@ -178,7 +180,7 @@ void RunTrainPose(const TrainPoseFlags& flags) {
   const std::vector<NamedPath> outputs = {{"--out", flags.out}};
   std::vector<NamedPath> inputs = {{"--functaset", flags.functaset}, {"--model", flags.model}};
   if (!flags.data.empty()) {
-    const std::vector<NamedPath> data = DatasetPathInputs("--data", flags.data, DatasetFlags());
+    const std::vector<NamedPath> data = DatasetPathInputs("--data", flags.data, flags.dataset);
     inputs.insert(inputs.end(), data.begin(), data.end());
   }
   RefuseOutputsThatAreInputs(outputs, inputs);
@@ -214,7 +216,7 @@ void RunTrainPose(const TrainPoseFlags& flags) {
     }
     const FunctaModel model = FunctaModel::Load(flags.model);
     functaset.CheckModel(model, flags.model, flags.functaset);
-    const Dataset dataset = Dataset::Open(flags.data);
+    const Dataset dataset = OpenDataset(flags.data, flags.dataset);
     RefuseOutputsThatAreInputs(outputs, DatasetFileInputs("--data", dataset));
     const PosePosterior::Options posterior_options;
     LatentFitter::Options fit = posterior_options.fit;
@@ -475,6 +477,7 @@ void RegisterTrainPose(CLI::App& app, CommandBody* selected) {
       ->check(CLI::PositiveNumber);
   sub->add_option("--model", flags->model, "Model (.tfm) of the functaset, for --refit");
   sub->add_option("--data", flags->data, "Dataset of the functaset, for --refit");
+  AddDatasetFlags(sub, &flags->dataset, {"--sensor"});
   sub->add_option("--calibration-fraction", flags->calibration_fraction,
                   "Fraction of the train split held out of training whose residuals are stored "
                   "as the model's own error for the posteriors (default 0.1; 0 = none)")

@@ -12,15 +12,16 @@ find_package(nlohmann_json 3 REQUIRED)  # dataset.json (estimation, private)
 if(TACTFUNC_BUILD_APPS)
   find_package(benchmark REQUIRED)
   find_package(CLI11 CONFIG REQUIRED)
-  # Optional: with MPI, `mpirun -np N tactfunc train|encode` runs as N processes
-  # (docs/SCALING.md); without it the program runs alone and refuses mpirun.
+  # Optional: with MPI, `mpirun -np N tactfunc train|encode|recon|eval|bench posterior`
+  # runs as N processes (docs/SCALING.md); without it the program runs alone and refuses
+  # mpirun.
   if(TACTFUNC_MPI)
     set(MPI_CXX_SKIP_MPICXX ON)  # the C API only, not the deprecated C++ bindings
     find_package(MPI COMPONENTS CXX)
   endif()
   if(MPI_CXX_FOUND)
-    message(STATUS "tactfunc: MPI ${MPI_CXX_VERSION} found: train and encode run under mpirun")
+    message(STATUS "tactfunc: MPI ${MPI_CXX_VERSION} found: train, encode, recon, eval and bench posterior run under mpirun")
   else()
-    message(STATUS "tactfunc: building without MPI (train and encode run as one process)")
+    message(STATUS "tactfunc: building without MPI (every command runs as one process)")
   endif()
 endif()

@@ -3,7 +3,9 @@
 
 #include <chrono>
 #include <cmath>
+#include <algorithm>
 #include <limits>
+#include <memory>
 #include <stdexcept>
 
 #include <Eigen/Cholesky>
@@ -33,6 +35,78 @@ double FoldNear(double v, double centre, double period) {
 struct State {
   Eigen::VectorXd x, gradient;
   double log_p = -std::numeric_limits<double>::infinity();
+};
+
+// The mode-jump proposal q: a mixture of Gaussians whose angle coordinates are wrapped
+// (header comment).
+class JumpMixture {
+ public:
+  JumpMixture(const std::vector<JumpComponent>& components, const std::vector<int>& angles)
+      : angles_(angles) {
+    double total = 0;
+    for (const JumpComponent& c : components) total += c.weight;
+    for (const JumpComponent& c : components) {
+      Part part;
+      part.mean = c.mean;
+      part.L = Eigen::LLT<Eigen::MatrixXd>(0.5 * (c.covariance + c.covariance.transpose()))
+                   .matrixL();
+      part.log_weight = std::log(c.weight / total) - part.L.diagonal().array().log().sum();
+      parts_.push_back(std::move(part));
+      cumulative_.push_back((cumulative_.empty() ? 0.0 : cumulative_.back()) + c.weight / total);
+    }
+    // Every combination of copy shifts m in [-2, 2] over the angle coordinates.
+    const int copies = angles_.empty() ? 1 : (angles_.size() == 1 ? 5 : 25);
+    for (int i = 0; i < copies; ++i) {
+      Eigen::VectorXd shift = Eigen::VectorXd::Zero(parts_.front().mean.size());
+      int code = i;
+      for (int a : angles_) {
+        shift[a] = 2 * kPi * (code % 5 - 2);
+        code /= 5;
+      }
+      shifts_.push_back(std::move(shift));
+    }
+  }
+  int num_components() const { return static_cast<int>(parts_.size()); }
+  const Eigen::VectorXd& mean(int k) const { return parts_[k].mean; }
+  // Component index for a uniform draw u in [0, 1).
+  int Pick(double u) const {
+    for (std::size_t k = 0; k + 1 < cumulative_.size(); ++k) {
+      if (u < cumulative_[k]) return static_cast<int>(k);
+    }
+    return num_components() - 1;
+  }
+  // mean_k + L_k xi (angles not yet wrapped).
+  Eigen::VectorXd Draw(int k, const Eigen::VectorXd& xi) const {
+    return parts_[k].mean + parts_[k].L * xi;
+  }
+  // log q(x) up to the constant -d/2 log(2 pi), which cancels in the MH ratio.
+  double LogDensity(const Eigen::VectorXd& x) const {
+    std::vector<double> terms;
+    terms.reserve(parts_.size() * shifts_.size());
+    for (const Part& part : parts_) {
+      for (const Eigen::VectorXd& shift : shifts_) {
+        const Eigen::VectorXd diff = x + shift - part.mean;
+        terms.push_back(part.log_weight -
+                        0.5 * part.L.triangularView<Eigen::Lower>().solve(diff).squaredNorm());
+      }
+    }
+    const double top = *std::max_element(terms.begin(), terms.end());
+    if (!std::isfinite(top)) return top;
+    double sum = 0;
+    for (double t : terms) sum += std::exp(t - top);
+    return top + std::log(sum);
+  }
+
+ private:
+  struct Part {
+    Eigen::VectorXd mean;
+    Eigen::MatrixXd L;
+    double log_weight = 0;  // log normalised weight - log det L
+  };
+  std::vector<int> angles_;
+  std::vector<Part> parts_;
+  std::vector<double> cumulative_;
+  std::vector<Eigen::VectorXd> shifts_;
 };
 
 }  // namespace
@@ -70,6 +144,28 @@ bool MetropolisOptions::IsValid(int dim, std::string* error) const {
     return fail("initial_jitter must be finite and >= 0");
   }
   if (!(angle_fold > 0) || !std::isfinite(angle_fold)) return fail("angle_fold must be > 0");
+  if (!jumps.empty()) {
+    if (!(jump_probability >= 0 && jump_probability < 1)) {
+      return fail("jump_probability must be in [0, 1)");
+    }
+    if (angles.size() > 2) return fail("mode jumps support at most 2 angle coordinates");
+    for (std::size_t k = 0; k < jumps.size(); ++k) {
+      const JumpComponent& c = jumps[k];
+      const std::string name = "jump component " + std::to_string(k);
+      if (!(c.weight > 0) || !std::isfinite(c.weight)) return fail(name + ": weight must be > 0");
+      if (c.mean.size() != dim || !c.mean.allFinite()) {
+        return fail(name + ": the mean must be finite with " + std::to_string(dim) + " entries");
+      }
+      if (c.covariance.rows() != dim || c.covariance.cols() != dim || !c.covariance.allFinite()) {
+        return fail(name + ": the covariance must be finite and " + std::to_string(dim) + " x " +
+                    std::to_string(dim));
+      }
+      if (Eigen::LLT<Eigen::MatrixXd>(0.5 * (c.covariance + c.covariance.transpose())).info() !=
+          Eigen::Success) {
+        return fail(name + ": the covariance is not positive definite");
+      }
+    }
+  }
   for (int a : angles) {
     if (a < 0 || a >= dim) {
       return fail("angle coordinate " + std::to_string(a) + " is outside [0, " +
@@ -88,6 +184,14 @@ double MetropolisResult::MeanAcceptance() const {
   double sum = 0;
   for (double a : acceptance) sum += a;
   return acceptance.empty() ? 0 : sum / acceptance.size();
+}
+
+double MetropolisResult::JumpAcceptance() const {
+  long proposed = 0, accepted = 0;
+  for (int p : jumps_proposed) proposed += p;
+  for (int a : jumps_accepted) accepted += a;
+  return proposed == 0 ? std::numeric_limits<double>::quiet_NaN()
+                       : static_cast<double>(accepted) / proposed;
 }
 
 double MetropolisResult::MaxSplitRhat() const {
@@ -126,6 +230,8 @@ MetropolisResult SampleMetropolis(const LogDensityFunction& log_density, const E
 
   MetropolisResult result;
   result.kernel = options.kernel;
+  std::unique_ptr<JumpMixture> jumps;
+  if (!options.jumps.empty()) jumps = std::make_unique<JumpMixture>(options.jumps, options.angles);
   auto wrap = [&](Eigen::VectorXd* x) {
     for (int a : options.angles) (*x)[a] = WrapAngle((*x)[a]);
   };
@@ -159,9 +265,11 @@ MetropolisResult SampleMetropolis(const LogDensityFunction& log_density, const E
       return xi;
     };
     State current;
-    // Over-dispersed start; a few redraws if it lands outside the support, else x0.
+    // Over-dispersed start (chain c at jump component c mod K with jumps); a few redraws
+    // if it lands outside the support, else x0.
+    const Eigen::VectorXd centre = jumps ? jumps->mean(c % jumps->num_components()) : x0;
     for (int attempt = 0; attempt < 20; ++attempt) {
-      current.x = x0 + options.initial_jitter * (L * noise());
+      current.x = centre + options.initial_jitter * (L * noise());
       wrap(&current.x);
       evaluate(&current);
       if (std::isfinite(current.log_p)) break;
@@ -175,9 +283,31 @@ MetropolisResult SampleMetropolis(const LogDensityFunction& log_density, const E
     double log_eps_sum = 0;
     int log_eps_count = 0;
     Eigen::MatrixXd kept(options.num_samples_per_chain, d);
-    int accepted = 0;
+    int accepted = 0, local_moves = 0, jumps_proposed = 0, jumps_accepted = 0;
     const int total = options.burn_in + options.num_samples_per_chain;
     for (int t = 0; t < total; ++t) {
+      // The kernel of this iteration is drawn first, independently of the state.
+      if (jumps && options.jump_probability > 0 && uniform(rng) < options.jump_probability) {
+        State proposal;
+        proposal.x = jumps->Draw(jumps->Pick(uniform(rng)), noise());
+        wrap(&proposal.x);
+        evaluate(&proposal);
+        double log_ratio = -std::numeric_limits<double>::infinity();
+        if (std::isfinite(proposal.log_p)) {
+          log_ratio = std::isfinite(current.log_p)
+                          ? proposal.log_p - current.log_p + jumps->LogDensity(current.x) -
+                                jumps->LogDensity(proposal.x)
+                          : 0.0;
+        }
+        const bool accept = log_ratio >= 0 || uniform(rng) < std::exp(log_ratio);
+        if (accept) current = std::move(proposal);
+        if (t >= options.burn_in) {
+          ++jumps_proposed;
+          jumps_accepted += accept;
+          kept.row(t - options.burn_in) = current.x.transpose();
+        }
+        continue;
+      }
       const double eps = std::exp(log_eps);
       State proposal;
       proposal.x = current.x + drift(current, eps) + eps * (L * noise());
@@ -204,11 +334,14 @@ MetropolisResult SampleMetropolis(const LogDensityFunction& log_density, const E
         }
       } else {
         accepted += accept;
+        ++local_moves;
         kept.row(t - options.burn_in) = current.x.transpose();
       }
     }
     result.chains.push_back(std::move(kept));
-    result.acceptance.push_back(static_cast<double>(accepted) / options.num_samples_per_chain);
+    result.acceptance.push_back(local_moves == 0 ? 0.0 : static_cast<double>(accepted) / local_moves);
+    result.jumps_proposed.push_back(jumps_proposed);
+    result.jumps_accepted.push_back(jumps_accepted);
     result.step_size.push_back(std::exp(log_eps));
   }
 

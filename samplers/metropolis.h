@@ -28,6 +28,18 @@
 // second half), so the kept samples come from a fixed, valid kernel. Each chain adapts
 // its own eps.
 //
+// Mode jumps. A multimodal density (a pose whose yaw is ambiguous between two faces of
+// a tool) traps a local kernel in the mode it starts in. With Options::jumps (a Gaussian
+// mixture q, typically the Laplace components at the modes an optimiser found), each
+// iteration instead proposes, with probability jump_probability, an INDEPENDENT draw
+// x' ~ q, accepted with min(1, p(x') q(x) / (p(x) q(x'))). Each of the two kernels
+// leaves p invariant and the choice between them does not depend on the state, so the
+// mixture kernel does too (Tierney 1994). q's angle coordinates are wrapped Gaussians;
+// their density sums the copies shifted by 2 pi m, |m| <= 2 (exact to e^-30 for angular
+// standard deviations up to pi / 2). Only local moves adapt eps and count in
+// `acceptance`; jumps are counted apart. With jumps, chain c starts at component
+// c mod K (plus jitter) instead of x0, so the chains start over-dispersed across modes.
+//
 // Chains. num_chains chains start at x0 + initial_jitter L xi_0 (over-dispersed starts
 // for split R-hat) and run one after another; chain c draws all its randomness from
 // boost::random::mt19937_64 seeded with DeriveSeed(seed, c) (models/core/seed.h), so the
@@ -64,6 +76,13 @@ const char* ToString(MetropolisKernel kernel);
 // Parses "mala" or "rwm"; false otherwise.
 bool ParseMetropolisKernel(const std::string& name, MetropolisKernel* kernel);
 
+// One Gaussian component of the mode-jump proposal (header comment).
+struct JumpComponent {
+  double weight = 1;         // > 0; the weights are normalised
+  Eigen::VectorXd mean;      // size d
+  Eigen::MatrixXd covariance;  // d x d, symmetric positive definite
+};
+
 struct MetropolisOptions {
   MetropolisKernel kernel = MetropolisKernel::kMala;
   int num_chains = 4;               // >= 1 (>= 2 for a meaningful R-hat)
@@ -79,6 +98,9 @@ struct MetropolisOptions {
   std::vector<int> angles;          // coordinates wrapped to (-pi, pi]
   double angle_fold = 2 * 3.14159265358979323846;  // > 0 (header comment)
   std::uint64_t seed = 0;
+  // Mode-jump proposal (header comment): empty = none. At most 2 angle coordinates.
+  std::vector<JumpComponent> jumps;
+  double jump_probability = 0.1;  // in [0, 1), used only with jumps
   bool IsValid(int dim, std::string* error) const;
   double EffectiveTargetAcceptance() const;
 };
@@ -87,13 +109,17 @@ struct MetropolisResult {
   MetropolisKernel kernel = MetropolisKernel::kMala;
   // Per chain: num_samples_per_chain x d kept states (angles wrapped to (-pi, pi]).
   std::vector<Eigen::MatrixXd> chains;
-  std::vector<double> acceptance;   // per chain: accepted share of the kept iterations
+  std::vector<double> acceptance;   // per chain: accepted share of the kept local moves
+  // Per chain, kept iterations: mode jumps proposed and accepted (0 without jumps).
+  std::vector<int> jumps_proposed, jumps_accepted;
   std::vector<double> step_size;    // per chain: the frozen eps
   Eigen::VectorXd effective_sample_size;  // per coordinate, over all chains
   Eigen::VectorXd split_rhat;             // per coordinate
   long num_evaluations = 0;  // density calls (proposals outside the support included)
   double time_ms = 0;        // wall clock
   double MeanAcceptance() const;
+  // Accepted share of all kept jump proposals (NaN when none was proposed).
+  double JumpAcceptance() const;
   double MaxSplitRhat() const;
   // All kept samples, chain-major: (num_chains * num_samples_per_chain) x d.
   Eigen::MatrixXd Stacked() const;

@@ -2,9 +2,11 @@
 # The demo (README command 1 ends here): a small paired Soft Bubble + GelSlim dataset
 # from the simulator and its contact sheet; then, with the committed pretrained trunk
 # (models/pretrained/default.tfm, reproducible with scripts/train_pretrained.sh), the
-# functaset of the dataset and its reconstructions; then one frame's pose posterior with
-# the committed pose model (models/pretrained/pose_bubble.tpm,
-# scripts/train_pretrained_pose.sh). Everything lands in demo/.
+# functaset of the dataset and its reconstructions; then one frame's pose posterior by
+# both paths: the committed pose model on the frame's latent
+# (models/pretrained/pose_bubble.tpm, scripts/train_pretrained_pose.sh) and the pose
+# fitted through the committed generator (models/pretrained/pose_generator_bubble.tpg,
+# scripts/train_pretrained_generator.sh). Everything lands in demo/.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 TF=build/bin/tactfunc
@@ -21,10 +23,12 @@ echo "== 3. encode every frame as one latent under the pretrained trunk (the fun
 echo "== 4. reconstruct from the latents: PSNR, size, pictures"
 "$TF" recon --model "$MODEL" --functaset "$OUT/functaset.tfs" --data "$OUT/data" \
   --out "$OUT/recon" --examples 6
-echo "== 5. one frame in, pose posterior out: sgld samples through the pretrained pose MLP"
+echo "== 5. one frame in, pose posterior out: sgld samples through the pretrained pose MLP (latent"
+echo "      path), then the pose fitted through the pretrained generator and the trunk (generator path)"
 # A test-split frame of the rod (frames 000000.. are listed tool by tool; see labels.csv).
 ID=$(awk -F, '$2 == "bubble" && $8 == "test" { if (!any) any = $1; if ($3 == "rod") { print $1; found = 1; exit } }
               END { if (!found) print any }' "$OUT/data/labels.csv")
 "$TF" pose --model "$MODEL" --pose-model models/pretrained/pose_bubble.tpm --data "$OUT/data" \
-  --id "$ID" --sampler sgld --samples 100 --out "$OUT/pose"
+  --id "$ID" --sampler sgld --samples 100 --method both \
+  --generator models/pretrained/pose_generator_bubble.tpg --out "$OUT/pose"
 echo "demo: done. Look at $OUT/contact_sheet.png, $OUT/recon/recon_*.png and $OUT/pose/posterior.png"

@@ -31,6 +31,7 @@ constexpr const char* kMetadataFile = "dataset.json";
 constexpr const char* kLabelsFile = "labels.csv";
 constexpr const char* kClipsFile = "clips.csv";
 constexpr const char* kToolsFile = "tools.csv";
+constexpr const char* kSensorFile = "sensor.json";
 constexpr const char* kFormatName = "tactfunc-dataset";
 constexpr int kFormatVersion = 1;
 constexpr const char* kCleanFolder = "clean";
@@ -391,6 +392,16 @@ bool IsValidPoseLabel(const PoseLabel& label, int rows, int cols, double pixel_p
   return false;
 }
 
+SensorDescription DataSensorDescription(const SensorInfo& info) {
+  if (info.description) return *info.description;
+  SensorDescription d = BuiltInSensorDescription(info.kind);
+  d.channels = info.channels;
+  d.pixel_pitch_m = info.pixel_pitch_m;
+  d.normalization_scale = info.normalization_scale > 0 ? info.normalization_scale
+                                                       : DefaultNormalizationScale(info.kind);
+  return d;
+}
+
 double DefaultNormalizationScale(SensorKind kind) {
   // Bubble: indentations of a few millimetres to about a centimetre are typical, so
   // 1 cm -> 1.0 keeps values O(1). GelSlim: intensity changes under contact rarely
@@ -557,7 +568,7 @@ Dataset Dataset::Open(const std::string& dir, const OpenOptions& options) {
       }
       dataset.has_clean_ = dataset.has_clean_ || found_clean;
       dataset.frames_.insert(dataset.frames_.end(), frames.begin(), frames.end());
-      dataset.sensors_[kind] = SensorData{info, std::move(reference)};
+      dataset.sensors_[kind] = SensorData{info, std::move(reference), info};
     }
     if (has_clean && !dataset.has_clean_) {
       throw DatasetError(metadata_path +
@@ -602,10 +613,11 @@ Dataset Dataset::Open(const std::string& dir, const OpenOptions& options) {
       ListSensorFrames(dir, subdir, kind, reference_in_folder, /*with_clean=*/true,
                        &dataset.frames_, &found_clean);
       dataset.has_clean_ = dataset.has_clean_ || found_clean;
-      dataset.sensors_[kind] = SensorData{info, std::move(reference)};
+      dataset.sensors_[kind] = SensorData{info, std::move(reference), info};
     }
   }
   dataset.SortAndIndexFrames();
+  dataset.AttachDescription(options, /*folder=*/true);
   if (!dataset.clips_.empty()) {
     const std::string clips_path = internal::JoinPath(dir, kClipsFile);
     if (internal::IsRegularFile(clips_path)) dataset.AttachClipSplits(clips_path);
@@ -642,10 +654,11 @@ Dataset Dataset::OpenVideo(const std::string& path, const OpenOptions& options) 
   const std::string name = internal::BaseName(path);
   SensorInfo info = UserSensorInfo(SensorKind::kGelSlim, reference, options);
   info.reference = name + "#" + VideoFrameId(reference_index);
-  dataset.sensors_[info.kind] = SensorData{info, std::move(reference)};
+  dataset.sensors_[info.kind] = SensorData{info, std::move(reference), info};
   // Ids are zero-padded, so the frames come out sorted.
   AppendVideoFrames(name, "", -1, video->num_frames(), reference_index, &dataset.frames_);
   dataset.video_ = std::move(video);
+  dataset.AttachDescription(options, /*folder=*/false);
   if (!options.labels.empty()) dataset.AttachLabels(options.labels, false);
   if (!options.tools.empty()) dataset.AttachTools(options.tools);
   return dataset;
@@ -712,7 +725,7 @@ void Dataset::OpenClips(const OpenOptions& options) {
     clip_videos_.push_back(std::move(video));
   }
   // The sensor's own reference stays empty: each clip has its own (FrameReference).
-  sensors_[shared->kind] = SensorData{*shared, Image()};
+  sensors_[shared->kind] = SensorData{*shared, Image(), *shared};
 }
 
 void Dataset::AttachClipSplits(const std::string& clips_path) {
@@ -731,6 +744,75 @@ void Dataset::AttachClipSplits(const std::string& clips_path) {
   }
   for (FrameRecord& record : frames_) {
     if (record.clip >= 0 && clips_[record.clip].split) record.split = *clips_[record.clip].split;
+  }
+}
+
+void Dataset::AttachDescription(const OpenOptions& options, bool folder) {
+  for (auto& entry : sensors_) entry.second.raw = entry.second.info;
+  std::string path = options.sensor_file;
+  if (path.empty() && folder) {
+    const std::string default_path = internal::JoinPath(root_, kSensorFile);
+    if (internal::IsRegularFile(default_path)) path = default_path;
+  }
+  if (path.empty()) return;
+  SensorDescription description;
+  try {
+    description = ReadSensorDescriptionFile(path);
+  } catch (const SensorDescriptionError& e) {
+    throw DatasetError(e.what());
+  }
+  const auto it = sensors_.find(description.kind);
+  if (it == sensors_.end()) {
+    std::string present;
+    for (const auto& entry : sensors_) {
+      present += (present.empty() ? "" : " or ") + std::string("\"") +
+                 SensorKindDescriptionName(entry.first) + "\" (" + ToString(entry.first) + ")";
+    }
+    throw DatasetError(path + ": field 'kind': expected the kind of " + root_ + "'s frames, " +
+                       present + ", got \"" + SensorKindDescriptionName(description.kind) + "\"");
+  }
+  SensorData& data = it->second;
+  SensorInfo& info = data.info;
+  const int raw_channels = info.channels;
+  if (!(description.channels == raw_channels || (description.channels == 1 && raw_channels == 3))) {
+    throw DatasetError(path + ": field 'channels': expected " + std::to_string(raw_channels) +
+                       (raw_channels == 3 ? " (or 1 for luma)" : "") + ", as " + root_ +
+                       "'s frames have, got " + std::to_string(description.channels));
+  }
+  int rows = 0, cols = 0;
+  try {
+    GeometryOutputSize(description, info.rows, info.cols, path, &rows, &cols);
+  } catch (const SensorDescriptionError& e) {
+    throw DatasetError(e.what());
+  }
+  // A pitch or scale given twice must agree: which one the user meant cannot be guessed.
+  auto agree = [&](double other, double own, const std::string& field, const std::string& where) {
+    if (other > 0 && std::abs(other / own - 1.0) > 1e-9) {
+      throw DatasetError(path + ": field '" + field + "': " + where + " gives " +
+                         internal::FormatDoubleShort(other) + ", the description " +
+                         internal::FormatDoubleShort(own) + " (give it once)");
+    }
+  };
+  agree(options.pixel_pitch_m * 1e3, description.pixel_pitch_m * 1e3, "pixel_pitch_mm",
+        "--pixel-pitch-mm (OpenOptions::pixel_pitch_m)");
+  if (has_metadata_) {
+    agree(info.pixel_pitch_m * 1e3, description.pixel_pitch_m * 1e3, "pixel_pitch_mm",
+          metadata_path_);
+    agree(info.normalization_scale, description.normalization_scale, "normalization_scale",
+          metadata_path_);
+  }
+  info.rows = rows;
+  info.cols = cols;
+  info.channels = description.channels;
+  info.pixel_pitch_m = description.pixel_pitch_m;
+  info.normalization_scale = description.normalization_scale;
+  info.description = description;
+  info.description_path = path;
+  description_path_ = path;
+  const std::string reference_where = info.reference.empty() ? root_ : info.reference;
+  if (!data.reference.empty()) data.reference = Describe(data.reference, it->first, reference_where);
+  for (std::size_t k = 0; k < clip_references_.size(); ++k) {
+    clip_references_[k] = Describe(clip_references_[k], it->first, clips_[k].reference);
   }
 }
 
@@ -890,9 +972,10 @@ Image Dataset::LoadFrame(std::size_t index) const {
   if (record.video_frame >= 0) {
     internal::VideoReader& video =
         record.clip >= 0 ? *clip_videos_[static_cast<std::size_t>(record.clip)] : *video_;
-    return video.Frame(static_cast<std::size_t>(record.video_frame));
+    return Describe(video.Frame(static_cast<std::size_t>(record.video_frame)), record.sensor,
+                    internal::JoinPath(root_, record.path));
   }
-  const SensorInfo& info = sensor_info(record.sensor);
+  const SensorInfo& info = sensor_data(record.sensor).raw;
   const std::string path = internal::JoinPath(root_, record.path);
   CheckFrameHeader(path, info, record.sensor);
   Image image = ReadImage(path, info.encoding);
@@ -901,7 +984,17 @@ Image Dataset::LoadFrame(std::size_t index) const {
                        " frame (the " + ToString(record.sensor) + " reference's shape), got " +
                        image.ShapeString());
   }
-  return image;
+  return Describe(std::move(image), record.sensor, path);
+}
+
+Image Dataset::Describe(Image raw, SensorKind sensor, const std::string& path) const {
+  const SensorInfo& info = sensor_info(sensor);
+  if (!info.description) return raw;
+  try {
+    return ApplySensorGeometry(raw, *info.description, info.description_path);
+  } catch (const SensorDescriptionError& e) {
+    throw DatasetError(path + ": " + e.what());
+  }
 }
 
 Image Dataset::LoadCleanFrame(std::size_t index) const {
@@ -915,7 +1008,7 @@ Image Dataset::LoadCleanFrame(std::size_t index) const {
                        ": expected a clean version, got none (no " + ToString(record.sensor) +
                        "/clean/" + record.id + ".png)");
   }
-  const SensorInfo& info = sensor_info(record.sensor);
+  const SensorInfo& info = sensor_data(record.sensor).raw;
   const std::string path = internal::JoinPath(root_, record.clean_path);
   CheckFrameHeader(path, info, record.sensor);
   Image image = ReadImage(path, info.encoding);
@@ -923,7 +1016,7 @@ Image Dataset::LoadCleanFrame(std::size_t index) const {
     throw DatasetError(path + ": expected a " + ShapeText(info.rows, info.cols, info.channels) +
                        " clean frame, got " + image.ShapeString());
   }
-  return image;
+  return Describe(std::move(image), record.sensor, path);
 }
 
 void Dataset::ValidateAllFrames() const {
@@ -956,6 +1049,7 @@ std::vector<std::string> Dataset::Files() const {
   }
   if (!metadata_path_.empty()) files.insert(metadata_path_);
   if (!clips_path_.empty()) files.insert(clips_path_);
+  if (!description_path_.empty()) files.insert(description_path_);
   if (!labels_path_.empty()) files.insert(labels_path_);
   if (!tools_path_.empty()) files.insert(tools_path_);
   return std::vector<std::string>(files.begin(), files.end());

@@ -14,6 +14,8 @@
 //   DIR/bubble/clean/000000.png optional noise-free frames (simulated data)
 //   DIR/gelslim/reference.png   8-bit RGB PNG
 //   DIR/gelslim/000000.png ...
+//   DIR/sensor.json             optional: a sensor description (models/core/
+//                               sensor_description.h) cropping / warping one sensor's frames
 //
 // Frames of the two sensors taken at the same time share their id (the file stem).
 // Dataset::Open also reads folders that users bring without metadata (a flat folder
@@ -47,6 +49,7 @@
 #include "estimation/data/image_io.h"
 #include "models/core/image.h"
 #include "models/core/sensor.h"
+#include "models/core/sensor_description.h"
 #include "models/simulator/contact.h"
 
 namespace tactfunc {
@@ -97,7 +100,18 @@ struct SensorInfo {
                                    // intensity); 0 = unknown (see preprocess.h)
   std::string reference;           // reference image path, relative to Dataset::root();
                                    // "" for a clip set (see ClipInfo::reference)
+  // The sensor description the frames were read with (sensor.json or
+  // OpenOptions::sensor_file; models/core/sensor_description.h), absent for the built-in
+  // reading. With one, rows, cols and channels are those AFTER its geometry (what
+  // LoadFrame returns), and pitch and scale are its own.
+  std::optional<SensorDescription> description;
+  std::string description_path;  // the file it came from, "" without one
 };
+
+// The description of a sensor's frames: SensorInfo::description, else the built-in
+// description of its kind (BuiltInSensorDescription) with the info's channels, pitch and
+// scale (DefaultNormalizationScale if it records none).
+SensorDescription DataSensorDescription(const SensorInfo& info);
 
 struct FrameRecord {
   // Frame id = file stem (frames of both sensors taken together share it); in a clip
@@ -151,6 +165,12 @@ struct DatasetOpenOptions {
   // tools.csv declaring the rotational symmetry of the dataset's own tools (header
   // `tool,symmetry_order`); "" = DIR/tools.csv if present for folders, none for videos.
   std::string tools;
+  // A sensor description file (models/core/sensor_description.h) for the sensor of its
+  // kind: "" = DIR/sensor.json if present for folders, none for videos. Its geometry is
+  // applied to that sensor's reference(s) and to every frame LoadFrame returns, its
+  // pitch and scale replace the defaults (a pixel_pitch_m or a dataset.json value that
+  // disagrees is refused), and labels are in the frame after its geometry.
+  std::string sensor_file;
   bool IsValid(std::string* error) const;
 };
 
@@ -248,6 +268,9 @@ class Dataset {
   struct SensorData {
     SensorInfo info;
     Image reference;
+    // The frames as they are on disk (shape and encoding), which LoadFrame checks before
+    // it applies info.description; equal to info without a description.
+    SensorInfo raw;
   };
   Dataset() = default;
   const SensorData& sensor_data(SensorKind kind) const;
@@ -257,6 +280,11 @@ class Dataset {
   void KeepOnlySensor(SensorKind kind);
   void OpenClips(const OpenOptions& options);
   void AttachClipSplits(const std::string& clips_path);
+  // Reads the description (options.sensor_file, else DIR/sensor.json for a folder) and
+  // applies it to the sensor of its kind: references, rows/cols/channels, pitch, scale.
+  void AttachDescription(const OpenOptions& options, bool folder);
+  // A raw frame of `sensor` (or its reference) through the sensor's description, if any.
+  Image Describe(Image raw, SensorKind sensor, const std::string& path) const;
 
   std::string root_;
   std::map<SensorKind, SensorData> sensors_;
@@ -270,6 +298,7 @@ class Dataset {
   std::map<std::string, int> tool_symmetries_;
   std::string metadata_path_;
   std::string clips_path_;  // DIR/clips.csv of a clip set, "" if none
+  std::string description_path_;  // the sensor description read, "" if none
   // A video dataset's decoder (shared by copies; thread-safe), null otherwise.
   std::shared_ptr<internal::VideoReader> video_;
   // A clip set: clips_[k]'s reference and, for a video clip, its decoder.

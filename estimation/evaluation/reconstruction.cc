@@ -137,6 +137,30 @@ void ReconstructionCentre(const Eigen::MatrixXf& prediction, const FrameFormat& 
   *col = (*col + 0.5) * source_cols / format.cols - 0.5;
 }
 
+// A FrameResult's computed figures (not its id, sensor, split and index, which every
+// process knows) as bytes for ProcessGroup::GatherItems, and back.
+Bytes PackFigures(const ReconstructionEvaluator::FrameResult& r) {
+  ByteWriter out;
+  for (double v : {r.psnr, r.psnr_clean, r.psnr_zero, r.psnr_source_peak, r.target_range,
+                   r.source_range, r.rmse, r.contact_score, r.contact_row, r.contact_col,
+                   r.recon_contact_row, r.recon_contact_col}) {
+    out.Put(v);
+  }
+  out.Put<std::uint8_t>(r.contact ? 1 : 0);
+  return std::move(out.bytes());
+}
+
+void UnpackFigures(const Bytes& bytes, ReconstructionEvaluator::FrameResult* r) {
+  ByteReader in(bytes);
+  for (double* v : {&r->psnr, &r->psnr_clean, &r->psnr_zero, &r->psnr_source_peak,
+                    &r->target_range, &r->source_range, &r->rmse, &r->contact_score,
+                    &r->contact_row, &r->contact_col, &r->recon_contact_row,
+                    &r->recon_contact_col}) {
+    *v = in.Get<double>();
+  }
+  r->contact = in.Get<std::uint8_t>() != 0;
+}
+
 }  // namespace
 
 std::string ReconstructionEvaluator::Summary::BriefReport() const {
@@ -249,7 +273,16 @@ ReconstructionEvaluator::Summary ReconstructionEvaluator::Evaluate(const FunctaM
     }
   }
 
-  internal::ParallelFor(static_cast<int>(entries.size()), options_.threads, [&](int i) {
+  // This process's entries on its threads, then every process's (GatherItems): each
+  // frame's figures travel as the doubles computed, so they are the same bits whichever
+  // process computed them.
+  const ProcessGroup& group =
+      options_.processes != nullptr ? *options_.processes : SingleProcess();
+  const std::int64_t count = static_cast<std::int64_t>(entries.size());
+  const std::vector<std::int64_t> own = group.OwnItems(count);
+  std::vector<Bytes> computed(own.size());
+  internal::ParallelFor(static_cast<int>(own.size()), options_.threads, [&](int k) {
+    const std::size_t i = static_cast<std::size_t>(own[k]);
     FrameResult& r = summary.frames[i];
     const SensorState& state = states.at(r.sensor);
     const FrameFormat& format = state.trunk->format;
@@ -274,7 +307,10 @@ ReconstructionEvaluator::Summary ReconstructionEvaluator::Evaluate(const FunctaM
     if (summary.has_clean && !dataset.frames()[r.dataset_index].clean_path.empty()) {
       r.psnr_clean = Psnr(prediction, LoadTrunkTargets(dataset, r.dataset_index, format, true));
     }
+    computed[k] = PackFigures(r);
   });
+  const std::vector<Bytes> all = group.GatherItems(count, computed);
+  for (std::size_t i = 0; i < entries.size(); ++i) UnpackFigures(all[i], &summary.frames[i]);
 
   for (const auto& [sensor, state] : states) {
     for (Split split : {Split::kTrain, Split::kTest}) {

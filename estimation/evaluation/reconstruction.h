@@ -44,6 +44,7 @@
 #include "estimation/data/contact.h"
 #include "estimation/data/dataset.h"
 #include "estimation/functaset/functaset.h"
+#include "models/core/process_group.h"
 #include "models/trunk/functa_model.h"
 
 namespace tactfunc {
@@ -95,6 +96,11 @@ class ReconstructionEvaluator {
     bool clean = true;
     // The contact test; its encoding is set per sensor from the dataset.
     ContactOptions contact;
+    // The processes sharing the run (models/core/process_group.h; `mpirun ... tactfunc
+    // recon`, docs/SCALING.md); null = this process alone. Each process evaluates its
+    // OwnItems of the entries, and every process receives all of them (GatherItems), so
+    // the Summary is the same on every process and does not depend on their number.
+    const ProcessGroup* processes = nullptr;
     bool IsValid(std::string* error) const;
   };
 

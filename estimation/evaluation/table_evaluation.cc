@@ -2,6 +2,7 @@
 #include "estimation/evaluation/table_evaluation.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <map>
 #include <set>
@@ -30,13 +31,78 @@ constexpr double kNan = std::numeric_limits<double>::quiet_NaN();
 // Mean of the finite values (ComputePsnrStats' rule: NaN and +inf left out).
 double MeanPsnr(const std::vector<double>& values) { return ComputePsnrStats(values).mean; }
 
-// The observer's task around internal::ParallelFor over [0, n): ticks after each item.
-template <typename Fn>
-void ParallelForWithTicks(std::size_t n, int threads, Observer* observer, const Fn& fn) {
-  internal::ParallelFor(static_cast<int>(n), threads, [&](int i) {
-    fn(static_cast<std::size_t>(i));
-    if (observer != nullptr) observer->Tick();
+// Per-frame work shared over the processes (Options::processes): compute(i, &out) packs
+// item i's result for this process's items of [0, n) (ProcessGroup::OwnItems) on
+// `threads` workers; then read(i, in) unpacks every item's, in item order, whichever
+// process computed it (GatherItems). Results travel as the bits computed, so every
+// process ends with the same values as one process alone. The observer's task (if any)
+// ticks size() times per own item -- the other processes advance alike -- and is topped
+// up to n once all results are in.
+template <typename Compute, typename Read>
+void ShardedFor(const ProcessGroup& group, std::size_t n, int threads, Observer* observer,
+                const Compute& compute, const Read& read) {
+  const std::int64_t count = static_cast<std::int64_t>(n);
+  const std::vector<std::int64_t> own = group.OwnItems(count);
+  std::vector<Bytes> mine(own.size());
+  std::atomic<std::int64_t> ticked{0};
+  internal::ParallelFor(static_cast<int>(own.size()), threads, [&](int k) {
+    ByteWriter out;
+    compute(static_cast<std::size_t>(own[k]), &out);
+    mine[k] = std::move(out.bytes());
+    if (observer == nullptr) return;
+    for (int t = 0; t < group.size() && ticked.fetch_add(1) < count; ++t) observer->Tick();
   });
+  if (observer != nullptr) {
+    for (std::int64_t t = std::min(ticked.load(), count); t < count; ++t) observer->Tick();
+  }
+  const std::vector<Bytes> all = group.GatherItems(count, mine);
+  for (std::size_t i = 0; i < n; ++i) {
+    ByteReader in(all[i]);
+    read(i, in);
+  }
+}
+
+void PutTargets(const TrunkTargets& t, ByteWriter* out) {
+  out->Put<std::int64_t>(t.values.rows());
+  out->Put<std::int64_t>(t.values.cols());
+  out->PutFloats(t.values.data(), static_cast<std::size_t>(t.values.size()));
+  out->PutFloats(t.weights.data(), static_cast<std::size_t>(t.weights.size()));
+  out->Put<std::uint8_t>(t.flat ? 1 : 0);
+  out->Put(t.scale);
+  out->Put(t.offset);
+  out->Put(t.source_range);
+  out->Put(t.rows);
+  out->Put(t.cols);
+}
+
+// Reads what PutTargets wrote; throws std::runtime_error on arrays of inconsistent sizes.
+TrunkTargets GetTargets(ByteReader& in) {
+  TrunkTargets t;
+  const auto rows = in.Get<std::int64_t>();
+  const auto cols = in.Get<std::int64_t>();
+  const std::size_t values = in.FloatCount();
+  if (rows < 0 || cols < 0 || values != static_cast<std::size_t>(rows * cols)) {
+    throw std::runtime_error("eval: frame targets of " + std::to_string(values) +
+                             " values for " + std::to_string(rows) + " x " +
+                             std::to_string(cols) + " came from another process");
+  }
+  t.values.resize(rows, cols);
+  in.GetFloats(t.values.data(), values);
+  const std::size_t weights = in.FloatCount();
+  if (weights != static_cast<std::size_t>(rows)) {
+    throw std::runtime_error("eval: frame targets of " + std::to_string(weights) +
+                             " weights for " + std::to_string(rows) +
+                             " pixels came from another process");
+  }
+  t.weights.resize(rows);
+  in.GetFloats(t.weights.data(), weights);
+  t.flat = in.Get<std::uint8_t>() != 0;
+  t.scale = in.Get<double>();
+  t.offset = in.Get<double>();
+  t.source_range = in.Get<double>();
+  t.rows = in.Get<int>();
+  t.cols = in.Get<int>();
+  return t;
 }
 
 // One sensor's frames as every approach sees them.
@@ -68,8 +134,9 @@ struct SensorFrames {
   }
 };
 
+// Every process ends with every frame's targets (each decodes its share of the frames).
 SensorFrames LoadSensorFrames(const TableEvaluation::Inputs& in, const SensorTrunk& trunk,
-                              int threads, Observer* observer) {
+                              const ProcessGroup& group, int threads, Observer* observer) {
   SensorFrames s;
   s.sensor = trunk.sensor;
   s.trunk = &trunk;
@@ -92,14 +159,25 @@ SensorFrames LoadSensorFrames(const TableEvaluation::Inputs& in, const SensorTru
     observer->BeginTask(std::string("eval: loading ") + ToString(trunk.sensor),
                         static_cast<std::int64_t>(s.entries.size()), "frames");
   }
-  ParallelForWithTicks(s.entries.size(), threads, observer, [&](std::size_t i) {
-    const Image frame = in.dataset->LoadFrame(dataset_index[i]);
-    s.targets[i] = DatasetFrameTargets(*in.dataset, dataset_index[i], frame, trunk.format);
-    s.contact[i] = DetectFrameContact(*in.dataset, dataset_index[i], frame).contact ? 1 : 0;
-    if (in.dataset->has_clean() && !in.dataset->frames()[dataset_index[i]].clean_path.empty()) {
-      s.clean[i] = LoadTrunkTargets(*in.dataset, dataset_index[i], trunk.format, /*clean=*/true);
-    }
-  });
+  ShardedFor(
+      group, s.entries.size(), threads, observer,
+      [&](std::size_t i, ByteWriter* out) {
+        const Image frame = in.dataset->LoadFrame(dataset_index[i]);
+        PutTargets(DatasetFrameTargets(*in.dataset, dataset_index[i], frame, trunk.format), out);
+        out->Put<std::uint8_t>(DetectFrameContact(*in.dataset, dataset_index[i], frame).contact);
+        const bool clean = in.dataset->has_clean() &&
+                           !in.dataset->frames()[dataset_index[i]].clean_path.empty();
+        out->Put<std::uint8_t>(clean);
+        if (clean) {
+          PutTargets(LoadTrunkTargets(*in.dataset, dataset_index[i], trunk.format, /*clean=*/true),
+                     out);
+        }
+      },
+      [&](std::size_t i, ByteReader& in) {
+        s.targets[i] = GetTargets(in);
+        s.contact[i] = in.Get<std::uint8_t>() != 0 ? 1 : 0;
+        if (in.Get<std::uint8_t>() != 0) s.clean[i] = GetTargets(in);
+      });
   if (observer) observer->EndTask();
   return s;
 }
@@ -108,20 +186,26 @@ SensorFrames LoadSensorFrames(const TableEvaluation::Inputs& in, const SensorTru
 // and, if `clean` is given, against the noise-free frames it holds (NaN where none).
 std::vector<double> LatentPsnrs(const SensorTrunk& trunk,
                                 const std::vector<const FunctasetEntry*>& entries,
-                                const std::vector<const TrunkTargets*>& targets, int threads,
+                                const std::vector<const TrunkTargets*>& targets,
+                                const ProcessGroup& group, int threads,
                                 const std::string& label, Observer* observer,
                                 const std::vector<std::optional<TrunkTargets>>* clean = nullptr,
                                 std::vector<double>* psnr_clean = nullptr) {
   std::vector<double> psnr(entries.size(), kNan);
   if (psnr_clean != nullptr) psnr_clean->assign(entries.size(), kNan);
   if (observer) observer->BeginTask(label, static_cast<std::int64_t>(entries.size()), "frames");
-  ParallelForWithTicks(entries.size(), threads, observer, [&](std::size_t i) {
-    const Eigen::MatrixXf prediction = Reconstruct(trunk, entries[i]->latent);
-    psnr[i] = Psnr(prediction, *targets[i]);
-    if (clean != nullptr && psnr_clean != nullptr && (*clean)[i]) {
-      (*psnr_clean)[i] = Psnr(prediction, *(*clean)[i]);
-    }
-  });
+  ShardedFor(
+      group, entries.size(), threads, observer,
+      [&](std::size_t i, ByteWriter* out) {
+        const Eigen::MatrixXf prediction = Reconstruct(trunk, entries[i]->latent);
+        out->Put(Psnr(prediction, *targets[i]));
+        out->Put(clean != nullptr && (*clean)[i] ? Psnr(prediction, *(*clean)[i]) : kNan);
+      },
+      [&](std::size_t i, ByteReader& in) {
+        psnr[i] = in.Get<double>();
+        const double c = in.Get<double>();
+        if (psnr_clean != nullptr) (*psnr_clean)[i] = c;
+      });
   if (observer) observer->EndTask();
   return psnr;
 }
@@ -209,6 +293,7 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
                                                   Observer* observer) {
   CheckInputs(in, options);
   const int threads = options.threads;
+  const ProcessGroup& group = options.processes != nullptr ? *options.processes : SingleProcess();
   const FunctaModel& model = *in.model;
   const Functaset& functaset = *in.functaset;
   const Dataset& dataset = *in.dataset;
@@ -233,7 +318,7 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
     RdCurves& curves = sensor_result.curves;
     Details& details = sensor_result.details;
     const SensorTrunk& trunk = model.Trunk(sensor);
-    const SensorFrames s = LoadSensorFrames(in, trunk, threads, observer);
+    const SensorFrames s = LoadSensorFrames(in, trunk, group, threads, observer);
     if (s.train.empty()) {
       throw DatasetError("functaset '" + in.functaset_name + "' has no train-split " +
                          ToString(sensor) + " entries: the baselines are fitted on those");
@@ -251,7 +336,7 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
     for (const TrunkTargets& t : s.targets) frame_targets.push_back(&t);
     std::vector<double> tf_psnr_clean;
     const std::vector<double> tf_psnr =
-        LatentPsnrs(trunk, s.entries, frame_targets, threads,
+        LatentPsnrs(trunk, s.entries, frame_targets, group, threads,
                     std::string("eval: TactFunc ") + ToString(sensor), observer, &s.clean,
                     &tf_psnr_clean);
     const std::uint64_t trunk_bytes = 4ull * (trunk.siren.NumParameters() + trunk.alpha.size());
@@ -325,12 +410,18 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
       const JpegCodec codec(o);
       psnr->assign(m, kNan);
       bytes->assign(m, 0);
-      internal::ParallelFor(static_cast<int>(m), threads, [&](int i) {
-        Eigen::MatrixXf decoded;
-        (*bytes)[i] = static_cast<double>(
-            codec.EncodeDecode(s.targets[i].values, s.targets[i].rows, s.targets[i].cols, &decoded));
-        (*psnr)[i] = Psnr(decoded, s.targets[i]);
-      });
+      ShardedFor(
+          group, m, threads, nullptr,
+          [&](std::size_t i, ByteWriter* out) {
+            Eigen::MatrixXf decoded;
+            out->Put(static_cast<double>(codec.EncodeDecode(
+                s.targets[i].values, s.targets[i].rows, s.targets[i].cols, &decoded)));
+            out->Put(Psnr(decoded, s.targets[i]));
+          },
+          [&](std::size_t i, ByteReader& in) {
+            (*bytes)[i] = in.Get<double>();
+            (*psnr)[i] = in.Get<double>();
+          });
     };
     std::vector<double> jpeg_psnr, jpeg_bytes;
     jpeg_eval(jpeg_options, &jpeg_psnr, &jpeg_bytes);
@@ -386,7 +477,7 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
       }
       const int d2 = e.functaset->latent_dim(sensor);
       const std::vector<double> psnr =
-          LatentPsnrs(t2, test_entries, t_targets, threads,
+          LatentPsnrs(t2, test_entries, t_targets, group, threads,
                       "eval: TactFunc d=" + std::to_string(d2) + " " + ToString(sensor), observer);
       curves.tactfunc.push_back(
           {e.functaset->BytesPerFrame(sensor), MeanPsnr(psnr), "d=" + std::to_string(d2)});
@@ -424,11 +515,23 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
           observer->BeginTask("eval: latents for the pose model (" + latent_map.ToString() + ")",
                               static_cast<std::int64_t>(m), "frames");
         }
-        ParallelForWithTicks(m, threads, observer, [&](std::size_t i) {
-          Eigen::VectorXd z;
-          fitter.Fit(LatentProblem(trunk, s.targets[i], problem), &z);
-          latents.row(static_cast<Eigen::Index>(i)) = z.cast<float>().transpose();
-        });
+        ShardedFor(
+            group, m, threads, observer,
+            [&](std::size_t i, ByteWriter* out) {
+              Eigen::VectorXd z;
+              fitter.Fit(LatentProblem(trunk, s.targets[i], problem), &z);
+              const Eigen::VectorXf latent = z.cast<float>();
+              out->PutFloats(latent.data(), static_cast<std::size_t>(latent.size()));
+            },
+            [&](std::size_t i, ByteReader& in) {
+              if (in.FloatCount() != static_cast<std::size_t>(d)) {
+                throw std::runtime_error("eval: a re-fitted latent of another length than " +
+                                         std::to_string(d) + " came from another process");
+              }
+              Eigen::VectorXf latent(d);
+              in.GetFloats(latent.data(), static_cast<std::size_t>(d));
+              latents.row(static_cast<Eigen::Index>(i)) = latent.transpose();
+            });
         if (observer) observer->EndTask();
         message("eval: the pose model reads " + latent_map.ToString() + " latents, the functaset holds " +
                 stored + " ones: re-fitted every " + ToString(sensor) + " frame for the pose rows\n");

@@ -63,6 +63,7 @@
 #include "estimation/data/dataset.h"
 #include "estimation/evaluation/baselines.h"
 #include "estimation/functaset/functaset.h"
+#include "models/core/process_group.h"
 #include "models/core/sensor.h"
 #include "models/pose/pose_mlp.h"
 #include "models/trunk/functa_model.h"
@@ -81,6 +82,14 @@ class TableEvaluation {
     int knn_k = 5;
     // JPEG qualities of the rate-distortion curve.
     std::vector<int> jpeg_curve_qualities = {1, 3, 5, 10, 20, 30, 50, 70, 90};
+    // The processes sharing the run (models/core/process_group.h; `mpirun ... tactfunc
+    // eval`, docs/SCALING.md); null = this process alone. The per-frame work -- decoding
+    // the frames, TactFunc and extra functasets' reconstructions, JPEG coding, the
+    // pose model's latent re-fits -- is shared out (ProcessGroup::OwnItems) and its
+    // results gathered on every process (GatherItems); the fits over all frames (PCA,
+    // the JPEG quality search, the pose baselines) run on every process alike. So the
+    // Result is the same on every process and does not depend on their number.
+    const ProcessGroup* processes = nullptr;
 
     bool IsValid(std::string* error) const;
   };

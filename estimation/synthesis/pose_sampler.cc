@@ -14,6 +14,13 @@ bool PoseSamplerOptions::IsValid(std::string* error) const {
     if (error != nullptr) *error = "PoseSamplerOptions: expected 0 <= depth_min_m < depth_max_m";
     return false;
   }
+  if (!(jump_probability >= 0 && jump_probability < 1) ||
+      !(jump_variance_scale > 0) || !std::isfinite(jump_variance_scale)) {
+    if (error != nullptr) {
+      *error = "PoseSamplerOptions: expected jump_probability in [0, 1) and jump_variance_scale > 0";
+    }
+    return false;
+  }
   return chain.IsValid(4, error);
 }
 
@@ -40,9 +47,28 @@ Eigen::Matrix4d CoordinateCovariance(const LaplaceComponent& component) {
   return c;
 }
 
+namespace {
+Eigen::VectorXd CoordinateMean(const LaplaceComponent& c, const PoseSamplerOptions& options) {
+  Eigen::VectorXd x(4);
+  x << c.mean.x(), c.mean.y(), c.mean.yaw(),
+      std::clamp(c.depth_m, options.depth_min_m, options.depth_max_m);
+  return x;
+}
+}  // namespace
+
 PoseSamples SamplePosePosterior(const LatentProblem& problem, const PoseGenerator& generator,
                                 int tool_index, double sigma, const LaplaceComponent& start,
                                 const PoseSamplerOptions& options) {
+  return SamplePosePosterior(problem, generator, tool_index, sigma,
+                             std::vector<LaplaceComponent>{start}, options);
+}
+
+PoseSamples SamplePosePosterior(const LatentProblem& problem, const PoseGenerator& generator,
+                                int tool_index, double sigma,
+                                const std::vector<LaplaceComponent>& modes,
+                                const PoseSamplerOptions& options) {
+  if (modes.empty()) throw std::invalid_argument("SamplePosePosterior: no starting component");
+  const LaplaceComponent& start = modes.front();
   std::string error;
   if (!options.IsValid(&error)) throw std::invalid_argument(error);
   if (!(sigma > 0) || !std::isfinite(sigma)) {
@@ -80,9 +106,22 @@ PoseSamples SamplePosePosterior(const LatentProblem& problem, const PoseGenerato
   MetropolisOptions chain = options.chain;
   chain.angles = {2};
   chain.angle_fold = n > 0 ? 2 * M_PI / n : 2 * M_PI;
-  Eigen::VectorXd x0(4);
-  x0 << start.mean.x(), start.mean.y(), start.mean.yaw(),
-      std::clamp(start.depth_m, options.depth_min_m, options.depth_max_m);
+  if (modes.size() > 1 && options.jump_probability > 0) {
+    chain.jump_probability = options.jump_probability;
+    // Half the Laplace weight, half uniform: a mode the Laplace evidence underrates is
+    // still proposed often enough for the MH ratio to correct its mass.
+    double total = 0;
+    for (const LaplaceComponent& mode : modes) total += std::max(0.0, mode.weight);
+    for (const LaplaceComponent& mode : modes) {
+      JumpComponent j;
+      j.weight = 0.5 / modes.size() + (total > 0 ? 0.5 * std::max(0.0, mode.weight) / total
+                                                 : 0.5 / modes.size());
+      j.mean = CoordinateMean(mode, options);
+      j.covariance = options.jump_variance_scale * CoordinateCovariance(mode);
+      chain.jumps.push_back(std::move(j));
+    }
+  }
+  const Eigen::VectorXd x0 = CoordinateMean(start, options);
   out.chains = SampleMetropolis(log_density, x0, CoordinateCovariance(start), chain);
   return out;
 }

@@ -25,6 +25,15 @@
 // Gaussian; the step size adapts during the burn-in, then is frozen. Diagnostics fold the
 // yaw modulo 2 pi / n for a C_n tool (the density has that symmetry exactly).
 //
+// Several modes. Given every Laplace component the search found for the tool (the
+// overload taking a list), the chains also propose mode jumps (samplers/metropolis.h):
+// independent draws from those components' Gaussians in the coordinates, their
+// covariances widened by jump_variance_scale so the proposal's tails are heavier than
+// the target's, each proposed with half its Laplace weight plus an equal share, and
+// chain c starts at component c mod K. A chain started in one yaw
+// mode then visits the others in proportion to their posterior mass instead of staying
+// where it started.
+//
 // Errors: bad options or a tool index outside the generator throw std::invalid_argument.
 #ifndef TACTFUNC_ESTIMATION_SYNTHESIS_POSE_SAMPLER_H_
 #define TACTFUNC_ESTIMATION_SYNTHESIS_POSE_SAMPLER_H_
@@ -46,6 +55,10 @@ struct PoseSamplerOptions {
   MetropolisOptions chain;
   double depth_min_m = PoseFitOptions().depth_min_m;  // the fitter's bounds by default
   double depth_max_m = PoseFitOptions().depth_max_m;
+  // Mode jumps between the components (header comment): the probability of a jump
+  // proposal per iteration (0 = none) and the factor on the components' covariances.
+  double jump_probability = 0.1;
+  double jump_variance_scale = 2.0;
   bool IsValid(std::string* error) const;
 };
 
@@ -67,6 +80,12 @@ Eigen::Matrix4d CoordinateCovariance(const LaplaceComponent& component);
 // `problem` at pixel sigma `sigma` (> 0), starting from `start`.
 PoseSamples SamplePosePosterior(const LatentProblem& problem, const PoseGenerator& generator,
                                 int tool_index, double sigma, const LaplaceComponent& start,
+                                const PoseSamplerOptions& options);
+// The same from every component in `modes` (non-empty, all of this tool; modes[0] is the
+// start), with mode jumps between them when there are two or more (header comment).
+PoseSamples SamplePosePosterior(const LatentProblem& problem, const PoseGenerator& generator,
+                                int tool_index, double sigma,
+                                const std::vector<LaplaceComponent>& modes,
                                 const PoseSamplerOptions& options);
 
 }  // namespace tactfunc

@@ -49,6 +49,16 @@ class ProcessGroup {
   // [count rank / size, count (rank + 1) / size), so the shares cover [0, count) in
   // rank order.
   void Share(std::int64_t count, int rank, std::int64_t* begin, std::int64_t* end) const;
+
+  // Per-item work spread over the processes (recon, eval, bench posterior): of `count`
+  // items, this process computes OwnItems(count) -- every size()-th from rank(), so that
+  // items listed in runs (a dataset's frames tool by tool) spread their runs over the
+  // processes -- and passes one buffer per own item, in that order, to GatherItems,
+  // which returns every item's buffer in item order [0, count), on every process (one
+  // AllGather). Throws std::runtime_error if a process passed another number of buffers
+  // than it owns items, or if the processes passed different counts.
+  std::vector<std::int64_t> OwnItems(std::int64_t count) const;
+  std::vector<Bytes> GatherItems(std::int64_t count, const std::vector<Bytes>& mine) const;
 };
 
 // The group of this process alone: rank 0 of 1; AllGather returns {mine}, Broadcast
@@ -95,6 +105,7 @@ class ByteReader {
   // The float array's length, then its values into `out` (which must hold that many).
   std::size_t FloatCount() { return static_cast<std::size_t>(Get<std::uint64_t>()); }
   void GetFloats(float* out, std::size_t count) { Copy(out, count * sizeof(float)); }
+  void GetBytes(std::uint8_t* out, std::size_t count) { Copy(out, count); }
   std::string GetString() {
     std::string text(static_cast<std::size_t>(Get<std::uint64_t>()), '\0');
     Copy(text.data(), text.size());

@@ -58,6 +58,23 @@ void FunctaModel::SetTrunk(SensorTrunk trunk) {
             [](const SensorTrunk& a, const SensorTrunk& b) { return a.sensor < b.sensor; });
 }
 
+SensorDescription TrunkSensorDescription(const SensorTrunk& trunk) {
+  if (trunk.description) return *trunk.description;
+  SensorDescription d = BuiltInSensorDescription(trunk.sensor);
+  d.working_rows = trunk.format.rows;
+  d.working_cols = trunk.format.cols;
+  d.aspect = SensorDescription::Aspect::kStretch;
+  // Without grayscale the trunk outputs the frames' channels; with it they are unknown
+  // and the kind's are assumed.
+  if (!trunk.format.grayscale) d.channels = trunk.siren.options().output_channels;
+  // A fixed-scale trunk normalised by its format's scale, the data's unless a preset
+  // overrode it: the best statement of the scale the model has.
+  if (!trunk.format.per_image_min_max && trunk.format.scale > 0) {
+    d.normalization_scale = trunk.format.scale;
+  }
+  return d;
+}
+
 bool FunctaModel::HasSensor(SensorKind sensor) const {
   return std::any_of(trunks_.begin(), trunks_.end(),
                      [&](const SensorTrunk& t) { return t.sensor == sensor; });
@@ -125,6 +142,11 @@ std::string FunctaModel::Serialize() const {
            {"latent_l2_weight", t.meta_sgd.latent_l2_weight},
            {"first_order", t.meta_sgd.first_order}}},
          {"residual_sigma", t.residual_sigma}});
+    // Written only when present, so a trunk without one keeps the bytes it had.
+    if (t.description) {
+      meta["trunks"].back()["sensor_description"] =
+          nlohmann::json::parse(SensorDescriptionToJson(*t.description));
+    }
     file.Add(name + "/theta", TensorFile::DType::kFloat32, {t.siren.NumParameters()},
              ToVector(t.siren.parameters()));
     file.Add(name + "/alpha", TensorFile::DType::kFloat32, {t.alpha.size()}, ToVector(t.alpha));
@@ -222,6 +244,21 @@ FunctaModel FunctaModel::FromTensorFile(const TensorFile& file, const std::strin
       if (!trunk.meta_sgd.IsValid(&error)) throw TensorFileError(source + ": " + field + ": " + error);
       field = name + ".residual_sigma";
       trunk.residual_sigma = entry.at("residual_sigma").get<double>();
+      if (entry.contains("sensor_description")) {  // absent in files written before
+        field = name + ".sensor_description";
+        try {
+          trunk.description = ParseSensorDescription(entry.at("sensor_description").dump(),
+                                                     source + " (" + field + ")",
+                                                     /*allow_unknown_pitch=*/true);
+        } catch (const SensorDescriptionError& e) {
+          throw TensorFileError(e.what());
+        }
+        if (trunk.description->kind != trunk.sensor) {
+          throw TensorFileError(source + ": field '" + field + ".kind': expected " +
+                                SensorKindDescriptionName(trunk.sensor) + " for the " + name +
+                                " trunk, got " + SensorKindDescriptionName(trunk.description->kind));
+        }
+      }
       const auto& theta = file.Get(name + "/theta", {trunk.siren.NumParameters()});
       trunk.siren.SetParameters(Eigen::Map<const Eigen::VectorXd>(theta.values.data(),
                                                                   theta.values.size()));

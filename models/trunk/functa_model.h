@@ -20,12 +20,16 @@
 // load as trunks without the branch. A trunk with spatial latents records its grid as
 // "siren": {..., "spatial": {"rows", "cols", "channels", "global_latent_dim", "layout"}}
 // (layout: how z and the modulation matrix split, one fixed string today); files without
-// the key load as trunks with one global latent. Loading checks every field and shape and
-// names the file and field on error.
+// the key load as trunks with one global latent. A trunk trained on described frames
+// records the description as "sensor_description" (the file format of
+// models/core/sensor_description.h, "pixel_pitch_mm": 0 for an unknown pitch); files
+// without it load without one. Loading checks every field and shape and names the file
+// and field on error.
 #ifndef TACTFUNC_MODELS_TRUNK_FUNCTA_MODEL_H_
 #define TACTFUNC_MODELS_TRUNK_FUNCTA_MODEL_H_
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -34,6 +38,7 @@
 #include "models/trunk/latent_modulated_siren.h"
 #include "models/trunk/meta_sgd.h"
 #include "models/core/sensor.h"
+#include "models/core/sensor_description.h"
 
 namespace tactfunc {
 
@@ -59,7 +64,18 @@ struct SensorTrunk {
   // Standard deviation of the per-pixel fit residual on the training frames
   // (normalised units); the likelihood scale of the posterior samplers. 0 = unknown.
   double residual_sigma = 0;
+  // The sensor description of the frames the trunk was trained on
+  // (models/core/sensor_description.h), its working size the format's. Absent in files
+  // written before descriptions (and in hand-built trunks): TrunkSensorDescription then
+  // gives the built-in description of the trunk's kind.
+  std::optional<SensorDescription> description;
 };
+
+// The trunk's description, or for a trunk without one the built-in description of its
+// kind with the format's working size (aspect "stretch": such trunks resized whatever
+// they got), the trunk's output channels (unless grayscale) and a fixed-scale format's
+// scale. Its pitch is unknown.
+SensorDescription TrunkSensorDescription(const SensorTrunk& trunk);
 
 class FunctaModel {
  public:

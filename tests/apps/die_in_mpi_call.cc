@@ -3,8 +3,8 @@
 // LD_PRELOAD shim for mpi_cli_test, through MPI's profiling interface: the process of
 // rank $TACTFUNC_TEST_DIE_RANK kills itself with SIGKILL (as a crashed machine would
 // end it) on entering its $TACTFUNC_TEST_DIE_AT-th MPI_Allgatherv, the collective
-// through which train and encode exchange their work. Every other call goes straight
-// to the real one (PMPI_Allgatherv).
+// through which the commands that run as several processes exchange their work. Every
+// other call goes straight to the real one (PMPI_Allgatherv).
 #include <mpi.h>
 #include <signal.h>
 

@@ -1,14 +1,19 @@
 // Copyright 2026 The tactfunc Authors.
 //
-// `mpirun -np 2 tactfunc train|encode` on this machine (loopback), against the same
-// command run as one process (docs/SCALING.md): encode writes the same functaset bytes,
-// train the same model bytes; only rank 0 speaks. A process killed mid-run (SIGKILL
-// from the die_in_mpi_call shim) stops the job with mpirun's error, leaves no
-// half-written file, and --resume under mpirun finishes the run with the bytes of an
-// uninterrupted one. Other commands refuse mpirun. Skipped where the build has no MPI
-// (then the last test checks that the program refuses to run as several processes).
+// `mpirun -np 2 tactfunc train|encode|recon|eval|bench posterior` on this machine
+// (loopback), against the same command run as one process (docs/SCALING.md): encode
+// writes the same functaset bytes, train the same model bytes, recon and eval the same
+// files (but for eval's PCA fit time), bench posterior the same figures (but for its
+// times); only rank 0 speaks. A process killed mid-run (SIGKILL from the
+// die_in_mpi_call shim) stops the job with mpirun's error naming its rank, leaves no
+// half-written file, and --resume under mpirun finishes an encode or a training with
+// the bytes of an uninterrupted one. Other commands refuse mpirun. Skipped where the
+// build has no MPI (then the last test checks that the program refuses to run as
+// several processes).
 #include <filesystem>
+#include <set>
 #include <string>
+#include <utility>
 
 #include <unistd.h>
 
@@ -84,6 +89,72 @@ class MpiCliTest : public ::testing::Test {
   }
   std::string Train(const std::string& out) const {
     return "train --data " + Root("d") + " --out " + Root(out) + " --preset tiny --seed 5";
+  }
+  // For recon, eval and bench posterior: a dataset with test frames (2 tools x 4
+  // contacts, half of them test, two sensors = 16 frames), its functaset under the tiny
+  // model, and a pose model of its bubble latents re-fitted with ceres:3 (so that eval
+  // re-fits every bubble frame for the pose rows, per-frame work it shares out).
+  static void MakeEvaluationInputs() {
+    if (fs::exists(Root("pt.tpm"))) return;
+    Result r = Run("synth --out " + Root("dt") +
+                   " --frames-per-tool 4 --test-fraction 0.5 --tools rod,square --seed 4 "
+                   "--threads 1");
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    r = Run("encode --model " + Root("m.tfm") + " --data " + Root("dt") + " --out " +
+            Root("ft.tfs") + " --threads 1");
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    r = Run("train-pose --functaset " + Root("ft.tfs") + " --model " + Root("m.tfm") +
+            " --data " + Root("dt") + " --refit ceres:3 --out " + Root("pt.tpm") +
+            " --hidden 16,16 --epochs 20 --batch 4");
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+  }
+  std::string Recon(const std::string& out) const {
+    return "recon --model " + Root("m.tfm") + " --functaset " + Root("ft.tfs") + " --data " +
+           Root("dt") + " --out " + Root(out) + " --examples 3";
+  }
+  std::string Eval(const std::string& out) const {
+    return "eval --data " + Root("dt") + " --model " + Root("m.tfm") + " --functaset " +
+           Root("ft.tfs") + " --pose-model " + Root("pt.tpm") + " --extra-functaset " +
+           Root("ft.tfs") + " --extra-model " + Root("m.tfm") + " --out " + Root(out);
+  }
+  std::string BenchPosterior() const {
+    return "bench posterior --model " + Root("m.tfm") + " --pose-model " + Root("pt.tpm") +
+           " --functaset " + Root("ft.tfs") + " --data " + Root("dt") +
+           " --frames 4 --samples 10 --json";
+  }
+  // Moves folder `from` to `to` (replacing it): the one-process run's outputs, so that
+  // the run of two processes writes to the same --out (eval's table.md and table.json
+  // quote the command line).
+  static void MoveFolder(const std::string& from, const std::string& to) {
+    fs::remove_all(Root(to));
+    fs::rename(Root(from), Root(to));
+  }
+  // Every file of folder `a` has the bytes of the same file in `b`, and both hold the
+  // same names; `except` are compared by the caller.
+  static void ExpectSameFiles(const std::string& a, const std::string& b,
+                              const std::set<std::string>& except = {}) {
+    std::set<std::string> names_a, names_b;
+    for (const auto& e : fs::directory_iterator(Root(a))) names_a.insert(e.path().filename());
+    for (const auto& e : fs::directory_iterator(Root(b))) names_b.insert(e.path().filename());
+    EXPECT_EQ(names_a, names_b);
+    for (const std::string& name : names_a) {
+      if (except.count(name)) continue;
+      EXPECT_TRUE(SameBytes(Root(a + "/" + name), Root(b + "/" + name))) << a << "/" << name;
+    }
+  }
+  static int Count(const std::string& text, const std::string& part) {
+    int n = 0;
+    for (std::size_t at = text.find(part); at != std::string::npos; at = text.find(part, at + 1)) {
+      ++n;
+    }
+    return n;
+  }
+  // No temporary file of an atomic write anywhere under the suite's folder.
+  static void ExpectNoTemporaries() {
+    for (const fs::directory_entry& entry : fs::recursive_directory_iterator(*root_)) {
+      EXPECT_THAT(entry.path().filename().string(), ::testing::Not(HasSubstr(".tmp.")))
+          << "left behind";
+    }
   }
 
   static fs::path* root_;
@@ -187,12 +258,140 @@ TEST_F(MpiCliTest, ATrainingWhoseWriterDiesResumesToTheModelOfAnUninterruptedRun
   EXPECT_TRUE(SameBytes(Root("dead.tfm"), Root("whole.tfm")));
 }
 
+TEST_F(MpiCliTest, ReconAsTwoProcessesWritesTheFilesOfOneProcess) {
+  if (!kWithMpi) GTEST_SKIP() << "this build has no MPI (configure found none)";
+  MakeEvaluationInputs();
+  const Result one = Run(Recon("recon") + " --threads 1 --json");
+  ASSERT_EQ(one.exit_code, 0) << one.err;
+  MoveFolder("recon", "recon_one");
+  for (const std::string& threads : {std::string("1"), std::string("2")}) {
+    const Result two = RunMpi(2, Recon("recon") + " --json --threads " + threads);
+    ASSERT_EQ(two.exit_code, 0) << two.out << two.err;
+    // frames.csv (16 rows) and both pictures, byte for byte.
+    ExpectSameFiles("recon", "recon_one");
+    EXPECT_EQ(Count(testing_util::Slurp(Root("recon/frames.csv")), "\n"), 17);
+    // The figures but the wall time; rank 0 alone prints.
+    nlohmann::json a = one.LastJson(), b = two.LastJson();
+    EXPECT_EQ(a["frames"], 16);
+    a.erase("seconds");
+    b.erase("seconds");
+    EXPECT_EQ(a.dump(), b.dump()) << "threads " << threads;
+    EXPECT_EQ(Count(two.out, "recon: wrote "), 3) << two.out;  // two pictures, frames.csv
+    const std::string table = one.out.substr(0, one.out.find("recon: wrote"));
+    EXPECT_THAT(two.out, HasSubstr(table));
+  }
+}
+
+// table.json without its one timing (the PCA fit's seconds per sensor).
+nlohmann::json WithoutTimes(nlohmann::json table) {
+  for (auto& [sensor, details] : table["details"].items()) details["pca"].erase("fit_seconds");
+  return table;
+}
+
+TEST_F(MpiCliTest, EvalAsTwoProcessesWritesTheTableOfOneProcess) {
+  if (!kWithMpi) GTEST_SKIP() << "this build has no MPI (configure found none)";
+  MakeEvaluationInputs();
+  const Result one = Run(Eval("eval") + " --threads 1 --json");
+  ASSERT_EQ(one.exit_code, 0) << one.err;
+  EXPECT_THAT(one.out, HasSubstr("re-fitted every bubble frame"));
+  MoveFolder("eval", "eval_one");
+  const Result two = RunMpi(2, Eval("eval") + " --threads 1 --json");
+  ASSERT_EQ(two.exit_code, 0) << two.out << two.err;
+  // table.md and rate_distortion.png byte for byte; table.json but for the PCA fit time.
+  ExpectSameFiles("eval", "eval_one", {"table.json"});
+  const nlohmann::json a = nlohmann::json::parse(testing_util::Slurp(Root("eval_one/table.json")));
+  const nlohmann::json b = nlohmann::json::parse(testing_util::Slurp(Root("eval/table.json")));
+  ASSERT_TRUE(a["details"]["bubble"]["pca"].contains("fit_seconds"));
+  EXPECT_EQ(WithoutTimes(a).dump(2), WithoutTimes(b).dump(2));
+  EXPECT_EQ(WithoutTimes(one.LastJson()).dump(), WithoutTimes(two.LastJson()).dump());
+  EXPECT_EQ(a["rows"].size(), b["rows"].size());
+  // Rank 0 alone speaks: one table, one "wrote" line.
+  EXPECT_EQ(Count(two.out, "eval: wrote"), 1) << two.out;
+  EXPECT_EQ(Count(two.out, "| approach |"), 1) << two.out;
+}
+
+// bench posterior's --json figures without its times (per-frame medians and p90 of
+// wall times, measured on whichever process ran the frame).
+nlohmann::json WithoutPosteriorTimes(nlohmann::json figures) {
+  for (auto& sampler : figures["samplers"]) {
+    for (const char* key : {"ms_median", "ms_p90", "ms_median_after_fit"}) {
+      EXPECT_TRUE(sampler[key].is_number()) << key;
+      sampler.erase(key);
+    }
+  }
+  return figures;
+}
+
+TEST_F(MpiCliTest, BenchPosteriorAsTwoProcessesReportsTheFiguresOfOneProcess) {
+  if (!kWithMpi) GTEST_SKIP() << "this build has no MPI (configure found none)";
+  MakeEvaluationInputs();
+  const Result one = Run(BenchPosterior());
+  ASSERT_EQ(one.exit_code, 0) << one.err;
+  const Result two = RunMpi(2, BenchPosterior());
+  ASSERT_EQ(two.exit_code, 0) << two.out << two.err;
+  const nlohmann::json a = one.LastJson(), b = two.LastJson();
+  EXPECT_EQ(a["frames"], 4);
+  ASSERT_EQ(a["samplers"].size(), 3u);
+  EXPECT_EQ(WithoutPosteriorTimes(a).dump(), WithoutPosteriorTimes(b).dump());
+  // Every time gathered: the medians are of all 4 frames' times, not of rank 0's two.
+  EXPECT_GT(b["samplers"][0]["ms_median"].get<double>(), 0.0);
+  EXPECT_EQ(Count(two.out, "bench posterior: 4 labelled bubble test frames"), 1) << two.out;
+}
+
+TEST_F(MpiCliTest, AnEvalOrReconWhoseProcessDiesLeavesTheEarlierFilesUntouched) {
+  if (!kWithMpi) GTEST_SKIP() << "this build has no MPI (configure found none)";
+  MakeEvaluationInputs();
+  // The files of an earlier complete run in --out; then a run whose rank 1 (or rank 0,
+  // the writer) is killed entering an exchange: the job stops, mpirun names the rank,
+  // and --out still holds the earlier bytes, without temporary files.
+  const Result eval = Run(Eval("eval_dead") + " --threads 1");
+  ASSERT_EQ(eval.exit_code, 0) << eval.err;
+  fs::remove_all(Root("eval_before"));
+  fs::copy(Root("eval_dead"), Root("eval_before"));
+  // Exchanges: per sensor the frames, the TactFunc PSNRs, 10 JPEG qualities and the
+  // extra functaset's PSNRs, and for bubble (the pose sensor) the re-fitted latents:
+  // 14 + 13. Rank 1 dies in the first, rank 0 in the third, rank 1 in the last (after
+  // which rank 0 would write the files).
+  for (const auto& [rank, at] : {std::pair<int, int>{1, 1}, std::pair<int, int>{0, 3},
+                                 std::pair<int, int>{1, 27}}) {
+    const Result dead = RunMpi(2, Eval("eval_dead") + " --threads 1", DieAt(rank, at));
+    EXPECT_NE(dead.exit_code, 0) << rank << " " << at;
+    EXPECT_THAT(dead.out + dead.err, HasSubstr("rank " + std::to_string(rank)));
+    EXPECT_THAT(dead.out + dead.err, HasSubstr("signal 9"));
+    ExpectSameFiles("eval_dead", "eval_before");
+  }
+  const Result recon = Run(Recon("recon_dead") + " --threads 1");
+  ASSERT_EQ(recon.exit_code, 0) << recon.err;
+  fs::remove_all(Root("recon_before"));
+  fs::copy(Root("recon_dead"), Root("recon_before"));
+  const Result dead = RunMpi(2, Recon("recon_dead") + " --threads 1", DieAt(1, 1));
+  EXPECT_NE(dead.exit_code, 0);
+  EXPECT_THAT(dead.out + dead.err, HasSubstr("rank 1"));
+  EXPECT_THAT(dead.out + dead.err, HasSubstr("signal 9"));
+  ExpectSameFiles("recon_dead", "recon_before");
+  // bench posterior writes no file: the job stops naming the rank, and no figures.
+  const Result bench = RunMpi(2, BenchPosterior(), DieAt(1, 1));
+  EXPECT_NE(bench.exit_code, 0);
+  EXPECT_THAT(bench.out + bench.err, HasSubstr("rank 1"));
+  EXPECT_THAT(bench.out, ::testing::Not(HasSubstr("\"samplers\"")));
+  ExpectNoTemporaries();
+}
+
 TEST_F(MpiCliTest, OtherCommandsRefuseToRunAsSeveralProcesses) {
   if (!kWithMpi) GTEST_SKIP() << "this build has no MPI (configure found none)";
-  const Result info = RunMpi(2, "info --tools");
-  EXPECT_NE(info.exit_code, 0);
-  EXPECT_THAT(info.err, HasSubstr("tactfunc info: error: started as 2 processes (mpirun), but "
-                                  "only train and encode run as several processes"));
+  // A command of its own, a bench suite other than posterior, and one that writes files.
+  for (const std::string& command :
+       {std::string("info --tools"), std::string("bench synth"),
+        "synth --out " + Root("refused") + " --frames-per-tool 1 --tools rod"}) {
+    const Result run = RunMpi(2, command);
+    EXPECT_NE(run.exit_code, 0) << command;
+    const std::string name = command.substr(0, command.find(" --"));
+    EXPECT_THAT(run.err, HasSubstr("tactfunc " + name + ": error: started as 2 processes "
+                                   "(mpirun), but only train, encode, recon, eval and bench "
+                                   "posterior run as several processes; run " + name +
+                                   " without mpirun"));
+  }
+  EXPECT_FALSE(fs::exists(Root("refused")));
 }
 
 TEST_F(MpiCliTest, ABuildWithoutMpiRefusesToRunAsSeveralProcesses) {

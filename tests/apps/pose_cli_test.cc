@@ -20,6 +20,7 @@
 #include "tests/apps/cli_test_util.h"
 #include "models/pose/pose_mlp.h"
 #include "nlohmann/json.hpp"
+#include "tests/support/dataset_test_util.h"
 #include "tests/support/functa_test_util.h"
 
 namespace tactfunc {
@@ -151,6 +152,30 @@ TEST_F(PoseCliTest, PoseWithEachSamplerPrintsMeanCovarianceAndWritesFiles) {
   }
 }
 
+// A single video is a dataset too: --data names the file, --reference-index its
+// no-contact frame; the frame ids are the other frames' indices.
+TEST_F(PoseCliTest, PoseReadsAFrameOfAVideo) {
+  std::vector<cv::Mat> frames;
+  for (int i = 0; i < 4; ++i) frames.push_back(testing_util::PatternFrame(i));
+  const std::string video = Root("clip.avi");
+  if (!testing_util::WriteMjpgVideo(video, frames)) GTEST_SKIP() << "no MJPG writer in this OpenCV";
+  const Result info = Run("info " + video + " --reference-index 1 --json");
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  const Result train = Run("train-pose --functaset " + Root("f.tfs") + " --sensor gelslim --out " +
+                           Root("pg.tpm") + " --hidden 8 --epochs 3 --batch 4");
+  ASSERT_EQ(train.exit_code, 0) << train.err;
+  const std::string args = "pose --model " + Root("m.tfm") + " --pose-model " + Root("pg.tpm") +
+                           " --data " + video + " --sensor gelslim --sampler laplace --samples 10 "
+                           "--allow-other-frames --json";
+  Result r = Run(args + " --reference-index 1 --id 000002");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(r.LastJson().contains("mean"));
+  // Frame 1 is the reference there, not a frame.
+  r = Run(args + " --reference-index 1 --id 000001");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.err, HasSubstr("000001"));
+}
+
 TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities) {
   ASSERT_EQ(train_pose_->exit_code, 0) << train_pose_->err;
   // The generator knows the simulator's tools: a small synthetic bubble dataset of them.
@@ -193,6 +218,31 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
           Root("gd") + " --id 000003 --sampler mala");
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_THAT(r.err, HasSubstr("--method generator"));
+  // Both paths on the same frame: each record in its subfolder, one stacked picture.
+  const std::string both = Root("pose_both");
+  r = Run("pose --method both --sampler laplace --model " + Root("m.tfm") + " --pose-model " +
+          Root("p.tpm") + " --data " + Root("gd") + " --id 000003 --samples 20 --generator " +
+          Root("g.tpg") + " --out " + both);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("latent path"));
+  EXPECT_THAT(r.out, HasSubstr("generator path"));
+  EXPECT_EQ(nlohmann::json::parse(Slurp(both + "/latent/posterior.json"))["sampler"], "laplace");
+  EXPECT_EQ(nlohmann::json::parse(Slurp(both + "/generator/posterior.json"))["method"],
+            "generator");
+  const Image upper = ReadImage(both + "/latent/posterior.png", PixelEncoding::kRgb8);
+  const Image lower = ReadImage(both + "/generator/posterior.png", PixelEncoding::kRgb8);
+  const Image stacked = ReadImage(both + "/posterior.png", PixelEncoding::kRgb8);
+  EXPECT_GT(stacked.rows, upper.rows + lower.rows);  // one above the other
+  EXPECT_GE(stacked.cols, std::max(upper.cols, lower.cols));
+  r = Run("pose --method both --model " + Root("m.tfm") + " --pose-model " + Root("p.tpm") +
+          " --data " + Root("gd") + " --id 000003");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("--generator"));
+  r = Run("pose --method both --sampler mala --generator " + Root("g.tpg") + " --model " +
+          Root("m.tfm") + " --pose-model " + Root("p.tpm") + " --data " + Root("gd") +
+          " --id 000003");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("latent path's sampler"));
   // Every tool fitted: probabilities over the generator's tools sum to 1.
   r = Run(args + " --generator " + Root("g.tpg") + " --unknown-tool --json");
   ASSERT_EQ(r.exit_code, 0) << r.err;

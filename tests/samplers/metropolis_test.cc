@@ -15,6 +15,8 @@
 #include <boost/math/special_functions/bessel.hpp>
 #include <gtest/gtest.h>
 
+#include "samplers/sgld.h"
+
 namespace tactfunc {
 namespace {
 
@@ -121,6 +123,59 @@ TEST(MetropolisTest, VonMisesAngleAcrossTheWrap) {
     const double sn = (s.col(0).array() - mu).sin().mean();
     EXPECT_NEAR(c, expected_cos, 5 * std::sqrt(0.5 / ess));
     EXPECT_NEAR(sn, 0.0, 5 * std::sqrt(0.5 / ess));
+  }
+}
+
+// Two well separated modes (weights 0.3 and 0.7) over (angle, x): mode A centred at
+// angle 3.0, across the wrap, mode B at -1.2, each 0.15 rad wide, so local moves never
+// cross between them. Mode jumps from a proposal whose weights are wrong on purpose
+// (0.8 / 0.2) and whose means and widths are off must still give each mode its mass:
+// the MH ratio with q's density corrects q. Dropping q's ratio gives ~0.8 / 0.2.
+TEST(MetropolisTest, ModeJumpsGiveEachModeItsMass) {
+  const double wa = 0.3, wb = 0.7, s = 0.15;
+  const Eigen::Vector2d ma(3.0, 1.0), mb(-1.2, -1.0);
+  auto wrap = [](double a) { return std::remainder(a, 2 * M_PI); };
+  auto log_normal = [&](const Eigen::VectorXd& x, const Eigen::Vector2d& m, Eigen::Vector2d* g) {
+    const Eigen::Vector2d d(wrap(x[0] - m[0]), x[1] - m[1]);
+    if (g != nullptr) *g = -d / (s * s);
+    return -0.5 * d.squaredNorm() / (s * s);
+  };
+  const LogDensityFunction log_p = [&](const Eigen::VectorXd& x, Eigen::VectorXd* g) {
+    Eigen::Vector2d ga, gb;
+    const double la = std::log(wa) + log_normal(x, ma, &ga);
+    const double lb = std::log(wb) + log_normal(x, mb, &gb);
+    const double top = std::max(la, lb);
+    const double pa = std::exp(la - top), pb = std::exp(lb - top);
+    if (g != nullptr) *g = (pa * ga + pb * gb) / (pa + pb);
+    return top + std::log(pa + pb);
+  };
+  const Eigen::MatrixXd cov = Eigen::Matrix2d::Identity() * s * s;
+  for (MetropolisKernel kernel : kKernels) {
+    SCOPED_TRACE(ToString(kernel));
+    MetropolisOptions o = LongRun(kernel);
+    o.angles = {0};
+    // Without jumps every chain stays in the mode it starts in (B).
+    const MetropolisResult local = SampleMetropolis(log_p, mb, cov, o);
+    const Eigen::MatrixXd sl = local.Stacked();
+    EXPECT_EQ(((sl.col(1).array() > 0).cast<double>()).sum(), 0.0);
+
+    o.jump_probability = 0.2;
+    o.jumps = {{0.8, Eigen::Vector2d(3.1, 0.9), cov * 3.0},
+               {0.2, Eigen::Vector2d(-1.1, -1.1), cov * 2.0}};
+    const MetropolisResult r = SampleMetropolis(log_p, mb, cov, o);
+    std::vector<Eigen::VectorXd> in_a;
+    for (const Eigen::MatrixXd& chain : r.chains) {
+      in_a.push_back((chain.col(1).array() > 0).cast<double>().matrix());
+    }
+    const double ess = EffectiveSampleSize(in_a);
+    const Eigen::MatrixXd all = r.Stacked();
+    const double share = (all.col(1).array() > 0).cast<double>().mean();
+    EXPECT_GT(ess, 200);
+    EXPECT_NEAR(share, wa, 5 * std::sqrt(wa * wb / ess));
+    EXPECT_GT(r.JumpAcceptance(), 0.05);
+    // Both modes keep their own spread: mode A's angles straddle the wrap.
+    EXPECT_GT(all.col(0).maxCoeff(), 3.1);
+    EXPECT_LT(all.col(0).minCoeff(), -3.1);
   }
 }
 

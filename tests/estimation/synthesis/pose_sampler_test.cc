@@ -91,8 +91,12 @@ PoseSamples Sample(const Frame& f, MetropolisKernel kernel, int burn_in, int sam
   o.chain.burn_in = burn_in;
   o.chain.num_samples_per_chain = samples;
   o.chain.seed = seed;
-  return SamplePosePosterior(problem, m.generator, f.tool_index, f.summary.sigma,
-                             f.mixture.components().front(), o);
+  // Every mode the search found for the tool, as pose and bench pose-mcmc pass them.
+  std::vector<LaplaceComponent> modes;
+  for (const LaplaceComponent& c : f.mixture.components()) {
+    if (c.tool == f.tool) modes.push_back(c);
+  }
+  return SamplePosePosterior(problem, m.generator, f.tool_index, f.summary.sigma, modes, o);
 }
 
 class PoseSamplerTest : public ::testing::Test {

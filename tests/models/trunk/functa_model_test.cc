@@ -168,5 +168,57 @@ TEST(FunctaModel, SetTrunkRejectsInconsistentTrunks) {
   EXPECT_THROW(model.SetTrunk(trunk), std::invalid_argument);
 }
 
+TEST(FunctaModel, RecordsTheSensorDescriptionItWasTrainedOn) {
+  FunctaModel model = TwoSensorModel();
+  SensorDescription described = ParseSensorDescription(
+      R"({"name": "wedge", "kind": "optical", "channels": 3, "perspective":
+          {"corners": [[12, 8], [150, 10], [148, 118], [10, 116]], "rows": 90, "cols": 120},
+          "working_size": {"rows": 10, "cols": 12}, "pixel_pitch_mm": 0.1245,
+          "normalization_scale": 0.4, "markers": false})",
+      "sensor.json");
+  model.MutableTrunk(SensorKind::kGelSlim).description = described;
+  const std::string path = (std::filesystem::path(testing::TempDir()) / "described.tfm").string();
+  model.Save(path);
+  const FunctaModel read = FunctaModel::Load(path);
+  EXPECT_EQ(read.checksum(), model.checksum());
+  ASSERT_TRUE(read.Trunk(SensorKind::kGelSlim).description);
+  const SensorDescription& back = *read.Trunk(SensorKind::kGelSlim).description;
+  EXPECT_TRUE(SameFrames(back, described)) << SensorDescriptionToJson(back);
+  EXPECT_EQ(back.name, "wedge");
+  EXPECT_TRUE(SameFrames(TrunkSensorDescription(read.Trunk(SensorKind::kGelSlim)), described));
+  // The bubble trunk records none: it reads as the built-in of its kind at its format's
+  // working size (as do all models written before descriptions).
+  EXPECT_FALSE(read.Trunk(SensorKind::kSoftBubble).description);
+  const SensorDescription fallback = TrunkSensorDescription(read.Trunk(SensorKind::kSoftBubble));
+  EXPECT_EQ(fallback.name, "soft_bubble");
+  EXPECT_EQ(fallback.geometry, SensorDescription::Geometry::kNone);
+  EXPECT_EQ(fallback.working_rows, 10);
+  EXPECT_EQ(fallback.working_cols, 12);
+  EXPECT_EQ(fallback.channels, 1);
+}
+
+TEST(FunctaModel, AModelWithoutDescriptionsKeepsItsBytes) {
+  // The file of a model without descriptions has no "sensor_description" key, so models
+  // written before descriptions load unchanged and re-save to the same checksum.
+  const FunctaModel model = TwoSensorModel();
+  const std::string bytes = model.Serialize();
+  EXPECT_EQ(bytes.find("sensor_description"), std::string::npos);
+  const FunctaModel read = FunctaModel::Parse(bytes, "m.tfm");
+  EXPECT_EQ(read.Serialize(), bytes);
+}
+
+TEST(FunctaModel, ADescriptionOfAnotherKindIsRefusedNamingTheField) {
+  FunctaModel model = TwoSensorModel();
+  SensorDescription depth = BuiltInSensorDescription(SensorKind::kSoftBubble);
+  model.MutableTrunk(SensorKind::kGelSlim).description = depth;
+  try {
+    FunctaModel::Parse(model.Serialize(), "m.tfm");
+    ADD_FAILURE() << "accepted";
+  } catch (const TensorFileError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("m.tfm: field 'gelslim.sensor_description.kind': expected "
+                                    "optical for the gelslim trunk, got depth"));
+  }
+}
+
 }  // namespace
 }  // namespace tactfunc
