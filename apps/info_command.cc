@@ -109,6 +109,15 @@ nlohmann::json DescribeModel(const std::string& bytes, const std::string& path) 
                 t.format.grayscale ? " grayscale" : "", t.format.scale, t.meta_sgd.inner_steps,
                 t.meta_sgd.first_order ? " (first-order)" : "", t.alpha.minCoeff(),
                 t.alpha.maxCoeff(), t.residual_sigma);
+    if (o.has_spatial()) {
+      std::printf("           spatial latents: a %d x %d grid of %d values (%d) + %d global\n",
+                  o.spatial_rows, o.spatial_cols, o.spatial_channels, o.spatial_size(),
+                  o.global_latent_dim());
+    }
+    if (o.has_readout()) {
+      std::printf("           linear readout branch on a %d x %d grid\n", o.readout_rows,
+                  o.readout_cols);
+    }
     nlohmann::json trunk = {{"width", o.width},
                             {"layers", o.num_hidden_layers},
                             {"omega_0", o.omega_0},
@@ -124,6 +133,13 @@ nlohmann::json DescribeModel(const std::string& bytes, const std::string& path) 
                             {"alpha_min", t.alpha.minCoeff()},
                             {"alpha_max", t.alpha.maxCoeff()},
                             {"residual_sigma", t.residual_sigma}};
+    if (o.has_spatial()) {
+      trunk["spatial"] = {{"rows", o.spatial_rows},
+                          {"cols", o.spatial_cols},
+                          {"channels", o.spatial_channels},
+                          {"global_latent_dim", o.global_latent_dim()}};
+    }
+    if (o.has_readout()) trunk["readout"] = {{"rows", o.readout_rows}, {"cols", o.readout_cols}};
     const SensorDescription described = TrunkSensorDescription(t);
     std::cout << "           sensor " << DescribeSensor(described)
               << (t.description ? "" : " (built in: the model records none)") << "\n";

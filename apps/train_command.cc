@@ -55,6 +55,7 @@ struct TrainFlags {
   bool readout = false;
   bool skip_rest = false;
   std::string working_size;  // "ROWSxCOLS", empty = the preset's
+  std::string spatial_latent;  // "GHxGWxC", empty = one global latent
   bool resume = false;
   bool json = false;
   // Set after parsing: which overrides were given.
@@ -127,6 +128,32 @@ TrunkTrainer::Options OptionsFor(const TrainFlags& flags, SensorKind sensor) {
     options.divergence_drop_db = flags.divergence_drop_db;
   }
   if (flags.skip_rest) options.skip_frames_at_rest = true;
+  if (!flags.spatial_latent.empty()) {
+    int rows = 0, cols = 0, channels = 0;
+    char x1 = 0, x2 = 0, extra = 0;
+    std::istringstream in(flags.spatial_latent);
+    if (!(in >> rows >> x1 >> cols >> x2 >> channels) || (x1 != 'x' && x1 != 'X') ||
+        (x2 != 'x' && x2 != 'X') || (in >> extra) || rows < 1 || cols < 1 || channels < 1 ||
+        rows > 1024 || cols > 1024 || channels > 1024) {
+      throw UsageError("--spatial-latent: expected GHxGWxC (grid rows x grid cols x values "
+                       "per node, each in [1, 1024]), got '" +
+                       flags.spatial_latent + "'");
+    }
+    const long grid = static_cast<long>(rows) * cols * channels;
+    if (options.siren.latent_dim < grid) {
+      throw UsageError("--spatial-latent " + flags.spatial_latent + ": the grid holds " +
+                       std::to_string(grid) + " latent values, more than the latent " +
+                       "dimension " + std::to_string(options.siren.latent_dim) + " (" +
+                       (flags.latent_dim_option->count() ? std::string("--latent-dim")
+                                                         : "preset " + flags.preset + ", " +
+                                                               ToString(sensor)) +
+                       "); --latent-dim counts the grid's values plus the global ones, so "
+                       "give --latent-dim >= " + std::to_string(grid));
+    }
+    options.siren.spatial_rows = rows;
+    options.siren.spatial_cols = cols;
+    options.siren.spatial_channels = channels;
+  }
   if (!flags.working_size.empty()) {
     int rows = 0, cols = 0;
     char x = 0, extra = 0;
@@ -302,7 +329,14 @@ void RunTrain(const TrainFlags& flags) {
               << flags.preset << (flags.steps_option->count() ? ", --steps" : "") << ")"
               << resolution << ", batch " << o.batch_size << " on "
               << (processes.size() > 1 ? std::to_string(processes.size()) + " processes x " : "")
-              << o.threads << " thread(s); a time estimate follows the first steps" << std::endl;
+              << o.threads << " thread(s)"
+              << (o.siren.has_spatial()
+                      ? ", spatial latents " + std::to_string(o.siren.spatial_rows) + "x" +
+                            std::to_string(o.siren.spatial_cols) + "x" +
+                            std::to_string(o.siren.spatial_channels) + " + " +
+                            std::to_string(o.siren.global_latent_dim()) + " global"
+                      : std::string())
+              << "; a time estimate follows the first steps" << std::endl;
   }
 
   g_interrupted.store(false);
@@ -551,6 +585,11 @@ void RegisterTrain(CLI::App& app, CommandBody* selected) {
   sub->add_flag("--skip-rest", flags->skip_rest,
                 "Leave train-split frames at rest (no contact above the sensor's noise; "
                 "docs/REAL_DATA.md) out of training");
+  sub->add_option("--spatial-latent", flags->spatial_latent,
+                  "Spatial latents GHxGWxC: a GH x GW grid of C-value latents, interpolated "
+                  "per pixel into the trunk's shifts, beside a global latent of "
+                  "latent-dim - GH*GW*C values (0: spatial alone); --latent-dim counts both "
+                  "(docs/REPRESENTATION.md)");
   sub->add_option("--working-size", flags->working_size,
                   "Working resolution ROWSxCOLS the frames are resized to (default: the "
                   "preset's; keep your frames' aspect ratio)");

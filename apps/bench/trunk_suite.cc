@@ -48,6 +48,7 @@ struct TrunkFlags {
   int threads = 1;
   int repeats = 20;
   std::string workloads = "fit,meta-step";
+  std::string spatial;  // "GHxGWxC", empty = one global latent
   bool json = false;
 };
 
@@ -124,6 +125,17 @@ SensorTrunk MakeTrunk(const TrunkFlags& flags) {
   options.num_hidden_layers = flags.layers;
   options.latent_dim = flags.latent;
   options.output_channels = flags.channels;
+  if (!flags.spatial.empty()) {
+    char x1 = 0, x2 = 0, extra = 0;
+    std::istringstream in(flags.spatial);
+    if (!(in >> options.spatial_rows >> x1 >> options.spatial_cols >> x2 >>
+          options.spatial_channels) ||
+        x1 != 'x' || x2 != 'x' || (in >> extra)) {
+      throw UsageError("--spatial: expected GHxGWxC, got '" + flags.spatial + "'");
+    }
+  }
+  std::string error;
+  if (!options.IsValid(&error)) throw UsageError(error);
   trunk.siren = LatentModulatedSiren(options, 1);
   trunk.alpha = Eigen::VectorXd::Ones(flags.latent);  // the trainer's initial rates
   trunk.meta_sgd = TrunkTrainer::Options::DefaultMetaSgdOptions();
@@ -238,7 +250,9 @@ void RunTrunkBench(const TrunkFlags& flags) {
   };
   const SensorTrunk trunk = MakeTrunk(flags);
   std::cout << "bench trunk: width " << flags.width << ", " << flags.layers << " layers, d = "
-            << flags.latent << ", C = " << flags.channels << ", " << trunk.siren.NumParameters()
+            << flags.latent
+            << (flags.spatial.empty() ? "" : " (spatial latents " + flags.spatial + ")")
+            << ", C = " << flags.channels << ", " << trunk.siren.NumParameters()
             << " parameters, " << flags.rows << "x" << flags.cols << " frames, float\n";
   const double gemm_gflops = MeasureGemmGflops(20);
   std::cout << "bench trunk: Eigen float GEMM 4096x256x256, one thread: "
@@ -249,6 +263,8 @@ void RunTrunkBench(const TrunkFlags& flags) {
                             {"layers", flags.layers},
                             {"latent", flags.latent},
                             {"channels", flags.channels},
+                            {"spatial", flags.spatial.empty() ? nlohmann::json(nullptr)
+                                                              : nlohmann::json(flags.spatial)},
                             {"rows", flags.rows},
                             {"cols", flags.cols},
                             {"steps", flags.steps},
@@ -294,6 +310,9 @@ void RegisterTrunkSuite(CLI::App* bench, CommandBody* selected) {
   sub->add_option("--repeats", flags->repeats, "Timed repetitions of each workload (default 20)")
       ->check(CLI::Range(1, 100000));
   sub->add_option("--workloads", flags->workloads, "fit,meta-step (default both)");
+  sub->add_option("--spatial", flags->spatial,
+                  "Spatial latents GHxGWxC counted in --latent (train --spatial-latent; default "
+                  "none)");
   sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
   sub->callback([flags, selected]() { *selected = [flags]() { RunTrunkBench(*flags); }; });
 }

@@ -581,6 +581,11 @@ std::string TrunkTrainer::TrajectoryOptionsJson(SensorKind sensor,
   json["siren.latent_dim"] = o.siren.latent_dim;
   json["siren.omega_0"] = o.siren.omega_0;
   json["siren.coordinates"] = ToString(o.siren.coordinates);
+  if (o.siren.has_spatial()) {  // absent = one global latent (older files)
+    json["siren.spatial_rows"] = o.siren.spatial_rows;
+    json["siren.spatial_cols"] = o.siren.spatial_cols;
+    json["siren.spatial_channels"] = o.siren.spatial_channels;
+  }
   if (o.readout) {  // absent = no readout branch (older files)
     json["readout"] = true;
     json["readout_pca_frames"] = o.readout_pca_frames;

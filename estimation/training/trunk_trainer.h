@@ -81,9 +81,11 @@ class TrunkTrainer {
  public:
   struct Options {
     // ---- Trunk (models/trunk/latent_modulated_siren.h) --------------------------------------
-    // width, num_hidden_layers, latent_dim and omega_0 (SIREN's 30) are used as given;
-    // output_channels is ignored and set from the frame format (1 for the bubble or
-    // grayscale, 3 for RGB GelSlim). Defaults: the "default" preset (see Preset()).
+    // width, num_hidden_layers, latent_dim, omega_0 (SIREN's 30) and the spatial latent
+    // grid (spatial_rows/cols/channels; its values count towards latent_dim) are used as
+    // given; output_channels is ignored and set from the frame format (1 for the bubble
+    // or grayscale, 3 for RGB GelSlim), readout_rows/cols from `readout` below.
+    // Defaults: the "default" preset (see Preset()).
     LatentModulatedSiren::Options siren = DefaultSirenOptions();
     // The linear readout branch (models/trunk/latent_modulated_siren.h): a per-pixel
     // basis and mean at the working resolution, added to the SIREN's output. When set,

@@ -13,6 +13,10 @@ namespace {
 
 constexpr const char* kFormat = "tactfunc-model";
 constexpr int kVersion = 1;
+// How z and A split with spatial latents (models/trunk/latent_modulated_siren.h): z = [z_g,
+// the grid's node latents node-major], A = [A_g | A_s]. Recorded with the grid; a file
+// naming another layout is refused.
+constexpr const char* kSpatialLayout = "z=[global,grid node-major row-major]; A=[A_g|A_s]";
 
 std::vector<double> ToVector(const Eigen::VectorXd& v) {
   return std::vector<double>(v.data(), v.data() + v.size());
@@ -117,6 +121,13 @@ std::string FunctaModel::Serialize() const {
                             {"coordinates", ToString(o.coordinates)}};
     // Written only when present, so a trunk without the branch keeps the bytes it had.
     if (o.has_readout()) siren["readout"] = {{"rows", o.readout_rows}, {"cols", o.readout_cols}};
+    if (o.has_spatial()) {
+      siren["spatial"] = {{"rows", o.spatial_rows},
+                          {"cols", o.spatial_cols},
+                          {"channels", o.spatial_channels},
+                          {"global_latent_dim", o.global_latent_dim()},
+                          {"layout", kSpatialLayout}};
+    }
     meta["trunks"].push_back(
         {{"sensor", name},
          {"siren", siren},
@@ -184,6 +195,28 @@ FunctaModel FunctaModel::FromTensorFile(const TensorFile& file, const std::strin
         field = name + ".siren.readout";
         options.readout_rows = s.at("readout").at("rows").get<int>();
         options.readout_cols = s.at("readout").at("cols").get<int>();
+        field = name + ".siren";
+      }
+      if (s.contains("spatial")) {  // absent in files written before spatial latents
+        field = name + ".siren.spatial";
+        const auto& grid = s.at("spatial");
+        options.spatial_rows = grid.at("rows").get<int>();
+        options.spatial_cols = grid.at("cols").get<int>();
+        options.spatial_channels = grid.at("channels").get<int>();
+        const std::string layout = grid.at("layout").get<std::string>();
+        if (layout != kSpatialLayout) {
+          throw TensorFileError(source + ": field '" + field + ".layout': unknown layout '" +
+                                layout + "', expected '" + kSpatialLayout + "'");
+        }
+        std::string error;
+        if (!options.IsValid(&error)) throw TensorFileError(source + ": " + field + ": " + error);
+        const int global = grid.at("global_latent_dim").get<int>();
+        if (global != options.global_latent_dim()) {
+          throw TensorFileError(source + ": field '" + field + ".global_latent_dim': " +
+                                std::to_string(global) + " does not match latent_dim - rows * "
+                                "cols * channels = " +
+                                std::to_string(options.global_latent_dim()));
+        }
         field = name + ".siren";
       }
       std::string error;

@@ -17,10 +17,14 @@
 // LatentModulatedSiren's layout) and "<sensor>/alpha" (float32, latent_dim). A trunk with
 // the linear readout branch records its grid as "siren": {..., "readout": {"rows",
 // "cols"}} (its theta then ends with the branch's basis and mean); files without the key
-// load as trunks without the branch. A trunk trained on described frames records the
-// description as "sensor_description" (the file format of models/core/sensor_description.h,
-// "pixel_pitch_mm": 0 for an unknown pitch); files without it load without one. Loading checks every field and shape and names the
-// file and field on error.
+// load as trunks without the branch. A trunk with spatial latents records its grid as
+// "siren": {..., "spatial": {"rows", "cols", "channels", "global_latent_dim", "layout"}}
+// (layout: how z and the modulation matrix split, one fixed string today); files without
+// the key load as trunks with one global latent. A trunk trained on described frames
+// records the description as "sensor_description" (the file format of
+// models/core/sensor_description.h, "pixel_pitch_mm": 0 for an unknown pitch); files
+// without it load without one. Loading checks every field and shape and names the file
+// and field on error.
 #ifndef TACTFUNC_MODELS_TRUNK_FUNCTA_MODEL_H_
 #define TACTFUNC_MODELS_TRUNK_FUNCTA_MODEL_H_
 

@@ -92,10 +92,113 @@ struct Trace {
 // Block size for n pixels: at most kPixelBlock, and no larger than n.
 long BlockCapacity(long n) { return std::max<long>(1, std::min(n, kPixelBlock)); }
 
+// ---- Spatial latents (header comment): gamma(x) = A_g z_g + c + P w(x) -------------------
+// One call's spatial state: the split of z, P = A_s Z ((L*width) x G, one column of shifts
+// per node) and the current block's bilinear corners (4 per pixel).
+template <typename S>
+struct Spatial {
+  long d_global = 0;  // d_g
+  long channels = 0;  // c_s
+  long nodes = 0;     // G
+  MatrixX<S> P;       // (L*width) x G
+  std::vector<long> node;  // node[4 j + i]: corner i of the block's pixel j
+  std::vector<S> weight;   // its bilinear weight
+  long cols = 0;           // pixels in the current block
+
+  Spatial(const LatentModulatedSiren::Options& options, long capacity)
+      : d_global(options.global_latent_dim()),
+        channels(options.spatial_channels),
+        nodes(static_cast<long>(options.spatial_rows) * options.spatial_cols),
+        node(4 * capacity),
+        weight(4 * capacity) {}
+
+  // Z = the node latents of z as a c_s x G matrix (column k: node k's latent).
+  ConstMap<S> Nodes(const VectorX<S>& z) const {
+    return ConstMap<S>(z.data() + d_global, channels, nodes);
+  }
+  // A_g (the first d_g columns of A) and A_s (the last c_s).
+  auto Global(const ConstMap<S>& A) const { return A.leftCols(d_global); }
+  auto Local(const ConstMap<S>& A) const { return A.rightCols(channels); }
+
+  // The corners of every pixel of `coords` (m x 2, one block). A corner of weight 0
+  // (on the grid's last row or column, or a pixel on a node) is pointed at corner 0,
+  // whose weight is never 0 for a finite coordinate, so that blending it adds exactly 0
+  // (LocateSpatial's NaN weights stay NaN).
+  template <typename Coords>
+  void Locate(const LatentModulatedSiren& siren, const Eigen::MatrixBase<Coords>& coords) {
+    cols = coords.rows();
+    for (long j = 0; j < cols; ++j) {
+      const auto corners = siren.LocateSpatial(static_cast<double>(coords(j, 0)),
+                                               static_cast<double>(coords(j, 1)));
+      for (int i = 0; i < 4; ++i) {
+        node[4 * j + i] = corners.weight[i] == 0.0 ? corners.node[0] : corners.node[i];
+        weight[4 * j + i] = static_cast<S>(corners.weight[i]);
+      }
+    }
+  }
+
+  // out (width x m) += rows [row0, row0 + width) of Q (any (L*width) x G matrix of node
+  // columns: P or its tangent) blended per pixel: the four corners summed in one pass
+  // over the pixel's column (four read-modify-writes of it cost twice as much).
+  template <typename Out>
+  void Blend(const MatrixX<S>& Q, long row0, Eigen::MatrixBase<Out>& out) const {
+    const long width = out.rows();
+    for (long j = 0; j < cols; ++j) {
+      const long* n = &node[4 * j];
+      const S* w = &weight[4 * j];
+      out.col(j) += w[0] * Q.col(n[0]).segment(row0, width) +
+                    w[1] * Q.col(n[1]).segment(row0, width) +
+                    w[2] * Q.col(n[2]).segment(row0, width) +
+                    w[3] * Q.col(n[3]).segment(row0, width);
+    }
+  }
+
+  // Rows [row0, row0 + width) of *dQ ((L*width) x G) += the per-pixel columns of
+  // `delta` (width x m) scattered onto the nodes with the same weights. Consecutive
+  // pixels with the same four corners (a run along an image row between two grid
+  // columns) are summed as one product delta_run (width x len) * W_run (len x 4, their
+  // weights) before the four node columns are touched: four read-modify-writes of the
+  // node columns per pixel cost about as much as the layer's own reverse GEMM. Runs
+  // shorter than kMinRun (a training step's random pixels) are scattered pixel by
+  // pixel, where a product per run would cost more than it saves. Measured (`bench
+  // trunk --spatial 4x4x4`, width 64, 3 layers, d = 64, one thread, 2026-11): the
+  // meta_sgd:3 steps of a whole 70 x 88 frame 13.0 ms pixel by pixel, 12.4 ms by runs
+  // (10.5 ms without the grid); a meta-training step of 8 frames x 2048 random pixels
+  // 140 ms either way (116 ms without the grid).
+  static constexpr long kMinRun = 8;
+  template <typename Delta>
+  void Scatter(const Eigen::MatrixBase<Delta>& delta, long row0, MatrixX<S>* dQ) const {
+    using RunWeights = Eigen::Matrix<S, Eigen::Dynamic, 4, Eigen::RowMajor>;
+    const long width = delta.rows();
+    MatrixX<S>& sums = run_sums;
+    sums.resize(width, 4);
+    for (long begin = 0; begin < cols;) {
+      const long* n = &node[4 * begin];
+      long end = begin + 1;
+      while (end < cols && std::equal(n, n + 4, &node[4 * end])) ++end;
+      if (end - begin < kMinRun) {  // random pixel subsets: runs of one, no product
+        for (long j = begin; j < end; ++j) {
+          for (int i = 0; i < 4; ++i) {
+            dQ->col(n[i]).segment(row0, width) += weight[4 * j + i] * delta.col(j);
+          }
+        }
+      } else {
+        const Eigen::Map<const RunWeights> w(&weight[4 * begin], end - begin, 4);
+        sums.noalias() = delta.middleCols(begin, end - begin) * w;
+        for (int i = 0; i < 4; ++i) dQ->col(n[i]).segment(row0, width) += sums.col(i);
+      }
+      begin = end;
+    }
+  }
+  mutable MatrixX<S> run_sums;  // Scatter's width x 4 buffer (one per call's Spatial)
+};
+
 // Forward pass over `coords` (m x 2, one block of pixels) with shifts gamma = A z + c.
+// With spatial latents (spatial not null, its corners located for this block) gamma
+// is A_g z_g + c and each pixel adds its blend of the columns of spatial->P.
 template <typename S, typename Coords>
 void RunForward(const Net<S>& net, double omega_0, const Eigen::MatrixBase<Coords>& coords,
-                const VectorX<S>& gamma, Trace<S>* trace) {
+                const VectorX<S>& gamma, const Spatial<S>* spatial, Trace<S>* trace) {
   const int num_layers = static_cast<int>(net.W.size());
   const long m = coords.rows();
   const long width = net.b[0].rows();
@@ -106,6 +209,7 @@ void RunForward(const Net<S>& net, double omega_0, const Eigen::MatrixBase<Coord
     auto pre = trace->h[l + 1].leftCols(m);
     pre.noalias() = net.W[l] * trace->h[l].leftCols(m);
     pre.colwise() += net.b[l].col(0) + gamma.segment(l * width, width);
+    if (spatial != nullptr) spatial->Blend(spatial->P, l * width, pre);
     S* cosine = keep_cosine ? trace->cosine[l].data() : nullptr;
     internal::ScaledSinCos(width * m, static_cast<S>(omega_0), pre.data(), pre.data(),
                            cosine);
@@ -125,12 +229,15 @@ struct ReverseBuffers {
 // Reverse pass of one block from G = dL/dY^T (C x m). The trace must hold the cosines.
 // Adds the block's dL/dgamma to *dgamma and, if dL_dtheta is not null, its share of
 // dL/dW_l, dL/dW_out and dL/db_out to those blocks of *dL_dtheta; the blocks that
-// depend on pixels only through dgamma (b_l, A, c) are left to FinishGradient.
+// depend on pixels only through dgamma (b_l, A, c) are left to FinishGradient. With
+// spatial latents (spatial not null) it also scatters each pixel's dL/dgamma onto the
+// grid's nodes, *dP ((L*width) x G) += sum_j dL/dgamma(x_j) w(x_j)^T.
 template <typename S, typename GradY>
 void RunBackwardBlock(const Net<S>& net, const std::vector<ParameterBlock>& blocks,
                       double omega_0, const Trace<S>& trace,
                       const Eigen::MatrixBase<GradY>& G, ReverseBuffers<S>* buffers,
-                      VectorX<S>* dgamma, VectorX<S>* dL_dtheta) {
+                      const Spatial<S>* spatial, VectorX<S>* dgamma, MatrixX<S>* dP,
+                      VectorX<S>* dL_dtheta) {
   const int num_layers = static_cast<int>(net.W.size());
   const long width = net.b[0].rows();
   const long m = trace.cols;
@@ -149,6 +256,7 @@ void RunBackwardBlock(const Net<S>& net, const std::vector<ParameterBlock>& bloc
     auto delta = g->leftCols(m);
     delta.array() *= omega * trace.cosine[l].leftCols(m).array();  // now dL/dpre_l
     dgamma->segment(l * width, width) += delta.rowwise().sum();
+    if (spatial != nullptr) spatial->Scatter(delta, l * width, dP);
     if (dL_dtheta != nullptr) {
       block(2 * l).noalias() += delta * trace.h[l].leftCols(m).transpose();
     }
@@ -160,10 +268,13 @@ void RunBackwardBlock(const Net<S>& net, const std::vector<ParameterBlock>& bloc
 }
 
 // The gradient's pixel-independent parts from the accumulated dL/dgamma:
-// dL/db_l = dgamma_l, dL/dA = dgamma z^T, dL/dc = dgamma, dL/dz = A^T dgamma.
+// dL/db_l = dgamma_l, dL/dA = dgamma z^T, dL/dc = dgamma, dL/dz = A^T dgamma; with
+// spatial latents (spatial not null, dP the scattered dL/dgamma) dL/dA = [dgamma z_g^T |
+// dP Z^T], dL/dz_g = A_g^T dgamma, dL/dZ = A_s^T dP.
 template <typename S>
 void FinishGradient(const Net<S>& net, const std::vector<ParameterBlock>& blocks,
-                    const VectorX<S>& dgamma, const VectorX<S>& z, VectorX<S>* dL_dz,
+                    const VectorX<S>& dgamma, const VectorX<S>& z,
+                    const Spatial<S>* spatial, const MatrixX<S>* dP, VectorX<S>* dL_dz,
                     VectorX<S>* dL_dtheta) {
   const int num_layers = static_cast<int>(net.W.size());
   const long width = net.b[0].rows();
@@ -174,10 +285,35 @@ void FinishGradient(const Net<S>& net, const std::vector<ParameterBlock>& blocks
     for (int l = 0; l < num_layers; ++l) {
       block(2 * l + 1) = dgamma.segment(l * width, width);
     }
-    block(2 * num_layers).noalias() = dgamma * z.transpose();
+    if (spatial == nullptr) {
+      block(2 * num_layers).noalias() = dgamma * z.transpose();
+    } else {
+      auto dA = block(2 * num_layers);
+      dA.leftCols(spatial->d_global).noalias() =
+          dgamma * z.head(spatial->d_global).transpose();
+      dA.rightCols(spatial->channels).noalias() = *dP * spatial->Nodes(z).transpose();
+    }
     block(2 * num_layers + 1) = dgamma;
   }
-  if (dL_dz != nullptr) *dL_dz = net.A.transpose() * dgamma;
+  if (dL_dz == nullptr) return;
+  if (spatial == nullptr) {
+    *dL_dz = net.A.transpose() * dgamma;
+    return;
+  }
+  dL_dz->resize(z.size());
+  dL_dz->head(spatial->d_global).noalias() = spatial->Global(net.A).transpose() * dgamma;
+  Eigen::Map<MatrixX<S>>(dL_dz->data() + spatial->d_global, spatial->channels,
+                         spatial->nodes)
+      .noalias() = spatial->Local(net.A).transpose() * *dP;
+}
+
+// The shifts every pixel shares: gamma = A z + c, or A_g z_g + c with spatial latents,
+// whose *spatial then gets P = A_s Z.
+template <typename S>
+VectorX<S> SharedShifts(const Net<S>& net, const VectorX<S>& z, Spatial<S>* spatial) {
+  if (spatial == nullptr) return net.A * z + net.c;
+  spatial->P.noalias() = spatial->Local(net.A) * spatial->Nodes(z);
+  return spatial->Global(net.A) * z.head(spatial->d_global) + net.c;
 }
 
 // ---- The linear readout branch (header comment): y += R(x) z + m(x) ------------------
@@ -373,6 +509,18 @@ bool LatentModulatedSiren::Options::IsValid(std::string* error) const {
     message << "readout_rows and readout_cols must be both 0 (no readout branch) or both "
                ">= 1, found "
             << readout_rows << " x " << readout_cols;
+  } else if (spatial_rows < 0 || spatial_cols < 0 || spatial_channels < 0 ||
+             ((spatial_rows == 0) != (spatial_cols == 0)) ||
+             ((spatial_rows == 0) != (spatial_channels == 0))) {
+    message << "spatial_rows, spatial_cols and spatial_channels must be all 0 (no spatial "
+               "latents) or all >= 1, found "
+            << spatial_rows << " x " << spatial_cols << " x " << spatial_channels;
+  } else if (static_cast<double>(spatial_rows) * spatial_cols * spatial_channels >
+             latent_dim) {
+    message << "latent_dim must be >= spatial_rows * spatial_cols * spatial_channels (the "
+               "grid's values are part of the latent), found latent_dim "
+            << latent_dim << " for a " << spatial_rows << " x " << spatial_cols << " x "
+            << spatial_channels << " grid";
   } else if (static_cast<double>(readout_rows) * readout_cols * output_channels *
                  (latent_dim + 1) >
              1.0e9) {
@@ -413,7 +561,7 @@ void LatentModulatedSiren::BuildLayout() {
     add(ParameterGroup::kHiddenWeight, l, width, l == 0 ? 2 : width);
     add(ParameterGroup::kHiddenBias, l, width, 1);
   }
-  add(ParameterGroup::kModulationMatrix, 0, num_layers * width, options_.latent_dim);
+  add(ParameterGroup::kModulationMatrix, 0, num_layers * width, options_.modulation_inputs());
   add(ParameterGroup::kModulationBias, 0, num_layers * width, 1);
   add(ParameterGroup::kOutputWeight, 0, options_.output_channels, width);
   add(ParameterGroup::kOutputBias, 0, options_.output_channels, 1);
@@ -468,7 +616,7 @@ void LatentModulatedSiren::Initialize(std::uint64_t seed) {
         bound = block.layer == 0 ? 1.0 / 2.0 : hidden_bound;  // first: 1 / fan_in
         break;
       case ParameterGroup::kModulationMatrix:
-        bound = std::sqrt(6.0 / options_.latent_dim) / omega;
+        bound = std::sqrt(6.0 / options_.modulation_inputs()) / omega;  // d without spatial
         break;
       case ParameterGroup::kModulationBias:
         bound = 0.0;  // c = 0: at z = 0 the trunk is a plain SIREN
@@ -499,20 +647,22 @@ void LatentModulatedSiren::SetParameters(const Eigen::VectorXd& parameters) {
   parameters_float_ = parameters_.cast<float>();
 }
 
-LatentModulatedSiren::ReadoutCorners LatentModulatedSiren::LocateReadout(double x0,
-                                                                         double x1) const {
+namespace {
+// Bilinear corners of (x0, x1) on a rows x cols grid of nodes placed as the pixels of a
+// rows x cols image in `convention` (LocateReadout, LocateSpatial).
+LatentModulatedSiren::ReadoutCorners LocateOnGrid(CoordinateConvention convention, int rows,
+                                                  int cols, double x0, double x1) {
   // Grid position of a coordinate along an axis of `count` nodes, the inverse of
   // MakeGrid's mapping, clamped to [0, count - 1].
-  auto position = [this](double x, int count) {
-    double p = options_.coordinates == CoordinateConvention::kPixelCenters
+  auto position = [convention](double x, int count) {
+    double p = convention == CoordinateConvention::kPixelCenters
                    ? (x + 1.0) * 0.5 * count - 0.5
                    : (count == 1 ? 0.0 : (x + 1.0) * 0.5 * (count - 1));
     if (!(p >= 0.0)) p = std::isnan(p) ? p : 0.0;  // NaN stays NaN (a NaN output)
     return std::min(p, static_cast<double>(count - 1));
   };
-  const int rows = options_.readout_rows, cols = options_.readout_cols;
   const double pc = position(x0, cols), pr = position(x1, rows);
-  ReadoutCorners corners;
+  LatentModulatedSiren::ReadoutCorners corners;
   if (std::isnan(pc) || std::isnan(pr)) {
     for (int i = 0; i < 4; ++i) {
       corners.node[i] = 0;
@@ -532,6 +682,19 @@ LatentModulatedSiren::ReadoutCorners LatentModulatedSiren::LocateReadout(double 
   corners.weight[2] = fr * (1 - fc);
   corners.weight[3] = fr * fc;
   return corners;
+}
+}  // namespace
+
+LatentModulatedSiren::ReadoutCorners LatentModulatedSiren::LocateReadout(double x0,
+                                                                         double x1) const {
+  return LocateOnGrid(options_.coordinates, options_.readout_rows, options_.readout_cols, x0,
+                      x1);
+}
+
+LatentModulatedSiren::ReadoutCorners LatentModulatedSiren::LocateSpatial(double x0,
+                                                                         double x1) const {
+  return LocateOnGrid(options_.coordinates, options_.spatial_rows, options_.spatial_cols, x0,
+                      x1);
 }
 
 template <>
@@ -597,7 +760,9 @@ LatentModulatedSiren::MatrixX<Scalar> LatentModulatedSiren::Forward(
   CheckShape("z", z.rows(), 1, options_.latent_dim, 1);
   const long n = coords.rows();
   const Net<Scalar> net(ParameterData<Scalar>(), blocks_, options_.num_hidden_layers);
-  const VectorX<Scalar> gamma = net.A * z + net.c;
+  std::unique_ptr<Spatial<Scalar>> spatial;
+  if (has_spatial()) spatial = std::make_unique<Spatial<Scalar>>(options_, BlockCapacity(n));
+  const VectorX<Scalar> gamma = SharedShifts(net, z, spatial.get());
   Trace<Scalar> trace(options_.num_hidden_layers, options_.width, options_.output_channels,
                       BlockCapacity(n), /*keep_cosine=*/false);
   MatrixX<Scalar> outputs(n, options_.output_channels);
@@ -609,7 +774,9 @@ LatentModulatedSiren::MatrixX<Scalar> LatentModulatedSiren::Forward(
   }
   for (long begin = 0; begin < n; begin += kPixelBlock) {
     const long m = std::min(kPixelBlock, n - begin);
-    RunForward(net, options_.omega_0, coords.middleRows(begin, m), gamma, &trace);
+    if (spatial) spatial->Locate(*this, coords.middleRows(begin, m));
+    RunForward(net, options_.omega_0, coords.middleRows(begin, m), gamma, spatial.get(),
+               &trace);
     if (has_readout()) {
       auto y = trace.y.leftCols(m);
       AddReadout(*this, coords.middleRows(begin, m), u, y);
@@ -631,7 +798,13 @@ void LatentModulatedSiren::Backward(const MatrixX<Scalar>& coords,
   const long n = coords.rows();
   const long capacity = BlockCapacity(n);
   const Net<Scalar> net(ParameterData<Scalar>(), blocks_, options_.num_hidden_layers);
-  const VectorX<Scalar> gamma = net.A * z + net.c;
+  std::unique_ptr<Spatial<Scalar>> spatial;
+  MatrixX<Scalar> dP;  // the spatial latents' scattered dL/dgamma
+  if (has_spatial()) {
+    spatial = std::make_unique<Spatial<Scalar>>(options_, capacity);
+    dP.setZero(net.A.rows(), spatial->nodes);
+  }
+  const VectorX<Scalar> gamma = SharedShifts(net, z, spatial.get());
   Trace<Scalar> trace(options_.num_hidden_layers, options_.width, options_.output_channels,
                       capacity, /*keep_cosine=*/true);
   ReverseBuffers<Scalar> buffers(options_.width, capacity);
@@ -642,15 +815,18 @@ void LatentModulatedSiren::Backward(const MatrixX<Scalar>& coords,
   for (long begin = 0; begin < n; begin += kPixelBlock) {
     const long m = std::min(kPixelBlock, n - begin);
     // The readout adds to y but not to the SIREN's reverse pass (y is linear in both).
-    RunForward(net, options_.omega_0, coords.middleRows(begin, m), gamma, &trace);
+    if (spatial) spatial->Locate(*this, coords.middleRows(begin, m));
+    RunForward(net, options_.omega_0, coords.middleRows(begin, m), gamma, spatial.get(),
+               &trace);
     RunBackwardBlock(net, blocks_, options_.omega_0, trace,
-                     dL_dY.middleRows(begin, m).transpose(), &buffers, &dgamma, dL_dtheta);
+                     dL_dY.middleRows(begin, m).transpose(), &buffers, spatial.get(), &dgamma,
+                     &dP, dL_dtheta);
     if (has_readout()) {
       ScatterReadout(*this, coords.middleRows(begin, m), dL_dY.middleRows(begin, m).transpose(),
                      &s);
     }
   }
-  FinishGradient(net, blocks_, dgamma, z, dL_dz, dL_dtheta);
+  FinishGradient(net, blocks_, dgamma, z, spatial.get(), &dP, dL_dz, dL_dtheta);
   if (has_readout()) {
     const ReadoutMaps<Scalar> readout(ParameterData<Scalar>(), blocks_,
                                       options_.num_hidden_layers);
@@ -673,17 +849,21 @@ void LatentModulatedSiren::ForwardAndLatentJacobian(const MatrixX<Scalar>& coord
   const int channels = options_.output_channels;
   const int d = options_.latent_dim;
   const Net<Scalar> net(ParameterData<Scalar>(), blocks_, num_layers);
-  const VectorX<Scalar> gamma = net.A * z + net.c;
+  std::unique_ptr<Spatial<Scalar>> spatial;
+  if (has_spatial()) spatial = std::make_unique<Spatial<Scalar>>(options_, capacity);
+  const VectorX<Scalar> gamma = SharedShifts(net, z, spatial.get());
   const Scalar omega = static_cast<Scalar>(options_.omega_0);
   Trace<Scalar> trace(num_layers, width, channels, capacity,
                       /*keep_cosine=*/J_y_z != nullptr);
   if (outputs != nullptr) outputs->resize(n, channels);
-  MatrixX<Scalar> g, g_below, J_channel;  // d x B: d y_c / d z per pixel
+  // A.cols() x B: d y_c / d z per pixel (d = A.cols() without spatial latents; with them
+  // d y_c / d [z_g, z_s(x)], scattered onto the nodes below).
+  MatrixX<Scalar> g, g_below, J_channel;
   if (J_y_z != nullptr) {
     J_y_z->resize(n * channels, d);
     g.resize(width, capacity);
     g_below.resize(width, capacity);
-    J_channel.resize(d, capacity);
+    J_channel.resize(net.A.cols(), capacity);
   }
   std::unique_ptr<ReadoutMaps<Scalar>> readout;
   VectorX<Scalar> u;
@@ -693,7 +873,9 @@ void LatentModulatedSiren::ForwardAndLatentJacobian(const MatrixX<Scalar>& coord
   }
   for (long begin = 0; begin < n; begin += kPixelBlock) {
     const long m = std::min(kPixelBlock, n - begin);
-    RunForward(net, options_.omega_0, coords.middleRows(begin, m), gamma, &trace);
+    if (spatial) spatial->Locate(*this, coords.middleRows(begin, m));
+    RunForward(net, options_.omega_0, coords.middleRows(begin, m), gamma, spatial.get(),
+               &trace);
     if (outputs != nullptr) {
       auto y = trace.y.leftCols(m);
       if (readout) AddReadout(*this, coords.middleRows(begin, m), u, y);
@@ -733,7 +915,22 @@ void LatentModulatedSiren::ForwardAndLatentJacobian(const MatrixX<Scalar>& coord
           std::swap(delta, below);
         }
       }
-      if (channels == 1) {
+      if (spatial) {
+        // Row of pixel j, channel ch: the global columns from J's first d_g rows, each
+        // corner node's c_s columns from its last c_s rows times the corner's weight.
+        const long dg = spatial->d_global, cs = spatial->channels;
+        for (long j = 0; j < m; ++j) {
+          auto row = J_y_z->row((begin + j) * channels + ch);
+          if (!readout) row.setZero();
+          row.head(dg) += J.col(j).head(dg).transpose();
+          for (int i = 0; i < 4; ++i) {
+            const Scalar w = spatial->weight[4 * j + i];
+            if (w == Scalar(0)) continue;
+            row.segment(dg + spatial->node[4 * j + i] * cs, cs) +=
+                w * J.col(j).tail(cs).transpose();
+          }
+        }
+      } else if (channels == 1) {
         if (readout) {
           J_y_z->middleRows(begin, m) += J.transpose();
         } else {
@@ -792,7 +989,20 @@ Scalar LatentModulatedSiren::LossGradientAndHessianProduct(
   const long capacity = BlockCapacity(n);
   const Scalar omega = static_cast<Scalar>(options_.omega_0);
   const Net<Scalar> net(ParameterData<Scalar>(), blocks_, num_layers);
-  const VectorX<Scalar> gamma = net.A * z + net.c;
+  // Spatial latents: P (in *spatial) and the scattered dL/dgamma of the gradient pass
+  // (grad_dP) and of the Hessian-vector product's reverse pass (dP), as grad_dgamma and
+  // dgamma below; P_dot and ddP are their tangents.
+  std::unique_ptr<Spatial<Scalar>> spatial;
+  MatrixX<Scalar> grad_dP, dP, P_dot, ddP;
+  if (has_spatial()) {
+    spatial = std::make_unique<Spatial<Scalar>>(options_, capacity);
+    if (gradient) grad_dP.setZero(num_layers * width, spatial->nodes);
+    if (hvp) {
+      dP.setZero(num_layers * width, spatial->nodes);
+      ddP.setZero(num_layers * width, spatial->nodes);
+    }
+  }
+  const VectorX<Scalar> gamma = SharedShifts(net, z, spatial.get());
   Scalar scale;
   const double inverse_normaliser = MseNormaliser(weights, n, channels, &scale);
 
@@ -819,8 +1029,19 @@ Scalar LatentModulatedSiren::LossGradientAndHessianProduct(
     if (v_theta != nullptr) {
       dnet = std::make_unique<Net<Scalar>>(v_theta->data(), blocks_, num_layers);
     }
-    dgamma_dot = net.A * v_z;
-    if (dnet) dgamma_dot += dnet->A * z + dnet->c;
+    if (spatial) {
+      // gamma' = A_g v_zg + A_g' z_g + c' shared, P' = A_s V + A_s' Z per node.
+      const long dg = spatial->d_global;
+      dgamma_dot = spatial->Global(net.A) * v_z.head(dg);
+      P_dot.noalias() = spatial->Local(net.A) * spatial->Nodes(v_z);
+      if (dnet) {
+        dgamma_dot += spatial->Global(dnet->A) * z.head(dg) + dnet->c;
+        P_dot.noalias() += spatial->Local(dnet->A) * spatial->Nodes(z);
+      }
+    } else {
+      dgamma_dot = net.A * v_z;
+      if (dnet) dgamma_dot += dnet->A * z + dnet->c;
+    }
     ddgamma.setZero(num_layers * width);
     if (hv == nullptr) hv = &hv_theta_storage;  // the theta blocks are cheap by-products
     hv->setZero(num_parameters_);
@@ -860,7 +1081,8 @@ Scalar LatentModulatedSiren::LossGradientAndHessianProduct(
   for (long begin = 0; begin < n; begin += kPixelBlock) {
     const long m = std::min(kPixelBlock, n - begin);
     const auto block_coords = coords.middleRows(begin, m);
-    RunForward(net, options_.omega_0, block_coords, gamma, &trace);
+    if (spatial) spatial->Locate(*this, block_coords);
+    RunForward(net, options_.omega_0, block_coords, gamma, spatial.get(), &trace);
     if (readout) {
       auto y = trace.y.leftCols(m);
       AddReadout(*this, block_coords, u, y);
@@ -871,7 +1093,7 @@ Scalar LatentModulatedSiren::LossGradientAndHessianProduct(
     if (readout) ScatterReadout(*this, block_coords, Gm, &scatter);
     if (gradient) {
       RunBackwardBlock(net, blocks_, options_.omega_0, trace, Gm, buffers.get(),
-                       &grad_dgamma, dL_dtheta);
+                       spatial.get(), &grad_dgamma, &grad_dP, dL_dtheta);
     }
     if (!hvp) continue;
     // Tangent forward pass.
@@ -888,6 +1110,7 @@ Scalar LatentModulatedSiren::LossGradientAndHessianProduct(
       } else {
         s.colwise() += dgamma_dot.segment(l * width, width);
       }
+      if (spatial) spatial->Blend(P_dot, l * width, s);
       s *= omega;
       h_dot[l + 1].leftCols(m) = trace.cosine[l].leftCols(m).cwiseProduct(s);
     }
@@ -924,6 +1147,10 @@ Scalar LatentModulatedSiren::LossGradientAndHessianProduct(
       ddm = omega * (gdm.array() * cosine - gm.array() * sine * s_dot[l].leftCols(m).array());
       dgamma.segment(l * width, width) += dm.rowwise().sum();
       ddgamma.segment(l * width, width) += ddm.rowwise().sum();
+      if (spatial) {
+        spatial->Scatter(dm, l * width, &dP);
+        spatial->Scatter(ddm, l * width, &ddP);
+      }
       const auto h_below = trace.h[l].leftCols(m);
       hv_block(2 * l).noalias() += ddm * h_below.transpose();
       if (l > 0) hv_block(2 * l).noalias() += dm * h_dot[l].leftCols(m).transpose();
@@ -935,7 +1162,7 @@ Scalar LatentModulatedSiren::LossGradientAndHessianProduct(
     }
   }
   if (gradient) {
-    FinishGradient(net, blocks_, grad_dgamma, z, dL_dz, dL_dtheta);
+    FinishGradient(net, blocks_, grad_dgamma, z, spatial.get(), &grad_dP, dL_dz, dL_dtheta);
     if (readout) {
       FinishReadoutGradient(*readout, blocks_, num_layers, scatter, z, dL_dz,
                             readout_frozen_ ? nullptr : dL_dtheta);
@@ -945,11 +1172,32 @@ Scalar LatentModulatedSiren::LossGradientAndHessianProduct(
     for (int l = 0; l < num_layers; ++l) {
       hv_block(2 * l + 1) = ddgamma.segment(l * width, width);
     }
-    hv_block(2 * num_layers).noalias() = ddgamma * z.transpose() + dgamma * v_z.transpose();
     hv_block(2 * num_layers + 1) = ddgamma;
-    if (Hv_z != nullptr) {
-      *Hv_z = net.A.transpose() * ddgamma;
-      if (dnet) Hv_z->noalias() += dnet->A.transpose() * dgamma;
+    if (spatial) {
+      // g_A = [dgamma z_g^T | dP Z^T] and g_z = [A_g^T dgamma; A_s^T dP] differentiated
+      // along (v_theta, v_z).
+      const long dg = spatial->d_global, cs = spatial->channels;
+      auto hv_A = hv_block(2 * num_layers);
+      hv_A.leftCols(dg).noalias() =
+          ddgamma * z.head(dg).transpose() + dgamma * v_z.head(dg).transpose();
+      hv_A.rightCols(cs).noalias() =
+          ddP * spatial->Nodes(z).transpose() + dP * spatial->Nodes(v_z).transpose();
+      if (Hv_z != nullptr) {
+        Hv_z->resize(options_.latent_dim);
+        auto hv_nodes = Eigen::Map<MatrixX<Scalar>>(Hv_z->data() + dg, cs, spatial->nodes);
+        Hv_z->head(dg).noalias() = spatial->Global(net.A).transpose() * ddgamma;
+        hv_nodes.noalias() = spatial->Local(net.A).transpose() * ddP;
+        if (dnet) {
+          Hv_z->head(dg).noalias() += spatial->Global(dnet->A).transpose() * dgamma;
+          hv_nodes.noalias() += spatial->Local(dnet->A).transpose() * dP;
+        }
+      }
+    } else {
+      hv_block(2 * num_layers).noalias() = ddgamma * z.transpose() + dgamma * v_z.transpose();
+      if (Hv_z != nullptr) {
+        *Hv_z = net.A.transpose() * ddgamma;
+        if (dnet) Hv_z->noalias() += dnet->A.transpose() * dgamma;
+      }
     }
     if (readout) {
       // g_z's readout term R s has the tangent R s' + R' s; g_R = z s^T has v_z s^T +

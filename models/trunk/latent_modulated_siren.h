@@ -25,11 +25,33 @@
 // dataset and meta-learned; z starts at zero for every new frame and a few gradient
 // steps fit it (Eq. 6). At z = 0 the trunk computes the "initial image" of Fig. 3.
 //
+// SPATIAL LATENTS (optional; after "Spatial Functa", Bauer et al. 2023). With
+// Options::spatial_rows/cols/channels = G_h, G_w, c_s (all >= 1) part of z is a grid of
+// local latents and gamma becomes a per-pixel shift:
+//
+//   z       = [z_g (d_g values), Z (G c_s values)],   G = G_h G_w,  d = d_g + G c_s
+//   z_s(x)  = sum_k w_k(x) Z_k                         (c_s values: the bilinear mix of
+//                                                       the grid's node latents at x)
+//   gamma(x) = A_g z_g + A_s z_s(x) + c,   A = [A_g | A_s]: (L*width) x (d_g + c_s)
+//
+// Z_k, the latent of node k = row * G_w + col (row-major over the grid), is
+// z[d_g + k c_s .. d_g + (k+1) c_s); the nodes sit where the pixels of a G_h x G_w image
+// sit in the trunk's coordinate convention, and coordinates between the outer nodes and
+// the image's edge take the edge nodes' latents (LocateSpatial; the same placement and
+// clamping as the readout grid). d_g = 0 is a purely spatial latent. Without the option
+// (all three 0, the default) d_g = d, A is (L*width) x d and the trunk is exactly the
+// global-latent one above. The passes precompute P = A_s [Z_0 .. Z_{G-1}] (one column
+// of L*width shifts per node) once per call and blend 4 of its columns per pixel; the
+// reverse passes scatter each pixel's dL/dgamma onto the nodes with the same weights
+// (dP) and finish with dL/dZ = A_s^T dP, dL/dA_s = dP Z^T. The readout branch, if
+// present, still reads the whole z.
+//
 // Parameters. All of theta lives in ONE flat vector (double precision master copy,
 // mirrored in float for the fast paths), so that Adam, SGLD and model files see one
 // array. Its layout, in this order, every matrix column-major:
 //   for l = 0 .. L-1:  W_l (width x fan_in_l), b_l (width)
-//   A ((L*width) x d), c (L*width), W_out (C x width), b_out (C)
+//   A ((L*width) x d; with spatial latents (L*width) x (d_g + c_s), the columns of A_g
+//      then those of A_s), c (L*width), W_out (C x width), b_out (C)
 //   and, with the readout branch, R (d x (G*C)) and m (G*C), G = readout_rows *
 //   readout_cols, column / entry g*C + c for node g (row-major over the grid), channel c
 //   (so a trunk without the branch has exactly the layout it always had)
@@ -41,8 +63,10 @@
 //   W_0, b_0            ~ U(-1/fan_in, 1/fan_in)           (fan_in = 2)
 //   W_l, b_l (l >= 1)   ~ U(-sqrt(6/width)/omega_0, +...)
 //   W_out, b_out        ~ U(-sqrt(6/width)/omega_0, +...)
-//   A                   ~ U(-sqrt(6/d)/omega_0, +...)      (a unit change of one z_k
-//                                                           moves phases by O(1) rad)
+//   A                   ~ U(-sqrt(6/n)/omega_0, +...)      (n = A's columns: d, or
+//                                                           d_g + c_s with spatial
+//                                                           latents; a unit change of one
+//                                                           z_k moves phases by O(1) rad)
 //   c = 0, R = 0, m = 0 (the trainer may start R, m from a PCA), latents start at zero.
 // Biases take the range of their layer's weights: the first layer's then spreads the
 // phases of the first sines over +-omega_0/2 rad, as PyTorch SIREN's default bias does.
@@ -108,7 +132,8 @@ bool CoordinateConventionFromString(const std::string& name,
 enum class ParameterGroup {
   kHiddenWeight,      // W_l, width x fan_in_l (one block per hidden layer)
   kHiddenBias,        // b_l, width x 1        (one block per hidden layer)
-  kModulationMatrix,  // A, (L*width) x d
+  kModulationMatrix,  // A, (L*width) x d   ((L*width) x (d_g + c_s) = [A_g | A_s] with
+                      // spatial latents)
   kModulationBias,    // c, (L*width) x 1
   kOutputWeight,      // W_out, C x width
   kOutputBias,        // b_out, C x 1
@@ -159,6 +184,26 @@ class LatentModulatedSiren {
     int readout_rows = 0;
     int readout_cols = 0;
     bool has_readout() const { return readout_rows > 0 && readout_cols > 0; }
+    // Spatial latents (header comment): a spatial_rows x spatial_cols grid of
+    // spatial_channels-vectors, the last G c_s values of z (they count towards
+    // latent_dim, which must be >= G c_s). All three 0 (default: one global latent) or
+    // all three >= 1.
+    int spatial_rows = 0;
+    int spatial_cols = 0;
+    int spatial_channels = 0;
+    bool has_spatial() const {
+      return spatial_rows > 0 && spatial_cols > 0 && spatial_channels > 0;
+    }
+    // G c_s, the grid's share of z (0 without spatial latents).
+    int spatial_size() const {
+      return has_spatial() ? spatial_rows * spatial_cols * spatial_channels : 0;
+    }
+    // d_g = latent_dim - G c_s, the global part of z (z's first d_g values).
+    int global_latent_dim() const { return latent_dim - spatial_size(); }
+    // Columns of A: d_g + c_s (d without spatial latents).
+    int modulation_inputs() const {
+      return global_latent_dim() + (has_spatial() ? spatial_channels : 0);
+    }
 
     // True if every field is in range; otherwise false and *error (if not null)
     // names the bad field and its value.
@@ -201,6 +246,10 @@ class LatentModulatedSiren {
     double weight[4];
   };
   ReadoutCorners LocateReadout(double x0, double x1) const;
+  // The same on the spatial latent grid (node = row * spatial_cols + col). Requires
+  // has_spatial().
+  bool has_spatial() const { return options_.has_spatial(); }
+  ReadoutCorners LocateSpatial(double x0, double x1) const;
 
   // All blocks, in flat order (2 L + 4 of them, 2 L + 6 with the readout branch).
   const std::vector<ParameterBlock>& parameter_blocks() const { return blocks_; }
@@ -340,6 +389,7 @@ void LatentModulatedSiren::EvaluateImpl(const P* theta, const T* coord2, const T
   const int width = options_.width;
   const int num_layers = options_.num_hidden_layers;
   const int d = options_.latent_dim;
+  const int d_global = options_.global_latent_dim();
   const int channels = options_.output_channels;
   const int num_shifts = num_layers * width;
   const P* A = theta + blocks_[2 * num_layers].offset;
@@ -348,6 +398,21 @@ void LatentModulatedSiren::EvaluateImpl(const P* theta, const T* coord2, const T
   const P* b_out = theta + blocks_[2 * num_layers + 3].offset;
   const T omega(options_.omega_0);
 
+  // Spatial latents: z_s(x), the bilinear mix of the grid's node latents (the weights
+  // depend on the coordinate's value only).
+  const int spatial_channels = has_spatial() ? options_.spatial_channels : 0;
+  std::vector<T> z_s(spatial_channels, T(0.0));
+  if (has_spatial()) {
+    const ReadoutCorners corners =
+        LocateSpatial(PlainValue(coord2[0]), PlainValue(coord2[1]));
+    for (int i = 0; i < 4; ++i) {
+      if (corners.weight[i] == 0.0) continue;
+      const T w(corners.weight[i]);
+      for (int ch = 0; ch < spatial_channels; ++ch) {
+        z_s[ch] += w * z[d_global + corners.node[i] * spatial_channels + ch];
+      }
+    }
+  }
   std::vector<T> h(coord2, coord2 + 2);
   std::vector<T> next(width);
   for (int l = 0; l < num_layers; ++l) {
@@ -357,7 +422,10 @@ void LatentModulatedSiren::EvaluateImpl(const P* theta, const T* coord2, const T
     for (int i = 0; i < width; ++i) {
       const int row = l * width + i;
       T pre = T(b[i]) + T(c[row]);
-      for (int k = 0; k < d; ++k) pre += A[row + k * num_shifts] * z[k];
+      for (int k = 0; k < d_global; ++k) pre += A[row + k * num_shifts] * z[k];
+      for (int k = 0; k < spatial_channels; ++k) {
+        pre += A[row + (d_global + k) * num_shifts] * z_s[k];
+      }
       for (int j = 0; j < fan_in; ++j) pre += W[i + j * width] * h[j];
       next[i] = sin(omega * pre);
     }

@@ -295,6 +295,56 @@ TEST_F(TrainCliTest, TrainSaysWhatItWillRunAndEncodeRefusesFramesOfAnotherSensor
   EXPECT_THAT(r.err, ::testing::Not(HasSubstr("warning")));
 }
 
+TEST_F(TrainCliTest, ASpatialLatentTrunkTrainsAndEveryCommandUsesIt) {
+  // A 2 x 2 grid of 3-value latents (12 values) beside 4 global ones: d = 16.
+  const Result train = Run("train --data " + Root("d") + " --out " + Root("sp.tfm") +
+                           " --preset tiny --steps 3 --seed 2 --spatial-latent 2x2x3");
+  ASSERT_EQ(train.exit_code, 0) << train.err;
+  EXPECT_THAT(train.out, HasSubstr("spatial latents 2x2x3 + 4 global"));
+  const FunctaModel model = FunctaModel::Load(Root("sp.tfm"));
+  const LatentModulatedSiren::Options& o = model.Trunk(SensorKind::kSoftBubble).siren.options();
+  EXPECT_EQ(o.spatial_rows, 2);
+  EXPECT_EQ(o.spatial_cols, 2);
+  EXPECT_EQ(o.spatial_channels, 3);
+  EXPECT_EQ(o.latent_dim, 16);
+  EXPECT_EQ(o.global_latent_dim(), 4);
+  const Result info = Run("info " + Root("sp.tfm") + " --json");
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  EXPECT_THAT(info.out, HasSubstr("spatial latents: a 2 x 2 grid of 3 values (12) + 4 global"));
+  EXPECT_EQ(info.LastJson()["model"]["trunks"]["bubble"]["spatial"]["channels"].get<int>(), 3);
+  for (const std::string& strategy : {"meta_sgd:3", "ceres:3"}) {
+    const std::string name = strategy == "ceres:3" ? "sp_ceres" : "sp";
+    const Result encode = Run("encode --model " + Root("sp.tfm") + " --data " + Root("d") +
+                              " --out " + Root(name + ".tfs") + " --threads 1 --strategy " +
+                              strategy);
+    ASSERT_EQ(encode.exit_code, 0) << encode.err;
+    const Result recon = Run("recon --model " + Root("sp.tfm") + " --functaset " +
+                             Root(name + ".tfs") + " --data " + Root("d") + " --out " +
+                             Root(name + "_recon") + " --json");
+    ASSERT_EQ(recon.exit_code, 0) << recon.err;
+    const Result eval = Run("eval --data " + Root("d") + " --model " + Root("sp.tfm") +
+                            " --functaset " + Root(name + ".tfs") + " --out " +
+                            Root(name + "_eval") + " --threads 1");
+    EXPECT_EQ(eval.exit_code, 0) << eval.err;
+  }
+  const Result fit = Run("fit --model " + Root("sp.tfm") + " --frame " +
+                         Root("d/bubble/000003.png") + " --reference " +
+                         Root("d/bubble/reference.png") + " --strategy ceres:3 --out " +
+                         Root("sp_fit") + " --json");
+  EXPECT_EQ(fit.exit_code, 0) << fit.err;
+  // A grid with more values than the latent fails before any data is read, naming both.
+  const Result bad = Run("train --data " + Root("d") + " --out " + Root("bad_sp.tfm") +
+                         " --preset tiny --steps 2 --spatial-latent 3x3x2");
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_THAT(bad.err, HasSubstr("--spatial-latent 3x3x2"));
+  EXPECT_THAT(bad.err, HasSubstr("--latent-dim >= 18"));
+  const Result malformed = Run("train --data " + Root("d") + " --out " + Root("bad_sp.tfm") +
+                               " --preset tiny --steps 2 --spatial-latent 3x3");
+  EXPECT_EQ(malformed.exit_code, 2);
+  EXPECT_THAT(malformed.err, HasSubstr("GHxGWxC"));
+  EXPECT_FALSE(fs::exists(Root("bad_sp.tfm")));
+}
+
 TEST_F(TrainCliTest, ADivergingRunFailsNamingTheLearningRateAndWritesNoModel) {
   const Result r = Run("train --data " + Root("d") + " --out " + Root("div.tfm") +
                        " --preset tiny --learning-rate 0.03 --seed 1");

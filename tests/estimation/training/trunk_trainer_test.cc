@@ -344,6 +344,48 @@ TEST_F(TrunkTrainerTest, ResumingAReadoutRunIsBitIdentical) {
               ::testing::ThrowsMessage<std::runtime_error>(HasSubstr("readout")));
 }
 
+TEST_F(TrunkTrainerTest, ASpatialLatentRunLearnsResumesBitIdenticallyAndRecordsItsGrid) {
+  // A 2 x 2 grid of 3-value latents beside 4 global values (d = 16, the tiny preset's).
+  TrunkTrainer::Options options = ShortOptions();
+  options.siren.spatial_rows = 2;
+  options.siren.spatial_cols = 2;
+  options.siren.spatial_channels = 3;
+  options.checkpoint_path = dir_.path() + "/spatial.ckpt";
+  TrunkTrainer::Options uninterrupted = options;
+  uninterrupted.checkpoint_path.clear();
+  SensorTrunk whole;
+  const TrunkTrainer::Summary summary = Train(uninterrupted, &whole);
+  ASSERT_EQ(summary.termination_type, TrunkTrainer::TerminationType::kCompleted)
+      << summary.message;
+  EXPECT_LT(summary.final_loss, summary.history.front().loss) << summary.FullReport();
+  EXPECT_GT(summary.train_psnr, summary.train_psnr_at_zero) << summary.FullReport();
+  EXPECT_EQ(whole.siren.options().spatial_rows, 2);
+  EXPECT_EQ(whole.siren.options().spatial_channels, 3);
+  EXPECT_EQ(whole.siren.options().global_latent_dim(), 4);
+  EXPECT_EQ(whole.alpha.size(), 16);
+  EXPECT_THAT(TrunkTrainer(options).TrajectoryOptionsJson(SensorKind::kSoftBubble, whole.format),
+              HasSubstr("\"siren.spatial_channels\":3"));
+  EXPECT_THAT(TrunkTrainer(ShortOptions()).TrajectoryOptionsJson(SensorKind::kSoftBubble,
+                                                                  whole.format),
+              ::testing::Not(HasSubstr("spatial")));
+  SensorTrunk first, resumed;
+  Train(options, &first, [](const TrunkTrainer::StepReport& r) { return r.step < 11; });
+  options.resume = true;
+  Train(options, &resumed);
+  EXPECT_TRUE(SameParameters(whole, resumed));
+  // A checkpoint of another grid is refused, naming the field.
+  TrunkTrainer::Options other = options;
+  other.siren.spatial_channels = 2;
+  SensorTrunk refused;
+  EXPECT_THAT([&] { Train(other, &refused); },
+              ::testing::ThrowsMessage<std::runtime_error>(HasSubstr("siren.spatial_channels")));
+  // A grid larger than the latent is an invalid option naming latent_dim.
+  other.siren.spatial_channels = 5;  // 20 values > d = 16
+  std::string error;
+  EXPECT_FALSE(other.IsValid(&error));
+  EXPECT_THAT(error, HasSubstr("latent_dim"));
+}
+
 TEST_F(TrunkTrainerTest, TinyRunLowersTheOuterLossAndRaisesPsnrAfterKSteps) {
   TrunkTrainer::Options options = TrunkTrainer::Preset("tiny");
   options.threads = 2;

@@ -60,6 +60,55 @@ TEST(FunctaModel, RoundTripsEveryTrunkThroughItsFile) {
   EXPECT_EQ(read.ParameterBytes(), model.ParameterBytes());
 }
 
+TEST(FunctaModel, RoundTripsASpatialLatentTrunkAndRecordsItsGrid) {
+  SensorTrunk trunk = SmallTrunk(SensorKind::kSoftBubble, 3);
+  LatentModulatedSiren::Options options = trunk.siren.options();
+  options.spatial_rows = 2;
+  options.spatial_cols = 3;
+  options.spatial_channels = 2;
+  options.latent_dim = 4 + 12;
+  trunk.siren = LatentModulatedSiren(options, 3);
+  trunk.alpha = Eigen::VectorXd::Constant(16, 0.5);
+  FunctaModel model;
+  model.SetTrunk(trunk);
+  const std::string bytes = model.Serialize();
+  const TensorFile file = TensorFile::Parse(bytes, "m.tfm", "model");
+  EXPECT_THAT(file.meta_json(), HasSubstr("\"spatial\""));
+  EXPECT_THAT(file.meta_json(), HasSubstr("\"global_latent_dim\":4"));
+  const FunctaModel read = FunctaModel::Parse(bytes, "m.tfm");
+  const LatentModulatedSiren::Options& o = read.Trunk(SensorKind::kSoftBubble).siren.options();
+  EXPECT_EQ(o.spatial_rows, 2);
+  EXPECT_EQ(o.spatial_cols, 3);
+  EXPECT_EQ(o.spatial_channels, 2);
+  EXPECT_EQ(o.latent_dim, 16);
+  EXPECT_TRUE(trunk.siren.parameters().cast<float>().cast<double>().isApprox(
+      read.Trunk(SensorKind::kSoftBubble).siren.parameters(), 0.0));
+  // A trunk without spatial latents writes no key (older files load as before).
+  EXPECT_THAT(TensorFile::Parse(TwoSensorModel().Serialize(), "m.tfm", "model").meta_json(),
+              ::testing::Not(HasSubstr("spatial")));
+  // Another layout, or a global part that does not add up, is refused naming the field.
+  for (const auto& [from, to] :
+       std::vector<std::pair<std::string, std::string>>{{"A=[A_g|A_s]", "A=[A_s|A_g]"},
+                                                        {"\"global_latent_dim\":4",
+                                                         "\"global_latent_dim\":5"}}) {
+    std::string meta = file.meta_json();
+    ASSERT_NE(meta.find(from), std::string::npos) << from;
+    meta.replace(meta.find(from), from.size(), to);
+    TensorFile edited("model");
+    edited.set_meta_json(meta);
+    for (const std::string& name : {"bubble/theta", "bubble/alpha"}) {
+      const auto& tensor = file.Get(name);
+      edited.Add(name, TensorFile::DType::kFloat32, tensor.shape, tensor.values);
+    }
+    try {
+      FunctaModel::Parse(edited.Serialize(), "edited.tfm");
+      FAIL() << to;
+    } catch (const TensorFileError& e) {
+      EXPECT_THAT(e.what(), HasSubstr("bubble.siren.spatial")) << e.what();
+    }
+  }
+}
+
 TEST(FunctaModel, DifferentParametersGiveDifferentChecksums) {
   FunctaModel a = TwoSensorModel();
   FunctaModel b = TwoSensorModel();

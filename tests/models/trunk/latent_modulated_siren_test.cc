@@ -60,6 +60,38 @@ Siren::Options ReadoutOptions(int channels = 2) {
   return options;
 }
 
+// SmallOptions with spatial latents: a 2 x 3 grid of 2-vectors (12 values) after a
+// global part of `global` values (0: spatial alone), with or without the readout branch.
+// Random coordinates fall between the nodes and beyond the outer ones (clamped).
+Siren::Options SpatialOptions(int global, bool readout, int channels = 2) {
+  Siren::Options options = readout ? ReadoutOptions(channels) : SmallOptions(channels);
+  options.spatial_rows = 2;
+  options.spatial_cols = 3;
+  options.spatial_channels = 2;
+  options.latent_dim = global + 12;
+  return options;
+}
+
+// Every spatial combination: with and without the global part and the readout branch,
+// and a deeper trunk with a 3 x 2 grid of 3-vectors after 2 global values.
+std::vector<Siren::Options> SpatialVariants(int channels = 2) {
+  Siren::Options deeper = DeeperOptions();
+  deeper.output_channels = channels;
+  deeper.spatial_rows = 3;
+  deeper.spatial_cols = 2;
+  deeper.spatial_channels = 3;
+  deeper.latent_dim = 2 + 18;
+  return {SpatialOptions(3, false, channels), SpatialOptions(0, false, channels),
+          SpatialOptions(3, true, channels), SpatialOptions(0, true, channels), deeper};
+}
+
+std::string Describe(const Siren::Options& o) {
+  return "trunk " + std::to_string(o.width) + "x" + std::to_string(o.num_hidden_layers) +
+         " d=" + std::to_string(o.latent_dim) + " spatial " + std::to_string(o.spatial_rows) +
+         "x" + std::to_string(o.spatial_cols) + "x" + std::to_string(o.spatial_channels) +
+         (o.has_readout() ? " readout" : "");
+}
+
 // Deterministic pseudo-random numbers in [-1, 1] (Eigen's Random uses rand()).
 MatrixXd Uniform(int rows, int cols, unsigned seed) {
   MatrixXd m(rows, cols);
@@ -89,8 +121,9 @@ struct Frame {
 };
 
 // Zero latent, tiny inputs, random inputs; some pixels masked out.
+// Spatial trunks get 16 pixels, so that every node of their grids sees some.
 std::vector<Frame> Frames(const Siren& siren) {
-  const int n = 7;
+  const int n = siren.has_spatial() ? 16 : 7;
   const int d = siren.latent_dim();
   const int c = siren.output_channels();
   VectorXd weights = 0.5 * (Uniform(n, 1, 3).array() + 1.0);
@@ -329,8 +362,16 @@ TEST(LatentModulatedSiren, PixelCornersReachMinusOneAndOne) {
 
 // ---- Forward -----------------------------------------------------------------------
 
+std::vector<Siren::Options> With(std::vector<Siren::Options> options,
+                                 const std::vector<Siren::Options>& more) {
+  options.insert(options.end(), more.begin(), more.end());
+  return options;
+}
+
 TEST(LatentModulatedSiren, BatchedForwardMatchesTheOnePixelTemplate) {
-  for (const Siren::Options& options : {SmallOptions(), ReadoutOptions()}) {
+  for (const Siren::Options& options :
+       With({SmallOptions(), ReadoutOptions()}, SpatialVariants())) {
+    SCOPED_TRACE(Describe(options));
   const Siren siren = PerturbedSiren(options, 11);
   for (const Frame& frame : Frames(siren)) {
     const MatrixXd y = siren.Forward<double>(frame.coords, frame.z);
@@ -474,7 +515,9 @@ TEST(LatentModulatedSiren, WrongShapesThrowAndQuoteTheShapes) {
 // ---- Gradients -----------------------------------------------------------------------
 
 TEST(LatentModulatedSiren, LossGradientMatchesFiniteDifferencesForEveryGroup) {
-  for (const Siren::Options& options : {SmallOptions(), DeeperOptions(), ReadoutOptions()}) {
+  for (const Siren::Options& options :
+       With({SmallOptions(), DeeperOptions(), ReadoutOptions()}, SpatialVariants())) {
+    SCOPED_TRACE(Describe(options));
     const Siren siren = PerturbedSiren(options, 21);
     for (const Frame& frame : Frames(siren)) {
       VectorXd dz, dtheta;
@@ -489,7 +532,9 @@ TEST(LatentModulatedSiren, LossGradientMatchesFiniteDifferencesForEveryGroup) {
 }
 
 TEST(LatentModulatedSiren, LossGradientMatchesJetAutodiffForEveryGroup) {
-  for (const Siren::Options& options : {SmallOptions(), DeeperOptions(), ReadoutOptions()}) {
+  for (const Siren::Options& options :
+       With({SmallOptions(), DeeperOptions(), ReadoutOptions()}, SpatialVariants())) {
+    SCOPED_TRACE(Describe(options));
     const Siren siren = PerturbedSiren(options, 22);
     for (const Frame& frame : Frames(siren)) {
       VectorXd dz, dtheta, jet_dz, jet_dtheta;
@@ -503,7 +548,9 @@ TEST(LatentModulatedSiren, LossGradientMatchesJetAutodiffForEveryGroup) {
 }
 
 TEST(LatentModulatedSiren, BackwardOfAnyOutputGradientMatchesJetAutodiff) {
-  for (const Siren::Options& options : {SmallOptions(), ReadoutOptions()}) {
+  for (const Siren::Options& options :
+       With({SmallOptions(), ReadoutOptions()}, SpatialVariants())) {
+    SCOPED_TRACE(Describe(options));
   const Siren siren = PerturbedSiren(options, 23);
   const Frame frame = Frames(siren)[2];
   const MatrixXd dL_dY = Uniform(frame.coords.rows(), 2, 24);
@@ -557,7 +604,9 @@ TEST(LatentModulatedSiren, MaskedPixelsContributeNothingEvenWithNanTargets) {
 // -------------------------------------------------------------------
 
 TEST(LatentModulatedSiren, LatentJacobianEqualsTheBackwardPassPerOutput) {
-  for (const Siren::Options& options : {SmallOptions(3), DeeperOptions(), ReadoutOptions(3)}) {
+  for (const Siren::Options& options :
+       With({SmallOptions(3), DeeperOptions(), ReadoutOptions(3)}, SpatialVariants(3))) {
+    SCOPED_TRACE(Describe(options));
     const Siren siren = PerturbedSiren(options, 31);
     const int channels = options.output_channels;
     for (const Frame& frame : Frames(siren)) {
@@ -645,14 +694,18 @@ void CheckHessianProduct(const Siren& siren, const Frame& frame, bool with_theta
 }
 
 TEST(LatentModulatedSiren, HessianProductAlongTheLatentMatchesFiniteDifferences) {
-  for (const Siren::Options& options : {SmallOptions(), DeeperOptions(), ReadoutOptions()}) {
+  for (const Siren::Options& options :
+       With({SmallOptions(), DeeperOptions(), ReadoutOptions()}, SpatialVariants())) {
+    SCOPED_TRACE(Describe(options));
     const Siren siren = PerturbedSiren(options, 43);
     for (const Frame& frame : Frames(siren)) CheckHessianProduct(siren, frame, false);
   }
 }
 
 TEST(LatentModulatedSiren, HessianProductAlongThetaAndLatentMatchesFiniteDifferences) {
-  for (const Siren::Options& options : {SmallOptions(), DeeperOptions(), ReadoutOptions()}) {
+  for (const Siren::Options& options :
+       With({SmallOptions(), DeeperOptions(), ReadoutOptions()}, SpatialVariants())) {
+    SCOPED_TRACE(Describe(options));
     const Siren siren = PerturbedSiren(options, 44);
     for (const Frame& frame : Frames(siren)) CheckHessianProduct(siren, frame, true);
   }
@@ -675,6 +728,225 @@ TEST(LatentModulatedSiren, FloatHessianProductAgreesWithDouble) {
       &Hv_thetaf);
   ExpectClose(Hv_zf.cast<double>(), Hv_z, 1e-4, 0.0, "float Hv_z");
   ExpectClose(Hv_thetaf.cast<double>(), Hv_theta, 1e-4, 0.0, "float Hv_theta");
+}
+
+
+// ---- Spatial latents -------------------------------------------------------------------
+
+TEST(LatentModulatedSirenSpatial, OptionsAreValidatedAndNameTheField) {
+  std::string error;
+  EXPECT_TRUE(SpatialOptions(3, false).IsValid(&error)) << error;
+  EXPECT_TRUE(SpatialOptions(0, true).IsValid(&error)) << error;
+  Siren::Options partial = SmallOptions();
+  partial.spatial_rows = 2;
+  partial.spatial_cols = 2;
+  EXPECT_FALSE(partial.IsValid(&error));
+  EXPECT_NE(error.find("spatial_channels"), std::string::npos) << error;
+  Siren::Options negative = SpatialOptions(3, false);
+  negative.spatial_cols = -3;
+  EXPECT_FALSE(negative.IsValid(&error));
+  Siren::Options too_short = SpatialOptions(0, false);
+  too_short.latent_dim = 11;  // the grid alone has 12 values
+  EXPECT_FALSE(too_short.IsValid(&error));
+  EXPECT_NE(error.find("latent_dim"), std::string::npos) << error;
+  EXPECT_THROW(Siren(too_short, 1), std::invalid_argument);
+  EXPECT_EQ(SpatialOptions(3, false).global_latent_dim(), 3);
+  EXPECT_EQ(SpatialOptions(3, false).modulation_inputs(), 5);
+  EXPECT_EQ(SmallOptions().global_latent_dim(), 4);
+  EXPECT_EQ(SmallOptions().modulation_inputs(), 4);
+}
+
+TEST(LatentModulatedSirenSpatial, ModulationMatrixHoldsTheGlobalThenTheLocalColumns) {
+  const Siren siren(SpatialOptions(3, false), 1);
+  const ParameterBlock& A = siren.Block(ParameterGroup::kModulationMatrix);
+  EXPECT_EQ(A.rows, 16);
+  EXPECT_EQ(A.cols, 3 + 2);
+  EXPECT_EQ(siren.parameter_blocks().size(), 2u * 2 + 4);
+  EXPECT_EQ(siren.NumParameters(), (16 + 8) + (64 + 8) + 16 * 5 + 16 + 2 * 8 + 2);
+  // Initialised with the fan-in of gamma(x): d_g + c_s values.
+  const double bound = std::sqrt(6.0 / 5) / 30.0;
+  EXPECT_LE(Siren::View(siren.parameters(), A).cwiseAbs().maxCoeff(), bound);
+  EXPECT_GE(Siren::View(siren.parameters(), A).cwiseAbs().maxCoeff(), 0.5 * bound);
+}
+
+TEST(LatentModulatedSirenSpatial, AOneNodeGridIsTheGlobalLatentTrunk) {
+  // On a 1 x 1 grid z_s(x) = Z_0 everywhere: the trunk is the global-latent trunk with
+  // d = d_g + c_s and the same flat parameters (the layouts coincide).
+  Siren::Options one_node = SmallOptions();
+  one_node.spatial_rows = one_node.spatial_cols = 1;
+  one_node.spatial_channels = 2;
+  one_node.latent_dim = 3 + 2;
+  Siren::Options global = SmallOptions();
+  global.latent_dim = 5;
+  const Siren spatial = PerturbedSiren(one_node, 51);
+  Siren plain(global, 1);
+  ASSERT_EQ(plain.NumParameters(), spatial.NumParameters());
+  plain.SetParameters(spatial.parameters());
+  for (const Frame& frame : Frames(spatial)) {
+    SCOPED_TRACE(frame.name);
+    EXPECT_LE((spatial.Forward<double>(frame.coords, frame.z) -
+               plain.Forward<double>(frame.coords, frame.z))
+                  .cwiseAbs()
+                  .maxCoeff(),
+              1e-14);
+    const VectorXd v_z = Uniform(5, 1, 52);
+    const VectorXd v_theta = 0.1 * Uniform(spatial.NumParameters(), 1, 53);
+    VectorXd dz[2], dtheta[2], hz[2], htheta[2];
+    MatrixXd J[2];
+    const Siren* trunks[2] = {&spatial, &plain};
+    for (int t = 0; t < 2; ++t) {
+      trunks[t]->LossGradientAndHessianProduct<double>(frame.coords, frame.z, frame.targets,
+                                                       frame.weights, &v_theta, v_z, &dz[t],
+                                                       &dtheta[t], &hz[t], &htheta[t]);
+      trunks[t]->ForwardAndLatentJacobian<double>(frame.coords, frame.z, nullptr, &J[t]);
+    }
+    ExpectClose(dz[0], dz[1], 1e-12, 1e-15, "dL/dz");
+    ExpectClose(dtheta[0], dtheta[1], 1e-12, 1e-15, "dL/dtheta");
+    ExpectClose(hz[0], hz[1], 1e-12, 1e-15, "Hv_z");
+    ExpectClose(htheta[0], htheta[1], 1e-12, 1e-15, "Hv_theta");
+    EXPECT_LE((J[0] - J[1]).cwiseAbs().maxCoeff(), 1e-14);
+  }
+}
+
+TEST(LatentModulatedSirenSpatial, NodesSitOnThePixelsOfTheirGridAndActLocally) {
+  for (CoordinateConvention convention :
+       {CoordinateConvention::kPixelCenters, CoordinateConvention::kPixelCorners}) {
+    SCOPED_TRACE(ToString(convention));
+    Siren::Options options = SpatialOptions(3, false);
+    options.coordinates = convention;
+    const Siren siren = PerturbedSiren(options, 54);
+    const MatrixXd nodes = Siren::GridCoordinatesD(2, 3, convention);
+    for (int j = 0; j < nodes.rows(); ++j) {
+      const Siren::ReadoutCorners corners = siren.LocateSpatial(nodes(j, 0), nodes(j, 1));
+      double on_node = 0;
+      for (int i = 0; i < 4; ++i) on_node += corners.node[i] == j ? corners.weight[i] : 0.0;
+      EXPECT_NEAR(on_node, 1.0, 1e-12) << "node " << j;
+    }
+    // Moving node 5's latent (bottom right) changes only the pixels it is a corner of.
+    const MatrixXd pixels = Siren::GridCoordinatesD(8, 9, convention);
+    const VectorXd z = Uniform(15, 1, 55);
+    VectorXd moved = z;
+    moved.tail(2) += VectorXd::Constant(2, 0.7);
+    const MatrixXd before = siren.Forward<double>(pixels, z);
+    const MatrixXd after = siren.Forward<double>(pixels, moved);
+    int changed = 0;
+    for (int j = 0; j < pixels.rows(); ++j) {
+      const Siren::ReadoutCorners corners = siren.LocateSpatial(pixels(j, 0), pixels(j, 1));
+      double weight = 0;
+      for (int i = 0; i < 4; ++i) weight += corners.node[i] == 5 ? corners.weight[i] : 0.0;
+      const double change = (after.row(j) - before.row(j)).cwiseAbs().maxCoeff();
+      if (weight == 0.0) {
+        EXPECT_EQ(change, 0.0) << "pixel " << j;
+      } else {
+        EXPECT_GT(change, 0.0) << "pixel " << j;
+        ++changed;
+      }
+    }
+    EXPECT_GT(changed, 0);
+    EXPECT_LT(changed, pixels.rows());
+  }
+}
+
+TEST(LatentModulatedSirenSpatial, LatentJacobianMatchesJetAutodiff) {
+  for (const Siren::Options& options : SpatialVariants()) {
+    SCOPED_TRACE(Describe(options));
+    const Siren siren = PerturbedSiren(options, 56);
+    const int d = options.latent_dim;
+    for (const Frame& frame : Frames(siren)) {
+      MatrixXd values, J;
+      siren.ForwardAndLatentJacobian<double>(frame.coords, frame.z, &values, &J);
+      EXPECT_EQ(values, siren.Forward<double>(frame.coords, frame.z));
+      for (int j = 0; j < frame.coords.rows(); ++j) {
+        const Jet x[2] = {Jet(frame.coords(j, 0)), Jet(frame.coords(j, 1))};
+        for (int start = 0; start < d; start += kChunk) {
+          std::vector<Jet> z(d), out(2);
+          for (int k = 0; k < d; ++k) z[k] = Jet(frame.z[k]);
+          for (int k = start; k < std::min(d, start + kChunk); ++k) z[k].v[k - start] = 1.0;
+          siren.Evaluate(x, z.data(), out.data());
+          const int count = std::min(d, start + kChunk) - start;
+          for (int c = 0; c < 2; ++c) {
+            ExpectClose(J.row(j * 2 + c).segment(start, count).transpose(),
+                        out[c].v.head(count), 1e-6, 1e-13,
+                        frame.name + " pixel " + std::to_string(j));
+          }
+        }
+      }
+    }
+  }
+}
+
+// More pixels than one block of the batched passes (kPixelBlock = 256): the corners are
+// located per block, the node sums run across blocks.
+TEST(LatentModulatedSirenSpatial, PassesOverSeveralPixelBlocksMatchTheTemplate) {
+  for (bool readout : {false, true}) {
+    const Siren siren = PerturbedSiren(SpatialOptions(3, readout, 1), 57);
+    SCOPED_TRACE(Describe(siren.options()));
+    Frame frame;
+    frame.name = "600 pixels";
+    frame.coords = siren.Grid<double>(20, 30);
+    frame.z = Uniform(15, 1, 58);
+    frame.targets = 0.3 * Uniform(600, 1, 59);
+    frame.weights = 0.5 * (Uniform(600, 1, 60).array() + 1.0);
+    frame.weights[300] = 0.0;
+    const MatrixXd y = siren.Forward<double>(frame.coords, frame.z);
+    for (int j = 0; j < 600; j += 7) {
+      double out;
+      const double x[2] = {frame.coords(j, 0), frame.coords(j, 1)};
+      siren.Evaluate(x, frame.z.data(), &out);
+      EXPECT_NEAR(y(j, 0), out, 1e-13) << "pixel " << j;
+    }
+    VectorXd dz, dtheta, jet_dz, jet_dtheta;
+    siren.LossAndGradient<double>(frame.coords, frame.z, frame.targets, frame.weights, &dz,
+                                  &dtheta);
+    JetGradient(siren, frame, &jet_dtheta, &jet_dz);
+    ExpectBlocksClose(siren, dtheta, jet_dtheta, 1e-6, 1e-13, "jet");
+    ExpectClose(dz, jet_dz, 1e-6, 1e-13, "jet dL/dz");
+    CheckHessianProduct(siren, frame, true);
+    MatrixXd J;
+    siren.ForwardAndLatentJacobian<double>(frame.coords, frame.z, nullptr, &J);
+    for (int j : {0, 255, 256, 599}) {
+      MatrixXd seed = MatrixXd::Zero(600, 1);
+      seed(j, 0) = 1.0;
+      VectorXd row;
+      siren.Backward<double>(frame.coords, frame.z, seed, &row, nullptr);
+      ExpectClose(J.row(j).transpose(), row, 1e-12, 1e-15, "J row " + std::to_string(j));
+    }
+  }
+}
+
+TEST(LatentModulatedSirenSpatial, FloatPassesAgreeWithDouble) {
+  Siren::Options options = SpatialVariants(1).back();  // 12 x 3, a 3 x 2 x 3 grid
+  const Siren siren = PerturbedSiren(options, 61);
+  const MatrixXd coords = siren.Grid<double>(9, 11);
+  const VectorXd z = Uniform(options.latent_dim, 1, 62);
+  const MatrixXd y = siren.Forward<double>(coords, z);
+  const MatrixXf yf = siren.Forward<float>(coords.cast<float>(), z.cast<float>());
+  EXPECT_LE((yf.cast<double>() - y).cwiseAbs().maxCoeff(), 2e-5);
+  const MatrixXd targets = 0.2 * Uniform(99, 1, 63);
+  const VectorXd v_z = Uniform(options.latent_dim, 1, 64);
+  VectorXd dz, dtheta, hz, htheta;
+  VectorXf dzf, dthetaf, hzf, hthetaf;
+  siren.LossGradientAndHessianProduct<double>(coords, z, targets, VectorXd(), nullptr, v_z,
+                                              &dz, &dtheta, &hz, &htheta);
+  siren.LossGradientAndHessianProduct<float>(coords.cast<float>(), z.cast<float>(),
+                                             targets.cast<float>(), VectorXf(), nullptr,
+                                             v_z.cast<float>(), &dzf, &dthetaf, &hzf, &hthetaf);
+  ExpectClose(dzf.cast<double>(), dz, 1e-4, 0.0, "float dL/dz");
+  ExpectClose(dthetaf.cast<double>(), dtheta, 1e-4, 0.0, "float dL/dtheta");
+  ExpectClose(hzf.cast<double>(), hz, 1e-4, 0.0, "float Hv_z");
+  ExpectClose(hthetaf.cast<double>(), htheta, 1e-4, 0.0, "float Hv_theta");
+  MatrixXd J;
+  MatrixXf Jf;
+  siren.ForwardAndLatentJacobian<double>(coords, z, nullptr, &J);
+  siren.ForwardAndLatentJacobian<float>(coords.cast<float>(), z.cast<float>(), nullptr, &Jf);
+  EXPECT_LE((Jf.cast<double>() - J).cwiseAbs().maxCoeff(), 1e-4 * J.cwiseAbs().maxCoeff());
+}
+
+TEST(LatentModulatedSirenSpatial, StartLatentIsZeroWithoutTheReadoutBranch) {
+  const Siren siren = PerturbedSiren(SpatialOptions(3, false), 65);
+  const Frame frame = Frames(siren)[2];
+  EXPECT_EQ(siren.StartLatent<double>(frame.coords, frame.targets, frame.weights),
+            VectorXd::Zero(15));
 }
 
 }  // namespace
