@@ -26,12 +26,12 @@
 #include <filesystem>
 #include <iostream>
 #include <opencv2/core.hpp>
-#include <opencv2/videoio.hpp>
 #include <string>
 #include <vector>
 
 #include "apps/bench.h"
 #include "apps/command.h"
+#include "estimation/data/codecs.h"
 #include "estimation/data/image_io.h"
 
 namespace tactfunc::apps {
@@ -76,9 +76,8 @@ cv::Mat SyntheticFrame(int index, int rows, int cols) {
 }
 
 void WriteVideo(const std::string& path, int frames, int rows, int cols) {
-  cv::VideoWriter writer(path, cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 30.0,
-                         cv::Size(cols, rows), /*isColor=*/true);
-  if (!writer.isOpened()) {
+  codecs::VideoWriter writer;
+  if (!writer.open(path, "MJPG", 30.0, rows, cols)) {
     throw std::runtime_error(path + ": this OpenCV build cannot write MJPG .avi");
   }
   for (int i = 0; i < frames; ++i) writer.write(SyntheticFrame(i, rows, cols));

@@ -30,7 +30,6 @@
 #include <limits>
 #include <memory>
 #include <optional>
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "apps/command.h"

@@ -6,9 +6,9 @@
 #include <cstdio>
 #include <stdexcept>
 
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "estimation/data/codecs.h"
 #include "estimation/data/image_io.h"
 
 namespace tactfunc::apps {
@@ -189,8 +189,8 @@ cv::Mat TileGrid(const std::vector<std::vector<cv::Mat>>& rows, int gap) {
 }
 
 void WritePicture(const std::string& path, const cv::Mat& picture) {
-  std::vector<uchar> bytes;
-  if (!cv::imencode(".png", picture, bytes)) {
+  std::vector<std::uint8_t> bytes;
+  if (!codecs::Encode(".png", picture, {}, &bytes)) {
     throw std::runtime_error(path + ": could not encode the picture as PNG");
   }
   WriteFileAtomically(path, std::string(bytes.begin(), bytes.end()));

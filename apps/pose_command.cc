@@ -52,7 +52,6 @@
 #include <iostream>
 #include <map>
 #include <memory>
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <optional>
 
@@ -64,7 +63,9 @@
 #include "apps/model_inputs.h"
 #include "apps/output_paths.h"
 #include "apps/pictures.h"
+#include "estimation/data/codecs.h"
 #include "estimation/data/dataset.h"
+#include "estimation/data/image_io.h"
 #include "estimation/data/preprocess.h"
 #include "estimation/functaset/functaset.h"
 #include "estimation/data/trunk_targets.h"
@@ -719,7 +720,10 @@ void RunPose(const PoseFlags& flags) {
     std::vector<std::vector<cv::Mat>> rows;
     for (const std::string& part : {latent.out, generator.out}) {
       const std::string png = (fs::path(part) / "posterior.png").string();
-      const cv::Mat picture = cv::imread(png, cv::IMREAD_COLOR);
+      const std::string bytes = ReadFile(png);
+      const cv::Mat picture =
+          codecs::Decode(reinterpret_cast<const std::uint8_t*>(bytes.data()), bytes.size(),
+                         codecs::DecodeMode::kColor);
       if (picture.empty()) throw std::runtime_error(png + ": could not read the picture back");
       rows.push_back({picture});
     }

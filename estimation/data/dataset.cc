@@ -8,7 +8,6 @@
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
-#include <opencv2/videoio.hpp>
 #include <set>
 #include <stdexcept>
 #include <system_error>

@@ -14,12 +14,13 @@
 #include <functional>
 #include <limits>
 #include <opencv2/core.hpp>
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <sstream>
 #include <vector>
 
+#include "estimation/data/codecs.h"
 #include "estimation/data/internal/path_util.h"
+#include "estimation/data/internal/png_reader.h"
 #include "estimation/data/internal/png_writer.h"
 #include "estimation/data/internal/opencv_image.h"
 
@@ -318,23 +319,24 @@ void WritePngAtomically(const std::string& path, const Image& image, PixelEncodi
 }
 
 Image DecodeImage(const std::string& bytes, PixelEncoding encoding, const std::string& name) {
-  ParseImageHeader(bytes, name);  // the format and the size, before any pixel is decoded
+  // The format and the size, before any pixel is decoded.
+  const ImageHeader header = ParseImageHeader(bytes, name);
   if (bytes.size() > static_cast<std::uint64_t>(std::numeric_limits<int>::max())) {
     throw DatasetError(name + ": expected an image file under 2 GB, got " +
                        std::to_string(bytes.size()) + " bytes");
   }
-  cv::Mat mat;
-  try {
-    if (!bytes.empty()) {
-      mat = cv::imdecode(
-          cv::Mat(1, static_cast<int>(bytes.size()), CV_8U, const_cast<char*>(bytes.data())),
-          cv::IMREAD_UNCHANGED);
-    }
-  } catch (const cv::Exception& e) {
-    throw DatasetError(name +
-                       ": expected a PNG or JPEG image, got a file OpenCV "
-                       "cannot decode (" +
-                       std::string(e.what()) + ")");
+  // PNG (every dataset tactfunc writes) by libpng here; anything else by OpenCV's
+  // codec module, loaded on first use.
+  std::string reason;
+  const auto* data = reinterpret_cast<const std::uint8_t*>(bytes.data());
+  const cv::Mat mat =
+      header.format == ImageHeader::Format::kPng
+          ? internal::DecodePngSamples(data, bytes.size(), &reason)
+          : codecs::Decode(data, bytes.size(), codecs::DecodeMode::kUnchanged, &reason);
+  if (mat.empty() && !reason.empty()) {
+    throw DatasetError(name + ": expected a PNG or JPEG image, got " +
+                       std::to_string(bytes.size()) + " bytes that do not decode as one (" +
+                       reason + ")");
   }
   if (mat.empty()) {
     throw DatasetError(name + ": expected a PNG or JPEG image, got " +

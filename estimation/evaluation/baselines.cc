@@ -15,8 +15,8 @@
 
 #include <Eigen/Eigenvalues>
 #include <opencv2/core.hpp>
-#include <opencv2/imgcodecs.hpp>
 
+#include "estimation/data/codecs.h"
 #include "estimation/knn/knn_index.h"
 #include "models/simulator/tool.h"
 
@@ -412,7 +412,7 @@ std::vector<uchar> EncodeJpeg(const JpegCodec::Options& o, const Eigen::MatrixXf
     }
   }
   std::vector<uchar> jpeg;
-  if (!cv::imencode(".jpg", image, jpeg, {cv::IMWRITE_JPEG_QUALITY, o.quality})) {
+  if (!codecs::Encode(".jpg", image, {codecs::kJpegQuality, o.quality}, &jpeg)) {
     throw std::runtime_error("JpegCodec: cv::imencode failed");
   }
   return jpeg;
@@ -426,7 +426,8 @@ std::uint64_t JpegCodec::EncodeDecode(const Eigen::MatrixXf& values, int rows, i
   const int c = static_cast<int>(values.cols());
   if (reconstruction) {
     const cv::Mat decoded =
-        cv::imdecode(jpeg, c == 3 ? cv::IMREAD_COLOR : cv::IMREAD_GRAYSCALE);
+        codecs::Decode(jpeg.data(), jpeg.size(),
+                       c == 3 ? codecs::DecodeMode::kColor : codecs::DecodeMode::kGrayscale);
     if (decoded.empty() || decoded.rows != rows || decoded.cols != cols ||
         decoded.channels() != c) {
       throw std::runtime_error("JpegCodec: cv::imdecode failed");

@@ -159,7 +159,7 @@ class PcaCodec {
 class JpegCodec {
  public:
   struct Options {
-    // cv::IMWRITE_JPEG_QUALITY, 1..100.
+    // JPEG quality (cv::IMWRITE_JPEG_QUALITY), 1..100.
     int quality = 75;
     // The fixed quantisation range (normalised units, header comment): lo maps to 0,
     // hi to 255; finite, hi > lo. Values outside are clamped (and so count as error).

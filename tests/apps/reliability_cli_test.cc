@@ -22,6 +22,7 @@
 #include "gtest/gtest.h"
 #include "models/trunk/functa_model.h"
 #include "tests/apps/cli_test_util.h"
+#include "tests/support/image_test_util.h"
 #include "tests/support/test_dir.h"
 
 namespace tactfunc {
@@ -206,15 +207,39 @@ TEST_F(ReliabilityCliTest, TheSameSeedGivesTheSameModelBytes) {
 
 TEST_F(ReliabilityCliTest, AnOversizedFrameIsRefusedFromItsHeaderNamingTheFile) {
   // A PNG header claiming 100000 x 100000 16-bit pixels, nothing behind it.
-  std::string png("\x89PNG\r\n\x1a\n\0\0\0\x0dIHDR\0\x01\x86\xa0\0\x01\x86\xa0\x10\0\0\0\0", 29);
-  png += std::string(4, '\0');
-  testing_util::WriteText(Root("huge.png"), png);
+  testing_util::WriteText(Root("huge.png"), testing_util::PngHeaderOnly(100000, 100000, 16, 0));
   const Result r = Run("fit --model " + Root("m.tfm") + " --frame " + Root("huge.png") +
                        " --reference " + Root("d/bubble/reference.png"));
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_THAT(r.err, HasSubstr("tactfunc fit: error: --frame: " + Root("huge.png") +
                                ": expected a frame of at most 16777216 pixels"));
   EXPECT_THAT(r.err, HasSubstr("100000x100000"));
+}
+
+TEST_F(ReliabilityCliTest, WithoutItsCodecsModuleAFrameIsRefusedOrTheMissingModuleNamed) {
+  if (!fs::exists(std::string(TACTFUNC_BINARY_DIR) + "/lib/libtactfunc_codecs.so")) {
+    GTEST_SKIP() << "this build links the codecs in (TACTFUNC_CODECS_MODULE=OFF)";
+  }
+  const std::string missing = Root("no_codecs.so");
+  const std::string env = "TACTFUNC_CODECS_MODULE=" + missing + " ";
+  // The header alone refuses an oversized frame: no decoder is needed for that.
+  testing_util::WriteText(Root("huge_no_codecs.png"),
+                          testing_util::PngHeaderOnly(100000, 100000, 16, 0));
+  const Result refused = testing_util::RunShell(
+      *root_, env + testing_util::TactfuncPath() + " fit --model " + Root("m.tfm") +
+                  " --frame " + Root("huge_no_codecs.png") + " --reference " +
+                  Root("d/bubble/reference.png"));
+  EXPECT_EQ(refused.exit_code, 1);
+  EXPECT_THAT(refused.err, HasSubstr("expected a frame of at most 16777216 pixels"));
+  // A command that needs the module (show writes its sheet through it) names the module
+  // and the path it tried.
+  const Result shown = testing_util::RunShell(
+      *root_, env + testing_util::TactfuncPath() + " show " + Root("d") + " --out " +
+                  Root("sheet_no_codecs.png"));
+  EXPECT_NE(shown.exit_code, 0);
+  EXPECT_THAT(shown.err, HasSubstr("cannot load the image and video codecs"));
+  EXPECT_THAT(shown.err, HasSubstr(missing + ": no such file"));
+  EXPECT_THAT(shown.err, HasSubstr("TACTFUNC_CODECS_MODULE"));
 }
 
 TEST_F(ReliabilityCliTest, SynthPrintsASizeBoundAndRefusesAnAbsurdOneUnlessForced) {

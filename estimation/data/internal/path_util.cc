@@ -7,7 +7,6 @@
 #include <cstdio>
 #include <filesystem>
 #include <opencv2/core.hpp>
-#include <opencv2/imgcodecs.hpp>
 #include <system_error>
 
 #include "estimation/data/image_io.h"

@@ -25,13 +25,10 @@ std::string MatShapeText(const cv::Mat& mat) {
          std::to_string(mat.channels());
 }
 
-// Opens `path` with FFmpeg first: it reads AVI, MP4, MKV and MOV without the other
-// backends' noisy attempts (GStreamer, image sequences) on files they cannot open.
-void OpenCapture(const std::string& path, cv::VideoCapture* capture) {
-  try {
-    if (!capture->open(path, cv::CAP_FFMPEG)) capture->open(path, cv::CAP_ANY);
-  } catch (const cv::Exception& e) {
-    throw DatasetError(path + ": expected a video OpenCV can open, got an error: " + e.what());
+void OpenCapture(const std::string& path, codecs::VideoCapture* capture) {
+  std::string reason;
+  if (!capture->open(path, &reason) && !reason.empty()) {
+    throw DatasetError(path + ": expected a video OpenCV can open, got an error: " + reason);
   }
   if (!capture->isOpened()) {
     throw DatasetError(path +
@@ -41,12 +38,8 @@ void OpenCapture(const std::string& path, cv::VideoCapture* capture) {
 }
 
 // Reads the next frame; false at the end of the video (or on a decoding error).
-bool ReadFrame(cv::VideoCapture* capture, cv::Mat* frame) {
-  try {
-    return capture->read(*frame) && !frame->empty();
-  } catch (const cv::Exception&) {
-    return false;
-  }
+bool ReadFrame(codecs::VideoCapture* capture, cv::Mat* frame) {
+  return capture->read(frame) && !frame->empty();
 }
 
 }  // namespace
@@ -87,7 +80,7 @@ void VideoDecoderBudget::Forget(VideoReader* reader) {
 VideoReader::VideoReader(const std::string& path, std::size_t reference_index, Image* reference,
                          Options options)
     : path_(path), options_(std::move(options)) {
-  cv::VideoCapture capture;
+  codecs::VideoCapture capture;
   OpenCapture(path_, &capture);
   cv::Mat frame;
   cv::Mat first;
@@ -202,12 +195,7 @@ bool VideoReader::ReadForwardLocked(std::size_t index, cv::Mat* frame) {
     // threads); those further back are only stepped over.
     const bool keep = index - current < options_.cache_frames || current == index;
     cv::Mat decoded;  // a fresh buffer each time: cached frames are never overwritten
-    bool ok = false;
-    try {
-      ok = keep ? ReadFrame(&capture_, &decoded) : capture_.grab();
-    } catch (const cv::Exception&) {
-      ok = false;
-    }
+    const bool ok = keep ? ReadFrame(&capture_, &decoded) : capture_.grab();
     ++stats_.frames_decoded;
     if (!ok) {
       frame->release();
@@ -228,12 +216,7 @@ bool VideoReader::ReadForwardLocked(std::size_t index, cv::Mat* frame) {
 
 bool VideoReader::SeekLocked(std::size_t index, cv::Mat* frame) {
   ++stats_.seeks;
-  bool ok = false;
-  try {
-    ok = capture_.set(cv::CAP_PROP_POS_FRAMES, static_cast<double>(index));
-  } catch (const cv::Exception&) {
-    ok = false;
-  }
+  bool ok = capture_.seek(index);
   cv::Mat decoded;
   ok = ok && ReadFrame(&capture_, &decoded);
   *frame = decoded;

@@ -14,10 +14,10 @@
 #include <memory>
 #include <mutex>
 #include <opencv2/core.hpp>
-#include <opencv2/videoio.hpp>
 #include <string>
 #include <vector>
 
+#include "estimation/data/codecs.h"
 #include "models/core/image.h"
 
 namespace tactfunc::internal {
@@ -111,7 +111,7 @@ class VideoReader {
   std::vector<std::uint64_t> fingerprints_;  // one per frame, taken when opened
 
   mutable std::mutex mutex_;
-  cv::VideoCapture capture_;  // open while decoding; closed by Close() or the budget
+  codecs::VideoCapture capture_;  // open while decoding; closed by Close() or the budget
   std::size_t next_ = 0;      // index of the frame the decoder reads next
   std::list<std::pair<std::size_t, cv::Mat>> cache_;  // most recent first
   Stats stats_;

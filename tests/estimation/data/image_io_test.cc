@@ -13,6 +13,7 @@
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "tests/support/image_test_util.h"
 #include "tests/support/test_dir.h"
 
 namespace tactfunc {
@@ -246,18 +247,7 @@ TEST(WriteFileAtomically, MissingDirectoryIsAnErrorNamingThePath) {
   }
 }
 
-// The first 33 bytes of a PNG: signature and an IHDR chunk claiming `width` x `height`
-// (the chunk CRC is not checked by the header reader; OpenCV would check it).
-std::string PngHeaderOnly(std::uint32_t width, std::uint32_t height, int bit_depth, int colour) {
-  std::string out("\x89PNG\r\n\x1a\n\0\0\0\x0dIHDR", 16);
-  for (std::uint32_t v : {width, height}) {
-    for (int shift = 24; shift >= 0; shift -= 8) out.push_back(static_cast<char>(v >> shift));
-  }
-  out.push_back(static_cast<char>(bit_depth));
-  out.push_back(static_cast<char>(colour));
-  out += std::string(3, '\0') + std::string(4, '\0');  // methods, CRC
-  return out;
-}
+using testing_util::PngHeaderOnly;
 
 TEST(ReadImageHeader, ReadsPngAndJpegSizesWithoutDecoding) {
   TestDir dir;

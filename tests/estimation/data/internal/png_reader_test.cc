@@ -1,0 +1,126 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// The libpng reader (estimation/data/internal/png_reader.h) decodes what OpenCV writes
+// exactly as cv::imdecode(IMREAD_UNCHANGED) does, for every depth and channel count
+// OpenCV writes, including palettes and bit depths under 8 written by libpng itself;
+// damaged data is an empty Mat with libpng's reason, never a crash.
+#include "estimation/data/internal/png_reader.h"
+
+#include <png.h>
+
+#include <cstdint>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+
+namespace tactfunc::internal {
+namespace {
+
+using ::testing::HasSubstr;
+using ::testing::Not;
+
+cv::Mat RandomMat(int rows, int cols, int type, unsigned seed) {
+  cv::Mat m(rows, cols, type);
+  cv::RNG rng(seed);
+  rng.fill(m, cv::RNG::UNIFORM, 0, CV_MAT_DEPTH(type) == CV_16U ? 65536 : 256);
+  return m;
+}
+
+cv::Mat Decode(const std::vector<std::uint8_t>& bytes, std::string* error = nullptr) {
+  return DecodePngSamples(bytes.data(), bytes.size(), error);
+}
+
+bool Identical(const cv::Mat& a, const cv::Mat& b) {
+  return a.type() == b.type() && a.size() == b.size() && cv::norm(a, b, cv::NORM_INF) == 0;
+}
+
+TEST(PngReader, DecodesWhatOpenCvWritesAsOpenCvReadsIt) {
+  for (int type : {CV_8UC1, CV_8UC3, CV_8UC4, CV_16UC1, CV_16UC3, CV_16UC4}) {
+    for (int level : {0, 1, 9}) {
+      const cv::Mat original = RandomMat(17, 23, type, 7 + type + level);
+      std::vector<std::uint8_t> png;
+      ASSERT_TRUE(cv::imencode(".png", original, png, {cv::IMWRITE_PNG_COMPRESSION, level}));
+      const cv::Mat ours = Decode(png);
+      const cv::Mat opencv = cv::imdecode(png, cv::IMREAD_UNCHANGED);
+      EXPECT_TRUE(Identical(ours, opencv)) << "type " << type << " level " << level;
+      EXPECT_TRUE(Identical(ours, original)) << "type " << type << " level " << level;
+    }
+  }
+}
+
+// A PNG written by libpng directly, for the layouts OpenCV does not write.
+std::vector<std::uint8_t> WriteWithLibpng(int rows, int cols, int color_type, int bit_depth,
+                                          const std::vector<std::uint8_t>& packed_rows,
+                                          bool interlaced) {
+  std::vector<std::uint8_t> out;
+  png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
+  png_infop info = png_create_info_struct(png);
+  png_set_write_fn(
+      png, &out,
+      [](png_structp p, png_bytep data, png_size_t n) {
+        auto* o = static_cast<std::vector<std::uint8_t>*>(png_get_io_ptr(p));
+        o->insert(o->end(), data, data + n);
+      },
+      [](png_structp) {});
+  png_set_IHDR(png, info, cols, rows, bit_depth, color_type,
+               interlaced ? PNG_INTERLACE_ADAM7 : PNG_INTERLACE_NONE,
+               PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
+  png_color palette[3] = {{255, 0, 0}, {0, 255, 0}, {10, 20, 30}};
+  if (color_type == PNG_COLOR_TYPE_PALETTE) png_set_PLTE(png, info, palette, 3);
+  png_write_info(png, info);
+  const std::size_t row_bytes = packed_rows.size() / rows;
+  std::vector<png_bytep> pointers(rows);
+  for (int r = 0; r < rows; ++r) {
+    pointers[r] = const_cast<png_bytep>(packed_rows.data() + r * row_bytes);
+  }
+  png_write_image(png, pointers.data());
+  png_write_end(png, info);
+  png_destroy_write_struct(&png, &info);
+  return out;
+}
+
+TEST(PngReader, ExpandsPalettesLowBitDepthsAndInterlacingLikeOpenCv) {
+  // 4 x 8 pixels: palette indices 0..2 at 8 bits; 1-bit gray; 8-bit gray interlaced.
+  std::vector<std::uint8_t> indices(32);
+  for (std::size_t i = 0; i < indices.size(); ++i) indices[i] = static_cast<std::uint8_t>(i % 3);
+  std::vector<std::uint8_t> bits(4, 0xA5);  // one byte = 8 one-bit pixels per row
+  std::vector<std::uint8_t> gray(32);
+  for (std::size_t i = 0; i < gray.size(); ++i) gray[i] = static_cast<std::uint8_t>(7 * i);
+  for (const auto& png : {WriteWithLibpng(4, 8, PNG_COLOR_TYPE_PALETTE, 8, indices, false),
+                          WriteWithLibpng(4, 8, PNG_COLOR_TYPE_GRAY, 1, bits, false),
+                          WriteWithLibpng(4, 8, PNG_COLOR_TYPE_GRAY, 8, gray, true)}) {
+    const cv::Mat ours = Decode(png);
+    const cv::Mat opencv = cv::imdecode(png, cv::IMREAD_UNCHANGED);
+    ASSERT_FALSE(ours.empty());
+    EXPECT_TRUE(Identical(ours, opencv))
+        << "ours " << ours.channels() << " channels, OpenCV " << opencv.channels();
+  }
+  // The palette's third colour (10, 20, 30) arrives as B, G, R = 30, 20, 10.
+  const cv::Mat palette = Decode(WriteWithLibpng(4, 8, PNG_COLOR_TYPE_PALETTE, 8, indices, false));
+  EXPECT_EQ(palette.at<cv::Vec3b>(0, 2), cv::Vec3b(30, 20, 10));
+}
+
+TEST(PngReader, DamagedDataIsAnEmptyMatWithTheReason) {
+  const cv::Mat original = RandomMat(20, 30, CV_16UC1, 3);
+  std::vector<std::uint8_t> png;
+  ASSERT_TRUE(cv::imencode(".png", original, png));
+  std::string error;
+  EXPECT_TRUE(Decode({png.begin(), png.begin() + png.size() / 2}, &error).empty());
+  EXPECT_THAT(error, Not(::testing::IsEmpty()));
+  std::vector<std::uint8_t> flipped = png;
+  flipped[png.size() / 2] ^= 0x40;  // inside the image data: a CRC or zlib error
+  error.clear();
+  EXPECT_TRUE(Decode(flipped, &error).empty());
+  EXPECT_THAT(error, Not(::testing::IsEmpty()));
+  error.clear();
+  EXPECT_TRUE(Decode({'n', 'o', 't', ' ', 'p', 'n', 'g', '!', '!'}, &error).empty());
+  EXPECT_THAT(error, HasSubstr("signature"));
+}
+
+}  // namespace
+}  // namespace tactfunc::internal
