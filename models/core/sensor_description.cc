@@ -129,19 +129,32 @@ void GeometrySize(const SensorDescription& d, int raw_rows, int raw_cols, int* r
   }
 }
 
-// The centred window of the working aspect ratio inside a rows x cols frame (step 2):
-// top-left (*r0, *c0) and size (*out_rows, *out_cols). The whole frame without a
-// working size or with aspect "stretch".
+// The centred window of the working aspect ratio for a rows x cols frame (step 2):
+// top-left (*r0, *c0) and size (*out_rows, *out_cols), inside the frame for aspect
+// "crop", around it for "pad" (a negative corner). The whole frame without a working
+// size or with aspect "stretch".
 void AspectWindow(const SensorDescription& d, int rows, int cols, int* r0, int* c0,
                   int* out_rows, int* out_cols) {
   *r0 = 0;
   *c0 = 0;
   *out_rows = rows;
   *out_cols = cols;
-  if (d.working_rows <= 0 || d.aspect != SensorDescription::Aspect::kCrop) return;
-  // Integer products, so an aspect that already matches crops nothing.
+  if (d.working_rows <= 0 || d.aspect == SensorDescription::Aspect::kStretch) return;
+  // Integer products, so an aspect that already matches crops or pads nothing.
   const std::int64_t wide = static_cast<std::int64_t>(cols) * d.working_rows;
   const std::int64_t tall = static_cast<std::int64_t>(rows) * d.working_cols;
+  if (d.aspect == SensorDescription::Aspect::kPad) {
+    if (wide > tall) {  // too wide: add rows
+      const long keep = std::lround(static_cast<double>(cols) * d.working_rows / d.working_cols);
+      *out_rows = static_cast<int>(std::clamp<long>(keep, rows, 4 * 4096L));
+      *r0 = -((*out_rows - rows) / 2);
+    } else if (tall > wide) {  // too tall: add columns
+      const long keep = std::lround(static_cast<double>(rows) * d.working_cols / d.working_rows);
+      *out_cols = static_cast<int>(std::clamp<long>(keep, cols, 4 * 4096L));
+      *c0 = -((*out_cols - cols) / 2);
+    }
+    return;
+  }
   if (wide > tall) {  // too wide: keep every row
     const int keep = static_cast<int>(std::lround(static_cast<double>(rows) * d.working_cols /
                                                   d.working_rows));
@@ -239,6 +252,18 @@ SensorDescription BuiltInSensorDescription(SensorKind kind) {
 
 const char* SensorKindDescriptionName(SensorKind kind) {
   return kind == SensorKind::kSoftBubble ? "depth" : "optical";
+}
+
+const char* AspectName(SensorDescription::Aspect aspect) {
+  switch (aspect) {
+    case SensorDescription::Aspect::kCrop:
+      return "crop";
+    case SensorDescription::Aspect::kPad:
+      return "pad";
+    case SensorDescription::Aspect::kStretch:
+      return "stretch";
+  }
+  return "unknown";
 }
 
 SensorDescription ParseSensorDescription(const std::string& text, const std::string& source,
@@ -368,9 +393,11 @@ SensorDescription ParseSensorDescription(const std::string& text, const std::str
   }
   if (doc.contains("aspect")) {
     const json& a = doc["aspect"];
-    const char* expected = "\"crop\" or \"stretch\"";
+    const char* expected = "\"crop\", \"pad\" or \"stretch\"";
     if (a.is_string() && a.get<std::string>() == "crop") {
       d.aspect = SensorDescription::Aspect::kCrop;
+    } else if (a.is_string() && a.get<std::string>() == "pad") {
+      d.aspect = SensorDescription::Aspect::kPad;
     } else if (a.is_string() && a.get<std::string>() == "stretch") {
       d.aspect = SensorDescription::Aspect::kStretch;
     } else {
@@ -437,7 +464,7 @@ std::string SensorDescriptionToJson(const SensorDescription& d) {
   }
   if (d.working_rows > 0) {
     doc["working_size"] = {{"rows", d.working_rows}, {"cols", d.working_cols}};
-    doc["aspect"] = d.aspect == SensorDescription::Aspect::kCrop ? "crop" : "stretch";
+    doc["aspect"] = AspectName(d.aspect);
   }
   // A built-in's unknown pitch is written as 0, which only allow_unknown_pitch reads back.
   // 12 significant digits: the millimetres as written, not the float noise of mm -> m ->
@@ -466,7 +493,7 @@ std::vector<std::string> FrameDifferences(const SensorDescription& a, const Sens
   auto working = [](const SensorDescription& d) {
     if (d.working_rows <= 0) return std::string("unset");
     return std::to_string(d.working_rows) + "x" + std::to_string(d.working_cols) + " (aspect " +
-           (d.aspect == SensorDescription::Aspect::kCrop ? "crop" : "stretch") + ")";
+           AspectName(d.aspect) + ")";
   };
   if (working(a) != working(b)) out.push_back("working_size: " + working(a) + " vs " + working(b));
   auto close = [](double x, double y) { return std::abs(x - y) <= 1e-9 * std::max(std::abs(x), std::abs(y)); };
@@ -505,8 +532,7 @@ std::string DescribeSensor(const SensorDescription& d) {
                      ", geometry " + DescribeGeometry(d) + ", working size ";
   text += d.working_rows > 0
               ? std::to_string(d.working_rows) + "x" + std::to_string(d.working_cols) +
-                    (d.aspect == SensorDescription::Aspect::kCrop ? " (aspect crop)"
-                                                                  : " (aspect stretch)")
+                    " (aspect " + AspectName(d.aspect) + ")"
               : std::string("unset");
   text += ", pitch " + (d.pixel_pitch_m > 0 ? Number(d.pixel_pitch_m * 1e3) + " mm"
                                             : std::string("unknown"));
@@ -579,7 +605,17 @@ Image ApplySensorGeometry(const Image& raw, const SensorDescription& d, const st
       shaped = Warp(source_mat, transform, rows, cols);
     }
   }
-  const cv::Mat window = shaped(cv::Rect(c0, r0, out_cols, out_rows));  // step 2
+  cv::Mat window;  // step 2
+  if (r0 >= 0 && c0 >= 0) {
+    window = shaped(cv::Rect(c0, r0, out_cols, out_rows));
+  } else {
+    const float border = d.kind == SensorKind::kSoftBubble
+                             ? std::numeric_limits<float>::quiet_NaN()
+                             : 0.0f;
+    cv::copyMakeBorder(shaped, window, -r0, out_rows - shaped.rows + r0, -c0,
+                       out_cols - shaped.cols + c0, cv::BORDER_CONSTANT,
+                       cv::Scalar::all(border));
+  }
   Image out(out_rows, out_cols, d.channels);
   for (int r = 0; r < out_rows; ++r) {
     const float* row = window.ptr<float>(r);

@@ -21,7 +21,7 @@
 //     "perspective": {"corners": [[x, y], [x, y], [x, y], [x, y]],   top-left, top-right,
 //                     "rows": 90, "cols": 120},                      bottom-right, bottom-left
 //     "working_size": {"rows": 60, "cols": 80},       optional: the trunk's resolution
-//     "aspect": "crop",                               "crop" (default) or "stretch"
+//     "aspect": "crop",                               "crop" (default), "pad" or "stretch"
 //     "pixel_pitch_mm": 0.1245,                       > 0, of the cropped / warped frame
 //     "normalization_scale": 0.5,                     > 0, physical units mapping to 1.0
 //     "markers": false                                the gel carries markers (recorded)
@@ -39,7 +39,12 @@
 //      least half its interpolation weight was, and holds their ratio; else NaN.
 //   2. aspect (only with working_size): "crop" cuts the centred largest window of the
 //      working size's aspect ratio out of step 1's frame, so resizing it to the working
-//      size never stretches; "stretch" keeps the frame and lets the resize distort it.
+//      size never stretches; "pad" centres the frame in the smallest window of that
+//      aspect ratio that holds all of it (nothing is lost, nothing stretched), the border
+//      invalid (NaN) on depth frames and 0 on optical ones -- the same border in frame and
+//      reference, so their difference is exactly 0 there; "stretch" keeps the frame and
+//      lets the resize distort it. A pad or crop of an odd number of pixels puts the extra
+//      one at the bottom / right.
 //   3. channels 1 on 3-channel optical frames: ITU-R BT.601 luma, 0.299 R + 0.587 G +
 //      0.114 B (linear, so the luma of a difference is the difference of the lumas).
 // The sensor frame (models/core/sensor.h) and every pose label are those of the frame
@@ -81,7 +86,7 @@ struct SensorDescription {
 
   // The trunk's working resolution; both 0 = not set (the trainer's preset decides).
   int working_rows = 0, working_cols = 0;
-  enum class Aspect { kCrop, kStretch };
+  enum class Aspect { kCrop, kPad, kStretch };
   Aspect aspect = Aspect::kCrop;
 
   double pixel_pitch_m = 0;        // metres per pixel after the geometry; 0 = unknown
@@ -97,6 +102,8 @@ SensorDescription BuiltInSensorDescription(SensorKind kind);
 
 // "depth" / "optical".
 const char* SensorKindDescriptionName(SensorKind kind);
+// "crop" / "pad" / "stretch".
+const char* AspectName(SensorDescription::Aspect aspect);
 
 // Parses the JSON text of a description; `source` (the file) starts every message.
 // Every field is validated; unknown fields are refused (a typo must not pass for a

@@ -114,8 +114,8 @@ TEST(SensorDescription, EachBadFieldIsNamedWithTheFileAndWhatWasExpected) {
       {R"({"name": "a", "kind": "optical", "working_size": "60x80", )" + pitch + "}",
        "working_size", "an object"},
       {R"({"name": "a", "kind": "optical", "working_size": {"rows": 6, "cols": 8},
-           "aspect": "pad", )" + pitch + "}",
-       "aspect", "\"crop\" or \"stretch\""},
+           "aspect": "fit", )" + pitch + "}",
+       "aspect", "\"crop\", \"pad\" or \"stretch\""},
       {R"({"name": "a", "kind": "optical", "aspect": "crop", )" + pitch + "}", "aspect",
        "only with 'working_size'"},
       {R"({"name": "a", "kind": "optical", "normalization_scale": 0.5})", "pixel_pitch_mm",
@@ -393,6 +393,52 @@ TEST(SensorGeometry, AspectCropKeepsTheCentredWindowAndLumaMakesOneChannel) {
   SensorDescription rgb = d;
   rgb.channels = 3;
   EXPECT_THROW(ApplySensorGeometry(Image(10, 10, 1), rgb, kFile), SensorDescriptionError);
+}
+
+TEST(SensorGeometry, AspectPadKeepsEveryPixelInsideAZeroOrInvalidBorder) {
+  // A 4:3 optical frame padded to a square: 20 rows above, 20 below, nothing cut.
+  SensorDescription d = ParseSensorDescription(
+      R"({"name": "a", "kind": "optical", "working_size": {"rows": 60, "cols": 60},
+          "aspect": "pad", "pixel_pitch_mm": 0.1, "normalization_scale": 0.5})",
+      kFile);
+  EXPECT_EQ(d.aspect, SensorDescription::Aspect::kPad);
+  EXPECT_THAT(SensorDescriptionToJson(d), HasSubstr("\"aspect\":\"pad\""));
+  EXPECT_THAT(DescribeSensor(d), HasSubstr("(aspect pad)"));
+  const Image raw = Ramp(120, 160, 3);
+  const Image out = ApplySensorGeometry(raw, d, kFile);
+  ASSERT_EQ(out.rows, 160);
+  ASSERT_EQ(out.cols, 160);
+  int rows = 0, cols = 0;
+  GeometryOutputSize(d, 120, 160, kFile, &rows, &cols);
+  EXPECT_EQ(rows, 160);
+  EXPECT_EQ(cols, 160);
+  for (int c = 0; c < 160; c += 3) {
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_EQ(out.at(0, c, k), 0.0f);
+      EXPECT_EQ(out.at(19, c, k), 0.0f);
+      EXPECT_EQ(out.at(20, c, k), raw.at(0, c, k));
+      EXPECT_EQ(out.at(139, c, k), raw.at(119, c, k));
+      EXPECT_EQ(out.at(140, c, k), 0.0f);
+      EXPECT_EQ(out.at(159, c, k), 0.0f);
+    }
+  }
+  // A tall depth frame gains columns, invalid: 5 rows x 2 cols to 1:1 -> 5 x 5, the odd
+  // column at the right.
+  d.kind = SensorKind::kSoftBubble;
+  d.channels = 1;
+  const Image depth = Ramp(5, 2, 1);
+  const Image padded = ApplySensorGeometry(depth, d, kFile);
+  ASSERT_EQ(padded.rows, 5);
+  ASSERT_EQ(padded.cols, 5);
+  for (int r = 0; r < 5; ++r) {
+    EXPECT_TRUE(std::isnan(padded.at(r, 0)));
+    EXPECT_EQ(padded.at(r, 1), depth.at(r, 0));
+    EXPECT_EQ(padded.at(r, 2), depth.at(r, 1));
+    EXPECT_TRUE(std::isnan(padded.at(r, 3)));
+    EXPECT_TRUE(std::isnan(padded.at(r, 4)));
+  }
+  // A frame already of the working aspect is returned as read.
+  EXPECT_EQ(ApplySensorGeometry(Ramp(6, 6, 1), d, kFile).data, Ramp(6, 6, 1).data);
 }
 
 }  // namespace
