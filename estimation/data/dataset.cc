@@ -536,7 +536,7 @@ Dataset Dataset::Open(const std::string& dir, const OpenOptions& options) {
       info.normalization_scale =
           fields.NonNegative(entry, "normalization_scale", prefix + ".normalization_scale");
       info.reference = fields.String(entry, "reference", prefix + ".reference");
-      if (info.reference.empty()) {
+      if (info.reference.empty() || info.reference.front() == '/') {
         throw fields.Bad(prefix + ".reference", "a path relative to the dataset folder",
                          entry["reference"]);
       }

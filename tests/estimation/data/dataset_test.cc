@@ -677,6 +677,9 @@ TEST(Dataset, BadMetadataIsAnErrorNamingTheField) {
       {"\"bubble\": {", "\"digit\": {", {"field 'sensors.digit'", "'digit'"}},
       {"\"has_clean\": true,", "", {"field 'has_clean'"}},
       {"{", "[", {"dataset.json", "valid JSON"}},
+      {"\"bubble/reference.png\"",
+       "\"/reference.png\"",
+       {"dataset.json", "field 'sensors.bubble.reference'", "a path relative to the dataset"}},
   };
   TestDir dir;
   WriteDataset(dir.path());
