@@ -49,7 +49,8 @@ void AddDatasetFlags(CLI::App* sub, DatasetFlags* flags, const std::vector<std::
     sub->add_option("--sensor-file", flags->sensor_file,
                     "A sensor description (JSON: kind, channels, crop or perspective corners, "
                     "working size, pixel pitch, scale; docs/DATASET_FORMAT.md) to read instead "
-                    "of DIR/sensor.json");
+                    "of DIR/sensor.json, or to apply to --frame and --reference where the "
+                    "command takes them");
   }
 }
 

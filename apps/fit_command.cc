@@ -218,37 +218,12 @@ void RunFit(const FitFlags& flags) {
 
   // --sensor-file: the frames are raw camera frames of that sensor; its kind is the
   // sensor and its geometry is applied to both before they are compared.
-  std::optional<SensorDescription> description;
-  if (!flags.sensor_file.empty()) {
-    try {
-      description = ReadSensorDescriptionFile(flags.sensor_file);
-    } catch (const SensorDescriptionError& e) {
-      throw DatasetError(std::string("--sensor-file: ") + e.what());
-    }
-  }
-  SensorKind sensor;
-  if (!ParseSensorFlag(flags.sensor, &sensor)) {
-    sensor = description ? description->kind : InferSensor(flags.frame, "--frame");
-  } else if (description && description->kind != sensor) {
-    throw UsageError("--sensor " + flags.sensor + ": --sensor-file '" + flags.sensor_file +
-                     "' describes a " + SensorKindDescriptionName(description->kind) +
-                     " sensor");
-  }
-  Image frame = ReadInput(flags.frame, sensor, "--frame");
-  Image reference = ReadInput(flags.reference, sensor, "--reference");
-  if (description) {
-    try {
-      frame = ApplySensorGeometry(frame, *description, flags.sensor_file);
-      reference = ApplySensorGeometry(reference, *description, flags.sensor_file);
-    } catch (const SensorDescriptionError& e) {
-      throw DatasetError("--frame '" + flags.frame + "': " + e.what());
-    }
-  }
-  if (!frame.SameShape(reference)) {
-    throw DatasetError("--reference '" + flags.reference + "' is " + Shape(reference) +
-                       " (rows x cols x channels) but --frame '" + flags.frame + "' is " +
-                       Shape(frame) + "; they must be of the same sensor and size");
-  }
+  const FramePair pair =
+      ReadFramePair(flags.frame, flags.reference, flags.sensor, flags.sensor_file);
+  const SensorKind sensor = pair.sensor;
+  const std::optional<SensorDescription>& description = pair.description;
+  const Image& frame = pair.frame;
+  const Image& reference = pair.reference;
 
   const FunctaModel model = FunctaModel::Load(flags.model);
   if (!model.HasSensor(sensor)) {

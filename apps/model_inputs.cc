@@ -60,6 +60,41 @@ bool ParseSensorFlag(const std::string& text, SensorKind* sensor) {
   return true;
 }
 
+FramePair ReadFramePair(const std::string& frame_path, const std::string& reference_path,
+                        const std::string& sensor_flag, const std::string& sensor_file) {
+  FramePair pair;
+  if (!sensor_file.empty()) {
+    try {
+      pair.description = ReadSensorDescriptionFile(sensor_file);
+    } catch (const SensorDescriptionError& e) {
+      throw DatasetError(std::string("--sensor-file: ") + e.what());
+    }
+  }
+  if (!ParseSensorFlag(sensor_flag, &pair.sensor)) {
+    pair.sensor = pair.description ? pair.description->kind : InferSensor(frame_path, "--frame");
+  } else if (pair.description && pair.description->kind != pair.sensor) {
+    throw UsageError("--sensor " + sensor_flag + ": --sensor-file '" + sensor_file +
+                     "' describes a " + SensorKindDescriptionName(pair.description->kind) +
+                     " sensor");
+  }
+  pair.frame = ReadInput(frame_path, pair.sensor, "--frame");
+  pair.reference = ReadInput(reference_path, pair.sensor, "--reference");
+  if (pair.description) {
+    try {
+      pair.frame = ApplySensorGeometry(pair.frame, *pair.description, sensor_file);
+      pair.reference = ApplySensorGeometry(pair.reference, *pair.description, sensor_file);
+    } catch (const SensorDescriptionError& e) {
+      throw DatasetError("--frame '" + frame_path + "': " + e.what());
+    }
+  }
+  if (!pair.frame.SameShape(pair.reference)) {
+    throw DatasetError("--reference '" + reference_path + "' is " + Shape(pair.reference) +
+                       " (rows x cols x channels) but --frame '" + frame_path + "' is " +
+                       Shape(pair.frame) + "; they must be of the same sensor and size");
+  }
+  return pair;
+}
+
 double DatasetPixelPitch(const std::string& frame_path, SensorKind sensor) {
   std::error_code ec;
   const fs::path root = fs::absolute(frame_path, ec).parent_path().parent_path();

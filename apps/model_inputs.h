@@ -8,6 +8,7 @@
 #define TACTFUNC_APPS_MODEL_INPUTS_H_
 
 #include <memory>
+#include <optional>
 
 #include "nlohmann/json.hpp"
 #include <string>
@@ -19,6 +20,7 @@
 #include "models/core/image.h"
 #include "models/pose/pose_mlp.h"
 #include "models/core/sensor.h"
+#include "models/core/sensor_description.h"
 #include "models/simulator/tool.h"  // SymmetryOrderOfTool
 #include "estimation/posterior/knn_posterior.h"
 
@@ -34,6 +36,23 @@ std::string Shape(const Image& image);
 // Parses --sensor (empty = not given: returns false); throws UsageError for a bad name.
 bool ParseSensorFlag(const std::string& text, SensorKind* sensor);
 
+
+// A frame and its no-contact reference given as files (--frame, --reference), with the
+// sensor description of --sensor-file (if given) applied to both: its geometry, aspect
+// and luma, so they are differenced on the grid the description's trunk models. The
+// sensor is --sensor if given (it must be the description's kind), else the
+// description's kind, else inferred from the frame (InferSensor). Throws UsageError for
+// a --sensor that contradicts the description and DatasetError naming the flag and file
+// for anything unreadable, a description that does not fit the frames, or a frame and
+// reference of different shapes.
+struct FramePair {
+  Image frame;
+  Image reference;
+  SensorKind sensor = SensorKind::kSoftBubble;
+  std::optional<SensorDescription> description;  // of --sensor-file
+};
+FramePair ReadFramePair(const std::string& frame_path, const std::string& reference_path,
+                        const std::string& sensor_flag, const std::string& sensor_file);
 
 // Pixel pitch (m) of `sensor` in the tactfunc dataset a frame file lies in
 // (<dataset>/<sensor>/<id>.png with <dataset>/dataset.json), or 0 if it is not in one.

@@ -637,6 +637,8 @@ void RunPose(const PoseFlags& flags) {
     if (from_data) {
       const std::vector<NamedPath> data = DatasetPathInputs("--data", flags.data, flags.dataset);
       inputs.insert(inputs.end(), data.begin(), data.end());
+    } else if (!flags.dataset.sensor_file.empty()) {
+      inputs.push_back({"--sensor-file", flags.dataset.sensor_file});
     }
     RefuseOutputsThatAreInputs(outputs, inputs);
   }
@@ -672,22 +674,25 @@ void RunPose(const PoseFlags& flags) {
     input.name = "frame " + flags.id;
     input.tool_symmetries = dataset.tool_symmetries();
   } else {
-    if (!sensor_given) sensor = InferSensor(flags.frame, "--frame");
-    const Image frame = ReadInput(flags.frame, sensor, "--frame");
-    const Image reference = ReadInput(flags.reference, sensor, "--reference");
-    if (!frame.SameShape(reference)) {
-      throw DatasetError("--reference '" + flags.reference + "' is " + Shape(reference) +
-                         " (rows x cols x channels) but --frame '" + flags.frame + "' is " +
-                         Shape(frame) + "; they must be of the same sensor and size");
-    }
+    // --sensor-file: raw camera frames of that sensor, its geometry applied to both.
+    const FramePair pair = ReadFramePair(flags.frame, flags.reference, flags.sensor,
+                                         flags.dataset.sensor_file);
+    sensor = pair.sensor;
     if (!model.HasSensor(sensor)) {
       throw DatasetError("--model '" + flags.model + "' has no trunk for sensor " +
                          ToString(sensor) + "; the frame '" + flags.frame + "' was read as " +
                          ToString(sensor));
     }
-    targets = MakeTrunkTargets(frame, reference, sensor, model.Trunk(sensor).format);
-    input.difference = Difference(frame, reference, sensor);
-    input.pitch_m = DatasetPixelPitch(flags.frame, sensor);
+    if (pair.description) {
+      CheckModelDescription(model, flags.model, *pair.description,
+                            "--sensor-file '" + flags.dataset.sensor_file + "'", sensor, "pose",
+                            "--allow-other-frames", flags.allow_other_frames);
+    }
+    targets = MakeTrunkTargets(pair.frame, pair.reference, sensor, model.Trunk(sensor).format);
+    input.difference = Difference(pair.frame, pair.reference, sensor);
+    input.pitch_m = pair.description && pair.description->pixel_pitch_m > 0
+                        ? pair.description->pixel_pitch_m
+                        : DatasetPixelPitch(flags.frame, sensor);
     input.name = fs::path(flags.frame).filename().string();
   }
   if (flags.pixel_pitch_mm > 0) input.pitch_m = flags.pixel_pitch_mm * 1e-3;

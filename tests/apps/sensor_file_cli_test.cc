@@ -144,6 +144,11 @@ TEST_F(SensorFileCliTest, DataDescribedOtherwiseIsRefusedNamingBoth) {
           " --reference " + Root("raw/reference.png") + other);
   expect_refused(r, "--sensor-file '" + Root("other.json") + "'");
   EXPECT_THAT(r.err, HasSubstr(differs));
+  // pose on raw files applies --sensor-file as fit does, and checks it against the model.
+  r = Run("pose --model " + Root("m.tfm") + " --pose-model " + Root("p.tpm") + " --frame " +
+          Root("raw/press_01.png") + " --reference " + Root("raw/reference.png") + other);
+  expect_refused(r, "--sensor-file '" + Root("other.json") + "'");
+  EXPECT_THAT(r.err, HasSubstr(differs));
   // No description at all: the raw 120 x 160 frames are the built-in GelSlim's.
   r = Run("encode --data " + Root("raw") + " --model " + Root("m.tfm") + " --out " +
           Root("raw.tfs") + " --threads 2");
