@@ -3,7 +3,8 @@
 // Every analytic derivative of the SIREN (w.r.t. z and each parameter group, the
 // latent Jacobian, the Hessian-vector product) is checked against central finite
 // differences and against ceres::Jet autodiff, at zero latent, at tiny inputs and at
-// random ones, in double precision. Nets are tiny (width 8-12, 2-3 layers).
+// random ones, in double precision. Nets are tiny (width 8-12, 2-3 layers). Products
+// from a Tape must equal the untaped ones bit for bit, in float and double.
 //
 // Tolerances: analytic vs Jet and vs 4th-order central differences must agree to a
 // relative error of 1e-6 per parameter block (max-norm of the difference over the
