@@ -67,12 +67,12 @@ struct PassMacs {
   double GradientZ() const { return Forward() + hidden + out; }
   // LossAndGradient w.r.t. z and theta: also the weight gradients of every layer.
   double GradientTheta() const { return GradientZ() + Forward(); }
-  // LossGradientAndHessianProduct with v_theta = 0 and no gradient output: the forward
-  // pass again, the tangent forward pass (W_l for l >= 1, and W_out), and the reverse
-  // pass with its tangent: two output-weight products and two W_out^T products, then per
-  // sine layer the weight product of ddm (every layer) and of dm (l >= 1) and the two
-  // W_l^T products (l >= 1).
-  double HessianProduct() const { return 2 * first + 6 * hidden + 6 * out; }
+  // HessianProduct with v_theta = 0 from the tape of the inner step's LossAndGradient
+  // (MetaSgd), which holds that step's forward pass and dL/dh_l: the tangent forward pass
+  // (W_l for l >= 1, and W_out) and the reverse pass's tangent: two output-weight
+  // products and one W_out^T product, then per sine layer the weight product of ddm
+  // (every layer) and of dm (l >= 1) and one W_l^T product (l >= 1).
+  double HessianProduct() const { return first + 4 * hidden + 4 * out; }
 };
 
 // GEMM FLOPs (2 per multiply-add) of a meta_sgd:K fit's steps over n pixels, of the

@@ -2,6 +2,7 @@
 #include "models/trunk/latent_modulated_siren.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <memory>
 #include <sstream>
@@ -219,14 +220,19 @@ void RunForward(const Net<S>& net, double omega_0, const Eigen::MatrixBase<Coord
   y.colwise() += net.b_out.col(0);
 }
 
-// Reverse-pass buffers, width x B each, reused across blocks.
-template <typename S>
-struct ReverseBuffers {
-  MatrixX<S> g, g_below;
-  ReverseBuffers(long width, long capacity) : g(width, capacity), g_below(width, capacity) {}
-};
+// dL/dpre_l = dL/dh_{l+1} (*) omega_0 cos(omega_0 pre_l) (element-wise) into *out: the one
+// expression of it, so that the reverse pass and the Hessian-vector product, which
+// recomputes it from a kept dL/dh_{l+1}, round alike.
+template <typename S, typename GradH, typename Cosine, typename Out>
+void PreActivationGradient(const Eigen::MatrixBase<GradH>& g,
+                           const Eigen::MatrixBase<Cosine>& cosine, S omega,
+                           Eigen::MatrixBase<Out>* out) {
+  out->array() = g.array() * (omega * cosine.array());
+}
 
 // Reverse pass of one block from G = dL/dY^T (C x m). The trace must hold the cosines.
+// (*g)[l] receives dL/dh_{l+1} (width x >= m) for every layer l, or, if g holds one
+// matrix, that one serves every layer in turn; *delta (width x >= m) is a work buffer.
 // Adds the block's dL/dgamma to *dgamma and, if dL_dtheta is not null, its share of
 // dL/dW_l, dL/dW_out and dL/db_out to those blocks of *dL_dtheta; the blocks that
 // depend on pixels only through dgamma (b_l, A, c) are left to FinishGradient. With
@@ -235,9 +241,9 @@ struct ReverseBuffers {
 template <typename S, typename GradY>
 void RunBackwardBlock(const Net<S>& net, const std::vector<ParameterBlock>& blocks,
                       double omega_0, const Trace<S>& trace,
-                      const Eigen::MatrixBase<GradY>& G, ReverseBuffers<S>* buffers,
-                      const Spatial<S>* spatial, VectorX<S>* dgamma, MatrixX<S>* dP,
-                      VectorX<S>* dL_dtheta) {
+                      const Eigen::MatrixBase<GradY>& G, std::vector<MatrixX<S>>* g,
+                      MatrixX<S>* delta_buffer, const Spatial<S>* spatial,
+                      VectorX<S>* dgamma, MatrixX<S>* dP, VectorX<S>* dL_dtheta) {
   const int num_layers = static_cast<int>(net.W.size());
   const long width = net.b[0].rows();
   const long m = trace.cols;
@@ -245,25 +251,21 @@ void RunBackwardBlock(const Net<S>& net, const std::vector<ParameterBlock>& bloc
   auto block = [&](int index) {
     return LatentModulatedSiren::View(dL_dtheta, blocks[index]);
   };
+  auto layer_g = [&](int l) { return (*g)[g->size() == 1 ? 0 : l].leftCols(m); };
   if (dL_dtheta != nullptr) {
     block(2 * num_layers + 2).noalias() += G * trace.h[num_layers].leftCols(m).transpose();
     block(2 * num_layers + 3) += G.rowwise().sum();
   }
-  MatrixX<S>* g = &buffers->g;
-  MatrixX<S>* g_below = &buffers->g_below;
-  g->leftCols(m).noalias() = net.W_out.transpose() * G;
+  layer_g(num_layers - 1).noalias() = net.W_out.transpose() * G;
+  auto delta = delta_buffer->leftCols(m);
   for (int l = num_layers - 1; l >= 0; --l) {
-    auto delta = g->leftCols(m);
-    delta.array() *= omega * trace.cosine[l].leftCols(m).array();  // now dL/dpre_l
+    PreActivationGradient(layer_g(l), trace.cosine[l].leftCols(m), omega, &delta);
     dgamma->segment(l * width, width) += delta.rowwise().sum();
     if (spatial != nullptr) spatial->Scatter(delta, l * width, dP);
     if (dL_dtheta != nullptr) {
       block(2 * l).noalias() += delta * trace.h[l].leftCols(m).transpose();
     }
-    if (l > 0) {
-      g_below->leftCols(m).noalias() = net.W[l].transpose() * delta;
-      std::swap(g, g_below);
-    }
+    if (l > 0) layer_g(l - 1).noalias() = net.W[l].transpose() * delta;
   }
 }
 
@@ -430,6 +432,321 @@ double BlockResidualGradient(const Trace<S>& trace, const MatrixX<S>& targets,
   return loss;
 }
 
+// ---- The loss passes: LossGradientAndHessianProduct, a Tape's recording and reading --
+
+// Shapes of a loss pass's inputs (coords N x 2, z d, targets N x C, weights N or empty)
+// and of a Hessian-vector product's direction (v_theta may be null).
+template <typename S>
+void CheckLossInputs(const LatentModulatedSiren& siren, const MatrixX<S>& coords,
+                     const VectorX<S>& z, const MatrixX<S>& targets,
+                     const VectorX<S>& weights) {
+  const long n = coords.rows();
+  CheckShape("coords", n, coords.cols(), n, 2);
+  CheckShape("z", z.rows(), 1, siren.latent_dim(), 1);
+  CheckShape("targets", targets.rows(), targets.cols(), n, siren.output_channels());
+  if (weights.size() != 0) CheckShape("weights", weights.rows(), 1, n, 1);
+}
+template <typename S>
+void CheckDirection(const LatentModulatedSiren& siren, const VectorX<S>* v_theta,
+                    const VectorX<S>& v_z) {
+  CheckShape("v_z", v_z.rows(), 1, siren.latent_dim(), 1);
+  if (v_theta != nullptr) CheckShape("v_theta", v_theta->rows(), 1, siren.NumParameters(), 1);
+}
+
+// What the passes of one call share: theta's maps, the spatial latents' state (corners
+// located per block) and the readout branch's maps.
+template <typename S>
+struct PassContext {
+  const LatentModulatedSiren& siren;
+  const std::vector<ParameterBlock>& blocks;
+  const int num_layers;
+  const long width, channels;
+  const double omega_0;
+  const Net<S> net;
+  std::unique_ptr<Spatial<S>> spatial;      // with spatial latents
+  std::unique_ptr<ReadoutMaps<S>> readout;  // with the readout branch
+
+  PassContext(const LatentModulatedSiren& trunk, const S* theta, long capacity)
+      : siren(trunk),
+        blocks(trunk.parameter_blocks()),
+        num_layers(trunk.num_hidden_layers()),
+        width(trunk.width()),
+        channels(trunk.output_channels()),
+        omega_0(trunk.options().omega_0),
+        net(theta, blocks, num_layers) {
+    if (trunk.has_spatial()) spatial = std::make_unique<Spatial<S>>(trunk.options(), capacity);
+    if (trunk.has_readout()) readout = std::make_unique<ReadoutMaps<S>>(theta, blocks, num_layers);
+  }
+};
+
+// One block's primal values as the Hessian-vector product reads them: the forward
+// trace (with the cosines), G = dL/dY^T (C x m) and the reverse pass's dL/dh_{l+1} per
+// layer l (g; one matrix serving every layer in turn when they are not kept).
+template <typename S>
+struct BlockRecord {
+  Trace<S> trace;
+  MatrixX<S> G;
+  std::vector<MatrixX<S>> g;
+  BlockRecord(int num_layers, long width, long channels, long capacity, bool reverse,
+              bool keep_layers)
+      : trace(num_layers, width, channels, capacity, /*keep_cosine=*/reverse),
+        G(channels, capacity),
+        g(reverse ? (keep_layers ? num_layers : 1) : 0, MatrixX<S>(width, capacity)) {}
+};
+
+// The loss over blocks of pixels and, if `reverse`, the reverse pass: dL/dgamma summed
+// over blocks (dgamma), its scatter onto the spatial nodes (dP), the readout branch's
+// scattered dL/dY (scatter), and dL/dtheta's pixel-dependent blocks.
+template <typename S>
+struct LossPass {
+  const PassContext<S>& context;
+  const bool reverse;
+  VectorX<S>* const dL_dtheta;
+  VectorX<S> gamma;  // the shifts every pixel shares (SharedShifts)
+  VectorX<S> u;      // the readout's node values R^T z + m
+  S scale = 0;       // MseNormaliser's
+  double inverse_normaliser = 0;
+  double loss = 0;   // sum_j w_j ||r_j||^2 so far
+  VectorX<S> dgamma, scatter;
+  MatrixX<S> dP, delta;  // delta: RunBackwardBlock's work buffer
+
+  LossPass(PassContext<S>& c, const VectorX<S>& z, const VectorX<S>& weights, long n,
+           long capacity, bool reverse_pass, VectorX<S>* theta_gradient)
+      : context(c), reverse(reverse_pass), dL_dtheta(theta_gradient) {
+    gamma = SharedShifts(c.net, z, c.spatial.get());
+    if (c.readout) u = c.readout->R.transpose() * z + c.readout->m;
+    inverse_normaliser = MseNormaliser(weights, n, c.channels, &scale);
+    if (dL_dtheta != nullptr) dL_dtheta->setZero(c.siren.NumParameters());
+    if (!reverse) return;
+    dgamma.setZero(c.num_layers * c.width);
+    if (c.spatial) dP.setZero(c.num_layers * c.width, c.spatial->nodes);
+    if (c.readout) scatter.setZero(u.size());
+    delta.resize(c.width, capacity);
+  }
+
+  // Pixels [begin, begin + m) into *record (the spatial corners are located for them).
+  void Block(const MatrixX<S>& coords, const MatrixX<S>& targets, const VectorX<S>& weights,
+             long begin, long m, BlockRecord<S>* record) {
+    const PassContext<S>& c = context;
+    const auto block_coords = coords.middleRows(begin, m);
+    if (c.spatial) c.spatial->Locate(c.siren, block_coords);
+    RunForward(c.net, c.omega_0, block_coords, gamma, c.spatial.get(), &record->trace);
+    if (c.readout) {
+      auto y = record->trace.y.leftCols(m);
+      AddReadout(c.siren, block_coords, u, y);
+    }
+    loss += BlockResidualGradient(record->trace, targets, weights, begin, scale, &record->G);
+    if (!reverse) return;
+    const auto Gm = record->G.leftCols(m);
+    if (c.readout) ScatterReadout(c.siren, block_coords, Gm, &scatter);
+    RunBackwardBlock(c.net, c.blocks, c.omega_0, record->trace, Gm, &record->g, &delta,
+                     c.spatial.get(), &dgamma, &dP, dL_dtheta);
+  }
+
+  // dL/dz (may be null) and the rest of dL/dtheta from the sums.
+  void Finish(const VectorX<S>& z, VectorX<S>* dL_dz) const {
+    const PassContext<S>& c = context;
+    FinishGradient(c.net, c.blocks, dgamma, z, c.spatial.get(), &dP, dL_dz, dL_dtheta);
+    if (c.readout) {
+      FinishReadoutGradient(*c.readout, c.blocks, c.num_layers, scatter, z, dL_dz,
+                            c.siren.readout_frozen() ? nullptr : dL_dtheta);
+    }
+  }
+
+  S Loss() const { return static_cast<S>(loss * inverse_normaliser); }
+};
+
+// The Hessian-vector product (Pearlmutter's R-operator, written with dots: theta' =
+// v_theta, z' = v_z): the tangent of the forward pass, then of the reverse pass, block
+// by block from the blocks' primal values (BlockRecord, with every layer's dL/dh kept),
+// and finally from the reverse pass's sums (LossPass's dgamma, dP, scatter).
+template <typename S>
+struct TangentPass {
+  const PassContext<S>& context;
+  std::unique_ptr<Net<S>> dnet;              // theta' (v_theta not null)
+  std::unique_ptr<ReadoutMaps<S>> dreadout;  // R', m' (v_theta not null, branch not frozen)
+  VectorX<S> dgamma_dot;                     // gamma', the shared part
+  MatrixX<S> P_dot;                          // P' (spatial latents)
+  VectorX<S> u_dot;                          // the readout's node values' tangent
+  // h_dot[l]: tangent of h_l (h_dot[0] = 0); s_dot[l] = omega_0 * pre_l'.
+  std::vector<MatrixX<S>> h_dot, s_dot;
+  MatrixX<S> y_dot, G_dot, g_dot, dm, ddm;
+  // Summed over blocks: the tangents of dgamma, dP and scatter.
+  VectorX<S> ddgamma, scatter_dot;
+  MatrixX<S> ddP;
+  VectorX<S> hv_storage;
+  VectorX<S>* hv;  // Hv_theta, or hv_storage (the theta blocks are cheap by-products)
+
+  TangentPass(const PassContext<S>& c, const VectorX<S>& z, const VectorX<S>* v_theta,
+              const VectorX<S>& v_z, long capacity, VectorX<S>* Hv_theta)
+      : context(c), hv(Hv_theta != nullptr ? Hv_theta : &hv_storage) {
+    const int num_layers = c.num_layers;
+    const long width = c.width;
+    if (v_theta != nullptr) dnet = std::make_unique<Net<S>>(v_theta->data(), c.blocks, num_layers);
+    if (c.spatial) {
+      // gamma' = A_g v_zg + A_g' z_g + c' shared, P' = A_s V + A_s' Z per node.
+      const long dg = c.spatial->d_global;
+      dgamma_dot = c.spatial->Global(c.net.A) * v_z.head(dg);
+      P_dot.noalias() = c.spatial->Local(c.net.A) * c.spatial->Nodes(v_z);
+      if (dnet) {
+        dgamma_dot += c.spatial->Global(dnet->A) * z.head(dg) + dnet->c;
+        P_dot.noalias() += c.spatial->Local(dnet->A) * c.spatial->Nodes(z);
+      }
+      ddP.setZero(num_layers * width, c.spatial->nodes);
+    } else {
+      dgamma_dot = c.net.A * v_z;
+      if (dnet) dgamma_dot += dnet->A * z + dnet->c;
+    }
+    ddgamma.setZero(num_layers * width);
+    hv->setZero(c.siren.NumParameters());
+    h_dot.resize(num_layers + 1);
+    s_dot.resize(num_layers);
+    for (int l = 0; l < num_layers; ++l) {
+      h_dot[l + 1].resize(width, capacity);
+      s_dot[l].resize(width, capacity);
+    }
+    y_dot.resize(c.channels, capacity);
+    G_dot.resize(c.channels, capacity);
+    for (MatrixX<S>* buffer : {&g_dot, &dm, &ddm}) buffer->resize(width, capacity);
+    if (c.readout) {
+      u_dot = c.readout->R.transpose() * v_z;
+      if (v_theta != nullptr && !c.siren.readout_frozen()) {
+        dreadout = std::make_unique<ReadoutMaps<S>>(v_theta->data(), c.blocks, num_layers);
+        u_dot += dreadout->R.transpose() * z + dreadout->m;
+      }
+      scatter_dot.setZero(u_dot.size());
+    }
+  }
+
+  // Pixels [begin, begin + m) of coords and weights, whose primal values `record` holds
+  // (the spatial corners located for them); scale as LossPass's.
+  void Block(const BlockRecord<S>& record, const MatrixX<S>& coords,
+             const VectorX<S>& weights, long begin, long m, S scale) {
+    const PassContext<S>& c = context;
+    const Net<S>& net = c.net;
+    const int num_layers = c.num_layers;
+    const long width = c.width;
+    const S omega = static_cast<S>(c.omega_0);
+    const Trace<S>& trace = record.trace;
+    const auto block_coords = coords.middleRows(begin, m);
+    auto hv_block = [&](int index) { return LatentModulatedSiren::View(hv, c.blocks[index]); };
+    // Tangent forward pass.
+    for (int l = 0; l < num_layers; ++l) {
+      auto s = s_dot[l].leftCols(m);
+      if (l > 0) {
+        s.noalias() = net.W[l] * h_dot[l].leftCols(m);
+      } else {
+        s.setZero();
+      }
+      if (dnet) {
+        s.noalias() += dnet->W[l] * trace.h[l].leftCols(m);
+        s.colwise() += dnet->b[l].col(0) + dgamma_dot.segment(l * width, width);
+      } else {
+        s.colwise() += dgamma_dot.segment(l * width, width);
+      }
+      if (c.spatial) c.spatial->Blend(P_dot, l * width, s);
+      s *= omega;
+      h_dot[l + 1].leftCols(m) = trace.cosine[l].leftCols(m).cwiseProduct(s);
+    }
+    auto yd = y_dot.leftCols(m);
+    yd.noalias() = net.W_out * h_dot[num_layers].leftCols(m);
+    if (dnet) {
+      yd.noalias() += dnet->W_out * trace.h[num_layers].leftCols(m);
+      yd.colwise() += dnet->b_out.col(0);
+    }
+    if (c.readout) AddReadout(c.siren, block_coords, u_dot, yd);
+    // G' = scale * w * y' (zero where w = 0).
+    auto Gd = G_dot.leftCols(m);
+    Gd = scale * yd;
+    if (weights.size() != 0) Gd *= weights.segment(begin, m).asDiagonal();
+    if (c.readout) ScatterReadout(c.siren, block_coords, Gd, &scatter_dot);
+
+    // The reverse pass's tangent, from the reverse pass's dL/dh_{l+1} (gm) kept in the
+    // record; dm = dL/dpre_l is recomputed from it as the reverse pass computed it.
+    const auto Gm = record.G.leftCols(m);
+    const auto h_top = trace.h[num_layers].leftCols(m);
+    hv_block(2 * num_layers + 2).noalias() += Gd * h_top.transpose();
+    hv_block(2 * num_layers + 2).noalias() += Gm * h_dot[num_layers].leftCols(m).transpose();
+    hv_block(2 * num_layers + 3) += Gd.rowwise().sum();
+    auto gdm = g_dot.leftCols(m);
+    auto dmm = dm.leftCols(m);
+    auto ddmm = ddm.leftCols(m);
+    gdm.noalias() = net.W_out.transpose() * Gd;
+    if (dnet) gdm.noalias() += dnet->W_out.transpose() * Gm;
+    for (int l = num_layers - 1; l >= 0; --l) {
+      const auto gm = record.g[l].leftCols(m);
+      const auto cosine = trace.cosine[l].leftCols(m);
+      const auto sine = trace.h[l + 1].leftCols(m).array();
+      // d/dpre cos(omega pre) = -omega sin(omega pre); s_dot already holds omega pre'.
+      ddmm = omega * (gdm.array() * cosine.array() -
+                      gm.array() * sine * s_dot[l].leftCols(m).array());
+      ddgamma.segment(l * width, width) += ddmm.rowwise().sum();
+      if (c.spatial) c.spatial->Scatter(ddmm, l * width, &ddP);
+      const auto h_below = trace.h[l].leftCols(m);
+      hv_block(2 * l).noalias() += ddmm * h_below.transpose();
+      if (l == 0) break;  // h_dot[0] = 0, and nothing lies below
+      PreActivationGradient(gm, cosine, omega, &dmm);
+      hv_block(2 * l).noalias() += dmm * h_dot[l].leftCols(m).transpose();
+      gdm.noalias() = net.W[l].transpose() * ddmm;
+      if (dnet) gdm.noalias() += dnet->W[l].transpose() * dmm;
+    }
+  }
+
+  // Hv_theta's pixel-independent blocks and Hv_z (may be null) from the reverse pass's
+  // sums (dgamma, dP with spatial latents, scatter with the readout branch).
+  void Finish(const VectorX<S>& z, const VectorX<S>& v_z, const VectorX<S>& dgamma,
+              const MatrixX<S>& dP, const VectorX<S>& scatter, VectorX<S>* Hv_z) {
+    const PassContext<S>& c = context;
+    const int num_layers = c.num_layers;
+    const long width = c.width;
+    auto hv_block = [&](int index) { return LatentModulatedSiren::View(hv, c.blocks[index]); };
+    for (int l = 0; l < num_layers; ++l) {
+      hv_block(2 * l + 1) = ddgamma.segment(l * width, width);
+    }
+    hv_block(2 * num_layers + 1) = ddgamma;
+    if (c.spatial) {
+      // g_A = [dgamma z_g^T | dP Z^T] and g_z = [A_g^T dgamma; A_s^T dP] differentiated
+      // along (v_theta, v_z).
+      const Spatial<S>& spatial = *c.spatial;
+      const long dg = spatial.d_global, cs = spatial.channels;
+      auto hv_A = hv_block(2 * num_layers);
+      hv_A.leftCols(dg).noalias() =
+          ddgamma * z.head(dg).transpose() + dgamma * v_z.head(dg).transpose();
+      hv_A.rightCols(cs).noalias() =
+          ddP * spatial.Nodes(z).transpose() + dP * spatial.Nodes(v_z).transpose();
+      if (Hv_z != nullptr) {
+        Hv_z->resize(z.size());
+        auto hv_nodes = Eigen::Map<MatrixX<S>>(Hv_z->data() + dg, cs, spatial.nodes);
+        Hv_z->head(dg).noalias() = spatial.Global(c.net.A).transpose() * ddgamma;
+        hv_nodes.noalias() = spatial.Local(c.net.A).transpose() * ddP;
+        if (dnet) {
+          Hv_z->head(dg).noalias() += spatial.Global(dnet->A).transpose() * dgamma;
+          hv_nodes.noalias() += spatial.Local(dnet->A).transpose() * dP;
+        }
+      }
+    } else {
+      hv_block(2 * num_layers).noalias() = ddgamma * z.transpose() + dgamma * v_z.transpose();
+      if (Hv_z != nullptr) {
+        *Hv_z = c.net.A.transpose() * ddgamma;
+        if (dnet) Hv_z->noalias() += dnet->A.transpose() * dgamma;
+      }
+    }
+    if (c.readout) {
+      // g_z's readout term R s has the tangent R s' + R' s; g_R = z s^T has v_z s^T +
+      // z s'^T; g_m = s has s'.
+      if (Hv_z != nullptr) {
+        Hv_z->noalias() += c.readout->R * scatter_dot;
+        if (dreadout) Hv_z->noalias() += dreadout->R * scatter;
+      }
+      if (!c.siren.readout_frozen()) {
+        hv_block(2 * num_layers + 4).noalias() =
+            v_z * scatter.transpose() + z * scatter_dot.transpose();
+        hv_block(2 * num_layers + 5) = scatter_dot;
+      }
+    }
+  }
+};
+
 }  // namespace
 
 // ---- Names -----------------------------------------------------------------------
@@ -540,6 +857,14 @@ bool LatentModulatedSiren::Options::IsValid(std::string* error) const {
   return false;
 }
 
+namespace {
+// A new value for every change of any trunk's parameters in this process.
+std::uint64_t NextParametersGeneration() {
+  static std::atomic<std::uint64_t> next{1};
+  return next.fetch_add(1, std::memory_order_relaxed);
+}
+}  // namespace
+
 LatentModulatedSiren::LatentModulatedSiren(const Options& options, std::uint64_t seed)
     : options_(options) {
   std::string error;
@@ -635,6 +960,7 @@ void LatentModulatedSiren::Initialize(std::uint64_t seed) {
     for (int i = 0; i < block.size(); ++i) parameters_[block.offset + i] = uniform(rng);
   }
   parameters_float_ = parameters_.cast<float>();
+  parameters_generation_ = NextParametersGeneration();
 }
 
 void LatentModulatedSiren::SetParameters(const Eigen::VectorXd& parameters) {
@@ -645,6 +971,7 @@ void LatentModulatedSiren::SetParameters(const Eigen::VectorXd& parameters) {
   }
   parameters_ = parameters;
   parameters_float_ = parameters_.cast<float>();
+  parameters_generation_ = NextParametersGeneration();
 }
 
 namespace {
@@ -807,7 +1134,8 @@ void LatentModulatedSiren::Backward(const MatrixX<Scalar>& coords,
   const VectorX<Scalar> gamma = SharedShifts(net, z, spatial.get());
   Trace<Scalar> trace(options_.num_hidden_layers, options_.width, options_.output_channels,
                       capacity, /*keep_cosine=*/true);
-  ReverseBuffers<Scalar> buffers(options_.width, capacity);
+  std::vector<MatrixX<Scalar>> g(1, MatrixX<Scalar>(options_.width, capacity));
+  MatrixX<Scalar> delta(options_.width, capacity);
   VectorX<Scalar> dgamma = VectorX<Scalar>::Zero(net.A.rows());
   if (dL_dtheta != nullptr) dL_dtheta->setZero(num_parameters_);
   VectorX<Scalar> s;  // the readout's scattered dL/dY
@@ -819,8 +1147,8 @@ void LatentModulatedSiren::Backward(const MatrixX<Scalar>& coords,
     RunForward(net, options_.omega_0, coords.middleRows(begin, m), gamma, spatial.get(),
                &trace);
     RunBackwardBlock(net, blocks_, options_.omega_0, trace,
-                     dL_dY.middleRows(begin, m).transpose(), &buffers, spatial.get(), &dgamma,
-                     &dP, dL_dtheta);
+                     dL_dY.middleRows(begin, m).transpose(), &g, &delta, spatial.get(),
+                     &dgamma, &dP, dL_dtheta);
     if (has_readout()) {
       ScatterReadout(*this, coords.middleRows(begin, m), dL_dY.middleRows(begin, m).transpose(),
                      &s);
@@ -973,247 +1301,122 @@ Scalar LatentModulatedSiren::LossGradientAndHessianProduct(
     const MatrixX<Scalar>& targets, const VectorX<Scalar>& weights,
     const VectorX<Scalar>* v_theta, const VectorX<Scalar>& v_z, VectorX<Scalar>* dL_dz,
     VectorX<Scalar>* dL_dtheta, VectorX<Scalar>* Hv_z, VectorX<Scalar>* Hv_theta) const {
+  CheckLossInputs(*this, coords, z, targets, weights);
+  CheckDirection(*this, v_theta, v_z);
   const long n = coords.rows();
-  const int num_layers = options_.num_hidden_layers;
-  const long width = options_.width;
-  const long channels = options_.output_channels;
-  const bool hvp = Hv_z != nullptr || Hv_theta != nullptr;
-  CheckShape("coords", n, coords.cols(), n, 2);
-  CheckShape("z", z.rows(), 1, options_.latent_dim, 1);
-  CheckShape("v_z", v_z.rows(), 1, options_.latent_dim, 1);
-  CheckShape("targets", targets.rows(), targets.cols(), n, channels);
-  if (weights.size() != 0) CheckShape("weights", weights.rows(), 1, n, 1);
-  if (v_theta != nullptr) CheckShape("v_theta", v_theta->rows(), 1, num_parameters_, 1);
   const bool gradient = dL_dz != nullptr || dL_dtheta != nullptr;
+  const bool hvp = Hv_z != nullptr || Hv_theta != nullptr;
   const bool reverse = gradient || hvp;
   const long capacity = BlockCapacity(n);
-  const Scalar omega = static_cast<Scalar>(options_.omega_0);
-  const Net<Scalar> net(ParameterData<Scalar>(), blocks_, num_layers);
-  // Spatial latents: P (in *spatial) and the scattered dL/dgamma of the gradient pass
-  // (grad_dP) and of the Hessian-vector product's reverse pass (dP), as grad_dgamma and
-  // dgamma below; P_dot and ddP are their tangents.
-  std::unique_ptr<Spatial<Scalar>> spatial;
-  MatrixX<Scalar> grad_dP, dP, P_dot, ddP;
-  if (has_spatial()) {
-    spatial = std::make_unique<Spatial<Scalar>>(options_, capacity);
-    if (gradient) grad_dP.setZero(num_layers * width, spatial->nodes);
-    if (hvp) {
-      dP.setZero(num_layers * width, spatial->nodes);
-      ddP.setZero(num_layers * width, spatial->nodes);
-    }
-  }
-  const VectorX<Scalar> gamma = SharedShifts(net, z, spatial.get());
-  Scalar scale;
-  const double inverse_normaliser = MseNormaliser(weights, n, channels, &scale);
-
-  Trace<Scalar> trace(num_layers, width, channels, capacity, /*keep_cosine=*/reverse);
-  MatrixX<Scalar> G(channels, capacity);
-  // dL/dgamma summed over blocks: of the gradient pass (grad_dgamma) and of the
-  // reverse pass inside the Hessian-vector product (dgamma). The two are the same sum,
-  // but the gradient is always taken from RunBackwardBlock so that it is bit-identical
-  // to LossAndGradient's.
-  VectorX<Scalar> grad_dgamma = VectorX<Scalar>::Zero(num_layers * width);
-  VectorX<Scalar> dgamma = VectorX<Scalar>::Zero(num_layers * width);
-  if (dL_dtheta != nullptr) dL_dtheta->setZero(num_parameters_);
-  std::unique_ptr<ReverseBuffers<Scalar>> buffers;
-  if (gradient) buffers = std::make_unique<ReverseBuffers<Scalar>>(width, capacity);
-
-  // Tangents (the R-operator, written with dots): theta' = v_theta, z' = v_z.
-  std::unique_ptr<Net<Scalar>> dnet;
-  VectorX<Scalar> dgamma_dot, ddgamma, hv_theta_storage;
-  VectorX<Scalar>* hv = Hv_theta;
-  // h_dot[l]: tangent of h_l (h_dot[0] = 0); s_dot[l] = omega_0 * pre_l'.
-  std::vector<MatrixX<Scalar>> h_dot, s_dot;
-  MatrixX<Scalar> y_dot, G_dot, g, g_dot, delta, delta_dot;
+  PassContext<Scalar> context(*this, ParameterData<Scalar>(), capacity);
+  LossPass<Scalar> pass(context, z, weights, n, capacity, reverse, dL_dtheta);
+  std::unique_ptr<TangentPass<Scalar>> tangent;
   if (hvp) {
-    if (v_theta != nullptr) {
-      dnet = std::make_unique<Net<Scalar>>(v_theta->data(), blocks_, num_layers);
-    }
-    if (spatial) {
-      // gamma' = A_g v_zg + A_g' z_g + c' shared, P' = A_s V + A_s' Z per node.
-      const long dg = spatial->d_global;
-      dgamma_dot = spatial->Global(net.A) * v_z.head(dg);
-      P_dot.noalias() = spatial->Local(net.A) * spatial->Nodes(v_z);
-      if (dnet) {
-        dgamma_dot += spatial->Global(dnet->A) * z.head(dg) + dnet->c;
-        P_dot.noalias() += spatial->Local(dnet->A) * spatial->Nodes(z);
-      }
-    } else {
-      dgamma_dot = net.A * v_z;
-      if (dnet) dgamma_dot += dnet->A * z + dnet->c;
-    }
-    ddgamma.setZero(num_layers * width);
-    if (hv == nullptr) hv = &hv_theta_storage;  // the theta blocks are cheap by-products
-    hv->setZero(num_parameters_);
-    h_dot.resize(num_layers + 1);
-    s_dot.resize(num_layers);
-    for (int l = 0; l < num_layers; ++l) {
-      h_dot[l + 1].resize(width, capacity);
-      s_dot[l].resize(width, capacity);
-    }
-    y_dot.resize(channels, capacity);
-    G_dot.resize(channels, capacity);
-    for (MatrixX<Scalar>* buffer : {&g, &g_dot, &delta, &delta_dot}) {
-      buffer->resize(width, capacity);
-    }
+    tangent = std::make_unique<TangentPass<Scalar>>(context, z, v_theta, v_z, capacity, Hv_theta);
   }
-  auto hv_block = [&](int index) { return View(hv, blocks_[index]); };
-
-  // The readout branch: node values u and their tangent u_dot; s and s_dot, the
-  // scattered G and G' (scatter, scatter_dot; see the helpers above).
-  std::unique_ptr<ReadoutMaps<Scalar>> readout, dreadout;
-  VectorX<Scalar> u, u_dot, scatter, scatter_dot;
-  if (has_readout()) {
-    readout = std::make_unique<ReadoutMaps<Scalar>>(ParameterData<Scalar>(), blocks_, num_layers);
-    u = readout->R.transpose() * z + readout->m;
-    if (reverse) scatter.setZero(u.size());
-    if (hvp) {
-      u_dot = readout->R.transpose() * v_z;
-      if (v_theta != nullptr && !readout_frozen_) {
-        dreadout = std::make_unique<ReadoutMaps<Scalar>>(v_theta->data(), blocks_, num_layers);
-        u_dot += dreadout->R.transpose() * z + dreadout->m;
-      }
-      scatter_dot.setZero(u.size());
-    }
-  }
-
-  double loss = 0.0;
+  // One block's primal values, reused by every block; the Hessian-vector product reads
+  // every layer's dL/dh.
+  BlockRecord<Scalar> record(options_.num_hidden_layers, options_.width,
+                             options_.output_channels, capacity, reverse,
+                             /*keep_layers=*/hvp);
   for (long begin = 0; begin < n; begin += kPixelBlock) {
     const long m = std::min(kPixelBlock, n - begin);
-    const auto block_coords = coords.middleRows(begin, m);
-    if (spatial) spatial->Locate(*this, block_coords);
-    RunForward(net, options_.omega_0, block_coords, gamma, spatial.get(), &trace);
-    if (readout) {
-      auto y = trace.y.leftCols(m);
-      AddReadout(*this, block_coords, u, y);
-    }
-    loss += BlockResidualGradient(trace, targets, weights, begin, scale, &G);
-    if (!reverse) continue;
-    const auto Gm = G.leftCols(m);
-    if (readout) ScatterReadout(*this, block_coords, Gm, &scatter);
-    if (gradient) {
-      RunBackwardBlock(net, blocks_, options_.omega_0, trace, Gm, buffers.get(),
-                       spatial.get(), &grad_dgamma, &grad_dP, dL_dtheta);
-    }
-    if (!hvp) continue;
-    // Tangent forward pass.
-    for (int l = 0; l < num_layers; ++l) {
-      auto s = s_dot[l].leftCols(m);
-      if (l > 0) {
-        s.noalias() = net.W[l] * h_dot[l].leftCols(m);
-      } else {
-        s.setZero();
-      }
-      if (dnet) {
-        s.noalias() += dnet->W[l] * trace.h[l].leftCols(m);
-        s.colwise() += dnet->b[l].col(0) + dgamma_dot.segment(l * width, width);
-      } else {
-        s.colwise() += dgamma_dot.segment(l * width, width);
-      }
-      if (spatial) spatial->Blend(P_dot, l * width, s);
-      s *= omega;
-      h_dot[l + 1].leftCols(m) = trace.cosine[l].leftCols(m).cwiseProduct(s);
-    }
-    auto yd = y_dot.leftCols(m);
-    yd.noalias() = net.W_out * h_dot[num_layers].leftCols(m);
-    if (dnet) {
-      yd.noalias() += dnet->W_out * trace.h[num_layers].leftCols(m);
-      yd.colwise() += dnet->b_out.col(0);
-    }
-    if (readout) AddReadout(*this, block_coords, u_dot, yd);
-    // G' = scale * w * y' (zero where w = 0).
-    auto Gd = G_dot.leftCols(m);
-    Gd = scale * yd;
-    if (weights.size() != 0) Gd *= weights.segment(begin, m).asDiagonal();
-    if (readout) ScatterReadout(*this, block_coords, Gd, &scatter_dot);
+    pass.Block(coords, targets, weights, begin, m, &record);
+    if (tangent) tangent->Block(record, coords, weights, begin, m, pass.scale);
+  }
+  if (gradient) pass.Finish(z, dL_dz);
+  if (tangent) tangent->Finish(z, v_z, pass.dgamma, pass.dP, pass.scatter, Hv_z);
+  return pass.Loss();
+}
 
-    // Reverse pass and its tangent.
-    const auto h_top = trace.h[num_layers].leftCols(m);
-    hv_block(2 * num_layers + 2).noalias() += Gd * h_top.transpose();
-    hv_block(2 * num_layers + 2).noalias() += Gm * h_dot[num_layers].leftCols(m).transpose();
-    hv_block(2 * num_layers + 3) += Gd.rowwise().sum();
-    auto gm = g.leftCols(m);  // dL/dh_{l+1}
-    auto gdm = g_dot.leftCols(m);
-    auto dm = delta.leftCols(m);
-    auto ddm = delta_dot.leftCols(m);
-    gm.noalias() = net.W_out.transpose() * Gm;
-    gdm.noalias() = net.W_out.transpose() * Gd;
-    if (dnet) gdm.noalias() += dnet->W_out.transpose() * Gm;
-    for (int l = num_layers - 1; l >= 0; --l) {
-      const auto cosine = trace.cosine[l].leftCols(m).array();
-      const auto sine = trace.h[l + 1].leftCols(m).array();
-      dm = omega * gm.array() * cosine;
-      // d/dpre cos(omega pre) = -omega sin(omega pre); s_dot already holds omega pre'.
-      ddm = omega * (gdm.array() * cosine - gm.array() * sine * s_dot[l].leftCols(m).array());
-      dgamma.segment(l * width, width) += dm.rowwise().sum();
-      ddgamma.segment(l * width, width) += ddm.rowwise().sum();
-      if (spatial) {
-        spatial->Scatter(dm, l * width, &dP);
-        spatial->Scatter(ddm, l * width, &ddP);
-      }
-      const auto h_below = trace.h[l].leftCols(m);
-      hv_block(2 * l).noalias() += ddm * h_below.transpose();
-      if (l > 0) hv_block(2 * l).noalias() += dm * h_dot[l].leftCols(m).transpose();
-      if (l > 0) {
-        gm.noalias() = net.W[l].transpose() * dm;
-        gdm.noalias() = net.W[l].transpose() * ddm;
-        if (dnet) gdm.noalias() += dnet->W[l].transpose() * dm;
-      }
-    }
+// ---- Tapes -------------------------------------------------------------------------
+
+// What LossAndGradient records: the inputs the tangent pass reads again, every block's
+// primal values (every layer's dL/dh kept) and the reverse pass's sums.
+template <typename Scalar>
+struct LatentModulatedSiren::Tape<Scalar>::Record {
+  std::uint64_t parameters_generation = 0;
+  MatrixX<Scalar> coords;
+  VectorX<Scalar> z, weights;
+  Scalar scale = 0;
+  std::vector<BlockRecord<Scalar>> blocks;  // pixels [b kPixelBlock, ...) in blocks[b]
+  VectorX<Scalar> dgamma, scatter;
+  MatrixX<Scalar> dP;
+};
+
+template <typename Scalar>
+LatentModulatedSiren::Tape<Scalar>::Tape() = default;
+template <typename Scalar>
+LatentModulatedSiren::Tape<Scalar>::~Tape() = default;
+template <typename Scalar>
+LatentModulatedSiren::Tape<Scalar>::Tape(Tape&& other) noexcept = default;
+template <typename Scalar>
+LatentModulatedSiren::Tape<Scalar>& LatentModulatedSiren::Tape<Scalar>::operator=(
+    Tape&& other) noexcept = default;
+
+template <typename Scalar>
+Scalar LatentModulatedSiren::LossAndGradient(const MatrixX<Scalar>& coords,
+                                             const VectorX<Scalar>& z,
+                                             const MatrixX<Scalar>& targets,
+                                             const VectorX<Scalar>& weights,
+                                             VectorX<Scalar>* dL_dz,
+                                             VectorX<Scalar>* dL_dtheta,
+                                             Tape<Scalar>* tape) const {
+  if (tape == nullptr) {
+    throw std::invalid_argument("LatentModulatedSiren::LossAndGradient: tape must not be null");
   }
-  if (gradient) {
-    FinishGradient(net, blocks_, grad_dgamma, z, spatial.get(), &grad_dP, dL_dz, dL_dtheta);
-    if (readout) {
-      FinishReadoutGradient(*readout, blocks_, num_layers, scatter, z, dL_dz,
-                            readout_frozen_ ? nullptr : dL_dtheta);
-    }
+  CheckLossInputs(*this, coords, z, targets, weights);
+  const long n = coords.rows();
+  const long capacity = BlockCapacity(n);
+  auto record = std::make_unique<typename Tape<Scalar>::Record>();
+  PassContext<Scalar> context(*this, ParameterData<Scalar>(), capacity);
+  LossPass<Scalar> pass(context, z, weights, n, capacity, /*reverse=*/true, dL_dtheta);
+  record->blocks.reserve((n + kPixelBlock - 1) / kPixelBlock);
+  for (long begin = 0; begin < n; begin += kPixelBlock) {
+    const long m = std::min(kPixelBlock, n - begin);
+    record->blocks.emplace_back(options_.num_hidden_layers, options_.width,
+                                options_.output_channels, m, /*reverse=*/true,
+                                /*keep_layers=*/true);
+    pass.Block(coords, targets, weights, begin, m, &record->blocks.back());
   }
-  if (hvp) {
-    for (int l = 0; l < num_layers; ++l) {
-      hv_block(2 * l + 1) = ddgamma.segment(l * width, width);
-    }
-    hv_block(2 * num_layers + 1) = ddgamma;
-    if (spatial) {
-      // g_A = [dgamma z_g^T | dP Z^T] and g_z = [A_g^T dgamma; A_s^T dP] differentiated
-      // along (v_theta, v_z).
-      const long dg = spatial->d_global, cs = spatial->channels;
-      auto hv_A = hv_block(2 * num_layers);
-      hv_A.leftCols(dg).noalias() =
-          ddgamma * z.head(dg).transpose() + dgamma * v_z.head(dg).transpose();
-      hv_A.rightCols(cs).noalias() =
-          ddP * spatial->Nodes(z).transpose() + dP * spatial->Nodes(v_z).transpose();
-      if (Hv_z != nullptr) {
-        Hv_z->resize(options_.latent_dim);
-        auto hv_nodes = Eigen::Map<MatrixX<Scalar>>(Hv_z->data() + dg, cs, spatial->nodes);
-        Hv_z->head(dg).noalias() = spatial->Global(net.A).transpose() * ddgamma;
-        hv_nodes.noalias() = spatial->Local(net.A).transpose() * ddP;
-        if (dnet) {
-          Hv_z->head(dg).noalias() += spatial->Global(dnet->A).transpose() * dgamma;
-          hv_nodes.noalias() += spatial->Local(dnet->A).transpose() * dP;
-        }
-      }
-    } else {
-      hv_block(2 * num_layers).noalias() = ddgamma * z.transpose() + dgamma * v_z.transpose();
-      if (Hv_z != nullptr) {
-        *Hv_z = net.A.transpose() * ddgamma;
-        if (dnet) Hv_z->noalias() += dnet->A.transpose() * dgamma;
-      }
-    }
-    if (readout) {
-      // g_z's readout term R s has the tangent R s' + R' s; g_R = z s^T has v_z s^T +
-      // z s'^T; g_m = s has s'.
-      if (Hv_z != nullptr) {
-        Hv_z->noalias() += readout->R * scatter_dot;
-        if (dreadout) Hv_z->noalias() += dreadout->R * scatter;
-      }
-      if (!readout_frozen_) {
-        hv_block(2 * num_layers + 4).noalias() =
-            v_z * scatter.transpose() + z * scatter_dot.transpose();
-        hv_block(2 * num_layers + 5) = scatter_dot;
-      }
-    }
+  pass.Finish(z, dL_dz);
+  record->parameters_generation = parameters_generation_;
+  record->coords = coords;
+  record->z = z;
+  record->weights = weights;
+  record->scale = pass.scale;
+  record->dgamma = std::move(pass.dgamma);
+  record->scatter = std::move(pass.scatter);
+  record->dP = std::move(pass.dP);
+  tape->record_ = std::move(record);
+  return pass.Loss();
+}
+
+template <typename Scalar>
+void LatentModulatedSiren::HessianProduct(const Tape<Scalar>& tape,
+                                          const VectorX<Scalar>* v_theta,
+                                          const VectorX<Scalar>& v_z, VectorX<Scalar>* Hv_z,
+                                          VectorX<Scalar>* Hv_theta) const {
+  if (tape.empty() || tape.record_->parameters_generation != parameters_generation_) {
+    throw std::invalid_argument(
+        std::string("LatentModulatedSiren::HessianProduct: ") +
+        (tape.empty() ? "the tape is empty"
+                      : "the tape was recorded with other parameters than this trunk's"));
   }
-  return static_cast<Scalar>(loss * inverse_normaliser);
+  CheckDirection(*this, v_theta, v_z);
+  if (Hv_z == nullptr && Hv_theta == nullptr) return;
+  const typename Tape<Scalar>::Record& record = *tape.record_;
+  const long n = record.coords.rows();
+  const long capacity = BlockCapacity(n);
+  PassContext<Scalar> context(*this, ParameterData<Scalar>(), capacity);
+  TangentPass<Scalar> tangent(context, record.z, v_theta, v_z, capacity, Hv_theta);
+  for (std::size_t b = 0; b < record.blocks.size(); ++b) {
+    const long begin = static_cast<long>(b) * kPixelBlock;
+    const long m = std::min(kPixelBlock, n - begin);
+    if (context.spatial) context.spatial->Locate(*this, record.coords.middleRows(begin, m));
+    tangent.Block(record.blocks[b], record.coords, record.weights, begin, m, record.scale);
+  }
+  tangent.Finish(record.z, v_z, record.dgamma, record.dP, record.scatter, Hv_z);
 }
 
 template <typename Scalar>
@@ -1279,7 +1482,14 @@ LatentModulatedSiren::VectorX<Scalar> LatentModulatedSiren::StartLatent(
   template S LatentModulatedSiren::LossGradientAndHessianProduct<S>(                     \
       const MatrixX<S>&, const VectorX<S>&, const MatrixX<S>&, const VectorX<S>&,        \
       const VectorX<S>*, const VectorX<S>&, VectorX<S>*, VectorX<S>*, VectorX<S>*,       \
-      VectorX<S>*) const;
+      VectorX<S>*) const;                                                                \
+  template class LatentModulatedSiren::Tape<S>;                                          \
+  template S LatentModulatedSiren::LossAndGradient<S>(                                   \
+      const MatrixX<S>&, const VectorX<S>&, const MatrixX<S>&, const VectorX<S>&,        \
+      VectorX<S>*, VectorX<S>*, Tape<S>*) const;                                         \
+  template void LatentModulatedSiren::HessianProduct<S>(                                 \
+      const Tape<S>&, const VectorX<S>*, const VectorX<S>&, VectorX<S>*, VectorX<S>*)    \
+      const;
 
 TACTFUNC_INSTANTIATE_SIREN(float)
 TACTFUNC_INSTANTIATE_SIREN(double)

@@ -110,6 +110,7 @@
 
 #include <cmath>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <type_traits>
 #include <vector>
@@ -330,6 +331,45 @@ class LatentModulatedSiren {
       const VectorX<Scalar>* v_theta, const VectorX<Scalar>& v_z, VectorX<Scalar>* dL_dz,
       VectorX<Scalar>* dL_dtheta, VectorX<Scalar>* Hv_z, VectorX<Scalar>* Hv_theta) const;
 
+  // What a gradient pass keeps for Hessian-vector products at the same point, so that
+  // they need not repeat it: per block of pixels the activations h_l and cosines of the
+  // forward pass, dL/dY and the reverse pass's dL/dh_l, about (3 L + 1) x width x N
+  // values for N pixels, and copies of coords, weights and z. Opaque; recorded by the
+  // LossAndGradient overload below, read by HessianProduct. A tape is valid for trunks
+  // with the parameters (and options) of the one that recorded it, until they change:
+  // SetParameters and Initialize invalidate it (HessianProduct then throws). Movable.
+  template <typename Scalar>
+  class Tape {
+   public:
+    Tape();
+    ~Tape();
+    Tape(Tape&& other) noexcept;
+    Tape& operator=(Tape&& other) noexcept;
+    bool empty() const { return record_ == nullptr; }
+
+   private:
+    friend class LatentModulatedSiren;
+    struct Record;  // defined in the .cc
+    std::unique_ptr<Record> record_;
+  };
+
+  // LossAndGradient that also records *tape (not null; its previous content is
+  // replaced). Loss and gradients are bit-identical to the overload without a tape.
+  template <typename Scalar>
+  Scalar LossAndGradient(const MatrixX<Scalar>& coords, const VectorX<Scalar>& z,
+                         const MatrixX<Scalar>& targets, const VectorX<Scalar>& weights,
+                         VectorX<Scalar>* dL_dz, VectorX<Scalar>* dL_dtheta,
+                         Tape<Scalar>* tape) const;
+  // The Hessian-vector products of LossGradientAndHessianProduct at the tape's coords,
+  // z, targets and weights, bit-identical to its Hv_z and Hv_theta, without repeating
+  // the forward and reverse passes the tape holds: with v_theta = nullptr, 4 instead of
+  // 6 matrix products per hidden layer and block. Throws std::invalid_argument for an
+  // empty tape, a tape of other parameters (see Tape) or v of the wrong size.
+  template <typename Scalar>
+  void HessianProduct(const Tape<Scalar>& tape, const VectorX<Scalar>* v_theta,
+                      const VectorX<Scalar>& v_z, VectorX<Scalar>* Hv_z,
+                      VectorX<Scalar>* Hv_theta) const;
+
   // The latent every fit of a frame starts from: z = 0 without the readout branch (the
   // paper's start); with it, the branch's projection of the targets,
   //   z_0 = 2 / (C sum_j w_j) sum_j w_j sum_c R_c(x_j) (t_jc - m_c(x_j)),
@@ -378,6 +418,9 @@ class LatentModulatedSiren {
   std::vector<ParameterBlock> blocks_;
   Eigen::VectorXd parameters_;
   Eigen::VectorXf parameters_float_;
+  // Drawn anew from a process-wide counter whenever theta changes (copies share it):
+  // a Tape records it to know the parameters it was recorded with.
+  std::uint64_t parameters_generation_ = 0;
   bool readout_frozen_ = false;
 };
 

@@ -89,14 +89,20 @@ MetaSgd::Result<Scalar> MetaSgd::OuterLossAndGradient(
   const Scalar two_lambda = static_cast<Scalar>(2.0 * options_.latent_l2_weight);
   Result<Scalar> result;
 
-  // Inner loop, keeping every z_k and g_k for the reverse pass.
+  // Inner loop, keeping every z_k and g_k for the reverse pass, and (for the exact
+  // gradient) the passes at z_k on tapes, which its Hessian-vector products read
+  // instead of repeating them.
   std::vector<VectorX<Scalar>> z(steps + 1), g(steps);
+  std::vector<LatentModulatedSiren::Tape<Scalar>> tapes(options_.first_order ? 0 : steps);
   // The start (zero, or the readout branch's projection; a frozen branch makes it
   // independent of the trained parameters, else its dependence is not differentiated).
   z[0] = siren.StartLatent<Scalar>(coords, targets, weights);
   for (int k = 0; k < steps; ++k) {
     const Scalar loss =
-        siren.LossAndGradient<Scalar>(coords, z[k], targets, weights, &g[k], nullptr);
+        options_.first_order
+            ? siren.LossAndGradient<Scalar>(coords, z[k], targets, weights, &g[k], nullptr)
+            : siren.LossAndGradient<Scalar>(coords, z[k], targets, weights, &g[k], nullptr,
+                                            &tapes[k]);
     if (k == 0) result.loss_at_zero = loss;
     g[k] += two_lambda * z[k];
     z[k + 1] = z[k] - alpha.cwiseProduct(g[k]);
@@ -115,8 +121,7 @@ MetaSgd::Result<Scalar> MetaSgd::OuterLossAndGradient(
     result.dL_dalpha -= v.cwiseProduct(g[k]);
     if (options_.first_order) continue;
     const VectorX<Scalar> u = alpha.cwiseProduct(v);
-    siren.LossGradientAndHessianProduct<Scalar>(coords, z[k], targets, weights, nullptr,
-                                                u, nullptr, nullptr, &Hv_z, &Hv_theta);
+    siren.HessianProduct<Scalar>(tapes[k], nullptr, u, &Hv_z, &Hv_theta);
     result.dL_dtheta -= Hv_theta;
     if (k > 0) v -= Hv_z + two_lambda * u;  // z_0 = 0 is a constant
   }

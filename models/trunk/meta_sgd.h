@@ -22,9 +22,14 @@
 //     dL/dtheta -= d/dtheta (g_k . u_k),    u_k = alpha (*) v_{k+1}
 //     v_k        = v_{k+1} - d/dz (g_k . u_k)
 //
-// Both products come from one LatentModulatedSiren::LossGradientAndHessianProduct
-// call (an R-operator pass), so an exact meta-gradient costs about K + 1 gradient and
-// K Hessian-vector passes, about (3.5 K + 2) forward passes in all.
+// Both products come from one LatentModulatedSiren::HessianProduct call (an R-operator
+// pass) that reads the tape the inner step's LossAndGradient at z_k recorded (its
+// forward pass and reverse pass, kept instead of repeated), so an exact meta-gradient
+// costs K + 1 gradient passes and K tangent passes: per pixel and square hidden layer
+// 6 K + 3 products of width^2 multiply-adds (2 per inner step, 3 for the outer gradient,
+// 4 per Hessian-vector product), as reverse-mode autograd through the inner loop
+// (docs/BENCHMARKS.md). The K tapes hold about K (3 L + 1) width N values for N pixels
+// (L sine layers) until the call returns.
 //
 // first_order = true drops the Hessian terms (v_k = v_K, no d/dtheta of g_k), as
 // first-order MAML does: cheaper (K + 1 gradient passes), biased.

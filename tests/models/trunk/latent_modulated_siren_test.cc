@@ -3,7 +3,8 @@
 // Every analytic derivative of the SIREN (w.r.t. z and each parameter group, the
 // latent Jacobian, the Hessian-vector product) is checked against central finite
 // differences and against ceres::Jet autodiff, at zero latent, at tiny inputs and at
-// random ones, in double precision. Nets are tiny (width 8-12, 2-3 layers).
+// random ones, in double precision. Nets are tiny (width 8-12, 2-3 layers). Products
+// from a Tape must equal the untaped ones bit for bit, in float and double.
 //
 // Tolerances: analytic vs Jet and vs 4th-order central differences must agree to a
 // relative error of 1e-6 per parameter block (max-norm of the difference over the
@@ -728,6 +729,111 @@ TEST(LatentModulatedSiren, FloatHessianProductAgreesWithDouble) {
       &Hv_thetaf);
   ExpectClose(Hv_zf.cast<double>(), Hv_z, 1e-4, 0.0, "float Hv_z");
   ExpectClose(Hv_thetaf.cast<double>(), Hv_theta, 1e-4, 0.0, "float Hv_theta");
+}
+
+// ---- Tapes -------------------------------------------------------------------------
+
+// LossAndGradient with a tape against LossGradientAndHessianProduct without one, in
+// scalar S on `coords`: the same loss and gradients, and HessianProduct from the tape
+// the same Hv_z and Hv_theta, bit for bit (the same arithmetic on the same values), with
+// and without v_theta. The tape is recorded as MetaSgd records it (dL/dz alone).
+template <typename S>
+void ExpectTapedPassesBitIdentical(const Siren& siren, const MatrixXd& coords_d,
+                                   unsigned seed) {
+  using MatrixS = Siren::MatrixX<S>;
+  using VectorS = Siren::VectorX<S>;
+  const long n = coords_d.rows();
+  const int d = siren.latent_dim();
+  const MatrixS coords = coords_d.cast<S>();
+  const VectorS z = (0.5 * Uniform(d, 1, seed)).cast<S>();
+  const MatrixS targets = (0.3 * Uniform(n, siren.output_channels(), seed + 1)).cast<S>();
+  VectorS weights = (0.5 * (Uniform(n, 1, seed + 2).array() + 1.0)).matrix().cast<S>();
+  weights[n / 2] = S(0);
+  const VectorS v_theta = (0.1 * Uniform(siren.NumParameters(), 1, seed + 3)).cast<S>();
+  const VectorS v_z = Uniform(d, 1, seed + 4).cast<S>();
+
+  Siren::Tape<S> tape;
+  EXPECT_TRUE(tape.empty());
+  VectorS dz;
+  const S loss = siren.LossAndGradient<S>(coords, z, targets, weights, &dz, nullptr, &tape);
+  EXPECT_FALSE(tape.empty());
+  VectorS full_dz, dtheta, ref_dz, ref_dtheta;
+  siren.LossAndGradient<S>(coords, z, targets, weights, &full_dz, &dtheta, &tape);
+  for (const VectorS* direction : {static_cast<const VectorS*>(nullptr), &v_theta}) {
+    const std::string what = direction == nullptr ? "v = (0, v_z)" : "v = (v_theta, v_z)";
+    VectorS hz, htheta, ref_hz, ref_htheta, alone_hz, alone_htheta;
+    const S ref_loss = siren.LossGradientAndHessianProduct<S>(
+        coords, z, targets, weights, direction, v_z, &ref_dz, &ref_dtheta, &ref_hz,
+        &ref_htheta);
+    // The products alone, as MetaSgd asked for them before tapes.
+    siren.LossGradientAndHessianProduct<S>(coords, z, targets, weights, direction, v_z,
+                                           nullptr, nullptr, &alone_hz, &alone_htheta);
+    siren.HessianProduct<S>(tape, direction, v_z, &hz, &htheta);
+    EXPECT_EQ(loss, ref_loss) << what;
+    EXPECT_EQ(dz, ref_dz) << what;
+    EXPECT_EQ(full_dz, ref_dz) << what;
+    EXPECT_EQ(dtheta, ref_dtheta) << what;
+    EXPECT_EQ(hz, ref_hz) << what << ", max difference " << (hz - ref_hz).cwiseAbs().maxCoeff();
+    EXPECT_EQ(htheta, ref_htheta)
+        << what << ", max difference " << (htheta - ref_htheta).cwiseAbs().maxCoeff();
+    EXPECT_EQ(alone_hz, ref_hz) << what;
+    EXPECT_EQ(alone_htheta, ref_htheta) << what;
+    EXPECT_GT(hz.norm(), S(0)) << what;
+    EXPECT_GT(htheta.norm(), S(0)) << what;
+  }
+}
+
+// Global, deeper, readout (also frozen) and every spatial variant; 7 random pixels (one
+// block) and a 20 x 30 grid (600 pixels: blocks of 256, 256 and 88, and runs of pixels
+// sharing their spatial corners); float and double.
+TEST(LatentModulatedSirenTape, HessianProductFromATapeIsBitIdenticalToTheUntapedOne) {
+  std::vector<Siren::Options> variants =
+      With({SmallOptions(), DeeperOptions(), ReadoutOptions()}, SpatialVariants());
+  for (std::size_t i = 0; i <= variants.size(); ++i) {
+    const bool frozen = i == variants.size();  // the readout branch once more, frozen
+    Siren siren =
+        PerturbedSiren(frozen ? ReadoutOptions() : variants[i], 70 + static_cast<unsigned>(i));
+    siren.set_readout_frozen(frozen);
+    SCOPED_TRACE(Describe(siren.options()) + (frozen ? " (frozen)" : ""));
+    for (const MatrixXd& coords : {Uniform(7, 2, 80), siren.Grid<double>(20, 30)}) {
+      SCOPED_TRACE(std::to_string(coords.rows()) + " pixels");
+      ExpectTapedPassesBitIdentical<double>(siren, coords, 81);
+      ExpectTapedPassesBitIdentical<float>(siren, coords, 82);
+    }
+  }
+}
+
+TEST(LatentModulatedSirenTape, RefusesAnEmptyTapeAndOneOfOtherParameters) {
+  Siren siren = PerturbedSiren(SmallOptions(), 90);
+  const Frame frame = Frames(siren)[2];
+  VectorXd hz, expected;
+  Siren::Tape<double> tape;
+  auto product = [&](const Siren& trunk) {
+    trunk.HessianProduct<double>(tape, nullptr, frame.z, &hz, nullptr);
+  };
+  EXPECT_THROW(product(siren), std::invalid_argument);
+  EXPECT_THROW(siren.LossAndGradient<double>(frame.coords, frame.z, frame.targets,
+                                             frame.weights, nullptr, nullptr, nullptr),
+               std::invalid_argument);
+  siren.LossAndGradient<double>(frame.coords, frame.z, frame.targets, frame.weights,
+                                nullptr, nullptr, &tape);
+  product(siren);
+  expected = hz;
+  const Siren copy = siren;  // the same parameters: the tape holds for it
+  product(copy);
+  EXPECT_EQ(hz, expected);
+  VectorXd wrong_size = VectorXd::Zero(siren.latent_dim() + 1);
+  EXPECT_THROW(siren.HessianProduct<double>(tape, nullptr, wrong_size, &hz, nullptr),
+               std::invalid_argument);
+  EXPECT_THROW(product(PerturbedSiren(SmallOptions(), 91)), std::invalid_argument);
+  siren.SetParameters(siren.parameters());  // any change of theta invalidates it
+  EXPECT_THROW(product(siren), std::invalid_argument);
+  EXPECT_NO_THROW(product(copy));
+  Siren::Tape<double> moved = std::move(tape);
+  EXPECT_FALSE(moved.empty());
+  siren.Initialize(3);
+  EXPECT_THROW(siren.HessianProduct<double>(moved, nullptr, frame.z, &hz, nullptr),
+               std::invalid_argument);
 }
 
 
