@@ -63,7 +63,8 @@ class VideoCapture {
   // one) if no backend opens it.
   bool open(const std::string& path, std::string* error = nullptr);
   bool isOpened() const { return handle_ != nullptr; }
-  // The next frame (8-bit BGR as OpenCV decodes it); false at the end or on an error.
+  // The next frame (8-bit BGR as OpenCV decodes it); false at the end, on an error or
+  // for an empty frame.
   bool read(cv::Mat* frame);
   // Steps over the next frame without decoding it into a Mat.
   bool grab();

@@ -37,11 +37,6 @@ void OpenCapture(const std::string& path, codecs::VideoCapture* capture) {
   }
 }
 
-// Reads the next frame; false at the end of the video (or on a decoding error).
-bool ReadFrame(codecs::VideoCapture* capture, cv::Mat* frame) {
-  return capture->read(frame) && !frame->empty();
-}
-
 }  // namespace
 
 std::uint64_t FrameFingerprint(const cv::Mat& frame) {
@@ -84,7 +79,7 @@ VideoReader::VideoReader(const std::string& path, std::size_t reference_index, I
   OpenCapture(path_, &capture);
   cv::Mat frame;
   cv::Mat first;
-  while (ReadFrame(&capture, &frame)) {
+  while (capture.read(&frame)) {
     const std::size_t index = fingerprints_.size();
     if (index == 0) {
       if (static_cast<std::int64_t>(frame.rows) * frame.cols > kMaxFramePixels) {
@@ -195,7 +190,7 @@ bool VideoReader::ReadForwardLocked(std::size_t index, cv::Mat* frame) {
     // threads); those further back are only stepped over.
     const bool keep = index - current < options_.cache_frames || current == index;
     cv::Mat decoded;  // a fresh buffer each time: cached frames are never overwritten
-    const bool ok = keep ? ReadFrame(&capture_, &decoded) : capture_.grab();
+    const bool ok = keep ? capture_.read(&decoded) : capture_.grab();
     ++stats_.frames_decoded;
     if (!ok) {
       frame->release();
@@ -218,7 +213,7 @@ bool VideoReader::SeekLocked(std::size_t index, cv::Mat* frame) {
   ++stats_.seeks;
   bool ok = capture_.seek(index);
   cv::Mat decoded;
-  ok = ok && ReadFrame(&capture_, &decoded);
+  ok = ok && capture_.read(&decoded);
   *frame = decoded;
   ++stats_.frames_decoded;
   // The fingerprint decides whether the seek landed where asked: containers whose
