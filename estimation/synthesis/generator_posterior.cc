@@ -440,7 +440,6 @@ double CalibrateSigmaInflation(const GeneratorPosterior& posterior,
   if (frames.size() != labels.size()) {
     throw std::invalid_argument("CalibrateSigmaInflation: one label per frame expected");
   }
-  GeneratorPosterior::Options o = posterior.options();
   std::vector<double> d2;
   for (std::size_t i = 0; i < frames.size(); ++i) {
     PoseMixture mixture;

@@ -312,7 +312,9 @@ TEST_F(CliTest, ASetOfClipsEncodesAndReconstructsUnderClipQualifiedIds) {
   const std::string frames = Slurp(Path("r/frames.csv"));
   EXPECT_THAT(frames, HasSubstr("\na/f0,gelslim,train,"));
   EXPECT_THAT(frames, HasSubstr("\nb/f1,gelslim,test,"));
-  if (video) EXPECT_THAT(frames, HasSubstr("\nc/000002,gelslim,train,"));
+  if (video) {
+    EXPECT_THAT(frames, HasSubstr("\nc/000002,gelslim,train,"));
+  }
   EXPECT_TRUE(fs::exists(Path("r/recon_gelslim.png")));
 }
 

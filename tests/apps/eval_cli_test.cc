@@ -93,8 +93,12 @@ TEST_F(EvalCliTest, JsonHasARowPerApproachSensorAndSplitWithTheTableColumns) {
   // PCA as many float32 components (bubble d = 8, gelslim d = 6).
   for (const nlohmann::json& row : j["rows"]) {
     const int d = row["sensor"] == "bubble" ? 8 : 6;
-    if (row["approach"] == "TactFunc") EXPECT_EQ(row["bytes_per_frame"].get<double>(), 2 * d);
-    if (row["approach"] == "PCA") EXPECT_EQ(row["bytes_per_frame"].get<double>(), 4 * d);
+    if (row["approach"] == "TactFunc") {
+      EXPECT_EQ(row["bytes_per_frame"].get<double>(), 2 * d);
+    }
+    if (row["approach"] == "PCA") {
+      EXPECT_EQ(row["bytes_per_frame"].get<double>(), 4 * d);
+    }
   }
 }
 
@@ -123,8 +127,12 @@ TEST_F(EvalCliTest, TargetsSayPlainlyWhetherEachIsMetWithTheNumbers) {
         EXPECT_DOUBLE_EQ(c["tactfunc_db"].get<double>(), row["psnr_clean"].get<double>());
         EXPECT_NE(row["psnr_clean"].get<double>(), row["psnr"].get<double>());  // other frames
       }
-      if (row["approach"] == "PCA") EXPECT_TRUE(row["psnr_clean"].is_number()) << row.dump();
-      if (row["approach"] == "JPEG") EXPECT_TRUE(row["psnr_clean"].is_null()) << row.dump();
+      if (row["approach"] == "PCA") {
+        EXPECT_TRUE(row["psnr_clean"].is_number()) << row.dump();
+      }
+      if (row["approach"] == "JPEG") {
+        EXPECT_TRUE(row["psnr_clean"].is_null()) << row.dump();
+      }
     }
     EXPECT_DOUBLE_EQ(c["margin_db"].get<double>(),
                      c["tactfunc_db"].get<double>() - c["pca_db"].get<double>());
@@ -210,7 +218,9 @@ TEST_F(EvalCliTest, WithoutAPoseModelTheTableHoldsTheReconstructionColumnsAlone)
     EXPECT_TRUE(row["pose_mse"].is_null()) << row.dump();
     EXPECT_TRUE(row["rmse_mm"].is_null()) << row.dump();
     EXPECT_TRUE(row["pose_from"].is_null()) << row.dump();
-    if (row["approach"] != "Raw frames") EXPECT_TRUE(row["psnr"].is_number()) << row.dump();
+    if (row["approach"] != "Raw frames") {
+      EXPECT_TRUE(row["psnr"].is_number()) << row.dump();
+    }
   }
   EXPECT_EQ(approaches, (std::set<std::string>{"TactFunc", "PCA", "JPEG", "Raw frames"}));
   EXPECT_TRUE(j["pose_sensor"].is_null());

@@ -312,7 +312,7 @@ TEST_F(TrainCliTest, ASpatialLatentTrunkTrainsAndEveryCommandUsesIt) {
   ASSERT_EQ(info.exit_code, 0) << info.err;
   EXPECT_THAT(info.out, HasSubstr("spatial latents: a 2 x 2 grid of 3 values (12) + 4 global"));
   EXPECT_EQ(info.LastJson()["model"]["trunks"]["bubble"]["spatial"]["channels"].get<int>(), 3);
-  for (const std::string& strategy : {"meta_sgd:3", "ceres:3"}) {
+  for (const std::string strategy : {"meta_sgd:3", "ceres:3"}) {
     const std::string name = strategy == "ceres:3" ? "sp_ceres" : "sp";
     const Result encode = Run("encode --model " + Root("sp.tfm") + " --data " + Root("d") +
                               " --out " + Root(name + ".tfs") + " --threads 1 --strategy " +

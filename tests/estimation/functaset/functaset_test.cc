@@ -377,7 +377,9 @@ TEST(Functaset, CodeLatentsTakeCeilOfDTimesBitsOverEightBytesPerFrame) {
     const std::uint64_t header_length = *reinterpret_cast<const std::uint64_t*>(bytes.data() + 16);
     const nlohmann::json header = nlohmann::json::parse(bytes.substr(24, header_length));
     for (const nlohmann::json& t : header["tensors"]) {
-      if (t["name"] == "bubble/latent_codes") EXPECT_EQ(t["bytes"], 40 * row);
+      if (t["name"] == "bubble/latent_codes") {
+        EXPECT_EQ(t["bytes"], 40 * row);
+      }
     }
   }
   // The float precisions: 4 d and 2 d bytes per frame, no shared tables.

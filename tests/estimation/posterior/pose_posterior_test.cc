@@ -171,7 +171,7 @@ TEST(PosePosterior, ModelErrorComposesEverySampleWithAStoredResidual) {
   ASSERT_TRUE(PosePosterior(f.trunk, calibrated, options).Estimate(f.targets, 1, &shifted)
                   .IsSolutionUsable());
   ASSERT_EQ(plain->size(), shifted->size());
-  for (std::size_t i = 0; i < plain->size(); ++i) {
+  for (int i = 0; i < plain->size(); ++i) {
     const SE2d expected = plain->samples()[i] * SE2d::Exp(r);
     EXPECT_NEAR(shifted->samples()[i].x(), expected.x(), 1e-12);
     EXPECT_NEAR(shifted->samples()[i].y(), expected.y(), 1e-12);

@@ -96,7 +96,7 @@ TEST(FunctaModel, RoundTripsASpatialLatentTrunkAndRecordsItsGrid) {
     meta.replace(meta.find(from), from.size(), to);
     TensorFile edited("model");
     edited.set_meta_json(meta);
-    for (const std::string& name : {"bubble/theta", "bubble/alpha"}) {
+    for (const char* name : {"bubble/theta", "bubble/alpha"}) {
       const auto& tensor = file.Get(name);
       edited.Add(name, TensorFile::DType::kFloat32, tensor.shape, tensor.values);
     }
