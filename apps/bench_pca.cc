@@ -9,6 +9,20 @@
 // The frames: a smooth rank-`--rank` signal (component i with scale 1 / (1 + i)) plus
 // white noise of standard deviation 0.01, from a fixed seed. One fit each (no
 // repetitions: a fit of the default size takes seconds to minutes).
+//
+// With --data D --model M it measures instead what the sensor noise leaves a linear
+// basis on a dataset with noise-free frames (`synth --clean`; docs/REPRESENTATION.md):
+//
+//   tactfunc bench pca --data D --model M [--sensor S] [--sizes 32,64,128] [--smooth 0.8] [--json]
+//
+// For each sensor of the model that D has, the trunk's frame format gives the targets
+// (the trunk itself is not used). Three bases are fitted on the train split: PCA of the
+// noisy frames (eval's baseline), PCA of the noise-free frames (what no user's data
+// offers: a bound on any basis learned from these frames), and PCA of the noisy frames
+// after a Gaussian blur of --smooth pixels (a smooth basis). Each test frame's NOISY
+// targets are projected on each basis, the codes rounded to float16 (2 bytes a
+// component, as `encode`'s default latents), decoded and scored by THE PSNR against the
+// noise-free and the noisy targets of the frame.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -19,7 +33,10 @@
 
 #include "apps/bench.h"
 #include "apps/command.h"
+#include "apps/dataset_flags.h"
+#include "estimation/data/trunk_targets.h"
 #include "estimation/evaluation/baselines.h"
+#include "models/trunk/functa_model.h"
 
 namespace tactfunc::apps {
 namespace {
@@ -31,6 +48,12 @@ struct PcaBenchFlags {
   int rank = 64;
   bool reference = false;
   bool json = false;
+  // The dataset study (header comment).
+  std::string data;
+  std::string model;
+  std::string sizes = "32,64,128";
+  double smooth = 0.8;
+  DatasetFlags dataset;
 };
 
 double Seconds(std::chrono::steady_clock::time_point start) {
@@ -49,7 +72,166 @@ double ExplainedBy(const Eigen::MatrixXf& frames, const Eigen::RowVectorXf& mean
   return total > 0 ? 1.0 - error.squaredNorm() / total : 1.0;
 }
 
+// A separable Gaussian blur of standard deviation `sigma` pixels over a rows x cols
+// frame of targets (N x C, pixel-major), edges clamped; invalid pixels blur as their
+// stored 0.
+Eigen::MatrixXf BlurTargets(const TrunkTargets& t, double sigma) {
+  const int radius = std::max(1, static_cast<int>(std::ceil(3 * sigma)));
+  std::vector<float> kernel(2 * radius + 1);
+  float sum = 0;
+  for (int i = -radius; i <= radius; ++i) {
+    kernel[i + radius] = static_cast<float>(std::exp(-0.5 * i * i / (sigma * sigma)));
+    sum += kernel[i + radius];
+  }
+  for (float& k : kernel) k /= sum;
+  const int rows = t.rows, cols = t.cols;
+  const Eigen::Index channels = t.values.cols();
+  auto at = [](int i, int n) { return std::min(std::max(i, 0), n - 1); };
+  Eigen::MatrixXf across(t.values.rows(), channels), out(t.values.rows(), channels);
+  for (int r = 0; r < rows; ++r) {
+    for (int c = 0; c < cols; ++c) {
+      for (Eigen::Index ch = 0; ch < channels; ++ch) {
+        float v = 0;
+        for (int i = -radius; i <= radius; ++i) {
+          v += kernel[i + radius] * t.values(static_cast<Eigen::Index>(r) * cols + at(c + i, cols), ch);
+        }
+        across(static_cast<Eigen::Index>(r) * cols + c, ch) = v;
+      }
+    }
+  }
+  for (int r = 0; r < rows; ++r) {
+    for (int c = 0; c < cols; ++c) {
+      for (Eigen::Index ch = 0; ch < channels; ++ch) {
+        float v = 0;
+        for (int i = -radius; i <= radius; ++i) {
+          v += kernel[i + radius] * across(static_cast<Eigen::Index>(at(r + i, rows)) * cols + c, ch);
+        }
+        out(static_cast<Eigen::Index>(r) * cols + c, ch) = v;
+      }
+    }
+  }
+  return out;
+}
+
+std::vector<int> ParseSizes(const std::string& text) {
+  std::vector<int> sizes;
+  std::size_t start = 0;
+  while (start <= text.size()) {
+    const std::size_t comma = std::min(text.find(',', start), text.size());
+    const std::string item = text.substr(start, comma - start);
+    std::size_t used = 0;
+    int n = 0;
+    try {
+      n = std::stoi(item, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used != item.size() || item.empty() || n < 1) {
+      throw UsageError("--sizes: expected a comma-separated list of component counts >= 1, "
+                       "got '" + text + "'");
+    }
+    sizes.push_back(n);
+    start = comma + 1;
+  }
+  return sizes;
+}
+
+void RunPcaDataStudy(const PcaBenchFlags& flags) {
+  if (flags.model.empty()) throw UsageError("--data needs --model (the trunks' frame formats)");
+  const std::vector<int> sizes = ParseSizes(flags.sizes);
+  const int largest = *std::max_element(sizes.begin(), sizes.end());
+  const FunctaModel model = FunctaModel::Load(flags.model);
+  const Dataset dataset = OpenDataset(flags.data, flags.dataset);
+  if (!dataset.has_clean()) {
+    throw std::runtime_error(flags.data + ": the dataset has no noise-free frames (write it "
+                             "with `tactfunc synth --clean`); the study scores against them");
+  }
+  nlohmann::json rows = nlohmann::json::array();
+  std::cout << "bench pca: " << flags.data << ", bases fitted on the train split, test frames "
+            << "coded as float16 PCA codes (2 bytes a component), PSNR in dB\n"
+            << "sensor   basis fitted on            components  bytes/frame  noise-free  noisy\n";
+  for (SensorKind sensor : model.sensors()) {
+    if (!dataset.has_sensor(sensor)) continue;
+    if (!flags.dataset.sensor.empty() && flags.dataset.sensor != ToString(sensor)) continue;
+    const FrameFormat& format = model.Trunk(sensor).format;
+    std::vector<TrunkTargets> train_noisy, train_clean, test_noisy, test_clean;
+    for (std::size_t i : dataset.FrameIndices(sensor, Split::kTrain)) {
+      train_noisy.push_back(LoadTrunkTargets(dataset, i, format, false));
+      train_clean.push_back(LoadTrunkTargets(dataset, i, format, true));
+    }
+    for (std::size_t i : dataset.FrameIndices(sensor, Split::kTest)) {
+      test_noisy.push_back(LoadTrunkTargets(dataset, i, format, false));
+      test_clean.push_back(LoadTrunkTargets(dataset, i, format, true));
+    }
+    if (train_noisy.size() < 2 || test_noisy.empty()) {
+      throw std::runtime_error(flags.data + ": " + ToString(sensor) + " needs at least 2 train "
+                               "and 1 test frame, found " + std::to_string(train_noisy.size()) +
+                               " and " + std::to_string(test_noisy.size()));
+    }
+    auto pointers = [](const std::vector<TrunkTargets>& v) {
+      std::vector<const TrunkTargets*> p;
+      for (const TrunkTargets& t : v) p.push_back(&t);
+      return p;
+    };
+    const Eigen::MatrixXf noisy_matrix = StackFrames(pointers(train_noisy));
+    Eigen::MatrixXf smooth_matrix(noisy_matrix.rows(), noisy_matrix.cols());
+    for (std::size_t i = 0; i < train_noisy.size(); ++i) {
+      TrunkTargets blurred = train_noisy[i];
+      blurred.values = BlurTargets(train_noisy[i], flags.smooth);
+      smooth_matrix.row(static_cast<Eigen::Index>(i)) = FlattenFrame(blurred);
+    }
+    const Eigen::MatrixXf test_matrix = StackFrames(pointers(test_noisy));
+    const int channels = static_cast<int>(test_noisy.front().values.cols());
+    struct Basis {
+      std::string name;
+      Eigen::MatrixXf frames;
+    };
+    char smooth_name[64];
+    std::snprintf(smooth_name, sizeof(smooth_name), "noisy frames, blurred %.2g px", flags.smooth);
+    const std::vector<Basis> bases = {{"noisy frames (eval's PCA)", noisy_matrix},
+                                      {"noise-free frames (bound)",
+                                       StackFrames(pointers(train_clean))},
+                                      {smooth_name, smooth_matrix}};
+    for (const Basis& basis : bases) {
+      PcaCodec::Options options;
+      options.components = largest;
+      const PcaCodec full = PcaCodec::Fit(basis.frames, options);
+      for (int n : sizes) {
+        if (n > full.components()) continue;
+        const PcaCodec pca = full.Truncated(n);
+        Eigen::MatrixXf codes = pca.Encode(test_matrix);
+        for (Eigen::Index i = 0; i < codes.size(); ++i) {
+          codes.data()[i] = static_cast<float>(Eigen::half(codes.data()[i]));
+        }
+        const Eigen::MatrixXf decoded = pca.Decode(codes);
+        double clean_sum = 0, noisy_sum = 0;
+        for (std::size_t i = 0; i < test_noisy.size(); ++i) {
+          const Eigen::MatrixXf prediction =
+              UnflattenFrame(decoded.row(static_cast<Eigen::Index>(i)), channels);
+          clean_sum += Psnr(prediction, test_clean[i]);
+          noisy_sum += Psnr(prediction, test_noisy[i]);
+        }
+        const double clean = clean_sum / test_noisy.size(), noisy = noisy_sum / test_noisy.size();
+        std::printf("%-8s %-28s %10d  %11d  %10.2f  %5.2f\n", ToString(sensor),
+                    basis.name.c_str(), n, 2 * n, clean, noisy);
+        rows.push_back({{"sensor", ToString(sensor)}, {"basis", basis.name},
+                        {"components", n}, {"bytes_per_frame", 2 * n},
+                        {"psnr_clean", clean}, {"psnr", noisy},
+                        {"train_frames", train_noisy.size()}, {"test_frames", test_noisy.size()}});
+      }
+    }
+  }
+  std::fflush(stdout);
+  if (flags.json) {
+    EmitJson({{"bench", "pca"}, {"data", flags.data}, {"smooth_px", flags.smooth}, {"rows", rows}});
+  }
+}
+
 void RunPcaBench(const PcaBenchFlags& flags) {
+  if (!flags.data.empty()) {
+    RunPcaDataStudy(flags);
+    return;
+  }
   const int m = flags.frames, p = flags.pixels, r = flags.rank;
   std::mt19937 rng(7);
   std::normal_distribution<float> normal(0.f, 1.f);
@@ -134,6 +316,19 @@ void RegisterPcaBenchmark(CLI::App* bench, CommandBody* selected) {
       ->check(CLI::Range(1, 10000));
   sub->add_flag("--reference", flags->reference, "Also fit with cv::PCA and compare");
   sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
+  sub->add_option("--data", flags->data,
+                  "Instead: what the sensor noise leaves a linear basis on this dataset "
+                  "(needs noise-free frames, synth --clean; docs/REPRESENTATION.md)");
+  sub->add_option("--model", flags->model, "With --data: the model whose frame formats give "
+                  "the targets");
+  sub->add_option("--sizes", flags->sizes, "With --data: component counts (default 32,64,128)");
+  sub->add_option("--smooth", flags->smooth,
+                  "With --data: Gaussian blur of the smoothed basis's frames, pixels "
+                  "(default 0.8)")
+      ->check(CLI::Range(0.05, 100.0));
+  sub->add_option("--sensor", flags->dataset.sensor,
+                  "With --data: one sensor (bubble or gelslim; default: every sensor of the "
+                  "model the dataset has)");
   sub->callback([flags, selected]() { *selected = [flags]() { RunPcaBench(*flags); }; });
 }
 

@@ -4,9 +4,11 @@
 // error messages that name the file, and nothing lost on failure.
 #include <sys/wait.h>
 
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -184,6 +186,42 @@ TEST_F(CliTest, BenchTrunkTimesTheFitAndTheMetaStepAndCountsTheirFlops) {
   const Result bad = Run("bench trunk --workloads fit,train");
   EXPECT_NE(bad.exit_code, 0);
   EXPECT_THAT(bad.err, HasSubstr("--workloads"));
+}
+
+TEST_F(CliTest, BenchPcaOnADatasetScoresThreeBasesAgainstTheNoiseFreeFrames) {
+  ASSERT_EQ(Run("synth --out " + Path("d") + " --frames-per-tool 4 --tools rod,square,lines5 "
+                "--clean --seed 3 --test-fraction 0.5").exit_code, 0);
+  testing_util::MakeModel().Save(Path("m.tfm"));
+  const Result r = Run("bench pca --data " + Path("d") + " --model " + Path("m.tfm") +
+                       " --sizes 2,4 --smooth 1 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json j = r.LastJson();
+  EXPECT_EQ(j["bench"], "pca");
+  // Two sensors x three bases x two sizes.
+  ASSERT_EQ(j["rows"].size(), 12u) << j.dump();
+  std::map<std::string, int> per_sensor;
+  for (const nlohmann::json& row : j["rows"]) {
+    ++per_sensor[row["sensor"].get<std::string>()];
+    EXPECT_EQ(row["bytes_per_frame"].get<int>(), 2 * row["components"].get<int>());
+    EXPECT_TRUE(std::isfinite(row["psnr_clean"].get<double>())) << row.dump();
+    EXPECT_GT(row["psnr_clean"].get<double>(), 0.0) << row.dump();
+    EXPECT_GT(row["test_frames"].get<int>(), 0);
+  }
+  EXPECT_EQ(per_sensor["bubble"], 6);
+  EXPECT_EQ(per_sensor["gelslim"], 6);
+  EXPECT_THAT(r.out, HasSubstr("noise-free frames (bound)"));
+  EXPECT_THAT(r.out, HasSubstr("noisy frames, blurred 1 px"));
+
+  // A dataset without noise-free frames is refused naming it; so is a bad size list.
+  ASSERT_EQ(Run("synth --out " + Path("n") + " --frames-per-tool 2 --tools rod").exit_code, 0);
+  const Result unclean = Run("bench pca --data " + Path("n") + " --model " + Path("m.tfm"));
+  EXPECT_NE(unclean.exit_code, 0);
+  EXPECT_THAT(unclean.err, HasSubstr("no noise-free frames"));
+  EXPECT_THAT(unclean.err, HasSubstr(Path("n")));
+  const Result sizes = Run("bench pca --data " + Path("d") + " --model " + Path("m.tfm") +
+                           " --sizes 4,x");
+  EXPECT_NE(sizes.exit_code, 0);
+  EXPECT_THAT(sizes.err, HasSubstr("--sizes"));
 }
 
 TEST_F(CliTest, SynthWritesThePairedFramesItReports) {
