@@ -113,32 +113,9 @@ Eigen::MatrixXf BlurTargets(const TrunkTargets& t, double sigma) {
   return out;
 }
 
-std::vector<int> ParseSizes(const std::string& text) {
-  std::vector<int> sizes;
-  std::size_t start = 0;
-  while (start <= text.size()) {
-    const std::size_t comma = std::min(text.find(',', start), text.size());
-    const std::string item = text.substr(start, comma - start);
-    std::size_t used = 0;
-    int n = 0;
-    try {
-      n = std::stoi(item, &used);
-    } catch (const std::exception&) {
-      used = 0;
-    }
-    if (used != item.size() || item.empty() || n < 1) {
-      throw UsageError("--sizes: expected a comma-separated list of component counts >= 1, "
-                       "got '" + text + "'");
-    }
-    sizes.push_back(n);
-    start = comma + 1;
-  }
-  return sizes;
-}
-
 void RunPcaDataStudy(const PcaBenchFlags& flags) {
   if (flags.model.empty()) throw UsageError("--data needs --model (the trunks' frame formats)");
-  const std::vector<int> sizes = ParseSizes(flags.sizes);
+  const std::vector<int> sizes = ParsePositiveIntList(flags.sizes, "--sizes", "component counts");
   const int largest = *std::max_element(sizes.begin(), sizes.end());
   const FunctaModel model = FunctaModel::Load(flags.model);
   const Dataset dataset = OpenDataset(flags.data, flags.dataset);

@@ -13,6 +13,30 @@ void EmitJson(const nlohmann::json& figures) {
   std::cout << figures.dump() << std::endl;
 }
 
+std::vector<int> ParsePositiveIntList(const std::string& text, const std::string& flag,
+                                      const std::string& what) {
+  std::vector<int> values;
+  for (const std::string& item : SplitList(text)) {
+    std::size_t used = 0;
+    int value = 0;
+    try {
+      value = std::stoi(item, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used != item.size() || value < 1) {
+      values.clear();
+      break;
+    }
+    values.push_back(value);
+  }
+  if (values.empty()) {
+    throw UsageError(flag + ": expected a comma-separated list of " + what + " >= 1, got '" +
+                     text + "'");
+  }
+  return values;
+}
+
 std::vector<std::string> SplitList(const std::string& text) {
   std::vector<std::string> items;
   std::string current;

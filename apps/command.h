@@ -51,6 +51,12 @@ void EmitJson(const nlohmann::json& figures);
 // "a,b,,c" -> {"a", "b", "c"}; surrounding spaces trimmed.
 std::vector<std::string> SplitList(const std::string& text);
 
+// A flag's comma-separated list of whole numbers >= 1 ("64,128"), in order. Throws
+// UsageError "<flag>: expected a comma-separated list of <what> >= 1, got '<text>'" for
+// an empty list or any item that is not such a number.
+std::vector<int> ParsePositiveIntList(const std::string& text, const std::string& flag,
+                                      const std::string& what);
+
 // The worker count for a --threads flag: `requested` if > 0, else every core (>= 1).
 int ResolveThreads(int requested);
 

@@ -98,20 +98,6 @@ Labelled Collect(const PoseGenerator& g, const Functaset& f, const Dataset& data
   return out;
 }
 
-std::vector<int> ParseWidths(const std::string& text) {
-  std::vector<int> widths;
-  for (const std::string& w : SplitList(text)) {
-    int v = 0;
-    try {
-      v = std::stoi(w);
-    } catch (const std::exception&) {
-    }
-    if (v < 1) throw UsageError("--hidden: expected comma-separated widths >= 1, got '" + text + "'");
-    widths.push_back(v);
-  }
-  return widths;
-}
-
 void RunTrainGenerator(const TrainGeneratorFlags& flags) {
   if (flags.mode != "latents" && flags.mode != "pixels") {
     throw UsageError("--mode: expected latents or pixels, got '" + flags.mode + "'");
@@ -127,7 +113,7 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
     options.symmetry_orders.push_back(t.symmetry_order());
   }
   options.latent_dim = trunk.siren.latent_dim();
-  options.hidden_sizes = ParseWidths(flags.hidden);
+  options.hidden_sizes = ParsePositiveIntList(flags.hidden, "--hidden", "widths");
   options.yaw_harmonics = flags.harmonics;
   PoseGenerator generator(options, DeriveSeed(flags.seed, 0));
 

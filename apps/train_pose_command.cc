@@ -153,21 +153,7 @@ std::string Cell(double v, int width, int digits) {
 }
 
 void RunTrainPose(const TrainPoseFlags& flags) {
-  std::vector<int> hidden;
-  for (const std::string& width : SplitList(flags.hidden)) {
-    std::size_t used = 0;
-    int value = 0;
-    try {
-      value = std::stoi(width, &used);
-    } catch (const std::exception&) {
-      used = 0;
-    }
-    if (used != width.size() || value < 1) {
-      throw UsageError("--hidden: expected comma-separated layer widths >= 1, got '" +
-                       flags.hidden + "'");
-    }
-    hidden.push_back(value);
-  }
+  const std::vector<int> hidden = ParsePositiveIntList(flags.hidden, "--hidden", "layer widths");
   PoseMlpTrainingOptions training;
   training.epochs = flags.epochs;
   training.batch_size = flags.batch;
