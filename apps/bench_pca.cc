@@ -30,6 +30,7 @@
 #include <random>
 
 #include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "apps/bench.h"
 #include "apps/command.h"
@@ -72,45 +73,17 @@ double ExplainedBy(const Eigen::MatrixXf& frames, const Eigen::RowVectorXf& mean
   return total > 0 ? 1.0 - error.squaredNorm() / total : 1.0;
 }
 
-// A separable Gaussian blur of standard deviation `sigma` pixels over a rows x cols
-// frame of targets (N x C, pixel-major), edges clamped; invalid pixels blur as their
-// stored 0.
-Eigen::MatrixXf BlurTargets(const TrunkTargets& t, double sigma) {
-  const int radius = std::max(1, static_cast<int>(std::ceil(3 * sigma)));
-  std::vector<float> kernel(2 * radius + 1);
-  float sum = 0;
-  for (int i = -radius; i <= radius; ++i) {
-    kernel[i + radius] = static_cast<float>(std::exp(-0.5 * i * i / (sigma * sigma)));
-    sum += kernel[i + radius];
+// `t` with each channel blurred by OpenCV's Gaussian of standard deviation `sigma`
+// pixels (edges replicated); invalid pixels blur as their stored 0.
+TrunkTargets BlurTargets(const TrunkTargets& t, double sigma) {
+  TrunkTargets blurred = t;
+  for (Eigen::Index ch = 0; ch < t.values.cols(); ++ch) {
+    // A channel is one contiguous column of N = rows x cols pixels, pixel-major.
+    const cv::Mat plane(t.rows, t.cols, CV_32F, const_cast<float*>(t.values.col(ch).data()));
+    cv::Mat out(t.rows, t.cols, CV_32F, blurred.values.col(ch).data());
+    cv::GaussianBlur(plane, out, cv::Size(0, 0), sigma, sigma, cv::BORDER_REPLICATE);
   }
-  for (float& k : kernel) k /= sum;
-  const int rows = t.rows, cols = t.cols;
-  const Eigen::Index channels = t.values.cols();
-  auto at = [](int i, int n) { return std::min(std::max(i, 0), n - 1); };
-  Eigen::MatrixXf across(t.values.rows(), channels), out(t.values.rows(), channels);
-  for (int r = 0; r < rows; ++r) {
-    for (int c = 0; c < cols; ++c) {
-      for (Eigen::Index ch = 0; ch < channels; ++ch) {
-        float v = 0;
-        for (int i = -radius; i <= radius; ++i) {
-          v += kernel[i + radius] * t.values(static_cast<Eigen::Index>(r) * cols + at(c + i, cols), ch);
-        }
-        across(static_cast<Eigen::Index>(r) * cols + c, ch) = v;
-      }
-    }
-  }
-  for (int r = 0; r < rows; ++r) {
-    for (int c = 0; c < cols; ++c) {
-      for (Eigen::Index ch = 0; ch < channels; ++ch) {
-        float v = 0;
-        for (int i = -radius; i <= radius; ++i) {
-          v += kernel[i + radius] * across(static_cast<Eigen::Index>(at(r + i, rows)) * cols + c, ch);
-        }
-        out(static_cast<Eigen::Index>(r) * cols + c, ch) = v;
-      }
-    }
-  }
-  return out;
+  return blurred;
 }
 
 void RunPcaDataStudy(const PcaBenchFlags& flags) {
@@ -153,9 +126,8 @@ void RunPcaDataStudy(const PcaBenchFlags& flags) {
     const Eigen::MatrixXf noisy_matrix = StackFrames(pointers(train_noisy));
     Eigen::MatrixXf smooth_matrix(noisy_matrix.rows(), noisy_matrix.cols());
     for (std::size_t i = 0; i < train_noisy.size(); ++i) {
-      TrunkTargets blurred = train_noisy[i];
-      blurred.values = BlurTargets(train_noisy[i], flags.smooth);
-      smooth_matrix.row(static_cast<Eigen::Index>(i)) = FlattenFrame(blurred);
+      smooth_matrix.row(static_cast<Eigen::Index>(i)) =
+          FlattenFrame(BlurTargets(train_noisy[i], flags.smooth));
     }
     const Eigen::MatrixXf test_matrix = StackFrames(pointers(test_noisy));
     const int channels = static_cast<int>(test_noisy.front().values.cols());

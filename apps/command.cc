@@ -15,6 +15,8 @@ void EmitJson(const nlohmann::json& figures) {
 
 std::vector<int> ParsePositiveIntList(const std::string& text, const std::string& flag,
                                       const std::string& what) {
+  const UsageError error(flag + ": expected a comma-separated list of " + what + " >= 1, got '" +
+                         text + "'");
   std::vector<int> values;
   for (const std::string& item : SplitList(text)) {
     std::size_t used = 0;
@@ -22,18 +24,12 @@ std::vector<int> ParsePositiveIntList(const std::string& text, const std::string
     try {
       value = std::stoi(item, &used);
     } catch (const std::exception&) {
-      used = 0;
+      throw error;
     }
-    if (used != item.size() || value < 1) {
-      values.clear();
-      break;
-    }
+    if (used != item.size() || value < 1) throw error;
     values.push_back(value);
   }
-  if (values.empty()) {
-    throw UsageError(flag + ": expected a comma-separated list of " + what + " >= 1, got '" +
-                     text + "'");
-  }
+  if (values.empty()) throw error;
   return values;
 }
 
