@@ -113,7 +113,9 @@ int main(int argc, char** argv) {
   try {
     StartProcesses(CommandPath(app));
   } catch (const std::exception& e) {
-    if (LaunchedRank() == 0) std::cerr << name << ": error: " << e.what() << "\n";
+    // One write of the whole line: mpirun prints to the same stderr as the processes
+    // exit, and a line written in pieces could be split by its message.
+    if (LaunchedRank() == 0) std::cerr << (name + ": error: " + e.what() + "\n") << std::flush;
     return 2;
   }
   int code = 0;
