@@ -78,6 +78,7 @@ struct PosteriorBenchFlags {
   int samples = 100;
   std::uint64_t seed = 0;
   int knn_k = 8;
+  int sgld_minibatch = PosePosterior::kDefaultSgldMinibatch;
   bool json = false;
   bool no_model_error = false;
   double sigma_z = 0;
@@ -165,6 +166,7 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
   options.num_samples = flags.samples;
   options.seed = flags.seed;
   options.knn.k = flags.knn_k;
+  options.sgld.minibatch_size = flags.sgld_minibatch;
   // Centre on the latent map the pose MLP was trained on (estimation/posterior/pose_posterior.h).
   options.fit.strategy = LatentMapOfPoseModel(pose_model, trunk);
   options.model_error = !flags.no_model_error;
@@ -480,6 +482,11 @@ void RegisterPosteriorBenchmark(CLI::App* bench, CommandBody* selected) {
   sub->add_option("--seed", flags->seed, "Sampler seed (default 0)");
   sub->add_option("--knn-k", flags->knn_k, "Neighbours of the knn sampler (default 8)")
       ->check(CLI::Range(1, 100000));
+  sub->add_option("--sgld-minibatch", flags->sgld_minibatch,
+                  "Pixels per SGLD gradient, with the control variate at the fitted latent; 0 = "
+                  "every pixel (default " +
+                      std::to_string(PosePosterior::kDefaultSgldMinibatch) + ")")
+      ->check(CLI::Range(0, 100000000));
   sub->add_option("--sigma-z", flags->sigma_z,
                   "Latent prior standard deviation sigma_z (default: PosePosterior's)")
       ->check(CLI::PositiveNumber);

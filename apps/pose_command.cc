@@ -120,6 +120,7 @@ struct PoseFlags {
   int samples = 100;
   std::uint64_t seed = 0;
   int knn_k = 8;
+  int sgld_minibatch = PosePosterior::kDefaultSgldMinibatch;
   double pixel_pitch_mm = 0;
   std::string out;
   int height = 420;
@@ -760,6 +761,7 @@ void RunLatentPose(const PoseFlags& flags, PosteriorSampler sampler, const Funct
   options.num_samples = flags.samples;
   options.seed = flags.seed;
   options.knn.k = flags.knn_k;
+  options.sgld.minibatch_size = flags.sgld_minibatch;
   // Centre on the latent map the pose MLP was trained on (estimation/posterior/pose_posterior.h).
   options.fit.strategy = LatentMapOfPoseModel(pose_model, model.Trunk(sensor));
   options.model_error = !flags.no_model_error;
@@ -900,6 +902,11 @@ void RegisterPose(CLI::App& app, CommandBody* selected) {
   sub->add_option("--seed", flags->seed, "Sampler seed (default 0)");
   sub->add_option("--knn-k", flags->knn_k, "Neighbours of the knn sampler (default 8)")
       ->check(CLI::Range(1, 100000));
+  sub->add_option("--sgld-minibatch", flags->sgld_minibatch,
+                  "Pixels per SGLD gradient, with the control variate at the fitted latent; 0 = "
+                  "every pixel (default " +
+                      std::to_string(PosePosterior::kDefaultSgldMinibatch) + ")")
+      ->check(CLI::Range(0, 100000000));
   sub->add_option("--pixel-pitch-mm", flags->pixel_pitch_mm,
                   "Pixel pitch for posterior.png (default: the frame's dataset.json)")
       ->check(CLI::NonNegativeNumber);

@@ -94,6 +94,12 @@ bool TrunkPotential::GaussNewtonHessian(const Eigen::VectorXd& z,
   return true;
 }
 
+bool TrunkPotential::DataTerms(const Eigen::VectorXd& z, Eigen::VectorXd* values,
+                               Eigen::MatrixXd* gradients, Eigen::MatrixXd* hessian) const {
+  problem_->DataTerms(z, values, gradients, hessian);
+  return true;
+}
+
 // ---- Diagnostics ---------------------------------------------------------------------
 
 namespace {
@@ -286,7 +292,10 @@ std::string Sgld::Summary::FullReport() const {
   s << "  step size " << initial_step_size << " -> " << final_step_size
     << "; achievable diffusion " << min_diffusion << " conditional std devs (least dimension)\n";
   s << "  data terms " << num_data_terms << ", per gradient "
-    << (minibatched ? std::to_string(minibatch_size) : std::string("all")) << "\n";
+    << (minibatched ? std::to_string(minibatch_size) +
+                          (control_variate ? " (control variate at z0)" : "")
+                    : std::string("all"))
+    << "\n";
   s << "  U(z0) = " << potential_at_start << "; time: preconditioner "
     << preconditioner_time_ms << " ms, sampling " << sampling_time_ms << " ms\n";
   for (size_t c = 0; c < chains.size(); ++c) {
@@ -364,7 +373,33 @@ Sgld::Summary Sgld::Sample(const LatentPotential& potential, const Eigen::Vector
   summary.num_data_terms = num_data;
   summary.minibatched = options_.minibatch_size > 0 && options_.minibatch_size < num_data;
   summary.minibatch_size = summary.minibatched ? options_.minibatch_size : num_data;
+  summary.control_variate = summary.minibatched && options_.control_variate;
   std::string notes;
+  // The control variate's anchor at z0: every data term's value and gradient (then
+  // also H_GN for the dense preconditioner), or, from a potential without DataTerms, U
+  // and grad U, each minibatch then evaluated at z0 too.
+  bool anchor_terms = false;
+  double anchor_sum = 0;                   // sum_j u_j(z0), or U(z0)
+  Eigen::VectorXd anchor_values;           // u_j(z0)
+  Eigen::MatrixXd anchor_gradients_t;      // d x N, column j = grad u_j(z0)
+  Eigen::VectorXd anchor_gradient;         // sum_j grad u_j(z0), or grad U(z0)
+  Eigen::MatrixXd anchor_hessian;          // H_GN(z0) from the same pass
+  if (summary.control_variate) {
+    Eigen::MatrixXd gradients;
+    anchor_terms = potential.DataTerms(
+        z0, &anchor_values, &gradients,
+        options_.preconditioner == Preconditioner::kDense ? &anchor_hessian : nullptr);
+    anchor_terms = anchor_terms && anchor_values.size() == num_data &&
+                   gradients.rows() == num_data && gradients.cols() == d;
+    if (anchor_terms) {
+      anchor_gradients_t = gradients.transpose();
+      anchor_gradient = anchor_gradients_t.rowwise().sum();
+      anchor_sum = anchor_values.sum();
+    } else {
+      anchor_hessian.resize(0, 0);
+      anchor_sum = potential.Evaluate(z0, &anchor_gradient);
+    }
+  }
 
   // The fixed preconditioner, and the Gauss-Newton diagonal for the step-size check.
   const auto precondition_start = std::chrono::steady_clock::now();
@@ -372,8 +407,10 @@ Sgld::Summary Sgld::Sample(const LatentPotential& potential, const Eigen::Vector
   Eigen::VectorXd gn_diagonal;
   bool have_diagonal = false;
   if (options_.preconditioner == Preconditioner::kDense) {
-    Eigen::MatrixXd hessian;
-    if (potential.GaussNewtonHessian(z0, &hessian) && hessian.allFinite()) {
+    Eigen::MatrixXd hessian = std::move(anchor_hessian);
+    const bool have_hessian =
+        hessian.rows() == d || potential.GaussNewtonHessian(z0, &hessian);
+    if (have_hessian && hessian.allFinite()) {
       gn_diagonal = hessian.diagonal();
       have_diagonal = true;
       pre.hessian.compute(hessian);
@@ -456,7 +493,26 @@ Sgld::Summary Sgld::Sample(const LatentPotential& potential, const Eigen::Vector
       std::copy(permutation.begin(), permutation.begin() + options_.minibatch_size,
                 batch.begin());
       std::sort(batch.begin(), batch.end());
-      return potential.EvaluateMinibatch(z, batch, g);
+      const double u = potential.EvaluateMinibatch(z, batch, g);
+      if (!summary.control_variate) return u;
+      // U_hat(z) = U(z0) + [minibatch estimate at z - the same at z0]; the prior's
+      // part cancels when the anchor comes as data terms.
+      if (anchor_terms) {
+        const double scale = static_cast<double>(num_data) / options_.minibatch_size;
+        double batch_sum = 0;
+        for (int j : batch) batch_sum += anchor_values[j];
+        if (g != nullptr) {
+          Eigen::VectorXd at_anchor = Eigen::VectorXd::Zero(d);
+          for (int j : batch) at_anchor += anchor_gradients_t.col(j);
+          *g += anchor_gradient - scale * at_anchor;
+        }
+        return u + anchor_sum - scale * batch_sum;
+      }
+      Eigen::VectorXd g_at_anchor;
+      const double u_at_anchor =
+          potential.EvaluateMinibatch(z0, batch, g != nullptr ? &g_at_anchor : nullptr);
+      if (g != nullptr) *g += anchor_gradient - g_at_anchor;
+      return anchor_sum + (u - u_at_anchor);
     };
     Eigen::VectorXd z = z0;
     if (options_.initial_jitter > 0) z += options_.initial_jitter * pre.ApplySqrt(draw());
@@ -517,7 +573,9 @@ Sgld::Summary Sgld::Sample(const LatentPotential& potential, const Eigen::Vector
       healthy.push_back(c);
     }
   }
-  summary.potential_at_start = potential.Evaluate(z0, nullptr);
+  summary.potential_at_start = summary.control_variate && !anchor_terms
+                                  ? anchor_sum
+                                  : potential.Evaluate(z0, nullptr);
   const int per_chain = options_.num_samples_per_chain;
   summary.num_samples = static_cast<int>(healthy.size()) * per_chain;
   samples->resize(summary.num_samples, d);

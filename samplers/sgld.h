@@ -47,6 +47,22 @@
 // 2011, Sec. 4) -- small steps, or full batches. The per-sample U reported is then the
 // minibatch estimate (N / n) sum_batch u_j + prior, unbiased but noisy.
 //
+// Control variate (Options::control_variate, on by default; Baker, Fearnhead, Fox and
+// Nemeth 2019, "Control variates for stochastic gradient MCMC"). The plain estimate's
+// noise does not shrink near the mode: V_j is the spread of the pixels' gradients, large
+// even where their sum is zero. Anchored at z0 (the fit's mode), the estimate
+//   grad U_hat(z) = grad U(z0) + (N / n) sum_{j in batch} (grad u_j(z) - grad u_j(z0))
+// is still unbiased, exact at z0, and its V_j is the spread of grad u_j(z) - grad u_j(z0)
+// ~ H_j (z - z0), which is small wherever the posterior puts its mass. In the dense
+// preconditioner's metric, with a_j = H^-1/2 J_j^T / sigma (sum_j a_j a_j^T ~ I, so
+// |a_j|^2 ~ d / N) and u = H^1/2 (z - z0) (|u|^2 ~ d), the extra variance per step and
+// direction is about eta^2 N / n E[|a_j|^2 (a_j^T u)^2] ~ eta^2 d / n against the 2 eta
+// injected: a relative widening of eta d / (2 n), 1% for eta = 0.3, d = 64, n = 1024.
+// U_hat is anchored the same way. It costs one pass over every pixel at z0, shared by
+// the chains (LatentPotential::DataTerms: each term's value and gradient from one latent
+// Jacobian, which also gives the dense preconditioner's H_GN), and one minibatch pass
+// per step; a potential without DataTerms pays a second minibatch pass at z0 instead.
+//
 // Diagnostics (over all chains that did not diverge, per latent dimension):
 //   ESS    effective sample size of Vehtari et al. 2021 (Stan): the chains are split
 //          in halves; rho_t = 1 - (W - mean_m acov_m(t)) / var+; Geyer's initial
@@ -112,6 +128,15 @@ class LatentPotential {
   }
   // Its diagonal (size d). Default: the diagonal of GaussNewtonHessian.
   virtual bool GaussNewtonDiagonal(const Eigen::VectorXd& z, Eigen::VectorXd* diagonal) const;
+  // Each data term at z: values u_j (size NumDataTerms()) and gradients (N x d, row j =
+  // grad u_j), so that U = sum_j u_j + prior; and, if hessian is not null, the
+  // Gauss-Newton Hessian from the same pass. Returns false if this potential cannot
+  // provide them (the default); the control variate then evaluates each minibatch at
+  // the anchor instead.
+  virtual bool DataTerms(const Eigen::VectorXd& z, Eigen::VectorXd* values,
+                         Eigen::MatrixXd* gradients, Eigen::MatrixXd* hessian) const {
+    return false;
+  }
 };
 
 // U(z) = (z - mean)^T precision (z - mean) / 2: a Gaussian N(mean, precision^-1), the
@@ -146,6 +171,8 @@ class TrunkPotential : public LatentPotential {
   double EvaluateMinibatch(const Eigen::VectorXd& z, const std::vector<int>& indices,
                            Eigen::VectorXd* gradient) const override;
   bool GaussNewtonHessian(const Eigen::VectorXd& z, Eigen::MatrixXd* hessian) const override;
+  bool DataTerms(const Eigen::VectorXd& z, Eigen::VectorXd* values, Eigen::MatrixXd* gradients,
+                 Eigen::MatrixXd* hessian) const override;
 
   const LatentProblem& problem() const { return *problem_; }
 
@@ -217,6 +244,9 @@ class Sgld {
     // Data terms (pixels) per stochastic gradient, >= 0; 0, or >= N, = full batch. See
     // the header comment for the extra variance.
     int minibatch_size = 0;
+    // With minibatches: anchor the estimate at z0 (header comment, "Control variate").
+    // No effect on full batches.
+    bool control_variate = true;
     // Seed of every chain's stream (DeriveSeed(seed, chain)).
     std::uint64_t seed = 0;
     // Threads running chains, >= 0; 0 = min(num_chains, hardware threads).
@@ -249,6 +279,7 @@ class Sgld {
     int dim = 0;
     long num_gradient_evaluations = 0;
     bool minibatched = false;
+    bool control_variate = false;    // minibatch estimates anchored at z0
     int minibatch_size = 0;          // n used (N when full batch)
     int num_data_terms = 0;          // N
     double initial_step_size = 0, final_step_size = 0;

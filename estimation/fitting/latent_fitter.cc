@@ -321,10 +321,27 @@ LatentFitter::Summary LatentFitter::FitImpl(const LatentProblem& problem,
     summary.stages.push_back(Stage{name, cost, MsSince(began), iterations});
     summary.iterations += iterations;
   };
+  // A fit that is meta-SGD steps alone takes the start's cost (and PSNR) from its first
+  // step's forward pass instead of a pass of its own.
+  const int steps = options_.strategy.steps;
+  const bool meta_sgd_only = !options_.strategy.knn && steps >= 1 &&
+                             options_.strategy.refinement == FitStrategy::Refinement::kMetaSgd;
   std::optional<double> psnr;
-  double cost = objective(z, &psnr);
+  double cost = 0;
+  Eigen::VectorXd meta_sgd_latent;
+  Clock::time_point meta_sgd_began;
+  if (meta_sgd_only) {
+    summary.stages.push_back(Stage{"start", 0, MsSince(start_time), 0});
+    meta_sgd_began = Clock::now();
+    double data_cost = 0;
+    meta_sgd_latent = problem.MetaSgdSteps(z, steps, &data_cost, &psnr);
+    cost = data_cost + HalfSquaredNorm(prior_cost, z.data());
+    summary.stages.back().cost = cost;
+  } else {
+    cost = objective(z, &psnr);
+    add_stage("start", cost, start_time, 0);
+  }
   summary.initial_cost = cost;
-  add_stage("start", cost, start_time, 0);
   summary.termination_type = FitTermination::kCompleted;
 
   // A stage whose result is not finite is undone: the fit keeps the last finite latent.
@@ -383,11 +400,11 @@ LatentFitter::Summary LatentFitter::FitImpl(const LatentProblem& problem,
     add_stage("knn", cost, began, 0);
   }
 
-  const int steps = options_.strategy.steps;
   if (options_.strategy.refinement == FitStrategy::Refinement::kMetaSgd &&
       summary.termination_type != FitTermination::kFailure) {
-    const Clock::time_point began = Clock::now();
-    const Eigen::VectorXd candidate = problem.MetaSgdSteps(z, steps);
+    const Clock::time_point began = meta_sgd_only ? meta_sgd_began : Clock::now();
+    const Eigen::VectorXd candidate =
+        meta_sgd_only ? std::move(meta_sgd_latent) : problem.MetaSgdSteps(z, steps);
     accept(candidate, "meta_sgd");
     add_stage("meta_sgd", cost, began, steps);
   }

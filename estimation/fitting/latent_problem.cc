@@ -339,6 +339,40 @@ double LatentProblem::EvaluateRows(const Eigen::VectorXd& z, const std::vector<i
   return prior + 0.5 * scale * data;
 }
 
+void LatentProblem::DataTerms(const Eigen::VectorXd& z, Eigen::VectorXd* values,
+                              Eigen::MatrixXd* gradients, Eigen::MatrixXd* hessian) const {
+  CheckLatent(z, "DataTerms");
+  const int d = dim();
+  const int c_count = channels();
+  const long n = num_pixels();
+  values->setZero(n);
+  gradients->setZero(n, d);
+  if (hessian != nullptr) hessian->setIdentity(d, d) /= options_.sigma_z * options_.sigma_z;
+  if (n == 0) return;
+  Eigen::VectorXd residuals(num_residuals());
+  RowMajorMatrixXd jacobian(num_residuals(), d);
+  ResidualsAndJacobian(z.data(), residuals.data(), jacobian.data());
+  for (long j = 0; j < n; ++j) {
+    for (int c = 0; c < c_count; ++c) {
+      const long i = j * c_count + c;
+      (*values)[j] += 0.5 * residuals[i] * residuals[i];
+      gradients->row(j) += residuals[i] * jacobian.row(i);
+    }
+  }
+  if (hessian == nullptr) return;
+  // J^T J by SYRK at the problem's precision, as GaussNewtonHessian.
+  if (options_.precision == Precision::kFloat) {
+    const Eigen::MatrixXf J = jacobian.cast<float>();
+    Eigen::MatrixXf jtj = Eigen::MatrixXf::Zero(d, d);
+    jtj.selfadjointView<Eigen::Lower>().rankUpdate(J.transpose());
+    *hessian += jtj.selfadjointView<Eigen::Lower>().toDenseMatrix().cast<double>();
+  } else {
+    Eigen::MatrixXd jtj = Eigen::MatrixXd::Zero(d, d);
+    jtj.selfadjointView<Eigen::Lower>().rankUpdate(jacobian.transpose());
+    *hessian += jtj.selfadjointView<Eigen::Lower>().toDenseMatrix();
+  }
+}
+
 void LatentProblem::GaussNewtonHessian(const Eigen::VectorXd& z, Eigen::MatrixXd* hessian) const {
   CheckLatent(z, "GaussNewtonHessian");
   const int d = dim();
@@ -384,17 +418,34 @@ void LatentProblem::GaussNewtonHessian(const Eigen::VectorXd& z, Eigen::MatrixXd
 
 // ---- Meta-SGD and PSNR ----------------------------------------------------------------------
 
-Eigen::VectorXd LatentProblem::MetaSgdSteps(const Eigen::VectorXd& z0, int steps) const {
+Eigen::VectorXd LatentProblem::MetaSgdSteps(const Eigen::VectorXd& z0, int steps,
+                                            double* start_cost,
+                                            std::optional<double>* start_psnr) const {
   CheckLatent(z0, "MetaSgdSteps");
   const MetaSgd meta_sgd(trunk_->meta_sgd);
+  Eigen::VectorXd z;
+  Eigen::MatrixXd outputs;
   if (options_.precision == Precision::kFloat) {
-    return meta_sgd
-        .InnerLoop<float>(trunk_->siren, coords_float_, targets_float_, weights_float_,
-                          trunk_->alpha.cast<float>(), z0.cast<float>(), steps)
-        .cast<double>();
+    Eigen::MatrixXf start_outputs;
+    z = meta_sgd
+            .InnerLoop<float>(trunk_->siren, coords_float_, targets_float_, weights_float_,
+                              trunk_->alpha.cast<float>(), z0.cast<float>(), steps,
+                              start_cost != nullptr ? &start_outputs : nullptr)
+            .cast<double>();
+    if (start_cost != nullptr) outputs = start_outputs.cast<double>();
+  } else {
+    z = meta_sgd.InnerLoop<double>(trunk_->siren, coords_, pixel_targets_,
+                                   weights_float_.cast<double>(), trunk_->alpha, z0, steps,
+                                   start_cost != nullptr ? &outputs : nullptr);
   }
-  return meta_sgd.InnerLoop<double>(trunk_->siren, coords_, pixel_targets_,
-                                    weights_float_.cast<double>(), trunk_->alpha, z0, steps);
+  if (start_cost != nullptr) {
+    if (start_psnr == nullptr) {
+      throw std::invalid_argument("LatentProblem::MetaSgdSteps: start_psnr must not be null "
+                                  "when start_cost is asked for");
+    }
+    *start_cost = CostOfOutputs(outputs, start_psnr);
+  }
+  return z;
 }
 
 Eigen::VectorXd LatentProblem::StartLatent() const {
@@ -403,49 +454,54 @@ Eigen::VectorXd LatentProblem::StartLatent() const {
 }
 
 // The trunk's output over the whole frame at the problem's precision, as floats (the
-// PSNR's convention) and, if `outputs` is not null, at the precision itself.
-Eigen::MatrixXf LatentProblem::FramePrediction(const Eigen::VectorXd& z,
-                                               Eigen::MatrixXd* outputs) const {
+// PSNR's convention).
+Eigen::MatrixXf LatentProblem::FramePrediction(const Eigen::VectorXd& z) const {
   const LatentModulatedSiren& siren = trunk_->siren;
   if (options_.precision == Precision::kFloat) {
-    Eigen::MatrixXf prediction =
-        siren.Forward<float>(siren.Grid<float>(frame_->rows, frame_->cols), z.cast<float>());
-    if (outputs != nullptr) *outputs = prediction.cast<double>();
-    return prediction;
+    return siren.Forward<float>(siren.Grid<float>(frame_->rows, frame_->cols), z.cast<float>());
   }
-  Eigen::MatrixXd prediction =
-      siren.Forward<double>(siren.Grid<double>(frame_->rows, frame_->cols), z);
-  Eigen::MatrixXf as_float = prediction.cast<float>();
-  if (outputs != nullptr) *outputs = std::move(prediction);
-  return as_float;
+  return siren.Forward<double>(siren.Grid<double>(frame_->rows, frame_->cols), z).cast<float>();
 }
 
 double LatentProblem::Psnr(const Eigen::VectorXd& z) const {
   CheckLatent(z, "Psnr");
-  const double psnr = tactfunc::Psnr(FramePrediction(z, nullptr), *frame_);  // +inf if exact
+  const double psnr = tactfunc::Psnr(FramePrediction(z), *frame_);  // +inf if exact
   return std::isnan(psnr) ? 0.0 : psnr;
 }
 
 double LatentProblem::DataCost(const Eigen::VectorXd& z, std::optional<double>* psnr) const {
   CheckLatent(z, "DataCost");
+  const LatentModulatedSiren& siren = trunk_->siren;
+  if (options_.precision == Precision::kFloat) {
+    return CostOfOutputs(siren.Forward<float>(coords_float_, z.cast<float>()).cast<double>(),
+                         psnr);
+  }
+  return CostOfOutputs(siren.Forward<double>(coords_, z), psnr);
+}
+
+double LatentProblem::CostOfOutputs(const Eigen::MatrixXd& outputs,
+                                    std::optional<double>* psnr) const {
   const int c_count = channels();
   const long n = num_pixels();
   Eigen::VectorXd residuals(n * c_count);
-  if (n < num_valid_pixels_) {
-    psnr->reset();
-    ResidualsAndJacobian(z.data(), residuals.data(), nullptr);
-    return 0.5 * residuals.squaredNorm();
-  }
-  Eigen::MatrixXd outputs;
-  const double frame_psnr = tactfunc::Psnr(FramePrediction(z, &outputs), *frame_);
-  *psnr = std::isnan(frame_psnr) ? 0.0 : frame_psnr;
   for (long i = 0; i < n; ++i) {
     for (int c = 0; c < c_count; ++c) {
       const long k = i * c_count + c;
-      residuals[k] = residual_scale_[k] * (outputs(pixel_index_[i], c) - pixel_targets_(i, c));
+      residuals[k] = residual_scale_[k] * (outputs(i, c) - pixel_targets_(i, c));
     }
   }
   Robustify(static_cast<int>(residuals.size()), residuals.data(), nullptr, 0);
+  psnr->reset();
+  if (n == num_valid_pixels_) {
+    // The PSNR reads valid pixels only (estimation/data/trunk_targets.h), which are the
+    // selected ones here; the others' predictions are never read.
+    Eigen::MatrixXf prediction = Eigen::MatrixXf::Zero(frame_->values.rows(), c_count);
+    for (long i = 0; i < n; ++i) {
+      prediction.row(pixel_index_[i]) = outputs.row(i).cast<float>();
+    }
+    const double frame_psnr = tactfunc::Psnr(prediction, *frame_);
+    *psnr = std::isnan(frame_psnr) ? 0.0 : frame_psnr;
+  }
   return 0.5 * residuals.squaredNorm();
 }
 

@@ -140,12 +140,21 @@ class LatentProblem {
                            Eigen::VectorXd* gradient) const;
   // H_GN(z), d x d symmetric positive definite.
   void GaussNewtonHessian(const Eigen::VectorXd& z, Eigen::MatrixXd* hessian) const;
+  // Every selected pixel's data term at z from one Jacobian pass: values (size N), u_j =
+  // ||r'_j||^2 / 2 over its channels, and gradients (N x d), row j = J'_j^T r'_j, so
+  // that U = sum_j u_j + prior and grad U = sum_j row j + z / sigma_z^2; and, if hessian
+  // is not null, H_GN(z) from the same Jacobian. (SGLD's control variate, samplers/sgld.h.)
+  void DataTerms(const Eigen::VectorXd& z, Eigen::VectorXd* values, Eigen::MatrixXd* gradients,
+                 Eigen::MatrixXd* hessian) const;
 
   // `steps` steps of the trunk's meta-SGD inner loop (MetaSgd::InnerLoop: the trunk's
   // weighted MSE over the selected pixels plus its latent_l2_weight, rates trunk.alpha)
   // from z0. They descend the loss the trunk was meta-trained on, not U: sigma, sigma_z
-  // and the robust loss do not enter.
-  Eigen::VectorXd MetaSgdSteps(const Eigen::VectorXd& z0, int steps) const;
+  // and the robust loss do not enter. If start_cost is not null it receives DataCost(z0)
+  // and *start_psnr (not null then) its PSNR as DataCost gives it, both from the first
+  // step's own forward pass (no extra pass).
+  Eigen::VectorXd MetaSgdSteps(const Eigen::VectorXd& z0, int steps, double* start_cost = nullptr,
+                               std::optional<double>* start_psnr = nullptr) const;
 
   // Where every fit of this frame starts without a warm start: the trunk's StartLatent
   // over the selected pixels (z = 0, or the readout branch's projection;
@@ -157,18 +166,20 @@ class LatentProblem {
   // frame has no valid pixel.
   double Psnr(const Eigen::VectorXd& z) const;
   // Half the squared norm of the (robustified) whitened data residuals at z -- the data
-  // part of U as Ceres sees it, ResidualsAndJacobian's residuals -- in one trunk pass.
-  // When the selected pixels are every valid pixel of the frame (no pixel_stride or
-  // max_pixels thinning), that pass runs over the whole frame and also gives
-  // *psnr = Psnr(z); otherwise it runs over the selected pixels only and *psnr is
-  // reset (Psnr needs its own whole-frame pass). psnr must not be null.
+  // part of U as Ceres sees it, ResidualsAndJacobian's residuals -- from one forward
+  // pass over the selected pixels. When they are every valid pixel of the frame (no
+  // pixel_stride or max_pixels thinning) the same pass also gives *psnr = Psnr(z) (the
+  // PSNR reads valid pixels only); otherwise *psnr is reset (Psnr needs its own pass
+  // over the valid pixels). psnr must not be null.
   double DataCost(const Eigen::VectorXd& z, std::optional<double>* psnr) const;
 
  private:
   // U over the selected pixels (rows == nullptr) or the minibatch `rows` (scaled by N / n).
   double EvaluateRows(const Eigen::VectorXd& z, const std::vector<int>* rows,
                       Eigen::VectorXd* gradient) const;
-  Eigen::MatrixXf FramePrediction(const Eigen::VectorXd& z, Eigen::MatrixXd* outputs) const;
+  Eigen::MatrixXf FramePrediction(const Eigen::VectorXd& z) const;
+  // DataCost from the trunk's outputs over the selected pixels (N x C).
+  double CostOfOutputs(const Eigen::MatrixXd& outputs, std::optional<double>* psnr) const;
   template <typename Scalar>
   double DataTermAndGradient(const Eigen::VectorXd& z, const std::vector<int>* rows,
                              double scale, Eigen::VectorXd* gradient) const;

@@ -150,6 +150,13 @@ std::string PosePosterior::Summary::FullReport() const {
   return s.str();
 }
 
+Sgld::Options PosePosterior::DefaultSgldOptions() {
+  Sgld::Options options;
+  options.minibatch_size = kDefaultSgldMinibatch;
+  options.control_variate = true;
+  return options;
+}
+
 PosePosterior::PosePosterior(const SensorTrunk& trunk, const PoseMlp& pose_mlp,
                              const Options& options, const KnnPosterior* knn)
     : trunk_(&trunk),

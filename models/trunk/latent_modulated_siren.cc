@@ -1296,11 +1296,36 @@ Scalar LatentModulatedSiren::LossAndGradient(const MatrixX<Scalar>& coords,
 }
 
 template <typename Scalar>
+Scalar LatentModulatedSiren::LossGradientAndOutputs(
+    const MatrixX<Scalar>& coords, const VectorX<Scalar>& z, const MatrixX<Scalar>& targets,
+    const VectorX<Scalar>& weights, VectorX<Scalar>* dL_dz, VectorX<Scalar>* dL_dtheta,
+    MatrixX<Scalar>* outputs) const {
+  if (outputs == nullptr) {
+    throw std::invalid_argument(
+        "LatentModulatedSiren::LossGradientAndOutputs: outputs must not be null");
+  }
+  // No Hessian-vector product is asked for, so v_z is never read.
+  return LossPasses<Scalar>(coords, z, targets, weights, nullptr,
+                            VectorX<Scalar>::Zero(options_.latent_dim), dL_dz, dL_dtheta,
+                            nullptr, nullptr, outputs);
+}
+
+template <typename Scalar>
 Scalar LatentModulatedSiren::LossGradientAndHessianProduct(
     const MatrixX<Scalar>& coords, const VectorX<Scalar>& z,
     const MatrixX<Scalar>& targets, const VectorX<Scalar>& weights,
     const VectorX<Scalar>* v_theta, const VectorX<Scalar>& v_z, VectorX<Scalar>* dL_dz,
     VectorX<Scalar>* dL_dtheta, VectorX<Scalar>* Hv_z, VectorX<Scalar>* Hv_theta) const {
+  return LossPasses<Scalar>(coords, z, targets, weights, v_theta, v_z, dL_dz, dL_dtheta, Hv_z,
+                            Hv_theta, nullptr);
+}
+
+template <typename Scalar>
+Scalar LatentModulatedSiren::LossPasses(
+    const MatrixX<Scalar>& coords, const VectorX<Scalar>& z, const MatrixX<Scalar>& targets,
+    const VectorX<Scalar>& weights, const VectorX<Scalar>* v_theta, const VectorX<Scalar>& v_z,
+    VectorX<Scalar>* dL_dz, VectorX<Scalar>* dL_dtheta, VectorX<Scalar>* Hv_z,
+    VectorX<Scalar>* Hv_theta, MatrixX<Scalar>* outputs) const {
   CheckLossInputs(*this, coords, z, targets, weights);
   CheckDirection(*this, v_theta, v_z);
   const long n = coords.rows();
@@ -1319,9 +1344,13 @@ Scalar LatentModulatedSiren::LossGradientAndHessianProduct(
   BlockRecord<Scalar> record(options_.num_hidden_layers, options_.width,
                              options_.output_channels, capacity, reverse,
                              /*keep_layers=*/hvp);
+  if (outputs != nullptr) outputs->resize(n, options_.output_channels);
   for (long begin = 0; begin < n; begin += kPixelBlock) {
     const long m = std::min(kPixelBlock, n - begin);
     pass.Block(coords, targets, weights, begin, m, &record);
+    if (outputs != nullptr) {
+      outputs->middleRows(begin, m) = record.trace.y.leftCols(m).transpose();
+    }
     if (tangent) tangent->Block(record, coords, weights, begin, m, pass.scale);
   }
   if (gradient) pass.Finish(z, dL_dz);
@@ -1479,6 +1508,9 @@ LatentModulatedSiren::VectorX<Scalar> LatentModulatedSiren::StartLatent(
   template S LatentModulatedSiren::LossAndGradient<S>(                                   \
       const MatrixX<S>&, const VectorX<S>&, const MatrixX<S>&, const VectorX<S>&,        \
       VectorX<S>*, VectorX<S>*) const;                                                   \
+  template S LatentModulatedSiren::LossGradientAndOutputs<S>(                            \
+      const MatrixX<S>&, const VectorX<S>&, const MatrixX<S>&, const VectorX<S>&,        \
+      VectorX<S>*, VectorX<S>*, MatrixX<S>*) const;                                      \
   template S LatentModulatedSiren::LossGradientAndHessianProduct<S>(                     \
       const MatrixX<S>&, const VectorX<S>&, const MatrixX<S>&, const VectorX<S>&,        \
       const VectorX<S>*, const VectorX<S>&, VectorX<S>*, VectorX<S>*, VectorX<S>*,       \

@@ -314,6 +314,14 @@ class LatentModulatedSiren {
   Scalar LossAndGradient(const MatrixX<Scalar>& coords, const VectorX<Scalar>& z,
                          const MatrixX<Scalar>& targets, const VectorX<Scalar>& weights,
                          VectorX<Scalar>* dL_dz, VectorX<Scalar>* dL_dtheta) const;
+  // The same, also returning the forward pass's outputs Y (N x C) in *outputs (not
+  // null), bit-identical to the loss pass's own: a caller that needs the trunk's values
+  // at z as well as the gradient (the cost at a fit's start) pays no extra pass.
+  template <typename Scalar>
+  Scalar LossGradientAndOutputs(const MatrixX<Scalar>& coords, const VectorX<Scalar>& z,
+                                const MatrixX<Scalar>& targets, const VectorX<Scalar>& weights,
+                                VectorX<Scalar>* dL_dz, VectorX<Scalar>* dL_dtheta,
+                                MatrixX<Scalar>* outputs) const;
 
   // Hessian-vector product of the loss (exact; Pearlmutter's R-operator, i.e.
   // forward-mode differentiation of the reverse pass). With H the Hessian of
@@ -409,6 +417,13 @@ class LatentModulatedSiren {
   }
   template <typename P, typename T>
   void EvaluateImpl(const P* theta, const T* coord2, const T* z, T* out) const;
+  // LossGradientAndHessianProduct's passes; outputs (may be null) receives Y.
+  template <typename Scalar>
+  Scalar LossPasses(const MatrixX<Scalar>& coords, const VectorX<Scalar>& z,
+                    const MatrixX<Scalar>& targets, const VectorX<Scalar>& weights,
+                    const VectorX<Scalar>* v_theta, const VectorX<Scalar>& v_z,
+                    VectorX<Scalar>* dL_dz, VectorX<Scalar>* dL_dtheta, VectorX<Scalar>* Hv_z,
+                    VectorX<Scalar>* Hv_theta, MatrixX<Scalar>* outputs) const;
   template <typename Scalar>
   const Scalar* ParameterData() const;
   void BuildLayout();

@@ -60,7 +60,8 @@ MetaSgd::VectorX<Scalar> MetaSgd::InnerLoop(const LatentModulatedSiren& siren,
                                             const MatrixX<Scalar>& targets,
                                             const VectorX<Scalar>& weights,
                                             const VectorX<Scalar>& alpha,
-                                            const VectorX<Scalar>& z0, int steps) const {
+                                            const VectorX<Scalar>& z0, int steps,
+                                            MatrixX<Scalar>* outputs_at_start) const {
   CheckAlpha(siren, alpha);
   if (z0.size() != siren.latent_dim() || steps < 0) {
     throw std::invalid_argument("MetaSgd::InnerLoop: expected a start of latent_dim = " +
@@ -71,8 +72,14 @@ MetaSgd::VectorX<Scalar> MetaSgd::InnerLoop(const LatentModulatedSiren& siren,
   const Scalar two_lambda = static_cast<Scalar>(2.0 * options_.latent_l2_weight);
   VectorX<Scalar> z = z0;
   VectorX<Scalar> g;
+  if (outputs_at_start != nullptr && steps == 0) *outputs_at_start = siren.Forward<Scalar>(coords, z);
   for (int k = 0; k < steps; ++k) {
-    siren.LossAndGradient<Scalar>(coords, z, targets, weights, &g, nullptr);
+    if (k == 0 && outputs_at_start != nullptr) {
+      siren.LossGradientAndOutputs<Scalar>(coords, z, targets, weights, &g, nullptr,
+                                           outputs_at_start);
+    } else {
+      siren.LossAndGradient<Scalar>(coords, z, targets, weights, &g, nullptr);
+    }
     g += two_lambda * z;
     z -= alpha.cwiseProduct(g);
   }
@@ -137,7 +144,7 @@ MetaSgd::Result<Scalar> MetaSgd::OuterLossAndGradient(
       const VectorX<S>&, const VectorX<S>&, S*) const;                  \
   template MetaSgd::VectorX<S> MetaSgd::InnerLoop<S>(                    \
       const LatentModulatedSiren&, const MatrixX<S>&, const MatrixX<S>&, \
-      const VectorX<S>&, const VectorX<S>&, const VectorX<S>&, int) const;
+      const VectorX<S>&, const VectorX<S>&, const VectorX<S>&, int, MatrixX<S>*) const;
 
 TACTFUNC_INSTANTIATE_META_SGD(float)
 TACTFUNC_INSTANTIATE_META_SGD(double)

@@ -96,13 +96,15 @@ class MetaSgd {
 
   // The inner loop's update z <- z - alpha (*) d/dz [L(theta, z) + lambda ||z||^2],
   // `steps` (>= 0) times from z0 (size d): the one implementation of the inner loop, also
-  // used to continue a fit from any start (LatentProblem::MetaSgdSteps). Throws
+  // used to continue a fit from any start (LatentProblem::MetaSgdSteps). If
+  // outputs_at_start is not null it receives the trunk's outputs at z0 over coords (N x
+  // C), from the first step's own forward pass (one forward pass when steps = 0). Throws
   // std::invalid_argument on wrong shapes.
   template <typename Scalar>
   VectorX<Scalar> InnerLoop(const LatentModulatedSiren& siren, const MatrixX<Scalar>& coords,
                             const MatrixX<Scalar>& targets, const VectorX<Scalar>& weights,
-                            const VectorX<Scalar>& alpha, const VectorX<Scalar>& z0,
-                            int steps) const;
+                            const VectorX<Scalar>& alpha, const VectorX<Scalar>& z0, int steps,
+                            MatrixX<Scalar>* outputs_at_start = nullptr) const;
 
  private:
   Options options_;

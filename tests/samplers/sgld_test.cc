@@ -335,5 +335,60 @@ TEST(Sgld, RunsOnATinyTrunkWithMinibatches) {
   EXPECT_TRUE(u.allFinite());
 }
 
+// The same potential without DataTerms: the control variate then evaluates each
+// minibatch at the anchor too.
+class WithoutDataTerms : public LatentPotential {
+ public:
+  explicit WithoutDataTerms(const LatentPotential& inner) : inner_(&inner) {}
+  int dim() const override { return inner_->dim(); }
+  double Evaluate(const Eigen::VectorXd& z, Eigen::VectorXd* gradient) const override {
+    return inner_->Evaluate(z, gradient);
+  }
+  int NumDataTerms() const override { return inner_->NumDataTerms(); }
+  double EvaluateMinibatch(const Eigen::VectorXd& z, const std::vector<int>& indices,
+                           Eigen::VectorXd* gradient) const override {
+    return inner_->EvaluateMinibatch(z, indices, gradient);
+  }
+  bool GaussNewtonHessian(const Eigen::VectorXd& z, Eigen::MatrixXd* hessian) const override {
+    return inner_->GaussNewtonHessian(z, hessian);
+  }
+
+ private:
+  const LatentPotential* inner_;
+};
+
+TEST(Sgld, ControlVariateIsTheSameEstimateWithOrWithoutStoredDataTerms) {
+  const SensorTrunk trunk = testing_util::MakeTinyTrunk(6, 7, 16, 2, 4, 3);
+  const Eigen::Vector4d z_true(0.3, -0.2, 0.1, 0.4);
+  const TrunkTargets targets = testing_util::MakeTargets(trunk, z_true, 0.05, 1);
+  LatentProblem::Options problem_options;
+  problem_options.precision = LatentProblem::Precision::kDouble;
+  const LatentProblem problem(trunk, targets, problem_options);
+  const TrunkPotential potential(problem);
+  const WithoutDataTerms generic(potential);
+  Sgld::Options options;
+  options.minibatch_size = 10;
+  options.num_threads = 1;
+  const Sgld sgld(options);
+  Eigen::MatrixXd stored, recomputed;
+  Eigen::VectorXd u_stored, u_recomputed;
+  const Sgld::Summary a = sgld.Sample(potential, z_true, &stored, &u_stored);
+  const Sgld::Summary b = sgld.Sample(generic, z_true, &recomputed, &u_recomputed);
+  ASSERT_TRUE(a.IsSolutionUsable()) << a.FullReport();
+  ASSERT_TRUE(b.IsSolutionUsable()) << b.FullReport();
+  EXPECT_TRUE(a.control_variate);
+  EXPECT_TRUE(b.control_variate);
+  ASSERT_EQ(stored.rows(), recomputed.rows());
+  // The same draws and batches; only the rounding of the anchor's terms differs.
+  EXPECT_LT((stored - recomputed).cwiseAbs().maxCoeff(), 1e-8);
+  EXPECT_LT((u_stored - u_recomputed).cwiseAbs().maxCoeff(), 1e-8 * u_stored.cwiseAbs().maxCoeff());
+  // Without the control variate the chains are others.
+  options.control_variate = false;
+  Eigen::MatrixXd plain;
+  const Sgld::Summary c = Sgld(options).Sample(potential, z_true, &plain);
+  EXPECT_FALSE(c.control_variate);
+  EXPECT_GT((stored - plain).cwiseAbs().maxCoeff(), 1e-6);
+}
+
 }  // namespace
 }  // namespace tactfunc

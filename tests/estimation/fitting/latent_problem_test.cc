@@ -232,6 +232,43 @@ TEST(LatentProblem, MinibatchesOfAPartitionAverageToTheFullGradient) {
   EXPECT_THROW(problem.EvaluateMinibatch(VectorXd::Zero(4), {42}, &g), std::invalid_argument);
 }
 
+TEST(LatentProblem, DataTermsSumToUAndItsGradientAndGiveTheGaussNewtonHessian) {
+  const SensorTrunk trunk = Trunk();
+  const TrunkTargets targets = testing_util::MakeTargets(trunk, kTrue, 0.05, 1);
+  for (auto loss : {LatentProblem::RobustLoss::kNone, LatentProblem::RobustLoss::kHuber}) {
+    LatentProblem::Options options = DoubleOptions();
+    options.robust_loss = loss;
+    options.robust_loss_scale = 0.5;
+    const LatentProblem problem(trunk, targets, options);
+    const VectorXd z = Eigen::Vector4d(0.1, 0.2, 0.3, 0.4);
+    VectorXd full, values;
+    Eigen::MatrixXd gradients, hessian, expected_hessian;
+    const double u = problem.Evaluate(z, &full);
+    problem.DataTerms(z, &values, &gradients, &hessian);
+    problem.GaussNewtonHessian(z, &expected_hessian);
+    ASSERT_EQ(values.size(), problem.num_pixels());
+    ASSERT_EQ(gradients.rows(), problem.num_pixels());
+    const double prior = 0.5 * z.squaredNorm() / (options.sigma_z * options.sigma_z);
+    EXPECT_NEAR(values.sum() + prior, u, 1e-9 * u) << ToString(loss);
+    const VectorXd sum = gradients.colwise().sum().transpose() +
+                         z / (options.sigma_z * options.sigma_z);
+    EXPECT_TRUE(sum.isApprox(full, 1e-9)) << ToString(loss);
+    EXPECT_TRUE(hessian.isApprox(expected_hessian, 1e-9)) << ToString(loss);
+    // A minibatch's data terms are its rows of them.
+    VectorXd g;
+    const std::vector<int> batch = {2, 9, 30};
+    const double scale = problem.num_pixels() / 3.0;
+    double batch_values = 0;
+    VectorXd batch_gradient = z / (options.sigma_z * options.sigma_z);
+    for (int j : batch) {
+      batch_values += scale * values[j];
+      batch_gradient += scale * gradients.row(j).transpose();
+    }
+    EXPECT_NEAR(problem.EvaluateMinibatch(z, batch, &g), batch_values + prior, 1e-9 * u);
+    EXPECT_TRUE(g.isApprox(batch_gradient, 1e-9)) << ToString(loss);
+  }
+}
+
 TEST(LatentProblem, GaussNewtonHessianIsTheHessianAtAnExactFit) {
   // With noise-free targets the residuals vanish at the true latent, where J^T J / sigma^2
   // + I / sigma_z^2 is the exact Hessian of U: compare with differences of the gradient.
