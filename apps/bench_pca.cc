@@ -2,9 +2,11 @@
 //
 // tactfunc bench pca: the wall time of PcaCodec::Fit (the PCA baseline of `eval`) on a
 // synthetic M x P frame matrix, and with --reference the same fit by OpenCV's cv::PCA
-// (what PcaCodec used before) with the agreement of the two:
+// (what PcaCodec used before) with the agreement of the two, and with --exact the exact
+// fit (PcaCodec::Options::exact) and how much more variance the default fit leaves out:
 //
-//   tactfunc bench pca [--frames 3991] [--pixels 8560] [--components 256] [--reference] [--json]
+//   tactfunc bench pca [--frames 3991] [--pixels 8560] [--components 256] [--reference]
+//                      [--exact] [--json]
 //
 // The frames: a smooth rank-`--rank` signal (component i with scale 1 / (1 + i)) plus
 // white noise of standard deviation 0.01, from a fixed seed. One fit each (no
@@ -48,6 +50,7 @@ struct PcaBenchFlags {
   int components = 256;
   int rank = 64;
   bool reference = false;
+  bool exact = false;
   bool json = false;
   // The dataset study (header comment).
   std::string data;
@@ -144,6 +147,7 @@ void RunPcaDataStudy(const PcaBenchFlags& flags) {
     for (const Basis& basis : bases) {
       PcaCodec::Options options;
       options.components = largest;
+      options.exact = true;  // a bound: the exact fit, not the fast one
       const PcaCodec full = PcaCodec::Fit(basis.frames, options);
       for (int n : sizes) {
         if (n > full.components()) continue;
@@ -216,6 +220,24 @@ void RunPcaBench(const PcaBenchFlags& flags) {
                         {"pixels", p},            {"components", codec.components()},
                         {"seconds", seconds},     {"explained_variance", explained},
                         {"method", summary.method}, {"machine", MachineDescription()}};
+  if (flags.exact) {
+    PcaCodec::Options exact_options = options;
+    exact_options.exact = true;
+    PcaCodec::Summary exact_summary;
+    const auto exact_start = std::chrono::steady_clock::now();
+    const PcaCodec exact = PcaCodec::Fit(frames, exact_options, &exact_summary);
+    const double exact_seconds = Seconds(exact_start);
+    const double exact_explained = ExplainedBy(frames, exact.mean(), exact.basis());
+    const double excess = (1 - explained) / (1 - exact_explained) - 1;
+    std::cout << "PcaCodec::Fit exact: " << exact_seconds << " s, variance left out "
+              << 1 - exact_explained << " (" << exact_summary.method << "); the default fit "
+              << "leaves out " << 100 * excess << "% more, "
+              << 10 * std::log10(1 + excess) << " dB of PSNR\n";
+    out["exact"] = {{"seconds", exact_seconds},
+                    {"explained_variance", exact_explained},
+                    {"method", exact_summary.method},
+                    {"excess_left_out", excess}};
+  }
   if (flags.reference) {
     const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> rows = frames;
     const cv::Mat data(m, p, CV_32F, const_cast<float*>(rows.data()));
@@ -264,6 +286,8 @@ void RegisterPcaBenchmark(CLI::App* bench, CommandBody* selected) {
   sub->add_option("--rank", flags->rank, "Rank of the smooth signal (default 64)")
       ->check(CLI::Range(1, 10000));
   sub->add_flag("--reference", flags->reference, "Also fit with cv::PCA and compare");
+  sub->add_flag("--exact", flags->exact,
+                "Also fit the exact PCA (Gram or covariance matrix in double) and compare");
   sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
   sub->add_option("--data", flags->data,
                   "Instead: what the sensor noise leaves a linear basis on this dataset "

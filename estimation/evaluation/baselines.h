@@ -14,9 +14,8 @@
 // and are left out of every PSNR.
 //
 // Reconstruction baselines
-//   PcaCodec   principal components fitted on the train split (exact, in double: the
-//              M x M Gram matrix Xc Xc^T of the centred frames when M <= P, else the
-//              P x P covariance Xc^T Xc; its top n eigenpairs, PcaCodec::Fit):
+//   PcaCodec   principal components fitted on the train split (PcaCodec::Fit: exact
+//              for small sets, randomised block Krylov iteration for large ones):
 //                code  = B (x - mu)          n floats   (B: n x P orthonormal rows)
 //                x_hat = mu + B^T code
 //              bytes per frame = 4 n (float32 codes); model bytes = 4 (P + n P) (mean and
@@ -99,6 +98,10 @@ class PcaCodec {
     // Components kept, >= 1. Capped at min(M, P) for M training frames of P floats
     // (there are no more). Table I uses the latent's float count (64 by default).
     int components = 64;
+    // false (default): for large frame sets the randomised block Krylov fit (Fit's
+    // comment), within a fraction of a per cent of the exact fit's variance; true: the
+    // exact fit always (a Gram or covariance matrix in double and its eigenpairs).
+    bool exact = false;
     bool IsValid(std::string* error) const;
   };
 
@@ -115,15 +118,18 @@ class PcaCodec {
 
   PcaCodec() = default;
   // Fits on `frames` (M x P, one frame per row; M >= 1, all finite), deterministic.
-  // Mean and products in double; for M <= P the M x M Gram matrix G = Xc Xc^T of the
-  // centred frames Xc (basis rows Xc^T u / |Xc^T u| for G's top eigenvectors u), else the
-  // P x P covariance Xc^T Xc (basis rows its top eigenvectors). The top n eigenpairs of
-  // that K x K matrix: Eigen's SelfAdjointEigenSolver for K <= 600 or n > K / 4, else
-  // block subspace iteration with Rayleigh-Ritz until every kept pair's residual
-  // |G v - s v| <= 1e-9 s_1 (the backward error of a dense solver) and the variance the
-  // n components keep has stopped rising (its last rise <= 1e-6 of the variance left
-  // out), so reconstructions match the exact fit's; the dense solver if that has not
-  // happened after 300 steps. Each basis row's largest-magnitude entry is
+  // With K = min(M, P) > 600 and n <= K / 4 (and not Options::exact): randomised block
+  // Krylov iteration on the centred frames Xc themselves (3n Krylov directions in float
+  // products, Rayleigh-Ritz on them; baselines.cc says how and what it costs in
+  // accuracy). Otherwise exact, with mean and products in double: for M <= P the M x M
+  // Gram matrix G = Xc Xc^T (basis rows Xc^T u / |Xc^T u| for G's top eigenvectors u),
+  // else the P x P covariance Xc^T Xc (basis rows its top eigenvectors). The top n
+  // eigenpairs of that K x K matrix: Eigen's SelfAdjointEigenSolver for K <= 600 or n >
+  // K / 4, else block subspace iteration with Rayleigh-Ritz until every kept pair's
+  // residual |G v - s v| <= 1e-9 s_1 (the backward error of a dense solver) and the
+  // variance the n components keep has stopped rising (its last rise <= 1e-6 of the
+  // variance left out), so reconstructions match the exact fit's; the dense solver if
+  // that has not happened after 300 steps. Each basis row's largest-magnitude entry is
   // positive. eigenvalues() are those of the covariance Xc^T Xc / M (descending).
   // 3,991 frames of 8,560 floats: docs/BENCHMARKS.md (`tactfunc bench pca`).
   // Throws std::invalid_argument for bad options or frames.

@@ -214,7 +214,9 @@ std::string LatentFitter::Summary::FullReport() const {
     }
     out << "\n";
   }
-  if (ceres_ran) out << "  ceres: " << solver_summary.BriefReport() << "\n";
+  // Ceres' own full report: its iterations and where its time went (residual and
+  // Jacobian evaluations, the linear solver).
+  if (ceres_ran) out << "  ceres: " << solver_summary.FullReport() << "\n";
   return out.str();
 }
 

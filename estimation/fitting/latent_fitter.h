@@ -155,7 +155,7 @@ class LatentFitter {
     bool IsSolutionUsable() const;
     // One line: strategy, termination, cost before -> after, PSNR, iterations, time.
     std::string BriefReport() const;
-    // Several lines: the options used, every stage, and Ceres' BriefReport.
+    // Several lines: the options used, every stage, and Ceres' FullReport (its timings).
     std::string FullReport() const;
   };
 
