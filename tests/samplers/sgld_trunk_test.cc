@@ -25,16 +25,14 @@
 #include "models/simulator/contact_simulator.h"
 #include "models/trunk/functa_model.h"
 #include "samplers/sgld.h"
+#include "tests/support/stored_frame_util.h"
 
 namespace tactfunc {
 namespace {
 
-const std::string kModel = std::string(TACTFUNC_SOURCE_DIR) + "/models/pretrained/default.tfm";
+using testing_util::AsStoredDepth;
 
-Image AsStored(const Image& depth) {
-  return DecodeImage(EncodePng(depth, PixelEncoding::kDepthU16Micrometres),
-                     PixelEncoding::kDepthU16Micrometres, "sgld test frame");
-}
+const std::string kModel = std::string(TACTFUNC_SOURCE_DIR) + "/models/pretrained/default.tfm";
 
 struct Moments {
   double mean_variance = 0;  // variance of u_k averaged over k
@@ -64,8 +62,8 @@ class SgldOnTheTrunk : public ::testing::Test {
     const ContactSimulator simulator;
     const std::uint64_t seed = 0x5c0de001u;
     const Contact contact = simulator.SamplePairedContact("rod", seed).bubble;
-    const Image frame = AsStored(simulator.Render(SensorKind::kSoftBubble, contact, seed).frame);
-    const Image reference = AsStored(simulator.Reference(SensorKind::kSoftBubble));
+    const Image frame = AsStoredDepth(simulator.Render(SensorKind::kSoftBubble, contact, seed).frame);
+    const Image reference = AsStoredDepth(simulator.Reference(SensorKind::kSoftBubble));
     targets_ = MakeTrunkTargets(frame, reference, SensorKind::kSoftBubble, trunk.format);
     problem_ = std::make_unique<LatentProblem>(trunk, targets_, LatentProblem::Options{});
     LatentFitter::Options fit;

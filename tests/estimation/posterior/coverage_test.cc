@@ -26,21 +26,17 @@
 #include "models/core/seed.h"
 #include "models/simulator/tool.h"
 #include "estimation/posterior/pose_posterior.h"
+#include "tests/support/stored_frame_util.h"
 
 namespace tactfunc {
 namespace {
+
+using testing_util::AsStoredDepth;
 
 const std::string kPretrained = std::string(TACTFUNC_SOURCE_DIR) + "/models/pretrained/";
 
 // Tools the held-out pose model never saw (scripts/train_pretrained_pose.sh).
 const std::vector<std::string> kHeldOutTools = {"l_shape", "lines2_60"};
-
-// What a dataset file holds: depth rounded to 16-bit micrometres (estimation/data/image_io.h),
-// so the test frames are exactly what `tactfunc synth` would have written.
-Image AsStored(const Image& depth) {
-  return DecodeImage(EncodePng(depth, PixelEncoding::kDepthU16Micrometres),
-                     PixelEncoding::kDepthU16Micrometres, "coverage frame");
-}
 
 struct Coverage {
   int contacts = 0, failures = 0, covered_50 = 0, covered_90 = 0;
@@ -51,7 +47,7 @@ struct Coverage {
 Coverage Measure(const SensorTrunk& trunk, const PoseMlp& pose_mlp, PosteriorSampler sampler,
                  const std::vector<std::string>& tools, int contacts_per_tool) {
   const ContactSimulator simulator;
-  const Image reference = AsStored(simulator.Reference(SensorKind::kSoftBubble));
+  const Image reference = AsStoredDepth(simulator.Reference(SensorKind::kSoftBubble));
   PosePosterior::Options options;
   options.sampler = sampler;
   options.num_samples = 100;
@@ -66,7 +62,7 @@ Coverage Measure(const SensorTrunk& trunk, const PoseMlp& pose_mlp, PosteriorSam
     const std::uint64_t seed = DeriveSeed(0x5eed0000u, k);
     const Contact contact = simulator.SamplePairedContact(tool, seed).bubble;
     const Image frame =
-        AsStored(simulator.Render(SensorKind::kSoftBubble, contact, seed).frame);
+        AsStoredDepth(simulator.Render(SensorKind::kSoftBubble, contact, seed).frame);
     const TrunkTargets targets =
         MakeTrunkTargets(frame, reference, SensorKind::kSoftBubble, trunk.format);
     PosePosterior::Options o = options;

@@ -25,16 +25,14 @@
 #include "models/core/seed.h"
 #include "models/simulator/contact_simulator.h"
 #include "models/simulator/tool.h"
+#include "tests/support/stored_frame_util.h"
 
 namespace tactfunc {
 namespace {
 
-const std::string kPretrained = std::string(TACTFUNC_SOURCE_DIR) + "/models/pretrained/";
+using testing_util::AsStoredDepth;
 
-Image AsStored(const Image& depth) {
-  return DecodeImage(EncodePng(depth, PixelEncoding::kDepthU16Micrometres),
-                     PixelEncoding::kDepthU16Micrometres, "coverage frame");
-}
+const std::string kPretrained = std::string(TACTFUNC_SOURCE_DIR) + "/models/pretrained/";
 
 struct Result {
   int contacts = 0, failures = 0, covered_90 = 0, yaw_count = 0;
@@ -63,7 +61,7 @@ const Result& Measure() {
     GeneratorPosterior::Options options;
     const GeneratorPosterior posterior(trunk, generator, options, nullptr, &mlp);
     const ContactSimulator simulator;
-    const Image reference = AsStored(simulator.Reference(SensorKind::kSoftBubble));
+    const Image reference = AsStoredDepth(simulator.Reference(SensorKind::kSoftBubble));
     Result r;
     const int per_tool = 17;  // 12 x 17 = 204 contacts (>= 200)
     const std::vector<std::string>& tools = generator.options().tools;
@@ -71,7 +69,7 @@ const Result& Measure() {
       for (int j = 0; j < per_tool; ++j) {
         const std::uint64_t seed = DeriveSeed(0x5eed0000u, t * per_tool + j);
         const Contact contact = simulator.SamplePairedContact(tools[t], seed).bubble;
-        const Image frame = AsStored(simulator.Render(SensorKind::kSoftBubble, contact, seed).frame);
+        const Image frame = AsStoredDepth(simulator.Render(SensorKind::kSoftBubble, contact, seed).frame);
         const TrunkTargets targets =
             MakeTrunkTargets(frame, reference, SensorKind::kSoftBubble, trunk.format);
         PoseMixture mixture;

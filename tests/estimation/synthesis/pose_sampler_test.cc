@@ -27,16 +27,14 @@
 #include "models/core/seed.h"
 #include "models/simulator/contact_simulator.h"
 #include "models/simulator/tool.h"
+#include "tests/support/stored_frame_util.h"
 
 namespace tactfunc {
 namespace {
 
-const std::string kPretrained = std::string(TACTFUNC_SOURCE_DIR) + "/models/pretrained/";
+using testing_util::AsStoredDepth;
 
-Image AsStored(const Image& depth) {
-  return DecodeImage(EncodePng(depth, PixelEncoding::kDepthU16Micrometres),
-                     PixelEncoding::kDepthU16Micrometres, "pose sampler frame");
-}
+const std::string kPretrained = std::string(TACTFUNC_SOURCE_DIR) + "/models/pretrained/";
 
 struct Models {
   FunctaModel model = FunctaModel::Load(kPretrained + "default.tfm");
@@ -45,7 +43,7 @@ struct Models {
   PoseMlp mlp = PoseMlp::Load(kPretrained + "pose_bubble.tpm");
   GeneratorPosterior posterior{trunk, generator, GeneratorPosterior::Options(), nullptr, &mlp};
   ContactSimulator simulator;
-  Image reference = AsStored(simulator.Reference(SensorKind::kSoftBubble));
+  Image reference = AsStoredDepth(simulator.Reference(SensorKind::kSoftBubble));
 };
 
 const Models& Shared() {
@@ -76,7 +74,7 @@ Frame MakeFrame(int k) {
   const std::uint64_t seed = DeriveSeed(0x5a3b1e00u, k);
   const Contact contact = m.simulator.SamplePairedContact(f.tool, seed).bubble;
   f.truth = contact.sensor_T_object;
-  f.targets = MakeTrunkTargets(AsStored(m.simulator.Render(SensorKind::kSoftBubble, contact, seed).frame),
+  f.targets = MakeTrunkTargets(AsStoredDepth(m.simulator.Render(SensorKind::kSoftBubble, contact, seed).frame),
                                m.reference, SensorKind::kSoftBubble, m.trunk.format);
   f.summary = m.posterior.Estimate(f.targets, f.tool, &f.mixture);
   return f;
