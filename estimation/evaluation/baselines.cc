@@ -236,13 +236,15 @@ void TopEigenpairs(const Eigen::MatrixXd& a_lower, int n, Eigen::VectorXd* value
 // classical Gram-Schmidt loses orthogonality once). Then Rayleigh-Ritz on that range
 // Q: B = Q^T Xc, B B^T = U Theta U^T (double), basis rows U_n^T B (norms sqrt(theta_i)),
 // values theta_n (the squared singular values of Xc). b = max(16, n / 4) and q =
-// ceil(3 n / b) blocks (3n columns, 2 q - 1 products of M x P x b). A Krylov range holds
+// max(ceil(3 n / b), 6) blocks (3n columns or more, 2 q - 1 products of M x P x b). A Krylov range holds
 // the top directions far better than a subspace iteration's range after as many
 // products; where the spectrum is flat around n (a sensor-noise floor) the n kept
 // directions are still not exactly the top ones: on `tactfunc bench pca`'s 3,991 x
 // 8,560 frames (256 components, 192 of them in the noise floor) the reconstructions
 // leave out 0.27% more variance than the exact fit (0.01 dB of PSNR), in 3.5 s against
 // 22.7 s for the exact Gram-matrix fit (docs/BENCHMARKS.md).
+constexpr Eigen::Index kMinKrylovBlocks = 6;
+
 Eigen::MatrixXd ThinQ(const Eigen::MatrixXd& y) {
   const Eigen::HouseholderQR<Eigen::MatrixXd> qr(y);
   return qr.householderQ() * Eigen::MatrixXd::Identity(y.rows(), y.cols());
@@ -253,7 +255,10 @@ void RandomizedTopComponents(const Eigen::MatrixXf& frames, const Eigen::RowVect
                              std::string* method) {
   const Eigen::Index m = frames.rows(), p = frames.cols();
   const Eigen::Index b = std::max(16, n / 4);
-  const Eigen::Index blocks = std::min<Eigen::Index>((3 * n + b - 1) / b, std::min(m, p) / b);
+  // At least kMinKrylovBlocks products deep: a few components would otherwise get one
+  // block, a range finder without a single power step.
+  const Eigen::Index blocks = std::min<Eigen::Index>(
+      std::max<Eigen::Index>((3 * n + b - 1) / b, kMinKrylovBlocks), std::min(m, p) / b);
   const Eigen::MatrixXf centred = frames.rowwise() - mean.cast<float>();
   std::mt19937 rng(20260101u);
   Eigen::MatrixXf omega(p, b);

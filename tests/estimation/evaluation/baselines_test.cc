@@ -190,6 +190,7 @@ TEST(Baselines, PcaMatchesABruteForceSvdOnEveryPath) {
   ExpectPcaMatchesSvd(DecayingFrames(20, 20, 30, 3), 19);   // every component but the null one
   ExpectPcaMatchesSvd(DecayingFrames(700, 760, 40, 4), 24); // block Krylov
   ExpectPcaMatchesSvd(DecayingFrames(760, 700, 40, 5), 24); // block Krylov, P < M
+  ExpectPcaMatchesSvd(DecayingFrames(700, 760, 40, 7), 2);  // block Krylov, few components
   PcaCodec::Options options;
   options.components = 24;
   PcaCodec::Summary summary;
