@@ -375,6 +375,7 @@ Sgld::Summary Sgld::Sample(const LatentPotential& potential, const Eigen::Vector
   summary.minibatch_size = summary.minibatched ? options_.minibatch_size : num_data;
   summary.control_variate = summary.minibatched && options_.control_variate;
   std::string notes;
+  const auto precondition_start = std::chrono::steady_clock::now();
   // The control variate's anchor at z0: every data term's value and gradient (then
   // also H_GN for the dense preconditioner), or, from a potential without DataTerms, U
   // and grad U, each minibatch then evaluated at z0 too.
@@ -402,7 +403,6 @@ Sgld::Summary Sgld::Sample(const LatentPotential& potential, const Eigen::Vector
   }
 
   // The fixed preconditioner, and the Gauss-Newton diagonal for the step-size check.
-  const auto precondition_start = std::chrono::steady_clock::now();
   Preconditioning pre;
   Eigen::VectorXd gn_diagonal;
   bool have_diagonal = false;

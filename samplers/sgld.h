@@ -291,7 +291,7 @@ class Sgld {
     double min_effective_sample_size = 0;
     double max_split_rhat = 0;
     double potential_at_start = 0;  // U(z0)
-    double preconditioner_time_ms = 0;
+    double preconditioner_time_ms = 0;  // with the control variate's anchor pass
     double sampling_time_ms = 0;
     double total_time_ms = 0;
     // True unless kDiverged left no samples.

@@ -386,6 +386,39 @@ TEST(LatentFitter, MetaSgdFromZeroIsTheTrunksInnerLoop) {
   EXPECT_LE((z - expected).cwiseAbs().maxCoeff(), 1e-12);
 }
 
+TEST(LatentFitter, AMetaSgdFitReportsTheCostsAndPsnrOfSeparatePasses) {
+  // The start's cost comes from the first step's forward pass and the final PSNR from
+  // the pass over the problem's pixels: both must be what separate passes give, for a
+  // whole-frame problem (PSNR from the same pass) and a thinned one (its own pass).
+  const SensorTrunk trunk = MakeTrunk();
+  TrunkTargets targets = Generate(trunk, TrueLatent(8));
+  targets.values += 0.02 * Uniform(kRows * kCols, 1, 43).cast<float>();
+  for (int j = 0; j < kRows * kCols; j += 7) targets.weights[j] = 0;
+  Fitter::Options options;
+  options.strategy = FitStrategy::FromString("meta_sgd:3");
+  for (const int max_pixels : {0, 100}) {
+    for (const auto precision : {LatentProblem::Precision::kFloat, LatentProblem::Precision::kDouble}) {
+      LatentProblem::Options problem_options;
+      problem_options.precision = precision;
+      problem_options.max_pixels = max_pixels;
+      const LatentProblem problem(trunk, targets, problem_options);
+      VectorXd z;
+      const Fitter::Summary summary = Fitter(trunk, options).Fit(problem, &z);
+      SCOPED_TRACE(std::to_string(max_pixels) + " pixels, " + ToString(precision));
+      const VectorXd start = problem.StartLatent();
+      const double prior = 0.5 * start.squaredNorm() / (summary.sigma_z * summary.sigma_z);
+      std::optional<double> ignored;
+      const double start_cost = problem.DataCost(start, &ignored) + prior;
+      EXPECT_NEAR(summary.initial_cost, start_cost, 1e-5 * start_cost);
+      const double final_prior = 0.5 * z.squaredNorm() / (summary.sigma_z * summary.sigma_z);
+      EXPECT_NEAR(summary.final_cost, problem.DataCost(z, &ignored) + final_prior,
+                  1e-9 * summary.final_cost);
+      EXPECT_NEAR(summary.psnr, problem.Psnr(z), 1e-4);
+      EXPECT_LT(summary.final_cost, summary.initial_cost);
+    }
+  }
+}
+
 TEST(LatentFitter, MaskedPixelsDoNotChangeTheFit) {
   const SensorTrunk trunk = MakeTrunk();
   TrunkTargets a = Generate(trunk, TrueLatent(8));
