@@ -385,6 +385,21 @@ nlohmann::json PoseJson(const SE2d& pose) {
   return {{"x_m", pose.x()}, {"y_m", pose.y()}, {"yaw_rad", pose.yaw()}};
 }
 
+// What the SGLD run was: pixels per gradient (all of them, or a minibatch with or without
+// the control variate), chains, gradients and the diagnostics.
+nlohmann::json SgldJson(const Sgld::Summary& s) {
+  return {{"pixels_per_gradient", s.minibatch_size},
+          {"pixels", s.num_data_terms},
+          {"minibatched", s.minibatched},
+          {"control_variate", s.control_variate},
+          {"chains", s.num_chains},
+          {"gradients", s.num_gradient_evaluations},
+          {"min_ess", NumberOrNull(s.min_effective_sample_size)},
+          {"max_split_rhat", NumberOrNull(s.max_split_rhat)},
+          {"termination", ToString(s.termination_type)},
+          {"ms", s.total_time_ms}};
+}
+
 nlohmann::json MatrixJson(const Eigen::Matrix3d& m) {
   nlohmann::json rows = nlohmann::json::array();
   for (int r = 0; r < 3; ++r) rows.push_back({m(r, 0), m(r, 1), m(r, 2)});
@@ -834,6 +849,7 @@ void RunLatentPose(const PoseFlags& flags, PosteriorSampler sampler, const Funct
       record["truth"] = PoseJson(input.label->sensor_T_object);
       record["truth"]["tool"] = input.label->tool;
     }
+    if (sampler == PosteriorSampler::kSgld) record["sgld"] = SgldJson(summary.sgld_summary);
     WritePosteriorFiles(flags.out, record, input, *distribution, summary, modes, flags.height,
                         ToString(sampler));
   }
@@ -849,6 +865,7 @@ void RunLatentPose(const PoseFlags& flags, PosteriorSampler sampler, const Funct
     if (input.label) {
       j["truth"] = PoseJson(input.label->sensor_T_object);
     }
+    if (sampler == PosteriorSampler::kSgld) j["sgld"] = SgldJson(summary.sgld_summary);
     EmitJson(j);
   }
 }

@@ -17,6 +17,7 @@
 #include "estimation/data/image_io.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "estimation/posterior/pose_posterior.h"
 #include "tests/apps/cli_test_util.h"
 #include "models/pose/pose_mlp.h"
 #include "nlohmann/json.hpp"
@@ -150,6 +151,37 @@ TEST_F(PoseCliTest, PoseWithEachSamplerPrintsMeanCovarianceAndWritesFiles) {
     const Image picture = ReadImage(out + "/posterior.png", PixelEncoding::kRgb8);
     EXPECT_GT(picture.cols, 400);  // image panel + zoom panel side by side
   }
+}
+
+TEST_F(PoseCliTest, SgldRunsOnMinibatchesWithTheControlVariateUnlessToldOtherwise) {
+  ASSERT_EQ(train_pose_->exit_code, 0) << train_pose_->err;
+  // By default batches of kDefaultSgldMinibatch pixels, or every pixel of a smaller frame.
+  Result r = Run(PoseArgs("sgld") + " --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  nlohmann::json sgld = r.LastJson()["sgld"];
+  const int pixels = sgld["pixels"].get<int>();
+  ASSERT_GT(pixels, 20);
+  EXPECT_EQ(sgld["minibatched"].get<bool>(), pixels > PosePosterior::kDefaultSgldMinibatch);
+  // A batch smaller than the frame: minibatches anchored at the fit (the control variate).
+  const int batch = pixels / 4;
+  r = Run(PoseArgs("sgld") + " --json --sgld-minibatch " + std::to_string(batch));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  sgld = r.LastJson()["sgld"];
+  EXPECT_TRUE(sgld["minibatched"].get<bool>());
+  EXPECT_TRUE(sgld["control_variate"].get<bool>());
+  EXPECT_EQ(sgld["pixels_per_gradient"].get<int>(), batch);
+  EXPECT_EQ(sgld["termination"], "COMPLETED");
+  // 0: full batches.
+  r = Run(PoseArgs("sgld") + " --json --sgld-minibatch 0");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  sgld = r.LastJson()["sgld"];
+  EXPECT_FALSE(sgld["minibatched"].get<bool>());
+  EXPECT_FALSE(sgld["control_variate"].get<bool>());
+  EXPECT_EQ(sgld["pixels_per_gradient"].get<int>(), pixels);
+  // A negative batch is refused naming the flag.
+  r = Run(PoseArgs("sgld") + " --sgld-minibatch -3");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("--sgld-minibatch"));
 }
 
 // A single video is a dataset too: --data names the file, --reference-index its
