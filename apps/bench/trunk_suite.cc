@@ -76,10 +76,11 @@ struct PassMacs {
 };
 
 // GEMM FLOPs (2 per multiply-add) of a meta_sgd:K fit's steps over n pixels, of the
-// whole fit (two more whole-frame forward passes), and of one meta-training step.
+// whole fit (one more forward pass, at z_K; the start's cost comes from the first step's
+// pass, and K = 0 pays a pass at the start instead), and of one meta-training step.
 double FitStepsFlops(const PassMacs& m, int steps, long n) { return 2.0 * steps * n * m.GradientZ(); }
 double FitFlops(const PassMacs& m, int steps, long n) {
-  return FitStepsFlops(m, steps, n) + 2.0 * 2 * n * m.Forward();
+  return FitStepsFlops(m, steps, n) + 2.0 * (steps > 0 ? 1 : 2) * n * m.Forward();
 }
 double MetaStepFlops(const PassMacs& m, int steps, int batch, long pixels) {
   return 2.0 * batch * pixels *

@@ -20,8 +20,9 @@ Subcommands (each prints one JSON line of medians, min and max over --repeats):
   fit        a meta_sgd:K fit of one whole frame on one thread, as tactfunc's LatentFitter
              does it: "core" times the K steps; "full" adds what the whole fit also
              does -- the frame's coordinate grid, the objective at the start latent and
-             at z_K (data term 1/2 sum w (y - t)^2 / sigma^2 plus 1/2 ||z||^2), each from
-             one whole-frame forward pass that also gives the frame's PSNR.
+             at z_K (data term 1/2 sum w (y - t)^2 / sigma^2 plus 1/2 ||z||^2) with the
+             frame's PSNR: at the start from the first step's outputs (as tactfunc does),
+             at z_K from one whole-frame forward pass.
   meta-step  one second-order meta-training step, batched as a PyTorch user writes it: a
              batch of frames, a random subset of pixels of each, K inner steps with
              create_graph=True, the outer loss after them, backward through the inner
@@ -121,7 +122,8 @@ def analytic_flops(args, pixels_per_frame):
     fit_core = 2.0 * args.steps * n * grad_z
     return {
         "fit_core_gemm_gflop": fit_core / 1e9,
-        "fit_full_gemm_gflop": (fit_core + 2.0 * 2 * n * (first + hidden + out)) / 1e9,
+        "fit_full_gemm_gflop":
+            (fit_core + 2.0 * (1 if args.steps > 0 else 2) * n * (first + hidden + out)) / 1e9,
         "meta_step_gemm_gflop": 2.0 * args.batch * pixels_per_frame *
         (args.steps * grad_z + grad_theta + args.steps * double_backward) / 1e9,
     }
@@ -134,11 +136,15 @@ def make_trunk(args):
 
 # ---- fit ----------------------------------------------------------------------------
 
-def fit_steps(trunk, coords, targets, weights, alpha, z, steps):
-    """The K meta-SGD steps from z (gradients w.r.t. z only)."""
-    for _ in range(steps):
+def fit_steps(trunk, coords, targets, weights, alpha, z, steps, start_outputs=None):
+    """The K meta-SGD steps from z (gradients w.r.t. z only). If start_outputs is a list,
+    the first step's outputs (the trunk at the start z) are appended to it."""
+    for k in range(steps):
         z = z.detach().requires_grad_(True)
-        loss = weighted_mse(trunk(coords, z), targets, weights) + LATENT_L2 * (z * z).sum()
+        y = trunk(coords, z)
+        if k == 0 and start_outputs is not None:
+            start_outputs.append(y.detach())
+        loss = weighted_mse(y, targets, weights) + LATENT_L2 * (z * z).sum()
         (g,) = torch.autograd.grad(loss, z)
         z = z - alpha * g
     return z.detach()
@@ -147,7 +153,12 @@ def fit_steps(trunk, coords, targets, weights, alpha, z, steps):
 def objective(trunk, coords, targets, weights, z, sigma, sigma_z=1.0):
     """The fit's cost at z and the frame's PSNR, from one whole-frame forward pass."""
     with torch.no_grad():
-        y = trunk(coords, z)
+        return cost_and_psnr(trunk(coords, z), targets, weights, z, sigma, sigma_z)
+
+
+def cost_and_psnr(y, targets, weights, z, sigma, sigma_z=1.0):
+    """The fit's cost at z and the frame's PSNR from the trunk's outputs y at z."""
+    with torch.no_grad():
         squared = weights * ((y - targets) ** 2).sum(-1)
         cost = 0.5 * squared.sum() / sigma ** 2 + 0.5 * (z * z).sum() / sigma_z ** 2
         valid = targets[weights > 0]
@@ -158,10 +169,16 @@ def objective(trunk, coords, targets, weights, z, sigma, sigma_z=1.0):
 
 
 def full_fit(trunk, rows, cols, targets, weights, alpha, steps, sigma=0.01):
+    """As tactfunc's meta_sgd:K fit: the start's cost and PSNR from the first step's own
+    forward pass (a pass of its own when K = 0), the final ones from one pass at z_K."""
     coords = grid(rows, cols)
-    z = torch.zeros(alpha.shape[0])
-    objective(trunk, coords, targets, weights, z, sigma)
-    z = fit_steps(trunk, coords, targets, weights, alpha, z, steps)
+    z0 = torch.zeros(alpha.shape[0])
+    first = []
+    z = fit_steps(trunk, coords, targets, weights, alpha, z0, steps, first)
+    if first:
+        cost_and_psnr(first[0], targets, weights, z0, sigma)
+    else:
+        objective(trunk, coords, targets, weights, z0, sigma)
     _, psnr = objective(trunk, coords, targets, weights, z, sigma)
     return z, psnr
 
