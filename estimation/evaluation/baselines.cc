@@ -168,6 +168,12 @@ constexpr int kMaxIterations = 300;
 constexpr double kResidualTolerance = 1e-9;
 constexpr double kKeptTolerance = 1e-6;
 
+// The thin Q (rows x cols, orthonormal columns) of y's Householder QR.
+Eigen::MatrixXd ThinQ(const Eigen::MatrixXd& y) {
+  const Eigen::HouseholderQR<Eigen::MatrixXd> qr(y);
+  return qr.householderQ() * Eigen::MatrixXd::Identity(y.rows(), y.cols());
+}
+
 void TopEigenpairs(const Eigen::MatrixXd& a_lower, int n, Eigen::VectorXd* values,
                    Eigen::MatrixXd* vectors, std::string* method) {
   const Eigen::Index K = a_lower.rows();
@@ -188,11 +194,7 @@ void TopEigenpairs(const Eigen::MatrixXd& a_lower, int n, Eigen::VectorXd* value
   std::mt19937 rng(20260101u);
   Eigen::MatrixXd q(K, k);
   for (Eigen::Index i = 0; i < q.size(); ++i) q.data()[i] = rng() / 4294967296.0 - 0.5;
-  auto orthonormalise = [&](const Eigen::MatrixXd& y) {
-    Eigen::HouseholderQR<Eigen::MatrixXd> qr(y);
-    return Eigen::MatrixXd(qr.householderQ() * Eigen::MatrixXd::Identity(K, k));
-  };
-  q = orthonormalise(q);
+  q = ThinQ(q);
   const double trace = a.trace();
   double previous_sum = -1;
   for (int iteration = 1; iteration <= kMaxIterations; ++iteration) {
@@ -220,7 +222,7 @@ void TopEigenpairs(const Eigen::MatrixXd& a_lower, int n, Eigen::VectorXd* value
                 " (" + std::to_string(iteration) + " steps)";
       return;
     }
-    q = orthonormalise(zw);
+    q = ThinQ(zw);
   }
   dense(" (subspace iteration did not converge)");
 }
@@ -236,19 +238,14 @@ void TopEigenpairs(const Eigen::MatrixXd& a_lower, int n, Eigen::VectorXd* value
 // classical Gram-Schmidt loses orthogonality once). Then Rayleigh-Ritz on that range
 // Q: B = Q^T Xc, B B^T = U Theta U^T (double), basis rows U_n^T B (norms sqrt(theta_i)),
 // values theta_n (the squared singular values of Xc). b = max(16, n / 4) and q =
-// max(ceil(3 n / b), 6) blocks (3n columns or more, 2 q - 1 products of M x P x b). A Krylov range holds
-// the top directions far better than a subspace iteration's range after as many
-// products; where the spectrum is flat around n (a sensor-noise floor) the n kept
+// max(ceil(3 n / b), 6) blocks (3n columns or more, 2 q - 1 products of M x P x b). A
+// Krylov range holds the top directions far better than a subspace iteration's range
+// after as many products; where the spectrum is flat around n (a sensor-noise floor) the n kept
 // directions are still not exactly the top ones: on `tactfunc bench pca`'s 3,991 x
 // 8,560 frames (256 components, 192 of them in the noise floor) the reconstructions
 // leave out 0.27% more variance than the exact fit (0.01 dB of PSNR), in 3.5 s against
 // 22.7 s for the exact Gram-matrix fit (docs/BENCHMARKS.md).
 constexpr Eigen::Index kMinKrylovBlocks = 6;
-
-Eigen::MatrixXd ThinQ(const Eigen::MatrixXd& y) {
-  const Eigen::HouseholderQR<Eigen::MatrixXd> qr(y);
-  return qr.householderQ() * Eigen::MatrixXd::Identity(y.rows(), y.cols());
-}
 
 void RandomizedTopComponents(const Eigen::MatrixXf& frames, const Eigen::RowVectorXd& mean,
                              int n, Eigen::VectorXd* values, Eigen::MatrixXd* basis,

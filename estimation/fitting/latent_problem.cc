@@ -33,6 +33,17 @@ std::unique_ptr<ceres::LossFunction> MakeLoss(const LatentProblem::Options& opti
   return nullptr;
 }
 
+// J^T J (d x d, as double) of a Jacobian J with one row per residual: SYRK in J's own
+// scalar type (float or double) on the lower triangle, then filled in.
+template <typename Jacobian>
+Eigen::MatrixXd GramOfJacobian(const Jacobian& J) {
+  using Scalar = typename Jacobian::Scalar;
+  Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic> jtj =
+      Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic>::Zero(J.cols(), J.cols());
+  jtj.template selfadjointView<Eigen::Lower>().rankUpdate(J.transpose());
+  return jtj.template selfadjointView<Eigen::Lower>().toDenseMatrix().template cast<double>();
+}
+
 }  // namespace
 
 const char* ToString(LatentProblem::RobustLoss loss) {
@@ -360,16 +371,11 @@ void LatentProblem::DataTerms(const Eigen::VectorXd& z, Eigen::VectorXd* values,
     }
   }
   if (hessian == nullptr) return;
-  // J^T J by SYRK at the problem's precision, as GaussNewtonHessian.
+  // J^T J at the problem's precision, as GaussNewtonHessian.
   if (options_.precision == Precision::kFloat) {
-    const Eigen::MatrixXf J = jacobian.cast<float>();
-    Eigen::MatrixXf jtj = Eigen::MatrixXf::Zero(d, d);
-    jtj.selfadjointView<Eigen::Lower>().rankUpdate(J.transpose());
-    *hessian += jtj.selfadjointView<Eigen::Lower>().toDenseMatrix().cast<double>();
+    *hessian += GramOfJacobian(Eigen::MatrixXf(jacobian.cast<float>()));
   } else {
-    Eigen::MatrixXd jtj = Eigen::MatrixXd::Zero(d, d);
-    jtj.selfadjointView<Eigen::Lower>().rankUpdate(jacobian.transpose());
-    *hessian += jtj.selfadjointView<Eigen::Lower>().toDenseMatrix();
+    *hessian += GramOfJacobian(jacobian);
   }
 }
 
@@ -384,9 +390,7 @@ void LatentProblem::GaussNewtonHessian(const Eigen::VectorXd& z, Eigen::MatrixXd
     Eigen::VectorXd residuals(num_residuals());
     RowMajorMatrixXd jacobian(num_residuals(), d);
     ResidualsAndJacobian(z.data(), residuals.data(), jacobian.data());
-    Eigen::MatrixXd jtj = Eigen::MatrixXd::Zero(d, d);
-    jtj.selfadjointView<Eigen::Lower>().rankUpdate(jacobian.transpose());
-    *hessian += jtj.selfadjointView<Eigen::Lower>().toDenseMatrix();
+    *hessian += GramOfJacobian(jacobian);
     return;
   }
   // Rows j*C + c of J scaled by sqrt(w_j) / sigma, then J^T J by SYRK, in Scalar.
@@ -400,14 +404,12 @@ void LatentProblem::GaussNewtonHessian(const Eigen::VectorXd& z, Eigen::MatrixXd
       coords = &coords_;
     }
     const Eigen::Matrix<Scalar, Eigen::Dynamic, 1> zs = z.cast<Scalar>();
-    Matrix jtj = Matrix::Zero(d, d), J;
+    Matrix J;
     trunk_->siren.template ForwardAndLatentJacobian<Scalar>(*coords, zs, nullptr, &J);
     for (long j = 0; j < num_pixels(); ++j) {
       J.middleRows(j * c_count, c_count) *= static_cast<Scalar>(std::sqrt(weights_[j]) / sigma_);
     }
-    jtj.template selfadjointView<Eigen::Lower>().rankUpdate(J.transpose());
-    *hessian +=
-        jtj.template selfadjointView<Eigen::Lower>().toDenseMatrix().template cast<double>();
+    *hessian += GramOfJacobian(J);
   };
   if (options_.precision == Precision::kFloat) {
     accumulate(float());
