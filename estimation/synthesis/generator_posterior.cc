@@ -9,6 +9,8 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <map>
+#include <numeric>
 #include <stdexcept>
 #include <time.h>
 
@@ -68,6 +70,35 @@ SE2d PoseMixture::Mode() const {
   return std::max_element(components_.begin(), components_.end(),
                           [](const auto& a, const auto& b) { return a.weight < b.weight; })
       ->mean;
+}
+
+SE2d PoseMixture::Mean(const std::string& tool) const {
+  std::string chosen = tool;
+  if (chosen.empty()) {
+    std::map<std::string, double> mass;
+    for (const LaplaceComponent& c : components_) mass[c.tool] += c.weight;
+    double best = -1;
+    for (const auto& [name, m] : mass) {
+      if (m > best) best = m, chosen = name;
+    }
+  }
+  std::vector<SE2d> means;
+  std::vector<double> weights;
+  int symmetry_order = 1;
+  for (const LaplaceComponent& c : components_) {
+    if (c.tool != chosen) continue;
+    means.push_back(c.mean);
+    weights.push_back(c.weight);
+    symmetry_order = c.symmetry_order;
+  }
+  if (means.empty()) {
+    throw std::invalid_argument("PoseMixture::Mean: no component" +
+                                (chosen.empty() ? std::string() : " of tool '" + chosen + "'"));
+  }
+  if (!(std::accumulate(weights.begin(), weights.end(), 0.0) > 0)) weights.assign(means.size(), 1);
+  return PoseDistribution(std::move(means), std::move(weights))
+      .FoldedBySymmetry(symmetry_order)
+      .Mean();
 }
 
 double PoseMixture::Density(const SE2d& t, const std::string& tool) const {

@@ -89,6 +89,16 @@ class PoseMixture {
   bool empty() const { return components_.empty(); }
   // The heaviest component's mean (the MAP mode).
   SE2d Mode() const;
+  // The posterior pose mean conditional on `tool` (empty: the most probable tool, the
+  // largest sum of weights): the exponential barycentre (PoseDistribution::Mean) of that
+  // tool's component means weighted by their weights, yaws first folded by its symmetry
+  // order (PoseDistribution::FoldedBySymmetry; n = 0: yaw 0). Each Laplace component is
+  // centred on its mean in the tangent space, so this is the mixture's mean to first
+  // order in the components' spread; with one component it is that component's mean.
+  // Between two mirrored modes of an asymmetric tool it falls between them: the Bayes
+  // estimate under squared error, not a pose either mode explains (Mode() or the
+  // components give hypotheses). Throws std::invalid_argument if no component matches.
+  SE2d Mean(const std::string& tool = "") const;
   // Density of the (x, y, yaw) marginal at T (the yaw folded per component by its tool's
   // symmetry; n = 0 components: the (x, y) marginal, yaw ignored). Only components of
   // `tool` count when it is not empty (density conditional on that tool, renormalised).

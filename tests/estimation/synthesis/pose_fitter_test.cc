@@ -168,6 +168,35 @@ TEST(FitPoseModes, RecoversTheRenderedPoseFromNearbyStartsAndKeepsDistinctModes)
   EXPECT_LE(bounded[0].depth_m, options.depth_max_m);
 }
 
+LaplaceComponent Component(const std::string& tool, int n, double weight, const SE2d& mean) {
+  LaplaceComponent c;
+  c.tool = tool;
+  c.symmetry_order = n;
+  c.weight = weight;
+  c.mean = mean;
+  c.covariance = 1e-8 * Eigen::Matrix4d::Identity();
+  return c;
+}
+
+TEST(PoseMixture, MeanWeighsTheModesOfOneToolAfterFoldingItsSymmetry) {
+  // A C4 tool's two modes at yaw 0.1 and 0.1 + pi / 2 + 0.2 are 0.2 rad apart once
+  // folded: their weighted mean lies 3/4 of the way towards the heavier one.
+  const PoseMixture mixture({Component("square", 4, 0.45, SE2d::FromXYYaw(1e-3, 0, 0.1)),
+                             Component("square", 4, 0.15,
+                                       SE2d::FromXYYaw(3e-3, 0, 0.1 + M_PI / 2 + 0.2)),
+                             Component("rod", 2, 0.4, SE2d::FromXYYaw(-5e-3, 0, 1.0))});
+  const SE2d square = mixture.Mean("square");
+  EXPECT_NEAR(square.x(), 1.5e-3, 1e-5);
+  EXPECT_NEAR(YawErrorModuloSymmetry(square.yaw(), 0.15, 4), 0, 1e-3);
+  // The unconditional mean is that of the most probable tool (square: 0.6 of the mass).
+  EXPECT_NEAR(mixture.Mean().x(), square.x(), 1e-12);
+  // One component: its own mean.
+  const SE2d rod = mixture.Mean("rod");
+  EXPECT_NEAR(rod.x(), -5e-3, 1e-12);
+  EXPECT_NEAR(YawErrorModuloSymmetry(rod.yaw(), 1.0, 2), 0, 1e-9);
+  EXPECT_THROW(mixture.Mean("spoon"), std::invalid_argument);
+}
+
 TEST(GeneratorPosterior, LaplaceCoversTheTruthAndPrefersTheRenderingTool) {
   const SensorTrunk trunk = Trunk();
   const PoseGenerator g = Generator();
@@ -185,6 +214,8 @@ TEST(GeneratorPosterior, LaplaceCoversTheTruthAndPrefersTheRenderingTool) {
   EXPECT_NEAR(s.mean.x(), truth.x(), 5e-4);
   EXPECT_NEAR(YawErrorModuloSymmetry(s.mean.yaw(), truth.yaw(), 1), 0, 0.05);
   EXPECT_TRUE(mixture.Contains(truth, 0.9, 400, 1, "l_shape"));
+  // The posterior mean of the tool: near the truth as well.
+  EXPECT_NEAR(mixture.Mean("l_shape").x(), truth.x(), 5e-4);
   // A scene that names the tool fits only that tool.
   const GeneratorPosterior::Summary named = posterior.Estimate(targets, "rod", &mixture);
   ASSERT_TRUE(named.usable);
