@@ -38,6 +38,7 @@ void RegisterPose(CLI::App& app, CommandBody* selected);         // apps/pose_co
 void RegisterEval(CLI::App& app, CommandBody* selected);         // apps/eval_command.cc
 void RegisterTrainGenerator(CLI::App& app, CommandBody* selected);  // apps/generator_command.cc
 void RegisterEvalGenerator(CLI::App& app, CommandBody* selected);   // apps/generator_command.cc
+void RegisterExport(CLI::App& app, CommandBody* selected);         // apps/export_command.cc
 
 // Bad user input that the command detected itself (flag values, lists).
 class UsageError : public std::runtime_error {

@@ -100,6 +100,7 @@ int main(int argc, char** argv) {
   RegisterEval(app, &body);
   RegisterTrainGenerator(app, &body);
   RegisterEvalGenerator(app, &body);
+  RegisterExport(app, &body);
   RegisterBench(app, &body);
   try {
     app.parse(argc, argv);

@@ -47,6 +47,118 @@ ValueRange RangeOfValidPixels(const Image& image, const Valid& valid) {
   return range;
 }
 
+// Checks `options` and `image` (non-empty) and returns the kFixedScale scale:
+// options.fixed_scale, else sensor_scale. Throws std::invalid_argument naming `caller`
+// and `what` (the image's role).
+double CheckedFixedScale(const char* caller, const char* what, const Image& image,
+                         const PreprocessOptions& options, double sensor_scale) {
+  std::string error;
+  if (!options.IsValid(&error)) throw std::invalid_argument(error);
+  if (image.empty() || image.size() != image.pixels() * image.channels) {
+    throw std::invalid_argument(std::string(caller) + ": " + what +
+                                ": expected a non-empty image, got " + image.ShapeString() +
+                                " holding " + std::to_string(image.size()) + " values");
+  }
+  const double fixed_scale = options.fixed_scale > 0 ? options.fixed_scale : sensor_scale;
+  if (options.normalization == PreprocessOptions::Normalization::kFixedScale &&
+      !(std::isfinite(fixed_scale) && fixed_scale > 0)) {
+    throw std::invalid_argument(
+        std::string(caller) +
+        ": kFixedScale needs a scale: expected PreprocessOptions::fixed_scale "
+        "> 0 or sensor_scale > 0, got " +
+        internal::FormatDoubleShort(options.fixed_scale) + " and " +
+        internal::FormatDoubleShort(sensor_scale));
+  }
+  return fixed_scale;
+}
+
+// Steps 2-4 of Preprocess on `difference` (invalid pixels hold 0) with its validity
+// `mask` (1 valid, 0 invalid, one per pixel); fixed_scale > 0 for kFixedScale.
+PreprocessedFrame GrayResizeNormalize(Image difference, std::vector<float> mask,
+                                      const PreprocessOptions& options, double fixed_scale) {
+  const std::size_t pixels = difference.pixels();
+  // 2. Grayscale (linear, so invalid pixels stay exactly 0).
+  if (options.grayscale && difference.channels == 3) {
+    Image gray(difference.rows, difference.cols, 1);
+    for (std::size_t p = 0; p < pixels; ++p) {
+      const float* rgb = &difference.data[p * 3];
+      gray.data[p] = kLumaR * rgb[0] + kLumaG * rgb[1] + kLumaB * rgb[2];
+    }
+    difference = std::move(gray);
+  }
+
+  // 3. Mask-aware area resize, after noting the source-resolution range.
+  PreprocessedFrame out;
+  const ValueRange source =
+      RangeOfValidPixels(difference, [&](std::size_t p) { return mask[p] > 0; });
+  out.source_range = source.empty() ? 0.0 : source.hi - source.lo;
+  const int rows = options.rows > 0 ? options.rows : difference.rows;
+  const int cols = options.cols > 0 ? options.cols : difference.cols;
+  const int out_channels = difference.channels;
+  out.values = Image(rows, cols, out_channels, 0.0f);
+  out.valid.assign(static_cast<std::size_t>(rows) * cols, 0);
+  if (rows == difference.rows && cols == difference.cols) {
+    out.values = std::move(difference);
+    for (std::size_t p = 0; p < pixels; ++p) out.valid[p] = mask[p] > 0 ? 1 : 0;
+  } else {
+    cv::Mat resized_values;
+    cv::Mat resized_mask;
+    cv::resize(internal::MatView(difference), resized_values, cv::Size(cols, rows), 0, 0,
+               cv::INTER_AREA);
+    cv::resize(cv::Mat(difference.rows, difference.cols, CV_32F, mask.data()), resized_mask,
+               cv::Size(cols, rows), 0, 0, cv::INTER_AREA);
+    for (int r = 0; r < rows; ++r) {
+      const float* values_row = resized_values.ptr<float>(r);
+      const float* mask_row = resized_mask.ptr<float>(r);
+      for (int c = 0; c < cols; ++c) {
+        const float weight = mask_row[c];
+        if (!(weight >= kMinValidFraction)) continue;
+        out.valid[static_cast<std::size_t>(r) * cols + c] = 1;
+        for (int k = 0; k < out_channels; ++k) {
+          out.values.at(r, c, k) = values_row[c * out_channels + k] / weight;
+        }
+      }
+    }
+  }
+
+  // 4. Normalisation.
+  if (options.normalization == PreprocessOptions::Normalization::kFixedScale) {
+    out.scale = fixed_scale;
+    out.offset = 0;
+  } else {
+    const ValueRange range =
+        RangeOfValidPixels(out.values, [&](std::size_t p) { return out.valid[p] != 0; });
+    const double lo = range.lo, hi = range.hi;
+    const bool any_valid = !range.empty();
+    if (!any_valid || !(hi - lo >= options.min_range_epsilon)) {
+      out.flat = true;
+      out.scale = 1;
+      out.offset = any_valid ? lo : 0;
+      std::fill(out.values.data.begin(), out.values.data.end(), 0.0f);
+      return out;
+    }
+    out.scale = hi - lo;
+    out.offset = lo;
+  }
+  for (std::size_t p = 0; p < out.valid.size(); ++p) {
+    for (int k = 0; k < out_channels; ++k) {
+      float& v = out.values.data[p * out_channels + k];
+      if (!out.valid[p]) {
+        v = 0.0f;
+        continue;
+      }
+      v = static_cast<float>((v - out.offset) / out.scale);
+      // Guards overflow of huge differences over a tiny scale: never let inf out.
+      if (!std::isfinite(v)) {
+        out.valid[p] = 0;
+        for (int j = 0; j < out_channels; ++j) out.values.data[p * out_channels + j] = 0.0f;
+        break;
+      }
+    }
+  }
+  return out;
+}
+
 }  // namespace
 
 bool PreprocessOptions::IsValid(std::string* error) const {
@@ -115,25 +227,11 @@ Image Difference(const Image& frame, const Image& reference, SensorKind sensor) 
 
 PreprocessedFrame Preprocess(const Image& frame, const Image& reference, SensorKind sensor,
                              const PreprocessOptions& options, double sensor_scale) {
-  std::string error;
-  if (!options.IsValid(&error)) throw std::invalid_argument(error);
-  if (frame.empty() || frame.size() != frame.pixels() * frame.channels) {
-    throw std::invalid_argument("Preprocess: frame: expected a non-empty image, got " +
-                                frame.ShapeString() + " holding " + std::to_string(frame.size()) +
-                                " values");
-  }
+  const double fixed_scale =
+      CheckedFixedScale("Preprocess", "frame", frame, options, sensor_scale);
   if (!frame.SameShape(reference) || reference.size() != frame.size()) {
     throw std::invalid_argument("Preprocess: reference: expected the frame's shape " +
                                 frame.ShapeString() + ", got " + reference.ShapeString());
-  }
-  double fixed_scale = options.fixed_scale > 0 ? options.fixed_scale : sensor_scale;
-  if (options.normalization == PreprocessOptions::Normalization::kFixedScale &&
-      !(std::isfinite(fixed_scale) && fixed_scale > 0)) {
-    throw std::invalid_argument(
-        "Preprocess: kFixedScale needs a scale: expected PreprocessOptions::fixed_scale "
-        "> 0 or sensor_scale > 0, got " +
-        internal::FormatDoubleShort(options.fixed_scale) + " and " +
-        internal::FormatDoubleShort(sensor_scale));
   }
 
   // 1. Difference and validity mask. Pressing the bubble moves the membrane towards
@@ -159,86 +257,25 @@ PreprocessedFrame Preprocess(const Image& frame, const Image& reference, SensorK
     }
   }
 
-  // 2. Grayscale (linear, so invalid pixels stay exactly 0).
-  if (options.grayscale && channels == 3) {
-    Image gray(frame.rows, frame.cols, 1);
-    for (std::size_t p = 0; p < pixels; ++p) {
-      const float* rgb = &difference.data[p * 3];
-      gray.data[p] = kLumaR * rgb[0] + kLumaG * rgb[1] + kLumaB * rgb[2];
-    }
-    difference = std::move(gray);
-  }
+  return GrayResizeNormalize(std::move(difference), std::move(mask), options, fixed_scale);
+}
 
-  // 3. Mask-aware area resize, after noting the source-resolution range.
-  PreprocessedFrame out;
-  const ValueRange source =
-      RangeOfValidPixels(difference, [&](std::size_t p) { return mask[p] > 0; });
-  out.source_range = source.empty() ? 0.0 : source.hi - source.lo;
-  const int rows = options.rows > 0 ? options.rows : frame.rows;
-  const int cols = options.cols > 0 ? options.cols : frame.cols;
-  const int out_channels = difference.channels;
-  out.values = Image(rows, cols, out_channels, 0.0f);
-  out.valid.assign(static_cast<std::size_t>(rows) * cols, 0);
-  if (rows == frame.rows && cols == frame.cols) {
-    out.values = std::move(difference);
-    for (std::size_t p = 0; p < pixels; ++p) out.valid[p] = mask[p] > 0 ? 1 : 0;
-  } else {
-    cv::Mat resized_values;
-    cv::Mat resized_mask;
-    cv::resize(internal::MatView(difference), resized_values, cv::Size(cols, rows), 0, 0,
-               cv::INTER_AREA);
-    cv::resize(cv::Mat(frame.rows, frame.cols, CV_32F, mask.data()), resized_mask,
-               cv::Size(cols, rows), 0, 0, cv::INTER_AREA);
-    for (int r = 0; r < rows; ++r) {
-      const float* values_row = resized_values.ptr<float>(r);
-      const float* mask_row = resized_mask.ptr<float>(r);
-      for (int c = 0; c < cols; ++c) {
-        const float weight = mask_row[c];
-        if (!(weight >= kMinValidFraction)) continue;
-        out.valid[static_cast<std::size_t>(r) * cols + c] = 1;
-        for (int k = 0; k < out_channels; ++k) {
-          out.values.at(r, c, k) = values_row[c * out_channels + k] / weight;
-        }
-      }
-    }
+PreprocessedFrame PreprocessImage(const Image& image, const PreprocessOptions& options,
+                                  double sensor_scale) {
+  const double fixed_scale =
+      CheckedFixedScale("PreprocessImage", "image", image, options, sensor_scale);
+  const int channels = image.channels;
+  const std::size_t pixels = image.pixels();
+  Image values(image.rows, image.cols, channels, 0.0f);
+  std::vector<float> mask(pixels, 0.0f);
+  for (std::size_t p = 0; p < pixels; ++p) {
+    bool valid = true;
+    for (int c = 0; c < channels; ++c) valid = valid && std::isfinite(image.data[p * channels + c]);
+    if (!valid) continue;
+    mask[p] = 1.0f;
+    for (int c = 0; c < channels; ++c) values.data[p * channels + c] = image.data[p * channels + c];
   }
-
-  // 4. Normalisation.
-  if (options.normalization == PreprocessOptions::Normalization::kFixedScale) {
-    out.scale = fixed_scale;
-    out.offset = 0;
-  } else {
-    const ValueRange range =
-        RangeOfValidPixels(out.values, [&](std::size_t p) { return out.valid[p] != 0; });
-    const double lo = range.lo, hi = range.hi;
-    const bool any_valid = !range.empty();
-    if (!any_valid || !(hi - lo >= options.min_range_epsilon)) {
-      out.flat = true;
-      out.scale = 1;
-      out.offset = any_valid ? lo : 0;
-      std::fill(out.values.data.begin(), out.values.data.end(), 0.0f);
-      return out;
-    }
-    out.scale = hi - lo;
-    out.offset = lo;
-  }
-  for (std::size_t p = 0; p < out.valid.size(); ++p) {
-    for (int k = 0; k < out_channels; ++k) {
-      float& v = out.values.data[p * out_channels + k];
-      if (!out.valid[p]) {
-        v = 0.0f;
-        continue;
-      }
-      v = static_cast<float>((v - out.offset) / out.scale);
-      // Guards overflow of huge differences over a tiny scale: never let inf out.
-      if (!std::isfinite(v)) {
-        out.valid[p] = 0;
-        for (int j = 0; j < out_channels; ++j) out.values.data[p * out_channels + j] = 0.0f;
-        break;
-      }
-    }
-  }
-  return out;
+  return GrayResizeNormalize(std::move(values), std::move(mask), options, fixed_scale);
 }
 
 PreprocessedFrame Preprocess(const Image& frame, const Image& reference,

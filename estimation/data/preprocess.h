@@ -102,6 +102,15 @@ PreprocessedFrame Preprocess(const Image& frame, const Image& reference, SensorK
 PreprocessedFrame Preprocess(const Image& frame, const Image& reference,
                              const PreprocessOptions& options, double sensor_scale = 0);
 
+// Steps 2-4 alone, on `image` itself (no reference subtracted): a pixel is valid where
+// every channel is finite; grayscale, mask-aware area resize and normalisation exactly
+// as Preprocess does them to a difference. E.g. a sensor's reference in the units and
+// at the working resolution of its targets (`tactfunc export`). Throws
+// std::invalid_argument like Preprocess (invalid options, an empty image, kFixedScale
+// without a scale).
+PreprocessedFrame PreprocessImage(const Image& image, const PreprocessOptions& options,
+                                  double sensor_scale = 0);
+
 // Loads frame `index` of `dataset` and preprocesses it against its sensor's reference
 // with the sensor's kind and normalisation scale (DefaultNormalizationScale if the
 // dataset records none). Throws like Dataset::LoadFrame and Preprocess.

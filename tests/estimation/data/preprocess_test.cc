@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 #include <random>
+#include <stdexcept>
 #include <string>
 
 #include "estimation/data/dataset.h"
@@ -309,6 +310,69 @@ TEST(Difference, AShapeMismatchThrowsNamingTheShapes) {
     FAIL() << "expected std::invalid_argument";
   } catch (const std::invalid_argument& e) {
     EXPECT_THAT(e.what(), HasSubstr("reference"));
+  }
+}
+
+// ---- PreprocessImage: steps 2-4 on an image itself ----------------------------------
+
+// A 3-channel image with a gradient, a few NaN pixels and a few large values.
+Image RgbTestImage(int rows, int cols) {
+  Image image(rows, cols, 3);
+  for (int r = 0; r < rows; ++r) {
+    for (int c = 0; c < cols; ++c) {
+      for (int k = 0; k < 3; ++k) image.at(r, c, k) = 0.1f * k + 0.01f * r - 0.02f * c;
+    }
+  }
+  image.at(1, 2, 0) = kNaN;
+  image.at(4, 4, 2) = kNaN;
+  image.at(0, 5, 1) = 7.5f;
+  return image;
+}
+
+TEST(PreprocessImage, EqualsPreprocessOfTheImageAgainstAZeroReference) {
+  const Image image = RgbTestImage(9, 13);
+  const Image zeros(image.rows, image.cols, image.channels, 0.0f);
+  for (bool grayscale : {false, true}) {
+    for (int rows : {0, 4}) {
+      for (Normalization normalization :
+           {Normalization::kFixedScale, Normalization::kPerImageMinMax}) {
+        PreprocessOptions options;
+        options.rows = rows;
+        options.cols = rows == 0 ? 0 : 6;
+        options.grayscale = grayscale;
+        options.normalization = normalization;
+        options.fixed_scale = 0.5;
+        // GelSlim's difference is frame - reference: the image itself against zeros.
+        const PreprocessedFrame expected =
+            Preprocess(image, zeros, SensorKind::kGelSlim, options);
+        const PreprocessedFrame got = PreprocessImage(image, options);
+        EXPECT_EQ(got.values.data, expected.values.data) << grayscale << " " << rows;
+        EXPECT_TRUE(got.values.SameShape(expected.values));
+        EXPECT_EQ(got.valid, expected.valid);
+        EXPECT_EQ(got.scale, expected.scale);
+        EXPECT_EQ(got.offset, expected.offset);
+        EXPECT_EQ(got.source_range, expected.source_range);
+      }
+    }
+  }
+}
+
+TEST(PreprocessImage, DepthIsTheImageNotAPressAndNaNPixelsAreInvalid) {
+  Image depth(4, 5, 1, 0.05f);
+  depth.at(2, 3) = kNaN;
+  const PreprocessedFrame out = PreprocessImage(depth, PreprocessOptions(), 0.01);
+  EXPECT_EQ(out.valid[2 * 5 + 3], 0);
+  EXPECT_EQ(out.values.at(2, 3), 0.0f);
+  EXPECT_EQ(out.num_valid(), 19u);
+  EXPECT_NEAR(out.values.at(0, 0), 5.0f, 1e-6);  // 0.05 m over 0.01 m, positive
+}
+
+TEST(PreprocessImage, FixedScaleWithoutAScaleThrowsNamingIt) {
+  try {
+    PreprocessImage(Image(2, 2, 1, 0.05f), PreprocessOptions(), 0);
+    FAIL() << "expected std::invalid_argument";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_THAT(e.what(), HasSubstr("PreprocessImage: kFixedScale needs a scale"));
   }
 }
 
