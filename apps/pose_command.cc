@@ -516,6 +516,16 @@ void RunGeneratorPose(const PoseFlags& flags, const FunctaModel& model, const In
               mean.x() * 1e3, mean.y() * 1e3, mean.yaw() * kDeg);
   std::printf("pose: sd   x = %.3f mm, y = %.3f mm, yaw = %.2f deg (its Laplace component)\n",
               std::sqrt(cov(0, 0)) * 1e3, std::sqrt(cov(1, 1)) * 1e3, std::sqrt(cov(2, 2)) * kDeg);
+  // The posterior mean of the tool's modes (PoseMixture::Mean): the mode when there is one.
+  const SE2d posterior_mean = mixture.Mean(chosen);
+  std::printf("pose: posterior mean x = %.3f mm, y = %.3f mm, yaw = %.2f deg (over the tool's "
+              "%d modes)\n",
+              posterior_mean.x() * 1e3, posterior_mean.y() * 1e3, posterior_mean.yaw() * kDeg,
+              static_cast<int>(std::count_if(mixture.components().begin(),
+                                             mixture.components().end(),
+                                             [&](const LaplaceComponent& c) {
+                                               return c.tool == chosen;
+                                             })));
   if (input.label) {
     const SE2d& truth = input.label->sensor_T_object;
     const double e_mm = 1e3 * std::hypot(mean.x() - truth.x(), mean.y() - truth.y());
@@ -550,6 +560,7 @@ void RunGeneratorPose(const PoseFlags& flags, const FunctaModel& model, const In
         {"tool_probabilities", probabilities},
         {"symmetry_order", n},
         {"mean", PoseJson(mean)},
+        {"posterior_mean", PoseJson(posterior_mean)},
         {"covariance", MatrixJson(cov)},
         {"covariance_convention",
          "tangent space at the heaviest mode of the tool, right perturbations, order x (m), "
@@ -582,6 +593,7 @@ void RunGeneratorPose(const PoseFlags& flags, const FunctaModel& model, const In
   }
   if (flags.json) {
     nlohmann::json j = {{"mean", PoseJson(mean)},
+                        {"posterior_mean", PoseJson(posterior_mean)},
                         {"covariance", MatrixJson(cov)},
                         {"ms", gs.total_time_ms + sampling_ms},
                         {"method", "generator"},

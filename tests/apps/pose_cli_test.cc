@@ -230,7 +230,8 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
   EXPECT_THAT(r.out, HasSubstr("tangent space at the mode"));
   const nlohmann::json j = r.LastJson();
   EXPECT_EQ(j["method"], "generator");
-  for (const char* key : {"mean", "covariance", "ms", "tool", "tool_probabilities", "truth"}) {
+  for (const char* key : {"mean", "posterior_mean", "covariance", "ms", "tool",
+                          "tool_probabilities", "truth"}) {
     EXPECT_TRUE(j.contains(key)) << key;
   }
   EXPECT_EQ(j["samples"].get<int>(), 20);
@@ -238,6 +239,11 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
   const nlohmann::json record = nlohmann::json::parse(Slurp(out + "/posterior.json"));
   EXPECT_GE(record["components"].size(), 1u);
   EXPECT_EQ(record["samples"].size(), 20u);
+  // One mode of the tool: the posterior mean is that mode.
+  if (j["modes"].get<int>() == 1) {
+    EXPECT_NEAR(record["posterior_mean"]["x_m"].get<double>(), record["mean"]["x_m"].get<double>(),
+                1e-12);
+  }
   // MCMC over the pose: 4 chains of 5 kept samples, their diagnostics in the record.
   r = Run(args + " --generator " + Root("g.tpg") + " --sampler rwm --out " + out + " --json");
   ASSERT_EQ(r.exit_code, 0) << r.err;
