@@ -1,0 +1,389 @@
+#!/usr/bin/env python3
+"""A study of optical-sensor representations: a SIREN that draws the gel's indentation
+w(p), a learned photometric head that turns its slope into the image difference, and the
+printed markers moved with the skin -- against a SIREN that draws the difference itself,
+and against PCA at the same bytes per frame.
+
+Why: on an optical sensor (GelSlim, GelSight, DIGIT) the difference image is a function
+of the surface's slope (photometric stereo: each light's brightness follows n . l), plus
+the markers displaced by the skin's stretch. Thin shading ridges and marker dipoles are
+derivatives of a smooth field; a coordinate network's spectral bias favours the smooth
+field, so drawing w and differentiating it should keep the ridges a direct SIREN blurs.
+
+The two trunks are trained the same way (trunk and per-frame latents optimised jointly on
+the noisy train frames of one dataset), then every test frame's latent is fitted to
+convergence with the trunk frozen, stored as float16 (d values, 2 d bytes per frame), and
+scored against the noise-free test frames with tactfunc's PSNR (per frame, the target's
+range over its valid pixels as the peak; mean over frames). PCA is fitted on the noisy
+train split of the evaluation dataset (as `tactfunc eval` does), its codes stored as
+float32 (bytes / 4 components) and as float16 (bytes / 2 components, the same bits as the
+latents).
+
+Inputs: the `tactfunc export` directories of a training dataset and an evaluation
+dataset (docs/CLI.md), e.g. (see docs/REPRESENTATION.md for the full commands):
+
+  python3 scripts/representation_photometric.py --train /tmp/export_train \\
+      --eval /tmp/export_eval --sensor gelslim --head photometric --out /tmp/photometric.json
+
+Deterministic for a seed on a given machine and PyTorch build; needs NumPy and PyTorch.
+"""
+import argparse
+import json
+import math
+import os
+import sys
+import time
+
+try:
+    import numpy as np
+    import torch
+    import torch.nn as nn
+    import torch.nn.functional as F
+except ImportError as e:  # pragma: no cover
+    sys.exit(f"representation_photometric.py: needs NumPy and PyTorch ({e})")
+
+
+def load(directory, sensor, split, clean=False):
+    suffix = "_clean" if clean else ""
+    path = os.path.join(directory, f"{sensor}_{split}{suffix}.npy")
+    if not os.path.exists(path):
+        sys.exit(f"representation_photometric.py: {path} is missing (run `tactfunc export`"
+                 f"{' --clean' if clean else ''} with --split {split})")
+    return np.load(path)
+
+
+def psnr_per_frame(pred, target, weights):
+    """tactfunc's PSNR (estimation/data/trunk_targets.h): peak = the target's range."""
+    out = []
+    for p, t, w in zip(pred, target, weights):
+        valid = w.reshape(-1) > 0
+        tv = t.reshape(len(valid), -1)[valid]
+        pv = p.reshape(len(valid), -1)[valid]
+        r = float(tv.max() - tv.min()) if tv.size else 0.0
+        r = r if r >= 1e-9 else 1.0
+        mse = float(np.mean((pv.astype(np.float64) - tv.astype(np.float64)) ** 2))
+        out.append(10 * math.log10(r * r / mse) if mse > 0 else float("inf"))
+    return np.array(out)
+
+
+def pca_rows(train, test_noisy, test_clean, weights, bytes_per_frame):
+    n, h, w, c = train.shape
+    x = train.reshape(n, -1).astype(np.float64)
+    mean = x.mean(0)
+    xc = x - mean
+    # Eigen-decomposition of the Gram matrix (n <= pixels here).
+    gram = xc @ xc.T
+    vals, vecs = np.linalg.eigh(gram)
+    order = np.argsort(vals)[::-1]
+    vals, vecs = vals[order], vecs[:, order]
+    rows = {}
+    for name, comps, dtype in (("pca_float32", bytes_per_frame // 4, np.float32),
+                               ("pca_float16", bytes_per_frame // 2, np.float16)):
+        k = min(comps, n - 1)
+        basis = (xc.T @ vecs[:, :k]) / np.sqrt(np.maximum(vals[:k], 1e-30))
+        y = test_noisy.reshape(len(test_noisy), -1).astype(np.float64) - mean
+        codes = (y @ basis).astype(dtype).astype(np.float64)
+        rec = (codes @ basis.T + mean).reshape(test_noisy.shape)
+        rows[name] = {"components": k,
+                      "psnr_clean": float(psnr_per_frame(rec, test_clean, weights).mean()),
+                      "psnr_noisy": float(psnr_per_frame(rec, test_noisy, weights).mean())}
+        last = rec
+    return rows, last
+
+
+class Trunk(nn.Module):
+    """A latent-modulated SIREN (shifts = A z + c per layer, as tactfunc's trunk) with a
+    choice of head:
+      direct       y(p) = SIREN(p; z)                    (tactfunc's trunk)
+      photometric  w(p) = SIREN(p; z)_0,
+                   y(p) = S(grad w, w, p) - S(0, 0, p)   (learned photometric head)
+                        + R(p - M grad w) - R(p)         (markers moved with the skin)
+                        + SIREN(p; z)_1                  (a direct channel for the rest)
+    where R is the sensor's reference frame (bilinearly sampled) and M a learned 2 x 2.
+    With `transform` the first three latent values are a rigid motion of the frame's
+    contact, (t_row, t_col, theta), and the SIREN draws the contact in its own frame,
+    SIREN(R(-theta) (p - t); z[3:]): a contact moved or turned is three numbers, not a
+    re-weighting of the whole code. Coordinates are then isotropic (one unit per (h - 1) / 2
+    pixels along both axes), so that a rotation keeps shapes."""
+
+    def __init__(self, head, width, layers, d, channels, reference, omega=30.0,
+                 transform=False, aspect=1.0):
+        super().__init__()
+        self.head, self.omega, self.width, self.layers = head, omega, width, layers
+        self.channels, self.transform, self.aspect = channels, transform, aspect
+        code = d - 3 if transform else d
+        self.hidden = nn.ModuleList([nn.Linear(2, width)] +
+                                    [nn.Linear(width, width) for _ in range(layers - 1)])
+        outputs = channels if head == "direct" else 1 + channels
+        self.out = nn.Linear(width, outputs)
+        self.shift = nn.Linear(code, width * layers)
+        with torch.no_grad():
+            self.hidden[0].weight.uniform_(-1 / 2, 1 / 2)
+            for lin in list(self.hidden[1:]) + [self.out]:
+                bound = math.sqrt(6 / lin.in_features) / omega
+                lin.weight.uniform_(-bound, bound)
+            self.shift.weight.mul_(0.1)
+            self.shift.bias.zero_()
+        if head == "photometric":
+            self.shade = nn.Sequential(nn.Linear(5, 64), nn.SiLU(), nn.Linear(64, 64), nn.SiLU(),
+                                       nn.Linear(64, channels))
+            self.marker = nn.Parameter(torch.zeros(2, 2))
+            # (1, C, H, W) for grid_sample.
+            self.register_buffer("reference", torch.from_numpy(reference).permute(2, 0, 1)[None])
+            h, w = reference.shape[:2]
+            # Coordinate units per pixel along (row, col): slopes in w per pixel.
+            col_unit = 2 * aspect / max(w - 1, 1)
+            self.register_buffer("pixel", torch.tensor([2 / max(h - 1, 1), col_unit]))
+            # From coordinates to grid_sample's [-1, 1] along (row, col).
+            self.register_buffer("to_unit", torch.tensor([1.0, 1.0 / aspect]))
+
+    def siren(self, x, z):
+        b, p, _ = x.shape
+        g = self.shift(z).view(b, 1, self.layers, self.width)
+        h = x
+        for l, lin in enumerate(self.hidden):
+            h = torch.sin(self.omega * (lin(h) + g[:, :, l]))
+        return self.out(h)
+
+    def contact_frame(self, x, z):
+        """(coordinates the SIREN sees, its latent code)."""
+        if not self.transform:
+            return x, z
+        t, theta = z[:, None, :2], z[:, None, 2]
+        c, s = torch.cos(theta), torch.sin(theta)
+        d = x - t
+        q = torch.stack([c * d[..., 0] + s * d[..., 1], -s * d[..., 0] + c * d[..., 1]], -1)
+        return q, z[:, 3:]
+
+    def forward(self, x, z, create_graph):
+        if self.head == "direct":
+            return self.siren(*self.contact_frame(x, z))
+        if not x.requires_grad:
+            x = x.clone().requires_grad_(True)
+        s = self.siren(*self.contact_frame(x, z))
+        w = s[..., :1]
+        grad = torch.autograd.grad(w.sum(), x, create_graph=create_graph)[0] * self.pixel
+        shade_in = torch.cat([grad, w, x], -1)
+        flat_in = torch.cat([torch.zeros_like(grad), torch.zeros_like(w), x], -1)
+        shading = self.shade(shade_in) - self.shade(flat_in)
+        moved = x - (grad @ self.marker) * self.pixel
+        ref = self.reference.expand(x.shape[0], -1, -1, -1)
+        # grid_sample takes (x = column, y = row) in [-1, 1]; our coords are (row, col).
+        sampled = F.grid_sample(ref, (moved * self.to_unit).flip(-1)[:, :, None, :],
+                                mode="bilinear", padding_mode="border",
+                                align_corners=True)[..., 0]
+        at_rest = F.grid_sample(ref, (x * self.to_unit).flip(-1)[:, :, None, :],
+                                mode="bilinear", padding_mode="border",
+                                align_corners=True)[..., 0]
+        markers = (sampled - at_rest).transpose(1, 2)
+        return shading + markers + s[..., 1:]
+
+
+def masked_mse(pred, target, valid):
+    """Mean squared error over the valid pixels (valid: (..., 1) of 0 / 1)."""
+    return ((pred - target) ** 2 * valid).sum() / (valid.sum() * pred.shape[-1]).clamp(min=1)
+
+
+def write_png(path, image):
+    """An 8-bit grayscale PNG (zlib only), atomically."""
+    import struct
+    import zlib
+    image = np.clip(np.rint(image), 0, 255).astype(np.uint8)
+    h, w = image.shape
+    raw = b"".join(b"\x00" + image[r].tobytes() for r in range(h))
+
+    def chunk(kind, data):
+        return (struct.pack(">I", len(data)) + kind + data +
+                struct.pack(">I", zlib.crc32(kind + data) & 0xffffffff))
+
+    data = (b"\x89PNG\r\n\x1a\n" +
+            chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 0, 0, 0, 0)) +
+            chunk(b"IDAT", zlib.compress(raw, 9)) + chunk(b"IEND", b""))
+    with open(path + ".tmp", "wb") as f:
+        f.write(data)
+    os.replace(path + ".tmp", path)
+
+
+def write_sheet(path, rows, count, zoom=2):
+    """Rows of frames (N, h, w, C; channel 0), each frame scaled by the range of the first
+    row's frame, enlarged `zoom` times."""
+    reference = rows[0]
+    tiles = []
+    for row in rows:
+        cells = []
+        for i in range(min(count, len(reference))):
+            lo, hi = float(reference[i].min()), float(reference[i].max())
+            cell = (row[i][..., 0] - lo) / max(hi - lo, 1e-9) * 255
+            cells.append(np.kron(cell, np.ones((zoom, zoom))))
+        tiles.append(np.concatenate(cells, 1))
+    write_png(path, np.concatenate(tiles, 0))
+
+
+def grid(h, w, aspect=1.0):
+    r = torch.linspace(-1, 1, h)
+    c = torch.linspace(-aspect, aspect, w)
+    rr, cc = torch.meshgrid(r, c, indexing="ij")
+    return torch.stack([rr, cc], -1).reshape(-1, 2)
+
+
+def moment_poses(frames, coords):
+    """Per frame (t_row, t_col, theta) from the second moments of the difference's energy:
+    the start of the rigid motion (theta modulo pi)."""
+    out = np.zeros((len(frames), 3), np.float32)
+    xy = coords.numpy().astype(np.float64)
+    for i, f in enumerate(frames):
+        e = (f.reshape(len(xy), -1).astype(np.float64) ** 2).sum(1)
+        total = e.sum()
+        if not total > 0:
+            continue
+        t = (e[:, None] * xy).sum(0) / total
+        d = xy - t
+        cov = (e[:, None, None] * d[:, :, None] * d[:, None, :]).sum(0) / total
+        out[i, :2] = t
+        out[i, 2] = 0.5 * math.atan2(2 * cov[0, 1], cov[0, 0] - cov[1, 1])
+    return out
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--train", required=True, help="`tactfunc export` dir of the training set")
+    ap.add_argument("--eval", required=True,
+                    help="`tactfunc export --clean --split all` dir of the evaluation set")
+    ap.add_argument("--sensor", default="gelslim")
+    ap.add_argument("--head", choices=["direct", "photometric"], default="photometric")
+    ap.add_argument("--transform", action="store_true",
+                    help="the first three latent values move and turn the contact")
+    ap.add_argument("--width", type=int, default=64)
+    ap.add_argument("--layers", type=int, default=3)
+    ap.add_argument("--latent-dim", type=int, default=64)
+    ap.add_argument("--steps", type=int, default=3000)
+    ap.add_argument("--batch", type=int, default=64)
+    ap.add_argument("--pixels", type=int, default=512)
+    ap.add_argument("--latent-rate", type=float, default=1e-2)
+    ap.add_argument("--trunk-rate", type=float, default=1e-4)
+    ap.add_argument("--fit-steps", type=int, default=400)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--out", help="write the figures as JSON here")
+    args = ap.parse_args()
+    torch.manual_seed(args.seed)
+    np.random.seed(args.seed)
+    torch.set_num_threads(args.threads)
+
+    train = load(args.train, args.sensor, "train")
+    eval_train = load(args.eval, args.sensor, "train")
+    test = load(args.eval, args.sensor, "test")
+    test_clean = load(args.eval, args.sensor, "test", clean=True)
+    test_w = load(args.eval, args.sensor, "test_weights") if os.path.exists(
+        os.path.join(args.eval, f"{args.sensor}_test_weights.npy")) else np.ones(test.shape[:3], np.float32)
+    ref_path = os.path.join(args.train, f"{args.sensor}_reference.npy")
+    reference = np.load(ref_path).astype(np.float32) if os.path.exists(ref_path) else None
+    if args.head == "photometric" and reference is None:
+        sys.exit(f"representation_photometric.py: {ref_path} is missing (the photometric head "
+                 "needs the reference frame; `tactfunc export` writes it for fixed-scale formats)")
+    n, h, w, c = train.shape
+    bytes_per_frame = 2 * args.latent_dim
+    print(f"{args.sensor}: {n} train frames of {h}x{w}x{c}, {len(test)} test frames; "
+          f"{bytes_per_frame} B per frame", flush=True)
+    result = {"sensor": args.sensor, "head": args.head, "transform": args.transform,
+              "width": args.width,
+              "layers": args.layers, "latent_dim": args.latent_dim, "steps": args.steps,
+              "bytes_per_frame": bytes_per_frame}
+    pca, pca_same_bits = pca_rows(eval_train, test, test_clean, test_w, bytes_per_frame)
+    result.update(pca)
+    print("PCA:", {k: result[k] for k in ("pca_float32", "pca_float16")}, flush=True)
+
+    aspect = (w - 1) / max(h - 1, 1) if args.transform else 1.0
+    coords = grid(h, w, aspect)
+    trunk = Trunk(args.head, args.width, args.layers, args.latent_dim, c,
+                  reference if reference is not None else np.zeros((h, w, c), np.float32),
+                  transform=args.transform, aspect=aspect)
+    start_latents = torch.zeros(n, args.latent_dim)
+    if args.transform:
+        start_latents[:, :3] = torch.from_numpy(moment_poses(train, coords))
+    latents = nn.Parameter(start_latents)
+    targets = torch.from_numpy(train.reshape(n, h * w, c))
+    # Invalid pixels (dropouts) hold 0 in the targets: they are left out of every loss.
+    train_w_path = os.path.join(args.train, f"{args.sensor}_train_weights.npy")
+    train_w = torch.from_numpy(np.load(train_w_path).reshape(n, h * w, 1)) if os.path.exists(
+        train_w_path) else torch.ones(n, h * w, 1)
+    opt = torch.optim.Adam([{"params": trunk.parameters(), "lr": args.trunk_rate},
+                            {"params": [latents], "lr": args.latent_rate}])
+    start = time.time()
+    gen = torch.Generator().manual_seed(args.seed)
+    for step in range(1, args.steps + 1):
+        frames = torch.randint(0, n, (args.batch,), generator=gen)
+        pix = torch.randint(0, h * w, (args.batch, args.pixels), generator=gen)
+        x = coords[pix]
+        y = torch.gather(targets[frames], 1, pix[..., None].expand(-1, -1, c))
+        pred = trunk(x, latents[frames], create_graph=True)
+        v = torch.gather(train_w[frames], 1, pix[..., None])
+        loss = masked_mse(pred, y, v)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        if step % max(1, args.steps // 10) == 0:
+            print(f"  step {step}/{args.steps}: train MSE {loss.item():.3e} "
+                  f"({time.time() - start:.0f} s)", flush=True)
+    result["train_seconds"] = time.time() - start
+
+    # Fit every test latent to convergence with the trunk frozen: Adam on random pixel
+    # subsets with a decaying rate, frames in chunks (memory), then scored on all pixels.
+    for p in trunk.parameters():
+        p.requires_grad_(False)
+    m = len(test)
+    test_t = torch.from_numpy(test.reshape(m, h * w, c))
+    test_v = torch.from_numpy(test_w.reshape(m, h * w, 1))
+    z_all = torch.zeros(m, args.latent_dim)
+    start = time.time()
+    chunk = 60
+    for first in range(0, m, chunk):
+        idx = torch.arange(first, min(m, first + chunk))
+        z0 = torch.zeros(len(idx), args.latent_dim)
+        if args.transform:
+            z0[:, :3] = torch.from_numpy(moment_poses(test[idx.numpy()], coords))
+        z = nn.Parameter(z0)
+        fit_opt = torch.optim.Adam([z], lr=1e-2)
+        sched = torch.optim.lr_scheduler.CosineAnnealingLR(fit_opt, args.fit_steps, 1e-4)
+        for step in range(1, args.fit_steps + 1):
+            pix = torch.randint(0, h * w, (len(idx), args.pixels), generator=gen)
+            y = torch.gather(test_t[idx], 1, pix[..., None].expand(-1, -1, c))
+            v = torch.gather(test_v[idx], 1, pix[..., None])
+            loss = masked_mse(trunk(coords[pix], z, create_graph=True), y, v)
+            fit_opt.zero_grad()
+            loss.backward()
+            fit_opt.step()
+            sched.step()
+        z_all[idx] = z.detach()
+        print(f"  fitted {idx[-1].item() + 1}/{m} test latents: MSE {loss.item():.3e} "
+              f"({time.time() - start:.0f} s)", flush=True)
+    result["fit_seconds"] = time.time() - start
+    z16 = z_all.half().float()
+    recon = np.zeros(test.shape, np.float32)
+    for first in range(0, m, 20):
+        idx = torch.arange(first, min(m, first + 20))
+        x = coords[None].expand(len(idx), -1, -1)
+        with torch.enable_grad():
+            recon[first:first + len(idx)] = trunk(x, z16[idx], create_graph=False).detach() \
+                .numpy().reshape((len(idx), h, w, c))
+    result["trunk_float16"] = {
+        "psnr_clean": float(psnr_per_frame(recon, test_clean, test_w).mean()),
+        "psnr_noisy": float(psnr_per_frame(recon, test, test_w).mean())}
+    result["margin_vs_pca_float32_clean"] = (result["trunk_float16"]["psnr_clean"] -
+                                            result["pca_float32"]["psnr_clean"])
+    result["margin_vs_pca_float16_clean"] = (result["trunk_float16"]["psnr_clean"] -
+                                            result["pca_float16"]["psnr_clean"])
+    print(json.dumps(result, indent=1), flush=True)
+    if args.out:
+        tmp = args.out + ".tmp"
+        with open(tmp, "w") as f:
+            json.dump(result, f, indent=1)
+        os.replace(tmp, args.out)
+        picture = os.path.splitext(args.out)[0] + ".png"
+        write_sheet(picture, [test_clean, pca_same_bits, recon], count=6)
+        print(f"wrote {args.out} and {picture} (rows: noise-free frame, PCA with the same "
+              f"bits, this trunk; each frame scaled by its noise-free range)")
+
+
+if __name__ == "__main__":
+    main()
