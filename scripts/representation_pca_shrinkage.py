@@ -29,17 +29,8 @@ try:
 except ImportError as e:  # pragma: no cover
     sys.exit(f"representation_pca_shrinkage.py: needs NumPy ({e})")
 
-
-def psnr(pred, target, weights):
-    out = []
-    for p, t, w in zip(pred, target, weights):
-        valid = w.reshape(-1) > 0
-        tv = t.reshape(len(valid), -1)[valid]
-        pv = p.reshape(len(valid), -1)[valid]
-        r = float(tv.max() - tv.min()) if tv.size else 0.0
-        r = r if r >= 1e-9 else 1.0
-        out.append(10 * np.log10(r * r / np.mean((pv - tv) ** 2)))
-    return float(np.mean(out))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from representation_common import psnr_per_frame  # noqa: E402
 
 
 def main():
@@ -74,7 +65,7 @@ def main():
         row = {"components": k, "bytes_per_frame_float16": 2 * k}
         for name, c in (("plain", codes), ("shrunk", codes * gain)):
             rec = (c.astype(np.float16).astype(np.float64) @ basis.T + mean).reshape(clean[test].shape)
-            row[name + "_clean"] = psnr(rec, clean[test], weights[test])
+            row[name + "_clean"] = float(psnr_per_frame(rec, clean[test], weights[test]).mean())
         rows.append(row)
         print(f"{args.sensor}: {k} float16 components ({2 * k} B): plain {row['plain_clean']:.2f} dB, "
               f"shrunk {row['shrunk_clean']:.2f} dB against the noise-free test frames")

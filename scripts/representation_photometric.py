@@ -42,6 +42,9 @@ try:
 except ImportError as e:  # pragma: no cover
     sys.exit(f"representation_photometric.py: needs NumPy and PyTorch ({e})")
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from representation_common import psnr_per_frame  # noqa: E402
+
 
 def load(directory, sensor, split, clean=False):
     suffix = "_clean" if clean else ""
@@ -50,20 +53,6 @@ def load(directory, sensor, split, clean=False):
         sys.exit(f"representation_photometric.py: {path} is missing (run `tactfunc export`"
                  f"{' --clean' if clean else ''} with --split {split})")
     return np.load(path)
-
-
-def psnr_per_frame(pred, target, weights):
-    """tactfunc's PSNR (estimation/data/trunk_targets.h): peak = the target's range."""
-    out = []
-    for p, t, w in zip(pred, target, weights):
-        valid = w.reshape(-1) > 0
-        tv = t.reshape(len(valid), -1)[valid]
-        pv = p.reshape(len(valid), -1)[valid]
-        r = float(tv.max() - tv.min()) if tv.size else 0.0
-        r = r if r >= 1e-9 else 1.0
-        mse = float(np.mean((pv.astype(np.float64) - tv.astype(np.float64)) ** 2))
-        out.append(10 * math.log10(r * r / mse) if mse > 0 else float("inf"))
-    return np.array(out)
 
 
 def pca_rows(train, test_noisy, test_clean, weights, bytes_per_frame):
