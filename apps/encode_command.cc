@@ -145,15 +145,7 @@ void RunEncode(const EncodeFlags& flags) {
   options.checkpoint_every = flags.checkpoint_every;
   options.resume = flags.resume;
   options.processes = &processes;
-  for (const std::string& name : SplitList(flags.sensors)) {
-    SensorKind kind;
-    if (!SensorKindFromString(name, &kind)) {
-      throw UsageError("--sensors: unknown sensor '" + name + "', expected bubble or gelslim");
-    }
-    if (std::find(options.sensors.begin(), options.sensors.end(), kind) == options.sensors.end()) {
-      options.sensors.push_back(kind);
-    }
-  }
+  options.sensors = ParseSensorsFlag(flags.sensors);
   if (!flags.split.empty()) {
     Split split;
     if (!SplitFromString(flags.split, &split)) {

@@ -82,17 +82,13 @@ std::string SensorNames(const std::vector<SensorKind>& sensors) {
 // sensor in both.
 std::vector<SensorKind> SelectSensors(const ExportFlags& flags, const FunctaModel& model,
                                       const Dataset& dataset) {
-  std::vector<SensorKind> selected;
-  const std::vector<std::string> names = SplitList(flags.sensors);
-  if (!flags.sensors.empty() && names.empty()) {
+  std::vector<SensorKind> selected = ParseSensorsFlag(flags.sensors);
+  if (!flags.sensors.empty() && selected.empty()) {
     throw UsageError("--sensors: expected a comma-separated list of bubble and/or gelslim, got '" +
                      flags.sensors + "'");
   }
-  for (const std::string& name : names) {
-    SensorKind kind;
-    if (!SensorKindFromString(name, &kind)) {
-      throw UsageError("--sensors: unknown sensor '" + name + "', expected bubble or gelslim");
-    }
+  for (SensorKind kind : selected) {
+    const std::string name = ToString(kind);
     if (!model.HasSensor(kind)) {
       throw UsageError("--sensors: the model '" + flags.model + "' has no trunk for " + name +
                        " (its trunks: " + SensorNames(model.sensors()) + ")");
@@ -101,11 +97,8 @@ std::vector<SensorKind> SelectSensors(const ExportFlags& flags, const FunctaMode
       throw UsageError("--sensors: the dataset '" + flags.data + "' has no " + name +
                        " frames (its sensors: " + SensorNames(dataset.sensors()) + ")");
     }
-    if (std::find(selected.begin(), selected.end(), kind) == selected.end()) {
-      selected.push_back(kind);
-    }
   }
-  if (names.empty()) {
+  if (selected.empty()) {
     for (SensorKind sensor : dataset.sensors()) {
       if (model.HasSensor(sensor)) selected.push_back(sensor);
     }

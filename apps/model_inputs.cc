@@ -60,6 +60,18 @@ bool ParseSensorFlag(const std::string& text, SensorKind* sensor) {
   return true;
 }
 
+std::vector<SensorKind> ParseSensorsFlag(const std::string& list) {
+  std::vector<SensorKind> sensors;
+  for (const std::string& name : SplitList(list)) {
+    SensorKind kind;
+    if (!SensorKindFromString(name, &kind)) {
+      throw UsageError("--sensors: unknown sensor '" + name + "', expected bubble or gelslim");
+    }
+    if (std::find(sensors.begin(), sensors.end(), kind) == sensors.end()) sensors.push_back(kind);
+  }
+  return sensors;
+}
+
 FramePair ReadFramePair(const std::string& frame_path, const std::string& reference_path,
                         const std::string& sensor_flag, const std::string& sensor_file) {
   FramePair pair;

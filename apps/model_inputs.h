@@ -35,6 +35,9 @@ Image ReadInput(const std::string& path, SensorKind sensor, const std::string& f
 std::string Shape(const Image& image);
 // Parses --sensor (empty = not given: returns false); throws UsageError for a bad name.
 bool ParseSensorFlag(const std::string& text, SensorKind* sensor);
+// Parses --sensors, a comma-separated list (empty = not given: returns {}), keeping the
+// first of repeated names; throws UsageError naming --sensors for an unknown name.
+std::vector<SensorKind> ParseSensorsFlag(const std::string& list);
 
 
 // A frame and its no-contact reference given as files (--frame, --reference), with the

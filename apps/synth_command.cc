@@ -11,6 +11,7 @@
 #include <thread>
 
 #include "apps/command.h"
+#include "apps/model_inputs.h"
 #include "apps/progress_bar.h"
 #include "estimation/data/synthetic_dataset.h"
 #include "estimation/data/dataset.h"
@@ -92,16 +93,8 @@ void RunSynth(const SynthFlags& flags) {
   plan.threads = ResolveThreads(flags.threads);
   plan.tools = flags.tools.empty() ? ToolNames() : SplitList(flags.tools);
   for (const std::string& tool : plan.tools) GetTool(tool);  // throws with the valid names
-  plan.sensors.clear();  // the plan's default is both sensors; --sensors replaces it
-  for (const std::string& name : SplitList(flags.sensors)) {
-    SensorKind kind;
-    if (!SensorKindFromString(name, &kind)) {
-      throw UsageError("--sensors: unknown sensor '" + name +
-                       "', expected a list of bubble, gelslim");
-    }
-    if (std::find(plan.sensors.begin(), plan.sensors.end(), kind) == plan.sensors.end())
-      plan.sensors.push_back(kind);
-  }
+  // The plan's default is both sensors; --sensors replaces it.
+  plan.sensors = ParseSensorsFlag(flags.sensors);
   if (plan.sensors.empty()) throw UsageError("--sensors: expected at least one sensor");
 
   ContactSimulator::Options simulator_options;

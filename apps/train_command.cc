@@ -286,16 +286,12 @@ void RunTrain(const TrainFlags& flags) {
   if (flags.sensors.empty()) {
     sensors = dataset.sensors();
   } else {
-    for (const std::string& name : SplitList(flags.sensors)) {
-      SensorKind kind;
-      if (!SensorKindFromString(name, &kind)) {
-        throw UsageError("--sensors: unknown sensor '" + name +
-                         "', expected a list of bubble, gelslim");
-      }
+    sensors = ParseSensorsFlag(flags.sensors);
+    for (SensorKind kind : sensors) {
       if (!dataset.has_sensor(kind)) {
-        throw UsageError("--sensors: the dataset " + flags.data + " has no '" + name + "' frames");
+        throw UsageError("--sensors: the dataset " + flags.data + " has no '" +
+                         std::string(ToString(kind)) + "' frames");
       }
-      if (std::find(sensors.begin(), sensors.end(), kind) == sensors.end()) sensors.push_back(kind);
     }
   }
   if (sensors.empty()) throw UsageError("--sensors: expected at least one sensor");
