@@ -1,5 +1,7 @@
-"""What the representation study scripts share: tactfunc's PSNR on exported targets."""
+"""What the representation study scripts share: tactfunc's PSNR on exported targets and
+a picture sheet of frames."""
 import math
+import os
 
 import numpy as np
 
@@ -17,3 +19,38 @@ def psnr_per_frame(pred, target, weights):
         mse = float(np.mean((pv.astype(np.float64) - tv.astype(np.float64)) ** 2))
         out.append(10 * math.log10(r * r / mse) if mse > 0 else float("inf"))
     return np.array(out)
+
+
+def write_png(path, image):
+    """An 8-bit grayscale PNG (zlib only), atomically."""
+    import struct
+    import zlib
+    image = np.clip(np.rint(image), 0, 255).astype(np.uint8)
+    h, w = image.shape
+    raw = b"".join(b"\x00" + image[r].tobytes() for r in range(h))
+
+    def chunk(kind, data):
+        return (struct.pack(">I", len(data)) + kind + data +
+                struct.pack(">I", zlib.crc32(kind + data) & 0xffffffff))
+
+    data = (b"\x89PNG\r\n\x1a\n" +
+            chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 0, 0, 0, 0)) +
+            chunk(b"IDAT", zlib.compress(raw, 9)) + chunk(b"IEND", b""))
+    with open(path + ".tmp", "wb") as f:
+        f.write(data)
+    os.replace(path + ".tmp", path)
+
+
+def write_sheet(path, rows, count, zoom=2):
+    """Rows of frames (N, h, w, C; channel 0), each frame scaled by the range of the first
+    row's frame, enlarged `zoom` times."""
+    reference = rows[0]
+    tiles = []
+    for row in rows:
+        cells = []
+        for i in range(min(count, len(reference))):
+            lo, hi = float(reference[i].min()), float(reference[i].max())
+            cell = (row[i][..., 0] - lo) / max(hi - lo, 1e-9) * 255
+            cells.append(np.kron(cell, np.ones((zoom, zoom))))
+        tiles.append(np.concatenate(cells, 1))
+    write_png(path, np.concatenate(tiles, 0))

@@ -43,7 +43,7 @@ except ImportError as e:  # pragma: no cover
     sys.exit(f"representation_photometric.py: needs NumPy and PyTorch ({e})")
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from representation_common import psnr_per_frame  # noqa: E402
+from representation_common import psnr_per_frame, write_sheet  # noqa: E402
 
 
 def load(directory, sensor, split, clean=False):
@@ -92,7 +92,8 @@ class Trunk(nn.Module):
     With `transform` the first three latent values are a rigid motion of the frame's
     contact, (t_row, t_col, theta), and the SIREN draws the contact in its own frame,
     SIREN(R(-theta) (p - t); z[3:]): a contact moved or turned is three numbers, not a
-    re-weighting of the whole code. Coordinates are then isotropic (one unit per (h - 1) / 2
+    re-weighting of the whole code; with transform "translation" only t (two values),
+    SIREN(p - t; z[2:]). Coordinates are then isotropic (one unit per (h - 1) / 2
     pixels along both axes), so that a rotation keeps shapes."""
 
     def __init__(self, head, width, layers, d, channels, reference, omega=30.0,
@@ -100,7 +101,9 @@ class Trunk(nn.Module):
         super().__init__()
         self.head, self.omega, self.width, self.layers = head, omega, width, layers
         self.channels, self.transform, self.aspect = channels, transform, aspect
-        code = d - 3 if transform else d
+        # transform: False, "rigid" (t, theta) or "translation" (t only).
+        self.pose_values = {False: 0, "rigid": 3, "translation": 2}[transform]
+        code = d - self.pose_values
         self.hidden = nn.ModuleList([nn.Linear(2, width)] +
                                     [nn.Linear(width, width) for _ in range(layers - 1)])
         outputs = channels if head == "direct" else 1 + channels
@@ -138,6 +141,8 @@ class Trunk(nn.Module):
         """(coordinates the SIREN sees, its latent code)."""
         if not self.transform:
             return x, z
+        if self.transform == "translation":
+            return x - z[:, None, :2], z[:, 2:]
         t, theta = z[:, None, :2], z[:, None, 2]
         c, s = torch.cos(theta), torch.sin(theta)
         d = x - t
@@ -173,41 +178,6 @@ def masked_mse(pred, target, valid):
     return ((pred - target) ** 2 * valid).sum() / (valid.sum() * pred.shape[-1]).clamp(min=1)
 
 
-def write_png(path, image):
-    """An 8-bit grayscale PNG (zlib only), atomically."""
-    import struct
-    import zlib
-    image = np.clip(np.rint(image), 0, 255).astype(np.uint8)
-    h, w = image.shape
-    raw = b"".join(b"\x00" + image[r].tobytes() for r in range(h))
-
-    def chunk(kind, data):
-        return (struct.pack(">I", len(data)) + kind + data +
-                struct.pack(">I", zlib.crc32(kind + data) & 0xffffffff))
-
-    data = (b"\x89PNG\r\n\x1a\n" +
-            chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 0, 0, 0, 0)) +
-            chunk(b"IDAT", zlib.compress(raw, 9)) + chunk(b"IEND", b""))
-    with open(path + ".tmp", "wb") as f:
-        f.write(data)
-    os.replace(path + ".tmp", path)
-
-
-def write_sheet(path, rows, count, zoom=2):
-    """Rows of frames (N, h, w, C; channel 0), each frame scaled by the range of the first
-    row's frame, enlarged `zoom` times."""
-    reference = rows[0]
-    tiles = []
-    for row in rows:
-        cells = []
-        for i in range(min(count, len(reference))):
-            lo, hi = float(reference[i].min()), float(reference[i].max())
-            cell = (row[i][..., 0] - lo) / max(hi - lo, 1e-9) * 255
-            cells.append(np.kron(cell, np.ones((zoom, zoom))))
-        tiles.append(np.concatenate(cells, 1))
-    write_png(path, np.concatenate(tiles, 0))
-
-
 def grid(h, w, aspect=1.0):
     r = torch.linspace(-1, 1, h)
     c = torch.linspace(-aspect, aspect, w)
@@ -240,8 +210,10 @@ def main():
                     help="`tactfunc export --clean --split all` dir of the evaluation set")
     ap.add_argument("--sensor", default="gelslim")
     ap.add_argument("--head", choices=["direct", "photometric"], default="photometric")
-    ap.add_argument("--transform", action="store_true",
-                    help="the first three latent values move and turn the contact")
+    ap.add_argument("--transform", nargs="?", const="rigid", default=False,
+                    choices=["rigid", "translation"],
+                    help="the first three latent values move and turn the contact (rigid, "
+                         "the default), or the first two only move it (translation)")
     ap.add_argument("--width", type=int, default=64)
     ap.add_argument("--layers", type=int, default=3)
     ap.add_argument("--latent-dim", type=int, default=64)
@@ -251,6 +223,14 @@ def main():
     ap.add_argument("--latent-rate", type=float, default=1e-2)
     ap.add_argument("--trunk-rate", type=float, default=1e-4)
     ap.add_argument("--fit-steps", type=int, default=400)
+    ap.add_argument("--schedule", choices=["constant", "cosine"], default="constant",
+                    help="training rates: constant, or a cosine decay to 1/10 over the steps")
+    ap.add_argument("--fit-starts", type=int, choices=[1, 2], default=1,
+                    help="with --transform, 2 fits each test frame from the moment angle and "
+                         "from it + pi and keeps the lower loss on the frame's own pixels")
+    ap.add_argument("--save-trunk", help="save the trained trunk here (torch.save)")
+    ap.add_argument("--load-trunk", help="skip training: load a trunk saved by --save-trunk "
+                                         "with the same options")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--out", help="write the figures as JSON here")
@@ -277,7 +257,9 @@ def main():
     result = {"sensor": args.sensor, "head": args.head, "transform": args.transform,
               "width": args.width,
               "layers": args.layers, "latent_dim": args.latent_dim, "steps": args.steps,
-              "bytes_per_frame": bytes_per_frame}
+              "bytes_per_frame": bytes_per_frame, "schedule": args.schedule,
+              "trunk_rate": args.trunk_rate, "latent_rate": args.latent_rate,
+              "fit_starts": args.fit_starts if args.transform else 1}
     pca, pca_same_bits = pca_rows(eval_train, test, test_clean, test_w, bytes_per_frame)
     result.update(pca)
     print("PCA:", {k: result[k] for k in ("pca_float32", "pca_float16")}, flush=True)
@@ -290,6 +272,8 @@ def main():
     start_latents = torch.zeros(n, args.latent_dim)
     if args.transform:
         start_latents[:, :3] = torch.from_numpy(moment_poses(train, coords))
+        if args.transform == "translation":
+            start_latents[:, 2] = 0
     latents = nn.Parameter(start_latents)
     targets = torch.from_numpy(train.reshape(n, h * w, c))
     # Invalid pixels (dropouts) hold 0 in the targets: they are left out of every loss.
@@ -298,9 +282,16 @@ def main():
         train_w_path) else torch.ones(n, h * w, 1)
     opt = torch.optim.Adam([{"params": trunk.parameters(), "lr": args.trunk_rate},
                             {"params": [latents], "lr": args.latent_rate}])
+    sched = None
+    if args.schedule == "cosine":
+        sched = torch.optim.lr_scheduler.LambdaLR(
+            opt, lambda k: 0.1 + 0.45 * (1 + math.cos(math.pi * min(k, args.steps) / args.steps)))
     start = time.time()
     gen = torch.Generator().manual_seed(args.seed)
-    for step in range(1, args.steps + 1):
+    if args.load_trunk:
+        trunk.load_state_dict(torch.load(args.load_trunk))
+        print(f"loaded the trunk from {args.load_trunk}: no training", flush=True)
+    for step in range(1, 0 if args.load_trunk else args.steps + 1):
         frames = torch.randint(0, n, (args.batch,), generator=gen)
         pix = torch.randint(0, h * w, (args.batch, args.pixels), generator=gen)
         x = coords[pix]
@@ -311,10 +302,15 @@ def main():
         opt.zero_grad()
         loss.backward()
         opt.step()
+        if sched is not None:
+            sched.step()
         if step % max(1, args.steps // 10) == 0:
             print(f"  step {step}/{args.steps}: train MSE {loss.item():.3e} "
                   f"({time.time() - start:.0f} s)", flush=True)
     result["train_seconds"] = time.time() - start
+    if args.save_trunk:
+        torch.save(trunk.state_dict(), args.save_trunk + ".tmp")
+        os.replace(args.save_trunk + ".tmp", args.save_trunk)
 
     # Fit every test latent to convergence with the trunk frozen: Adam on random pixel
     # subsets with a decaying rate, frames in chunks (memory), then scored on all pixels.
@@ -326,11 +322,15 @@ def main():
     z_all = torch.zeros(m, args.latent_dim)
     start = time.time()
     chunk = 60
-    for first in range(0, m, chunk):
+    starts = args.fit_starts if args.transform == "rigid" else 1
+    for first, flip in ((f, k) for f in range(0, m, chunk) for k in range(starts)):
         idx = torch.arange(first, min(m, first + chunk))
         z0 = torch.zeros(len(idx), args.latent_dim)
         if args.transform:
             z0[:, :3] = torch.from_numpy(moment_poses(test[idx.numpy()], coords))
+            z0[:, 2] += math.pi * flip
+            if args.transform == "translation":
+                z0[:, 2] = 0
         z = nn.Parameter(z0)
         fit_opt = torch.optim.Adam([z], lr=1e-2)
         sched = torch.optim.lr_scheduler.CosineAnnealingLR(fit_opt, args.fit_steps, 1e-4)
@@ -343,7 +343,17 @@ def main():
             loss.backward()
             fit_opt.step()
             sched.step()
-        z_all[idx] = z.detach()
+        if flip == 0:
+            z_all[idx] = z.detach()
+        else:  # keep the start whose fit explains the frame's own (noisy) pixels better
+            with torch.enable_grad():
+                x = coords[None].expand(len(idx), -1, -1)
+                def frame_loss(zz):
+                    pred = trunk(x, zz, create_graph=False).detach()
+                    return (((pred - test_t[idx]) ** 2) * test_v[idx]).sum((1, 2))
+                better = frame_loss(z.detach()) < frame_loss(z_all[idx])
+            z_all[idx[better]] = z.detach()[better]
+            result["flipped_starts_kept"] = result.get("flipped_starts_kept", 0) + int(better.sum())
         print(f"  fitted {idx[-1].item() + 1}/{m} test latents: MSE {loss.item():.3e} "
               f"({time.time() - start:.0f} s)", flush=True)
     result["fit_seconds"] = time.time() - start

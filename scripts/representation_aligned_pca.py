@@ -1,0 +1,281 @@
+#!/usr/bin/env python3
+"""A study of PCA in the contact's own frame: every frame is moved and turned so that its
+contact sits at the origin along its principal axis, a linear basis is learned on those
+aligned frames, and each frame is stored as its pose (3 values) plus its aligned code.
+
+Why: a linear basis spends many components on a contact that only moved or turned (a
+shifted edge is not a re-weighted edge). Aligning the frames first leaves the basis the
+shape of the contacts; the price is three values per frame and two bilinear resamplings,
+whose own loss this script reports ("resampling only": warp and unwarp the noise-free
+frame with no code at all, the best any code in that frame can score).
+
+Pose: the centroid t and principal axis theta of the frame's difference energy over its
+valid pixels (theta modulo pi from the second moments; the sign is chosen so that the
+third moment along the axis is positive, which makes a one-sided contact turn the same
+way every time). Aligned frame A(q) = F(t + R(theta) q) on a square grid of side
+`--canvas` x the frame's diagonal, `--upsample` samples per pixel (samples outside the
+frame read 0); reconstruction F(p) = A(R(-theta) (p - t)).
+
+Every code is stored as float16: (bytes / 2 - 3) aligned components plus the 3 pose values,
+the same bytes as PCA with bytes / 2 float16 components. Scored as `tactfunc eval`
+scores (representation_common.psnr_per_frame) against the noise-free test frames, the
+basis fitted on the noisy train split of the evaluation set (as eval's PCA).
+
+  python3 scripts/representation_aligned_pca.py --eval /tmp/export_eval --sensor bubble \\
+      --bytes 128 256 --out /tmp/aligned_pca_bubble.json
+
+Input: `tactfunc export --clean` of the train and test splits (docs/CLI.md). Needs NumPy and
+PyTorch (bilinear sampling). Deterministic.
+"""
+import argparse
+import json
+import math
+import os
+import sys
+
+try:
+    import numpy as np
+    import torch
+    import torch.nn.functional as F
+except ImportError as e:  # pragma: no cover
+    sys.exit(f"representation_aligned_pca.py: needs NumPy and PyTorch ({e})")
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from representation_common import psnr_per_frame, write_sheet  # noqa: E402
+
+
+def load(directory, name):
+    path = os.path.join(directory, name + ".npy")
+    if not os.path.exists(path):
+        sys.exit(f"representation_aligned_pca.py: {path} is missing (run `tactfunc export "
+                 f"--clean` with the split it names)")
+    return np.load(path)
+
+
+def moment_poses(frames, weights):
+    """(t_row, t_col, theta) per frame, in pixels about the frame's centre."""
+    n, h, w, _ = frames.shape
+    rr, cc = np.meshgrid(np.arange(h) - (h - 1) / 2, np.arange(w) - (w - 1) / 2, indexing="ij")
+    xy = np.stack([rr.ravel(), cc.ravel()], 1)
+    poses = np.zeros((n, 4))
+    poses[:, 3] = 1
+    for i in range(n):
+        e = (frames[i] ** 2).sum(-1).ravel() * weights[i].ravel()
+        total = e.sum()
+        if not total > 0:
+            continue
+        t = (e[:, None] * xy).sum(0) / total
+        d = xy - t
+        cov = (e[:, None, None] * d[:, :, None] * d[:, None, :]).sum(0) / total
+        theta = 0.5 * math.atan2(2 * cov[0, 1], cov[0, 0] - cov[1, 1])
+        axis = np.array([math.cos(theta), math.sin(theta)])
+        if (e * (d @ axis) ** 3).sum() < 0:
+            theta += math.pi
+        poses[i] = (t[0], t[1], theta, math.sqrt(max(cov[0, 0] + cov[1, 1], 1e-12)))
+    return poses
+
+
+def sample(images, points, h, w):
+    """Bilinear samples of images (n, h, w, c) at points (n, m, 2) in pixels about the
+    centre, (row, col); 0 outside."""
+    grid = torch.stack([points[..., 1] / ((w - 1) / 2), points[..., 0] / ((h - 1) / 2)], -1)
+    out = F.grid_sample(torch.from_numpy(images).permute(0, 3, 1, 2).double(),
+                        grid[:, :, None, :], mode="bilinear", padding_mode="zeros",
+                        align_corners=True)[..., 0]
+    return out.permute(0, 2, 1).numpy()  # (n, m, c)
+
+
+class Canvas:
+    def __init__(self, h, w, canvas, upsample):
+        half = canvas * math.hypot(h, w) / 2
+        self.side = int(math.ceil(2 * half * upsample)) | 1
+        s = np.linspace(-half, half, self.side)
+        rr, cc = np.meshgrid(s, s, indexing="ij")
+        self.q = torch.from_numpy(np.stack([rr.ravel(), cc.ravel()], 1))
+        self.half, self.h, self.w = half, h, w
+
+    def align(self, frames, poses):
+        p = torch.from_numpy(poses)
+        c, s = torch.cos(p[:, 2])[:, None], torch.sin(p[:, 2])[:, None]
+        q0, q1 = self.q[None, :, 0], self.q[None, :, 1]
+        k = p[:, 3:4]
+        pts = torch.stack([p[:, None, 0] + k * (c * q0 - s * q1),
+                           p[:, None, 1] + k * (s * q0 + c * q1)], -1)
+        out = sample(frames, pts, self.h, self.w)
+        return out.reshape(len(frames), -1)
+
+    def unalign(self, aligned, poses, channels):
+        n = len(aligned)
+        canvas = aligned.reshape(n, self.side, self.side, channels)
+        rr, cc = np.meshgrid(np.arange(self.h) - (self.h - 1) / 2,
+                             np.arange(self.w) - (self.w - 1) / 2, indexing="ij")
+        p = torch.from_numpy(poses)
+        c, s = torch.cos(p[:, 2])[:, None], torch.sin(p[:, 2])[:, None]
+        d0 = torch.from_numpy(rr.ravel())[None] - p[:, None, 0]
+        d1 = torch.from_numpy(cc.ravel())[None] - p[:, None, 1]
+        k = p[:, 3:4]
+        q = torch.stack([c * d0 + s * d1, -s * d0 + c * d1], -1) / k[..., None]  # R(-theta) (p - t) / k
+        # Canvas coordinates as "pixels about the centre" of a side x side image.
+        scale = (self.side - 1) / (2 * self.half)
+        out = sample(canvas, q * scale, self.side, self.side)
+        return out.reshape(n, self.h, self.w, channels)
+
+
+def blur(frames, sigma):
+    """Separable Gaussian blur of (n, h, w, c) frames, edges replicated."""
+    if sigma <= 0:
+        return frames
+    radius = int(math.ceil(3 * sigma))
+    taps = torch.exp(-0.5 * (torch.arange(-radius, radius + 1, dtype=torch.float64) / sigma) ** 2)
+    taps /= taps.sum()
+    x = torch.from_numpy(frames).permute(0, 3, 1, 2).reshape(-1, 1, *frames.shape[1:3])
+    x = F.conv2d(F.pad(x, (radius, radius, 0, 0), mode="replicate"), taps.view(1, 1, 1, -1))
+    x = F.conv2d(F.pad(x, (0, 0, radius, radius), mode="replicate"), taps.view(1, 1, -1, 1))
+    return x.reshape(frames.shape[0], frames.shape[3], *frames.shape[1:3]).permute(
+        0, 2, 3, 1).numpy()
+
+
+def pca(x, k):
+    mean = x.mean(0)
+    xc = x - mean
+    vals, vecs = np.linalg.eigh(xc @ xc.T)
+    order = np.argsort(vals)[::-1][:k]
+    basis = (xc.T @ vecs[:, order]) / np.sqrt(np.maximum(vals[order], 1e-30))
+    return mean, basis
+
+
+def unexplained(aligned, mean, basis):
+    """Per frame, the energy the basis leaves out of the aligned frame."""
+    centred = aligned - mean
+    return (centred ** 2).sum(1) - ((centred @ basis) ** 2).sum(1)
+
+
+def refine_poses(canvas, frames, poses, mean, basis):
+    """Coordinate search of each frame's translation that minimises unexplained()."""
+    poses = poses.copy()
+    best = unexplained(canvas.align(frames, poses), mean, basis)
+    for step in (1.0, 0.5, 0.25):
+        for dr, dc in ((a, b) for a in (-step, 0, step) for b in (-step, 0, step)):
+            if dr == 0 and dc == 0:
+                continue
+            trial = poses.copy()
+            trial[:, 0] += dr
+            trial[:, 1] += dc
+            err = unexplained(canvas.align(frames, trial), mean, basis)
+            better = err < best
+            poses[better] = trial[better]
+            best[better] = err[better]
+    return poses
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--eval", required=True,
+                    help="`tactfunc export --clean` dir with the train and test splits")
+    ap.add_argument("--sensor", default="bubble")
+    ap.add_argument("--bytes", type=int, nargs="+", default=[128, 256])
+    ap.add_argument("--canvas", type=float, default=1.0,
+                    help="aligned grid's side as a multiple of the frame's diagonal")
+    ap.add_argument("--upsample", type=float, default=1.0, help="aligned samples per pixel")
+    ap.add_argument("--translate-only", action="store_true",
+                    help="align by the centroid only (theta = 0)")
+    ap.add_argument("--scale", action="store_true",
+                    help="also scale each frame by the spread of its energy (one more value)")
+    ap.add_argument("--residual", type=int, default=0,
+                    help="spend this many of the components on a sensor-frame PCA of what "
+                         "the aligned code leaves (the rim, the dome: what does not move)")
+    ap.add_argument("--refine", type=int, default=0,
+                    help="rounds of pose refinement: each frame's centroid is moved (3 x 3 "
+                         "searches at 1, 1/2, 1/4 px) to where the aligned basis explains its "
+                         "(noisy) frame best, and the train basis is refitted")
+    ap.add_argument("--blur", type=float, default=0.0,
+                    help="Gaussian sigma (px) of a blur of the TRAIN frames before the basis is "
+                         "learned (a smoothness prior against their noise; test frames are "
+                         "coded as they are)")
+    ap.add_argument("--out", help="write the figures as JSON here")
+    args = ap.parse_args()
+
+    train = load(args.eval, f"{args.sensor}_train").astype(np.float64)
+    test = load(args.eval, f"{args.sensor}_test").astype(np.float64)
+    clean = load(args.eval, f"{args.sensor}_test_clean").astype(np.float64)
+    wpath = os.path.join(args.eval, f"{args.sensor}_test_weights.npy")
+    test_w = np.load(wpath) if os.path.exists(wpath) else np.ones(test.shape[:3], np.float32)
+    trpath = os.path.join(args.eval, f"{args.sensor}_train_weights.npy")
+    train_w = np.load(trpath) if os.path.exists(trpath) else np.ones(train.shape[:3], np.float32)
+    n, h, w, c = train.shape
+    canvas = Canvas(h, w, args.canvas, args.upsample)
+    print(f"{args.sensor}: {n} train / {len(test)} test frames of {h}x{w}x{c}; aligned canvas "
+          f"{canvas.side}x{canvas.side}", flush=True)
+
+    train_pose = moment_poses(train, train_w)
+    test_pose = moment_poses(test, test_w)
+    if args.translate_only:
+        train_pose[:, 2] = 0
+        test_pose[:, 2] = 0
+    if args.scale:  # relative to the median spread of the train contacts
+        typical = np.median(train_pose[:, 3])
+        train_pose[:, 3] /= typical
+        test_pose[:, 3] /= typical
+    else:
+        train_pose[:, 3] = 1
+        test_pose[:, 3] = 1
+    test_pose16 = test_pose.astype(np.float16).astype(np.float64)
+    basis_train = blur(train, args.blur)
+    aligned_train = canvas.align(basis_train, train_pose)
+    resampled = canvas.unalign(canvas.align(clean, test_pose16), test_pose16, c)
+    result = {"sensor": args.sensor, "canvas": args.canvas, "upsample": args.upsample,
+              "translate_only": args.translate_only, "scale": args.scale, "blur": args.blur,
+              "refine": args.refine,
+              "canvas_side": canvas.side,
+              "resampling_only_psnr_clean": float(psnr_per_frame(resampled, clean, test_w).mean()),
+              "rows": []}
+    print(f"resampling only (noise-free frame warped and unwarped): "
+          f"{result['resampling_only_psnr_clean']:.2f} dB", flush=True)
+    flat_train = train.reshape(n, -1)  # eval's PCA: the noisy train frames as they are
+    for bytes_per_frame in args.bytes:
+        k_plain = bytes_per_frame // 2
+        k_aligned = (k_plain - (2 if args.translate_only else 3) - (1 if args.scale else 0)
+                     - args.residual)
+        mean, basis = pca(flat_train, k_plain)
+        codes = ((test.reshape(len(test), -1) - mean) @ basis).astype(np.float16)
+        plain = (codes.astype(np.float64) @ basis.T + mean).reshape(test.shape)
+        amean, abasis = pca(aligned_train, k_aligned)
+        train_pose_k, test_pose_k = train_pose, test_pose16
+        for _ in range(args.refine):
+            train_pose_k = refine_poses(canvas, train, train_pose_k, amean, abasis)
+            amean, abasis = pca(canvas.align(train, train_pose_k), k_aligned)
+        aligned_test = canvas.align(test, test_pose16)
+        if args.refine:
+            test_pose_k = refine_poses(canvas, test, test_pose16, amean, abasis).astype(
+                np.float16).astype(np.float64)
+            aligned_test = canvas.align(test, test_pose_k)
+        acodes = ((aligned_test - amean) @ abasis).astype(np.float16)
+        aligned = canvas.unalign(acodes.astype(np.float64) @ abasis.T + amean, test_pose_k, c)
+        if args.residual > 0:
+            train_codes = (canvas.align(train, train_pose_k) - amean) @ abasis
+            left = train - canvas.unalign(train_codes @ abasis.T + amean, train_pose_k, c)
+            rmean, rbasis = pca(left.reshape(n, -1), args.residual)
+            rcodes = ((test - aligned).reshape(len(test), -1) - rmean) @ rbasis
+            aligned = aligned + (rcodes.astype(np.float16).astype(np.float64) @ rbasis.T
+                                 + rmean).reshape(test.shape)
+        row = {"bytes_per_frame": bytes_per_frame,
+               "pca_float16_components": k_plain,
+               "pca_float16_psnr_clean": float(psnr_per_frame(plain, clean, test_w).mean()),
+               "aligned_components": k_aligned, "residual_components": args.residual,
+               "aligned_psnr_clean": float(psnr_per_frame(aligned, clean, test_w).mean())}
+        row["margin"] = row["aligned_psnr_clean"] - row["pca_float16_psnr_clean"]
+        result["rows"].append(row)
+        if args.out and bytes_per_frame == args.bytes[0]:
+            picture = os.path.splitext(args.out)[0] + ".png"
+            write_sheet(picture, [clean, plain, aligned], count=6)
+            print(f"wrote {picture} (rows: noise-free frame, PCA with the same bits, PCA in "
+                  f"the contact's frame; {bytes_per_frame} B per frame)", flush=True)
+        print(json.dumps(row), flush=True)
+    if args.out:
+        with open(args.out + ".tmp", "w") as f:
+            json.dump(result, f, indent=1)
+        os.replace(args.out + ".tmp", args.out)
+
+
+if __name__ == "__main__":
+    main()
