@@ -16,8 +16,10 @@ way every time). Aligned frame A(q) = F(t + R(theta) q) on a square grid of side
 `--canvas` x the frame's diagonal, `--upsample` samples per pixel (samples outside the
 frame read 0); reconstruction F(p) = A(R(-theta) (p - t)).
 
-Every code is stored as float16: (bytes / 2 - 3) aligned components plus the 3 pose values,
-the same bytes as PCA with bytes / 2 float16 components. Scored as `tactfunc eval`
+Every value is stored as float16 (or, with `--precision uint8`, the code values as 8-bit
+codes on the functaset's per-dimension grid and the pose values as float16): the aligned
+components plus the 2 or 3 pose values fill the same bytes as PCA with bytes / 2 float16
+(bytes uint8) components. Scored as `tactfunc eval`
 scores (representation_common.psnr_per_frame) against the noise-free test frames, the
 basis fitted on the noisy train split of the evaluation set (as eval's PCA).
 
@@ -168,6 +170,16 @@ def refine_poses(canvas, frames, poses, mean, basis):
     return poses
 
 
+def store(codes, precision):
+    """Codes as stored: float16, or `uint8` codes on the functaset's grid (per dimension,
+    the min and max over the stored frames, 255 steps; docs/FUNCTASET.md, b-bit codes)."""
+    if precision == "float16":
+        return codes.astype(np.float16).astype(np.float64)
+    lo, hi = codes.min(0), codes.max(0)
+    step = np.where(hi > lo, (hi - lo) / 255, 1.0)
+    return lo + np.clip(np.rint((codes - lo) / step), 0, 255) * step
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--eval", required=True,
@@ -192,6 +204,9 @@ def main():
                     help="Gaussian sigma (px) of a blur of the TRAIN frames before the basis is "
                          "learned (a smoothness prior against their noise; test frames are "
                          "coded as they are)")
+    ap.add_argument("--precision", choices=["float16", "uint8"], default="float16",
+                    help="how every code value is stored (PCA and aligned alike; the pose "
+                         "values stay float16): bytes / 2 or bytes components")
     ap.add_argument("--out", help="write the figures as JSON here")
     args = ap.parse_args()
 
@@ -233,12 +248,14 @@ def main():
           f"{result['resampling_only_psnr_clean']:.2f} dB", flush=True)
     flat_train = train.reshape(n, -1)  # eval's PCA: the noisy train frames as they are
     for bytes_per_frame in args.bytes:
-        k_plain = bytes_per_frame // 2
-        k_aligned = (k_plain - (2 if args.translate_only else 3) - (1 if args.scale else 0)
-                     - args.residual)
+        k_plain = bytes_per_frame // 2 if args.precision == "float16" else bytes_per_frame
+        pose_values = (2 if args.translate_only else 3) + (1 if args.scale else 0)
+        # The pose values take 2 bytes each, i.e. 1 (float16) or 2 (uint8) code values.
+        k_aligned = k_plain - pose_values * (1 if args.precision == "float16" else 2) \
+            - args.residual
         mean, basis = pca(flat_train, k_plain)
-        codes = ((test.reshape(len(test), -1) - mean) @ basis).astype(np.float16)
-        plain = (codes.astype(np.float64) @ basis.T + mean).reshape(test.shape)
+        codes = store((test.reshape(len(test), -1) - mean) @ basis, args.precision)
+        plain = (codes @ basis.T + mean).reshape(test.shape)
         amean, abasis = pca(aligned_train, k_aligned)
         train_pose_k, test_pose_k = train_pose, test_pose16
         for _ in range(args.refine):
@@ -249,21 +266,21 @@ def main():
             test_pose_k = refine_poses(canvas, test, test_pose16, amean, abasis).astype(
                 np.float16).astype(np.float64)
             aligned_test = canvas.align(test, test_pose_k)
-        acodes = ((aligned_test - amean) @ abasis).astype(np.float16)
-        aligned = canvas.unalign(acodes.astype(np.float64) @ abasis.T + amean, test_pose_k, c)
+        acodes = store((aligned_test - amean) @ abasis, args.precision)
+        aligned = canvas.unalign(acodes @ abasis.T + amean, test_pose_k, c)
         if args.residual > 0:
             train_codes = (canvas.align(train, train_pose_k) - amean) @ abasis
             left = train - canvas.unalign(train_codes @ abasis.T + amean, train_pose_k, c)
             rmean, rbasis = pca(left.reshape(n, -1), args.residual)
             rcodes = ((test - aligned).reshape(len(test), -1) - rmean) @ rbasis
-            aligned = aligned + (rcodes.astype(np.float16).astype(np.float64) @ rbasis.T
+            aligned = aligned + (store(rcodes, args.precision) @ rbasis.T
                                  + rmean).reshape(test.shape)
-        row = {"bytes_per_frame": bytes_per_frame,
-               "pca_float16_components": k_plain,
-               "pca_float16_psnr_clean": float(psnr_per_frame(plain, clean, test_w).mean()),
+        row = {"bytes_per_frame": bytes_per_frame, "precision": args.precision,
+               "pca_components": k_plain,
+               "pca_psnr_clean": float(psnr_per_frame(plain, clean, test_w).mean()),
                "aligned_components": k_aligned, "residual_components": args.residual,
                "aligned_psnr_clean": float(psnr_per_frame(aligned, clean, test_w).mean())}
-        row["margin"] = row["aligned_psnr_clean"] - row["pca_float16_psnr_clean"]
+        row["margin"] = row["aligned_psnr_clean"] - row["pca_psnr_clean"]
         result["rows"].append(row)
         if args.out and bytes_per_frame == args.bytes[0]:
             picture = os.path.splitext(args.out)[0] + ".png"
