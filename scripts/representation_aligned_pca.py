@@ -204,6 +204,9 @@ def main():
                     help="Gaussian sigma (px) of a blur of the TRAIN frames before the basis is "
                          "learned (a smoothness prior against their noise; test frames are "
                          "coded as they are)")
+    ap.add_argument("--basis-from-clean", action="store_true",
+                    help="learn both bases from the NOISE-FREE train frames (a bound: what a "
+                         "basis free of the sensor noise would give; needs their export)")
     ap.add_argument("--precision", choices=["float16", "uint8"], default="float16",
                     help="how every code value is stored (PCA and aligned alike; the pose "
                          "values stay float16): bytes / 2 or bytes components")
@@ -235,10 +238,13 @@ def main():
         train_pose[:, 3] = 1
         test_pose[:, 3] = 1
     test_pose16 = test_pose.astype(np.float16).astype(np.float64)
+    if args.basis_from_clean:
+        train = load(args.eval, f"{args.sensor}_train_clean").astype(np.float64)
     basis_train = blur(train, args.blur)
     aligned_train = canvas.align(basis_train, train_pose)
     resampled = canvas.unalign(canvas.align(clean, test_pose16), test_pose16, c)
     result = {"sensor": args.sensor, "canvas": args.canvas, "upsample": args.upsample,
+              "basis_from_clean": args.basis_from_clean,
               "translate_only": args.translate_only, "scale": args.scale, "blur": args.blur,
               "refine": args.refine,
               "canvas_side": canvas.side,
