@@ -79,6 +79,7 @@ struct PosteriorBenchFlags {
   std::uint64_t seed = 0;
   int knn_k = 8;
   int sgld_minibatch = PosePosterior::kDefaultSgldMinibatch;
+  int max_pixels = 0;  // the latent path's; 0 = every valid pixel
   bool json = false;
   bool no_model_error = false;
   double sigma_z = 0;
@@ -167,6 +168,7 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
   options.seed = flags.seed;
   options.knn.k = flags.knn_k;
   options.sgld.minibatch_size = flags.sgld_minibatch;
+  options.problem.max_pixels = flags.max_pixels;
   // Centre on the latent map the pose MLP was trained on (estimation/posterior/pose_posterior.h).
   options.fit.strategy = LatentMapOfPoseModel(pose_model, trunk);
   options.model_error = !flags.no_model_error;
@@ -486,6 +488,10 @@ void RegisterPosteriorBenchmark(CLI::App* bench, CommandBody* selected) {
                   "Pixels per SGLD gradient, with the control variate at the fitted latent; 0 = "
                   "every pixel (default " +
                       std::to_string(PosePosterior::kDefaultSgldMinibatch) + ")")
+      ->check(CLI::Range(0, 100000000));
+  sub->add_option("--max-pixels", flags->max_pixels,
+                  "Latent path: fit and sample at most N of each frame's valid pixels, evenly "
+                  "spaced; 0 = every one (default 0)")
       ->check(CLI::Range(0, 100000000));
   sub->add_option("--sigma-z", flags->sigma_z,
                   "Latent prior standard deviation sigma_z (default: PosePosterior's)")

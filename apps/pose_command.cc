@@ -121,6 +121,7 @@ struct PoseFlags {
   std::uint64_t seed = 0;
   int knn_k = 8;
   int sgld_minibatch = PosePosterior::kDefaultSgldMinibatch;
+  int max_pixels = -1;  // -1 = the method's default (latent: every valid pixel)
   double pixel_pitch_mm = 0;
   std::string out;
   int height = 420;
@@ -448,6 +449,7 @@ void RunGeneratorPose(const PoseFlags& flags, const FunctaModel& model, const In
   }
   GeneratorPosterior::Options options;
   options.seed = flags.seed;
+  if (flags.max_pixels >= 0) options.problem.max_pixels = flags.max_pixels;
   const GeneratorPosterior posterior(trunk, generator, options, knn.get(), &pose_model);
   PoseMixture mixture;
   const GeneratorPosterior::Summary gs = posterior.Estimate(targets, tool, &mixture);
@@ -789,6 +791,7 @@ void RunLatentPose(const PoseFlags& flags, PosteriorSampler sampler, const Funct
   options.seed = flags.seed;
   options.knn.k = flags.knn_k;
   options.sgld.minibatch_size = flags.sgld_minibatch;
+  if (flags.max_pixels >= 0) options.problem.max_pixels = flags.max_pixels;
   // Centre on the latent map the pose MLP was trained on (estimation/posterior/pose_posterior.h).
   options.fit.strategy = LatentMapOfPoseModel(pose_model, model.Trunk(sensor));
   options.model_error = !flags.no_model_error;
@@ -935,6 +938,12 @@ void RegisterPose(CLI::App& app, CommandBody* selected) {
                   "Pixels per SGLD gradient, with the control variate at the fitted latent; 0 = "
                   "every pixel (default " +
                       std::to_string(PosePosterior::kDefaultSgldMinibatch) + ")")
+      ->check(CLI::Range(0, 100000000));
+  sub->add_option("--max-pixels", flags->max_pixels,
+                  "Fit and sample at most N of the frame's valid pixels, evenly spaced; 0 = "
+                  "every one (default: every one for --method latent, " +
+                      std::to_string(GeneratorPosterior::Options().problem.max_pixels) +
+                      " for --method generator)")
       ->check(CLI::Range(0, 100000000));
   sub->add_option("--pixel-pitch-mm", flags->pixel_pitch_mm,
                   "Pixel pitch for posterior.png (default: the frame's dataset.json)")

@@ -184,6 +184,26 @@ TEST_F(PoseCliTest, SgldRunsOnMinibatchesWithTheControlVariateUnlessToldOtherwis
   EXPECT_THAT(r.err, HasSubstr("--sgld-minibatch"));
 }
 
+// --max-pixels thins the latent path's problem (fit and sampler) to N evenly spaced
+// valid pixels; 0 keeps every one, a negative count is refused naming the flag.
+TEST_F(PoseCliTest, MaxPixelsThinsTheLatentProblemToThatManyPixels) {
+  ASSERT_EQ(train_pose_->exit_code, 0) << train_pose_->err;
+  Result r = Run(PoseArgs("sgld") + " --json --sgld-minibatch 0");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const int pixels = r.LastJson()["sgld"]["pixels"].get<int>();
+  ASSERT_GT(pixels, 20);
+  const int fewer = pixels / 3;
+  r = Run(PoseArgs("sgld") + " --json --sgld-minibatch 0 --max-pixels " + std::to_string(fewer));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.LastJson()["sgld"]["pixels"].get<int>(), fewer);
+  r = Run(PoseArgs("sgld") + " --json --sgld-minibatch 0 --max-pixels 0");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.LastJson()["sgld"]["pixels"].get<int>(), pixels);
+  r = Run(PoseArgs("laplace") + " --max-pixels -1");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("--max-pixels"));
+}
+
 // A single video is a dataset too: --data names the file, --reference-index its
 // no-contact frame; the frame ids are the other frames' indices.
 TEST_F(PoseCliTest, PoseReadsAFrameOfAVideo) {
