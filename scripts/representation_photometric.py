@@ -88,7 +88,11 @@ class Trunk(nn.Module):
                    y(p) = S(grad w, w, p) - S(0, 0, p)   (learned photometric head)
                         + R(p - M grad w) - R(p)         (markers moved with the skin)
                         + SIREN(p; z)_1                  (a direct channel for the rest)
-    where R is the sensor's reference frame (bilinearly sampled) and M a learned 2 x 2.
+    where R is the sensor's reference frame (bilinearly sampled) and M a learned 2 x 2;
+      photometric_gain  the same parts multiplied as an optical sensor forms its image
+                   (the skin's printed pattern, moved, times the shading of its slope):
+                   y(p) = R(p - M grad w) (1 + S(grad w, w, p) - S(0, 0, p)) - R(p)
+                        + SIREN(p; z)_1.
     With `transform` the first three latent values are a rigid motion of the frame's
     contact, (t_row, t_col, theta), and the SIREN draws the contact in its own frame,
     SIREN(R(-theta) (p - t); z[3:]): a contact moved or turned is three numbers, not a
@@ -116,7 +120,7 @@ class Trunk(nn.Module):
                 lin.weight.uniform_(-bound, bound)
             self.shift.weight.mul_(0.1)
             self.shift.bias.zero_()
-        if head == "photometric":
+        if head != "direct":
             self.shade = nn.Sequential(nn.Linear(5, 64), nn.SiLU(), nn.Linear(64, 64), nn.SiLU(),
                                        nn.Linear(64, channels))
             self.marker = nn.Parameter(torch.zeros(2, 2))
@@ -169,8 +173,10 @@ class Trunk(nn.Module):
         at_rest = F.grid_sample(ref, (x * self.to_unit).flip(-1)[:, :, None, :],
                                 mode="bilinear", padding_mode="border",
                                 align_corners=True)[..., 0]
-        markers = (sampled - at_rest).transpose(1, 2)
-        return shading + markers + s[..., 1:]
+        sampled, at_rest = sampled.transpose(1, 2), at_rest.transpose(1, 2)
+        if self.head == "photometric_gain":
+            return sampled * (1 + shading) - at_rest + s[..., 1:]
+        return shading + sampled - at_rest + s[..., 1:]
 
 
 def masked_mse(pred, target, valid):
@@ -209,7 +215,10 @@ def main():
     ap.add_argument("--eval", required=True,
                     help="`tactfunc export --clean --split all` dir of the evaluation set")
     ap.add_argument("--sensor", default="gelslim")
-    ap.add_argument("--head", choices=["direct", "photometric"], default="photometric")
+    ap.add_argument("--head", choices=["direct", "photometric", "photometric_gain"],
+                    default="photometric",
+                    help="photometric: shading added to the moved reference; "
+                         "photometric_gain: the moved reference times a shading gain")
     ap.add_argument("--transform", nargs="?", const="rigid", default=False,
                     choices=["rigid", "translation"],
                     help="the first three latent values move and turn the contact (rigid, "
@@ -247,7 +256,7 @@ def main():
         os.path.join(args.eval, f"{args.sensor}_test_weights.npy")) else np.ones(test.shape[:3], np.float32)
     ref_path = os.path.join(args.train, f"{args.sensor}_reference.npy")
     reference = np.load(ref_path).astype(np.float32) if os.path.exists(ref_path) else None
-    if args.head == "photometric" and reference is None:
+    if args.head != "direct" and reference is None:
         sys.exit(f"representation_photometric.py: {ref_path} is missing (the photometric head "
                  "needs the reference frame; `tactfunc export` writes it for fixed-scale formats)")
     n, h, w, c = train.shape
