@@ -101,8 +101,9 @@ class Trunk(nn.Module):
     pixels along both axes), so that a rotation keeps shapes."""
 
     def __init__(self, head, width, layers, d, channels, reference, omega=30.0,
-                 transform=False, aspect=1.0):
+                 transform=False, aspect=1.0, finite_differences=False):
         super().__init__()
+        self.finite_differences = finite_differences
         self.head, self.omega, self.width, self.layers = head, omega, width, layers
         self.channels, self.transform, self.aspect = channels, transform, aspect
         # transform: False, "rigid" (t, theta) or "translation" (t only).
@@ -156,11 +157,27 @@ class Trunk(nn.Module):
     def forward(self, x, z, create_graph):
         if self.head == "direct":
             return self.siren(*self.contact_frame(x, z))
-        if not x.requires_grad:
-            x = x.clone().requires_grad_(True)
-        s = self.siren(*self.contact_frame(x, z))
-        w = s[..., :1]
-        grad = torch.autograd.grad(w.sum(), x, create_graph=create_graph)[0] * self.pixel
+        if self.finite_differences:
+            # Central differences one pixel apart along rows and columns: the slope per
+            # pixel from five SIREN evaluations, no second-order pass.
+            p = x.shape[1]
+            step_r = torch.zeros(2, dtype=x.dtype)
+            step_r[0] = self.pixel[0]
+            step_c = torch.zeros(2, dtype=x.dtype)
+            step_c[1] = self.pixel[1]
+            xs = torch.cat([x, x + step_r, x - step_r, x + step_c, x - step_c], 1)
+            all_s = self.siren(*self.contact_frame(xs, z))
+            s = all_s[:, :p]
+            w = s[..., :1]
+            wr = (all_s[:, p:2 * p, :1] - all_s[:, 2 * p:3 * p, :1]) / 2
+            wc = (all_s[:, 3 * p:4 * p, :1] - all_s[:, 4 * p:, :1]) / 2
+            grad = torch.cat([wr, wc], -1)
+        else:
+            if not x.requires_grad:
+                x = x.clone().requires_grad_(True)
+            s = self.siren(*self.contact_frame(x, z))
+            w = s[..., :1]
+            grad = torch.autograd.grad(w.sum(), x, create_graph=create_graph)[0] * self.pixel
         shade_in = torch.cat([grad, w, x], -1)
         flat_in = torch.cat([torch.zeros_like(grad), torch.zeros_like(w), x], -1)
         shading = self.shade(shade_in) - self.shade(flat_in)
@@ -223,6 +240,9 @@ def main():
                     choices=["rigid", "translation"],
                     help="the first three latent values move and turn the contact (rigid, "
                          "the default), or the first two only move it (translation)")
+    ap.add_argument("--gradient", choices=["exact", "differences"], default="exact",
+                    help="the photometric heads' slope: the SIREN's exact derivative, or "
+                         "central differences one pixel apart (no second-order pass)")
     ap.add_argument("--width", type=int, default=64)
     ap.add_argument("--layers", type=int, default=3)
     ap.add_argument("--latent-dim", type=int, default=64)
@@ -268,7 +288,8 @@ def main():
               "layers": args.layers, "latent_dim": args.latent_dim, "steps": args.steps,
               "bytes_per_frame": bytes_per_frame, "schedule": args.schedule,
               "trunk_rate": args.trunk_rate, "latent_rate": args.latent_rate,
-              "fit_starts": args.fit_starts if args.transform else 1}
+              "fit_starts": args.fit_starts if args.transform else 1,
+              "gradient": args.gradient}
     pca, pca_same_bits = pca_rows(eval_train, test, test_clean, test_w, bytes_per_frame)
     result.update(pca)
     print("PCA:", {k: result[k] for k in ("pca_float32", "pca_float16")}, flush=True)
@@ -277,7 +298,8 @@ def main():
     coords = grid(h, w, aspect)
     trunk = Trunk(args.head, args.width, args.layers, args.latent_dim, c,
                   reference if reference is not None else np.zeros((h, w, c), np.float32),
-                  transform=args.transform, aspect=aspect)
+                  transform=args.transform, aspect=aspect,
+                  finite_differences=args.gradient == "differences")
     start_latents = torch.zeros(n, args.latent_dim)
     if args.transform:
         start_latents[:, :3] = torch.from_numpy(moment_poses(train, coords))
