@@ -170,6 +170,31 @@ def refine_poses(canvas, frames, poses, mean, basis):
     return poses
 
 
+def mixture_codes(aligned_train, aligned_test, clusters, components, precision):
+    """A mixture of aligned bases: k-means (30 rounds, seed 0) of the train frames' first
+    32 aligned PCA codes into `clusters` groups, one basis of `components` per group;
+    each test frame is coded by the basis that explains its (noisy) aligned frame best
+    (the group's index takes one value's bytes). Returns the reconstructed aligned frames."""
+    mean, basis = pca(aligned_train, 32)
+    features = (aligned_train - mean) @ basis
+    rng = np.random.default_rng(0)
+    centres = features[rng.choice(len(features), clusters, replace=False)]
+    for _ in range(30):
+        label = ((features[:, None] - centres[None]) ** 2).sum(-1).argmin(1)
+        for k in range(clusters):
+            if (label == k).any():
+                centres[k] = features[label == k].mean(0)
+    models = [pca(aligned_train[label == k], min(components, int((label == k).sum()) - 1))
+              for k in range(clusters)]
+    pick = np.stack([unexplained(aligned_test, m, b) for m, b in models], 1).argmin(1)
+    out = np.zeros_like(aligned_test)
+    for k, (m, b) in enumerate(models):
+        chosen = pick == k
+        if chosen.any():
+            out[chosen] = store((aligned_test[chosen] - m) @ b, precision) @ b.T + m
+    return out
+
+
 def store(codes, precision):
     """Codes as stored: float16, or `uint8` codes on the functaset's grid (per dimension,
     the min and max over the stored frames, 255 steps; docs/FUNCTASET.md, b-bit codes)."""
@@ -204,6 +229,9 @@ def main():
                     help="Gaussian sigma (px) of a blur of the TRAIN frames before the basis is "
                          "learned (a smoothness prior against their noise; test frames are "
                          "coded as they are)")
+    ap.add_argument("--clusters", type=int, default=1,
+                    help="a mixture of this many aligned bases (k-means groups of the train "
+                         "frames), each test frame coded by its best one")
     ap.add_argument("--basis-from-clean", action="store_true",
                     help="learn both bases from the NOISE-FREE train frames (a bound: what a "
                          "basis free of the sensor noise would give; needs their export)")
@@ -245,7 +273,7 @@ def main():
     resampled = canvas.unalign(canvas.align(clean, test_pose16), test_pose16, c)
     result = {"sensor": args.sensor, "canvas": args.canvas, "upsample": args.upsample,
               "basis_from_clean": args.basis_from_clean,
-              "translate_only": args.translate_only, "scale": args.scale, "blur": args.blur,
+              "translate_only": args.translate_only, "clusters": args.clusters, "scale": args.scale, "blur": args.blur,
               "refine": args.refine,
               "canvas_side": canvas.side,
               "resampling_only_psnr_clean": float(psnr_per_frame(resampled, clean, test_w).mean()),
@@ -274,6 +302,10 @@ def main():
             aligned_test = canvas.align(test, test_pose_k)
         acodes = store((aligned_test - amean) @ abasis, args.precision)
         aligned = canvas.unalign(acodes @ abasis.T + amean, test_pose_k, c)
+        if args.clusters > 1:
+            aligned = canvas.unalign(mixture_codes(aligned_train, aligned_test, args.clusters,
+                                                   k_aligned - 1, args.precision),
+                                     test_pose_k, c)
         if args.residual > 0:
             train_codes = (canvas.align(train, train_pose_k) - amean) @ abasis
             left = train - canvas.unalign(train_codes @ abasis.T + amean, train_pose_k, c)
