@@ -43,7 +43,7 @@ except ImportError as e:  # pragma: no cover
     sys.exit(f"representation_aligned_pca.py: needs NumPy and PyTorch ({e})")
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from representation_common import psnr_per_frame, write_sheet  # noqa: E402
+from representation_common import energy_moments, psnr_per_frame, write_sheet  # noqa: E402
 
 
 def load(directory, name):
@@ -55,25 +55,15 @@ def load(directory, name):
 
 
 def moment_poses(frames, weights):
-    """(t_row, t_col, theta) per frame, in pixels about the frame's centre."""
+    """(t_row, t_col, theta, spread) per frame, in pixels about the frame's centre; theta
+    turned by pi where the energy is skewed the other way along the axis."""
     n, h, w, _ = frames.shape
     rr, cc = np.meshgrid(np.arange(h) - (h - 1) / 2, np.arange(w) - (w - 1) / 2, indexing="ij")
-    xy = np.stack([rr.ravel(), cc.ravel()], 1)
-    poses = np.zeros((n, 4))
-    poses[:, 3] = 1
-    for i in range(n):
-        e = (frames[i] ** 2).sum(-1).ravel() * weights[i].ravel()
-        total = e.sum()
-        if not total > 0:
-            continue
-        t = (e[:, None] * xy).sum(0) / total
-        d = xy - t
-        cov = (e[:, None, None] * d[:, :, None] * d[:, None, :]).sum(0) / total
-        theta = 0.5 * math.atan2(2 * cov[0, 1], cov[0, 0] - cov[1, 1])
-        axis = np.array([math.cos(theta), math.sin(theta)])
-        if (e * (d @ axis) ** 3).sum() < 0:
-            theta += math.pi
-        poses[i] = (t[0], t[1], theta, math.sqrt(max(cov[0, 0] + cov[1, 1], 1e-12)))
+    t, theta, skew, spread = energy_moments(frames, np.stack([rr.ravel(), cc.ravel()], 1),
+                                            weights)
+    theta = np.where(skew < 0, theta + math.pi, theta)
+    poses = np.stack([t[:, 0], t[:, 1], theta, spread], 1)
+    poses[spread == 0, 3] = 1
     return poses
 
 

@@ -1,5 +1,5 @@
 """What the representation study scripts share: tactfunc's PSNR on exported targets and
-a picture sheet of frames."""
+a picture sheet of frames, and the moments of a frame's difference energy."""
 import math
 import os
 
@@ -19,6 +19,32 @@ def psnr_per_frame(pred, target, weights):
         mse = float(np.mean((pv.astype(np.float64) - tv.astype(np.float64)) ** 2))
         out.append(10 * math.log10(r * r / mse) if mse > 0 else float("inf"))
     return np.array(out)
+
+
+def energy_moments(frames, xy, weights=None):
+    """Per frame (N, h, w, C) of the difference's energy e_j = w_j sum_c f_jc^2 over the
+    pixels at xy (h w x 2, row-major; weights N x h x w or None = all 1): the centroid t
+    (N x 2), the principal axis's angle theta = atan2(2 c01, c00 - c11) / 2 of the second
+    central moments c, the third moment along that axis (its sign tells which way the
+    energy is skewed) and the spread sqrt(c00 + c11); zeros for a frame without energy."""
+    n = len(frames)
+    t, theta = np.zeros((n, 2)), np.zeros(n)
+    skew, spread = np.zeros(n), np.zeros(n)
+    for i in range(n):
+        e = (frames[i].reshape(len(xy), -1).astype(np.float64) ** 2).sum(1)
+        if weights is not None:
+            e = e * weights[i].reshape(-1)
+        total = e.sum()
+        if not total > 0:
+            continue
+        t[i] = (e[:, None] * xy).sum(0) / total
+        d = xy - t[i]
+        cov = (e[:, None, None] * d[:, :, None] * d[:, None, :]).sum(0) / total
+        theta[i] = 0.5 * math.atan2(2 * cov[0, 1], cov[0, 0] - cov[1, 1])
+        axis = np.array([math.cos(theta[i]), math.sin(theta[i])])
+        skew[i] = (e * (d @ axis) ** 3).sum()
+        spread[i] = math.sqrt(max(cov[0, 0] + cov[1, 1], 1e-12))
+    return t, theta, skew, spread
 
 
 def write_png(path, image):

@@ -43,7 +43,7 @@ except ImportError as e:  # pragma: no cover
     sys.exit(f"representation_photometric.py: needs NumPy and PyTorch ({e})")
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from representation_common import psnr_per_frame, write_sheet  # noqa: E402
+from representation_common import energy_moments, psnr_per_frame, write_sheet  # noqa: E402
 
 
 def load(directory, sensor, split, clean=False):
@@ -211,19 +211,8 @@ def grid(h, w, aspect=1.0):
 def moment_poses(frames, coords):
     """Per frame (t_row, t_col, theta) from the second moments of the difference's energy:
     the start of the rigid motion (theta modulo pi)."""
-    out = np.zeros((len(frames), 3), np.float32)
-    xy = coords.numpy().astype(np.float64)
-    for i, f in enumerate(frames):
-        e = (f.reshape(len(xy), -1).astype(np.float64) ** 2).sum(1)
-        total = e.sum()
-        if not total > 0:
-            continue
-        t = (e[:, None] * xy).sum(0) / total
-        d = xy - t
-        cov = (e[:, None, None] * d[:, :, None] * d[:, None, :]).sum(0) / total
-        out[i, :2] = t
-        out[i, 2] = 0.5 * math.atan2(2 * cov[0, 1], cov[0, 0] - cov[1, 1])
-    return out
+    t, theta, _, _ = energy_moments(frames, coords.numpy().astype(np.float64))
+    return np.concatenate([t, theta[:, None]], 1).astype(np.float32)
 
 
 def main():
