@@ -193,7 +193,7 @@ class Trunk(nn.Module):
         sampled, at_rest = sampled.transpose(1, 2), at_rest.transpose(1, 2)
         if self.head == "photometric_gain":
             return sampled * (1 + shading) - at_rest + s[..., 1:]
-        return shading + sampled - at_rest + s[..., 1:]
+        return shading + (sampled - at_rest) + s[..., 1:]
 
 
 def masked_mse(pred, target, valid):
