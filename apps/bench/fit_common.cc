@@ -71,18 +71,6 @@ std::string CommandLine(const std::vector<std::string>& parts) {
   return out;
 }
 
-std::vector<SensorKind> ParseSensors(const std::string& text) {
-  std::vector<SensorKind> sensors;
-  for (const std::string& name : SplitList(text)) {
-    SensorKind kind;
-    if (!SensorKindFromString(name, &kind)) {
-      throw UsageError("--sensors: expected bubble and/or gelslim, got '" + name + "'");
-    }
-    sensors.push_back(kind);
-  }
-  return sensors;
-}
-
 TrunkTargets TrunkGeneratedFrame(const LatentModulatedSiren& siren, int rows, int cols,
                                  std::uint64_t seed) {
   std::mt19937_64 rng(seed);

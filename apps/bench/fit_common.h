@@ -59,8 +59,6 @@ std::string Ms(double value);
 nlohmann::json FiniteOrNull(double value);
 // The non-empty parts joined by spaces (the command line of a report).
 std::string CommandLine(const std::vector<std::string>& parts);
-// --sensors: a comma-separated list of bubble / gelslim; throws UsageError otherwise.
-std::vector<SensorKind> ParseSensors(const std::string& text);
 
 // A rows x cols frame that `siren` generates from a random latent (each entry 0.3 N(0, 1))
 // plus Gaussian noise of standard deviation 0.01, every pixel valid, drawn from `seed`:

@@ -17,6 +17,7 @@
 #include "apps/bench/fit_suite.h"
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
+#include "apps/model_inputs.h"
 #include "apps/pictures.h"
 #include "apps/progress_bar.h"
 #include "estimation/data/dataset.h"
@@ -76,7 +77,7 @@ void RunFitBench(const FitBenchFlags& flags) {
   const Dataset dataset = OpenDataset(flags.data, flags.dataset);
 
   std::vector<SensorKind> wanted =
-      flags.sensors.empty() ? model.sensors() : ParseSensors(flags.sensors);
+      flags.sensors.empty() ? model.sensors() : ParseSensorsFlag(flags.sensors);
   std::vector<SensorFitData> sensors;
   for (SensorKind sensor : wanted) {
     const bool usable =
