@@ -285,9 +285,9 @@ std::vector<PoseStart> GeneratorPosterior::Starts(const LatentProblem& problem,
   if (options_.flip_starts && n == 1 && !yaw_grid_active(n)) {
     const std::size_t base = starts.size();
     for (std::size_t i = 0; i < base; ++i) {
-      const SE2d& p = starts[i].sensor_T_object;
-      starts.push_back({SE2d::FromXYYaw(p.x(), p.y(), p.yaw() + M_PI), starts[i].depth_m,
-                        starts[i].source + "+pi"});
+      const PoseStart s = starts[i];  // a copy: push_back may reallocate `starts`
+      const SE2d& p = s.sensor_T_object;
+      starts.push_back({SE2d::FromXYYaw(p.x(), p.y(), p.yaw() + M_PI), s.depth_m, s.source + "+pi"});
     }
   }
   if (options_.position_grid_m > 0 && !starts.empty()) {
@@ -309,12 +309,15 @@ std::vector<PoseStart> GeneratorPosterior::Starts(const LatentProblem& problem,
     const double period = 2 * M_PI / n;
     const std::size_t base = starts.size();
     for (std::size_t i = 0; i < base; ++i) {
-      const SE2d& p = starts[i].sensor_T_object;
+      // A copy: push_back reallocates `starts`, and a reference into it would then read
+      // freed memory (the grid's later yaws would start from wherever that memory says).
+      const PoseStart s = starts[i];
+      const SE2d& p = s.sensor_T_object;
       for (int k = 1; k < grid; ++k) {
         const double offset = 2 * M_PI * k / grid;
         if (offset > period - 1e-9) break;
-        starts.push_back({SE2d::FromXYYaw(p.x(), p.y(), p.yaw() + offset), starts[i].depth_m,
-                          starts[i].source + "+grid"});
+        starts.push_back({SE2d::FromXYYaw(p.x(), p.y(), p.yaw() + offset), s.depth_m,
+                          s.source + "+grid"});
       }
     }
   }

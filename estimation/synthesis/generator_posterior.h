@@ -200,9 +200,14 @@ class GeneratorPosterior {
 
   const Options& options() const { return options_; }
 
- private:
+  // The starts of one tool's search (k-NN labels near `query`, the frame's meta-SGD
+  // latent; the pose MLP at it; else a yaw grid at the centre; then the flipped yaws,
+  // the position grid around the first start and the yaw grid at every start position,
+  // as Options says). Estimate scores and refines them (FitPoseModes).
   std::vector<PoseStart> Starts(const LatentProblem& problem, const Eigen::VectorXf& query,
                                 int tool_index) const;
+
+ private:
 
   bool yaw_grid_active(int symmetry_order) const {
     return options_.yaw_grid > 1 && symmetry_order > 0 && 2 * symmetry_order <= options_.yaw_grid;

@@ -227,5 +227,47 @@ TEST(GeneratorPosterior, LaplaceCoversTheTruthAndPrefersTheRenderingTool) {
   EXPECT_EQ(again.Mode().x(), posterior.Estimate(targets, "", &mixture).mean.x());
 }
 
+// The yaw grid copies every start position to the grid's yaws: each added start sits
+// exactly where its base start sits, with the base's depth. The list grows while it is
+// copied, so a reference into it would read freed memory once it reallocates; with a
+// position grid of 24 rings the list is large enough for glibc to give it its own
+// mapping, which a reallocation unmaps, so such a read would crash here.
+TEST(GeneratorPosterior, YawGridStartsKeepTheirBaseStartsPositionAndDepth) {
+  const SensorTrunk trunk = Trunk();
+  const PoseGenerator g = Generator();
+  const TrunkTargets targets = Render(trunk, g, 0, SE2d::FromXYYaw(1e-3, -2e-3, 0.3), 0.010);
+  const LatentProblem problem(trunk, targets, LatentProblem::Options());
+  GeneratorPosterior::Options options;
+  options.position_grid_m = 0.1e-3;
+  options.position_grid_rings = 24;
+  const int shifts = 49 * 49 - 1;
+  const GeneratorPosterior posterior(trunk, g, options);  // no k-NN: centre, position grid
+  for (int tool : {0, 1}) {
+    const int n = g.SymmetryOrder(tool);
+    const std::vector<PoseStart> starts = posterior.Starts(problem, Eigen::VectorXf(), tool);
+    // Base starts: the centre's yaw grid (8 / n yaws) and the positions around it.
+    const int centre = std::max(1, 8 / n);
+    const int base = centre + shifts;
+    const int per_base = options.yaw_grid / n - 1;  // the grid's other yaws in one period
+    ASSERT_EQ(static_cast<int>(starts.size()), base * (1 + per_base)) << "tool " << tool;
+    int nonzero = 0;
+    for (int i = 0; i < base; ++i) {
+      for (int k = 0; k < per_base; ++k) {
+        const PoseStart& copy = starts[base + i * per_base + k];
+        EXPECT_EQ(copy.sensor_T_object.x(), starts[i].sensor_T_object.x()) << i << " " << k;
+        EXPECT_EQ(copy.sensor_T_object.y(), starts[i].sensor_T_object.y()) << i << " " << k;
+        EXPECT_EQ(copy.depth_m, starts[i].depth_m);
+        EXPECT_EQ(copy.source, starts[i].source + "+grid");
+        EXPECT_NEAR(std::remainder(copy.sensor_T_object.yaw() - starts[i].sensor_T_object.yaw() -
+                                       2 * M_PI * (k + 1) / options.yaw_grid,
+                                   2 * M_PI),
+                    0, 1e-9);
+      }
+      nonzero += starts[i].sensor_T_object.x() != 0 || starts[i].sensor_T_object.y() != 0;
+    }
+    EXPECT_EQ(nonzero, shifts);  // the position grid's starts
+  }
+}
+
 }  // namespace
 }  // namespace tactfunc
