@@ -139,10 +139,14 @@ TEST(LaplaceSampler, CovarianceOnATinyTrunkIsSymmetricPositiveDefinite) {
   EXPECT_EQ(cov, cov.transpose());
   Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(cov);
   EXPECT_GT(eigen.eigenvalues().minCoeff(), 0.0);
-  // At the mode the gradient of U vanishes (fit and sampler share the problem).
-  Eigen::VectorXd g;
+  // At the mode the gradient of U vanishes (fit and sampler share the problem), down to
+  // the noise of the problem's float evaluation: compared with the gradient where the fit
+  // starts (z = 0), under 1% of it is left (measured: 0.0071 of it at -O3, 0.0078 in the -O1
+  // sanitizer build; an absolute bound sat within 5% of both).
+  Eigen::VectorXd g, g_start;
   potential.Evaluate(summary.mode, &g);
-  EXPECT_LT(g.norm(), 1e-2 * std::sqrt(potential.NumDataTerms()));
+  potential.Evaluate(Eigen::VectorXd::Zero(z_true.size()), &g_start);
+  EXPECT_LT(g.norm(), 1e-2 * g_start.norm());
 }
 
 TEST(LaplaceSampler, SameSeedSameSamples) {
