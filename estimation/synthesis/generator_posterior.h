@@ -208,7 +208,6 @@ class GeneratorPosterior {
                                 int tool_index) const;
 
  private:
-
   bool yaw_grid_active(int symmetry_order) const {
     return options_.yaw_grid > 1 && symmetry_order > 0 && 2 * symmetry_order <= options_.yaw_grid;
   }
