@@ -58,6 +58,22 @@ double ComponentDensity(const LaplaceComponent& c, const SE2d& t) {
   return std::exp(-0.5 * r.dot(s.ldlt().solve(r))) / (std::pow(2 * M_PI, 1.5) * std::sqrt(det));
 }
 
+// Appends every start of *starts turned by each of `offsets` (radians, in that order for
+// each start), its source tagged with `suffix`. The turned starts are made from a copy
+// of the list as it was: appending reallocates it.
+void AppendTurnedStarts(const std::vector<double>& offsets, const std::string& suffix,
+                        std::vector<PoseStart>* starts) {
+  const std::vector<PoseStart> base = *starts;
+  starts->reserve(base.size() * (1 + offsets.size()));
+  for (const PoseStart& s : base) {
+    const SE2d& p = s.sensor_T_object;
+    for (double offset : offsets) {
+      starts->push_back(
+          {SE2d::FromXYYaw(p.x(), p.y(), p.yaw() + offset), s.depth_m, s.source + suffix});
+    }
+  }
+}
+
 }  // namespace
 
 // ---- PoseMixture ------------------------------------------------------------------------
@@ -283,12 +299,7 @@ std::vector<PoseStart> GeneratorPosterior::Starts(const LatentProblem& problem,
     }
   }
   if (options_.flip_starts && n == 1 && !yaw_grid_active(n)) {
-    const std::size_t base = starts.size();
-    for (std::size_t i = 0; i < base; ++i) {
-      const PoseStart s = starts[i];  // a copy: push_back may reallocate `starts`
-      const SE2d& p = s.sensor_T_object;
-      starts.push_back({SE2d::FromXYYaw(p.x(), p.y(), p.yaw() + M_PI), s.depth_m, s.source + "+pi"});
-    }
+    AppendTurnedStarts({M_PI}, "+pi", &starts);
   }
   if (options_.position_grid_m > 0 && !starts.empty()) {
     const PoseStart first = starts.front();
@@ -307,19 +318,13 @@ std::vector<PoseStart> GeneratorPosterior::Starts(const LatentProblem& problem,
     // Every start position at the grid's yaws (those inside one symmetry period).
     const int grid = options_.yaw_grid;
     const double period = 2 * M_PI / n;
-    const std::size_t base = starts.size();
-    for (std::size_t i = 0; i < base; ++i) {
-      // A copy: push_back reallocates `starts`, and a reference into it would then read
-      // freed memory (the grid's later yaws would start from wherever that memory says).
-      const PoseStart s = starts[i];
-      const SE2d& p = s.sensor_T_object;
-      for (int k = 1; k < grid; ++k) {
-        const double offset = 2 * M_PI * k / grid;
-        if (offset > period - 1e-9) break;
-        starts.push_back({SE2d::FromXYYaw(p.x(), p.y(), p.yaw() + offset), s.depth_m,
-                          s.source + "+grid"});
-      }
+    std::vector<double> offsets;
+    for (int k = 1; k < grid; ++k) {
+      const double offset = 2 * M_PI * k / grid;
+      if (offset > period - 1e-9) break;
+      offsets.push_back(offset);
     }
+    AppendTurnedStarts(offsets, "+grid", &starts);
   }
   (void)problem;
   return starts;
