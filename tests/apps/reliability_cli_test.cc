@@ -166,8 +166,9 @@ TEST_F(ReliabilityCliTest, CtrlCDuringTheFinalModelWriteDoesNotLoseTheModel) {
   const std::string out = Root("sig/m_sig.tfm");
 #if defined(__SANITIZE_ADDRESS__)
   // Under AddressSanitizer (scripts/sanitize.sh) the preloaded shim comes before ASan's
-  // runtime in the library list, which ASan refuses unless told to accept it.
-  const std::string asan = "ASAN_OPTIONS=detect_leaks=0:verify_asan_link_order=0 ";
+  // runtime in the library list, which ASan refuses unless told to accept it (added to
+  // the caller's ASAN_OPTIONS, which the shell expands).
+  const std::string asan = "ASAN_OPTIONS=\"$ASAN_OPTIONS:verify_asan_link_order=0\" ";
 #else
   const std::string asan;
 #endif
