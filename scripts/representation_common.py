@@ -80,3 +80,57 @@ def write_sheet(path, rows, count, zoom=2):
             cells.append(np.kron(cell, np.ones((zoom, zoom))))
         tiles.append(np.concatenate(cells, 1))
     write_png(path, np.concatenate(tiles, 0))
+
+
+def read_png(path):
+    """An 8-bit PNG (grayscale, RGB or RGBA, not interlaced) as a (h, w, channels) uint8
+    array, with zlib and NumPy only."""
+    import struct
+    import zlib
+    with open(path, "rb") as f:
+        data = f.read()
+    if data[:8] != b"\x89PNG\r\n\x1a\n":
+        raise ValueError(f"{path}: not a PNG file")
+    pos, idat, header = 8, [], None
+    while pos < len(data):
+        length, kind = struct.unpack(">I4s", data[pos:pos + 8])
+        body = data[pos + 8:pos + 8 + length]
+        if kind == b"IHDR":
+            header = struct.unpack(">IIBBBBB", body)
+        elif kind == b"IDAT":
+            idat.append(body)
+        pos += 12 + length
+    w, h, depth, color, _, _, interlace = header
+    channels = {0: 1, 2: 3, 6: 4}.get(color)
+    if depth != 8 or channels is None or interlace != 0:
+        raise ValueError(f"{path}: only 8-bit grayscale/RGB/RGBA non-interlaced PNGs are read "
+                         f"(bit depth {depth}, colour type {color}, interlace {interlace})")
+    raw = np.frombuffer(zlib.decompress(b"".join(idat)), np.uint8)
+    stride = w * channels
+    rows = raw.reshape(h, stride + 1)
+    out = np.zeros((h, stride), np.int32)
+    prev = np.zeros(stride, np.int32)
+    for r in range(h):
+        kind, line = rows[r, 0], rows[r, 1:].astype(np.int32)
+        if kind == 0:
+            cur = line
+        elif kind == 2:
+            cur = (line + prev) & 255
+        else:  # Sub, Average and Paeth depend on the pixel to the left: pixel by pixel
+            cur = np.zeros(stride, np.int32)
+            for i in range(stride):
+                left = cur[i - channels] if i >= channels else 0
+                up = prev[i]
+                if kind == 1:
+                    cur[i] = (line[i] + left) & 255
+                elif kind == 3:
+                    cur[i] = (line[i] + (left + up) // 2) & 255
+                else:
+                    up_left = prev[i - channels] if i >= channels else 0
+                    p = left + up - up_left
+                    pa, pb, pc = abs(p - left), abs(p - up), abs(p - up_left)
+                    pred = left if pa <= pb and pa <= pc else (up if pb <= pc else up_left)
+                    cur[i] = (line[i] + pred) & 255
+        out[r] = cur
+        prev = cur
+    return out.reshape(h, w, channels).astype(np.uint8)

@@ -43,7 +43,7 @@ except ImportError as e:  # pragma: no cover
     sys.exit(f"representation_photometric.py: needs NumPy and PyTorch ({e})")
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from representation_common import energy_moments, psnr_per_frame, write_sheet  # noqa: E402
+from representation_common import energy_moments, psnr_per_frame, read_png, write_sheet  # noqa: E402
 
 
 def load(directory, sensor, split, clean=False):
@@ -101,8 +101,10 @@ class Trunk(nn.Module):
     pixels along both axes), so that a rotation keeps shapes."""
 
     def __init__(self, head, width, layers, d, channels, reference, omega=30.0,
-                 transform=False, aspect=1.0, finite_differences=False):
+                 transform=False, aspect=1.0, finite_differences=False, markers="bilinear",
+                 native_reference=None, supersample=4):
         super().__init__()
+        self.markers, self.supersample = markers, supersample
         self.finite_differences = finite_differences
         self.head, self.omega, self.width, self.layers = head, omega, width, layers
         self.channels, self.transform, self.aspect = channels, transform, aspect
@@ -133,6 +135,11 @@ class Trunk(nn.Module):
             self.register_buffer("pixel", torch.tensor([2 / max(h - 1, 1), col_unit]))
             # From coordinates to grid_sample's [-1, 1] along (row, col).
             self.register_buffer("to_unit", torch.tensor([1.0, 1.0 / aspect]))
+            if markers == "native":
+                # (1, C, H, W): the reference at the sensor's own resolution, in the
+                # targets' units, for markers moved before the area resize.
+                self.register_buffer("native", torch.from_numpy(
+                    native_reference.astype(np.float32)).permute(2, 0, 1)[None])
 
     def siren(self, x, z):
         b, p, _ = x.shape
@@ -181,19 +188,60 @@ class Trunk(nn.Module):
         shade_in = torch.cat([grad, w, x], -1)
         flat_in = torch.cat([torch.zeros_like(grad), torch.zeros_like(w), x], -1)
         shading = self.shade(shade_in) - self.shade(flat_in)
-        moved = x - (grad @ self.marker) * self.pixel
-        ref = self.reference.expand(x.shape[0], -1, -1, -1)
-        # grid_sample takes (x = column, y = row) in [-1, 1]; our coords are (row, col).
-        sampled = F.grid_sample(ref, (moved * self.to_unit).flip(-1)[:, :, None, :],
-                                mode="bilinear", padding_mode="border",
-                                align_corners=True)[..., 0]
-        at_rest = F.grid_sample(ref, (x * self.to_unit).flip(-1)[:, :, None, :],
-                                mode="bilinear", padding_mode="border",
-                                align_corners=True)[..., 0]
-        sampled, at_rest = sampled.transpose(1, 2), at_rest.transpose(1, 2)
+        if self.markers == "native":
+            sampled = self.native_markers(x, grad @ self.marker)
+            at_rest = self.native_markers(x, torch.zeros_like(grad))
+        else:
+            moved = x - (grad @ self.marker) * self.pixel
+            ref = self.reference.expand(x.shape[0], -1, -1, -1)
+            # grid_sample takes (x = column, y = row) in [-1, 1]; our coords are (row, col).
+            sampled = F.grid_sample(ref, (moved * self.to_unit).flip(-1)[:, :, None, :],
+                                    mode=self.markers, padding_mode="border",
+                                    align_corners=True)[..., 0]
+            at_rest = F.grid_sample(ref, (x * self.to_unit).flip(-1)[:, :, None, :],
+                                    mode=self.markers, padding_mode="border",
+                                    align_corners=True)[..., 0]
+            sampled, at_rest = sampled.transpose(1, 2), at_rest.transpose(1, 2)
         if self.head == "photometric_gain":
             return sampled * (1 + shading) - at_rest + s[..., 1:]
         return shading + (sampled - at_rest) + s[..., 1:]
+
+
+    def native_markers(self, x, shift):
+        """The reference moved by `shift` (B, P, 2; working pixels along row, col) as the
+        sensor images it: sampled bilinearly at the sensor's own resolution on a K x K grid
+        inside each working pixel and averaged (the area resize of the targets), so a
+        marker a pixel wide moves by a fraction of a working pixel without the blur and
+        ringing of resampling the already-resized reference."""
+        h, w = self.reference.shape[2:]
+        H, W = self.native.shape[2:]
+        k = self.supersample
+        row = (x[..., 0] + 1) / 2 * (h - 1) - shift[..., 0]        # working pixel index
+        col = (x[..., 1] * self.to_unit[1] + 1) / 2 * (w - 1) - shift[..., 1]
+        sub = (torch.arange(k, dtype=x.dtype) + 0.5) / k             # inside the pixel
+        sr, sc = H / h, W / w
+        rows = (row[..., None, None] + sub[:, None]) * sr - 0.5      # native index space
+        cols = (col[..., None, None] + sub[None, :]) * sc - 0.5
+        rows, cols = torch.broadcast_tensors(rows, cols)
+        b, p = x.shape[:2]
+        grid = torch.stack([2 * cols / (W - 1) - 1, 2 * rows / (H - 1) - 1], -1)
+        out = F.grid_sample(self.native.expand(b, -1, -1, -1), grid.reshape(b, p * k * k, 1, 2),
+                            mode="bilinear", padding_mode="border", align_corners=True)
+        return out[..., 0].reshape(b, -1, p, k * k).mean(-1).transpose(1, 2)
+
+
+def test_tools(directory, sensor, count):
+    """The tool of every test frame from `tactfunc export`'s export.json (None without
+    labels)."""
+    path = os.path.join(directory, "export.json")
+    if not os.path.exists(path):
+        return None
+    with open(path) as f:
+        frames = json.load(f)["sensors"][sensor]["frames"]
+    tools = [fr.get("label", {}).get("tool") for fr in frames if fr.get("split") == "test"]
+    if len(tools) != count or any(t is None for t in tools):
+        return None
+    return np.array(tools)
 
 
 def masked_mse(pred, target, valid):
@@ -232,6 +280,17 @@ def main():
     ap.add_argument("--gradient", choices=["exact", "differences"], default="exact",
                     help="the photometric heads' slope: the SIREN's exact derivative, or "
                          "central differences one pixel apart (no second-order pass)")
+    ap.add_argument("--markers", choices=["bilinear", "bicubic", "native"], default="bilinear",
+                    help="how the photometric heads move the reference's markers: resample "
+                         "the working-resolution reference (bilinear, bicubic), or sample the "
+                         "sensor-resolution reference on a K x K grid per working pixel and "
+                         "average (native; needs --native-reference)")
+    ap.add_argument("--native-reference",
+                    help="the dataset's reference image (e.g. DATA/gelslim/reference.png) for "
+                         "--markers native; converted to the targets' units as tactfunc does "
+                         "(grey = 0.299 R + 0.587 G + 0.114 B, divided by the export's scale)")
+    ap.add_argument("--supersample", type=int, default=4,
+                    help="K of --markers native (K x K samples per working pixel)")
     ap.add_argument("--width", type=int, default=64)
     ap.add_argument("--layers", type=int, default=3)
     ap.add_argument("--latent-dim", type=int, default=64)
@@ -246,6 +305,10 @@ def main():
     ap.add_argument("--fit-starts", type=int, choices=[1, 2], default=1,
                     help="with --transform, 2 fits each test frame from the moment angle and "
                          "from it + pi and keeps the lower loss on the frame's own pixels")
+    ap.add_argument("--refine-steps", type=int, default=0,
+                    help="after the Adam fits, refine every test latent by this many L-BFGS "
+                         "iterations on all of its frame's pixels (a converged fit, as a "
+                         "Levenberg-Marquardt fit would reach)")
     ap.add_argument("--save-trunk", help="save the trained trunk here (torch.save)")
     ap.add_argument("--load-trunk", help="skip training: load a trunk saved by --save-trunk "
                                          "with the same options")
@@ -285,10 +348,23 @@ def main():
 
     aspect = (w - 1) / max(h - 1, 1) if args.transform else 1.0
     coords = grid(h, w, aspect)
+    native = None
+    if args.markers == "native":
+        if args.head == "direct" or not args.native_reference:
+            sys.exit("representation_photometric.py: --markers native needs a photometric "
+                     "head and --native-reference")
+        with open(os.path.join(args.train, "export.json")) as f:
+            scale = json.load(f)["sensors"][args.sensor]["frames"][0]["scale"]
+        image = read_png(args.native_reference).astype(np.float64) / 255
+        if c == 1 and image.shape[2] >= 3:
+            image = (0.299 * image[..., 0] + 0.587 * image[..., 1] + 0.114 * image[..., 2])[..., None]
+        native = image / scale
+    result["markers"] = args.markers
     trunk = Trunk(args.head, args.width, args.layers, args.latent_dim, c,
                   reference if reference is not None else np.zeros((h, w, c), np.float32),
                   transform=args.transform, aspect=aspect,
-                  finite_differences=args.gradient == "differences")
+                  finite_differences=args.gradient == "differences", markers=args.markers,
+                  native_reference=native, supersample=args.supersample)
     start_latents = torch.zeros(n, args.latent_dim)
     if args.transform:
         start_latents[:, :3] = torch.from_numpy(moment_poses(train, coords))
@@ -376,6 +452,31 @@ def main():
             result["flipped_starts_kept"] = result.get("flipped_starts_kept", 0) + int(better.sum())
         print(f"  fitted {idx[-1].item() + 1}/{m} test latents: MSE {loss.item():.3e} "
               f"({time.time() - start:.0f} s)", flush=True)
+    if args.refine_steps > 0:
+        # Full-frame L-BFGS from the Adam fits: separable per frame, so chunks of frames
+        # share one solve (the sum of their losses).
+        adam_z = z_all.clone()
+        for first in range(0, m, 20):
+            idx = torch.arange(first, min(m, first + 20))
+            x = coords[None].expand(len(idx), -1, -1)
+            z = nn.Parameter(z_all[idx].clone())
+            lbfgs = torch.optim.LBFGS([z], lr=1, max_iter=args.refine_steps,
+                                      history_size=20, line_search_fn="strong_wolfe")
+
+            def closure():
+                lbfgs.zero_grad()
+                pred = trunk(x, z, create_graph=True)
+                loss = (((pred - test_t[idx]) ** 2) * test_v[idx]).sum()
+                loss.backward()
+                return loss
+
+            with torch.enable_grad():
+                lbfgs.step(closure)
+            z_all[idx] = z.detach()
+            print(f"  refined {idx[-1].item() + 1}/{m} test latents "
+                  f"({time.time() - start:.0f} s)", flush=True)
+        result["refine_steps"] = args.refine_steps
+        result["refine_mean_change"] = float((z_all - adam_z).norm(dim=1).mean())
     result["fit_seconds"] = time.time() - start
     z16 = z_all.half().float()
     recon = np.zeros(test.shape, np.float32)
@@ -388,6 +489,15 @@ def main():
     result["trunk_float16"] = {
         "psnr_clean": float(psnr_per_frame(recon, test_clean, test_w).mean()),
         "psnr_noisy": float(psnr_per_frame(recon, test, test_w).mean())}
+    tools = test_tools(args.eval, args.sensor, len(test))
+    if tools is not None:
+        # Per tool: which contacts hold the mean back, for the trunk and same-bits PCA.
+        trunk_db = psnr_per_frame(recon, test_clean, test_w)
+        pca_db = psnr_per_frame(pca_same_bits, test_clean, test_w)
+        result["per_tool_psnr_clean"] = {
+            t: {"trunk_float16": float(trunk_db[tools == t].mean()),
+                "pca_float16": float(pca_db[tools == t].mean())}
+            for t in sorted(set(tools))}
     result["margin_vs_pca_float32_clean"] = (result["trunk_float16"]["psnr_clean"] -
                                             result["pca_float32"]["psnr_clean"])
     result["margin_vs_pca_float16_clean"] = (result["trunk_float16"]["psnr_clean"] -
