@@ -230,6 +230,18 @@ class Trunk(nn.Module):
         return out[..., 0].reshape(b, -1, p, k * k).mean(-1).transpose(1, 2)
 
 
+def render(trunk, coords, z, shape):
+    """Every frame of latents z (m x d) on the full grid, as a (m, h, w, c) array."""
+    out = np.zeros(shape, np.float32)
+    for first in range(0, len(z), 20):
+        idx = torch.arange(first, min(len(z), first + 20))
+        x = coords[None].expand(len(idx), -1, -1)
+        with torch.enable_grad():
+            out[first:first + len(idx)] = trunk(x, z[idx], create_graph=False).detach() \
+                .numpy().reshape((len(idx),) + tuple(shape[1:]))
+    return out
+
+
 def test_tools(directory, sensor, count):
     """The tool of every test frame from `tactfunc export`'s export.json (None without
     labels)."""
@@ -478,14 +490,10 @@ def main():
         result["refine_steps"] = args.refine_steps
         result["refine_mean_change"] = float((z_all - adam_z).norm(dim=1).mean())
     result["fit_seconds"] = time.time() - start
-    z16 = z_all.half().float()
-    recon = np.zeros(test.shape, np.float32)
-    for first in range(0, m, 20):
-        idx = torch.arange(first, min(m, first + 20))
-        x = coords[None].expand(len(idx), -1, -1)
-        with torch.enable_grad():
-            recon[first:first + len(idx)] = trunk(x, z16[idx], create_graph=False).detach() \
-                .numpy().reshape((len(idx), h, w, c))
+    recon = render(trunk, coords, z_all.half().float(), test.shape)
+    if args.refine_steps > 0:
+        result["trunk_float16_before_refine"] = float(psnr_per_frame(
+            render(trunk, coords, adam_z.half().float(), test.shape), test_clean, test_w).mean())
     result["trunk_float16"] = {
         "psnr_clean": float(psnr_per_frame(recon, test_clean, test_w).mean()),
         "psnr_noisy": float(psnr_per_frame(recon, test, test_w).mean())}
