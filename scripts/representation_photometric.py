@@ -397,7 +397,12 @@ def main():
     start = time.time()
     gen = torch.Generator().manual_seed(args.seed)
     if args.load_trunk:
-        trunk.load_state_dict(torch.load(args.load_trunk))
+        # A trunk trained with other --markers loads too: the sensor-resolution
+        # reference is a buffer of this run's options, not a trained value.
+        missing, unexpected = trunk.load_state_dict(torch.load(args.load_trunk), strict=False)
+        if set(missing) - {"native"} or set(unexpected) - {"native"}:
+            sys.exit(f"representation_photometric.py: {args.load_trunk} does not fit these "
+                     f"options (missing {missing}, unexpected {unexpected})")
         print(f"loaded the trunk from {args.load_trunk}: no training", flush=True)
     for step in range(1, 0 if args.load_trunk else args.steps + 1):
         frames = torch.randint(0, n, (args.batch,), generator=gen)
