@@ -301,6 +301,10 @@ def main():
                     help="the dataset's reference image (e.g. DATA/gelslim/reference.png) for "
                          "--markers native; converted to the targets' units as tactfunc does "
                          "(grey = 0.299 R + 0.587 G + 0.114 B, divided by the export's scale)")
+    ap.add_argument("--marker-warmup", type=int, default=0,
+                    help="with --markers native, train the first N steps with bilinear "
+                         "markers on the resized reference (smooth gradients while the head "
+                         "learns how far a slope moves the skin), then switch")
     ap.add_argument("--supersample", type=int, default=4,
                     help="K of --markers native (K x K samples per working pixel)")
     ap.add_argument("--width", type=int, default=64)
@@ -405,6 +409,8 @@ def main():
                      f"options (missing {missing}, unexpected {unexpected})")
         print(f"loaded the trunk from {args.load_trunk}: no training", flush=True)
     for step in range(1, 0 if args.load_trunk else args.steps + 1):
+        if args.markers == "native":
+            trunk.markers = "bilinear" if step <= args.marker_warmup else "native"
         frames = torch.randint(0, n, (args.batch,), generator=gen)
         pix = torch.randint(0, h * w, (args.batch, args.pixels), generator=gen)
         x = coords[pix]
@@ -420,6 +426,8 @@ def main():
         if step % max(1, args.steps // 10) == 0:
             print(f"  step {step}/{args.steps}: train MSE {loss.item():.3e} "
                   f"({time.time() - start:.0f} s)", flush=True)
+    trunk.markers = args.markers
+    result["marker_warmup"] = args.marker_warmup
     result["train_seconds"] = time.time() - start
     if args.save_trunk:
         torch.save(trunk.state_dict(), args.save_trunk + ".tmp")
