@@ -88,7 +88,9 @@ class Trunk(nn.Module):
                    y(p) = S(grad w, w, p) - S(0, 0, p)   (learned photometric head)
                         + R(p - M grad w) - R(p)         (markers moved with the skin)
                         + SIREN(p; z)_1                  (a direct channel for the rest)
-    where R is the sensor's reference frame (bilinearly sampled) and M a learned 2 x 2;
+    where R is the sensor's reference frame (bilinearly sampled at the working resolution,
+    or with markers "native" sampled at the sensor's resolution K x K times per pixel
+    and averaged, as the sensor forms the frame) and M a learned 2 x 2;
       photometric_gain  the same parts multiplied as an optical sensor forms its image
                    (the skin's printed pattern, moved, times the shading of its slope):
                    y(p) = R(p - M grad w) (1 + S(grad w, w, p) - S(0, 0, p)) - R(p)
