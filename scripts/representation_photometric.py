@@ -104,7 +104,7 @@ class Trunk(nn.Module):
 
     def __init__(self, head, width, layers, d, channels, reference, omega=30.0,
                  transform=False, aspect=1.0, finite_differences=False, markers="bilinear",
-                 native_reference=None, supersample=4):
+                 native_reference=None, supersample=4, marker_model="full"):
         super().__init__()
         self.markers, self.supersample = markers, supersample
         self.finite_differences = finite_differences
@@ -128,7 +128,14 @@ class Trunk(nn.Module):
         if head != "direct":
             self.shade = nn.Sequential(nn.Linear(5, 64), nn.SiLU(), nn.Linear(64, 64), nn.SiLU(),
                                        nn.Linear(64, channels))
-            self.marker = nn.Parameter(torch.zeros(2, 2))
+            # How far a unit slope moves the skin (working pixels): a full 2 x 2 matrix,
+            # or one scalar times the identity (an isotropic skin moves along the slope;
+            # the full matrix can settle on a sheared, one-sided solution instead).
+            self.marker_model = marker_model
+            if marker_model == "isotropic":
+                self.marker_scale = nn.Parameter(torch.zeros(1))
+            else:
+                self.marker = nn.Parameter(torch.zeros(2, 2))
             # (1, C, H, W) for grid_sample.
             self.register_buffer("reference", torch.from_numpy(reference).permute(2, 0, 1)[None])
             h, w = reference.shape[:2]
@@ -142,6 +149,11 @@ class Trunk(nn.Module):
                 # targets' units, for markers moved before the area resize.
                 self.register_buffer("native", torch.from_numpy(
                     native_reference.astype(np.float32)).permute(2, 0, 1)[None])
+
+    def marker_matrix(self):
+        if self.marker_model == "isotropic":
+            return self.marker_scale * torch.eye(2)
+        return self.marker
 
     def siren(self, x, z):
         b, p, _ = x.shape
@@ -191,10 +203,10 @@ class Trunk(nn.Module):
         flat_in = torch.cat([torch.zeros_like(grad), torch.zeros_like(w), x], -1)
         shading = self.shade(shade_in) - self.shade(flat_in)
         if self.markers == "native":
-            sampled = self.native_markers(x, grad @ self.marker)
+            sampled = self.native_markers(x, grad @ self.marker_matrix())
             at_rest = self.native_markers(x, torch.zeros_like(grad))
         else:
-            moved = x - (grad @ self.marker) * self.pixel
+            moved = x - (grad @ self.marker_matrix()) * self.pixel
             ref = self.reference.expand(x.shape[0], -1, -1, -1)
             # grid_sample takes (x = column, y = row) in [-1, 1]; our coords are (row, col).
             sampled = F.grid_sample(ref, (moved * self.to_unit).flip(-1)[:, :, None, :],
@@ -307,6 +319,9 @@ def main():
                     help="with --markers native, train the first N steps with bilinear "
                          "markers on the resized reference (smooth gradients while the head "
                          "learns how far a slope moves the skin), then switch")
+    ap.add_argument("--marker-model", choices=["full", "isotropic"], default="full",
+                    help="how a slope moves the markers: a learned 2 x 2 matrix (full), or "
+                         "one learned scalar along the slope (isotropic)")
     ap.add_argument("--supersample", type=int, default=4,
                     help="K of --markers native (K x K samples per working pixel)")
     ap.add_argument("--width", type=int, default=64)
@@ -378,11 +393,13 @@ def main():
             image = (0.299 * image[..., 0] + 0.587 * image[..., 1] + 0.114 * image[..., 2])[..., None]
         native = image / scale
     result["markers"] = args.markers
+    result["marker_model"] = args.marker_model
     trunk = Trunk(args.head, args.width, args.layers, args.latent_dim, c,
                   reference if reference is not None else np.zeros((h, w, c), np.float32),
                   transform=args.transform, aspect=aspect,
                   finite_differences=args.gradient == "differences", markers=args.markers,
-                  native_reference=native, supersample=args.supersample)
+                  native_reference=native, supersample=args.supersample,
+                  marker_model=args.marker_model)
     start_latents = torch.zeros(n, args.latent_dim)
     if args.transform:
         start_latents[:, :3] = torch.from_numpy(moment_poses(train, coords))
@@ -430,6 +447,10 @@ def main():
                   f"({time.time() - start:.0f} s)", flush=True)
     trunk.markers = args.markers
     result["marker_warmup"] = args.marker_warmup
+    if args.head != "direct":
+        # The learned slope-to-displacement map (working pixels per unit slope): a
+        # sheared or one-sided matrix says the head did not learn how the skin moves.
+        result["marker_matrix"] = trunk.marker_matrix().detach().numpy().round(4).tolist()
     result["train_seconds"] = time.time() - start
     if args.save_trunk:
         torch.save(trunk.state_dict(), args.save_trunk + ".tmp")

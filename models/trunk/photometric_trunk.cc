@@ -1,0 +1,494 @@
+// Copyright 2026 The tactfunc Authors.
+#include "models/trunk/photometric_trunk.h"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+#include <type_traits>
+
+#include "boost/random/mersenne_twister.hpp"
+#include "boost/random/uniform_real_distribution.hpp"
+#include "models/core/seed.h"
+
+namespace tactfunc {
+namespace {
+
+// The five coordinate sets of one pass: the pixel, then one pixel either side along
+// x_0, then along x_1 (the central differences of the slope).
+constexpr int kSets = 5;
+
+LatentModulatedSiren::Options SirenOptions(const PhotometricTrunk::Options& o) {
+  LatentModulatedSiren::Options s;
+  s.width = o.width;
+  s.num_hidden_layers = o.num_hidden_layers;
+  s.omega_0 = o.omega_0;
+  s.latent_dim = o.latent_dim - PhotometricTrunk::kPoseValues;
+  s.output_channels = 1 + o.channels;
+  return s;
+}
+
+template <typename S>
+S Silu(S a) {
+  return a / (S(1) + std::exp(-a));
+}
+template <typename S>
+S SiluSlope(S a) {
+  const S sigma = S(1) / (S(1) + std::exp(-a));
+  return sigma * (S(1) + a * (S(1) - sigma));
+}
+
+}  // namespace
+
+bool PhotometricTrunk::Options::IsValid(std::string* error) const {
+  std::ostringstream message;
+  if (rows < 3 || cols < 3) {
+    message << "rows and cols must be >= 3, found " << rows << " x " << cols;
+  } else if (channels < 1 || channels > 4) {
+    message << "channels must be in [1, 4], found " << channels;
+  } else if (width < 1 || num_hidden_layers < 1) {
+    message << "width and num_hidden_layers must be >= 1, found " << width << " and "
+            << num_hidden_layers;
+  } else if (!(std::isfinite(omega_0) && omega_0 > 0)) {
+    message << "omega_0 must be finite and > 0, found " << omega_0;
+  } else if (latent_dim <= kPoseValues) {
+    message << "latent_dim must be > " << kPoseValues << " (the pose values), found "
+            << latent_dim;
+  } else if (shading_width < 1) {
+    message << "shading_width must be >= 1, found " << shading_width;
+  } else if (supersample < 1) {
+    message << "supersample must be >= 1, found " << supersample;
+  }
+  const std::string text = message.str();
+  if (error != nullptr) *error = text;
+  return text.empty();
+}
+
+template <typename Scalar>
+struct PhotometricTrunkPass {
+  using Matrix = Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic>;
+  Matrix coords;          // kSets N x 2, the SIREN's coordinates
+  Matrix siren_out;       // kSets N x (1 + C)
+  Matrix input, input0;   // 5 x N: (g_0, g_1, w, x_0, x_1) and the flat (0, 0, 0, x)
+  Matrix a1, a2, h1, h2;  // H x N pre-activations and activations (contact)
+  Matrix a1f, a2f, h1f, h2f;  // the same for the flat input
+  Eigen::MatrixXd marker_d_row, marker_d_col;  // C x N
+};
+
+struct PhotometricTrunk::Pass {
+  PhotometricTrunkPass<float> f;
+  PhotometricTrunkPass<double> d;
+  template <typename Scalar>
+  PhotometricTrunkPass<Scalar>& get() {
+    if constexpr (std::is_same_v<Scalar, float>) {
+      return f;
+    } else {
+      return d;
+    }
+  }
+  template <typename Scalar>
+  const PhotometricTrunkPass<Scalar>& get() const {
+    return const_cast<Pass*>(this)->get<Scalar>();
+  }
+};
+
+namespace {
+
+LatentModulatedSiren::Options ValidatedSirenOptions(const PhotometricTrunk::Options& options) {
+  std::string error;
+  if (!options.IsValid(&error)) {
+    throw std::invalid_argument("PhotometricTrunk::Options: " + error);
+  }
+  return SirenOptions(options);
+}
+
+}  // namespace
+
+PhotometricTrunk::PhotometricTrunk(const Options& options, const Image& reference,
+                                   std::uint64_t seed)
+    : options_(options),
+      siren_(ValidatedSirenOptions(options), DeriveSeed(seed, 0)),
+      reference_(reference) {
+  if (reference.empty() || reference.channels != options.channels) {
+    throw std::invalid_argument(
+        "PhotometricTrunk: the reference must be a non-empty image with " +
+        std::to_string(options.channels) + " channel(s), found " + reference.ShapeString());
+  }
+  const int h = options.shading_width;
+  const int c = options.channels;
+  num_head_parameters_ = h * 5 + h + h * h + h + c * h + c + 1;
+  InitializeHead(DeriveSeed(seed, 1));
+  // The at-rest markers: the K x K average of the reference at zero shift.
+  at_rest_ = Image(options.rows, options.cols, c);
+  std::vector<double> value(c);
+  const MarkerSampling keep = marker_sampling_;
+  marker_sampling_ = MarkerSampling::kSensorResolution;
+  for (int r = 0; r < options.rows; ++r) {
+    for (int col = 0; col < options.cols; ++col) {
+      SampleMarkers(r, col, value.data(), nullptr, nullptr);
+      for (int ch = 0; ch < c; ++ch) at_rest_.at(r, col, ch) = static_cast<float>(value[ch]);
+    }
+  }
+  marker_sampling_ = keep;
+}
+
+void PhotometricTrunk::InitializeHead(std::uint64_t seed) {
+  boost::random::mt19937_64 rng(seed);
+  const int h = options_.shading_width;
+  const int c = options_.channels;
+  head_.setZero(num_head_parameters_);
+  // (size, fan_in) of W_1, b_1, W_2, b_2, W_3, b_3, as nn.Linear draws them.
+  const int sizes[6][2] = {{h * 5, 5}, {h, 5}, {h * h, h}, {h, h}, {c * h, h}, {c, h}};
+  int at = 0;
+  for (const auto& block : sizes) {
+    const double bound = 1.0 / std::sqrt(static_cast<double>(block[1]));
+    boost::random::uniform_real_distribution<double> uniform(-bound, bound);
+    for (int i = 0; i < block[0]; ++i) head_[at++] = uniform(rng);
+  }
+  head_[at] = 0.0;  // m: the markers start at rest
+}
+
+void PhotometricTrunk::SetHeadParameters(const Eigen::VectorXd& head) {
+  if (head.size() != num_head_parameters_) {
+    throw std::invalid_argument("PhotometricTrunk::SetHeadParameters: expected " +
+                                std::to_string(num_head_parameters_) + " values, found " +
+                                std::to_string(head.size()));
+  }
+  head_ = head;
+}
+
+Eigen::Vector2d PhotometricTrunk::PixelCoordinate(int pixel) const {
+  const int r = pixel / options_.cols;
+  const int c = pixel % options_.cols;
+  const double rows = options_.rows;
+  return {(2.0 * c + 1.0 - options_.cols) / rows, (2.0 * r + 1.0) / rows - 1.0};
+}
+
+std::vector<int> PhotometricTrunk::AllPixels() const {
+  std::vector<int> pixels(static_cast<std::size_t>(options_.rows) * options_.cols);
+  for (std::size_t j = 0; j < pixels.size(); ++j) pixels[j] = static_cast<int>(j);
+  return pixels;
+}
+
+void PhotometricTrunk::SampleMarkers(double row, double col, double* value, double* d_row,
+                                     double* d_col) const {
+  const int c = options_.channels;
+  std::fill(value, value + c, 0.0);
+  if (d_row != nullptr) std::fill(d_row, d_row + c, 0.0);
+  if (d_col != nullptr) std::fill(d_col, d_col + c, 0.0);
+  // One bilinear sample of `image` at (y, x) in its pixel indices, border-clamped (no
+  // slope along a clamped axis), scaled by `weight`; dy_scale / dx_scale turn the
+  // image's slopes into slopes per working pixel.
+  auto sample = [&](const Image& image, double y, double x, double weight, double dy_scale,
+                    double dx_scale) {
+    const double y_max = image.rows - 1, x_max = image.cols - 1;
+    const bool y_in = y > 0 && y < y_max, x_in = x > 0 && x < x_max;
+    y = std::clamp(y, 0.0, y_max);
+    x = std::clamp(x, 0.0, x_max);
+    const int y0 = static_cast<int>(std::floor(y)), x0 = static_cast<int>(std::floor(x));
+    const int y1 = std::min(y0 + 1, image.rows - 1), x1 = std::min(x0 + 1, image.cols - 1);
+    const double fy = y - y0, fx = x - x0;
+    for (int ch = 0; ch < c; ++ch) {
+      const double i00 = image.at(y0, x0, ch), i01 = image.at(y0, x1, ch);
+      const double i10 = image.at(y1, x0, ch), i11 = image.at(y1, x1, ch);
+      value[ch] += weight * ((1 - fy) * ((1 - fx) * i00 + fx * i01) +
+                             fy * ((1 - fx) * i10 + fx * i11));
+      if (d_row != nullptr && y_in) {
+        d_row[ch] += weight * dy_scale * ((1 - fx) * (i10 - i00) + fx * (i11 - i01));
+      }
+      if (d_col != nullptr && x_in) {
+        d_col[ch] += weight * dx_scale * ((1 - fy) * (i01 - i00) + fy * (i11 - i10));
+      }
+    }
+  };
+  if (marker_sampling_ == MarkerSampling::kWorkingResolution) {
+    sample(at_rest_, row, col, 1.0, 1.0, 1.0);
+    return;
+  }
+  const int k = options_.supersample;
+  const double sr = static_cast<double>(reference_.rows) / options_.rows;
+  const double sc = static_cast<double>(reference_.cols) / options_.cols;
+  const double weight = 1.0 / (k * k);
+  for (int a = 0; a < k; ++a) {
+    const double y = (row + (a + 0.5) / k) * sr - 0.5;
+    for (int b = 0; b < k; ++b) {
+      sample(reference_, y, (col + (b + 0.5) / k) * sc - 0.5, weight, sr, sc);
+    }
+  }
+}
+
+template <typename Scalar>
+void PhotometricTrunk::RunForward(const std::vector<int>& pixels, const VectorX<Scalar>& z,
+                                  Pass* pass_holder, MatrixX<Scalar>* outputs) const {
+  PhotometricTrunkPass<Scalar>& pass = pass_holder->get<Scalar>();
+  if (z.size() != options_.latent_dim) {
+    throw std::invalid_argument("PhotometricTrunk: expected a latent of " +
+                                std::to_string(options_.latent_dim) + " values, found " +
+                                std::to_string(z.size()));
+  }
+  const int n = static_cast<int>(pixels.size());
+  const int num_pixels = options_.rows * options_.cols;
+  for (int j : pixels) {
+    if (j < 0 || j >= num_pixels) {
+      throw std::invalid_argument("PhotometricTrunk: pixel index " + std::to_string(j) +
+                                  " is outside the " + std::to_string(options_.rows) + " x " +
+                                  std::to_string(options_.cols) + " grid");
+    }
+  }
+  const int c = options_.channels;
+  const double t0 = static_cast<double>(z[0]), t1 = static_cast<double>(z[1]);
+  const double cs = std::cos(static_cast<double>(z[2]));
+  const double sn = std::sin(static_cast<double>(z[2]));
+  const double step = 2.0 / options_.rows;  // one pixel in coordinates
+  const double offsets[kSets][2] = {{0, 0}, {step, 0}, {-step, 0}, {0, step}, {0, -step}};
+  pass.coords.resize(kSets * n, 2);
+  for (int k = 0; k < kSets; ++k) {
+    for (int i = 0; i < n; ++i) {
+      const Eigen::Vector2d p = PixelCoordinate(pixels[i]);
+      const double d0 = p[0] + offsets[k][0] - t0, d1 = p[1] + offsets[k][1] - t1;
+      pass.coords(k * n + i, 0) = static_cast<Scalar>(cs * d0 + sn * d1);
+      pass.coords(k * n + i, 1) = static_cast<Scalar>(-sn * d0 + cs * d1);
+    }
+  }
+  const VectorX<Scalar> code = z.tail(options_.latent_dim - kPoseValues);
+  pass.siren_out = siren_.Forward<Scalar>(pass.coords, code);
+  const MatrixX<Scalar>& s = pass.siren_out;
+
+  pass.input.resize(5, n);
+  pass.input0.setZero(5, n);
+  for (int i = 0; i < n; ++i) {
+    const Eigen::Vector2d p = PixelCoordinate(pixels[i]);
+    pass.input(0, i) = (s(n + i, 0) - s(2 * n + i, 0)) / Scalar(2);
+    pass.input(1, i) = (s(3 * n + i, 0) - s(4 * n + i, 0)) / Scalar(2);
+    pass.input(2, i) = s(i, 0);
+    pass.input(3, i) = pass.input0(3, i) = static_cast<Scalar>(p[0]);
+    pass.input(4, i) = pass.input0(4, i) = static_cast<Scalar>(p[1]);
+  }
+  // The shading network on the contact's and the flat input.
+  const int h = options_.shading_width;
+  const VectorX<Scalar> head = head_.cast<Scalar>();
+  int at = 0;
+  const Eigen::Map<const MatrixX<Scalar>> W1(head.data() + at, h, 5);
+  at += h * 5;
+  const Eigen::Map<const VectorX<Scalar>> b1(head.data() + at, h);
+  at += h;
+  const Eigen::Map<const MatrixX<Scalar>> W2(head.data() + at, h, h);
+  at += h * h;
+  const Eigen::Map<const VectorX<Scalar>> b2(head.data() + at, h);
+  at += h;
+  const Eigen::Map<const MatrixX<Scalar>> W3(head.data() + at, c, h);
+  at += c * h;
+  const Eigen::Map<const VectorX<Scalar>> b3(head.data() + at, c);
+  auto network = [&](const MatrixX<Scalar>& in, MatrixX<Scalar>* a1, MatrixX<Scalar>* h1,
+                     MatrixX<Scalar>* a2, MatrixX<Scalar>* h2) {
+    *a1 = (W1 * in).colwise() + b1;
+    *h1 = a1->unaryExpr([](Scalar v) { return Silu(v); });
+    *a2 = (W2 * *h1).colwise() + b2;
+    *h2 = a2->unaryExpr([](Scalar v) { return Silu(v); });
+    return MatrixX<Scalar>((W3 * *h2).colwise() + b3);
+  };
+  const MatrixX<Scalar> shade = network(pass.input, &pass.a1, &pass.h1, &pass.a2, &pass.h2);
+  const MatrixX<Scalar> shade0 =
+      network(pass.input0, &pass.a1f, &pass.h1f, &pass.a2f, &pass.h2f);
+
+  // The markers moved by u = m g.
+  const double m = marker_scale();
+  pass.marker_d_row.resize(c, n);
+  pass.marker_d_col.resize(c, n);
+  std::vector<double> value(c);
+  if (outputs != nullptr) outputs->resize(n, c);
+  for (int i = 0; i < n; ++i) {
+    const int r = pixels[i] / options_.cols, col = pixels[i] % options_.cols;
+    const double u0 = m * static_cast<double>(pass.input(0, i));
+    const double u1 = m * static_cast<double>(pass.input(1, i));
+    SampleMarkers(r - u1, col - u0, value.data(), pass.marker_d_row.col(i).data(),
+                  pass.marker_d_col.col(i).data());
+    if (outputs == nullptr) continue;
+    for (int ch = 0; ch < c; ++ch) {
+      (*outputs)(i, ch) = shade(ch, i) - shade0(ch, i) +
+                          static_cast<Scalar>(value[ch] - at_rest_.at(r, col, ch)) +
+                          s(i, 1 + ch);
+    }
+  }
+}
+
+template <typename Scalar>
+void PhotometricTrunk::RunBackward(const Pass& pass_holder, const std::vector<int>& pixels,
+                                   const VectorX<Scalar>& z, const MatrixX<Scalar>& dL_dY,
+                                   VectorX<Scalar>* dL_dz, VectorX<Scalar>* dL_dsiren,
+                                   VectorX<Scalar>* dL_dhead) const {
+  const PhotometricTrunkPass<Scalar>& pass = pass_holder.get<Scalar>();
+  const int n = static_cast<int>(pixels.size());
+  const int c = options_.channels;
+  const int h = options_.shading_width;
+  if (dL_dY.rows() != n || dL_dY.cols() != c) {
+    throw std::invalid_argument("PhotometricTrunk::Backward: dL/dY must be " +
+                                std::to_string(n) + " x " + std::to_string(c));
+  }
+  const VectorX<Scalar> head = head_.cast<Scalar>();
+  const Eigen::Map<const MatrixX<Scalar>> W1(head.data(), h, 5);
+  const Eigen::Map<const MatrixX<Scalar>> W2(head.data() + h * 6, h, h);
+  const Eigen::Map<const MatrixX<Scalar>> W3(head.data() + h * 7 + h * h, c, h);
+  VectorX<Scalar> dhead = VectorX<Scalar>::Zero(num_head_parameters_);
+  const MatrixX<Scalar> dshade = dL_dY.transpose();  // C x N
+  // Reverse through the network; adds its parameter gradients to dhead (scaled by
+  // sign) and returns dL/d(input) (5 x N).
+  auto network_back = [&](const MatrixX<Scalar>& in, const MatrixX<Scalar>& a1,
+                          const MatrixX<Scalar>& h1, const MatrixX<Scalar>& a2,
+                          const MatrixX<Scalar>& h2, const MatrixX<Scalar>& dout) {
+    int at = 0;
+    const MatrixX<Scalar> dh2 = W3.transpose() * dout;
+    const MatrixX<Scalar> da2 =
+        dh2.cwiseProduct(a2.unaryExpr([](Scalar v) { return SiluSlope(v); }));
+    const MatrixX<Scalar> dh1 = W2.transpose() * da2;
+    const MatrixX<Scalar> da1 =
+        dh1.cwiseProduct(a1.unaryExpr([](Scalar v) { return SiluSlope(v); }));
+    Eigen::Map<MatrixX<Scalar>>(dhead.data() + at, h, 5) += da1 * in.transpose();
+    at += h * 5;
+    Eigen::Map<VectorX<Scalar>>(dhead.data() + at, h) += da1.rowwise().sum();
+    at += h;
+    Eigen::Map<MatrixX<Scalar>>(dhead.data() + at, h, h) += da2 * h1.transpose();
+    at += h * h;
+    Eigen::Map<VectorX<Scalar>>(dhead.data() + at, h) += da2.rowwise().sum();
+    at += h;
+    Eigen::Map<MatrixX<Scalar>>(dhead.data() + at, c, h) += dout * h2.transpose();
+    at += c * h;
+    Eigen::Map<VectorX<Scalar>>(dhead.data() + at, c) += dout.rowwise().sum();
+    return MatrixX<Scalar>(W1.transpose() * da1);
+  };
+  MatrixX<Scalar> dinput = network_back(pass.input, pass.a1, pass.h1, pass.a2, pass.h2, dshade);
+  network_back(pass.input0, pass.a1f, pass.h1f, pass.a2f, pass.h2f, -dshade);
+
+  // The markers: sampled at (r - m g_1, c - m g_0).
+  const double m = marker_scale();
+  double dm = 0.0;
+  for (int i = 0; i < n; ++i) {
+    double dg0 = 0.0, dg1 = 0.0;
+    for (int ch = 0; ch < c; ++ch) {
+      const double dy = static_cast<double>(dL_dY(i, ch));
+      dg0 -= dy * pass.marker_d_col(ch, i);
+      dg1 -= dy * pass.marker_d_row(ch, i);
+    }
+    dm += dg0 * static_cast<double>(pass.input(0, i)) +
+          dg1 * static_cast<double>(pass.input(1, i));
+    dinput(0, i) += static_cast<Scalar>(m * dg0);
+    dinput(1, i) += static_cast<Scalar>(m * dg1);
+  }
+  dhead[num_head_parameters_ - 1] = static_cast<Scalar>(dm);
+  if (dL_dhead != nullptr) *dL_dhead = dhead;
+  if (dL_dz == nullptr && dL_dsiren == nullptr) return;
+
+  // Into the SIREN's five coordinate sets.
+  MatrixX<Scalar> ds = MatrixX<Scalar>::Zero(kSets * n, 1 + c);
+  for (int i = 0; i < n; ++i) {
+    ds(i, 0) = dinput(2, i);
+    for (int ch = 0; ch < c; ++ch) ds(i, 1 + ch) = dL_dY(i, ch);
+    ds(n + i, 0) = dinput(0, i) / Scalar(2);
+    ds(2 * n + i, 0) = -dinput(0, i) / Scalar(2);
+    ds(3 * n + i, 0) = dinput(1, i) / Scalar(2);
+    ds(4 * n + i, 0) = -dinput(1, i) / Scalar(2);
+  }
+  const VectorX<Scalar> code = z.tail(options_.latent_dim - kPoseValues);
+  VectorX<Scalar> dcode, dtheta;
+  siren_.Backward<Scalar>(pass.coords, code, ds, dL_dz != nullptr ? &dcode : nullptr,
+                          &dtheta);
+  if (dL_dz != nullptr) {
+    // The pose from the first layer's gradients (header comment).
+    const ParameterBlock& wblock = siren_.Block(ParameterGroup::kHiddenWeight, 0);
+    const ParameterBlock& bblock = siren_.Block(ParameterGroup::kHiddenBias, 0);
+    const Eigen::MatrixXd W0 =
+        LatentModulatedSiren::View<double>(siren_.parameters(), wblock);
+    const Eigen::MatrixXd dW0 =
+        LatentModulatedSiren::View<Scalar>(dtheta, wblock).template cast<double>();
+    const Eigen::VectorXd db0 =
+        LatentModulatedSiren::View<Scalar>(dtheta, bblock).template cast<double>();
+    const double cs = std::cos(static_cast<double>(z[2]));
+    const double sn = std::sin(static_cast<double>(z[2]));
+    Eigen::Matrix2d R;
+    R << cs, -sn, sn, cs;
+    const Eigen::Vector2d dt = -R * (W0.transpose() * db0);
+    const double dphi = (-W0.col(1).cwiseProduct(dW0.col(0)) +
+                         W0.col(0).cwiseProduct(dW0.col(1))).sum();
+    dL_dz->resize(options_.latent_dim);
+    (*dL_dz)[0] = static_cast<Scalar>(dt[0]);
+    (*dL_dz)[1] = static_cast<Scalar>(dt[1]);
+    (*dL_dz)[2] = static_cast<Scalar>(dphi);
+    dL_dz->tail(options_.latent_dim - kPoseValues) = dcode;
+  }
+  if (dL_dsiren != nullptr) *dL_dsiren = std::move(dtheta);
+}
+
+template <typename Scalar>
+PhotometricTrunk::MatrixX<Scalar> PhotometricTrunk::Forward(const std::vector<int>& pixels,
+                                                            const VectorX<Scalar>& z) const {
+  Pass pass;
+  MatrixX<Scalar> outputs;
+  RunForward<Scalar>(pixels, z, &pass, &outputs);
+  return outputs;
+}
+
+template <typename Scalar>
+void PhotometricTrunk::Backward(const std::vector<int>& pixels, const VectorX<Scalar>& z,
+                                const MatrixX<Scalar>& dL_dY, VectorX<Scalar>* dL_dz,
+                                VectorX<Scalar>* dL_dsiren, VectorX<Scalar>* dL_dhead) const {
+  Pass pass;
+  RunForward<Scalar>(pixels, z, &pass, nullptr);
+  RunBackward<Scalar>(pass, pixels, z, dL_dY, dL_dz, dL_dsiren, dL_dhead);
+}
+
+template <typename Scalar>
+Scalar PhotometricTrunk::LossAndGradient(const std::vector<int>& pixels,
+                                         const VectorX<Scalar>& z,
+                                         const MatrixX<Scalar>& targets,
+                                         const VectorX<Scalar>& weights,
+                                         VectorX<Scalar>* dL_dz, VectorX<Scalar>* dL_dsiren,
+                                         VectorX<Scalar>* dL_dhead,
+                                         MatrixX<Scalar>* outputs) const {
+  const int n = static_cast<int>(pixels.size());
+  const int c = options_.channels;
+  if (targets.rows() != n || targets.cols() != c ||
+      (weights.size() != 0 && weights.size() != n)) {
+    throw std::invalid_argument("PhotometricTrunk::LossAndGradient: expected targets of " +
+                                std::to_string(n) + " x " + std::to_string(c) +
+                                " and weights of " + std::to_string(n) + " (or none)");
+  }
+  Pass pass;
+  MatrixX<Scalar> y;
+  RunForward<Scalar>(pixels, z, &pass, &y);
+  double weight_sum = 0.0;
+  for (int i = 0; i < n; ++i) weight_sum += weights.size() == 0 ? 1.0 : weights[i];
+  MatrixX<Scalar> dY = MatrixX<Scalar>::Zero(n, c);
+  double loss = 0.0;
+  if (weight_sum > 0) {
+    const double norm = 1.0 / (c * weight_sum);
+    for (int i = 0; i < n; ++i) {
+      const double w = weights.size() == 0 ? 1.0 : static_cast<double>(weights[i]);
+      if (w == 0.0) continue;
+      for (int ch = 0; ch < c; ++ch) {
+        const double e = static_cast<double>(y(i, ch)) - static_cast<double>(targets(i, ch));
+        loss += w * e * e * norm;
+        dY(i, ch) = static_cast<Scalar>(2.0 * w * e * norm);
+      }
+    }
+  }
+  if (dL_dz != nullptr || dL_dsiren != nullptr || dL_dhead != nullptr) {
+    RunBackward<Scalar>(pass, pixels, z, dY, dL_dz, dL_dsiren, dL_dhead);
+  }
+  if (outputs != nullptr) *outputs = std::move(y);
+  return static_cast<Scalar>(loss);
+}
+
+#define TACTFUNC_INSTANTIATE(S)                                                           \
+  template PhotometricTrunk::MatrixX<S> PhotometricTrunk::Forward<S>(                     \
+      const std::vector<int>&, const VectorX<S>&) const;                                  \
+  template void PhotometricTrunk::Backward<S>(const std::vector<int>&, const VectorX<S>&, \
+                                              const MatrixX<S>&, VectorX<S>*,             \
+                                              VectorX<S>*, VectorX<S>*) const;            \
+  template S PhotometricTrunk::LossAndGradient<S>(                                        \
+      const std::vector<int>&, const VectorX<S>&, const MatrixX<S>&, const VectorX<S>&,   \
+      VectorX<S>*, VectorX<S>*, VectorX<S>*, MatrixX<S>*) const;
+TACTFUNC_INSTANTIATE(float)
+TACTFUNC_INSTANTIATE(double)
+#undef TACTFUNC_INSTANTIATE
+
+}  // namespace tactfunc

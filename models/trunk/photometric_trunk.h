@@ -1,0 +1,185 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// PhotometricTrunk: the trunk of an optical tactile sensor (GelSlim, GelSight) that draws
+// the CONTACT and lets the sensor's image form from it, instead of drawing the image's
+// difference from the reference directly. docs/REPRESENTATION.md ("Optical sensors" and
+// "Markers moved at the sensor's resolution") measured why: a SIREN that draws the
+// difference directly blurs the printed markers and the thin shading ridges, while this
+// head reproduces both from a smooth indentation field.
+//
+// The latent. z has d values: a rigid motion of the contact (t_0, t_1, phi) in the
+// trunk's isotropic coordinates (below), then the SIREN's code (d - 3 values). The SIREN
+// (models/trunk/latent_modulated_siren.h, latent_dim d - 3, 1 + C outputs) draws the
+// contact in its own frame:
+//
+//   s(p) = SIREN(R(phi)^T (p - t); code),     s_0 = w (the indentation), s_1..s_C
+//
+// and the head forms the frame's difference from the no-contact reference as the sensor
+// forms its image, the skin's printed pattern moved by the slope, plus the shading of the
+// slope, plus what neither explains:
+//
+//   g(p)   = ((w(p + e_0) - w(p - e_0)) / 2, (w(p + e_1) - w(p - e_1)) / 2)
+//            (the slope per working pixel by central differences, e_k one pixel along
+//             coordinate k: five evaluations of the SIREN's batched passes, no
+//             second-order pass; measured level with the exact slope)
+//   u(p)   = m g(p)                          (how far the skin moves, working pixels)
+//   y_c(p) = S_c(g, w, p) - S_c(0, 0, p) + M_c(p - u) - M_c(p) + s_c(p)
+//
+// S is a small shading network (5 -> H -> H -> C, SiLU) of the slope, the depth and the
+// position (so it can learn the sensor's vignetting and lighting), and M the reference's
+// markers moved by u. By default M is sampled at the SENSOR's resolution: the reference
+// as the sensor recorded it, sampled bilinearly on a K x K grid inside each working pixel
+// and averaged (the area resize the frames themselves went through), so that a marker a
+// pixel wide moves by a fraction of a working pixel without the blur and ringing of
+// resampling the already resized reference. M_c(p) at rest is the K x K average at zero
+// shift, precomputed once. MarkerSampling::kWorkingResolution instead samples that
+// at-rest table bilinearly (smoother gradients: training starts with it while m is
+// learned, docs/REPRESENTATION.md). m is ONE scalar: an isotropic skin moves along the
+// slope; a learned 2 x 2 matrix was measured to settle on sheared solutions.
+//
+// Coordinates. Pixel (r, c) of the rows x cols working grid sits at
+//   x_0 = (2 c + 1 - cols) / rows,   x_1 = (2 r + 1) / rows - 1
+// (x_0 along the columns, x_1 along the rows, as LatentModulatedSiren orders them; one
+// unit is rows / 2 pixels along both axes, so a rotation keeps shapes). The slope
+// g = (g_0, g_1) is in the same order, per working pixel.
+//
+// The contact frame touches only the SIREN's first layer: its pre-activation is
+// W_0 R^T (p - t) + b_0 + gamma_0, so the reverse pass's dL/dW_0 and dL/db_0 give
+//   dL/dt = -R W_0^T dL/db_0,   dL/dphi = <W_0 G, dL/dW_0>_F,  G = [[0, 1], [-1, 0]]
+// (dq/dphi = G q for q = R^T (p - t)): no per-pixel coordinate gradient is needed.
+//
+// Head parameters (one flat vector, double master copy): the shading network's
+// W_1 (H x 5), b_1 (H), W_2 (H x H), b_2 (H), W_3 (C x H), b_3 (C), column-major, then m.
+// Initialised from a seed (Boost.Random) as PyTorch initialises nn.Linear
+// (U(-1/sqrt(fan_in), +1/sqrt(fan_in)) for weights and biases), m = 0.
+//
+// Loss: the weighted MSE of LatentModulatedSiren (sum_j w_j sum_c (y - t)^2 /
+// (C sum_j w_j)). Pixels are named by their index j = r * cols + c on the working grid.
+//
+// Thread safety: const methods are safe to call concurrently.
+#ifndef TACTFUNC_MODELS_TRUNK_PHOTOMETRIC_TRUNK_H_
+#define TACTFUNC_MODELS_TRUNK_PHOTOMETRIC_TRUNK_H_
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "Eigen/Core"
+#include "models/core/image.h"
+#include "models/trunk/latent_modulated_siren.h"
+
+namespace tactfunc {
+
+class PhotometricTrunk {
+ public:
+  template <typename Scalar>
+  using MatrixX = Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic>;
+  template <typename Scalar>
+  using VectorX = Eigen::Matrix<Scalar, Eigen::Dynamic, 1>;
+
+  // The rigid motion's share of z: (t_0, t_1, phi).
+  static constexpr int kPoseValues = 3;
+
+  enum class MarkerSampling {
+    kSensorResolution,   // K x K bilinear samples of the sensor-resolution reference
+    kWorkingResolution,  // one bilinear sample of the at-rest (working-size) table
+  };
+
+  struct Options {
+    // Working resolution of the frames (the targets' grid). >= 3 each.
+    int rows = 0;
+    int cols = 0;
+    // Output channels C (1 for grayscale differences). In [1, 4].
+    int channels = 1;
+    // The SIREN (options().siren latent_dim is latent_dim - 3, outputs 1 + C).
+    int width = 64;
+    int num_hidden_layers = 3;
+    double omega_0 = 30.0;
+    // d, the pose values included. > kPoseValues.
+    int latent_dim = 64;
+    // H, units of each of the shading network's two hidden layers. >= 1.
+    int shading_width = 64;
+    // K of the sensor-resolution marker sampling. >= 1.
+    int supersample = 4;
+    bool IsValid(std::string* error) const;
+  };
+
+  // `reference` is the no-contact reference at the SENSOR's resolution, in the targets'
+  // units (the frame format's grayscale conversion and scale applied, not resized), with
+  // Options::channels channels; any size >= 1 x 1. Throws std::invalid_argument for
+  // invalid options or a reference with other channels.
+  PhotometricTrunk(const Options& options, const Image& reference, std::uint64_t seed = 0);
+
+  const Options& options() const { return options_; }
+  int latent_dim() const { return options_.latent_dim; }
+  int channels() const { return options_.channels; }
+  const LatentModulatedSiren& siren() const { return siren_; }
+  LatentModulatedSiren& mutable_siren() { return siren_; }
+  // The at-rest markers M(p): rows x cols x C, the K x K average of the reference.
+  const Image& at_rest() const { return at_rest_; }
+  const Image& reference() const { return reference_; }
+
+  int NumHeadParameters() const { return num_head_parameters_; }
+  const Eigen::VectorXd& head_parameters() const { return head_; }
+  // Throws std::invalid_argument if the size is not NumHeadParameters().
+  void SetHeadParameters(const Eigen::VectorXd& head);
+  // m, the last head parameter (working pixels of skin motion per unit of slope).
+  double marker_scale() const { return head_[num_head_parameters_ - 1]; }
+
+  MarkerSampling marker_sampling() const { return marker_sampling_; }
+  void set_marker_sampling(MarkerSampling sampling) { marker_sampling_ = sampling; }
+
+  // The isotropic coordinate of pixel j (x_0, x_1).
+  Eigen::Vector2d PixelCoordinate(int pixel) const;
+  // Every pixel index of the working grid, 0 .. rows * cols - 1.
+  std::vector<int> AllPixels() const;
+
+  // Outputs, N x C, for the N pixels named. Throws std::invalid_argument for a latent
+  // of the wrong size or a pixel index outside the grid.
+  template <typename Scalar>
+  MatrixX<Scalar> Forward(const std::vector<int>& pixels, const VectorX<Scalar>& z) const;
+
+  // The weighted MSE against targets (N x C) with weights (N, or empty for all ones),
+  // and its gradients w.r.t. z (d values, the pose first), the SIREN's flat parameters
+  // and the head's parameters; each output may be null. outputs (may be null) receives
+  // the N x C outputs of the same pass.
+  template <typename Scalar>
+  Scalar LossAndGradient(const std::vector<int>& pixels, const VectorX<Scalar>& z,
+                         const MatrixX<Scalar>& targets, const VectorX<Scalar>& weights,
+                         VectorX<Scalar>* dL_dz, VectorX<Scalar>* dL_dsiren,
+                         VectorX<Scalar>* dL_dhead, MatrixX<Scalar>* outputs = nullptr) const;
+
+  // The reverse pass for any dL/dY (N x C): gradients as LossAndGradient's.
+  template <typename Scalar>
+  void Backward(const std::vector<int>& pixels, const VectorX<Scalar>& z,
+                const MatrixX<Scalar>& dL_dY, VectorX<Scalar>* dL_dz,
+                VectorX<Scalar>* dL_dsiren, VectorX<Scalar>* dL_dhead) const;
+
+ private:
+  struct Pass;  // the forward pass's intermediate values, defined in the .cc
+  template <typename Scalar>
+  void RunForward(const std::vector<int>& pixels, const VectorX<Scalar>& z,
+                  Pass* pass, MatrixX<Scalar>* outputs) const;
+  template <typename Scalar>
+  void RunBackward(const Pass& pass, const std::vector<int>& pixels,
+                   const VectorX<Scalar>& z, const MatrixX<Scalar>& dL_dY,
+                   VectorX<Scalar>* dL_dz, VectorX<Scalar>* dL_dsiren,
+                   VectorX<Scalar>* dL_dhead) const;
+  // The markers at working-pixel position (row, col) (fractional), C values, and
+  // their derivatives along rows and columns (C values each; may be null).
+  void SampleMarkers(double row, double col, double* value, double* d_row,
+                     double* d_col) const;
+  void InitializeHead(std::uint64_t seed);
+
+  Options options_;
+  LatentModulatedSiren siren_;
+  Image reference_;
+  Image at_rest_;
+  MarkerSampling marker_sampling_ = MarkerSampling::kSensorResolution;
+  int num_head_parameters_ = 0;
+  Eigen::VectorXd head_;
+};
+
+}  // namespace tactfunc
+
+#endif  // TACTFUNC_MODELS_TRUNK_PHOTOMETRIC_TRUNK_H_

@@ -1,0 +1,245 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// The photometric trunk's reverse pass (latent with its rigid motion, SIREN parameters,
+// shading network and marker scale) is checked against central differences of its loss
+// with both marker samplings; the at-rest markers are the reference's area resize; a
+// SIREN that draws nothing gives an empty difference; float agrees with double; bad
+// options and references are refused by name.
+#include "models/trunk/photometric_trunk.h"
+
+#include <cmath>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "gtest/gtest.h"
+
+namespace tactfunc {
+namespace {
+
+using Eigen::MatrixXd;
+using Eigen::MatrixXf;
+using Eigen::VectorXd;
+using Eigen::VectorXf;
+
+double Uniform(unsigned* state) {
+  *state = *state * 1664525u + 1013904223u;
+  return 2.0 * (*state >> 8) / double(1u << 24) - 1.0;
+}
+
+PhotometricTrunk::Options SmallOptions() {
+  PhotometricTrunk::Options o;
+  o.rows = 8;
+  o.cols = 10;
+  o.channels = 1;
+  o.width = 12;
+  o.num_hidden_layers = 2;
+  o.latent_dim = 9;
+  o.shading_width = 6;
+  o.supersample = 3;
+  return o;
+}
+
+// A sensor-resolution reference (2x the working size) with marker-like dark dots.
+Image DottedReference(int rows, int cols, int channels) {
+  Image image(rows, cols, channels);
+  unsigned state = 7;
+  for (int r = 0; r < rows; ++r) {
+    for (int c = 0; c < cols; ++c) {
+      for (int ch = 0; ch < channels; ++ch) {
+        const bool dot = (r % 4 == 1) && (c % 4 == 2);
+        image.at(r, c, ch) = static_cast<float>(0.5 + 0.1 * Uniform(&state) - (dot ? 0.4 : 0));
+      }
+    }
+  }
+  return image;
+}
+
+struct Problem {
+  std::vector<int> pixels;
+  VectorXd z;
+  MatrixXd targets;
+  VectorXd weights;
+};
+
+Problem MakeProblem(const PhotometricTrunk& trunk) {
+  Problem p;
+  unsigned state = 99;
+  // Interior pixels and a few on the border (the marker sampling clamps there).
+  p.pixels = {0, 3, 11, 14, 25, 33, 38, 42, 47, 56, 61, 79};
+  p.z.resize(trunk.latent_dim());
+  for (int k = 0; k < p.z.size(); ++k) p.z[k] = 0.8 * Uniform(&state);
+  p.z[2] = 0.6;  // a turned contact
+  p.targets.resize(p.pixels.size(), trunk.channels());
+  for (int i = 0; i < p.targets.size(); ++i) p.targets.data()[i] = 0.2 * Uniform(&state);
+  p.weights.resize(p.pixels.size());
+  for (int i = 0; i < p.weights.size(); ++i) p.weights[i] = i == 4 ? 0.0 : 1.0 + 0.5 * Uniform(&state);
+  return p;
+}
+
+// A trunk whose markers move visibly (m = 1.5 working pixels per unit of slope) and
+// whose SIREN draws a slope of O(1) per pixel.
+PhotometricTrunk MovingTrunk(PhotometricTrunk::MarkerSampling sampling, int channels = 1) {
+  PhotometricTrunk::Options o = SmallOptions();
+  o.channels = channels;
+  PhotometricTrunk trunk(o, DottedReference(2 * o.rows, 2 * o.cols, channels), 5);
+  VectorXd head = trunk.head_parameters();
+  head[head.size() - 1] = 1.5;
+  trunk.SetHeadParameters(head);
+  trunk.set_marker_sampling(sampling);
+  return trunk;
+}
+
+void ExpectGradientsMatchDifferences(PhotometricTrunk trunk) {
+  const Problem p = MakeProblem(trunk);
+  VectorXd dz, dsiren, dhead;
+  trunk.LossAndGradient<double>(p.pixels, p.z, p.targets, p.weights, &dz, &dsiren, &dhead);
+  const double eps = 1e-6;
+  auto loss = [&](const PhotometricTrunk& t, const VectorXd& z) {
+    return t.LossAndGradient<double>(p.pixels, z, p.targets, p.weights, nullptr, nullptr,
+                                     nullptr);
+  };
+  auto expect_near = [](double analytic, double numeric, const std::string& what) {
+    EXPECT_NEAR(analytic, numeric, 2e-6 + 1e-4 * std::abs(numeric)) << what;
+  };
+  for (int k = 0; k < p.z.size(); ++k) {
+    VectorXd up = p.z, down = p.z;
+    up[k] += eps;
+    down[k] -= eps;
+    expect_near(dz[k], (loss(trunk, up) - loss(trunk, down)) / (2 * eps),
+                "dL/dz[" + std::to_string(k) + "]");
+  }
+  const VectorXd head = trunk.head_parameters();
+  for (int k = 0; k + 1 < head.size(); k += 7) {
+    PhotometricTrunk moved = trunk;
+    VectorXd h = head;
+    h[k] += eps;
+    moved.SetHeadParameters(h);
+    const double plus = loss(moved, p.z);
+    h[k] -= 2 * eps;
+    moved.SetHeadParameters(h);
+    expect_near(dhead[k], (plus - loss(moved, p.z)) / (2 * eps),
+                "dL/dhead[" + std::to_string(k) + "]");
+  }
+  expect_near(dhead[head.size() - 1], [&] {
+    PhotometricTrunk moved = trunk;
+    VectorXd h = head;
+    h[h.size() - 1] += eps;
+    moved.SetHeadParameters(h);
+    const double plus = loss(moved, p.z);
+    h[h.size() - 1] -= 2 * eps;
+    moved.SetHeadParameters(h);
+    return (plus - loss(moved, p.z)) / (2 * eps);
+  }(), "dL/dm");
+  const VectorXd theta = trunk.siren().parameters();
+  for (int k = 0; k < theta.size(); k += 5) {
+    PhotometricTrunk moved = trunk;
+    VectorXd t = theta;
+    t[k] += eps;
+    moved.mutable_siren().SetParameters(t);
+    const double plus = loss(moved, p.z);
+    t[k] -= 2 * eps;
+    moved.mutable_siren().SetParameters(t);
+    expect_near(dsiren[k], (plus - loss(moved, p.z)) / (2 * eps),
+                "dL/dtheta[" + std::to_string(k) + "]");
+  }
+}
+
+TEST(PhotometricTrunkTest, GradientsMatchCentralDifferencesWithSensorResolutionMarkers) {
+  ExpectGradientsMatchDifferences(
+      MovingTrunk(PhotometricTrunk::MarkerSampling::kSensorResolution));
+}
+
+TEST(PhotometricTrunkTest, GradientsMatchCentralDifferencesWithWorkingResolutionMarkers) {
+  ExpectGradientsMatchDifferences(
+      MovingTrunk(PhotometricTrunk::MarkerSampling::kWorkingResolution));
+}
+
+TEST(PhotometricTrunkTest, GradientsMatchCentralDifferencesWithThreeChannels) {
+  ExpectGradientsMatchDifferences(
+      MovingTrunk(PhotometricTrunk::MarkerSampling::kSensorResolution, 3));
+}
+
+TEST(PhotometricTrunkTest, MarkersMoveTheOutput) {
+  // The same trunk with the markers held at rest (m = 0) draws a different frame: the
+  // marker term is live, not cancelled.
+  PhotometricTrunk moving = MovingTrunk(PhotometricTrunk::MarkerSampling::kSensorResolution);
+  PhotometricTrunk still = moving;
+  VectorXd head = still.head_parameters();
+  head[head.size() - 1] = 0.0;
+  still.SetHeadParameters(head);
+  const Problem p = MakeProblem(moving);
+  const MatrixXd a = moving.Forward<double>(moving.AllPixels(), p.z);
+  const MatrixXd b = still.Forward<double>(still.AllPixels(), p.z);
+  EXPECT_GT((a - b).cwiseAbs().maxCoeff(), 1e-3);
+}
+
+TEST(PhotometricTrunkTest, AtRestMarkersAreTheAreaResizedReference) {
+  // K = 2 at a 2x reference samples each sensor pixel's centre exactly: the at-rest
+  // table is the 2 x 2 block mean.
+  PhotometricTrunk::Options o = SmallOptions();
+  o.supersample = 2;
+  const Image reference = DottedReference(2 * o.rows, 2 * o.cols, 1);
+  const PhotometricTrunk trunk(o, reference);
+  for (int r = 0; r < o.rows; ++r) {
+    for (int c = 0; c < o.cols; ++c) {
+      const double mean = (reference.at(2 * r, 2 * c) + reference.at(2 * r + 1, 2 * c) +
+                           reference.at(2 * r, 2 * c + 1) + reference.at(2 * r + 1, 2 * c + 1)) /
+                          4.0;
+      EXPECT_NEAR(trunk.at_rest().at(r, c), mean, 1e-6) << r << ", " << c;
+    }
+  }
+}
+
+TEST(PhotometricTrunkTest, ASirenThatDrawsNothingGivesAnEmptyDifference) {
+  PhotometricTrunk trunk = MovingTrunk(PhotometricTrunk::MarkerSampling::kSensorResolution);
+  VectorXd theta = trunk.siren().parameters();
+  for (ParameterGroup group : {ParameterGroup::kOutputWeight, ParameterGroup::kOutputBias}) {
+    LatentModulatedSiren::View<double>(&theta, trunk.siren().Block(group)).setZero();
+  }
+  trunk.mutable_siren().SetParameters(theta);
+  const Problem p = MakeProblem(trunk);
+  const MatrixXd y = trunk.Forward<double>(trunk.AllPixels(), p.z);
+  EXPECT_EQ(y.rows(), 80);
+  // The at-rest table is stored in float: the markers cancel to its rounding.
+  EXPECT_LT(y.cwiseAbs().maxCoeff(), 1e-6);
+}
+
+TEST(PhotometricTrunkTest, FloatAgreesWithDouble) {
+  const PhotometricTrunk trunk =
+      MovingTrunk(PhotometricTrunk::MarkerSampling::kSensorResolution);
+  const Problem p = MakeProblem(trunk);
+  VectorXd dz;
+  VectorXf dzf;
+  const double loss =
+      trunk.LossAndGradient<double>(p.pixels, p.z, p.targets, p.weights, &dz, nullptr, nullptr);
+  const float lossf = trunk.LossAndGradient<float>(p.pixels, p.z.cast<float>(),
+                                                   p.targets.cast<float>(),
+                                                   p.weights.cast<float>(), &dzf, nullptr,
+                                                   nullptr);
+  EXPECT_NEAR(lossf, loss, 1e-5 * loss + 1e-7);
+  EXPECT_LT((dzf.cast<double>() - dz).norm(), 1e-4 * dz.norm());
+}
+
+TEST(PhotometricTrunkTest, RefusesBadOptionsAndReferences) {
+  PhotometricTrunk::Options o = SmallOptions();
+  o.latent_dim = 3;
+  try {
+    PhotometricTrunk trunk(o, DottedReference(16, 20, 1));
+    FAIL() << "latent_dim 3 accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("latent_dim"), std::string::npos) << e.what();
+  }
+  try {
+    PhotometricTrunk trunk(SmallOptions(), DottedReference(16, 20, 3));
+    FAIL() << "a 3-channel reference accepted for 1 channel";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("16x20x3"), std::string::npos) << e.what();
+  }
+  const PhotometricTrunk trunk(SmallOptions(), DottedReference(16, 20, 1));
+  EXPECT_THROW(trunk.Forward<double>({80}, VectorXd::Zero(9)), std::invalid_argument);
+  EXPECT_THROW(trunk.Forward<double>({0}, VectorXd::Zero(8)), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace tactfunc
