@@ -42,6 +42,9 @@ void RegisterPosteriorBenchmark(CLI::App* bench, CommandBody* selected);
 void RegisterPoseMcmcBenchmark(CLI::App* bench, CommandBody* selected);
 // `bench pca` (apps/bench_pca.cc): the wall time of eval's PCA fit.
 void RegisterPcaBenchmark(CLI::App* bench, CommandBody* selected);
+// `bench photometric` (apps/bench_photometric.cc): the optical sensors' photometric trunk
+// against PCA at the same bytes per frame.
+void RegisterPhotometricBenchmark(CLI::App* bench, CommandBody* selected);
 // `bench video-memory` (apps/bench_video_memory.cc): peak memory of reading long videos.
 void RegisterVideoMemoryBenchmark(CLI::App* bench, CommandBody* selected);
 

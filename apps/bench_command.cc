@@ -141,6 +141,7 @@ void RegisterBench(CLI::App& app, CommandBody* selected) {
   RegisterPosteriorBenchmark(bench, selected);
   RegisterPoseMcmcBenchmark(bench, selected);
   RegisterPcaBenchmark(bench, selected);
+  RegisterPhotometricBenchmark(bench, selected);
   RegisterVideoMemoryBenchmark(bench, selected);
 }
 

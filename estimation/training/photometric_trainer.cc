@@ -1,0 +1,260 @@
+// Copyright 2026 The tactfunc Authors.
+#include "estimation/training/photometric_trainer.h"
+
+#include <chrono>
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+#include "boost/random/mersenne_twister.hpp"
+#include "boost/random/uniform_int_distribution.hpp"
+#include "models/core/parallel_for.h"
+#include "models/core/seed.h"
+
+namespace tactfunc {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+// Adam with bias correction on one flat vector (double moments).
+struct Adam {
+  Eigen::VectorXd m, v;
+  explicit Adam(Eigen::Index size) : m(Eigen::VectorXd::Zero(size)), v(Eigen::VectorXd::Zero(size)) {}
+  void Step(int t, double rate, const Eigen::VectorXd& gradient, double* values) {
+    constexpr double b1 = 0.9, b2 = 0.999, eps = 1e-8;
+    m = b1 * m + (1 - b1) * gradient;
+    v = b2 * v + (1 - b2) * gradient.cwiseAbs2();
+    const double c1 = 1 - std::pow(b1, t), c2 = 1 - std::pow(b2, t);
+    for (Eigen::Index i = 0; i < m.size(); ++i) {
+      values[i] -= rate * (m[i] / c1) / (std::sqrt(v[i] / c2) + eps);
+    }
+  }
+};
+
+// Draws `count` pixels (with replacement) among the frame's pixels and gathers their
+// targets and weights.
+void DrawPixels(const TrunkTargets& frame, int count, boost::random::mt19937_64* rng,
+                std::vector<int>* pixels, Eigen::MatrixXf* targets, Eigen::VectorXf* weights) {
+  const int n = static_cast<int>(frame.values.rows());
+  boost::random::uniform_int_distribution<int> pick(0, n - 1);
+  pixels->resize(count);
+  targets->resize(count, frame.values.cols());
+  weights->resize(count);
+  for (int i = 0; i < count; ++i) {
+    const int j = pick(*rng);
+    (*pixels)[i] = j;
+    targets->row(i) = frame.values.row(j);
+    (*weights)[i] = frame.weights.size() == 0 ? 1.0f : frame.weights[j];
+  }
+}
+
+void CheckFrame(const PhotometricTrunk& trunk, const TrunkTargets& frame) {
+  const auto& o = trunk.options();
+  if (frame.rows != o.rows || frame.cols != o.cols ||
+      frame.values.rows() != static_cast<Eigen::Index>(o.rows) * o.cols ||
+      frame.values.cols() != o.channels) {
+    std::ostringstream message;
+    message << "photometric trunk: expected frames of " << o.rows << " x " << o.cols << " x "
+            << o.channels << ", found " << frame.rows << " x " << frame.cols << " x "
+            << frame.values.cols();
+    throw std::invalid_argument(message.str());
+  }
+}
+
+}  // namespace
+
+bool PhotometricTrainer::Options::IsValid(std::string* error) const {
+  std::ostringstream message;
+  if (steps < 1) {
+    message << "steps must be >= 1, found " << steps;
+  } else if (batch_frames < 1 || batch_pixels < 1) {
+    message << "batch_frames and batch_pixels must be >= 1, found " << batch_frames << " and "
+            << batch_pixels;
+  } else if (!(trunk_learning_rate > 0 && std::isfinite(trunk_learning_rate))) {
+    message << "trunk_learning_rate must be finite and > 0, found " << trunk_learning_rate;
+  } else if (!(latent_learning_rate > 0 && std::isfinite(latent_learning_rate))) {
+    message << "latent_learning_rate must be finite and > 0, found " << latent_learning_rate;
+  } else if (marker_warmup_steps < 0) {
+    message << "marker_warmup_steps must be >= 0, found " << marker_warmup_steps;
+  } else if (threads < 1) {
+    message << "threads must be >= 1, found " << threads;
+  }
+  const std::string text = message.str();
+  if (error != nullptr) *error = text;
+  return text.empty();
+}
+
+bool PhotometricFitOptions::IsValid(std::string* error) const {
+  std::ostringstream message;
+  if (steps < 1 || batch_pixels < 1) {
+    message << "steps and batch_pixels must be >= 1, found " << steps << " and "
+            << batch_pixels;
+  } else if (!(learning_rate > 0 && std::isfinite(learning_rate)) ||
+             !(final_learning_rate >= 0 && final_learning_rate <= learning_rate)) {
+    message << "learning_rate must be finite and > 0 and final_learning_rate in [0, "
+               "learning_rate], found "
+            << learning_rate << " and " << final_learning_rate;
+  }
+  const std::string text = message.str();
+  if (error != nullptr) *error = text;
+  return text.empty();
+}
+
+PhotometricTrainer::PhotometricTrainer(const Options& options) : options_(options) {
+  std::string error;
+  if (!options.IsValid(&error)) {
+    throw std::invalid_argument("PhotometricTrainer::Options: " + error);
+  }
+}
+
+Eigen::Vector3d MomentPose(const PhotometricTrunk& trunk, const TrunkTargets& frame) {
+  CheckFrame(trunk, frame);
+  const Eigen::Index n = frame.values.rows();
+  double total = 0, s0 = 0, s1 = 0;
+  Eigen::VectorXd energy(n);
+  for (Eigen::Index j = 0; j < n; ++j) {
+    const double w = frame.weights.size() == 0 ? 1.0 : frame.weights[j];
+    energy[j] = w * frame.values.row(j).cast<double>().squaredNorm();
+    const Eigen::Vector2d x = trunk.PixelCoordinate(static_cast<int>(j));
+    total += energy[j];
+    s0 += energy[j] * x[0];
+    s1 += energy[j] * x[1];
+  }
+  if (!(total > 0)) return Eigen::Vector3d::Zero();
+  const Eigen::Vector2d t(s0 / total, s1 / total);
+  double c00 = 0, c01 = 0, c11 = 0;
+  for (Eigen::Index j = 0; j < n; ++j) {
+    const Eigen::Vector2d d = trunk.PixelCoordinate(static_cast<int>(j)) - t;
+    c00 += energy[j] * d[0] * d[0];
+    c01 += energy[j] * d[0] * d[1];
+    c11 += energy[j] * d[1] * d[1];
+  }
+  return {t[0], t[1], 0.5 * std::atan2(2 * c01, c00 - c11)};
+}
+
+PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTargets>& frames,
+                                                     const Image& reference,
+                                                     const Callback& callback) const {
+  if (frames.empty()) throw std::invalid_argument("PhotometricTrainer: no training frames");
+  const auto start = std::chrono::steady_clock::now();
+  const Options& o = options_;
+  PhotometricTrunk::Options trunk_options = o.trunk;
+  trunk_options.rows = frames[0].rows;
+  trunk_options.cols = frames[0].cols;
+  trunk_options.channels = static_cast<int>(frames[0].values.cols());
+  PhotometricTrunk trunk(trunk_options, reference, o.seed);
+  for (const TrunkTargets& frame : frames) CheckFrame(trunk, frame);
+  const int num_frames = static_cast<int>(frames.size());
+  const int d = trunk.latent_dim();
+  Eigen::MatrixXd latents = Eigen::MatrixXd::Zero(d, num_frames);  // one column per frame
+  for (int i = 0; i < num_frames; ++i) {
+    latents.col(i).head<PhotometricTrunk::kPoseValues>() = MomentPose(trunk, frames[i]);
+  }
+  Eigen::VectorXd siren_theta = trunk.siren().parameters();
+  Eigen::VectorXd head = trunk.head_parameters();
+  Adam adam_siren(siren_theta.size()), adam_head(head.size()), adam_latents(latents.size());
+
+  struct Slot {
+    int frame = 0;
+    double loss = 0;
+    Eigen::VectorXf dz, dsiren, dhead;
+  };
+  std::vector<Slot> slots(o.batch_frames);
+  Summary summary;
+  summary.loss.reserve(o.steps);
+  for (int step = 1; step <= o.steps; ++step) {
+    trunk.set_marker_sampling(step <= o.marker_warmup_steps
+                                  ? PhotometricTrunk::MarkerSampling::kWorkingResolution
+                                  : PhotometricTrunk::MarkerSampling::kSensorResolution);
+    const std::uint64_t step_seed = DeriveSeed(o.seed, 1000 + step);
+    {
+      boost::random::mt19937_64 rng(step_seed);
+      boost::random::uniform_int_distribution<int> pick(0, num_frames - 1);
+      for (Slot& slot : slots) slot.frame = pick(rng);
+    }
+    internal::ParallelFor(o.batch_frames, o.threads, [&](int s) {
+      Slot& slot = slots[s];
+      boost::random::mt19937_64 rng(DeriveSeed(step_seed, s));
+      std::vector<int> pixels;
+      Eigen::MatrixXf targets;
+      Eigen::VectorXf weights;
+      DrawPixels(frames[slot.frame], o.batch_pixels, &rng, &pixels, &targets, &weights);
+      const Eigen::VectorXf z = latents.col(slot.frame).cast<float>();
+      slot.loss = trunk.LossAndGradient<float>(pixels, z, targets, weights, &slot.dz,
+                                               &slot.dsiren, &slot.dhead);
+    });
+    Eigen::VectorXd g_siren = Eigen::VectorXd::Zero(siren_theta.size());
+    Eigen::VectorXd g_head = Eigen::VectorXd::Zero(head.size());
+    Eigen::MatrixXd g_latents = Eigen::MatrixXd::Zero(d, num_frames);
+    double loss = 0;
+    const double scale = 1.0 / o.batch_frames;
+    for (const Slot& slot : slots) {
+      loss += scale * slot.loss;
+      g_siren += scale * slot.dsiren.cast<double>();
+      g_head += scale * slot.dhead.cast<double>();
+      g_latents.col(slot.frame) += scale * slot.dz.cast<double>();
+    }
+    const double factor =
+        o.cosine_schedule ? 0.1 + 0.45 * (1 + std::cos(kPi * (step - 1) / o.steps)) : 1.0;
+    adam_siren.Step(step, factor * o.trunk_learning_rate, g_siren, siren_theta.data());
+    adam_head.Step(step, factor * o.trunk_learning_rate, g_head, head.data());
+    adam_latents.Step(step, factor * o.latent_learning_rate,
+                      Eigen::Map<const Eigen::VectorXd>(g_latents.data(), g_latents.size()),
+                      latents.data());
+    trunk.mutable_siren().SetParameters(siren_theta);
+    trunk.SetHeadParameters(head);
+    summary.steps = step;
+    summary.final_loss = loss;
+    summary.loss.push_back(loss);
+    if (!std::isfinite(loss)) break;
+    if (callback && !callback(step, loss)) {
+      summary.stopped = true;
+      break;
+    }
+  }
+  trunk.set_marker_sampling(PhotometricTrunk::MarkerSampling::kSensorResolution);
+  summary.seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return Result{std::move(trunk), latents.transpose(), std::move(summary)};
+}
+
+PhotometricFit FitPhotometricLatent(const PhotometricTrunk& trunk, const TrunkTargets& frame,
+                                    const PhotometricFitOptions& options, std::uint64_t seed) {
+  std::string error;
+  if (!options.IsValid(&error)) {
+    throw std::invalid_argument("PhotometricFitOptions: " + error);
+  }
+  CheckFrame(trunk, frame);
+  const Eigen::Vector3d pose = MomentPose(trunk, frame);
+  const std::vector<int> all = trunk.AllPixels();
+  PhotometricFit best;
+  for (int start = 0; start < (options.flipped_start ? 2 : 1); ++start) {
+    Eigen::VectorXd z = Eigen::VectorXd::Zero(trunk.latent_dim());
+    z.head<PhotometricTrunk::kPoseValues>() = pose;
+    z[2] += kPi * start;
+    Adam adam(z.size());
+    boost::random::mt19937_64 rng(DeriveSeed(seed, start));
+    std::vector<int> pixels;
+    Eigen::MatrixXf targets;
+    Eigen::VectorXf weights, dz;
+    for (int step = 1; step <= options.steps; ++step) {
+      DrawPixels(frame, options.batch_pixels, &rng, &pixels, &targets, &weights);
+      trunk.LossAndGradient<float>(pixels, z.cast<float>(), targets, weights, &dz, nullptr,
+                                   nullptr);
+      const double rate =
+          options.final_learning_rate + (options.learning_rate - options.final_learning_rate) *
+                                            0.5 * (1 + std::cos(kPi * (step - 1) / options.steps));
+      adam.Step(step, rate, dz.cast<double>(), z.data());
+    }
+    const double loss = trunk.LossAndGradient<float>(all, z.cast<float>(), frame.values,
+                                                     frame.weights, nullptr, nullptr, nullptr);
+    if (start == 0 || loss < best.loss) {
+      best.latent = z;
+      best.loss = loss;
+      best.flipped = start == 1;
+    }
+  }
+  return best;
+}
+
+}  // namespace tactfunc

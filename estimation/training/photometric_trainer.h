@@ -1,0 +1,133 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// PhotometricTrainer: trains an optical sensor's PhotometricTrunk
+// (models/trunk/photometric_trunk.h) and fits its latents.
+//
+// Training is JOINT ("auto-decoding"): the SIREN's parameters, the head's parameters and
+// one latent per training frame are optimised together by Adam (Kingma & Ba 2015) on
+// random pixel subsets, every latent starting from its frame's moment pose (below) and a
+// zero code. Meta-SGD, as TrunkTrainer trains the direct trunk, would need second
+// derivatives of the head's slope through the inner steps; joint training is what
+// docs/REPRESENTATION.md measured for this head. Each step draws Options::batch_frames
+// frames (with replacement) and Options::batch_pixels pixels of each (with replacement),
+// and minimises the mean of the frames' weighted MSEs. Adam updates every latent at
+// every step (a latent outside the batch has a zero gradient and moves by its momentum
+// alone), as a dense optimiser over one latent matrix does. The rates follow
+// rate * (0.1 + 0.45 (1 + cos(pi k / steps))) at step k + 1 with Options::cosine_schedule
+// (from the full rate to a tenth). For the first Options::marker_warmup_steps the markers
+// are sampled at the working resolution (smooth gradients while the head learns how far
+// a slope moves the skin; from the first step at the sensor's resolution the marker
+// scale was measured to stay at zero), then at the sensor's.
+//
+// Fitting (FitPhotometricLatent) keeps the trunk fixed and runs Adam on one frame's
+// latent: random pixel subsets, the rate annealed by a cosine from
+// PhotometricFitOptions::learning_rate to final_learning_rate, from the moment pose and
+// (with flipped_start) once more from the pose turned by pi (a principal axis has no
+// direction), keeping the fit with the lower loss on all of the frame's valid pixels.
+//
+// The moment pose (MomentPose): the centroid t of the frame's difference energy
+// e_j = w_j sum_c y_jc^2 over the trunk's isotropic coordinates, and the angle
+// phi = atan2(2 c_01, c_00 - c_11) / 2 of its second central moments c; zero for a frame
+// without energy.
+//
+// Determinism: every random choice is drawn from DeriveSeed (models/core/seed.h) of the
+// seed, the step (or the frame) and the batch slot; the frames of a step are processed
+// by Options::threads workers writing their own slots, summed in slot order, so a run
+// is bit-identical for any thread count.
+//
+// Errors: invalid options throw std::invalid_argument naming the field; frames of
+// another shape than the trunk's working grid throw std::invalid_argument quoting both.
+#ifndef TACTFUNC_ESTIMATION_TRAINING_PHOTOMETRIC_TRAINER_H_
+#define TACTFUNC_ESTIMATION_TRAINING_PHOTOMETRIC_TRAINER_H_
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "Eigen/Core"
+#include "estimation/data/trunk_targets.h"
+#include "models/core/image.h"
+#include "models/trunk/photometric_trunk.h"
+
+namespace tactfunc {
+
+class PhotometricTrainer {
+ public:
+  struct Options {
+    // The trunk; rows, cols and channels are taken from the training frames.
+    PhotometricTrunk::Options trunk;
+    // Adam steps. >= 1.
+    int steps = 3000;
+    // Frames and pixels per frame of one step. >= 1 each.
+    int batch_frames = 64;
+    int batch_pixels = 512;
+    // Adam step sizes of the trunk (SIREN and head) and of the latents. > 0.
+    double trunk_learning_rate = 2e-4;
+    double latent_learning_rate = 2e-2;
+    bool cosine_schedule = true;
+    // Steps with working-resolution markers before switching to the sensor's. >= 0.
+    int marker_warmup_steps = 1000;
+    std::uint64_t seed = 1;
+    // Worker threads over a step's frames. >= 1.
+    int threads = 1;
+    bool IsValid(std::string* error) const;
+  };
+
+  struct Summary {
+    int steps = 0;              // steps taken
+    double seconds = 0;
+    double final_loss = 0;      // the last step's batch loss
+    bool stopped = false;       // the callback asked to stop
+    std::vector<double> loss;   // every step's batch loss
+  };
+
+  // Called after every step with (step (1-based), batch loss); returning false stops.
+  using Callback = std::function<bool(int step, double loss)>;
+
+  // Throws std::invalid_argument with IsValid's message.
+  explicit PhotometricTrainer(const Options& options);
+  const Options& options() const { return options_; }
+
+  struct Result {
+    PhotometricTrunk trunk;
+    Eigen::MatrixXd latents;  // the training frames' latents, one row each
+    Summary summary;
+  };
+
+  // Trains a trunk on `frames` (all of one working size) given the sensor-resolution
+  // reference in the targets' units (PhotometricTrunk's constructor). Throws
+  // std::invalid_argument for no frames or frames of mixed sizes.
+  Result Train(const std::vector<TrunkTargets>& frames, const Image& reference,
+               const Callback& callback = {}) const;
+
+ private:
+  Options options_;
+};
+
+struct PhotometricFitOptions {
+  int steps = 400;           // Adam steps per start, >= 1
+  int batch_pixels = 512;    // pixels per step (with replacement), >= 1
+  double learning_rate = 1e-2;
+  double final_learning_rate = 1e-4;
+  bool flipped_start = true;  // also start from the moment pose turned by pi
+  bool IsValid(std::string* error) const;
+};
+
+struct PhotometricFit {
+  Eigen::VectorXd latent;
+  double loss = 0;        // the weighted MSE on all of the frame's valid pixels
+  bool flipped = false;   // the start turned by pi won
+};
+
+// The moment pose of the header comment, (t_0, t_1, phi).
+Eigen::Vector3d MomentPose(const PhotometricTrunk& trunk, const TrunkTargets& frame);
+
+// Fits one frame's latent with the trunk fixed (header comment); `seed` draws the pixel
+// subsets. Throws std::invalid_argument for invalid options or a frame of another size.
+PhotometricFit FitPhotometricLatent(const PhotometricTrunk& trunk, const TrunkTargets& frame,
+                                    const PhotometricFitOptions& options, std::uint64_t seed);
+
+}  // namespace tactfunc
+
+#endif  // TACTFUNC_ESTIMATION_TRAINING_PHOTOMETRIC_TRAINER_H_
