@@ -219,18 +219,27 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
 }
 
 PhotometricFit FitPhotometricLatent(const PhotometricTrunk& trunk, const TrunkTargets& frame,
-                                    const PhotometricFitOptions& options, std::uint64_t seed) {
+                                    const PhotometricFitOptions& options, std::uint64_t seed,
+                                    const Eigen::VectorXd* start_latent) {
   std::string error;
   if (!options.IsValid(&error)) {
     throw std::invalid_argument("PhotometricFitOptions: " + error);
   }
   CheckFrame(trunk, frame);
-  const Eigen::Vector3d pose = MomentPose(trunk, frame);
+  if (start_latent != nullptr && start_latent->size() != trunk.latent_dim()) {
+    throw std::invalid_argument("FitPhotometricLatent: expected a start of " +
+                                std::to_string(trunk.latent_dim()) + " values, found " +
+                                std::to_string(start_latent->size()));
+  }
   const std::vector<int> all = trunk.AllPixels();
   PhotometricFit best;
   for (int start = 0; start < (options.flipped_start ? 2 : 1); ++start) {
     Eigen::VectorXd z = Eigen::VectorXd::Zero(trunk.latent_dim());
-    z.head<PhotometricTrunk::kPoseValues>() = pose;
+    if (start_latent != nullptr) {
+      z = *start_latent;
+    } else {
+      z.head<PhotometricTrunk::kPoseValues>() = MomentPose(trunk, frame);
+    }
     z[2] += kPi * start;
     Adam adam(z.size());
     boost::random::mt19937_64 rng(DeriveSeed(seed, start));

@@ -124,9 +124,13 @@ struct PhotometricFit {
 Eigen::Vector3d MomentPose(const PhotometricTrunk& trunk, const TrunkTargets& frame);
 
 // Fits one frame's latent with the trunk fixed (header comment); `seed` draws the pixel
-// subsets. Throws std::invalid_argument for invalid options or a frame of another size.
+// subsets. `start` (d values; null: the moment pose and a zero code) is a warm start
+// instead, e.g. a neighbour's latent (with flipped_start also turned by pi). Throws
+// std::invalid_argument for invalid options, a frame of another size or a start of
+// another size.
 PhotometricFit FitPhotometricLatent(const PhotometricTrunk& trunk, const TrunkTargets& frame,
-                                    const PhotometricFitOptions& options, std::uint64_t seed);
+                                    const PhotometricFitOptions& options, std::uint64_t seed,
+                                    const Eigen::VectorXd* start = nullptr);
 
 }  // namespace tactfunc
 

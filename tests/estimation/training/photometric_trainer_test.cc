@@ -1,0 +1,194 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// PhotometricTrainer and FitPhotometricLatent: training lowers the loss on frames drawn
+// by a teacher trunk and is bit-identical for any thread count; a fit of a frame the
+// trunk drew from a known latent comes close to it; the moment pose finds a contact's
+// centre and axis; bad options and frames are refused by name.
+#include "estimation/training/photometric_trainer.h"
+
+#include <cmath>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "gtest/gtest.h"
+
+namespace tactfunc {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+PhotometricTrunk::Options SmallTrunk() {
+  PhotometricTrunk::Options o;
+  o.rows = 12;
+  o.cols = 16;
+  o.channels = 1;
+  o.width = 16;
+  o.num_hidden_layers = 2;
+  o.latent_dim = 8;
+  o.shading_width = 8;
+  o.supersample = 2;
+  return o;
+}
+
+Image Reference(int rows, int cols) {
+  Image image(rows, cols, 1);
+  for (int r = 0; r < rows; ++r) {
+    for (int c = 0; c < cols; ++c) {
+      image.at(r, c) = (r % 4 == 1 && c % 4 == 2) ? 0.2f : 0.6f;
+    }
+  }
+  return image;
+}
+
+TrunkTargets Targets(const Eigen::MatrixXf& values, int rows, int cols) {
+  TrunkTargets t;
+  t.values = values;
+  t.weights = Eigen::VectorXf::Ones(values.rows());
+  t.rows = rows;
+  t.cols = cols;
+  return t;
+}
+
+// Frames drawn by a teacher trunk (its markers moving) from latents with varied poses.
+struct Teacher {
+  PhotometricTrunk trunk;
+  std::vector<Eigen::VectorXd> latents;
+  std::vector<TrunkTargets> frames;
+};
+
+Teacher MakeTeacher(int count) {
+  const PhotometricTrunk::Options o = SmallTrunk();
+  Teacher t{PhotometricTrunk(o, Reference(2 * o.rows, 2 * o.cols), 42), {}, {}};
+  Eigen::VectorXd head = t.trunk.head_parameters();
+  head[head.size() - 1] = 0.8;
+  t.trunk.SetHeadParameters(head);
+  unsigned state = 3;
+  auto uniform = [&state] {
+    state = state * 1664525u + 1013904223u;
+    return 2.0 * (state >> 8) / double(1u << 24) - 1.0;
+  };
+  for (int i = 0; i < count; ++i) {
+    Eigen::VectorXd z(o.latent_dim);
+    for (int k = 0; k < z.size(); ++k) z[k] = 0.5 * uniform();
+    z[2] = kPi * uniform();
+    t.latents.push_back(z);
+    t.frames.push_back(Targets(t.trunk.Forward<float>(t.trunk.AllPixels(), z.cast<float>()),
+                               o.rows, o.cols));
+  }
+  return t;
+}
+
+PhotometricTrainer::Options QuickOptions(int threads) {
+  PhotometricTrainer::Options o;
+  o.trunk = SmallTrunk();
+  o.steps = 150;
+  o.batch_frames = 6;
+  o.batch_pixels = 64;
+  o.trunk_learning_rate = 2e-3;
+  o.marker_warmup_steps = 20;
+  o.threads = threads;
+  return o;
+}
+
+TEST(PhotometricTrainerTest, TrainingLowersTheLossAndIsTheSameForAnyThreadCount) {
+  const Teacher teacher = MakeTeacher(12);
+  const Image reference = teacher.trunk.reference();
+  const PhotometricTrainer::Result one =
+      PhotometricTrainer(QuickOptions(1)).Train(teacher.frames, reference);
+  const PhotometricTrainer::Result two =
+      PhotometricTrainer(QuickOptions(2)).Train(teacher.frames, reference);
+  ASSERT_EQ(one.summary.steps, 150);
+  ASSERT_EQ(one.summary.loss.size(), 150u);
+  double first = 0, last = 0;
+  for (int k = 0; k < 10; ++k) {
+    first += one.summary.loss[k];
+    last += one.summary.loss[140 + k];
+  }
+  EXPECT_LT(last, 0.7 * first) << "first 10 steps " << first / 10 << ", last " << last / 10;
+  EXPECT_EQ(one.summary.loss, two.summary.loss);
+  EXPECT_EQ(one.trunk.siren().parameters(), two.trunk.siren().parameters());
+  EXPECT_EQ(one.trunk.head_parameters(), two.trunk.head_parameters());
+  EXPECT_EQ(one.latents, two.latents);
+  EXPECT_EQ(one.latents.rows(), 12);
+  // The trained trunk samples its markers at the sensor's resolution.
+  EXPECT_EQ(one.trunk.marker_sampling(), PhotometricTrunk::MarkerSampling::kSensorResolution);
+}
+
+TEST(PhotometricTrainerTest, TheCallbackStopsTraining) {
+  const Teacher teacher = MakeTeacher(4);
+  const PhotometricTrainer::Result result = PhotometricTrainer(QuickOptions(1)).Train(
+      teacher.frames, teacher.trunk.reference(), [](int step, double) { return step < 5; });
+  EXPECT_TRUE(result.summary.stopped);
+  EXPECT_EQ(result.summary.steps, 5);
+}
+
+TEST(PhotometricTrainerTest, AFitOfAFrameTheTrunkDrewLowersItsLossTenfold) {
+  const Teacher teacher = MakeTeacher(3);
+  PhotometricFitOptions options;
+  options.steps = 300;
+  options.batch_pixels = 192;
+  for (int i = 0; i < 3; ++i) {
+    const TrunkTargets& frame = teacher.frames[i];
+    // From the true pose and a zero code (a random teacher's frames are no contacts:
+    // their moment pose says little about the pose that drew them).
+    Eigen::VectorXd start = Eigen::VectorXd::Zero(8);
+    start.head<3>() = teacher.latents[i].head<3>();
+    const double start_loss = teacher.trunk.LossAndGradient<float>(
+        teacher.trunk.AllPixels(), start.cast<float>(), frame.values, frame.weights, nullptr,
+        nullptr, nullptr);
+    const PhotometricFit fit = FitPhotometricLatent(teacher.trunk, frame, options, 11 + i,
+                                                    &start);
+    EXPECT_LT(fit.loss, 0.1 * start_loss) << "frame " << i;
+    EXPECT_EQ(fit.latent.size(), 8);
+  }
+}
+
+TEST(PhotometricTrainerTest, MomentPoseFindsTheCentreAndTheAxis) {
+  const PhotometricTrunk trunk(SmallTrunk(), Reference(24, 32));
+  // A bar along the columns, rows 5-6, columns 4-11: centre between pixels (5, 4) and
+  // (6, 11), axis along x_0 (phi = 0); then the same bar along the rows (phi = pi / 2).
+  Eigen::MatrixXf values = Eigen::MatrixXf::Zero(12 * 16, 1);
+  for (int r = 5; r <= 6; ++r) {
+    for (int c = 4; c <= 11; ++c) values(r * 16 + c, 0) = 1.0f;
+  }
+  const Eigen::Vector3d pose = MomentPose(trunk, Targets(values, 12, 16));
+  const Eigen::Vector2d a = trunk.PixelCoordinate(5 * 16 + 4), b = trunk.PixelCoordinate(6 * 16 + 11);
+  EXPECT_NEAR(pose[0], (a[0] + b[0]) / 2, 1e-9);
+  EXPECT_NEAR(pose[1], (a[1] + b[1]) / 2, 1e-9);
+  EXPECT_NEAR(pose[2], 0.0, 1e-9);
+  Eigen::MatrixXf column = Eigen::MatrixXf::Zero(12 * 16, 1);
+  for (int r = 2; r <= 9; ++r) column(r * 16 + 7, 0) = -1.0f;  // energy: the sign is squared
+  EXPECT_NEAR(std::abs(MomentPose(trunk, Targets(column, 12, 16))[2]), kPi / 2, 1e-9);
+  EXPECT_EQ(MomentPose(trunk, Targets(Eigen::MatrixXf::Zero(12 * 16, 1), 12, 16)),
+            Eigen::Vector3d::Zero());
+}
+
+TEST(PhotometricTrainerTest, RefusesBadOptionsAndFrames) {
+  PhotometricTrainer::Options o = QuickOptions(1);
+  o.batch_pixels = 0;
+  try {
+    PhotometricTrainer trainer(o);
+    FAIL() << "batch_pixels 0 accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("batch_pixels"), std::string::npos) << e.what();
+  }
+  const PhotometricTrainer trainer(QuickOptions(1));
+  EXPECT_THROW(trainer.Train({}, Reference(24, 32)), std::invalid_argument);
+  const Teacher teacher = MakeTeacher(2);
+  std::vector<TrunkTargets> mixed = teacher.frames;
+  mixed.push_back(Targets(Eigen::MatrixXf::Zero(10 * 16, 1), 10, 16));
+  try {
+    trainer.Train(mixed, teacher.trunk.reference());
+    FAIL() << "a frame of another size accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("10 x 16"), std::string::npos) << e.what();
+  }
+  PhotometricFitOptions fit;
+  fit.final_learning_rate = 1.0;  // above learning_rate
+  EXPECT_THROW(FitPhotometricLatent(teacher.trunk, teacher.frames[0], fit, 1),
+               std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace tactfunc
