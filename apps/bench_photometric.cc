@@ -168,8 +168,10 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
     Eigen::MatrixXf codes = pca.Encode(test_matrix);
     if (half) codes = codes.unaryExpr([](float v) { return Half(v); });
     const Eigen::MatrixXf decoded = pca.Decode(codes);
-    Row row{half ? "PCA-" + std::to_string(n) + " float16 (same bits)"
-                 : "PCA-" + std::to_string(n) + " float32",
+    // Fewer train frames than components cap PCA (it has no more): the name says so.
+    const bool capped = n < (half ? d : std::max(1, d / 2));
+    Row row{"PCA-" + std::to_string(n) + (half ? " float16" : " float32") +
+                (capped ? " (capped by the train frames)" : half ? " (same bits)" : ""),
             {}, {}};
     for (std::size_t i = 0; i < test.size(); ++i) {
       const Eigen::MatrixXf p = UnflattenFrame(decoded.row(static_cast<Eigen::Index>(i)), channels);

@@ -226,6 +226,37 @@ TEST_F(CliTest, BenchPcaOnADatasetScoresThreeBasesAgainstTheNoiseFreeFrames) {
   EXPECT_THAT(sizes.err, HasSubstr("--sizes"));
 }
 
+TEST_F(CliTest, BenchPhotometricTrainsFitsAndScoresAgainstPcaAtTheSameBits) {
+  ASSERT_EQ(Run("synth --out " + Path("d") + " --frames-per-tool 6 --tools rod,square "
+                "--sensors gelslim --clean --seed 3 --test-fraction 0.25").exit_code, 0);
+  const Result r = Run("bench photometric --data " + Path("d") + " --steps 6 --warmup 3 "
+                       "--latent-dim 8 --width 8 --layers 1 --fit-steps 3 --max-test-frames 2 "
+                       "--picture " + Path("p.png") + " --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json j = r.LastJson();
+  EXPECT_EQ(j["bench"], "photometric");
+  EXPECT_EQ(j["bytes_per_frame"], 16);
+  EXPECT_EQ(j["test_frames"], 2);
+  ASSERT_EQ(j["rows"].size(), 3u) << j.dump();
+  EXPECT_EQ(j["rows"][1]["representation"], "PCA-8 float16 (same bits)");
+  for (const nlohmann::json& row : j["rows"]) {
+    EXPECT_TRUE(std::isfinite(row["psnr_clean"].get<double>())) << row.dump();
+  }
+  EXPECT_NEAR(j["margin_vs_pca_same_bits_clean"].get<double>(),
+              j["rows"][2]["psnr_clean"].get<double>() - j["rows"][1]["psnr_clean"].get<double>(),
+              1e-9);
+  EXPECT_TRUE(std::filesystem::exists(Path("p.png")));
+  EXPECT_THAT(r.err, HasSubstr("step 6/6"));
+
+  // Data without noise-free frames is refused naming it.
+  ASSERT_EQ(Run("synth --out " + Path("n") + " --frames-per-tool 2 --tools rod --sensors gelslim")
+                .exit_code, 0);
+  const Result unclean = Run("bench photometric --data " + Path("n"));
+  EXPECT_NE(unclean.exit_code, 0);
+  EXPECT_THAT(unclean.err, HasSubstr("no noise-free frames"));
+  EXPECT_THAT(unclean.err, HasSubstr(Path("n")));
+}
+
 TEST_F(CliTest, SynthWritesThePairedFramesItReports) {
   const Result r = Run("synth --out " + Path("d") +
                        " --frames-per-tool 2 --seed 7 --tools rod,square,l_shape --json");
