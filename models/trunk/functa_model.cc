@@ -47,6 +47,10 @@ void FunctaModel::SetTrunk(SensorTrunk trunk) {
                                 std::to_string(trunk.siren.latent_dim()));
   }
   if (!trunk.meta_sgd.IsValid(&error)) throw std::invalid_argument(error);
+  if (trunk.photometric != nullptr &&
+      trunk.photometric->siren().parameters() != trunk.siren.parameters()) {
+    throw std::invalid_argument("FunctaModel: the photometric head's SIREN is not the trunk's");
+  }
   for (SensorTrunk& existing : trunks_) {
     if (existing.sensor == trunk.sensor) {
       existing = std::move(trunk);
@@ -56,6 +60,11 @@ void FunctaModel::SetTrunk(SensorTrunk trunk) {
   trunks_.push_back(std::move(trunk));
   std::sort(trunks_.begin(), trunks_.end(),
             [](const SensorTrunk& a, const SensorTrunk& b) { return a.sensor < b.sensor; });
+}
+
+int TrunkLatentDim(const SensorTrunk& trunk) {
+  return trunk.photometric != nullptr ? trunk.photometric->latent_dim()
+                                      : trunk.siren.latent_dim();
 }
 
 SensorDescription TrunkSensorDescription(const SensorTrunk& trunk) {
@@ -146,6 +155,20 @@ std::string FunctaModel::Serialize() const {
     if (t.description) {
       meta["trunks"].back()["sensor_description"] =
           nlohmann::json::parse(SensorDescriptionToJson(*t.description));
+    }
+    if (t.photometric != nullptr) {
+      const PhotometricTrunk& p = *t.photometric;
+      const Image& ref = p.reference();
+      meta["trunks"].back()["photometric"] = {
+          {"latent_dim", p.latent_dim()},
+          {"shading_width", p.options().shading_width},
+          {"supersample", p.options().supersample},
+          {"reference", {{"rows", ref.rows}, {"cols", ref.cols}, {"channels", ref.channels}}}};
+      file.Add(name + "/head", TensorFile::DType::kFloat32, {p.NumHeadParameters()},
+               ToVector(p.head_parameters()));
+      file.Add(name + "/reference", TensorFile::DType::kFloat32,
+               {static_cast<std::int64_t>(ref.size())},
+               std::vector<double>(ref.data.begin(), ref.data.end()));
     }
     file.Add(name + "/theta", TensorFile::DType::kFloat32, {t.siren.NumParameters()},
              ToVector(t.siren.parameters()));
@@ -264,6 +287,49 @@ FunctaModel FunctaModel::FromTensorFile(const TensorFile& file, const std::strin
                                                                   theta.values.size()));
       const auto& alpha = file.Get(name + "/alpha", {options.latent_dim});
       trunk.alpha = Eigen::Map<const Eigen::VectorXd>(alpha.values.data(), alpha.values.size());
+      if (entry.contains("photometric")) {  // absent for direct trunks
+        field = name + ".photometric";
+        const auto& p = entry.at("photometric");
+        PhotometricTrunk::Options po;
+        po.rows = trunk.format.rows;
+        po.cols = trunk.format.cols;
+        po.channels = options.output_channels - 1;
+        po.width = options.width;
+        po.num_hidden_layers = options.num_hidden_layers;
+        po.omega_0 = options.omega_0;
+        po.latent_dim = p.at("latent_dim").get<int>();
+        po.shading_width = p.at("shading_width").get<int>();
+        po.supersample = p.at("supersample").get<int>();
+        if (!po.IsValid(&error) ||
+            po.latent_dim - PhotometricTrunk::kPoseValues != options.latent_dim) {
+          throw TensorFileError(source + ": " + field + ": " +
+                                (error.empty() ? "latent_dim must be the SIREN's + " +
+                                                     std::to_string(PhotometricTrunk::kPoseValues)
+                                               : error));
+        }
+        field = name + ".photometric.reference";
+        const auto& r = p.at("reference");
+        const int rows = r.at("rows").get<int>(), cols = r.at("cols").get<int>();
+        const int channels = r.at("channels").get<int>();
+        if (rows < 1 || cols < 1 || rows > 100000 || cols > 100000 || channels != po.channels) {
+          throw TensorFileError(source + ": field '" + field + "': expected a reference of at "
+                                "least 1 x 1 with " + std::to_string(po.channels) +
+                                " channel(s), found " + std::to_string(rows) + " x " +
+                                std::to_string(cols) + " x " + std::to_string(channels));
+        }
+        Image reference(rows, cols, channels);
+        const auto& values = file.Get(name + "/reference",
+                                      {static_cast<std::int64_t>(reference.size())});
+        for (std::size_t i = 0; i < reference.size(); ++i) {
+          reference.data[i] = static_cast<float>(values.values[i]);
+        }
+        auto photometric = std::make_shared<PhotometricTrunk>(po, reference);
+        photometric->mutable_siren().SetParameters(trunk.siren.parameters());
+        const auto& head = file.Get(name + "/head", {photometric->NumHeadParameters()});
+        photometric->SetHeadParameters(
+            Eigen::Map<const Eigen::VectorXd>(head.values.data(), head.values.size()));
+        trunk.photometric = std::move(photometric);
+      }
       model.SetTrunk(std::move(trunk));
     }
     field = "info";

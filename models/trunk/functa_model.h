@@ -23,12 +23,17 @@
 // the key load as trunks with one global latent. A trunk trained on described frames
 // records the description as "sensor_description" (the file format of
 // models/core/sensor_description.h, "pixel_pitch_mm": 0 for an unknown pitch); files
-// without it load without one. Loading checks every field and shape and names the file
-// and field on error.
+// without it load without one. A trunk with the photometric head records it as
+// "photometric": {"latent_dim", "shading_width", "supersample", "reference": {"rows",
+// "cols", "channels"}} with the tensors "<sensor>/head" (float32, the head's parameters)
+// and "<sensor>/reference" (float32, the sensor-resolution reference, HWC); files
+// without the key load as direct trunks. Loading checks every field and shape and names
+// the file and field on error.
 #ifndef TACTFUNC_MODELS_TRUNK_FUNCTA_MODEL_H_
 #define TACTFUNC_MODELS_TRUNK_FUNCTA_MODEL_H_
 
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -37,6 +42,7 @@
 
 #include "models/trunk/latent_modulated_siren.h"
 #include "models/trunk/meta_sgd.h"
+#include "models/trunk/photometric_trunk.h"
 #include "models/core/sensor.h"
 #include "models/core/sensor_description.h"
 
@@ -69,7 +75,18 @@ struct SensorTrunk {
   // written before descriptions (and in hand-built trunks): TrunkSensorDescription then
   // gives the built-in description of the trunk's kind.
   std::optional<SensorDescription> description;
+  // The photometric head of an optical sensor's trunk (models/trunk/photometric_trunk.h;
+  // docs/REPRESENTATION.md): absent (null) for the direct trunk. With it a frame's
+  // latent has photometric->latent_dim() values (its rigid motion first), `siren` is a
+  // copy of the head's SIREN (latent_dim three less) and alpha, meta_sgd are unused
+  // (alpha holds zeros): its latents are fitted by FitPhotometricLatent
+  // (estimation/training/photometric_trainer.h), not by meta-SGD.
+  std::shared_ptr<const PhotometricTrunk> photometric;
 };
+
+// The values of one frame's latent under `trunk`: the photometric head's d, else the
+// SIREN's latent_dim.
+int TrunkLatentDim(const SensorTrunk& trunk);
 
 // The trunk's description, or for a trunk without one the built-in description of its
 // kind with the format's working size (aspect "stretch": such trunks resized whatever

@@ -109,6 +109,68 @@ TEST(FunctaModel, RoundTripsASpatialLatentTrunkAndRecordsItsGrid) {
   }
 }
 
+// A GelSlim trunk with the photometric head: 10 x 12 working frames, a 20 x 24 reference.
+SensorTrunk PhotometricSensorTrunk() {
+  PhotometricTrunk::Options o;
+  o.rows = 10;
+  o.cols = 12;
+  o.width = 8;
+  o.num_hidden_layers = 2;
+  o.latent_dim = 7;
+  o.shading_width = 5;
+  o.supersample = 2;
+  Image reference(20, 24, 1);
+  for (std::size_t i = 0; i < reference.size(); ++i) reference.data[i] = 0.01f * (i % 37);
+  auto photometric = std::make_shared<PhotometricTrunk>(o, reference, 9);
+  Eigen::VectorXd head = photometric->head_parameters();
+  head[head.size() - 1] = 0.7;
+  photometric->SetHeadParameters(head);
+  SensorTrunk trunk = SmallTrunk(SensorKind::kGelSlim, 2);
+  trunk.siren = photometric->siren();
+  trunk.photometric = photometric;
+  return trunk;
+}
+
+TEST(FunctaModel, RoundTripsAPhotometricTrunkWithItsHeadAndReference) {
+  FunctaModel model;
+  model.SetTrunk(PhotometricSensorTrunk());
+  const std::string bytes = model.Serialize();
+  const FunctaModel read = FunctaModel::Parse(bytes, "m.tfm");
+  const SensorTrunk& a = model.Trunk(SensorKind::kGelSlim);
+  const SensorTrunk& b = read.Trunk(SensorKind::kGelSlim);
+  ASSERT_NE(b.photometric, nullptr);
+  EXPECT_EQ(TrunkLatentDim(b), 7);
+  EXPECT_EQ(b.photometric->reference().data, a.photometric->reference().data);
+  EXPECT_TRUE(a.photometric->head_parameters().cast<float>().cast<double>().isApprox(
+      b.photometric->head_parameters(), 0.0));
+  EXPECT_FLOAT_EQ(b.photometric->marker_scale(), 0.7);
+  // The loaded trunk draws what the saved one draws, to float32 rounding of its parameters.
+  Eigen::VectorXf z = Eigen::VectorXf::LinSpaced(7, -0.3f, 0.4f);
+  const Eigen::MatrixXf ya = a.photometric->Forward<float>(a.photometric->AllPixels(), z);
+  const Eigen::MatrixXf yb = b.photometric->Forward<float>(b.photometric->AllPixels(), z);
+  EXPECT_LT((ya - yb).cwiseAbs().maxCoeff(), 1e-4);
+  // A direct trunk writes no key; its latent size is the SIREN's.
+  EXPECT_THAT(TensorFile::Parse(TwoSensorModel().Serialize(), "m.tfm", "model").meta_json(),
+              ::testing::Not(HasSubstr("photometric")));
+  EXPECT_EQ(TrunkLatentDim(TwoSensorModel().Trunk(SensorKind::kGelSlim)), 4);
+  // A head whose latent size does not match its SIREN is refused naming the field.
+  const TensorFile file = TensorFile::Parse(bytes, "m.tfm", "model");
+  std::string meta = file.meta_json();
+  const std::string from = "\"latent_dim\":7";
+  ASSERT_NE(meta.find(from), std::string::npos) << meta;
+  meta.replace(meta.find(from), from.size(), "\"latent_dim\":9");
+  TensorFile edited("model");
+  edited.set_meta_json(meta);
+  for (const TensorFile::Tensor& t : file.tensors()) edited.Add(t.name, t.dtype, t.shape, t.values);
+  try {
+    FunctaModel::Parse(edited.Serialize(), "edited.tfm");
+    FAIL() << "a mismatched head accepted";
+  } catch (const TensorFileError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("gelslim.photometric")) << e.what();
+    EXPECT_THAT(e.what(), HasSubstr("edited.tfm")) << e.what();
+  }
+}
+
 TEST(FunctaModel, DifferentParametersGiveDifferentChecksums) {
   FunctaModel a = TwoSensorModel();
   FunctaModel b = TwoSensorModel();
