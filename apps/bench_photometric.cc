@@ -7,7 +7,8 @@
 //
 //   tactfunc bench photometric --data D [--train-data T] [--sensor gelslim]
 //       [--steps 3000] [--warmup 1000] [--latent-dim 64] [--width 64] [--layers 3]
-//       [--fit-steps 400] [--seed 1] [--threads 1] [--picture F.png] [--json]
+//       [--fit-steps 400] [--marker-rate 2e-3] [--narrow-biases] [--seed 1] [--threads 1]
+//       [--picture F.png] [--json]
 //
 // The trunk is trained on the train split of T (default D); PCA is fitted on D's train
 // split; both code D's test frames (noisy targets, as a user's frames are) and are
@@ -55,31 +56,11 @@ struct PhotometricBenchFlags {
   int max_test_frames = 0;
   std::uint64_t seed = 1;
   int threads = 1;
+  double marker_rate = PhotometricTrainer::Options().marker_learning_rate;
+  bool narrow_biases = false;
   std::string picture;
   bool json = false;
 };
-
-// The sensor-resolution reference in the targets' units: luma if the format is
-// grayscale (the luma of a difference is the difference of the lumas), over the scale.
-Image ReferenceInTargetUnits(const Image& reference, const FrameFormat& format) {
-  const bool luma = format.grayscale && reference.channels == 3;
-  Image out(reference.rows, reference.cols, luma ? 1 : reference.channels);
-  for (int r = 0; r < reference.rows; ++r) {
-    for (int c = 0; c < reference.cols; ++c) {
-      if (luma) {
-        out.at(r, c) = static_cast<float>((0.299 * reference.at(r, c, 0) +
-                                           0.587 * reference.at(r, c, 1) +
-                                           0.114 * reference.at(r, c, 2)) /
-                                          format.scale);
-      } else {
-        for (int ch = 0; ch < out.channels; ++ch) {
-          out.at(r, c, ch) = static_cast<float>(reference.at(r, c, ch) / format.scale);
-        }
-      }
-    }
-  }
-  return out;
-}
 
 std::vector<TrunkTargets> LoadSplit(const Dataset& dataset, SensorKind sensor, Split split,
                                     const FrameFormat& format, bool clean, int threads,
@@ -142,7 +123,7 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
   const auto test_clean = LoadSplit(data, sensor, Split::kTest, format, true, flags.threads,
                                     test_indices);
   const Image reference =
-      ReferenceInTargetUnits(train_data.FrameReference(train_indices[0]), format);
+      PhotometricReference(train_data.FrameReference(train_indices[0]), format);
   const int channels = static_cast<int>(test[0].values.cols());
   const int d = flags.latent_dim;
   const int bytes = 2 * d;
@@ -188,6 +169,8 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
   options.trunk.latent_dim = d;
   options.steps = flags.steps;
   options.marker_warmup_steps = flags.warmup;
+  options.marker_learning_rate = flags.marker_rate;
+  options.trunk.wide_biases = !flags.narrow_biases;
   options.seed = flags.seed;
   options.threads = flags.threads;
   const PhotometricTrainer trainer(options);
@@ -356,6 +339,12 @@ void RegisterPhotometricBenchmark(CLI::App* bench, CommandBody* selected) {
   sub->add_option("--max-test-frames", flags->max_test_frames,
                   "Score at most this many test frames, evenly spaced (default 0: all)")
       ->check(CLI::Range(0, 100000000));
+  sub->add_option("--marker-rate", flags->marker_rate,
+                  "Adam step size of the marker scale (default 2e-3; 0: the trunk's)")
+      ->check(CLI::Range(0.0, 1.0));
+  sub->add_flag("--narrow-biases", flags->narrow_biases,
+                "Start the SIREN's biases as LatentModulatedSiren does, not as nn.Linear "
+                "(PhotometricTrunk::Options::wide_biases)");
   sub->add_option("--seed", flags->seed, "Seed (default 1)");
   sub->add_option("--threads", flags->threads, "Worker threads (default 1)")
       ->check(CLI::Range(1, 1024));

@@ -102,13 +102,21 @@ nlohmann::json DescribeModel(const std::string& bytes, const std::string& path) 
   for (SensorKind sensor : model.sensors()) {
     const SensorTrunk& t = model.Trunk(sensor);
     const LatentModulatedSiren::Options& o = t.siren.options();
-    std::printf("  %-8s SIREN %d x %d (omega_0 %g), d = %d, %d parameters; %dx%d%s, scale %g; "
-                "K = %d%s, alpha in [%.3g, %.3g]; residual sigma %.4g\n",
-                ToString(sensor), o.width, o.num_hidden_layers, o.omega_0, o.latent_dim,
-                t.siren.NumParameters(), t.format.rows, t.format.cols,
-                t.format.grayscale ? " grayscale" : "", t.format.scale, t.meta_sgd.inner_steps,
-                t.meta_sgd.first_order ? " (first-order)" : "", t.alpha.minCoeff(),
-                t.alpha.maxCoeff(), t.residual_sigma);
+    if (t.photometric != nullptr) {
+      std::printf("  %-8s SIREN %d x %d (omega_0 %g), d = %d, %d parameters; %dx%d%s, scale %g; "
+                  "residual sigma %.4g\n",
+                  ToString(sensor), o.width, o.num_hidden_layers, o.omega_0, TrunkLatentDim(t),
+                  t.siren.NumParameters(), t.format.rows, t.format.cols,
+                  t.format.grayscale ? " grayscale" : "", t.format.scale, t.residual_sigma);
+    } else {
+      std::printf("  %-8s SIREN %d x %d (omega_0 %g), d = %d, %d parameters; %dx%d%s, scale %g; "
+                  "K = %d%s, alpha in [%.3g, %.3g]; residual sigma %.4g\n",
+                  ToString(sensor), o.width, o.num_hidden_layers, o.omega_0, o.latent_dim,
+                  t.siren.NumParameters(), t.format.rows, t.format.cols,
+                  t.format.grayscale ? " grayscale" : "", t.format.scale, t.meta_sgd.inner_steps,
+                  t.meta_sgd.first_order ? " (first-order)" : "", t.alpha.minCoeff(),
+                  t.alpha.maxCoeff(), t.residual_sigma);
+    }
     if (o.has_spatial()) {
       std::printf("           spatial latents: a %d x %d grid of %d values (%d) + %d global\n",
                   o.spatial_rows, o.spatial_cols, o.spatial_channels, o.spatial_size(),
@@ -118,11 +126,20 @@ nlohmann::json DescribeModel(const std::string& bytes, const std::string& path) 
       std::printf("           linear readout branch on a %d x %d grid\n", o.readout_rows,
                   o.readout_cols);
     }
+    if (t.photometric != nullptr) {
+      const PhotometricTrunk& p = *t.photometric;
+      std::printf("           photometric head: latent %d = rigid motion 3 + code %d, shading "
+                  "network of %d, markers moved at the sensor's %dx%d (%d x %d samples a "
+                  "pixel), %.3f px per unit slope; fitted with adam:N\n",
+                  p.latent_dim(), p.latent_dim() - PhotometricTrunk::kPoseValues,
+                  p.options().shading_width, p.reference().rows, p.reference().cols,
+                  p.options().supersample, p.options().supersample, p.marker_scale());
+    }
     nlohmann::json trunk = {{"width", o.width},
                             {"layers", o.num_hidden_layers},
                             {"omega_0", o.omega_0},
-                            {"latent_dim", o.latent_dim},
-                            {"output_channels", o.output_channels},
+                            {"latent_dim", TrunkLatentDim(t)},
+                            {"output_channels", TrunkOutputChannels(t)},
                             {"parameters", t.siren.NumParameters()},
                             {"rows", t.format.rows},
                             {"cols", t.format.cols},
@@ -133,6 +150,12 @@ nlohmann::json DescribeModel(const std::string& bytes, const std::string& path) 
                             {"alpha_min", t.alpha.minCoeff()},
                             {"alpha_max", t.alpha.maxCoeff()},
                             {"residual_sigma", t.residual_sigma}};
+    if (t.photometric != nullptr) {
+      trunk["photometric"] = {{"latent_dim", t.photometric->latent_dim()},
+                              {"shading_width", t.photometric->options().shading_width},
+                              {"supersample", t.photometric->options().supersample},
+                              {"marker_scale", t.photometric->marker_scale()}};
+    }
     if (o.has_spatial()) {
       trunk["spatial"] = {{"rows", o.spatial_rows},
                           {"cols", o.spatial_cols},

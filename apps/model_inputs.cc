@@ -155,7 +155,7 @@ PoseMlp LoadPoseModelFor(const std::string& path, const FunctaModel& model, Sens
                          const std::string& model_path) {
   if (!fs::is_regular_file(path)) throw DatasetError("--pose-model '" + path + "': no such file");
   PoseMlp pose = PoseMlp::Load(path);
-  const int latent_dim = model.Trunk(sensor).siren.latent_dim();
+  const int latent_dim = TrunkLatentDim(model.Trunk(sensor));
   if (pose.input_dim() != latent_dim) {
     throw DatasetError("--pose-model '" + path + "' takes " + std::to_string(pose.input_dim()) +
                        "-dimensional latents but the " + ToString(sensor) + " trunk of --model '" +

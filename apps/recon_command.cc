@@ -112,7 +112,7 @@ std::vector<std::string> WriteExamples(const ReconFlags& flags, const FunctaMode
   const SensorTrunk& trunk = model.Trunk(sensor);
   const int rows = trunk.format.rows, cols = trunk.format.cols, h = flags.tile_height;
   const int w = std::max(1, static_cast<int>(std::lround(cols * double(h) / rows)));
-  const Eigen::MatrixXf zero = Reconstruct(trunk, Eigen::VectorXf::Zero(trunk.siren.latent_dim()));
+  const Eigen::MatrixXf zero = Reconstruct(trunk, Eigen::VectorXf::Zero(TrunkLatentDim(trunk)));
   struct Example {
     const ReconstructionEvaluator::FrameResult* result;
     TrunkTargets target;

@@ -27,7 +27,9 @@
 #include "apps/pictures.h"
 #include "apps/progress_bar.h"
 #include "estimation/data/dataset.h"
+#include "estimation/training/photometric_trainer.h"
 #include "estimation/training/trunk_trainer.h"
+#include "models/core/parallel_for.h"
 #include "models/core/atomic_file.h"
 #include "models/trunk/functa_model.h"
 
@@ -58,6 +60,8 @@ struct TrainFlags {
   std::string spatial_latent;  // "GHxGWxC", empty = one global latent
   bool resume = false;
   bool json = false;
+  std::string head = "direct";  // "direct" or "photometric"
+  int marker_warmup = 1000;
   // Set after parsing: which overrides were given.
   CLI::Option *latent_dim_option = nullptr, *width_option = nullptr, *layers_option = nullptr,
               *steps_option = nullptr, *batch_option = nullptr, *pixels_option = nullptr,
@@ -65,7 +69,8 @@ struct TrainFlags {
               *learning_rate_option = nullptr, *omega_0_option = nullptr,
               *lr_final_fraction_option = nullptr, *inner_steps_option = nullptr,
               *alpha_init_option = nullptr, *alpha_max_option = nullptr,
-              *divergence_drop_db_option = nullptr, *readout_rate_option = nullptr;
+              *divergence_drop_db_option = nullptr, *readout_rate_option = nullptr,
+              *marker_warmup_option = nullptr;
 };
 
 // SIGINT: the current step finishes, a checkpoint is written, the command exits 1. A
@@ -255,6 +260,188 @@ cv::Mat TrainingCurvesPlot(
   return canvas;
 }
 
+// `train --head photometric`: the optical sensors' photometric trunk
+// (models/trunk/photometric_trunk.h), trained jointly with its training latents
+// (PhotometricTrainer). Writes the model as the direct path does; no checkpoints yet.
+void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
+                      const std::vector<SensorKind>& sensors) {
+  const std::vector<std::pair<bool, const char*>> direct_only = {
+      {flags.resume, "--resume"},
+      {flags.readout, "--readout"},
+      {!flags.spatial_latent.empty(), "--spatial-latent"},
+      {flags.first_order, "--first-order"},
+      {flags.skip_rest, "--skip-rest"},
+      {flags.inner_steps_option->count() > 0, "--inner-steps"},
+      {flags.alpha_init_option->count() > 0, "--alpha-init"},
+      {flags.alpha_max_option->count() > 0, "--alpha-max"}};
+  for (const auto& [given, name] : direct_only) {
+    if (given) {
+      throw UsageError(std::string(name) + " applies to the direct trunk (meta-SGD); "
+                       "--head photometric trains its trunk and latents jointly");
+    }
+  }
+  if (Processes().size() > 1) {
+    throw UsageError("--head photometric runs as one process (several threads: --threads)");
+  }
+  FunctaModel model;
+  nlohmann::json figures = nlohmann::json::object();
+  nlohmann::json info_trunks = nlohmann::json::object();
+  for (SensorKind sensor : sensors) {
+    const char* name = ToString(sensor);
+    if (sensor == SensorKind::kSoftBubble) {
+      throw UsageError("--head photometric: the bubble is a depth sensor; the photometric head "
+                       "draws optical (gelslim) frames. Pass --sensors gelslim.");
+    }
+    const TrunkTrainer::Options base = OptionsForData(flags, dataset, sensor);
+    const SensorInfo& info = dataset.sensor_info(sensor);
+    const double scale =
+        info.normalization_scale > 0 ? info.normalization_scale : DefaultNormalizationScale(sensor);
+    const FrameFormat format = TrunkTrainer(base).ResolveFormat(sensor, scale);
+    const std::vector<std::size_t> indices = dataset.FrameIndices(sensor, Split::kTrain);
+    if (indices.empty()) {
+      throw DatasetError(flags.data + ": no train-split " + std::string(name) + " frames");
+    }
+    for (std::size_t i : indices) {
+      // Each clip of a clip set has its own reference.
+      if (dataset.frames()[i].clip != dataset.frames()[indices[0]].clip) {
+        throw DatasetError(flags.data + ": --head photometric draws every frame against one "
+                           "reference, but the train frames come from several clips, each "
+                           "with its own (" + dataset.frames()[indices[0]].id + ", " +
+                           dataset.frames()[i].id + ")");
+      }
+    }
+    PhotometricTrainer::Options o;
+    o.trunk.width = flags.width_option->count() ? flags.width : 64;
+    o.trunk.num_hidden_layers = flags.layers_option->count() ? flags.layers : 3;
+    o.trunk.latent_dim = flags.latent_dim_option->count() ? flags.latent_dim : 64;
+    o.steps = flags.steps_option->count() ? flags.steps : 3000;
+    o.batch_frames = flags.batch_option->count() ? flags.batch : 64;
+    o.batch_pixels = flags.pixels_option->count() && flags.pixels > 0 ? flags.pixels : 512;
+    o.trunk_learning_rate = flags.learning_rate_option->count() ? flags.learning_rate : 2e-4;
+    o.marker_warmup_steps = flags.marker_warmup;
+    o.seed = base.seed;
+    o.threads = base.threads;
+    if (o.trunk.latent_dim <= PhotometricTrunk::kPoseValues) {
+      throw UsageError("--latent-dim: the photometric trunk's latent holds a rigid motion (3 "
+                       "values) and a code: expected at least 4, got " +
+                       std::to_string(o.trunk.latent_dim));
+    }
+    const PhotometricTrainer trainer(o);  // bad values fail before the frames are read
+    std::cout << "train " << name << ": photometric head, " << o.steps << " steps ("
+              << (flags.steps_option->count() ? "--steps" : "default") << ", markers at the "
+              << "working resolution for the first " << o.marker_warmup_steps << ") at "
+              << format.rows << "x" << format.cols << ", " << o.batch_frames << " frames x "
+              << o.batch_pixels << " pixels a step on " << o.threads << " thread(s), latent "
+              << o.trunk.latent_dim << std::endl;
+    WarnIfStretched(dataset, flags.data, sensor, format.rows, format.cols, "train");
+    std::vector<TrunkTargets> frames(indices.size());
+    internal::ParallelFor(static_cast<int>(indices.size()), o.threads, [&](int i) {
+      frames[i] = LoadTrunkTargets(dataset, indices[i], format);
+    });
+    const Image reference = PhotometricReference(dataset.FrameReference(indices[0]), format);
+    auto bar = std::make_unique<ProgressBar>(std::string("train ") + name, o.steps, "steps");
+    const bool bar_enabled = ProgressBar::Enabled();
+    const int every = std::max(1, o.steps / 20);
+    const auto started = std::chrono::steady_clock::now();
+    const PhotometricTrainer::Result result =
+        trainer.Train(frames, reference, [&](int step, double loss) {
+          bar->Tick(1);
+          bar->SetStatus("loss " + FormatFixed(loss * 1e3, 3) + "e-3");
+          if (!bar_enabled && (step % every == 0 || step == o.steps)) {
+            const double seconds =
+                std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+            std::cout << "train " << name << ": step " << step << "/" << o.steps << "  batch loss "
+                      << loss << "  " << static_cast<int>(seconds) << " s" << std::endl;
+          }
+          return !g_interrupted.load();
+        });
+    bar->Finish();
+    if (result.summary.stopped) {
+      std::signal(SIGINT, SIG_DFL);
+      throw std::runtime_error(std::string("interrupted while training ") + name + " at step " +
+                               std::to_string(result.summary.steps) +
+                               "; --head photometric keeps no checkpoint yet: no model was "
+                               "written");
+    }
+    if (!std::isfinite(result.summary.final_loss)) {
+      throw std::runtime_error(std::string("training ") + name + " failed: the loss became " +
+                               "non-finite at step " + std::to_string(result.summary.steps) +
+                               ". No model was written. This run's --learning-rate was " +
+                               std::to_string(o.trunk_learning_rate));
+    }
+    // The likelihood scale of the samplers: the RMS residual of the training latents over
+    // up to 64 evenly spaced training frames, whole frames.
+    const int checked = std::min<int>(64, static_cast<int>(frames.size()));
+    std::vector<double> mse(checked);
+    internal::ParallelFor(checked, o.threads, [&](int k) {
+      const std::size_t i = static_cast<std::size_t>(k) * frames.size() / checked;
+      mse[k] = result.trunk.LossAndGradient<float>(
+          result.trunk.AllPixels(), result.latents.row(i).transpose().cast<float>(),
+          frames[i].values, frames[i].weights, nullptr, nullptr, nullptr);
+    });
+    double mse_sum = 0;
+    for (double m : mse) mse_sum += m;
+    SensorTrunk trunk;
+    trunk.sensor = sensor;
+    trunk.format = format;
+    trunk.siren = result.trunk.siren();
+    trunk.alpha = Eigen::VectorXd::Zero(trunk.siren.latent_dim());
+    trunk.photometric = std::make_shared<PhotometricTrunk>(result.trunk);
+    trunk.residual_sigma = std::sqrt(mse_sum / checked);
+    trunk.description = TrainedDescription(dataset, sensor, format);
+    std::cout << "train " << name << ": " << result.summary.steps << " steps in "
+              << FormatDuration(result.summary.seconds) << " (h:mm:ss / m:ss), final batch loss "
+              << result.summary.final_loss << ", marker scale "
+              << FormatFixed(result.trunk.marker_scale(), 3) << " px per unit slope, residual "
+              << "sigma " << trunk.residual_sigma << std::endl;
+    figures[name] = {{"head", "photometric"},
+                     {"steps", result.summary.steps},
+                     {"seconds", result.summary.seconds},
+                     {"loss", result.summary.final_loss},
+                     {"residual_sigma", trunk.residual_sigma},
+                     {"train_frames", frames.size()},
+                     {"marker_scale", result.trunk.marker_scale()}};
+    info_trunks[name] = {{"data_frames", DataFramesJson(info)},
+                         {"head", "photometric"},
+                         {"options",
+                          {{"width", o.trunk.width},
+                           {"layers", o.trunk.num_hidden_layers},
+                           {"latent_dim", o.trunk.latent_dim},
+                           {"steps", o.steps},
+                           {"batch_frames", o.batch_frames},
+                           {"batch_pixels", o.batch_pixels},
+                           {"trunk_learning_rate", o.trunk_learning_rate},
+                           {"latent_learning_rate", o.latent_learning_rate},
+                           {"marker_warmup_steps", o.marker_warmup_steps},
+                           {"seed", o.seed}}},
+                         {"steps", result.summary.steps},
+                         {"train_frames", frames.size()},
+                         {"final_loss", result.summary.final_loss}};
+    model.SetTrunk(std::move(trunk));
+  }
+  model.set_info_json(nlohmann::json({{"trainer", "tactfunc train --head photometric"},
+                                      {"preset", "photometric"},
+                                      {"data", flags.data},
+                                      {"trunks", info_trunks}})
+                          .dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
+  g_saving.store(true);
+  model.Save(flags.out);
+  g_saving.store(false);
+  std::signal(SIGINT, SIG_DFL);
+  const std::uint64_t model_bytes = std::filesystem::file_size(flags.out);
+  std::cout << "train: wrote " << flags.out << " (" << FormatBytes(model_bytes) << ", "
+            << sensors.size() << " photometric trunk(s))" << std::endl;
+  if (g_interrupted.load()) std::exit(130);
+  if (flags.json) {
+    EmitJson({{"out", flags.out},
+              {"sensors", figures},
+              {"processes", 1},
+              {"threads", OptionsForData(flags, dataset, sensors.front()).threads},
+              {"model_bytes", model_bytes},
+              {"curves", nullptr}});
+  }
+}
+
 void RunTrain(const TrainFlags& flags) {
   for (SensorKind sensor : {SensorKind::kSoftBubble, SensorKind::kGelSlim}) {
     OptionsFor(flags, sensor);  // bad flags fail before the dataset is read
@@ -295,6 +482,23 @@ void RunTrain(const TrainFlags& flags) {
     }
   }
   if (sensors.empty()) throw UsageError("--sensors: expected at least one sensor");
+  if (flags.head == "photometric") {
+    if (flags.sensors.empty()) {  // the dataset's optical sensors
+      sensors.erase(std::remove(sensors.begin(), sensors.end(), SensorKind::kSoftBubble),
+                    sensors.end());
+      if (sensors.empty()) {
+        throw UsageError("--head photometric: the dataset " + flags.data +
+                         " has no optical (gelslim) frames");
+      }
+    }
+    g_interrupted.store(false);
+    std::signal(SIGINT, HandleSigint);
+    TrainPhotometric(flags, dataset, sensors);
+    return;
+  }
+  if (flags.marker_warmup_option->count()) {
+    throw UsageError("--marker-warmup applies to --head photometric");
+  }
   if (flags.resume) {
     bool any = false;
     for (SensorKind s : sensors) any = any || std::filesystem::exists(CheckpointPath(flags.out, s));
@@ -599,6 +803,16 @@ void RegisterTrain(CLI::App& app, CommandBody* selected) {
           ->check(CLI::Range(0, 100000000));
   sub->add_flag("--resume", flags->resume,
                 "Continue from OUT.<sensor>.ckpt (the options must match the checkpoint's)");
+  sub->add_option("--head", flags->head,
+                  "direct (default: the SIREN draws the frame, meta-SGD fits) or photometric "
+                  "(optical sensors: the SIREN draws the contact, a head moves the reference's "
+                  "markers and shades it; trained jointly with its latents, docs/REPRESENTATION.md)")
+      ->check(CLI::IsMember({"direct", "photometric"}));
+  flags->marker_warmup_option =
+      sub->add_option("--marker-warmup", flags->marker_warmup,
+                      "--head photometric: steps with the markers moved at the working "
+                      "resolution before the sensor's (default 1000)")
+          ->check(CLI::Range(0, 100000000));
   sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
   sub->callback([flags, selected]() { *selected = [flags]() { RunTrain(*flags); }; });
 }

@@ -62,7 +62,7 @@ RepresentationSize ComputeRepresentationSize(const FunctaModel& model, const Fun
     const SensorTrunk& trunk = model.Trunk(sensor);
     const std::uint64_t m = functaset.entries(sensor).size();
     size.frames += static_cast<std::int64_t>(m);
-    size.model_bytes += 4ull * (trunk.siren.NumParameters() + trunk.alpha.size());
+    size.model_bytes += TrunkParameterBytes(trunk);
     // As on disk: per-frame codes (none for frames at rest) plus the sensor's shared
     // tables (b-bit latents) and shared rest latent.
     size.latent_bytes += static_cast<std::uint64_t>(functaset.BytesPerFrame(sensor)) *
@@ -78,14 +78,12 @@ RepresentationSize ComputeRepresentationSize(const FunctaModel& model, const Fun
 }
 
 Eigen::MatrixXf Reconstruct(const SensorTrunk& trunk, const Eigen::VectorXf& latent) {
-  if (latent.size() != trunk.siren.latent_dim()) {
+  if (latent.size() != TrunkLatentDim(trunk)) {
     throw std::invalid_argument("Reconstruct: latent has " + std::to_string(latent.size()) +
                                 " values, the " + ToString(trunk.sensor) +
-                                " trunk's latent_dim is " +
-                                std::to_string(trunk.siren.latent_dim()));
+                                " trunk's latent_dim is " + std::to_string(TrunkLatentDim(trunk)));
   }
-  return trunk.siren.Forward<float>(trunk.siren.Grid<float>(trunk.format.rows, trunk.format.cols),
-                                    latent);
+  return TrunkDecode(trunk, latent);
 }
 
 bool ReconstructionEvaluator::Options::IsValid(std::string* error) const {
@@ -242,8 +240,8 @@ ReconstructionEvaluator::Summary ReconstructionEvaluator::Evaluate(const FunctaM
     SensorState& state = states[sensor];
     state.trunk = &model.Trunk(sensor);
     state.grid = state.trunk->siren.Grid<float>(state.trunk->format.rows, state.trunk->format.cols);
-    state.zero_prediction = state.trunk->siren.Forward<float>(
-        state.grid, Eigen::VectorXf::Zero(state.trunk->siren.latent_dim()));
+    state.zero_prediction =
+        TrunkDecode(*state.trunk, Eigen::VectorXf::Zero(TrunkLatentDim(*state.trunk)));
     infos.push_back(dataset.sensor_info(sensor));
   }
   for (SensorKind sensor : functaset.sensors()) {
@@ -286,8 +284,7 @@ ReconstructionEvaluator::Summary ReconstructionEvaluator::Evaluate(const FunctaM
     FrameResult& r = summary.frames[i];
     const SensorState& state = states.at(r.sensor);
     const FrameFormat& format = state.trunk->format;
-    const Eigen::MatrixXf prediction =
-        state.trunk->siren.Forward<float>(state.grid, entries[i]->latent);
+    const Eigen::MatrixXf prediction = TrunkDecode(*state.trunk, entries[i]->latent);
     const Image frame = dataset.LoadFrame(r.dataset_index);
     const TrunkTargets targets = DatasetFrameTargets(dataset, r.dataset_index, frame, format);
     const ContactReport contact =

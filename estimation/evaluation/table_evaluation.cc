@@ -339,7 +339,7 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
         LatentPsnrs(trunk, s.entries, frame_targets, group, threads,
                     std::string("eval: TactFunc ") + ToString(sensor), observer, &s.clean,
                     &tf_psnr_clean);
-    const std::uint64_t trunk_bytes = 4ull * (trunk.siren.NumParameters() + trunk.alpha.size());
+    const std::uint64_t trunk_bytes = TrunkParameterBytes(trunk);
     // Bytes per frame as stored (encode --latent-precision); the representation also
     // counts the b-bit codes' shared tables and stores no latent for frames at rest
     // (encode --share-rest) but their one shared latent.

@@ -25,8 +25,8 @@ double MsSince(Clock::time_point start) {
 }
 
 const char* kStrategyForms =
-    "expected one of knn, meta_sgd:K, ceres:N, knn+meta_sgd:K, knn+ceres:N "
-    "(K >= 0, N >= 1 integers)";
+    "expected one of knn, meta_sgd:K, ceres:N, knn+meta_sgd:K, knn+ceres:N, adam:N "
+    "(K >= 0, N >= 1 integers; adam:N for photometric trunks)";
 
 bool ParseCount(const std::string& text, int* value) {
   if (text.empty() || text.size() > 9) return false;
@@ -71,6 +71,9 @@ bool FitStrategy::Parse(const std::string& text, FitStrategy* strategy, std::str
     out.refinement = Refinement::kMetaSgd;
   } else if (name == "ceres") {
     out.refinement = Refinement::kCeres;
+  } else if (name == "adam") {
+    if (out.knn) return fail("adam:N takes no k-NN start");
+    out.refinement = Refinement::kAdam;
   } else if (name.empty()) {
     return fail("no method");
   } else {
@@ -102,6 +105,8 @@ std::string FitStrategy::ToString() const {
       return out + (knn ? "+" : "") + "meta_sgd:" + std::to_string(steps);
     case Refinement::kCeres:
       return out + (knn ? "+" : "") + "ceres:" + std::to_string(steps);
+    case Refinement::kAdam:
+      return out + (knn ? "+" : "") + "adam:" + std::to_string(steps);
   }
   return "unknown";
 }
@@ -114,8 +119,10 @@ bool FitStrategy::IsValid(std::string* error) const {
     message = "meta_sgd:K needs K >= 0, found " + std::to_string(steps);
   } else if (refinement == Refinement::kCeres && steps < 1) {
     message = "ceres:N needs N >= 1, found " + std::to_string(steps);
+  } else if (refinement == Refinement::kAdam && (steps < 1 || knn)) {
+    message = "adam:N needs N >= 1 and no k-NN start, found " + ToString();
   } else if (refinement != Refinement::kNone && refinement != Refinement::kMetaSgd &&
-             refinement != Refinement::kCeres) {
+             refinement != Refinement::kCeres && refinement != Refinement::kAdam) {
     message = "refinement is not a Refinement";
   } else {
     return true;
@@ -230,6 +237,11 @@ LatentFitter::LatentFitter(const SensorTrunk& trunk, const Options& options,
     : trunk_(&trunk), options_(options), index_(index), latents_(latents) {
   std::string error;
   if (!options_.IsValid(&error)) throw std::invalid_argument(error);
+  if (trunk.photometric != nullptr || options_.strategy.refinement == FitStrategy::Refinement::kAdam) {
+    throw std::invalid_argument(
+        "LatentFitter: fits the direct trunk with meta_sgd:K or ceres:N; a photometric "
+        "trunk's latents are fitted by FitPhotometricLatent (adam:N)");
+  }
   const int d = trunk.siren.latent_dim();
   if (trunk.alpha.size() != d) {
     throw std::invalid_argument("LatentFitter: trunk.alpha must have latent_dim = " +

@@ -59,10 +59,12 @@ struct FitStrategy {
     kNone,     // knn alone
     kMetaSgd,  // K meta-SGD steps
     kCeres,    // at most N Ceres iterations
+    kAdam,     // N Adam steps per start: the photometric trunk's fit
+               // (FitPhotometricLatent, estimation/training/photometric_trainer.h)
   };
   bool knn = false;
   Refinement refinement = Refinement::kCeres;
-  // K (meta_sgd, >= 0) or N (ceres, >= 1); unused for kNone.
+  // K (meta_sgd, >= 0) or N (ceres, adam, >= 1); unused for kNone.
   int steps = 20;
 
   // Parses `text`; on failure returns false and sets *error to a message that quotes the

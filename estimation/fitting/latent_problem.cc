@@ -95,6 +95,11 @@ LatentProblem::LatentProblem(const SensorTrunk& trunk, const TrunkTargets& targe
     : trunk_(&trunk), frame_(&targets), options_(options) {
   std::string error;
   if (!options_.IsValid(&error)) throw std::invalid_argument(error);
+  if (trunk.photometric != nullptr) {
+    throw std::invalid_argument(
+        "LatentProblem: the direct trunk's problem; a photometric trunk's latents are fitted "
+        "by FitPhotometricLatent (adam:N)");
+  }
   const LatentModulatedSiren& siren = trunk.siren;
   const int d = siren.latent_dim();
   if (trunk.alpha.size() != d) {

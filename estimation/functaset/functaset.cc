@@ -261,7 +261,7 @@ void Functaset::CheckModel(const FunctaModel& model, const std::string& model_na
       throw FunctasetModelMismatch("functaset " + name + " holds sensor '" + ToString(sensor) +
                                    "', but model " + model_name + " has no trunk for it");
     }
-    const int d = model.Trunk(sensor).siren.latent_dim();
+    const int d = TrunkLatentDim(model.Trunk(sensor));
     if (d != block.latent_dim) {
       throw FunctasetModelMismatch("functaset " + name + ": sensor '" + ToString(sensor) +
                                    "' has latent_dim " + std::to_string(block.latent_dim) +

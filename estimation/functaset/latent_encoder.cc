@@ -13,7 +13,17 @@
 #include <thread>
 #include <utility>
 
+#include "estimation/training/photometric_trainer.h"
+
 namespace tactfunc {
+namespace {
+
+// The photometric trunk's default fit, adam:400 (the steps docs/REPRESENTATION.md
+// measured), and the fixed seed of its pixel subsets.
+constexpr int kPhotometricFitSteps = 400;
+constexpr std::uint64_t kPhotometricFitSeed = 0x70686f746f;
+
+}  // namespace
 
 const char* ToString(EncodeTermination termination) {
   switch (termination) {
@@ -104,10 +114,20 @@ LatentEncoder::LatentEncoder(const FunctaModel& model, const Options& options)
     state.grid = trunk.siren.Grid<float>(trunk.format.rows, trunk.format.cols);
     state.alpha = trunk.alpha.cast<float>();
     state.meta_sgd = MetaSgd(trunk.meta_sgd);
-    state.strategy = options_.strategy.empty()
-                         ? FitStrategy::FromString("meta_sgd:" +
-                                                   std::to_string(trunk.meta_sgd.inner_steps))
-                         : FitStrategy::FromString(options_.strategy);
+    const bool photometric = trunk.photometric != nullptr;
+    state.strategy =
+        options_.strategy.empty()
+            ? FitStrategy::FromString(photometric ? "adam:" + std::to_string(kPhotometricFitSteps)
+                                                  : "meta_sgd:" +
+                                                        std::to_string(trunk.meta_sgd.inner_steps))
+            : FitStrategy::FromString(options_.strategy);
+    if (photometric != (state.strategy.refinement == FitStrategy::Refinement::kAdam)) {
+      throw std::invalid_argument(
+          std::string("LatentEncoder: the ") + ToString(sensor) + " trunk is " +
+          (photometric ? "photometric: its latents are fitted with adam:N, not "
+                       : "direct: its latents are fitted with meta_sgd:K or ceres:N, not ") +
+          state.strategy.ToString());
+    }
     if (state.strategy.refinement == FitStrategy::Refinement::kCeres) {
       LatentFitter::Options fit;
       fit.strategy = state.strategy;
@@ -121,7 +141,7 @@ LatentEncoder::LatentEncoder(const FunctaModel& model, const Options& options)
       TrunkTargets rest;
       rest.rows = state.trunk->format.rows;
       rest.cols = state.trunk->format.cols;
-      rest.values = Eigen::MatrixXf::Zero(state.grid.rows(), state.trunk->siren.output_channels());
+      rest.values = Eigen::MatrixXf::Zero(state.grid.rows(), TrunkOutputChannels(*state.trunk));
       rest.weights = Eigen::VectorXf::Ones(state.grid.rows());
       state.rest_latent = EncodeTargets(state.sensor, rest).latent;
     }
@@ -140,19 +160,30 @@ LatentEncoder::EncodedFrame LatentEncoder::EncodeTargets(SensorKind sensor,
                                                          const TrunkTargets& targets) const {
   const SensorState& state = State(sensor);
   const LatentModulatedSiren& siren = state.trunk->siren;
-  if (targets.values.rows() != state.grid.rows() ||
-      targets.values.cols() != siren.output_channels() ||
+  const int channels = TrunkOutputChannels(*state.trunk);
+  if (targets.values.rows() != state.grid.rows() || targets.values.cols() != channels ||
       targets.weights.size() != targets.values.rows()) {
     throw std::invalid_argument(
         std::string("LatentEncoder: the ") + ToString(sensor) + " trunk expects " +
         std::to_string(state.trunk->format.rows) + "x" + std::to_string(state.trunk->format.cols) +
-        " pixels x " + std::to_string(siren.output_channels()) + " channel(s) (" +
-        std::to_string(state.grid.rows()) + " x " + std::to_string(siren.output_channels()) +
+        " pixels x " + std::to_string(channels) + " channel(s) (" +
+        std::to_string(state.grid.rows()) + " x " + std::to_string(channels) +
         " targets), found " + std::to_string(targets.values.rows()) + " x " +
         std::to_string(targets.values.cols()) + " targets and " +
         std::to_string(targets.weights.size()) + " weights");
   }
   EncodedFrame out;
+  if (state.trunk->photometric != nullptr) {
+    // The photometric fit (moment start and its flip); its pixel subsets come from one
+    // fixed seed, so a frame's latent depends on the frame alone.
+    PhotometricFitOptions fit;
+    fit.steps = state.strategy.steps;
+    const PhotometricFit result = FitPhotometricLatent(*state.trunk->photometric, targets, fit,
+                                                       kPhotometricFitSeed);
+    out.latent = result.latent.cast<float>();
+    out.psnr = Psnr(TrunkDecode(*state.trunk, out.latent), targets);
+    return out;
+  }
   if (state.fitter) {
     const LatentProblem problem(*state.trunk, targets, options_.problem);
     Eigen::VectorXd latent;
@@ -263,10 +294,10 @@ Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
     const SensorTrunk& trunk = *State(sensor).trunk;
     const SensorInfo& info = dataset.sensor_info(sensor);
     const int channels = trunk.format.grayscale ? 1 : info.channels;
-    if (channels != trunk.siren.output_channels()) {
+    if (channels != TrunkOutputChannels(trunk)) {
       throw std::invalid_argument(
           std::string("LatentEncoder: the model's ") + ToString(sensor) + " trunk outputs " +
-          std::to_string(trunk.siren.output_channels()) + " channel(s), but the dataset's " +
+          std::to_string(TrunkOutputChannels(trunk)) + " channel(s), but the dataset's " +
           std::to_string(info.channels) + "-channel frames give " + std::to_string(channels) +
           (trunk.format.grayscale ? " (grayscale)" : ""));
     }
@@ -410,7 +441,7 @@ Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
                                  ? Functaset::LatentPrecision::kFloat32
                                  : options_.latent_precision);
     for (SensorKind sensor : sensors) {
-      out.AddSensor(sensor, model_.Trunk(sensor).siren.latent_dim());
+      out.AddSensor(sensor, TrunkLatentDim(model_.Trunk(sensor)));
       out.set_fit_strategy(sensor, State(sensor).strategy.ToString());
       if (options_.share_rest_latent) out.set_rest_latent(sensor, State(sensor).rest_latent);
     }
@@ -489,7 +520,7 @@ Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
             job.entry.at_rest = true;
             job.entry.latent = state.rest_latent;
             job.entry.psnr = static_cast<float>(
-                Psnr(state.trunk->siren.Forward<float>(state.grid, state.rest_latent), targets));
+                Psnr(TrunkDecode(*state.trunk, state.rest_latent), targets));
           } else {
             EncodedFrame frame = EncodeTargets(job.sensor, targets);
             job.entry.latent = std::move(frame.latent);

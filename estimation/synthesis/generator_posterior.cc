@@ -268,6 +268,11 @@ GeneratorPosterior::GeneratorPosterior(const SensorTrunk& trunk, const PoseGener
     : trunk_(&trunk), generator_(&generator), options_(options), knn_(knn), pose_mlp_(pose_mlp) {
   std::string error;
   if (!options_.IsValid(&error)) throw std::invalid_argument(error);
+  if (trunk.photometric != nullptr) {
+    throw std::invalid_argument(
+        "GeneratorPosterior: renders through the direct trunk; the photometric trunk has no "
+        "pose generator yet");
+  }
   if (generator.latent_dim() != trunk.siren.latent_dim()) {
     throw std::invalid_argument("GeneratorPosterior: the generator's latent_dim " +
                                 std::to_string(generator.latent_dim()) + " is not the trunk's " +

@@ -183,6 +183,9 @@ GeneratorTrainingSummary TrainGeneratorOnPixels(PoseGenerator* generator,
   std::string error;
   Check(options.IsValid(&error), error);
   Check(generator != nullptr, "TrainGeneratorOnPixels: null generator");
+  Check(trunk.photometric == nullptr,
+        "TrainGeneratorOnPixels: renders through the direct trunk; the photometric trunk has "
+        "no pose generator yet");
   Check(generator->latent_dim() == trunk.siren.latent_dim(),
         "TrainGeneratorOnPixels: the generator's latent_dim " +
             std::to_string(generator->latent_dim()) + " is not the trunk's " +

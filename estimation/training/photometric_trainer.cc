@@ -20,13 +20,16 @@ constexpr double kPi = 3.14159265358979323846;
 struct Adam {
   Eigen::VectorXd m, v;
   explicit Adam(Eigen::Index size) : m(Eigen::VectorXd::Zero(size)), v(Eigen::VectorXd::Zero(size)) {}
-  void Step(int t, double rate, const Eigen::VectorXd& gradient, double* values) {
+  // last_scale multiplies the rate of the last value (the head's marker scale).
+  void Step(int t, double rate, const Eigen::VectorXd& gradient, double* values,
+            double last_scale = 1.0) {
     constexpr double b1 = 0.9, b2 = 0.999, eps = 1e-8;
     m = b1 * m + (1 - b1) * gradient;
     v = b2 * v + (1 - b2) * gradient.cwiseAbs2();
     const double c1 = 1 - std::pow(b1, t), c2 = 1 - std::pow(b2, t);
     for (Eigen::Index i = 0; i < m.size(); ++i) {
-      values[i] -= rate * (m[i] / c1) / (std::sqrt(v[i] / c2) + eps);
+      const double r = i + 1 == m.size() ? rate * last_scale : rate;
+      values[i] -= r * (m[i] / c1) / (std::sqrt(v[i] / c2) + eps);
     }
   }
 };
@@ -74,6 +77,8 @@ bool PhotometricTrainer::Options::IsValid(std::string* error) const {
     message << "trunk_learning_rate must be finite and > 0, found " << trunk_learning_rate;
   } else if (!(latent_learning_rate > 0 && std::isfinite(latent_learning_rate))) {
     message << "latent_learning_rate must be finite and > 0, found " << latent_learning_rate;
+  } else if (!(marker_learning_rate >= 0 && std::isfinite(marker_learning_rate))) {
+    message << "marker_learning_rate must be finite and >= 0, found " << marker_learning_rate;
   } else if (marker_warmup_steps < 0) {
     message << "marker_warmup_steps must be >= 0, found " << marker_warmup_steps;
   } else if (threads < 1) {
@@ -105,6 +110,31 @@ PhotometricTrainer::PhotometricTrainer(const Options& options) : options_(option
   if (!options.IsValid(&error)) {
     throw std::invalid_argument("PhotometricTrainer::Options: " + error);
   }
+}
+
+Image PhotometricReference(const Image& reference, const FrameFormat& format) {
+  if (format.per_image_min_max || !(format.scale > 0)) {
+    throw std::invalid_argument(
+        "PhotometricReference: the photometric trunk needs a fixed-scale frame format");
+  }
+  const bool luma = format.grayscale && reference.channels == 3;
+  Image out(reference.rows, reference.cols, luma ? 1 : reference.channels);
+  for (int r = 0; r < reference.rows; ++r) {
+    for (int c = 0; c < reference.cols; ++c) {
+      if (luma) {
+        // ITU-R BT.601 luma, as estimation/data/preprocess.h converts differences.
+        out.at(r, c) = static_cast<float>((0.299 * reference.at(r, c, 0) +
+                                           0.587 * reference.at(r, c, 1) +
+                                           0.114 * reference.at(r, c, 2)) /
+                                          format.scale);
+      } else {
+        for (int ch = 0; ch < out.channels; ++ch) {
+          out.at(r, c, ch) = static_cast<float>(reference.at(r, c, ch) / format.scale);
+        }
+      }
+    }
+  }
+  return out;
 }
 
 Eigen::Vector3d MomentPose(const PhotometricTrunk& trunk, const TrunkTargets& frame) {
@@ -197,7 +227,10 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
     const double factor =
         o.cosine_schedule ? 0.1 + 0.45 * (1 + std::cos(kPi * (step - 1) / o.steps)) : 1.0;
     adam_siren.Step(step, factor * o.trunk_learning_rate, g_siren, siren_theta.data());
-    adam_head.Step(step, factor * o.trunk_learning_rate, g_head, head.data());
+    const double head_rate = factor * o.trunk_learning_rate;
+    const double marker_rate =
+        factor * (o.marker_learning_rate > 0 ? o.marker_learning_rate : o.trunk_learning_rate);
+    adam_head.Step(step, head_rate, g_head, head.data(), marker_rate / head_rate);
     adam_latents.Step(step, factor * o.latent_learning_rate,
                       Eigen::Map<const Eigen::VectorXd>(g_latents.data(), g_latents.size()),
                       latents.data());

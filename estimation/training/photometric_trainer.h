@@ -65,6 +65,11 @@ class PhotometricTrainer {
     // Adam step sizes of the trunk (SIREN and head) and of the latents. > 0.
     double trunk_learning_rate = 2e-4;
     double latent_learning_rate = 2e-2;
+    // The marker scale m's Adam step size (0 = trunk_learning_rate). Adam moves a
+    // parameter by at most about its rate per step, so at the trunk's 2e-4 m can reach
+    // only about 0.5 px per unit slope in 3000 steps; at 2e-3 it settled at 1.55-1.67
+    // (docs/REPRESENTATION.md, "The photometric trunk in C++"). >= 0.
+    double marker_learning_rate = 2e-3;
     bool cosine_schedule = true;
     // Steps with working-resolution markers before switching to the sensor's. >= 0.
     int marker_warmup_steps = 1000;
@@ -119,6 +124,12 @@ struct PhotometricFit {
   double loss = 0;        // the weighted MSE on all of the frame's valid pixels
   bool flipped = false;   // the start turned by pi won
 };
+
+// The sensor-resolution reference in the targets' units under `format`: the luma of an
+// RGB reference if the format is grayscale (the luma of a difference is the difference of
+// the lumas), divided by the format's fixed scale; not resized. Throws
+// std::invalid_argument for a per-image min-max format (no fixed units).
+Image PhotometricReference(const Image& reference, const FrameFormat& format);
 
 // The moment pose of the header comment, (t_0, t_1, phi).
 Eigen::Vector3d MomentPose(const PhotometricTrunk& trunk, const TrunkTargets& frame);

@@ -67,6 +67,34 @@ int TrunkLatentDim(const SensorTrunk& trunk) {
                                       : trunk.siren.latent_dim();
 }
 
+int TrunkOutputChannels(const SensorTrunk& trunk) {
+  return trunk.photometric != nullptr ? trunk.photometric->channels()
+                                      : trunk.siren.output_channels();
+}
+
+Eigen::MatrixXf TrunkDecode(const SensorTrunk& trunk, const Eigen::VectorXf& latent) {
+  if (latent.size() != TrunkLatentDim(trunk)) {
+    throw std::invalid_argument("TrunkDecode: expected a latent of " +
+                                std::to_string(TrunkLatentDim(trunk)) + " values, found " +
+                                std::to_string(latent.size()));
+  }
+  if (trunk.photometric != nullptr) {
+    return trunk.photometric->Forward<float>(trunk.photometric->AllPixels(), latent);
+  }
+  return trunk.siren.Forward<float>(trunk.siren.Grid<float>(trunk.format.rows, trunk.format.cols),
+                                    latent);
+}
+
+std::uint64_t TrunkParameterBytes(const SensorTrunk& trunk) {
+  std::uint64_t values = static_cast<std::uint64_t>(trunk.siren.NumParameters()) +
+                         static_cast<std::uint64_t>(trunk.alpha.size());
+  if (trunk.photometric != nullptr) {
+    values += static_cast<std::uint64_t>(trunk.photometric->NumHeadParameters()) +
+              trunk.photometric->reference().size();
+  }
+  return 4ull * values;
+}
+
 SensorDescription TrunkSensorDescription(const SensorTrunk& trunk) {
   if (trunk.description) return *trunk.description;
   SensorDescription d = BuiltInSensorDescription(trunk.sensor);
@@ -317,15 +345,18 @@ FunctaModel FunctaModel::FromTensorFile(const TensorFile& file, const std::strin
                                 " channel(s), found " + std::to_string(rows) + " x " +
                                 std::to_string(cols) + " x " + std::to_string(channels));
         }
+        // The tensors' shapes are checked before anything of their size is allocated:
+        // a file holds the values it claims, so no field can ask for more memory.
+        const auto& values = file.Get(
+            name + "/reference", {static_cast<std::int64_t>(rows) * cols * channels});
+        const std::int64_t h = po.shading_width, c = po.channels;
+        const auto& head = file.Get(name + "/head", {h * 5 + h + h * h + h + c * h + c + 1});
         Image reference(rows, cols, channels);
-        const auto& values = file.Get(name + "/reference",
-                                      {static_cast<std::int64_t>(reference.size())});
         for (std::size_t i = 0; i < reference.size(); ++i) {
           reference.data[i] = static_cast<float>(values.values[i]);
         }
         auto photometric = std::make_shared<PhotometricTrunk>(po, reference);
         photometric->mutable_siren().SetParameters(trunk.siren.parameters());
-        const auto& head = file.Get(name + "/head", {photometric->NumHeadParameters()});
         photometric->SetHeadParameters(
             Eigen::Map<const Eigen::VectorXd>(head.values.data(), head.values.size()));
         trunk.photometric = std::move(photometric);
@@ -348,7 +379,7 @@ FunctaModel FunctaModel::Load(const std::string& path) {
 
 std::uint64_t FunctaModel::ParameterBytes() const {
   std::uint64_t bytes = 0;
-  for (const SensorTrunk& t : trunks_) bytes += 4ull * (t.siren.NumParameters() + t.alpha.size());
+  for (const SensorTrunk& t : trunks_) bytes += TrunkParameterBytes(t);
   return bytes;
 }
 

@@ -87,6 +87,15 @@ struct SensorTrunk {
 // The values of one frame's latent under `trunk`: the photometric head's d, else the
 // SIREN's latent_dim.
 int TrunkLatentDim(const SensorTrunk& trunk);
+// The channels of the trunk's targets: the photometric head's C, else the SIREN's outputs.
+int TrunkOutputChannels(const SensorTrunk& trunk);
+// The whole working-resolution frame the trunk draws for `latent` (TrunkLatentDim
+// values): rows * cols x C, pixel j = row * cols + col. Throws std::invalid_argument for
+// a latent of another size.
+Eigen::MatrixXf TrunkDecode(const SensorTrunk& trunk, const Eigen::VectorXf& latent);
+// Bytes of the trunk as stored (float32): its parameters and rates, and with the
+// photometric head the head's parameters and its sensor-resolution reference.
+std::uint64_t TrunkParameterBytes(const SensorTrunk& trunk);
 
 // The trunk's description, or for a trunk without one the built-in description of its
 // kind with the format's working size (aspect "stretch": such trunks resized whatever

@@ -54,10 +54,12 @@ bool PhotometricTrunk::Options::IsValid(std::string* error) const {
   } else if (latent_dim <= kPoseValues) {
     message << "latent_dim must be > " << kPoseValues << " (the pose values), found "
             << latent_dim;
-  } else if (shading_width < 1) {
-    message << "shading_width must be >= 1, found " << shading_width;
-  } else if (supersample < 1) {
-    message << "supersample must be >= 1, found " << supersample;
+  } else if (shading_width < 1 || shading_width > 4096) {
+    message << "shading_width must be in [1, 4096], found " << shading_width;
+  } else if (supersample < 1 || supersample > 32) {
+    message << "supersample must be in [1, 32], found " << supersample;
+  } else if (rows > 4096 || cols > 4096) {
+    message << "rows and cols must be <= 4096, found " << rows << " x " << cols;
   }
   const std::string text = message.str();
   if (error != nullptr) *error = text;
@@ -118,6 +120,25 @@ PhotometricTrunk::PhotometricTrunk(const Options& options, const Image& referenc
   const int c = options.channels;
   num_head_parameters_ = h * 5 + h + h * h + h + c * h + c + 1;
   InitializeHead(DeriveSeed(seed, 1));
+  if (options.wide_biases) {
+    boost::random::mt19937_64 rng(DeriveSeed(seed, 2));
+    Eigen::VectorXd theta = siren_.parameters();
+    for (const ParameterBlock& block : siren_.parameter_blocks()) {
+      double bound = 0;
+      if (block.group == ParameterGroup::kHiddenBias) {
+        bound = 1.0 / std::sqrt(block.layer == 0 ? 2.0 : static_cast<double>(options.width));
+      } else if (block.group == ParameterGroup::kOutputBias) {
+        bound = 1.0 / std::sqrt(static_cast<double>(options.width));
+      } else if (block.group == ParameterGroup::kModulationMatrix) {
+        bound = 0.1 / std::sqrt(static_cast<double>(options.latent_dim - kPoseValues));
+      } else {
+        continue;
+      }
+      boost::random::uniform_real_distribution<double> uniform(-bound, bound);
+      for (int i = 0; i < block.size(); ++i) theta[block.offset + i] = uniform(rng);
+    }
+    siren_.SetParameters(theta);
+  }
   // The at-rest markers: the K x K average of the reference at zero shift.
   at_rest_ = Image(options.rows, options.cols, c);
   std::vector<double> value(c);

@@ -86,7 +86,7 @@ class PhotometricTrunk {
   };
 
   struct Options {
-    // Working resolution of the frames (the targets' grid). >= 3 each.
+    // Working resolution of the frames (the targets' grid). In [3, 4096] each.
     int rows = 0;
     int cols = 0;
     // Output channels C (1 for grayscale differences). In [1, 4].
@@ -97,10 +97,18 @@ class PhotometricTrunk {
     double omega_0 = 30.0;
     // d, the pose values included. > kPoseValues.
     int latent_dim = 64;
-    // H, units of each of the shading network's two hidden layers. >= 1.
+    // H, units of each of the shading network's two hidden layers. In [1, 4096].
     int shading_width = 64;
-    // K of the sensor-resolution marker sampling. >= 1.
+    // K of the sensor-resolution marker sampling. In [1, 32].
     int supersample = 4;
+    // How the SIREN's biases and modulation matrix start: true (default) = as PyTorch's
+    // nn.Linear draws biases (U(+-1/sqrt(fan_in)): the first layer's phases spread over
+    // +-omega_0/sqrt(2), the others' over +-omega_0/sqrt(width)) with the modulation
+    // matrix at a tenth of nn.Linear's range, as the prototype of docs/REPRESENTATION.md
+    // started; false = LatentModulatedSiren's own initialisation (biases within
+    // +-sqrt(6/width)/omega_0), measured 5.6 dB worse for this head at width 64
+    // (docs/REPRESENTATION.md, "The photometric trunk in C++").
+    bool wide_biases = true;
     bool IsValid(std::string* error) const;
   };
 

@@ -24,6 +24,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "gmock/gmock.h"
+#include "estimation/functaset/functaset.h"
 #include "gtest/gtest.h"
 #include "models/trunk/functa_model.h"
 #include "nlohmann/json.hpp"
@@ -95,6 +96,58 @@ TEST_F(TrainCliTest, TheInnerLoopKnobsReachTheModelAndEncodeUsesIt) {
   EXPECT_EQ(encode.exit_code, 0) << encode.err;
 }
 
+
+TEST_F(TrainCliTest, ThePhotometricHeadTrainsEncodesAndReconstructsAnOpticalSensor) {
+  ASSERT_EQ(Run("synth --out " + Root("g") + " --frames-per-tool 2 --tools rod,square "
+                "--sensors gelslim --seed 4").exit_code, 0);
+  const Result train = Run("train --data " + Root("g") + " --out " + Root("p.tfm") +
+                           " --head photometric --steps 4 --marker-warmup 2 --latent-dim 8 "
+                           "--width 8 --layers 2 --threads 1 --seed 1 --json");
+  ASSERT_EQ(train.exit_code, 0) << train.err;
+  EXPECT_EQ(train.LastJson()["sensors"]["gelslim"]["head"], "photometric");
+  EXPECT_EQ(train.LastJson()["sensors"]["gelslim"]["steps"].get<int>(), 4);
+  const FunctaModel model = FunctaModel::Load(Root("p.tfm"));
+  const SensorTrunk& trunk = model.Trunk(SensorKind::kGelSlim);
+  ASSERT_NE(trunk.photometric, nullptr);
+  EXPECT_EQ(TrunkLatentDim(trunk), 8);
+  EXPECT_EQ(trunk.siren.latent_dim(), 5);
+  EXPECT_GT(trunk.residual_sigma, 0.0);
+  // The reference the head moves is the dataset's, at the sensor's resolution.
+  EXPECT_EQ(trunk.photometric->reference().rows, 320);
+  EXPECT_THAT(Run("info " + Root("p.tfm")).out, HasSubstr("photometric head: latent 8"));
+
+  const Result encode = Run("encode --model " + Root("p.tfm") + " --data " + Root("g") +
+                            " --out " + Root("p.tfs") + " --strategy adam:5 --threads 1 --json");
+  ASSERT_EQ(encode.exit_code, 0) << encode.err;
+  const Functaset functaset = Functaset::Load(Root("p.tfs"));
+  EXPECT_EQ(functaset.latent_dim(SensorKind::kGelSlim), 8);
+  EXPECT_EQ(functaset.fit_strategy(SensorKind::kGelSlim), "adam:5");
+  const Result recon = Run("recon --model " + Root("p.tfm") + " --data " + Root("g") +
+                           " --functaset " + Root("p.tfs") + " --out " + Root("pr"));
+  ASSERT_EQ(recon.exit_code, 0) << recon.err;
+  EXPECT_TRUE(fs::exists(Root("pr/recon_gelslim.png")));
+
+  // The direct trunk's strategies do not fit a photometric trunk, nor adam:N a direct one.
+  const Result meta = Run("encode --model " + Root("p.tfm") + " --data " + Root("g") +
+                          " --out " + Root("q.tfs") + " --strategy meta_sgd:3");
+  EXPECT_NE(meta.exit_code, 0);
+  EXPECT_THAT(meta.err, HasSubstr("photometric"));
+  ASSERT_NO_FATAL_FAILURE(TrainAndEncode("direct_for_adam"));
+  const Result adam = Run("encode --model " + Root("direct_for_adam.tfm") + " --data " +
+                          Root("d") + " --out " + Root("q.tfs") + " --strategy adam:3");
+  EXPECT_NE(adam.exit_code, 0);
+  EXPECT_THAT(adam.err, HasSubstr("adam:3"));
+  // A depth sensor and the direct trunk's knobs are refused by name.
+  const Result bubble = Run("train --data " + Root("d") + " --out " + Root("b.tfm") +
+                            " --head photometric --sensors bubble --steps 2");
+  EXPECT_NE(bubble.exit_code, 0);
+  EXPECT_THAT(bubble.err, HasSubstr("depth sensor"));
+  const Result resume = Run("train --data " + Root("g") + " --out " + Root("b.tfm") +
+                            " --head photometric --steps 2 --resume");
+  EXPECT_NE(resume.exit_code, 0);
+  EXPECT_THAT(resume.err, HasSubstr("--resume"));
+  EXPECT_FALSE(fs::exists(Root("b.tfm")));
+}
 
 TEST_F(TrainCliTest, ReconWritesOneCsvRowPerFrameThatAgreesWithItsSummary) {
   ASSERT_NO_FATAL_FAILURE(TrainAndEncode("r"));
