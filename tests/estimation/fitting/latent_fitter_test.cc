@@ -161,7 +161,7 @@ TEST(LatentFitterOptions, BadOptionsNameTheFieldAndTheConstructorThrows) {
 
 TEST(LatentFitterStrategy, ParsesEveryFormAndPrintsItBack) {
   for (const char* text : {"knn", "meta_sgd:3", "meta_sgd:0", "ceres:10", "knn+meta_sgd:2",
-                           "knn+ceres:15"}) {
+                           "knn+ceres:15", "adam:400"}) {
     FitStrategy strategy;
     std::string error;
     ASSERT_TRUE(FitStrategy::Parse(text, &strategy, &error)) << text << ": " << error;
@@ -179,6 +179,7 @@ TEST(LatentFitterStrategy, BadStringsGiveClearErrors) {
       {"ceres:-2", "not a non-negative integer"}, {"lbfgs:3", "unknown method 'lbfgs'"},
       {"knn+", "no method"},                    {"", "no method"},
       {"ceres:1x", "not a non-negative integer"}, {"knn+knn", "unknown method 'knn'"},
+      {"adam:0", "N >= 1"},                     {"knn+adam:5", "no k-NN start"},
   };
   for (const auto& [text, expected] : cases) {
     FitStrategy strategy;
@@ -187,6 +188,18 @@ TEST(LatentFitterStrategy, BadStringsGiveClearErrors) {
     EXPECT_NE(error.find(expected), std::string::npos) << text << ": " << error;
     EXPECT_NE(error.find(std::string("'") + text + "'"), std::string::npos) << error;
     EXPECT_THROW(FitStrategy::FromString(text), std::invalid_argument);
+  }
+}
+
+TEST(LatentFitter, RefusesTheAdamStrategyOfPhotometricTrunks) {
+  const SensorTrunk trunk = MakeTrunk();
+  Fitter::Options options;
+  options.strategy = FitStrategy::FromString("adam:10");
+  try {
+    Fitter fitter(trunk, options);
+    FAIL() << "adam:10 accepted for a direct trunk";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("photometric"), std::string::npos) << e.what();
   }
 }
 
