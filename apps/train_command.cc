@@ -283,15 +283,17 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
   if (Processes().size() > 1) {
     throw UsageError("--head photometric runs as one process (several threads: --threads)");
   }
+  for (SensorKind sensor : sensors) {  // before any sensor's training starts
+    if (sensor == SensorKind::kSoftBubble) {
+      throw UsageError("--head photometric: the bubble is a depth sensor; the photometric head "
+                       "draws optical (gelslim) frames. Pass --sensors gelslim.");
+    }
+  }
   FunctaModel model;
   nlohmann::json figures = nlohmann::json::object();
   nlohmann::json info_trunks = nlohmann::json::object();
   for (SensorKind sensor : sensors) {
     const char* name = ToString(sensor);
-    if (sensor == SensorKind::kSoftBubble) {
-      throw UsageError("--head photometric: the bubble is a depth sensor; the photometric head "
-                       "draws optical (gelslim) frames. Pass --sensors gelslim.");
-    }
     const TrunkTrainer::Options base = OptionsForData(flags, dataset, sensor);
     const SensorInfo& info = dataset.sensor_info(sensor);
     const double scale =
