@@ -62,16 +62,6 @@ struct PhotometricBenchFlags {
   bool json = false;
 };
 
-std::vector<TrunkTargets> LoadSplit(const Dataset& dataset, SensorKind sensor, Split split,
-                                    const FrameFormat& format, bool clean, int threads,
-                                    std::vector<std::size_t> indices) {
-  std::vector<TrunkTargets> out(indices.size());
-  internal::ParallelFor(static_cast<int>(indices.size()), threads, [&](int i) {
-    out[i] = LoadTrunkTargets(dataset, indices[i], format, clean);
-  });
-  return out;
-}
-
 float Half(double v) { return static_cast<float>(Eigen::half(static_cast<float>(v))); }
 
 void RunPhotometricBench(const PhotometricBenchFlags& flags) {
@@ -114,14 +104,10 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
   std::cerr << "bench photometric: loading " << train_indices.size() << " + "
             << pca_indices.size() << " train and " << test_indices.size() << " test frames"
             << std::endl;
-  const auto train = LoadSplit(train_data, sensor, Split::kTrain, format, false, flags.threads,
-                               train_indices);
-  const auto pca_train =
-      LoadSplit(data, sensor, Split::kTrain, format, false, flags.threads, pca_indices);
-  const auto test = LoadSplit(data, sensor, Split::kTest, format, false, flags.threads,
-                              test_indices);
-  const auto test_clean = LoadSplit(data, sensor, Split::kTest, format, true, flags.threads,
-                                    test_indices);
+  const auto train = LoadTrunkTargets(train_data, train_indices, format, false, flags.threads);
+  const auto pca_train = LoadTrunkTargets(data, pca_indices, format, false, flags.threads);
+  const auto test = LoadTrunkTargets(data, test_indices, format, false, flags.threads);
+  const auto test_clean = LoadTrunkTargets(data, test_indices, format, true, flags.threads);
   const Image reference =
       PhotometricReference(train_data.FrameReference(train_indices[0]), format);
   const int channels = static_cast<int>(test[0].values.cols());
@@ -143,12 +129,14 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
     std::vector<double> clean, noisy;
   };
   std::vector<Row> rows;
+  Eigen::MatrixXf same_bits;  // the float16 PCA's decoded test frames, for the picture
   for (int half : {0, 1}) {
     const int n = std::min(half ? d : std::max(1, d / 2), pca_full.components());
     const PcaCodec pca = pca_full.Truncated(n);
     Eigen::MatrixXf codes = pca.Encode(test_matrix);
     if (half) codes = codes.unaryExpr([](float v) { return Half(v); });
     const Eigen::MatrixXf decoded = pca.Decode(codes);
+    if (half) same_bits = decoded;
     // Fewer train frames than components cap PCA (it has no more): the name says so.
     const bool capped = n < (half ? d : std::max(1, d / 2));
     Row row{"PCA-" + std::to_string(n) + (half ? " float16" : " float32") +
@@ -266,15 +254,13 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
   if (!flags.picture.empty()) {
     // Six test frames spread over the split: noise-free, PCA at the same bits, trunk.
     const int count = std::min<int>(6, static_cast<int>(test.size()));
-    Eigen::MatrixXf codes = pca_full.Encode(test_matrix).unaryExpr([](float v) { return Half(v); });
-    const Eigen::MatrixXf decoded = pca_full.Decode(codes);
     std::vector<std::vector<cv::Mat>> grid(3);
     for (int k = 0; k < count; ++k) {
       const std::size_t i = k * test.size() / count;
       const TrunkTargets& t = test_clean[i];
       const double lo = t.values.minCoeff(), hi = t.values.maxCoeff();
       const Eigen::MatrixXf pca_frame =
-          UnflattenFrame(decoded.row(static_cast<Eigen::Index>(i)), channels);
+          UnflattenFrame(same_bits.row(static_cast<Eigen::Index>(i)), channels);
       grid[0].push_back(FitHeight(ValueTile(t.values, t.weights, t.rows, t.cols, lo, hi), 240));
       grid[1].push_back(FitHeight(ValueTile(pca_frame, t.weights, t.rows, t.cols, lo, hi), 240));
       grid[2].push_back(

@@ -336,10 +336,8 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
               << o.batch_pixels << " pixels a step on " << o.threads << " thread(s), latent "
               << o.trunk.latent_dim << std::endl;
     WarnIfStretched(dataset, flags.data, sensor, format.rows, format.cols, "train");
-    std::vector<TrunkTargets> frames(indices.size());
-    internal::ParallelFor(static_cast<int>(indices.size()), o.threads, [&](int i) {
-      frames[i] = LoadTrunkTargets(dataset, indices[i], format);
-    });
+    const std::vector<TrunkTargets> frames =
+        LoadTrunkTargets(dataset, indices, format, /*clean=*/false, o.threads);
     const Image reference = PhotometricReference(dataset.FrameReference(indices[0]), format);
     auto bar = std::make_unique<ProgressBar>(std::string("train ") + name, o.steps, "steps");
     const bool bar_enabled = ProgressBar::Enabled();

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "estimation/data/dataset.h"
+#include "models/core/parallel_for.h"
 
 namespace tactfunc {
 
@@ -48,6 +49,16 @@ TrunkTargets LoadTrunkTargets(const Dataset& dataset, std::size_t index,
                               const FrameFormat& format, bool clean) {
   return DatasetFrameTargets(
       dataset, index, clean ? dataset.LoadCleanFrame(index) : dataset.LoadFrame(index), format);
+}
+
+std::vector<TrunkTargets> LoadTrunkTargets(const Dataset& dataset,
+                                           const std::vector<std::size_t>& indices,
+                                           const FrameFormat& format, bool clean, int threads) {
+  std::vector<TrunkTargets> out(indices.size());
+  internal::ParallelFor(static_cast<int>(indices.size()), threads, [&](int i) {
+    out[i] = LoadTrunkTargets(dataset, indices[i], format, clean);
+  });
+  return out;
 }
 
 TrunkTargets DatasetFrameTargets(const Dataset& dataset, std::size_t index, const Image& frame,

@@ -25,6 +25,7 @@
 #define TACTFUNC_ESTIMATION_DATA_TRUNK_TARGETS_H_
 
 #include <cstddef>
+#include <vector>
 
 #include <Eigen/Core>
 
@@ -56,6 +57,11 @@ TrunkTargets MakeTrunkTargets(const Image& frame, const Image& reference, Sensor
 // Frame `index` of `dataset` (its noisy frame, or its noise-free copy if `clean`).
 TrunkTargets LoadTrunkTargets(const Dataset& dataset, std::size_t index,
                               const FrameFormat& format, bool clean = false);
+// LoadTrunkTargets of every frame of `indices`, on `threads` workers (>= 1), in the
+// order of `indices`.
+std::vector<TrunkTargets> LoadTrunkTargets(const Dataset& dataset,
+                                           const std::vector<std::size_t>& indices,
+                                           const FrameFormat& format, bool clean, int threads);
 // The same from `frame`, frame `index` as already decoded (Dataset::LoadFrame or
 // LoadCleanFrame), against its own reference: for callers that also look at the raw frame
 // (contact detection) and decode it once.

@@ -349,8 +349,8 @@ FunctaModel FunctaModel::FromTensorFile(const TensorFile& file, const std::strin
         // a file holds the values it claims, so no field can ask for more memory.
         const auto& values = file.Get(
             name + "/reference", {static_cast<std::int64_t>(rows) * cols * channels});
-        const std::int64_t h = po.shading_width, c = po.channels;
-        const auto& head = file.Get(name + "/head", {h * 5 + h + h * h + h + c * h + c + 1});
+        const auto& head = file.Get(
+            name + "/head", {PhotometricTrunk::HeadParameterCount(po.shading_width, po.channels)});
         Image reference(rows, cols, channels);
         for (std::size_t i = 0; i < reference.size(); ++i) {
           reference.data[i] = static_cast<float>(values.values[i]);

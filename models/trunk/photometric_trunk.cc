@@ -28,6 +28,15 @@ LatentModulatedSiren::Options SirenOptions(const PhotometricTrunk::Options& o) {
   return s;
 }
 
+// Offsets of the head's blocks in its flat vector, in the header comment's order: W_1
+// (H x 5), b_1, W_2 (H x H), b_2, W_3 (C x H), b_3, then m.
+struct HeadLayout {
+  HeadLayout(int h, int c)
+      : w1(0), b1(w1 + h * 5), w2(b1 + h), b2(w2 + h * h), w3(b2 + h), b3(w3 + c * h),
+        m(b3 + c), size(m + 1) {}
+  int w1, b1, w2, b2, w3, b3, m, size;
+};
+
 template <typename S>
 S Silu(S a) {
   return a / (S(1) + std::exp(-a));
@@ -116,9 +125,8 @@ PhotometricTrunk::PhotometricTrunk(const Options& options, const Image& referenc
         "PhotometricTrunk: the reference must be a non-empty image with " +
         std::to_string(options.channels) + " channel(s), found " + reference.ShapeString());
   }
-  const int h = options.shading_width;
   const int c = options.channels;
-  num_head_parameters_ = h * 5 + h + h * h + h + c * h + c + 1;
+  num_head_parameters_ = HeadParameterCount(options.shading_width, c);
   InitializeHead(DeriveSeed(seed, 1));
   if (options.wide_biases) {
     boost::random::mt19937_64 rng(DeriveSeed(seed, 2));
@@ -153,20 +161,25 @@ PhotometricTrunk::PhotometricTrunk(const Options& options, const Image& referenc
   marker_sampling_ = keep;
 }
 
+int PhotometricTrunk::HeadParameterCount(int shading_width, int channels) {
+  return HeadLayout(shading_width, channels).size;
+}
+
 void PhotometricTrunk::InitializeHead(std::uint64_t seed) {
   boost::random::mt19937_64 rng(seed);
   const int h = options_.shading_width;
-  const int c = options_.channels;
+  const HeadLayout layout(h, options_.channels);
   head_.setZero(num_head_parameters_);
-  // (size, fan_in) of W_1, b_1, W_2, b_2, W_3, b_3, as nn.Linear draws them.
-  const int sizes[6][2] = {{h * 5, 5}, {h, 5}, {h * h, h}, {h, h}, {c * h, h}, {c, h}};
-  int at = 0;
-  for (const auto& block : sizes) {
-    const double bound = 1.0 / std::sqrt(static_cast<double>(block[1]));
+  // Each block of W_1, b_1, W_2, b_2, W_3, b_3 with its fan-in, as nn.Linear draws them.
+  const int fan_in[6] = {5, 5, h, h, h, h};
+  const int starts[7] = {layout.w1, layout.b1, layout.w2, layout.b2, layout.w3, layout.b3,
+                         layout.m};
+  for (int block = 0; block < 6; ++block) {
+    const double bound = 1.0 / std::sqrt(static_cast<double>(fan_in[block]));
     boost::random::uniform_real_distribution<double> uniform(-bound, bound);
-    for (int i = 0; i < block[0]; ++i) head_[at++] = uniform(rng);
+    for (int i = starts[block]; i < starts[block + 1]; ++i) head_[i] = uniform(rng);
   }
-  head_[at] = 0.0;  // m: the markers start at rest
+  head_[layout.m] = 0.0;  // m: the markers start at rest
 }
 
 void PhotometricTrunk::SetHeadParameters(const Eigen::VectorXd& head) {
@@ -262,11 +275,12 @@ void PhotometricTrunk::RunForward(const std::vector<int>& pixels, const VectorX<
   const double sn = std::sin(static_cast<double>(z[2]));
   const double step = 2.0 / options_.rows;  // one pixel in coordinates
   const double offsets[kSets][2] = {{0, 0}, {step, 0}, {-step, 0}, {0, step}, {0, -step}};
+  std::vector<Eigen::Vector2d> p(n);
+  for (int i = 0; i < n; ++i) p[i] = PixelCoordinate(pixels[i]);
   pass.coords.resize(kSets * n, 2);
   for (int k = 0; k < kSets; ++k) {
     for (int i = 0; i < n; ++i) {
-      const Eigen::Vector2d p = PixelCoordinate(pixels[i]);
-      const double d0 = p[0] + offsets[k][0] - t0, d1 = p[1] + offsets[k][1] - t1;
+      const double d0 = p[i][0] + offsets[k][0] - t0, d1 = p[i][1] + offsets[k][1] - t1;
       pass.coords(k * n + i, 0) = static_cast<Scalar>(cs * d0 + sn * d1);
       pass.coords(k * n + i, 1) = static_cast<Scalar>(-sn * d0 + cs * d1);
     }
@@ -278,28 +292,22 @@ void PhotometricTrunk::RunForward(const std::vector<int>& pixels, const VectorX<
   pass.input.resize(5, n);
   pass.input0.setZero(5, n);
   for (int i = 0; i < n; ++i) {
-    const Eigen::Vector2d p = PixelCoordinate(pixels[i]);
     pass.input(0, i) = (s(n + i, 0) - s(2 * n + i, 0)) / Scalar(2);
     pass.input(1, i) = (s(3 * n + i, 0) - s(4 * n + i, 0)) / Scalar(2);
     pass.input(2, i) = s(i, 0);
-    pass.input(3, i) = pass.input0(3, i) = static_cast<Scalar>(p[0]);
-    pass.input(4, i) = pass.input0(4, i) = static_cast<Scalar>(p[1]);
+    pass.input(3, i) = pass.input0(3, i) = static_cast<Scalar>(p[i][0]);
+    pass.input(4, i) = pass.input0(4, i) = static_cast<Scalar>(p[i][1]);
   }
   // The shading network on the contact's and the flat input.
   const int h = options_.shading_width;
+  const HeadLayout layout(h, c);
   const VectorX<Scalar> head = head_.cast<Scalar>();
-  int at = 0;
-  const Eigen::Map<const MatrixX<Scalar>> W1(head.data() + at, h, 5);
-  at += h * 5;
-  const Eigen::Map<const VectorX<Scalar>> b1(head.data() + at, h);
-  at += h;
-  const Eigen::Map<const MatrixX<Scalar>> W2(head.data() + at, h, h);
-  at += h * h;
-  const Eigen::Map<const VectorX<Scalar>> b2(head.data() + at, h);
-  at += h;
-  const Eigen::Map<const MatrixX<Scalar>> W3(head.data() + at, c, h);
-  at += c * h;
-  const Eigen::Map<const VectorX<Scalar>> b3(head.data() + at, c);
+  const Eigen::Map<const MatrixX<Scalar>> W1(head.data() + layout.w1, h, 5);
+  const Eigen::Map<const VectorX<Scalar>> b1(head.data() + layout.b1, h);
+  const Eigen::Map<const MatrixX<Scalar>> W2(head.data() + layout.w2, h, h);
+  const Eigen::Map<const VectorX<Scalar>> b2(head.data() + layout.b2, h);
+  const Eigen::Map<const MatrixX<Scalar>> W3(head.data() + layout.w3, c, h);
+  const Eigen::Map<const VectorX<Scalar>> b3(head.data() + layout.b3, c);
   auto network = [&](const MatrixX<Scalar>& in, MatrixX<Scalar>* a1, MatrixX<Scalar>* h1,
                      MatrixX<Scalar>* a2, MatrixX<Scalar>* h2) {
     *a1 = (W1 * in).colwise() + b1;
@@ -346,10 +354,11 @@ void PhotometricTrunk::RunBackward(const Pass& pass_holder, const std::vector<in
     throw std::invalid_argument("PhotometricTrunk::Backward: dL/dY must be " +
                                 std::to_string(n) + " x " + std::to_string(c));
   }
+  const HeadLayout layout(h, c);
   const VectorX<Scalar> head = head_.cast<Scalar>();
-  const Eigen::Map<const MatrixX<Scalar>> W1(head.data(), h, 5);
-  const Eigen::Map<const MatrixX<Scalar>> W2(head.data() + h * 6, h, h);
-  const Eigen::Map<const MatrixX<Scalar>> W3(head.data() + h * 7 + h * h, c, h);
+  const Eigen::Map<const MatrixX<Scalar>> W1(head.data() + layout.w1, h, 5);
+  const Eigen::Map<const MatrixX<Scalar>> W2(head.data() + layout.w2, h, h);
+  const Eigen::Map<const MatrixX<Scalar>> W3(head.data() + layout.w3, c, h);
   VectorX<Scalar> dhead = VectorX<Scalar>::Zero(num_head_parameters_);
   const MatrixX<Scalar> dshade = dL_dY.transpose();  // C x N
   // Reverse through the network; adds its parameter gradients to dhead (scaled by
@@ -357,24 +366,18 @@ void PhotometricTrunk::RunBackward(const Pass& pass_holder, const std::vector<in
   auto network_back = [&](const MatrixX<Scalar>& in, const MatrixX<Scalar>& a1,
                           const MatrixX<Scalar>& h1, const MatrixX<Scalar>& a2,
                           const MatrixX<Scalar>& h2, const MatrixX<Scalar>& dout) {
-    int at = 0;
     const MatrixX<Scalar> dh2 = W3.transpose() * dout;
     const MatrixX<Scalar> da2 =
         dh2.cwiseProduct(a2.unaryExpr([](Scalar v) { return SiluSlope(v); }));
     const MatrixX<Scalar> dh1 = W2.transpose() * da2;
     const MatrixX<Scalar> da1 =
         dh1.cwiseProduct(a1.unaryExpr([](Scalar v) { return SiluSlope(v); }));
-    Eigen::Map<MatrixX<Scalar>>(dhead.data() + at, h, 5) += da1 * in.transpose();
-    at += h * 5;
-    Eigen::Map<VectorX<Scalar>>(dhead.data() + at, h) += da1.rowwise().sum();
-    at += h;
-    Eigen::Map<MatrixX<Scalar>>(dhead.data() + at, h, h) += da2 * h1.transpose();
-    at += h * h;
-    Eigen::Map<VectorX<Scalar>>(dhead.data() + at, h) += da2.rowwise().sum();
-    at += h;
-    Eigen::Map<MatrixX<Scalar>>(dhead.data() + at, c, h) += dout * h2.transpose();
-    at += c * h;
-    Eigen::Map<VectorX<Scalar>>(dhead.data() + at, c) += dout.rowwise().sum();
+    Eigen::Map<MatrixX<Scalar>>(dhead.data() + layout.w1, h, 5) += da1 * in.transpose();
+    Eigen::Map<VectorX<Scalar>>(dhead.data() + layout.b1, h) += da1.rowwise().sum();
+    Eigen::Map<MatrixX<Scalar>>(dhead.data() + layout.w2, h, h) += da2 * h1.transpose();
+    Eigen::Map<VectorX<Scalar>>(dhead.data() + layout.b2, h) += da2.rowwise().sum();
+    Eigen::Map<MatrixX<Scalar>>(dhead.data() + layout.w3, c, h) += dout * h2.transpose();
+    Eigen::Map<VectorX<Scalar>>(dhead.data() + layout.b3, c) += dout.rowwise().sum();
     return MatrixX<Scalar>(W1.transpose() * da1);
   };
   MatrixX<Scalar> dinput = network_back(pass.input, pass.a1, pass.h1, pass.a2, pass.h2, dshade);
@@ -395,7 +398,7 @@ void PhotometricTrunk::RunBackward(const Pass& pass_holder, const std::vector<in
     dinput(0, i) += static_cast<Scalar>(m * dg0);
     dinput(1, i) += static_cast<Scalar>(m * dg1);
   }
-  dhead[num_head_parameters_ - 1] = static_cast<Scalar>(dm);
+  dhead[layout.m] = static_cast<Scalar>(dm);
   if (dL_dhead != nullptr) *dL_dhead = dhead;
   if (dL_dz == nullptr && dL_dsiren == nullptr) return;
 

@@ -128,6 +128,8 @@ class PhotometricTrunk {
   const Image& reference() const { return reference_; }
 
   int NumHeadParameters() const { return num_head_parameters_; }
+  // The head's parameter count for a shading width H and C channels.
+  static int HeadParameterCount(int shading_width, int channels);
   const Eigen::VectorXd& head_parameters() const { return head_; }
   // Throws std::invalid_argument if the size is not NumHeadParameters().
   void SetHeadParameters(const Eigen::VectorXd& head);
