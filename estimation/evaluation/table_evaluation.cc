@@ -116,6 +116,16 @@ struct SensorFrames {
   std::vector<std::size_t> train, test;        // indices into entries
   // Whether each entry's raw frame is a contact (DetectFrameContact).
   std::vector<char> contact;
+  // A functaset of test entries only (encode --split test): the dataset's train-split
+  // frames, loaded for the baselines (PCA's basis, JPEG's range and quality) alone.
+  std::vector<TrunkTargets> baseline_train;
+  // The frames the baselines are fitted on: the train entries', else baseline_train.
+  std::vector<const TrunkTargets*> BaselineTrain() const {
+    if (!train.empty()) return Targets(train);
+    std::vector<const TrunkTargets*> out;
+    for (const TrunkTargets& t : baseline_train) out.push_back(&t);
+    return out;
+  }
   const std::vector<std::size_t>& Of(Split split) const {
     return split == Split::kTrain ? train : test;
   }
@@ -178,6 +188,27 @@ SensorFrames LoadSensorFrames(const TableEvaluation::Inputs& in, const SensorTru
         s.contact[i] = in.Get<std::uint8_t>() != 0 ? 1 : 0;
         if (in.Get<std::uint8_t>() != 0) s.clean[i] = GetTargets(in);
       });
+  if (observer) observer->EndTask();
+  if (!s.train.empty() || s.entries.empty()) return s;
+  const std::vector<std::size_t> train = in.dataset->FrameIndices(trunk.sensor, Split::kTrain);
+  if (train.empty()) {
+    throw DatasetError("functaset '" + in.functaset_name + "' has no train-split " +
+                       ToString(trunk.sensor) + " entries and dataset '" + in.dataset_name +
+                       "' no train-split " + ToString(trunk.sensor) +
+                       " frames: the baselines are fitted on those");
+  }
+  s.baseline_train.resize(train.size());
+  if (observer) {
+    observer->BeginTask(std::string("eval: loading ") + ToString(trunk.sensor) +
+                            " train frames for the baselines",
+                        static_cast<std::int64_t>(train.size()), "frames");
+  }
+  ShardedFor(
+      group, train.size(), threads, observer,
+      [&](std::size_t i, ByteWriter* out) {
+        PutTargets(LoadTrunkTargets(*in.dataset, train[i], trunk.format), out);
+      },
+      [&](std::size_t i, ByteReader& in) { s.baseline_train[i] = GetTargets(in); });
   if (observer) observer->EndTask();
   return s;
 }
@@ -319,9 +350,15 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
     Details& details = sensor_result.details;
     const SensorTrunk& trunk = model.Trunk(sensor);
     const SensorFrames s = LoadSensorFrames(in, trunk, group, threads, observer);
-    if (s.train.empty()) {
-      throw DatasetError("functaset '" + in.functaset_name + "' has no train-split " +
-                         ToString(sensor) + " entries: the baselines are fitted on those");
+    if (s.entries.empty()) {
+      throw DatasetError("functaset '" + in.functaset_name + "' has no " + ToString(sensor) +
+                         " entries");
+    }
+    const std::vector<const TrunkTargets*> baseline_train = s.BaselineTrain();
+    if (!s.baseline_train.empty()) {
+      message("eval: " + std::string(ToString(sensor)) + ": the functaset holds no train-split " +
+              "entries; the baselines are fitted on the dataset's " +
+              std::to_string(baseline_train.size()) + " train-split frames\n");
     }
     const std::uint64_t m = s.entries.size();
     const int d = functaset.latent_dim(sensor);
@@ -353,7 +390,7 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
         {tf_frame_bytes, MeanPsnr(Pick(tf_psnr, s.test)), "d=" + std::to_string(d)});
 
     // -- PCA -----------------------------------------------------------------------------
-    const Eigen::MatrixXf train_matrix = StackFrames(s.Targets(s.train));
+    const Eigen::MatrixXf train_matrix = StackFrames(baseline_train);
     std::set<int> sweep = {std::max(1, d / 4), std::max(1, d / 2), d, 2 * d, 4 * d};
     for (const Extra& e : in.extras) {
       if (e.functaset->has_sensor(sensor)) sweep.insert(e.functaset->latent_dim(sensor));
@@ -361,7 +398,7 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
     PcaCodec::Options pca_options;
     pca_options.components = *sweep.rbegin();
     PcaCodec::Summary pca_summary;
-    message("eval: fitting PCA on " + std::to_string(s.train.size()) + " frames of " +
+    message("eval: fitting PCA on " + std::to_string(baseline_train.size()) + " frames of " +
             std::to_string(train_matrix.cols()) + " floats...\n");
     const PcaCodec pca_full = PcaCodec::Fit(train_matrix, pca_options, &pca_summary);
     message(pca_summary.BriefReport() + "\n");
@@ -400,9 +437,9 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
 
     // -- JPEG ----------------------------------------------------------------------------
     JpegCodec::Options jpeg_options;
-    JpegRangeOfFrames(s.Targets(s.train), &jpeg_options.lo, &jpeg_options.hi);
+    JpegRangeOfFrames(baseline_train, &jpeg_options.lo, &jpeg_options.hi);
     const JpegQualitySearchSummary search =
-        FindJpegQuality(s.Targets(s.train), jpeg_options, tf_frame_bytes);
+        FindJpegQuality(baseline_train, jpeg_options, tf_frame_bytes);
     message(search.BriefReport() + "\n");
     jpeg_options.quality = search.quality;
     auto jpeg_eval = [&](const JpegCodec::Options& o, std::vector<double>* psnr,

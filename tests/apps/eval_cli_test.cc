@@ -249,6 +249,45 @@ TEST_F(EvalCliTest, WithoutAPoseModelTheTableHoldsTheReconstructionColumnsAlone)
   }
 }
 
+TEST_F(EvalCliTest, ATestOnlyFunctasetFitsTheBaselinesOnTheDatasetsTrainFrames) {
+  // encode --split test holds no train entries; the baselines are fitted on the
+  // dataset's train-split frames, the same frames the full functaset's train entries are.
+  const Result encode = Run("encode --model " + Root("m.tfm") + " --data " + Root("d") +
+                            " --out " + Root("f_test.tfs") + " --split test --threads 1");
+  ASSERT_EQ(encode.exit_code, 0) << encode.err;
+  const Result r = Run("eval --data " + Root("d") + " --model " + Root("m.tfm") +
+                       " --functaset " + Root("f_test.tfs") + " --out " + Root("table_test") +
+                       " --threads 1 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err << r.out;
+  EXPECT_THAT(r.err, HasSubstr("eval: loading bubble train frames for the baselines: 9/9"));
+  const nlohmann::json j = r.LastJson();
+  const nlohmann::json full = eval_->LastJson();
+  int compared = 0;
+  for (const nlohmann::json& row : j["rows"]) {
+    EXPECT_EQ(row["split"], "test") << row.dump();  // no train rows without train entries
+    for (const nlohmann::json& other : full["rows"]) {
+      if (other["split"] != "test" || other["sensor"] != row["sensor"] ||
+          other["approach"] != row["approach"] || row["approach"] == "Raw frames") {
+        continue;
+      }
+      // TactFunc: the same test latents; PCA and JPEG: the same train frames (PCA's
+      // codes come from a product of another row count: equal to rounding).
+      EXPECT_NEAR(other["psnr"].get<double>(), row["psnr"].get<double>(), 1e-6) << row.dump();
+      if (row["approach"] != "JPEG") {
+        EXPECT_NEAR(other["psnr_clean"].get<double>(), row["psnr_clean"].get<double>(), 1e-6)
+            << row.dump();
+      }
+      ++compared;
+    }
+  }
+  EXPECT_EQ(compared, 6);  // TactFunc, PCA and JPEG on both sensors
+  for (const char* sensor : {"bubble", "gelslim"}) {
+    EXPECT_NEAR(j["targets"][sensor]["psnr_3db_above_pca_clean"]["pca_db"].get<double>(),
+                full["targets"][sensor]["psnr_3db_above_pca_clean"]["pca_db"].get<double>(), 1e-6)
+        << sensor;
+  }
+}
+
 TEST_F(EvalCliTest, TakesTheDataFlagsOfTheOtherCommands) {
   const Result help = Run("eval --help");
   for (const char* flag : {"--sensor ", "--sensors", "--labels", "--pixel-pitch-mm", "--reference"}) {
