@@ -538,7 +538,9 @@ void RunEval(const EvalFlags& flags) {
        << (has_pose ? ""
                     : "\nNo pose model was given (--pose-model): the table holds the "
                       "reconstruction columns only; pose columns and pose targets are left out.\n")
-       << "\nrep. size: model + per-frame data for every frame of the sensor (train + test). "
+       << "\nrep. size: model + per-frame data for every frame of the sensor in the functaset "
+          "(train + test; the test frames alone for a functaset of test entries only, whose "
+          "baselines are fitted on the dataset's train-split frames). "
           "bytes/frame: codes as stored (TactFunc latents as encode --latent-precision stored them, "
           "float16 by default, b-bit codes without their per-dimension offset/step tables "
           "(counted once in rep. size); PCA float32); JPEG without its shared tables "
