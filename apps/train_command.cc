@@ -262,11 +262,11 @@ cv::Mat TrainingCurvesPlot(
 
 // `train --head photometric`: the optical sensors' photometric trunk
 // (models/trunk/photometric_trunk.h), trained jointly with its training latents
-// (PhotometricTrainer). Writes the model as the direct path does; no checkpoints yet.
+// (PhotometricTrainer). Writes the model and its checkpoints (OUT.<sensor>.ckpt, resumed
+// with --resume) as the direct path does.
 void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
                       const std::vector<SensorKind>& sensors) {
   const std::vector<std::pair<bool, const char*>> direct_only = {
-      {flags.resume, "--resume"},
       {flags.readout, "--readout"},
       {!flags.spatial_latent.empty(), "--spatial-latent"},
       {flags.first_order, "--first-order"},
@@ -323,6 +323,9 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
     o.marker_warmup_steps = flags.marker_warmup;
     o.seed = base.seed;
     o.threads = base.threads;
+    o.checkpoint_path = CheckpointPath(flags.out, sensor);
+    o.checkpoint_every = base.checkpoint_every;
+    o.resume = flags.resume;
     if (o.trunk.latent_dim <= PhotometricTrunk::kPoseValues) {
       throw UsageError("--latent-dim: the photometric trunk's latent holds a rigid motion (3 "
                        "values) and a code: expected at least 4, got " +
@@ -335,6 +338,13 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
               << format.rows << "x" << format.cols << ", " << o.batch_frames << " frames x "
               << o.batch_pixels << " pixels a step on " << o.threads << " thread(s), latent "
               << o.trunk.latent_dim << std::endl;
+    if (flags.resume) {
+      std::cout << "train " << name << ": "
+                << (std::filesystem::exists(o.checkpoint_path)
+                        ? "resuming from " + o.checkpoint_path
+                        : std::string("no checkpoint, starting at step 0"))
+                << std::endl;
+    }
     WarnIfStretched(dataset, flags.data, sensor, format.rows, format.cols, "train");
     const std::vector<TrunkTargets> frames =
         LoadTrunkTargets(dataset, indices, format, /*clean=*/false, o.threads);
@@ -343,9 +353,11 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
     const bool bar_enabled = ProgressBar::Enabled();
     const int every = std::max(1, o.steps / 20);
     const auto started = std::chrono::steady_clock::now();
+    bool first = true;
     const PhotometricTrainer::Result result =
         trainer.Train(frames, reference, [&](int step, double loss) {
-          bar->Tick(1);
+          bar->Tick(first ? step : 1);  // a resumed run starts with the bar part-way
+          first = false;
           bar->SetStatus("loss " + FormatFixed(loss * 1e3, 3) + "e-3");
           if (!bar_enabled && (step % every == 0 || step == o.steps)) {
             const double seconds =
@@ -359,9 +371,9 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
     if (result.summary.stopped) {
       std::signal(SIGINT, SIG_DFL);
       throw std::runtime_error(std::string("interrupted while training ") + name + " at step " +
-                               std::to_string(result.summary.steps) +
-                               "; --head photometric keeps no checkpoint yet: no model was "
-                               "written");
+                               std::to_string(result.summary.steps) + "; checkpoint written to " +
+                               o.checkpoint_path +
+                               ". Continue with the same command plus --resume.");
     }
     if (!std::isfinite(result.summary.final_loss)) {
       throw std::runtime_error(std::string("training ") + name + " failed: the loss became " +
@@ -482,15 +494,23 @@ void RunTrain(const TrainFlags& flags) {
     }
   }
   if (sensors.empty()) throw UsageError("--sensors: expected at least one sensor");
-  if (flags.head == "photometric") {
-    if (flags.sensors.empty()) {  // the dataset's optical sensors
-      sensors.erase(std::remove(sensors.begin(), sensors.end(), SensorKind::kSoftBubble),
-                    sensors.end());
-      if (sensors.empty()) {
-        throw UsageError("--head photometric: the dataset " + flags.data +
-                         " has no optical (gelslim) frames");
-      }
+  if (flags.head == "photometric" && flags.sensors.empty()) {  // the dataset's optical sensors
+    sensors.erase(std::remove(sensors.begin(), sensors.end(), SensorKind::kSoftBubble),
+                  sensors.end());
+    if (sensors.empty()) {
+      throw UsageError("--head photometric: the dataset " + flags.data +
+                       " has no optical (gelslim) frames");
     }
+  }
+  if (flags.resume) {
+    bool any = false;
+    for (SensorKind s : sensors) any = any || std::filesystem::exists(CheckpointPath(flags.out, s));
+    if (!any) {
+      throw UsageError("--resume: no checkpoint found (looked for " +
+                       CheckpointPath(flags.out, sensors[0]) + ")");
+    }
+  }
+  if (flags.head == "photometric") {
     g_interrupted.store(false);
     std::signal(SIGINT, HandleSigint);
     TrainPhotometric(flags, dataset, sensors);
@@ -500,12 +520,6 @@ void RunTrain(const TrainFlags& flags) {
     throw UsageError("--marker-warmup applies to --head photometric");
   }
   if (flags.resume) {
-    bool any = false;
-    for (SensorKind s : sensors) any = any || std::filesystem::exists(CheckpointPath(flags.out, s));
-    if (!any) {
-      throw UsageError("--resume: no checkpoint found (looked for " +
-                       CheckpointPath(flags.out, sensors[0]) + ")");
-    }
     // Every process reads the checkpoints (rank 0 writes them): they must see the same.
     for (SensorKind s : sensors) RefuseUnsharedFile(processes, CheckpointPath(flags.out, s));
   }

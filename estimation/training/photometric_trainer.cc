@@ -3,18 +3,23 @@
 
 #include <chrono>
 #include <cmath>
+#include <filesystem>
 #include <sstream>
 #include <stdexcept>
 
 #include "boost/random/mersenne_twister.hpp"
 #include "boost/random/uniform_int_distribution.hpp"
+#include "estimation/training/internal/checkpoint.h"
 #include "models/core/parallel_for.h"
 #include "models/core/seed.h"
+#include "nlohmann/json.hpp"
 
 namespace tactfunc {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
+const char* kCheckpointFormat = "tactfunc-photometric-checkpoint";
+constexpr int kCheckpointVersion = 1;
 
 // Adam with bias correction on one flat vector (double moments).
 struct Adam {
@@ -83,10 +88,35 @@ bool PhotometricTrainer::Options::IsValid(std::string* error) const {
     message << "marker_warmup_steps must be >= 0, found " << marker_warmup_steps;
   } else if (threads < 1) {
     message << "threads must be >= 1, found " << threads;
+  } else if (checkpoint_every < 0) {
+    message << "checkpoint_every must be >= 0 (0 = only at the end), found " << checkpoint_every;
+  } else if (resume && checkpoint_path.empty()) {
+    message << "resume requires a checkpoint_path";
   }
   const std::string text = message.str();
   if (error != nullptr) *error = text;
   return text.empty();
+}
+
+std::string PhotometricTrainer::Options::TrajectoryOptionsJson() const {
+  nlohmann::json json;
+  json["trunk.width"] = trunk.width;
+  json["trunk.num_hidden_layers"] = trunk.num_hidden_layers;
+  json["trunk.omega_0"] = trunk.omega_0;
+  json["trunk.latent_dim"] = trunk.latent_dim;
+  json["trunk.shading_width"] = trunk.shading_width;
+  json["trunk.supersample"] = trunk.supersample;
+  json["trunk.wide_biases"] = trunk.wide_biases;
+  json["steps"] = steps;
+  json["batch_frames"] = batch_frames;
+  json["batch_pixels"] = batch_pixels;
+  json["trunk_learning_rate"] = trunk_learning_rate;
+  json["latent_learning_rate"] = latent_learning_rate;
+  json["marker_learning_rate"] = marker_learning_rate;
+  json["cosine_schedule"] = cosine_schedule;
+  json["marker_warmup_steps"] = marker_warmup_steps;
+  json["seed"] = seed;
+  return json.dump();
 }
 
 bool PhotometricFitOptions::IsValid(std::string* error) const {
@@ -183,6 +213,83 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
   Eigen::VectorXd siren_theta = trunk.siren().parameters();
   Eigen::VectorXd head = trunk.head_parameters();
   Adam adam_siren(siren_theta.size()), adam_head(head.size()), adam_latents(latents.size());
+  Summary summary;
+  summary.loss.reserve(o.steps);
+
+  // Checkpoints: the run they belong to (options, frames and reference), then resume.
+  internal::CheckpointRun run;
+  double earlier_seconds = 0;  // training seconds of the runs resumed from
+  if (!o.checkpoint_path.empty()) {
+    run.format = kCheckpointFormat;
+    run.version = kCheckpointVersion;
+    run.sensor = "optical";
+    run.options_json = o.TrajectoryOptionsJson();
+    run.num_frames = num_frames;
+    std::uint64_t hash = internal::Fnv1a(nullptr, 0);
+    for (const TrunkTargets& frame : frames) {
+      hash = internal::Fnv1a(frame.values.data(), sizeof(float) * frame.values.size(), hash);
+      hash = internal::Fnv1a(frame.weights.data(), sizeof(float) * frame.weights.size(), hash);
+    }
+    run.fingerprint =
+        internal::Fnv1a(reference.data.data(), sizeof(float) * reference.data.size(), hash);
+  }
+  int first_step = 1;
+  if (o.resume && std::filesystem::exists(o.checkpoint_path)) {
+    nlohmann::json meta;
+    const TensorFile file = internal::ReadCheckpoint(o.checkpoint_path, run, &meta);
+    const int done = meta.at("step").get<int>();
+    if (done < 0 || done > o.steps) {
+      throw TensorFileError("checkpoint " + o.checkpoint_path + ": meta.step: expected 0.." +
+                            std::to_string(o.steps) + ", found " + std::to_string(done));
+    }
+    earlier_seconds = meta.at("train_seconds").get<double>();
+    const auto n = static_cast<std::int64_t>(siren_theta.size());
+    const auto h = static_cast<std::int64_t>(head.size());
+    const auto l = static_cast<std::int64_t>(latents.size());
+    siren_theta = internal::CheckpointVector(file, "siren", n);
+    head = internal::CheckpointVector(file, "head", h);
+    latents = Eigen::Map<const Eigen::MatrixXd>(
+        internal::CheckpointVector(file, "latents", l).data(), d, num_frames);
+    adam_siren.m = internal::CheckpointVector(file, "adam/siren_m", n);
+    adam_siren.v = internal::CheckpointVector(file, "adam/siren_v", n);
+    adam_head.m = internal::CheckpointVector(file, "adam/head_m", h);
+    adam_head.v = internal::CheckpointVector(file, "adam/head_v", h);
+    adam_latents.m = internal::CheckpointVector(file, "adam/latents_m", l);
+    adam_latents.v = internal::CheckpointVector(file, "adam/latents_v", l);
+    const Eigen::VectorXd loss = internal::CheckpointVector(file, "loss", done);
+    summary.loss.assign(loss.data(), loss.data() + loss.size());
+    trunk.mutable_siren().SetParameters(siren_theta);
+    trunk.SetHeadParameters(head);
+    summary.steps = done;
+    summary.final_loss = done > 0 ? summary.loss.back() : 0.0;
+    first_step = done + 1;
+  }
+  auto seconds = [&]() {
+    return earlier_seconds +
+           std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  };
+  auto checkpoint = [&]() {
+    if (o.checkpoint_path.empty()) return;
+    using internal::ToStdVector;
+    using D = TensorFile::DType;
+    TensorFile file = internal::NewCheckpoint(run, summary.steps, seconds());
+    const auto n = static_cast<std::int64_t>(siren_theta.size());
+    const auto h = static_cast<std::int64_t>(head.size());
+    const auto l = static_cast<std::int64_t>(latents.size());
+    file.Add("siren", D::kFloat64, {n}, ToStdVector(siren_theta));
+    file.Add("head", D::kFloat64, {h}, ToStdVector(head));
+    file.Add("latents", D::kFloat64, {l},
+             std::vector<double>(latents.data(), latents.data() + l));
+    file.Add("adam/siren_m", D::kFloat64, {n}, ToStdVector(adam_siren.m));
+    file.Add("adam/siren_v", D::kFloat64, {n}, ToStdVector(adam_siren.v));
+    file.Add("adam/head_m", D::kFloat64, {h}, ToStdVector(adam_head.m));
+    file.Add("adam/head_v", D::kFloat64, {h}, ToStdVector(adam_head.v));
+    file.Add("adam/latents_m", D::kFloat64, {l}, ToStdVector(adam_latents.m));
+    file.Add("adam/latents_v", D::kFloat64, {l}, ToStdVector(adam_latents.v));
+    file.Add("loss", D::kFloat64, {static_cast<std::int64_t>(summary.loss.size())},
+             summary.loss);
+    file.Write(o.checkpoint_path);
+  };
 
   struct Slot {
     int frame = 0;
@@ -190,9 +297,7 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
     Eigen::VectorXf dz, dsiren, dhead;
   };
   std::vector<Slot> slots(o.batch_frames);
-  Summary summary;
-  summary.loss.reserve(o.steps);
-  for (int step = 1; step <= o.steps; ++step) {
+  for (int step = first_step; step <= o.steps; ++step) {
     trunk.set_marker_sampling(step <= o.marker_warmup_steps
                                   ? PhotometricTrunk::MarkerSampling::kWorkingResolution
                                   : PhotometricTrunk::MarkerSampling::kSensorResolution);
@@ -244,10 +349,12 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
       summary.stopped = true;
       break;
     }
+    if (o.checkpoint_every > 0 && step % o.checkpoint_every == 0 && step < o.steps) checkpoint();
   }
+  // At the end or on a stop; a diverged run keeps its last finite checkpoint.
+  if (std::isfinite(summary.final_loss)) checkpoint();
   trunk.set_marker_sampling(PhotometricTrunk::MarkerSampling::kSensorResolution);
-  summary.seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  summary.seconds = seconds();
   return Result{std::move(trunk), latents.transpose(), std::move(summary)};
 }
 

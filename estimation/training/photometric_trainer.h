@@ -33,7 +33,16 @@
 // Determinism: every random choice is drawn from DeriveSeed (models/core/seed.h) of the
 // seed, the step (or the frame) and the batch slot; the frames of a step are processed
 // by Options::threads workers writing their own slots, summed in slot order, so a run
-// is bit-identical for any thread count.
+// is bit-identical for any thread count, and a run stopped, checkpointed and resumed is
+// bit-identical to one that never stopped.
+//
+// Checkpoints: a TensorFile of kind "checkpoint" (format "tactfunc-photometric-
+// checkpoint", estimation/training/internal/checkpoint.h) holding the SIREN's and the
+// head's parameters, the training latents, the three Adam moments, the step, every
+// step's batch loss and the seconds spent, with the trajectory options and a fingerprint
+// of the training frames and the reference. Resuming refuses, naming the field, a
+// checkpoint of other options (steps included: the cosine schedule depends on them) or
+// other frames.
 //
 // Errors: invalid options throw std::invalid_argument naming the field; frames of
 // another shape than the trunk's working grid throw std::invalid_argument quoting both.
@@ -76,12 +85,22 @@ class PhotometricTrainer {
     std::uint64_t seed = 1;
     // Worker threads over a step's frames. >= 1.
     int threads = 1;
+    // Checkpoints (header comment): written atomically to this path ("" = none; the
+    // folder must exist) every checkpoint_every steps (>= 0; 0 = only at the end or on a
+    // stop), when the callback stops the run, and at the end. With resume, Train()
+    // continues from the checkpoint if one exists. Do not change the result.
+    std::string checkpoint_path;
+    int checkpoint_every = 500;
+    bool resume = false;
     bool IsValid(std::string* error) const;
+    // The options that shape the trajectory, as a JSON object (a checkpoint must match
+    // them to be resumed): every one but threads and the checkpoint settings.
+    std::string TrajectoryOptionsJson() const;
   };
 
   struct Summary {
     int steps = 0;              // steps taken
-    double seconds = 0;
+    double seconds = 0;         // training seconds, those of the runs resumed from included
     double final_loss = 0;      // the last step's batch loss
     bool stopped = false;       // the callback asked to stop
     std::vector<double> loss;   // every step's batch loss
@@ -102,7 +121,8 @@ class PhotometricTrainer {
 
   // Trains a trunk on `frames` (all of one working size) given the sensor-resolution
   // reference in the targets' units (PhotometricTrunk's constructor). Throws
-  // std::invalid_argument for no frames or frames of mixed sizes.
+  // std::invalid_argument for no frames or frames of mixed sizes; TensorFileError or
+  // std::runtime_error (naming the field) for a checkpoint that cannot be resumed.
   Result Train(const std::vector<TrunkTargets>& frames, const Image& reference,
                const Callback& callback = {}) const;
 

@@ -17,6 +17,7 @@
 #include "boost/random/uniform_int_distribution.hpp"
 #include "boost/random/uniform_real_distribution.hpp"
 #include "estimation/data/dataset.h"
+#include "estimation/training/internal/checkpoint.h"
 #include "models/core/parallel_for.h"
 #include "models/core/seed.h"
 #include "models/core/tensor_file.h"
@@ -142,41 +143,31 @@ struct TrainingState {
   double train_seconds = 0;  // training-loop seconds of earlier runs
 };
 
-std::vector<double> ToStd(const Eigen::VectorXd& v) {
-  return std::vector<double>(v.data(), v.data() + v.size());
-}
-
 const char* kCheckpointFormat = "tactfunc-checkpoint";
 constexpr int kCheckpointVersion = 1;
 constexpr int kHistoryColumns = 5;
 
-std::string FingerprintHex(std::uint64_t fingerprint) {
-  char buffer[17];
-  std::snprintf(buffer, sizeof(buffer), "%016llx", static_cast<unsigned long long>(fingerprint));
-  return buffer;
+internal::CheckpointRun CheckpointRunOf(SensorKind sensor, const std::string& options_json,
+                                        std::uint64_t fingerprint, int num_frames) {
+  return {kCheckpointFormat, kCheckpointVersion, ToString(sensor), options_json, fingerprint,
+          num_frames};
 }
 
 void WriteCheckpoint(const std::string& path, const TrainingState& state, SensorKind sensor,
                      const std::string& options_json, std::uint64_t fingerprint, int num_frames) {
-  TensorFile file("checkpoint");
-  Json meta;
-  meta["format"] = kCheckpointFormat;
-  meta["version"] = kCheckpointVersion;
-  meta["sensor"] = ToString(sensor);
-  meta["step"] = state.step;
-  meta["train_seconds"] = state.train_seconds;
-  meta["frames"] = {{"count", num_frames}, {"fingerprint", FingerprintHex(fingerprint)}};
-  meta["options"] = Json::parse(options_json);
-  file.set_meta_json(meta.dump());
+  using internal::ToStdVector;
+  TensorFile file =
+      internal::NewCheckpoint(CheckpointRunOf(sensor, options_json, fingerprint, num_frames),
+                              state.step, state.train_seconds);
   using D = TensorFile::DType;
   const auto n = static_cast<std::int64_t>(state.theta.size());
   const auto d = static_cast<std::int64_t>(state.alpha.size());
-  file.Add("theta", D::kFloat64, {n}, ToStd(state.theta));
-  file.Add("alpha", D::kFloat64, {d}, ToStd(state.alpha));
-  file.Add("adam/theta_m", D::kFloat64, {n}, ToStd(state.m_theta));
-  file.Add("adam/theta_v", D::kFloat64, {n}, ToStd(state.v_theta));
-  file.Add("adam/alpha_m", D::kFloat64, {d}, ToStd(state.m_alpha));
-  file.Add("adam/alpha_v", D::kFloat64, {d}, ToStd(state.v_alpha));
+  file.Add("theta", D::kFloat64, {n}, ToStdVector(state.theta));
+  file.Add("alpha", D::kFloat64, {d}, ToStdVector(state.alpha));
+  file.Add("adam/theta_m", D::kFloat64, {n}, ToStdVector(state.m_theta));
+  file.Add("adam/theta_v", D::kFloat64, {n}, ToStdVector(state.v_theta));
+  file.Add("adam/alpha_m", D::kFloat64, {d}, ToStdVector(state.m_alpha));
+  file.Add("adam/alpha_v", D::kFloat64, {d}, ToStdVector(state.v_alpha));
   std::vector<double> history;
   for (const TrunkTrainer::HistoryPoint& p : state.history) {
     history.insert(history.end(),
@@ -189,71 +180,16 @@ void WriteCheckpoint(const std::string& path, const TrainingState& state, Sensor
   file.Write(path);
 }
 
-std::string JsonValueText(const Json* value) {
-  return value == nullptr ? std::string("(absent)") : value->dump();
-}
-
 // Reads a checkpoint into *state after checking that it belongs to this run.
 void ReadCheckpoint(const std::string& path, SensorKind sensor, const std::string& options_json,
                     std::uint64_t fingerprint, int num_frames, int num_parameters, int latent_dim,
                     TrainingState* state) {
-  TensorFile file;
-  try {
-    file = TensorFile::Read(path, "checkpoint");
-  } catch (const TensorFileError& e) {
-    throw TensorFileError(std::string("cannot resume from checkpoint: ") + e.what() +
-                          " (delete it, or train without resume, to start anew)");
-  }
-  const std::string where = "checkpoint " + path + ": ";
   Json meta;
-  try {
-    meta = Json::parse(file.meta_json());
-    if (meta.at("format").get<std::string>() != kCheckpointFormat) {
-      throw TensorFileError(where + "meta.format: expected '" + kCheckpointFormat + "', found '" +
-                            meta.at("format").get<std::string>() + "'");
-    }
-    if (meta.at("version").get<int>() != kCheckpointVersion) {
-      throw TensorFileError(where + "meta.version: expected " + std::to_string(kCheckpointVersion) +
-                            ", found " + meta.at("version").dump());
-    }
-  } catch (const Json::exception& e) {
-    throw TensorFileError(where + "malformed meta: " + e.what());
-  }
-  const std::string checkpoint_sensor = meta.value("sensor", std::string());
-  if (checkpoint_sensor != ToString(sensor)) {
-    throw std::runtime_error(where + "was written for sensor '" + checkpoint_sensor + "', not '" +
-                             ToString(sensor) + "'");
-  }
-  const Json current = Json::parse(options_json);
-  const Json& saved = meta.at("options");
-  for (auto it = current.begin(); it != current.end(); ++it) {
-    const Json* old = saved.contains(it.key()) ? &saved.at(it.key()) : nullptr;
-    if (old == nullptr || *old != it.value()) {
-      throw std::runtime_error(where + "option '" + it.key() + "' differs: " + JsonValueText(old) +
-                               " in the checkpoint, " + it.value().dump() +
-                               " now. Resume with the same options, or start anew without resume.");
-    }
-  }
-  for (auto it = saved.begin(); it != saved.end(); ++it) {
-    if (!current.contains(it.key())) {
-      throw std::runtime_error(where + "option '" + it.key() +
-                               "' is set in the checkpoint but not in this run (or unknown to this version of "
-                               "tactfunc). Resume with the same options, or start anew without "
-                               "resume.");
-    }
-  }
-  const Json& frames = meta.at("frames");
-  if (frames.at("count").get<int>() != num_frames ||
-      frames.at("fingerprint").get<std::string>() != FingerprintHex(fingerprint)) {
-    throw std::runtime_error(where + "training frames differ: the checkpoint was trained on " +
-                             frames.at("count").dump() + " frames (fingerprint " +
-                             frames.at("fingerprint").get<std::string>() + "), now " +
-                             std::to_string(num_frames) + " frames (fingerprint " +
-                             FingerprintHex(fingerprint) + ")");
-  }
+  const TensorFile file = internal::ReadCheckpoint(
+      path, CheckpointRunOf(sensor, options_json, fingerprint, num_frames), &meta);
+  const std::string where = "checkpoint " + path + ": ";
   auto vec = [&](const std::string& name, int size) {
-    const TensorFile::Tensor& t = file.Get(name, {size});
-    return Eigen::VectorXd(Eigen::Map<const Eigen::VectorXd>(t.values.data(), size));
+    return internal::CheckpointVector(file, name, size);
   };
   state->step = meta.at("step").get<int>();
   state->train_seconds = meta.at("train_seconds").get<double>();
@@ -672,11 +608,10 @@ TrunkTrainer::Summary TrunkTrainer::Train(const Dataset& dataset, SensorKind sen
     frames = std::move(kept_frames);
   }
   // FNV-1a over the frame ids: resuming on another training set is refused.
-  std::uint64_t fingerprint = 1469598103934665603ull;
+  std::uint64_t fingerprint = internal::Fnv1a(nullptr, 0);
   for (std::size_t index : indices) {
-    for (char ch : dataset.frames()[index].id + "\n") {
-      fingerprint = (fingerprint ^ static_cast<unsigned char>(ch)) * 1099511628211ull;
-    }
+    const std::string line = dataset.frames()[index].id + "\n";
+    fingerprint = internal::Fnv1a(line.data(), line.size(), fingerprint);
   }
   const double load_seconds = SecondsSince(start);
   Summary summary = Train(frames, sensor, format, fingerprint, trunk, callback);

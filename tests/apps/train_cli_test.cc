@@ -145,8 +145,28 @@ TEST_F(TrainCliTest, ThePhotometricHeadTrainsEncodesAndReconstructsAnOpticalSens
   const Result resume = Run("train --data " + Root("g") + " --out " + Root("b.tfm") +
                             " --head photometric --steps 2 --resume");
   EXPECT_NE(resume.exit_code, 0);
-  EXPECT_THAT(resume.err, HasSubstr("--resume"));
+  EXPECT_THAT(resume.err, HasSubstr("--resume: no checkpoint found"));
   EXPECT_FALSE(fs::exists(Root("b.tfm")));
+}
+
+TEST_F(TrainCliTest, ThePhotometricHeadCheckpointsAndResumes) {
+  ASSERT_EQ(Run("synth --out " + Root("gr") + " --frames-per-tool 2 --tools rod,square "
+                "--sensors gelslim --seed 4").exit_code, 0);
+  const std::string args = "train --data " + Root("gr") + " --head photometric --marker-warmup 2 "
+                           "--latent-dim 8 --width 8 --layers 2 --threads 1 --seed 1";
+  const Result whole = Run(args + " --steps 6 --out " + Root("whole.tfm"));
+  ASSERT_EQ(whole.exit_code, 0) << whole.err;
+  EXPECT_TRUE(fs::exists(Root("whole.tfm.gelslim.ckpt")));
+  // A checkpoint of other options is refused by name; nothing is written.
+  const Result other = Run(args + " --steps 8 --out " + Root("whole.tfm") + " --resume");
+  EXPECT_NE(other.exit_code, 0);
+  EXPECT_THAT(other.err, HasSubstr("option 'steps' differs"));
+  // Resuming the finished run writes the same model without another step.
+  fs::copy_file(Root("whole.tfm.gelslim.ckpt"), Root("again.tfm.gelslim.ckpt"));
+  const Result again = Run(args + " --steps 6 --out " + Root("again.tfm") + " --resume");
+  ASSERT_EQ(again.exit_code, 0) << again.err;
+  EXPECT_THAT(again.out, HasSubstr("resuming from " + Root("again.tfm.gelslim.ckpt")));
+  EXPECT_EQ(testing_util::Slurp(Root("again.tfm")), testing_util::Slurp(Root("whole.tfm")));
 }
 
 TEST_F(TrainCliTest, ReconWritesOneCsvRowPerFrameThatAgreesWithItsSummary) {

@@ -3,10 +3,13 @@
 // PhotometricTrainer and FitPhotometricLatent: training lowers the loss on frames drawn
 // by a teacher trunk and is bit-identical for any thread count; a fit of a frame the
 // trunk drew from a known latent comes close to it; the moment pose finds a contact's
-// centre and axis; bad options and frames are refused by name.
+// centre and axis; a run stopped and resumed from its checkpoint is bit-identical to one
+// that never stopped, and a checkpoint of other options or frames is refused by name;
+// bad options and frames are refused by name.
 #include "estimation/training/photometric_trainer.h"
 
 #include <cmath>
+#include <filesystem>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -121,6 +124,61 @@ TEST(PhotometricTrainerTest, TheCallbackStopsTraining) {
       teacher.frames, teacher.trunk.reference(), [](int step, double) { return step < 5; });
   EXPECT_TRUE(result.summary.stopped);
   EXPECT_EQ(result.summary.steps, 5);
+}
+
+TEST(PhotometricTrainerTest, AStoppedAndResumedRunIsBitIdenticalToOneThatNeverStopped) {
+  const Teacher teacher = MakeTeacher(6);
+  const Image reference = teacher.trunk.reference();
+  const PhotometricTrainer::Result whole =
+      PhotometricTrainer(QuickOptions(1)).Train(teacher.frames, reference);
+  const std::string path = ::testing::TempDir() + "/photometric_resume.ckpt";
+  std::filesystem::remove(path);
+  PhotometricTrainer::Options o = QuickOptions(1);
+  o.checkpoint_path = path;
+  o.checkpoint_every = 40;
+  o.resume = true;  // no checkpoint yet: starts at step 0
+  // Stopped at step 57 (between periodic checkpoints: the stop writes its own).
+  const PhotometricTrainer::Result first = PhotometricTrainer(o).Train(
+      teacher.frames, reference, [](int step, double) { return step < 57; });
+  ASSERT_TRUE(first.summary.stopped);
+  ASSERT_TRUE(std::filesystem::exists(path));
+  o.threads = 2;  // threads do not change the result
+  const PhotometricTrainer::Result rest = PhotometricTrainer(o).Train(teacher.frames, reference);
+  EXPECT_FALSE(rest.summary.stopped);
+  EXPECT_EQ(rest.summary.steps, 150);
+  EXPECT_EQ(rest.summary.loss, whole.summary.loss);
+  EXPECT_EQ(rest.trunk.siren().parameters(), whole.trunk.siren().parameters());
+  EXPECT_EQ(rest.trunk.head_parameters(), whole.trunk.head_parameters());
+  EXPECT_EQ(rest.latents, whole.latents);
+  // Resuming a finished run returns its trunk without another step.
+  const PhotometricTrainer::Result again = PhotometricTrainer(o).Train(teacher.frames, reference);
+  EXPECT_EQ(again.trunk.head_parameters(), whole.trunk.head_parameters());
+  EXPECT_EQ(again.summary.loss, whole.summary.loss);
+
+  // Another trajectory option is refused by name, and so are other frames.
+  PhotometricTrainer::Options other = o;
+  other.latent_learning_rate = 1e-2;
+  try {
+    PhotometricTrainer(other).Train(teacher.frames, reference);
+    FAIL() << "a checkpoint of another latent_learning_rate resumed";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("option 'latent_learning_rate' differs"),
+              std::string::npos)
+        << e.what();
+  }
+  std::vector<TrunkTargets> frames = teacher.frames;
+  frames[3].values(5, 0) += 1e-3f;
+  try {
+    PhotometricTrainer(o).Train(frames, reference);
+    FAIL() << "a checkpoint of other frames resumed";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("training frames differ"), std::string::npos)
+        << e.what();
+  }
+  std::filesystem::remove(path);
+  PhotometricTrainer::Options no_path = QuickOptions(1);
+  no_path.resume = true;
+  EXPECT_THROW(PhotometricTrainer{no_path}, std::invalid_argument);
 }
 
 TEST(PhotometricTrainerTest, AFitOfAFrameTheTrunkDrewLowersItsLossTenfold) {
