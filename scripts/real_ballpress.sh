@@ -3,27 +3,35 @@
 # and eval: PSNR of the functaset against PCA at equal bytes on the unseen presses, and
 # how far the contact centres of the raw frames and of the reconstructions fall from the
 # hand-placed ones (median and 90th percentile, pixels).
-#   usage: scripts/real_ballpress.sh OUT [LATENT_DIM] [STEPS] [STRATEGY]
-# Defaults: d = 16, 2000 steps, meta_sgd:3. Trunk: --preset small --readout.
+#   usage: scripts/real_ballpress.sh OUT [LATENT_DIM] [STEPS] [STRATEGY] [HEAD]
+# Defaults: d = 16, 2000 steps, meta_sgd:3, HEAD direct (trunk: --preset small --readout).
+# HEAD photometric trains `--head photometric --preset small` instead (the SIREN draws
+# the contact, a head shades it; fit it with STRATEGY adam:400).
 set -euo pipefail
 export LC_ALL=C
 cd "$(dirname "$0")/.."
-out=${1:?usage: $0 OUT [LATENT_DIM] [STEPS] [STRATEGY]}
+out=${1:?usage: $0 OUT [LATENT_DIM] [STEPS] [STRATEGY] [HEAD]}
 dim=${2:-16}
 steps=${3:-2000}
 strategy=${4:-meta_sgd:3}
+head=${5:-direct}
+case "$head" in
+  direct) trunk_flags=(--preset small --readout) ;;
+  photometric) trunk_flags=(--head photometric --preset small) ;;
+  *) echo "$0: HEAD must be direct or photometric, got '$head'" >&2; exit 2 ;;
+esac
 bin=build/bin/tactfunc
 data=tests/data/taxim_ballpress
 rm -rf "$out"
 mkdir -p "$out"
-$bin train --data "$data" --out "$out/m.tfm" --preset small --readout --latent-dim "$dim" \
+$bin train --data "$data" --out "$out/m.tfm" "${trunk_flags[@]}" --latent-dim "$dim" \
   --steps "$steps" --seed 1 >"$out/train.log" 2>&1 || { cat "$out/train.log"; exit 1; }
 $bin encode --data "$data" --model "$out/m.tfm" --out "$out/f.tfs" --strategy "$strategy" >"$out/encode.log" 2>&1 || { cat "$out/encode.log"; exit 1; }
 $bin recon --data "$data" --model "$out/m.tfm" --functaset "$out/f.tfs" --out "$out/recon" \
   --examples 6 >"$out/recon.log"
 $bin eval --data "$data" --model "$out/m.tfm" --functaset "$out/f.tfs" --out "$out/eval" \
   --json >"$out/eval.log" 2>&1
-echo "real GelSight presses: d = $dim, $steps steps, $strategy"
+echo "real GelSight presses: $head trunk, d = $dim, $steps steps, $strategy"
 grep -A3 '^sensor   split   contact' "$out/recon.log"
 # Centre errors: frames.csv columns 15-18 (contact_row/col, recon_contact_row/col) against
 # contacts.csv (x = column, y = row), per split.
