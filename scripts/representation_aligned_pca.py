@@ -16,10 +16,10 @@ way every time). Aligned frame A(q) = F(t + R(theta) q) on a square grid of side
 `--canvas` x the frame's diagonal, `--upsample` samples per pixel (samples outside the
 frame read 0); reconstruction F(p) = A(R(-theta) (p - t)).
 
-Every value is stored as float16 (or, with `--precision uint8`, the code values as 8-bit
-codes on the functaset's per-dimension grid and the pose values as float16): the aligned
-components plus the 2 or 3 pose values fill the same bytes as PCA with bytes / 2 float16
-(bytes uint8) components. Scored as `tactfunc eval`
+Every value is stored as float16 (or, with `--precision uint8`, `uint6` or `uint4`, the
+code values as b-bit codes on the functaset's per-dimension grid and the pose values as
+float16): the aligned components plus the 2 or 3 pose values fill the same bytes as PCA
+with bytes x 8 / b components. Scored as `tactfunc eval`
 scores (representation_common.psnr_per_frame) against the noise-free test frames, the
 basis fitted on the noisy train split of the evaluation set (as eval's PCA).
 
@@ -186,13 +186,18 @@ def mixture_codes(aligned_train, aligned_test, clusters, components, precision):
 
 
 def store(codes, precision):
-    """Codes as stored: float16, or `uint8` codes on the functaset's grid (per dimension,
-    the min and max over the stored frames, 255 steps; docs/FUNCTASET.md, b-bit codes)."""
+    """Codes as stored: float16, or b-bit codes (`uint8`, `uint6`, `uint4`) on the
+    functaset's grid (per dimension, the min and max over the stored frames, 2^b - 1
+    steps; docs/FUNCTASET.md, b-bit codes)."""
     if precision == "float16":
         return codes.astype(np.float16).astype(np.float64)
+    levels = (1 << BITS[precision]) - 1
     lo, hi = codes.min(0), codes.max(0)
-    step = np.where(hi > lo, (hi - lo) / 255, 1.0)
-    return lo + np.clip(np.rint((codes - lo) / step), 0, 255) * step
+    step = np.where(hi > lo, (hi - lo) / levels, 1.0)
+    return lo + np.clip(np.rint((codes - lo) / step), 0, levels) * step
+
+
+BITS = {"float16": 16, "uint8": 8, "uint6": 6, "uint4": 4}
 
 
 def main():
@@ -225,9 +230,9 @@ def main():
     ap.add_argument("--basis-from-clean", action="store_true",
                     help="learn both bases from the NOISE-FREE train frames (a bound: what a "
                          "basis free of the sensor noise would give; needs their export)")
-    ap.add_argument("--precision", choices=["float16", "uint8"], default="float16",
+    ap.add_argument("--precision", choices=list(BITS), default="float16",
                     help="how every code value is stored (PCA and aligned alike; the pose "
-                         "values stay float16): bytes / 2 or bytes components")
+                         "values stay float16): bytes x 8 / bits components")
     ap.add_argument("--out", help="write the figures as JSON here")
     args = ap.parse_args()
 
@@ -272,10 +277,10 @@ def main():
           f"{result['resampling_only_psnr_clean']:.2f} dB", flush=True)
     flat_train = train.reshape(n, -1)  # eval's PCA: the noisy train frames as they are
     for bytes_per_frame in args.bytes:
-        k_plain = bytes_per_frame // 2 if args.precision == "float16" else bytes_per_frame
+        k_plain = bytes_per_frame * 8 // BITS[args.precision]
         pose_values = (2 if args.translate_only else 3) + (1 if args.scale else 0)
-        # The pose values take 2 bytes each, i.e. 1 (float16) or 2 (uint8) code values.
-        k_aligned = k_plain - pose_values * (1 if args.precision == "float16" else 2) \
+        # The pose values take 2 bytes each: the code values they displace, rounded up.
+        k_aligned = k_plain - -(-pose_values * 16 // BITS[args.precision]) \
             - args.residual
         mean, basis = pca(flat_train, k_plain)
         codes = store((test.reshape(len(test), -1) - mean) @ basis, args.precision)
