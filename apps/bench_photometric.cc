@@ -23,10 +23,13 @@
 #include <cmath>
 #include <cstdio>
 #include <iostream>
+#include <limits>
 #include <map>
 #include <memory>
+#include <optional>
 
 #include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "apps/bench.h"
 #include "apps/command.h"
@@ -37,6 +40,7 @@
 #include "estimation/evaluation/baselines.h"
 #include "estimation/training/photometric_trainer.h"
 #include "estimation/training/trunk_trainer.h"
+#include "models/trunk/functa_model.h"
 #include "models/core/parallel_for.h"
 #include "models/core/seed.h"
 
@@ -52,7 +56,12 @@ struct PhotometricBenchFlags {
   int latent_dim = 64;
   int width = 64;
   int layers = 3;
-  int fit_steps = 400;
+  std::vector<int> fit_steps{PhotometricFitOptions().steps};
+  int fit_probe = 0;
+  int fit_batch = PhotometricFitOptions().batch_pixels;
+  std::vector<double> fit_rate{PhotometricFitOptions().learning_rate};
+  std::string trade_picture;
+  std::string model;
   int max_test_frames = 0;
   std::uint64_t seed = 1;
   int threads = 1;
@@ -63,6 +72,84 @@ struct PhotometricBenchFlags {
 };
 
 float Half(double v) { return static_cast<float>(Eigen::half(static_cast<float>(v))); }
+
+struct Row {
+  std::string name;
+  std::vector<double> clean, noisy;
+};
+
+double Mean(const std::vector<double>& v) {
+  double s = 0;
+  for (double x : v) s += x;
+  return v.empty() ? 0.0 : s / v.size();
+}
+
+// One fit setting of the bench and what it measured.
+struct FitRun {
+  PhotometricFitOptions options;
+  double seconds = 0;
+  int flipped = 0;
+  Row row;
+  std::vector<Eigen::MatrixXf> predictions;
+};
+
+// Noise-free PSNR against seconds per frame (log scale), one line per step size through
+// its step counts, and same-bits PCA as a dashed line.
+cv::Mat FitTradePicture(const std::vector<FitRun>& fits, double pca_db,
+                        const std::string& pca_name, int threads, int frames, int bytes) {
+  double x_lo = std::numeric_limits<double>::infinity(), x_hi = 0;
+  double y_lo = pca_db, y_hi = pca_db;
+  std::map<double, std::vector<const FitRun*>> by_rate;
+  for (const FitRun& run : fits) {
+    const double x = run.seconds / frames;
+    x_lo = std::min(x_lo, x);
+    x_hi = std::max(x_hi, x);
+    y_lo = std::min(y_lo, Mean(run.row.clean));
+    y_hi = std::max(y_hi, Mean(run.row.clean));
+    by_rate[run.options.learning_rate].push_back(&run);
+  }
+  if (!(x_hi > x_lo)) x_hi = 2 * x_lo;
+  LogXPlot::Layout layout;
+  layout.height = 620;
+  LogXPlot plot(layout, x_lo, x_hi, y_lo, y_hi);
+  plot.DrawFrame("seconds per frame, " + std::to_string(threads) + " thread(s) (log scale)",
+                 "mean noise-free PSNR, dB",
+                 "Photometric fit: steps and step size against time",
+                 std::to_string(frames) + " test frames, " + std::to_string(bytes) +
+                     " B per frame (float16 latents); labels: Adam steps per start");
+  cv::Mat& canvas = plot.canvas();
+  const cv::Scalar colours[] = {cv::Scalar(200, 110, 30), cv::Scalar(40, 120, 220),
+                                cv::Scalar(60, 160, 60), cv::Scalar(150, 60, 170),
+                                cv::Scalar(30, 30, 160)};
+  const int lx = plot.area().x + plot.area().width + 22, ly = plot.area().y + 14;
+  int k = 0;
+  for (auto& [rate, runs] : by_rate) {
+    std::sort(runs.begin(), runs.end(),
+              [](const FitRun* a, const FitRun* b) { return a->seconds < b->seconds; });
+    const cv::Scalar colour = colours[k % 5];
+    std::vector<cv::Point> line;
+    for (const FitRun* run : runs) {
+      line.push_back({plot.X(run->seconds / frames), plot.Y(Mean(run->row.clean))});
+    }
+    if (line.size() > 1) cv::polylines(canvas, line, false, colour, 2, cv::LINE_AA);
+    for (std::size_t i = 0; i < runs.size(); ++i) {
+      cv::circle(canvas, line[i], 5, colour, cv::FILLED, cv::LINE_AA);
+      PlainText(canvas, std::to_string(runs[i]->options.steps), line[i] + cv::Point(7, -7), 0.4,
+                colour * 0.7);
+    }
+    char name[64];
+    std::snprintf(name, sizeof(name), "Adam from %g", rate);
+    const int y = ly + 20 * k;
+    cv::line(canvas, {lx, y}, {lx + 14, y}, colour, 2, cv::LINE_AA);
+    PlainText(canvas, name, {lx + 20, y + 5}, 0.42);
+    ++k;
+  }
+  const int y = plot.Y(pca_db);
+  DrawDashedLine(canvas, {plot.area().x, y}, {plot.area().x + plot.area().width, y},
+                 cv::Scalar(120, 120, 120));
+  PlainText(canvas, pca_name, {plot.area().x + 8, y - 6}, 0.4, cv::Scalar(90, 90, 90));
+  return canvas;
+}
 
 void RunPhotometricBench(const PhotometricBenchFlags& flags) {
   const std::string sensor_name = flags.dataset.sensor.empty() ? "gelslim" : flags.dataset.sensor;
@@ -104,7 +191,10 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
   std::cerr << "bench photometric: loading " << train_indices.size() << " + "
             << pca_indices.size() << " train and " << test_indices.size() << " test frames"
             << std::endl;
-  const auto train = LoadTrunkTargets(train_data, train_indices, format, false, flags.threads);
+  // A trained model's trunk (--model) needs no train frames.
+  const auto train = flags.model.empty()
+                         ? LoadTrunkTargets(train_data, train_indices, format, false, flags.threads)
+                         : std::vector<TrunkTargets>();
   const auto pca_train = LoadTrunkTargets(data, pca_indices, format, false, flags.threads);
   const auto test = LoadTrunkTargets(data, test_indices, format, false, flags.threads);
   const auto test_clean = LoadTrunkTargets(data, test_indices, format, true, flags.threads);
@@ -124,10 +214,6 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
   PcaCodec::Options pca_options;
   pca_options.components = d;
   const PcaCodec pca_full = PcaCodec::Fit(StackFrames(pointers(pca_train)), pca_options);
-  struct Row {
-    std::string name;
-    std::vector<double> clean, noisy;
-  };
   std::vector<Row> rows;
   Eigen::MatrixXf same_bits;  // the float16 PCA's decoded test frames, for the picture
   for (int half : {0, 1}) {
@@ -150,76 +236,126 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
     rows.push_back(row);
   }
 
-  // The trunk.
-  PhotometricTrainer::Options options;
-  options.trunk.width = flags.width;
-  options.trunk.num_hidden_layers = flags.layers;
-  options.trunk.latent_dim = d;
-  options.steps = flags.steps;
-  options.marker_warmup_steps = flags.warmup;
-  options.marker_learning_rate = flags.marker_rate;
-  options.trunk.wide_biases = !flags.narrow_biases;
-  options.seed = flags.seed;
-  options.threads = flags.threads;
-  const PhotometricTrainer trainer(options);
-  std::cerr << "bench photometric: training " << flags.steps << " steps (markers at the "
-            << "working resolution for " << flags.warmup << ") on " << flags.threads
-            << " thread(s)" << std::endl;
-  const auto start = std::chrono::steady_clock::now();
-  auto elapsed = [&start] {
-    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  };
-  const int every = std::max(1, flags.steps / 20);
-  PhotometricTrainer::Result trained =
-      trainer.Train(train, reference, [&](int step, double loss) {
-        if (step % every == 0 || step == flags.steps) {
-          std::fprintf(stderr, "  step %d/%d: batch loss %.3e (%.0f s)\n", step, flags.steps,
-                       loss, elapsed());
-        }
-        return true;
-      });
-  const double train_seconds = trained.summary.seconds;
-  if (!std::isfinite(trained.summary.final_loss)) {
-    throw std::runtime_error("bench photometric: training diverged (loss " +
-                             std::to_string(trained.summary.final_loss) + ")");
-  }
-  const PhotometricTrunk& trunk = trained.trunk;
-  PhotometricFitOptions fit_options;
-  fit_options.steps = flags.fit_steps;
-  std::vector<Eigen::VectorXd> latents(test.size());
-  std::vector<char> flipped(test.size(), 0);
-  const auto fit_start = std::chrono::steady_clock::now();
-  std::atomic<int> done{0};
-  internal::ParallelFor(static_cast<int>(test.size()), flags.threads, [&](int i) {
-    const PhotometricFit fit =
-        FitPhotometricLatent(trunk, test[i], fit_options, DeriveSeed(flags.seed, 7000000 + i));
-    latents[i] = fit.latent.unaryExpr([](double v) { return static_cast<double>(Half(v)); });
-    flipped[i] = fit.flipped;
-    const int n = ++done;
-    if (n % 20 == 0 || n == static_cast<int>(test.size())) {
-      std::fprintf(stderr, "  fitted %d/%zu test latents\n", n, test.size());
+  // The trunk: trained here, or a trained model's.
+  std::optional<PhotometricTrunk> trunk_storage;
+  double train_seconds = 0;
+  std::string trained_on = train_path;
+  if (!flags.model.empty()) {
+    const FunctaModel model = FunctaModel::Load(flags.model);
+    if (!model.HasSensor(sensor) || model.Trunk(sensor).photometric == nullptr) {
+      throw std::runtime_error(flags.model + ": the model has no photometric " + sensor_name +
+                               " trunk (train it with `tactfunc train --head photometric`)");
     }
-  });
-  const double fit_seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - fit_start).count();
-  Row trunk_row{"photometric trunk, float16 latents", {}, {}};
-  std::vector<Eigen::MatrixXf> predictions(test.size());
-  for (std::size_t i = 0; i < test.size(); ++i) {
-    predictions[i] = trunk.Forward<float>(trunk.AllPixels(), latents[i].cast<float>());
-    trunk_row.clean.push_back(Psnr(predictions[i], test_clean[i]));
-    trunk_row.noisy.push_back(Psnr(predictions[i], test[i]));
+    const PhotometricTrunk& loaded = *model.Trunk(sensor).photometric;
+    if (loaded.options().rows != test[0].rows || loaded.options().cols != test[0].cols ||
+        loaded.channels() != channels) {
+      throw std::runtime_error(
+          flags.model + ": the trunk draws " + std::to_string(loaded.options().rows) + " x " +
+          std::to_string(loaded.options().cols) + " x " + std::to_string(loaded.channels()) +
+          " frames, " + flags.data + " has " + std::to_string(test[0].rows) + " x " +
+          std::to_string(test[0].cols) + " x " + std::to_string(channels));
+    }
+    if (loaded.latent_dim() != d) {
+      throw UsageError("--latent-dim " + std::to_string(d) + " differs from the model's " +
+                       std::to_string(loaded.latent_dim()) + " (" + flags.model + ")");
+    }
+    trunk_storage.emplace(loaded);
+    trained_on = flags.model;
+    std::cerr << "bench photometric: the trunk of " << flags.model << " (not trained here)"
+              << std::endl;
+  } else {
+    PhotometricTrainer::Options options;
+    options.trunk.width = flags.width;
+    options.trunk.num_hidden_layers = flags.layers;
+    options.trunk.latent_dim = d;
+    options.steps = flags.steps;
+    options.marker_warmup_steps = flags.warmup;
+    options.marker_learning_rate = flags.marker_rate;
+    options.trunk.wide_biases = !flags.narrow_biases;
+    options.seed = flags.seed;
+    options.threads = flags.threads;
+    const PhotometricTrainer trainer(options);
+    std::cerr << "bench photometric: training " << flags.steps << " steps (markers at the "
+              << "working resolution for " << flags.warmup << ") on " << flags.threads
+              << " thread(s)" << std::endl;
+    const auto start = std::chrono::steady_clock::now();
+    auto elapsed = [&start] {
+      return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    };
+    const int every = std::max(1, flags.steps / 20);
+    PhotometricTrainer::Result trained =
+        trainer.Train(train, reference, [&](int step, double loss) {
+          if (step % every == 0 || step == flags.steps) {
+            std::fprintf(stderr, "  step %d/%d: batch loss %.3e (%.0f s)\n", step, flags.steps,
+                         loss, elapsed());
+          }
+          return true;
+        });
+    train_seconds = trained.summary.seconds;
+    if (!std::isfinite(trained.summary.final_loss)) {
+      throw std::runtime_error("bench photometric: training diverged (loss " +
+                               std::to_string(trained.summary.final_loss) + ")");
+    }
+    trunk_storage.emplace(std::move(trained.trunk));
   }
-  rows.push_back(trunk_row);
+  const PhotometricTrunk& trunk = *trunk_storage;
+  // The fits: every step size of --fit-rate with every step count of --fit-steps; the
+  // first setting is the bench's row, the others only the fit trade table and picture.
+  std::vector<FitRun> fits;
+  for (double rate : flags.fit_rate) {
+    for (int steps : flags.fit_steps) {
+      if (flags.fit_probe > steps) {
+        throw UsageError("--fit-probe " + std::to_string(flags.fit_probe) +
+                         " exceeds --fit-steps " + std::to_string(steps));
+      }
+      FitRun run;
+      run.options.steps = steps;
+      run.options.probe_steps = flags.fit_probe;
+      run.options.batch_pixels = flags.fit_batch;
+      run.options.learning_rate = rate;
+      run.options.final_learning_rate = std::min(run.options.final_learning_rate, rate);
+      fits.push_back(std::move(run));
+    }
+  }
+  for (FitRun& run : fits) {
+    std::vector<Eigen::VectorXd> latents(test.size());
+    std::vector<char> flipped(test.size(), 0);
+    const auto fit_start = std::chrono::steady_clock::now();
+    std::atomic<int> done{0};
+    internal::ParallelFor(static_cast<int>(test.size()), flags.threads, [&](int i) {
+      const PhotometricFit fit =
+          FitPhotometricLatent(trunk, test[i], run.options, DeriveSeed(flags.seed, 7000000 + i));
+      latents[i] = fit.latent.unaryExpr([](double v) { return static_cast<double>(Half(v)); });
+      flipped[i] = fit.flipped;
+      const int n = ++done;
+      if (n % 20 == 0 || n == static_cast<int>(test.size())) {
+        std::fprintf(stderr, "  adam:%d from %g: fitted %d/%zu test latents\n",
+                     run.options.steps, run.options.learning_rate, n, test.size());
+      }
+    });
+    run.seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - fit_start).count();
+    run.flipped = static_cast<int>(std::count(flipped.begin(), flipped.end(), 1));
+    run.row.name = "photometric trunk, float16 latents";
+    run.predictions.resize(test.size());
+    for (std::size_t i = 0; i < test.size(); ++i) {
+      run.predictions[i] = trunk.Forward<float>(trunk.AllPixels(), latents[i].cast<float>());
+      run.row.clean.push_back(Psnr(run.predictions[i], test_clean[i]));
+      run.row.noisy.push_back(Psnr(run.predictions[i], test[i]));
+    }
+  }
+  rows.push_back(fits[0].row);
+  const std::vector<Eigen::MatrixXf>& predictions = fits[0].predictions;
+  const double fit_seconds = fits[0].seconds;
 
-  auto mean = [](const std::vector<double>& v) {
-    double s = 0;
-    for (double x : v) s += x;
-    return v.empty() ? 0.0 : s / v.size();
-  };
-  std::printf("bench photometric: %s, %zu test frames (%s), %d B per frame, trunk trained on "
-              "%zu frames of %s\n",
-              sensor_name.c_str(), test.size(), flags.data.c_str(), bytes, train.size(),
-              train_path.c_str());
+  const auto& mean = Mean;
+  std::printf("bench photometric: %s, %zu test frames (%s), %d B per frame, ", sensor_name.c_str(),
+              test.size(), flags.data.c_str(), bytes);
+  if (flags.model.empty()) {
+    std::printf("trunk trained on %zu frames of %s\n", train.size(), train_path.c_str());
+  } else {
+    std::printf("the trunk of %s\n", flags.model.c_str());
+  }
   std::printf("%-38s  %10s  %6s\n", "representation", "noise-free", "noisy");
   nlohmann::json json_rows = nlohmann::json::array();
   for (const Row& row : rows) {
@@ -245,11 +381,43 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
     per_tool[tool] = {{"pca_same_bits_clean", mean(values.first)},
                       {"trunk_clean", mean(values.second)}};
   }
-  const int num_flipped = static_cast<int>(std::count(flipped.begin(), flipped.end(), 1));
-  std::printf("marker scale %.3f px per unit slope; training %.0f s, fits %.0f s (%d of %zu "
-              "kept the start turned by pi)\n",
-              trunk.marker_scale(), train_seconds, fit_seconds, num_flipped, test.size());
+  const int num_flipped = fits[0].flipped;
+  std::printf("marker scale %.3f px per unit slope; training %.0f s, fits %.0f s (adam:%d, "
+              "probe %d, %d pixels a step; %.3f s per frame on %d thread(s); %d of %zu kept the "
+              "start turned by pi)\n",
+              trunk.marker_scale(), train_seconds, fit_seconds, fits[0].options.steps,
+              flags.fit_probe, flags.fit_batch, fit_seconds / test.size(), flags.threads,
+              num_flipped, test.size());
+  // The fit's trade of time against PSNR, where more than one setting was asked for.
+  nlohmann::json json_fits = nlohmann::json::array();
+  for (const FitRun& run : fits) {
+    json_fits.push_back({{"steps", run.options.steps},
+                         {"learning_rate", run.options.learning_rate},
+                         {"psnr_clean", mean(run.row.clean)},
+                         {"psnr", mean(run.row.noisy)},
+                         {"margin_vs_pca_same_bits_clean", mean(run.row.clean) - mean(rows[1].clean)},
+                         {"seconds", run.seconds},
+                         {"seconds_per_frame", run.seconds / test.size()},
+                         {"flipped_starts_kept", run.flipped}});
+  }
+  if (fits.size() > 1) {
+    std::printf("fit trade (probe %d, %d pixels a step, %d thread(s)):\n", flags.fit_probe,
+                flags.fit_batch, flags.threads);
+    std::printf("  %-22s  %10s  %8s  %11s\n", "fit", "noise-free", "vs PCA", "s per frame");
+    for (const FitRun& run : fits) {
+      char name[64];
+      std::snprintf(name, sizeof(name), "adam:%d from %g", run.options.steps,
+                    run.options.learning_rate);
+      std::printf("  %-22s  %10.2f  %+8.2f  %11.3f\n", name, mean(run.row.clean),
+                  mean(run.row.clean) - mean(rows[1].clean), run.seconds / test.size());
+    }
+  }
   std::fflush(stdout);
+  if (!flags.trade_picture.empty()) {
+    WritePicture(flags.trade_picture,
+                 FitTradePicture(fits, mean(rows[1].clean), rows[1].name, flags.threads,
+                                 static_cast<int>(test.size()), bytes));
+  }
 
   if (!flags.picture.empty()) {
     // Six test frames spread over the split: noise-free, PCA at the same bits, trunk.
@@ -276,7 +444,8 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
   if (flags.json) {
     EmitJson({{"bench", "photometric"},
               {"data", flags.data},
-              {"train_data", train_path},
+              {"train_data", flags.model.empty() ? train_path : std::string()},
+              {"model", flags.model},
               {"sensor", sensor_name},
               {"bytes_per_frame", bytes},
               {"steps", flags.steps},
@@ -290,6 +459,12 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
               {"marker_scale", trunk.marker_scale()},
               {"train_seconds", train_seconds},
               {"fit_seconds", fit_seconds},
+              {"fit_steps", fits[0].options.steps},
+              {"fit_probe", flags.fit_probe},
+              {"fit_batch", flags.fit_batch},
+              {"fit_rate", fits[0].options.learning_rate},
+              {"fits", json_fits},
+              {"threads", flags.threads},
               {"flipped_starts_kept", num_flipped}});
   }
 }
@@ -320,8 +495,30 @@ void RegisterPhotometricBenchmark(CLI::App* bench, CommandBody* selected) {
       ->check(CLI::Range(4, 4096));
   sub->add_option("--width", flags->width, "SIREN width (default 64)")->check(CLI::Range(1, 4096));
   sub->add_option("--layers", flags->layers, "SIREN layers (default 3)")->check(CLI::Range(1, 64));
-  sub->add_option("--fit-steps", flags->fit_steps, "Adam steps per test fit and start (default 400)")
+  sub->add_option("--fit-steps", flags->fit_steps,
+                  "Adam steps per test fit and start (default 200); a comma-separated list "
+                  "fits the test frames once per count (the fit trade table)")
+      ->delimiter(',')
       ->check(CLI::Range(1, 1000000));
+  sub->add_option("--fit-probe", flags->fit_probe,
+                  "After this many steps only the better of the two starts goes on "
+                  "(PhotometricFitOptions::probe_steps; default 0: both run all steps)")
+      ->check(CLI::Range(0, 1000000));
+  sub->add_option("--fit-batch", flags->fit_batch,
+                  "Pixels per fit step (PhotometricFitOptions::batch_pixels; default 512)")
+      ->check(CLI::Range(1, 1000000));
+  sub->add_option("--fit-rate", flags->fit_rate,
+                  "Adam's first step size in a fit, falling by a cosine to 1e-4 "
+                  "(PhotometricFitOptions::learning_rate; default 5e-2); a comma-separated "
+                  "list as --fit-steps, every rate with every count")
+      ->delimiter(',')
+      ->check(CLI::Range(1e-8, 10.0));
+  sub->add_option("--trade-picture", flags->trade_picture,
+                  "Write a PNG of the fit trade: noise-free PSNR against seconds per frame, "
+                  "one line per --fit-rate, PCA at the same bits as a dashed line");
+  sub->add_option("--model", flags->model,
+                  "Fit and score the photometric trunk of this trained model (train --head "
+                  "photometric) instead of training one; --latent-dim must be the model's");
   sub->add_option("--max-test-frames", flags->max_test_frames,
                   "Score at most this many test frames, evenly spaced (default 0: all)")
       ->check(CLI::Range(0, 100000000));

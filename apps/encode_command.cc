@@ -318,7 +318,7 @@ void RegisterEncode(CLI::App& app, CommandBody* selected) {
                   "trunk's own meta_sgd:K, what it was trained for; ceres:N fits the latent "
                   "problem to convergence, docs/FITTING.md); a photometric trunk (train "
                   "--head photometric): adam:N, N Adam steps from the contact's moment pose "
-                  "and its turn by pi (default adam:400)");
+                  "and its turn by pi (default adam:200)");
   sub->add_flag("--allow-other-frames", flags->allow_other_frames,
                 "Encode even when the data's frames (size, channels, sensor description) are "
                 "not those the model's trunk was trained on (a warning instead of an error)");

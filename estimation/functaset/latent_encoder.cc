@@ -18,9 +18,10 @@
 namespace tactfunc {
 namespace {
 
-// The photometric trunk's default fit, adam:400 (the steps docs/REPRESENTATION.md
-// measured), and the fixed seed of its pixel subsets.
-constexpr int kPhotometricFitSteps = 400;
+// The photometric trunk's default fit, adam:N with PhotometricFitOptions' default steps
+// (docs/REPRESENTATION.md, "How long to fit a photometric latent"), and the fixed seed of
+// its pixel subsets.
+const int kPhotometricFitSteps = PhotometricFitOptions().steps;
 constexpr std::uint64_t kPhotometricFitSeed = 0x70686f746f;
 
 }  // namespace

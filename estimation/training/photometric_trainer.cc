@@ -124,6 +124,8 @@ bool PhotometricFitOptions::IsValid(std::string* error) const {
   if (steps < 1 || batch_pixels < 1) {
     message << "steps and batch_pixels must be >= 1, found " << steps << " and "
             << batch_pixels;
+  } else if (probe_steps < 0 || probe_steps > steps) {
+    message << "probe_steps must be in [0, steps = " << steps << "], found " << probe_steps;
   } else if (!(learning_rate > 0 && std::isfinite(learning_rate)) ||
              !(final_learning_rate >= 0 && final_learning_rate <= learning_rate)) {
     message << "learning_rate must be finite and > 0 and final_learning_rate in [0, "
@@ -372,8 +374,17 @@ PhotometricFit FitPhotometricLatent(const PhotometricTrunk& trunk, const TrunkTa
                                 std::to_string(start_latent->size()));
   }
   const std::vector<int> all = trunk.AllPixels();
-  PhotometricFit best;
-  for (int start = 0; start < (options.flipped_start ? 2 : 1); ++start) {
+  // One start's state: it advances alone, from its own pixel-subset stream.
+  struct Start {
+    Eigen::VectorXd z;
+    Adam adam;
+    boost::random::mt19937_64 rng;
+    int step = 0;
+    double loss = 0;
+  };
+  const int num_starts = options.flipped_start ? 2 : 1;
+  std::vector<Start> starts;
+  for (int start = 0; start < num_starts; ++start) {
     Eigen::VectorXd z = Eigen::VectorXd::Zero(trunk.latent_dim());
     if (start_latent != nullptr) {
       z = *start_latent;
@@ -381,26 +392,40 @@ PhotometricFit FitPhotometricLatent(const PhotometricTrunk& trunk, const TrunkTa
       z.head<PhotometricTrunk::kPoseValues>() = MomentPose(trunk, frame);
     }
     z[2] += kPi * start;
-    Adam adam(z.size());
-    boost::random::mt19937_64 rng(DeriveSeed(seed, start));
-    std::vector<int> pixels;
-    Eigen::MatrixXf targets;
-    Eigen::VectorXf weights, dz;
-    for (int step = 1; step <= options.steps; ++step) {
-      DrawPixels(frame, options.batch_pixels, &rng, &pixels, &targets, &weights);
-      trunk.LossAndGradient<float>(pixels, z.cast<float>(), targets, weights, &dz, nullptr,
+    starts.push_back(Start{z, Adam(z.size()), boost::random::mt19937_64(DeriveSeed(seed, start))});
+  }
+  std::vector<int> pixels;
+  Eigen::MatrixXf targets;
+  Eigen::VectorXf weights, dz;
+  auto advance = [&](Start* s, int last_step) {
+    for (int step = s->step + 1; step <= last_step; ++step) {
+      DrawPixels(frame, options.batch_pixels, &s->rng, &pixels, &targets, &weights);
+      trunk.LossAndGradient<float>(pixels, s->z.cast<float>(), targets, weights, &dz, nullptr,
                                    nullptr);
       const double rate =
           options.final_learning_rate + (options.learning_rate - options.final_learning_rate) *
                                             0.5 * (1 + std::cos(kPi * (step - 1) / options.steps));
-      adam.Step(step, rate, dz.cast<double>(), z.data());
+      s->adam.Step(step, rate, dz.cast<double>(), s->z.data());
     }
-    const double loss = trunk.LossAndGradient<float>(all, z.cast<float>(), frame.values,
-                                                     frame.weights, nullptr, nullptr, nullptr);
-    if (start == 0 || loss < best.loss) {
-      best.latent = z;
-      best.loss = loss;
-      best.flipped = start == 1;
+    s->step = std::max(s->step, last_step);
+    s->loss = trunk.LossAndGradient<float>(all, s->z.cast<float>(), frame.values,
+                                           frame.weights, nullptr, nullptr, nullptr);
+  };
+  std::vector<int> running(num_starts);
+  for (int start = 0; start < num_starts; ++start) running[start] = start;
+  if (num_starts == 2 && options.probe_steps > 0 && options.probe_steps < options.steps) {
+    for (Start& s : starts) advance(&s, options.probe_steps);
+    // The lower loss goes on; a tie keeps the moment start, as the final comparison does.
+    running = {starts[1].loss < starts[0].loss ? 1 : 0};
+  }
+  for (int start : running) advance(&starts[start], options.steps);
+  PhotometricFit best;
+  for (int i = 0; i < static_cast<int>(running.size()); ++i) {
+    const Start& s = starts[running[i]];
+    if (i == 0 || s.loss < best.loss) {
+      best.latent = s.z;
+      best.loss = s.loss;
+      best.flipped = running[i] == 1;
     }
   }
   return best;

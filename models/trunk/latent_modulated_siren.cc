@@ -243,7 +243,8 @@ void RunBackwardBlock(const Net<S>& net, const std::vector<ParameterBlock>& bloc
                       double omega_0, const Trace<S>& trace,
                       const Eigen::MatrixBase<GradY>& G, std::vector<MatrixX<S>>* g,
                       MatrixX<S>* delta_buffer, const Spatial<S>* spatial,
-                      VectorX<S>* dgamma, MatrixX<S>* dP, VectorX<S>* dL_dtheta) {
+                      VectorX<S>* dgamma, MatrixX<S>* dP, VectorX<S>* dL_dtheta,
+                      bool first_layer_weights_only = false) {
   const int num_layers = static_cast<int>(net.W.size());
   const long width = net.b[0].rows();
   const long m = trace.cols;
@@ -253,7 +254,9 @@ void RunBackwardBlock(const Net<S>& net, const std::vector<ParameterBlock>& bloc
   };
   auto layer_g = [&](int l) { return (*g)[g->size() == 1 ? 0 : l].leftCols(m); };
   if (dL_dtheta != nullptr) {
-    block(2 * num_layers + 2).noalias() += G * trace.h[num_layers].leftCols(m).transpose();
+    if (!first_layer_weights_only) {
+      block(2 * num_layers + 2).noalias() += G * trace.h[num_layers].leftCols(m).transpose();
+    }
     block(2 * num_layers + 3) += G.rowwise().sum();
   }
   layer_g(num_layers - 1).noalias() = net.W_out.transpose() * G;
@@ -262,7 +265,7 @@ void RunBackwardBlock(const Net<S>& net, const std::vector<ParameterBlock>& bloc
     PreActivationGradient(layer_g(l), trace.cosine[l].leftCols(m), omega, &delta);
     dgamma->segment(l * width, width) += delta.rowwise().sum();
     if (spatial != nullptr) spatial->Scatter(delta, l * width, dP);
-    if (dL_dtheta != nullptr) {
+    if (dL_dtheta != nullptr && (l == 0 || !first_layer_weights_only)) {
       block(2 * l).noalias() += delta * trace.h[l].leftCols(m).transpose();
     }
     if (l > 0) layer_g(l - 1).noalias() = net.W[l].transpose() * delta;
@@ -1117,7 +1120,8 @@ template <typename Scalar>
 void LatentModulatedSiren::Backward(const MatrixX<Scalar>& coords,
                                     const VectorX<Scalar>& z,
                                     const MatrixX<Scalar>& dL_dY, VectorX<Scalar>* dL_dz,
-                                    VectorX<Scalar>* dL_dtheta) const {
+                                    VectorX<Scalar>* dL_dtheta,
+                                    WeightGradients weights) const {
   CheckShape("coords", coords.rows(), coords.cols(), coords.rows(), 2);
   CheckShape("z", z.rows(), 1, options_.latent_dim, 1);
   CheckShape("dL_dY", dL_dY.rows(), dL_dY.cols(), coords.rows(),
@@ -1148,7 +1152,7 @@ void LatentModulatedSiren::Backward(const MatrixX<Scalar>& coords,
                &trace);
     RunBackwardBlock(net, blocks_, options_.omega_0, trace,
                      dL_dY.middleRows(begin, m).transpose(), &g, &delta, spatial.get(),
-                     &dgamma, &dP, dL_dtheta);
+                     &dgamma, &dP, dL_dtheta, weights == WeightGradients::kFirstLayer);
     if (has_readout()) {
       ScatterReadout(*this, coords.middleRows(begin, m), dL_dY.middleRows(begin, m).transpose(),
                      &s);
@@ -1497,8 +1501,8 @@ LatentModulatedSiren::VectorX<Scalar> LatentModulatedSiren::StartLatent(
   template LatentModulatedSiren::MatrixX<S> LatentModulatedSiren::Forward<S>(            \
       const MatrixX<S>&, const VectorX<S>&) const;                                       \
   template void LatentModulatedSiren::Backward<S>(                                       \
-      const MatrixX<S>&, const VectorX<S>&, const MatrixX<S>&, VectorX<S>*, VectorX<S>*) \
-      const;                                                                             \
+      const MatrixX<S>&, const VectorX<S>&, const MatrixX<S>&, VectorX<S>*, VectorX<S>*, \
+      WeightGradients) const;                                                            \
   template void LatentModulatedSiren::ForwardAndLatentJacobian<S>(                       \
       const MatrixX<S>&, const VectorX<S>&, MatrixX<S>*, MatrixX<S>*) const;             \
   template LatentModulatedSiren::VectorX<S> LatentModulatedSiren::StartLatent<S>(        \

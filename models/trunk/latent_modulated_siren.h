@@ -289,13 +289,21 @@ class LatentModulatedSiren {
   template <typename Scalar>
   MatrixX<Scalar> Forward(const MatrixX<Scalar>& coords, const VectorX<Scalar>& z) const;
 
+  // Which weight matrices a reverse pass differentiates. kFirstLayer leaves W_1 ..
+  // W_{L-1} and W_out's blocks of dL/dtheta at zero (their GEMMs are skipped; every other
+  // block, dL/dz and W_0's are as with kAll): for a caller that needs the latent's and the
+  // first layer's gradients only, as the photometric head's contact frame in a fit
+  // (models/trunk/photometric_trunk.h).
+  enum class WeightGradients { kAll, kFirstLayer };
+
   // Exact reverse pass: given dL/dY (N x C) returns dL/dz (size d) and dL/dtheta
   // (size NumParameters(), flat layout; use View() for W_l, b_l, A, c, W_out, b_out).
   // Either output may be null. One GEMM per layer and gradient per block of pixels.
   template <typename Scalar>
   void Backward(const MatrixX<Scalar>& coords, const VectorX<Scalar>& z,
                 const MatrixX<Scalar>& dL_dY, VectorX<Scalar>* dL_dz,
-                VectorX<Scalar>* dL_dtheta) const;
+                VectorX<Scalar>* dL_dtheta,
+                WeightGradients weights = WeightGradients::kAll) const;
 
   // Outputs (N x C, may be null) and the Jacobian of every output w.r.t. z,
   // J_y_z: (N*C) x d with row j*C + c holding d y_jc / d z (pixel-major, channels

@@ -414,8 +414,11 @@ void PhotometricTrunk::RunBackward(const Pass& pass_holder, const std::vector<in
   }
   const VectorX<Scalar> code = z.tail(options_.latent_dim - kPoseValues);
   VectorX<Scalar> dcode, dtheta;
-  siren_.Backward<Scalar>(pass.coords, code, ds, dL_dz != nullptr ? &dcode : nullptr,
-                          &dtheta);
+  // Without dL/dsiren (a fit) the pose needs only the first layer's weight gradients.
+  siren_.Backward<Scalar>(pass.coords, code, ds, dL_dz != nullptr ? &dcode : nullptr, &dtheta,
+                          dL_dsiren != nullptr
+                              ? LatentModulatedSiren::WeightGradients::kAll
+                              : LatentModulatedSiren::WeightGradients::kFirstLayer);
   if (dL_dz != nullptr) {
     // The pose from the first layer's gradients (header comment).
     const ParameterBlock& wblock = siren_.Block(ParameterGroup::kHiddenWeight, 0);

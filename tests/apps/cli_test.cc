@@ -248,6 +248,39 @@ TEST_F(CliTest, BenchPhotometricTrainsFitsAndScoresAgainstPcaAtTheSameBits) {
   EXPECT_TRUE(std::filesystem::exists(Path("p.png")));
   EXPECT_THAT(r.err, HasSubstr("step 6/6"));
 
+  // A trained model's trunk, fitted with every step size and count asked for: the first
+  // setting is the bench's row, all of them the fit trade table and picture.
+  ASSERT_EQ(Run("train --data " + Path("d") + " --out " + Path("p.tfm") +
+                " --head photometric --steps 4 --marker-warmup 2 --latent-dim 8 --width 8 "
+                "--layers 1 --threads 1")
+                .exit_code, 0);
+  const Result trade = Run("bench photometric --data " + Path("d") + " --model " +
+                           Path("p.tfm") + " --latent-dim 8 --fit-steps 2,5 --fit-rate "
+                           "1e-2,5e-2 --max-test-frames 2 --trade-picture " + Path("t.png") +
+                           " --json");
+  ASSERT_EQ(trade.exit_code, 0) << trade.err;
+  const nlohmann::json t = trade.LastJson();
+  EXPECT_EQ(t["model"], Path("p.tfm"));
+  EXPECT_EQ(t["train_frames"], 0);
+  ASSERT_EQ(t["fits"].size(), 4u) << t.dump();
+  EXPECT_EQ(t["fits"][0]["steps"], 2);
+  EXPECT_EQ(t["fits"][0]["learning_rate"], 1e-2);
+  EXPECT_EQ(t["fits"][3]["steps"], 5);
+  EXPECT_EQ(t["fits"][3]["learning_rate"], 5e-2);
+  EXPECT_EQ(t["fits"][0]["psnr_clean"], t["rows"][2]["psnr_clean"]);
+  EXPECT_THAT(trade.out, HasSubstr("fit trade"));
+  EXPECT_THAT(trade.out, HasSubstr("the trunk of " + Path("p.tfm")));
+  EXPECT_TRUE(std::filesystem::exists(Path("t.png")));
+  // Another d than the model's, and a probe longer than a fit, are refused by name.
+  const Result other_d = Run("bench photometric --data " + Path("d") + " --model " +
+                             Path("p.tfm") + " --latent-dim 16 --max-test-frames 1");
+  EXPECT_NE(other_d.exit_code, 0);
+  EXPECT_THAT(other_d.err, HasSubstr("--latent-dim 16"));
+  const Result probe = Run("bench photometric --data " + Path("d") + " --model " +
+                           Path("p.tfm") + " --latent-dim 8 --fit-steps 3 --fit-probe 4");
+  EXPECT_NE(probe.exit_code, 0);
+  EXPECT_THAT(probe.err, HasSubstr("--fit-probe 4"));
+
   // Data without noise-free frames is refused naming it.
   ASSERT_EQ(Run("synth --out " + Path("n") + " --frames-per-tool 2 --tools rod --sensors gelslim")
                 .exit_code, 0);

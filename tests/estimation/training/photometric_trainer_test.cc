@@ -202,6 +202,45 @@ TEST(PhotometricTrainerTest, AFitOfAFrameTheTrunkDrewLowersItsLossTenfold) {
   }
 }
 
+TEST(PhotometricTrainerTest, AProbeKeepsTheStartAheadAndOtherwiseChangesNothing) {
+  const Teacher teacher = MakeTeacher(3);
+  PhotometricFitOptions both;
+  both.steps = 120;
+  both.batch_pixels = 96;
+  PhotometricFitOptions probed = both;
+  probed.probe_steps = 30;
+  int checked = 0;
+  for (int i = 0; i < 3; ++i) {
+    const TrunkTargets& frame = teacher.frames[i];
+    // Starts a quarter turn from the truth each way (a random teacher's moment pose says
+    // little), so that either may be ahead.
+    Eigen::VectorXd start = Eigen::VectorXd::Zero(8);
+    start.head<3>() = teacher.latents[i].head<3>();
+    start[2] += 0.5 * (i - 1);
+    const PhotometricFit full = FitPhotometricLatent(teacher.trunk, frame, both, 5 + i, &start);
+    const PhotometricFit fast = FitPhotometricLatent(teacher.trunk, frame, probed, 5 + i, &start);
+    // The kept start follows the same trajectory as in the full fit: when the probe keeps
+    // the full fit's winner, the latents are the same to the bit.
+    if (fast.flipped == full.flipped) {
+      EXPECT_EQ(fast.latent, full.latent) << "frame " << i;
+      EXPECT_EQ(fast.loss, full.loss) << "frame " << i;
+      ++checked;
+    } else {
+      EXPECT_GE(fast.loss, full.loss) << "frame " << i;
+    }
+  }
+  EXPECT_GE(checked, 2);
+  // The probe decides by the loss: starting on the truth, the turned start never wins.
+  Eigen::VectorXd truth = teacher.latents[0];
+  const PhotometricFit on_truth =
+      FitPhotometricLatent(teacher.trunk, teacher.frames[0], probed, 3, &truth);
+  EXPECT_FALSE(on_truth.flipped);
+  PhotometricFitOptions bad = both;
+  bad.probe_steps = both.steps + 1;
+  EXPECT_THROW(FitPhotometricLatent(teacher.trunk, teacher.frames[0], bad, 1),
+               std::invalid_argument);
+}
+
 TEST(PhotometricTrainerTest, MomentPoseFindsTheCentreAndTheAxis) {
   const PhotometricTrunk trunk(SmallTrunk(), Reference(24, 32));
   // A bar along the columns, rows 5-6, columns 4-11: centre between pixels (5, 4) and

@@ -570,6 +570,23 @@ TEST(LatentModulatedSiren, BackwardOfAnyOutputGradientMatchesJetAutodiff) {
   VectorXd dz_only;
   siren.Backward<double>(frame.coords, frame.z, dL_dY, &dz_only, nullptr);
   EXPECT_EQ(dz_only, dz);
+  // The first layer's weights only: the other weight matrices' blocks stay zero, every
+  // other block and dL/dz are those of the full pass, to the bit.
+  VectorXd dz_first, dtheta_first;
+  siren.Backward<double>(frame.coords, frame.z, dL_dY, &dz_first, &dtheta_first,
+                         Siren::WeightGradients::kFirstLayer);
+  EXPECT_EQ(dz_first, dz);
+  ASSERT_EQ(dtheta_first.size(), dtheta.size());
+  for (const ParameterBlock& block : siren.parameter_blocks()) {
+    const bool skipped = (block.group == ParameterGroup::kHiddenWeight && block.layer > 0) ||
+                         block.group == ParameterGroup::kOutputWeight;
+    const VectorXd first = dtheta_first.segment(block.offset, block.size());
+    if (skipped) {
+      EXPECT_EQ(first.cwiseAbs().maxCoeff(), 0.0) << block.Name();
+    } else {
+      EXPECT_EQ(first, dtheta.segment(block.offset, block.size())) << block.Name();
+    }
+  }
   }
 }
 
