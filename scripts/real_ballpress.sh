@@ -6,7 +6,7 @@
 #   usage: scripts/real_ballpress.sh OUT [LATENT_DIM] [STEPS] [STRATEGY] [HEAD]
 # Defaults: d = 16, 2000 steps, meta_sgd:3, HEAD direct (trunk: --preset small --readout).
 # HEAD photometric trains `--head photometric --preset small` instead (the SIREN draws
-# the contact, a head shades it; fit it with STRATEGY adam:400).
+# the contact, a head shades it; fit it with STRATEGY adam:N, the default adam:200).
 set -euo pipefail
 export LC_ALL=C
 cd "$(dirname "$0")/.."
