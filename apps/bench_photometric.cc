@@ -395,7 +395,8 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
                          {"learning_rate", run.options.learning_rate},
                          {"psnr_clean", mean(run.row.clean)},
                          {"psnr", mean(run.row.noisy)},
-                         {"margin_vs_pca_same_bits_clean", mean(run.row.clean) - mean(rows[1].clean)},
+                         {"margin_vs_pca_same_bits_clean",
+                          mean(run.row.clean) - mean(rows[1].clean)},
                          {"seconds", run.seconds},
                          {"seconds_per_frame", run.seconds / test.size()},
                          {"flipped_starts_kept", run.flipped}});

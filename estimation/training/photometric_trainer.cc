@@ -392,7 +392,8 @@ PhotometricFit FitPhotometricLatent(const PhotometricTrunk& trunk, const TrunkTa
       z.head<PhotometricTrunk::kPoseValues>() = MomentPose(trunk, frame);
     }
     z[2] += kPi * start;
-    starts.push_back(Start{z, Adam(z.size()), boost::random::mt19937_64(DeriveSeed(seed, start))});
+    starts.push_back(
+        Start{z, Adam(z.size()), boost::random::mt19937_64(DeriveSeed(seed, start))});
   }
   std::vector<int> pixels;
   Eigen::MatrixXf targets;
