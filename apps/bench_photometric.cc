@@ -239,7 +239,6 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
   // The trunk: trained here, or a trained model's.
   std::optional<PhotometricTrunk> trunk_storage;
   double train_seconds = 0;
-  std::string trained_on = train_path;
   if (!flags.model.empty()) {
     const FunctaModel model = FunctaModel::Load(flags.model);
     if (!model.HasSensor(sensor) || model.Trunk(sensor).photometric == nullptr) {
@@ -260,7 +259,6 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
                        std::to_string(loaded.latent_dim()) + " (" + flags.model + ")");
     }
     trunk_storage.emplace(loaded);
-    trained_on = flags.model;
     std::cerr << "bench photometric: the trunk of " << flags.model << " (not trained here)"
               << std::endl;
   } else {
@@ -449,8 +447,10 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
               {"model", flags.model},
               {"sensor", sensor_name},
               {"bytes_per_frame", bytes},
-              {"steps", flags.steps},
-              {"marker_warmup", flags.warmup},
+              // Training's figures; null for a trained model's trunk (--model).
+              {"steps", flags.model.empty() ? nlohmann::json(flags.steps) : nlohmann::json()},
+              {"marker_warmup",
+               flags.model.empty() ? nlohmann::json(flags.warmup) : nlohmann::json()},
               {"seed", flags.seed},
               {"train_frames", train.size()},
               {"test_frames", test.size()},
@@ -519,7 +519,9 @@ void RegisterPhotometricBenchmark(CLI::App* bench, CommandBody* selected) {
                   "one line per --fit-rate, PCA at the same bits as a dashed line");
   sub->add_option("--model", flags->model,
                   "Fit and score the photometric trunk of this trained model (train --head "
-                  "photometric) instead of training one; --latent-dim must be the model's");
+                  "photometric) instead of training one; --latent-dim must be the model's, "
+                  "and the training flags (--train-data, --steps, --warmup, --width, --layers, "
+                  "--marker-rate, --narrow-biases) do not apply");
   sub->add_option("--max-test-frames", flags->max_test_frames,
                   "Score at most this many test frames, evenly spaced (default 0: all)")
       ->check(CLI::Range(0, 100000000));

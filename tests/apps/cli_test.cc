@@ -262,6 +262,7 @@ TEST_F(CliTest, BenchPhotometricTrainsFitsAndScoresAgainstPcaAtTheSameBits) {
   const nlohmann::json t = trade.LastJson();
   EXPECT_EQ(t["model"], Path("p.tfm"));
   EXPECT_EQ(t["train_frames"], 0);
+  EXPECT_TRUE(t["steps"].is_null()) << t.dump();
   ASSERT_EQ(t["fits"].size(), 4u) << t.dump();
   EXPECT_EQ(t["fits"][0]["steps"], 2);
   EXPECT_EQ(t["fits"][0]["learning_rate"], 1e-2);
