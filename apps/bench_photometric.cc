@@ -34,6 +34,7 @@
 #include "apps/bench.h"
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
+#include "apps/model_inputs.h"
 #include "apps/pictures.h"
 #include "estimation/data/dataset.h"
 #include "estimation/data/trunk_targets.h"
@@ -62,6 +63,7 @@ struct PhotometricBenchFlags {
   std::vector<double> fit_rate{PhotometricFitOptions().learning_rate};
   std::string trade_picture;
   std::string model;
+  bool allow_other_frames = false;
   int max_test_frames = 0;
   std::uint64_t seed = 1;
   int threads = 1;
@@ -90,7 +92,6 @@ struct FitRun {
   double seconds = 0;
   int flipped = 0;
   Row row;
-  std::vector<Eigen::MatrixXf> predictions;
 };
 
 // Noise-free PSNR against seconds per frame (log scale), one line per step size through
@@ -168,10 +169,30 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
     throw std::runtime_error(train_path + " or " + flags.data + " has no " + sensor_name +
                              " frames");
   }
+  // A trained model's trunk (--model), checked against the data as the other commands
+  // check theirs; its frame format, else the one training resolves from the train data.
+  std::optional<FunctaModel> model;
+  if (!flags.model.empty()) {
+    model = FunctaModel::Load(flags.model);
+    if (!model->HasSensor(sensor) || model->Trunk(sensor).photometric == nullptr) {
+      throw std::runtime_error(flags.model + ": the model has no photometric " + sensor_name +
+                               " trunk (train it with `tactfunc train --head photometric`)");
+    }
+    CheckModelMatchesData(*model, flags.model, data, flags.data, sensor, "bench photometric",
+                          "--allow-other-frames", flags.allow_other_frames);
+    const int model_d = model->Trunk(sensor).photometric->latent_dim();
+    if (model_d != flags.latent_dim) {
+      throw UsageError("--latent-dim " + std::to_string(flags.latent_dim) +
+                       " differs from the model's " + std::to_string(model_d) + " (" +
+                       flags.model + ")");
+    }
+  }
   const SensorInfo& info = train_data.sensor_info(sensor);
   const double scale =
       info.normalization_scale > 0 ? info.normalization_scale : DefaultNormalizationScale(sensor);
-  const FrameFormat format = TrunkTrainer(TrunkTrainer::Options()).ResolveFormat(sensor, scale);
+  const FrameFormat format =
+      model ? model->Trunk(sensor).format
+            : TrunkTrainer(TrunkTrainer::Options()).ResolveFormat(sensor, scale);
 
   const auto train_indices = train_data.FrameIndices(sensor, Split::kTrain);
   const auto pca_indices = data.FrameIndices(sensor, Split::kTrain);
@@ -188,18 +209,16 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
     throw std::runtime_error("bench photometric: needs train frames in " + train_path +
                              ", at least 2 train and 1 test frame in " + flags.data);
   }
-  std::cerr << "bench photometric: loading " << train_indices.size() << " + "
-            << pca_indices.size() << " train and " << test_indices.size() << " test frames"
-            << std::endl;
-  // A trained model's trunk (--model) needs no train frames.
-  const auto train = flags.model.empty()
-                         ? LoadTrunkTargets(train_data, train_indices, format, false, flags.threads)
-                         : std::vector<TrunkTargets>();
+  // A trained model's trunk needs no train frames.
+  const std::size_t num_train = model ? 0 : train_indices.size();
+  std::cerr << "bench photometric: loading " << num_train << " + " << pca_indices.size()
+            << " train and " << test_indices.size() << " test frames" << std::endl;
+  const auto train =
+      model ? std::vector<TrunkTargets>()
+            : LoadTrunkTargets(train_data, train_indices, format, false, flags.threads);
   const auto pca_train = LoadTrunkTargets(data, pca_indices, format, false, flags.threads);
   const auto test = LoadTrunkTargets(data, test_indices, format, false, flags.threads);
   const auto test_clean = LoadTrunkTargets(data, test_indices, format, true, flags.threads);
-  const Image reference =
-      PhotometricReference(train_data.FrameReference(train_indices[0]), format);
   const int channels = static_cast<int>(test[0].values.cols());
   const int d = flags.latent_dim;
   const int bytes = 2 * d;
@@ -239,29 +258,13 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
   // The trunk: trained here, or a trained model's.
   std::optional<PhotometricTrunk> trunk_storage;
   double train_seconds = 0;
-  if (!flags.model.empty()) {
-    const FunctaModel model = FunctaModel::Load(flags.model);
-    if (!model.HasSensor(sensor) || model.Trunk(sensor).photometric == nullptr) {
-      throw std::runtime_error(flags.model + ": the model has no photometric " + sensor_name +
-                               " trunk (train it with `tactfunc train --head photometric`)");
-    }
-    const PhotometricTrunk& loaded = *model.Trunk(sensor).photometric;
-    if (loaded.options().rows != test[0].rows || loaded.options().cols != test[0].cols ||
-        loaded.channels() != channels) {
-      throw std::runtime_error(
-          flags.model + ": the trunk draws " + std::to_string(loaded.options().rows) + " x " +
-          std::to_string(loaded.options().cols) + " x " + std::to_string(loaded.channels()) +
-          " frames, " + flags.data + " has " + std::to_string(test[0].rows) + " x " +
-          std::to_string(test[0].cols) + " x " + std::to_string(channels));
-    }
-    if (loaded.latent_dim() != d) {
-      throw UsageError("--latent-dim " + std::to_string(d) + " differs from the model's " +
-                       std::to_string(loaded.latent_dim()) + " (" + flags.model + ")");
-    }
-    trunk_storage.emplace(loaded);
+  if (model) {
+    trunk_storage.emplace(*model->Trunk(sensor).photometric);
     std::cerr << "bench photometric: the trunk of " << flags.model << " (not trained here)"
               << std::endl;
   } else {
+    const Image reference =
+        PhotometricReference(train_data.FrameReference(train_indices[0]), format);
     PhotometricTrainer::Options options;
     options.trunk.width = flags.width;
     options.trunk.num_hidden_layers = flags.layers;
@@ -315,6 +318,8 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
       fits.push_back(std::move(run));
     }
   }
+  const std::vector<int> all_pixels = trunk.AllPixels();
+  std::vector<Eigen::MatrixXf> predictions(test.size());  // the first setting's, for --picture
   for (FitRun& run : fits) {
     std::vector<Eigen::VectorXd> latents(test.size());
     std::vector<char> flipped(test.size(), 0);
@@ -335,18 +340,16 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
         std::chrono::duration<double>(std::chrono::steady_clock::now() - fit_start).count();
     run.flipped = static_cast<int>(std::count(flipped.begin(), flipped.end(), 1));
     run.row.name = "photometric trunk, float16 latents";
-    run.predictions.resize(test.size());
     for (std::size_t i = 0; i < test.size(); ++i) {
-      run.predictions[i] = trunk.Forward<float>(trunk.AllPixels(), latents[i].cast<float>());
-      run.row.clean.push_back(Psnr(run.predictions[i], test_clean[i]));
-      run.row.noisy.push_back(Psnr(run.predictions[i], test[i]));
+      Eigen::MatrixXf prediction = trunk.Forward<float>(all_pixels, latents[i].cast<float>());
+      run.row.clean.push_back(Psnr(prediction, test_clean[i]));
+      run.row.noisy.push_back(Psnr(prediction, test[i]));
+      if (&run == &fits[0]) predictions[i] = std::move(prediction);
     }
   }
   rows.push_back(fits[0].row);
-  const std::vector<Eigen::MatrixXf>& predictions = fits[0].predictions;
   const double fit_seconds = fits[0].seconds;
 
-  const auto& mean = Mean;
   std::printf("bench photometric: %s, %zu test frames (%s), %d B per frame, ", sensor_name.c_str(),
               test.size(), flags.data.c_str(), bytes);
   if (flags.model.empty()) {
@@ -357,12 +360,12 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
   std::printf("%-38s  %10s  %6s\n", "representation", "noise-free", "noisy");
   nlohmann::json json_rows = nlohmann::json::array();
   for (const Row& row : rows) {
-    std::printf("%-38s  %10.2f  %6.2f\n", row.name.c_str(), mean(row.clean), mean(row.noisy));
+    std::printf("%-38s  %10.2f  %6.2f\n", row.name.c_str(), Mean(row.clean), Mean(row.noisy));
     json_rows.push_back({{"representation", row.name},
-                         {"psnr_clean", mean(row.clean)},
-                         {"psnr", mean(row.noisy)}});
+                         {"psnr_clean", Mean(row.clean)},
+                         {"psnr", Mean(row.noisy)}});
   }
-  const double margin = mean(rows[2].clean) - mean(rows[1].clean);
+  const double margin = Mean(rows[2].clean) - Mean(rows[1].clean);
   std::printf("margin over PCA at the same bits (noise-free): %+.2f dB (target +3)\n", margin);
   // Per tool, where the frames are labelled.
   std::map<std::string, std::pair<std::vector<double>, std::vector<double>>> tools;
@@ -374,10 +377,10 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
   }
   nlohmann::json per_tool = nlohmann::json::object();
   for (const auto& [tool, values] : tools) {
-    std::printf("  %-16s PCA %6.2f  trunk %6.2f  (%+.2f)\n", tool.c_str(), mean(values.first),
-                mean(values.second), mean(values.second) - mean(values.first));
-    per_tool[tool] = {{"pca_same_bits_clean", mean(values.first)},
-                      {"trunk_clean", mean(values.second)}};
+    std::printf("  %-16s PCA %6.2f  trunk %6.2f  (%+.2f)\n", tool.c_str(), Mean(values.first),
+                Mean(values.second), Mean(values.second) - Mean(values.first));
+    per_tool[tool] = {{"pca_same_bits_clean", Mean(values.first)},
+                      {"trunk_clean", Mean(values.second)}};
   }
   const int num_flipped = fits[0].flipped;
   std::printf("marker scale %.3f px per unit slope; training %.0f s, fits %.0f s (adam:%d, "
@@ -391,10 +394,10 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
   for (const FitRun& run : fits) {
     json_fits.push_back({{"steps", run.options.steps},
                          {"learning_rate", run.options.learning_rate},
-                         {"psnr_clean", mean(run.row.clean)},
-                         {"psnr", mean(run.row.noisy)},
+                         {"psnr_clean", Mean(run.row.clean)},
+                         {"psnr", Mean(run.row.noisy)},
                          {"margin_vs_pca_same_bits_clean",
-                          mean(run.row.clean) - mean(rows[1].clean)},
+                          Mean(run.row.clean) - Mean(rows[1].clean)},
                          {"seconds", run.seconds},
                          {"seconds_per_frame", run.seconds / test.size()},
                          {"flipped_starts_kept", run.flipped}});
@@ -407,14 +410,14 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
       char name[64];
       std::snprintf(name, sizeof(name), "adam:%d from %g", run.options.steps,
                     run.options.learning_rate);
-      std::printf("  %-22s  %10.2f  %+8.2f  %11.3f\n", name, mean(run.row.clean),
-                  mean(run.row.clean) - mean(rows[1].clean), run.seconds / test.size());
+      std::printf("  %-22s  %10.2f  %+8.2f  %11.3f\n", name, Mean(run.row.clean),
+                  Mean(run.row.clean) - Mean(rows[1].clean), run.seconds / test.size());
     }
   }
   std::fflush(stdout);
   if (!flags.trade_picture.empty()) {
     WritePicture(flags.trade_picture,
-                 FitTradePicture(fits, mean(rows[1].clean), rows[1].name, flags.threads,
+                 FitTradePicture(fits, Mean(rows[1].clean), rows[1].name, flags.threads,
                                  static_cast<int>(test.size()), bytes));
   }
 
@@ -522,6 +525,10 @@ void RegisterPhotometricBenchmark(CLI::App* bench, CommandBody* selected) {
                   "photometric) instead of training one; --latent-dim must be the model's, "
                   "and the training flags (--train-data, --steps, --warmup, --width, --layers, "
                   "--marker-rate, --narrow-biases) do not apply");
+  sub->add_flag("--allow-other-frames", flags->allow_other_frames,
+                "With --model: run even when the data's frames (size, channels, sensor "
+                "description) are not those the model's trunk was trained on (a warning "
+                "instead of an error)");
   sub->add_option("--max-test-frames", flags->max_test_frames,
                   "Score at most this many test frames, evenly spaced (default 0: all)")
       ->check(CLI::Range(0, 100000000));
