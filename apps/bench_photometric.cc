@@ -40,6 +40,7 @@
 #include "estimation/data/trunk_targets.h"
 #include "estimation/evaluation/baselines.h"
 #include "estimation/training/photometric_trainer.h"
+#include "estimation/training/photometric_warm_start.h"
 #include "estimation/training/trunk_trainer.h"
 #include "models/trunk/functa_model.h"
 #include "models/core/parallel_for.h"
@@ -59,6 +60,7 @@ struct PhotometricBenchFlags {
   int layers = 3;
   std::vector<int> fit_steps{PhotometricFitOptions().steps};
   int fit_probe = 0;
+  int fit_knn = 0;
   int fit_batch = PhotometricFitOptions().batch_pixels;
   std::vector<double> fit_rate{PhotometricFitOptions().learning_rate};
   std::string trade_picture;
@@ -255,11 +257,18 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
     rows.push_back(row);
   }
 
-  // The trunk: trained here, or a trained model's.
+  // The trunk: trained here, or a trained model's; with --fit-knn its warm-start table
+  // (the model's, or built here from the training latents).
   std::optional<PhotometricTrunk> trunk_storage;
+  std::shared_ptr<const WarmStartTable> table;
   double train_seconds = 0;
   if (model) {
     trunk_storage.emplace(*model->Trunk(sensor).photometric);
+    table = model->Trunk(sensor).warm_start;
+    if (flags.fit_knn > 0 && table == nullptr) {
+      throw UsageError("--fit-knn: the model " + flags.model + " has no warm-start table (it "
+                       "was trained before train --head photometric stored one)");
+    }
     std::cerr << "bench photometric: the trunk of " << flags.model << " (not trained here)"
               << std::endl;
   } else {
@@ -297,14 +306,23 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
       throw std::runtime_error("bench photometric: training diverged (loss " +
                                std::to_string(trained.summary.final_loss) + ")");
     }
+    if (flags.fit_knn > 0) {
+      table = std::make_shared<WarmStartTable>(PhotometricWarmStart::BuildTable(
+          trained.trunk, train, trained.latents, PhotometricWarmStart::Options(), flags.threads));
+    }
     trunk_storage.emplace(std::move(trained.trunk));
   }
   const PhotometricTrunk& trunk = *trunk_storage;
+  std::optional<PhotometricWarmStart> warm_start;
+  if (flags.fit_knn > 0) warm_start.emplace(trunk, table);
   // The fits: every step size of --fit-rate with every step count of --fit-steps; the
   // first setting is the bench's row, the others only the fit trade table and picture.
   std::vector<FitRun> fits;
   for (double rate : flags.fit_rate) {
     for (int steps : flags.fit_steps) {
+      if (steps == 0 && flags.fit_knn == 0) {
+        throw UsageError("--fit-steps 0 (the neighbour's latent as it is) needs --fit-knn");
+      }
       if (flags.fit_probe > steps) {
         throw UsageError("--fit-probe " + std::to_string(flags.fit_probe) +
                          " exceeds --fit-steps " + std::to_string(steps));
@@ -312,6 +330,8 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
       FitRun run;
       run.options.steps = steps;
       run.options.probe_steps = flags.fit_probe;
+      run.options.flipped_start = flags.fit_knn == 0;
+      run.options.score = flags.fit_knn == 0;
       run.options.batch_pixels = flags.fit_batch;
       run.options.learning_rate = rate;
       run.options.final_learning_rate = std::min(run.options.final_learning_rate, rate);
@@ -326,8 +346,19 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
     const auto fit_start = std::chrono::steady_clock::now();
     std::atomic<int> done{0};
     internal::ParallelFor(static_cast<int>(test.size()), flags.threads, [&](int i) {
-      const PhotometricFit fit =
-          FitPhotometricLatent(trunk, test[i], run.options, DeriveSeed(flags.seed, 7000000 + i));
+      PhotometricFit fit;
+      if (warm_start) {
+        const Eigen::VectorXd start = warm_start->BestStart(test[i], flags.fit_knn);
+        if (run.options.steps == 0) {
+          fit.latent = start;
+        } else {
+          fit = FitPhotometricLatent(trunk, test[i], run.options,
+                                     DeriveSeed(flags.seed, 7000000 + i), &start);
+        }
+      } else {
+        fit = FitPhotometricLatent(trunk, test[i], run.options,
+                                   DeriveSeed(flags.seed, 7000000 + i));
+      }
       latents[i] = fit.latent.unaryExpr([](double v) { return static_cast<double>(Half(v)); });
       flipped[i] = fit.flipped;
       const int n = ++done;
@@ -503,7 +534,13 @@ void RegisterPhotometricBenchmark(CLI::App* bench, CommandBody* selected) {
                   "Adam steps per test fit and start (default 200); a comma-separated list "
                   "fits the test frames once per count (the fit trade table)")
       ->delimiter(',')
-      ->check(CLI::Range(1, 1000000));
+      ->check(CLI::Range(0, 1000000));
+  sub->add_option("--fit-knn", flags->fit_knn,
+                  "Start each fit from the best of this many neighbours in the trunk's "
+                  "warm-start table (one start, not two; 0 = off, the default; "
+                  "estimation/training/photometric_warm_start.h); with it --fit-steps 0 "
+                  "scores the neighbour's latent as it is")
+      ->check(CLI::Range(0, 1000));
   sub->add_option("--fit-probe", flags->fit_probe,
                   "After this many steps only the better of the two starts goes on "
                   "(PhotometricFitOptions::probe_steps; default 0: both run all steps)")

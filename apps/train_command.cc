@@ -28,6 +28,7 @@
 #include "apps/progress_bar.h"
 #include "estimation/data/dataset.h"
 #include "estimation/training/photometric_trainer.h"
+#include "estimation/training/photometric_warm_start.h"
 #include "estimation/training/trunk_trainer.h"
 #include "models/core/parallel_for.h"
 #include "models/core/atomic_file.h"
@@ -399,6 +400,10 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
     trunk.siren = result.trunk.siren();
     trunk.alpha = Eigen::VectorXd::Zero(trunk.siren.latent_dim());
     trunk.photometric = std::make_shared<PhotometricTrunk>(result.trunk);
+    // The fits' warm starts (encode --strategy knn+adam:N): the training latents, looked
+    // up by each frame's descriptor in its moment frame.
+    trunk.warm_start = std::make_shared<WarmStartTable>(PhotometricWarmStart::BuildTable(
+        *trunk.photometric, frames, result.latents, PhotometricWarmStart::Options(), o.threads));
     trunk.residual_sigma = std::sqrt(mse_sum / checked);
     trunk.description = TrainedDescription(dataset, sensor, format);
     std::cout << "train " << name << ": " << result.summary.steps << " steps in "

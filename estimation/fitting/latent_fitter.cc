@@ -25,8 +25,8 @@ double MsSince(Clock::time_point start) {
 }
 
 const char* kStrategyForms =
-    "expected one of knn, meta_sgd:K, ceres:N, knn+meta_sgd:K, knn+ceres:N, adam:N "
-    "(K >= 0, N >= 1 integers; adam:N for photometric trunks)";
+    "expected one of knn, meta_sgd:K, ceres:N, knn+meta_sgd:K, knn+ceres:N, adam:N, "
+    "knn+adam:N (K >= 0, N >= 1 integers; adam:N and knn+adam:N for photometric trunks)";
 
 bool ParseCount(const std::string& text, int* value) {
   if (text.empty() || text.size() > 9) return false;
@@ -72,7 +72,6 @@ bool FitStrategy::Parse(const std::string& text, FitStrategy* strategy, std::str
   } else if (name == "ceres") {
     out.refinement = Refinement::kCeres;
   } else if (name == "adam") {
-    if (out.knn) return fail("adam:N takes no k-NN start");
     out.refinement = Refinement::kAdam;
   } else if (name.empty()) {
     return fail("no method");
@@ -119,8 +118,8 @@ bool FitStrategy::IsValid(std::string* error) const {
     message = "meta_sgd:K needs K >= 0, found " + std::to_string(steps);
   } else if (refinement == Refinement::kCeres && steps < 1) {
     message = "ceres:N needs N >= 1, found " + std::to_string(steps);
-  } else if (refinement == Refinement::kAdam && (steps < 1 || knn)) {
-    message = "adam:N needs N >= 1 and no k-NN start, found " + ToString();
+  } else if (refinement == Refinement::kAdam && steps < 1) {
+    message = "adam:N needs N >= 1, found " + ToString();
   } else if (refinement != Refinement::kNone && refinement != Refinement::kMetaSgd &&
              refinement != Refinement::kCeres && refinement != Refinement::kAdam) {
     message = "refinement is not a Refinement";

@@ -23,6 +23,10 @@ namespace {
 // its pixel subsets.
 const int kPhotometricFitSteps = PhotometricFitOptions().steps;
 constexpr std::uint64_t kPhotometricFitSeed = 0x70686f746f;
+// knn+adam:N: the neighbours scored per frame and the fit's first step size from the
+// start (docs/REPRESENTATION.md, "A warm start from the training latents").
+constexpr int kWarmStartCandidates = 4;
+constexpr double kWarmStartRate = 1e-2;
 
 }  // namespace
 
@@ -47,9 +51,12 @@ bool LatentEncoder::Options::IsValid(std::string* error) const {
     message << "resume needs a checkpoint_path, found \"\"";
   } else if (FitStrategy parsed; !strategy.empty() && !FitStrategy::Parse(strategy, &parsed, &why)) {
     message << "strategy: " << why;
-  } else if (!strategy.empty() && parsed.knn) {
+  } else if (!strategy.empty() && parsed.knn &&
+             (parsed.refinement == FitStrategy::Refinement::kMetaSgd ||
+              parsed.refinement == FitStrategy::Refinement::kCeres)) {
     message << "strategy '" << strategy
-            << "': the k-NN strategies need a functaset to search; use meta_sgd:K or ceres:N";
+            << "': the k-NN strategies need a functaset to search; use meta_sgd:K or ceres:N "
+               "(a photometric trunk's knn and knn+adam:N search its own warm-start table)";
   } else if (!problem.IsValid(&why)) {
     message << "problem: " << why;
   } else if (share_rest_latent && !contact.IsValid(&why)) {
@@ -122,12 +129,26 @@ LatentEncoder::LatentEncoder(const FunctaModel& model, const Options& options)
                                                   : "meta_sgd:" +
                                                         std::to_string(trunk.meta_sgd.inner_steps))
             : FitStrategy::FromString(options_.strategy);
-    if (photometric != (state.strategy.refinement == FitStrategy::Refinement::kAdam)) {
+    const bool adam = state.strategy.refinement == FitStrategy::Refinement::kAdam;
+    const bool knn_alone =
+        state.strategy.knn && state.strategy.refinement == FitStrategy::Refinement::kNone;
+    if (photometric ? !(adam || knn_alone) : (adam || state.strategy.knn)) {
       throw std::invalid_argument(
           std::string("LatentEncoder: the ") + ToString(sensor) + " trunk is " +
-          (photometric ? "photometric: its latents are fitted with adam:N, not "
+          (photometric ? "photometric: its latents are fitted with adam:N, knn+adam:N or knn, "
+                         "not "
                        : "direct: its latents are fitted with meta_sgd:K or ceres:N, not ") +
           state.strategy.ToString());
+    }
+    if (photometric && state.strategy.knn) {
+      if (trunk.warm_start == nullptr) {
+        throw std::invalid_argument(
+            std::string("LatentEncoder: the ") + ToString(sensor) + " trunk has no warm-start "
+            "table for " + state.strategy.ToString() + " (it was trained before train --head "
+            "photometric stored one); use adam:N or retrain");
+      }
+      state.warm_start =
+          std::make_shared<const PhotometricWarmStart>(*trunk.photometric, trunk.warm_start);
     }
     if (state.strategy.refinement == FitStrategy::Refinement::kCeres) {
       LatentFitter::Options fit;
@@ -179,9 +200,25 @@ LatentEncoder::EncodedFrame LatentEncoder::EncodeTargets(SensorKind sensor,
     // fixed seed, so a frame's latent depends on the frame alone.
     PhotometricFitOptions fit;
     fit.steps = state.strategy.steps;
-    const PhotometricFit result = FitPhotometricLatent(*state.trunk->photometric, targets, fit,
-                                                       kPhotometricFitSeed);
-    out.latent = result.latent.cast<float>();
+    if (state.warm_start != nullptr) {
+      // One start, the best of the table's nearest neighbours, refined by a short fit
+      // (docs/REPRESENTATION.md, "A warm start from the training latents").
+      const Eigen::VectorXd start = state.warm_start->BestStart(targets, kWarmStartCandidates);
+      if (state.strategy.refinement == FitStrategy::Refinement::kNone) {
+        out.latent = start.cast<float>();
+      } else {
+        fit.flipped_start = false;
+        fit.score = false;
+        fit.learning_rate = kWarmStartRate;
+        out.latent = FitPhotometricLatent(*state.trunk->photometric, targets, fit,
+                                          kPhotometricFitSeed, &start)
+                         .latent.cast<float>();
+      }
+    } else {
+      out.latent = FitPhotometricLatent(*state.trunk->photometric, targets, fit,
+                                        kPhotometricFitSeed)
+                       .latent.cast<float>();
+    }
     out.psnr = Psnr(TrunkDecode(*state.trunk, out.latent), targets);
     return out;
   }

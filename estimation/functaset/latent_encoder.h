@@ -57,6 +57,7 @@
 #include <cstdint>
 #include <functional>
 #include <map>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -68,6 +69,7 @@
 #include "estimation/fitting/latent_fitter.h"
 #include "estimation/functaset/functaset.h"
 #include "estimation/data/trunk_targets.h"
+#include "estimation/training/photometric_warm_start.h"
 #include "models/core/process_group.h"
 #include "models/trunk/functa_model.h"
 
@@ -189,6 +191,8 @@ class LatentEncoder {
     MetaSgd meta_sgd{MetaSgd::Options()};
     FitStrategy strategy;   // resolved: the trunk's meta_sgd:K when Options::strategy is ""
     std::optional<LatentFitter> fitter;  // for ceres:N
+    // For knn+adam:N (photometric trunks): the trunk's warm-start table.
+    std::shared_ptr<const PhotometricWarmStart> warm_start;
     Eigen::VectorXf rest_latent;  // with Options::share_rest_latent: the fit of no change
   };
   const SensorState& State(SensorKind sensor) const;

@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <limits>
 #include <sstream>
 #include <stdexcept>
 
@@ -409,8 +410,10 @@ PhotometricFit FitPhotometricLatent(const PhotometricTrunk& trunk, const TrunkTa
       s->adam.Step(step, rate, dz.cast<double>(), s->z.data());
     }
     s->step = std::max(s->step, last_step);
-    s->loss = trunk.LossAndGradient<float>(all, s->z.cast<float>(), frame.values,
-                                           frame.weights, nullptr, nullptr, nullptr);
+    s->loss = num_starts == 1 && !options.score
+                  ? std::numeric_limits<double>::quiet_NaN()
+                  : trunk.LossAndGradient<float>(all, s->z.cast<float>(), frame.values,
+                                                 frame.weights, nullptr, nullptr, nullptr);
   };
   std::vector<int> running(num_starts);
   for (int start = 0; start < num_starts; ++start) running[start] = start;

@@ -145,12 +145,17 @@ struct PhotometricFitOptions {
   // two-start fit's whenever the start ahead at the probe is also ahead at the end; the
   // cost is steps + probe_steps instead of 2 steps. In [0, steps].
   int probe_steps = 0;
+  // Score the fit on all of the frame's pixels (PhotometricFit::loss). Two starts are
+  // always scored (the lower loss wins); a single start's full-frame pass (as costly as
+  // about 17 steps of 512 pixels) can be left out: its loss is then NaN.
+  bool score = true;
   bool IsValid(std::string* error) const;
 };
 
 struct PhotometricFit {
   Eigen::VectorXd latent;
-  double loss = 0;        // the weighted MSE on all of the frame's valid pixels
+  double loss = 0;        // the weighted MSE on all of the frame's valid pixels (NaN
+                          // for one start without PhotometricFitOptions::score)
   bool flipped = false;   // the start turned by pi won
 };
 

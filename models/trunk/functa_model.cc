@@ -2,6 +2,7 @@
 #include "models/trunk/functa_model.h"
 
 #include <algorithm>
+#include <cmath>
 #include <stdexcept>
 
 #include "models/core/atomic_file.h"
@@ -92,7 +93,12 @@ std::uint64_t TrunkParameterBytes(const SensorTrunk& trunk) {
     values += static_cast<std::uint64_t>(trunk.photometric->NumHeadParameters()) +
               trunk.photometric->reference().size();
   }
-  return 4ull * values;
+  std::uint64_t bytes = 4ull * values;
+  if (trunk.warm_start != nullptr) {  // float16
+    bytes += 2ull * static_cast<std::uint64_t>(trunk.warm_start->descriptors.size() +
+                                               trunk.warm_start->latents.size());
+  }
+  return bytes;
 }
 
 SensorDescription TrunkSensorDescription(const SensorTrunk& trunk) {
@@ -197,6 +203,25 @@ std::string FunctaModel::Serialize() const {
       file.Add(name + "/reference", TensorFile::DType::kFloat32,
                {static_cast<std::int64_t>(ref.size())},
                std::vector<double>(ref.data.begin(), ref.data.end()));
+      if (t.warm_start != nullptr) {
+        const WarmStartTable& w = *t.warm_start;
+        meta["trunks"].back()["photometric"]["warm_start"] = {{"rows", w.descriptors.rows()},
+                                                              {"grid", w.grid},
+                                                              {"extent", w.extent},
+                                                              {"supersample", w.supersample}};
+        // Row-major: one training frame after another.
+        auto rows_of = [](const Eigen::MatrixXf& m) {
+          std::vector<double> out(static_cast<std::size_t>(m.size()));
+          for (Eigen::Index r = 0; r < m.rows(); ++r) {
+            for (Eigen::Index c = 0; c < m.cols(); ++c) out[r * m.cols() + c] = m(r, c);
+          }
+          return out;
+        };
+        file.Add(name + "/warm_start/descriptors", TensorFile::DType::kFloat16,
+                 {w.descriptors.rows(), w.descriptors.cols()}, rows_of(w.descriptors));
+        file.Add(name + "/warm_start/latents", TensorFile::DType::kFloat16,
+                 {w.latents.rows(), w.latents.cols()}, rows_of(w.latents));
+      }
     }
     file.Add(name + "/theta", TensorFile::DType::kFloat32, {t.siren.NumParameters()},
              ToVector(t.siren.parameters()));
@@ -359,6 +384,36 @@ FunctaModel FunctaModel::FromTensorFile(const TensorFile& file, const std::strin
         photometric->mutable_siren().SetParameters(trunk.siren.parameters());
         photometric->SetHeadParameters(
             Eigen::Map<const Eigen::VectorXd>(head.values.data(), head.values.size()));
+        if (p.contains("warm_start")) {
+          field = name + ".photometric.warm_start";
+          const auto& w = p.at("warm_start");
+          auto table = std::make_shared<WarmStartTable>();
+          const std::int64_t rows = w.at("rows").get<std::int64_t>();
+          table->grid = w.at("grid").get<int>();
+          table->extent = w.at("extent").get<double>();
+          table->supersample = w.at("supersample").get<int>();
+          if (rows < 1 || rows > 10000000 || table->grid < 1 || table->grid > 64 ||
+              !(table->extent > 0) || !std::isfinite(table->extent) || table->supersample < 1 ||
+              table->supersample > 8) {
+            throw TensorFileError(source + ": field '" + field + "': expected rows in [1, 1e7], "
+                                  "grid in [1, 64], extent > 0 and supersample in [1, 8]");
+          }
+          const std::int64_t columns =
+              static_cast<std::int64_t>(table->grid) * table->grid * po.channels;
+          const auto& descriptors = file.Get(name + "/warm_start/descriptors", {rows, columns});
+          const auto& latents = file.Get(name + "/warm_start/latents", {rows, po.latent_dim});
+          table->descriptors.resize(rows, columns);
+          table->latents.resize(rows, po.latent_dim);
+          for (std::int64_t r = 0; r < rows; ++r) {
+            for (std::int64_t c = 0; c < columns; ++c) {
+              table->descriptors(r, c) = static_cast<float>(descriptors.values[r * columns + c]);
+            }
+            for (int c = 0; c < po.latent_dim; ++c) {
+              table->latents(r, c) = static_cast<float>(latents.values[r * po.latent_dim + c]);
+            }
+          }
+          trunk.warm_start = std::move(table);
+        }
         trunk.photometric = std::move(photometric);
       }
       model.SetTrunk(std::move(trunk));

@@ -27,7 +27,10 @@
 // "photometric": {"latent_dim", "shading_width", "supersample", "reference": {"rows",
 // "cols", "channels"}} with the tensors "<sensor>/head" (float32, the head's parameters)
 // and "<sensor>/reference" (float32, the sensor-resolution reference, HWC); files
-// without the key load as direct trunks. Loading checks every field and shape and names
+// without the key load as direct trunks. Its warm-start table, if any, is recorded as
+// "photometric": {..., "warm_start": {"rows", "grid", "extent", "supersample"}} with the
+// tensors "<sensor>/warm_start/descriptors" and "<sensor>/warm_start/latents" (float16,
+// rows x grid^2 C and rows x d). Loading checks every field and shape and names
 // the file and field on error.
 #ifndef TACTFUNC_MODELS_TRUNK_FUNCTA_MODEL_H_
 #define TACTFUNC_MODELS_TRUNK_FUNCTA_MODEL_H_
@@ -61,6 +64,19 @@ struct FrameFormat {
   bool IsValid(std::string* error) const;
 };
 
+// A photometric trunk's warm-start table (estimation/training/photometric_warm_start.h):
+// one row per training frame, its descriptor (grid x grid cells x the trunk's channels of
+// its targets in its moment frame, `extent` the square's half-width in the trunk's
+// isotropic units, `supersample` samples per cell and side) and its latent with the
+// contact frame relative to the moment frame. Stored as float16.
+struct WarmStartTable {
+  int grid = 0;
+  double extent = 0;
+  int supersample = 0;
+  Eigen::MatrixXf descriptors;  // n x grid * grid * channels
+  Eigen::MatrixXf latents;      // n x d
+};
+
 struct SensorTrunk {
   SensorKind sensor = SensorKind::kSoftBubble;
   FrameFormat format;
@@ -82,6 +98,9 @@ struct SensorTrunk {
   // (alpha holds zeros): its latents are fitted by FitPhotometricLatent
   // (estimation/training/photometric_trainer.h), not by meta-SGD.
   std::shared_ptr<const PhotometricTrunk> photometric;
+  // With the photometric head: the table its fits can start from (null: none; files
+  // written before tables, and trunks trained without one).
+  std::shared_ptr<const WarmStartTable> warm_start;
 };
 
 // The values of one frame's latent under `trunk`: the photometric head's d, else the
@@ -93,8 +112,9 @@ int TrunkOutputChannels(const SensorTrunk& trunk);
 // values): rows * cols x C, pixel j = row * cols + col. Throws std::invalid_argument for
 // a latent of another size.
 Eigen::MatrixXf TrunkDecode(const SensorTrunk& trunk, const Eigen::VectorXf& latent);
-// Bytes of the trunk as stored (float32): its parameters and rates, and with the
-// photometric head the head's parameters and its sensor-resolution reference.
+// Bytes of the trunk as stored: its parameters and rates (float32), and with the
+// photometric head the head's parameters and its sensor-resolution reference (float32)
+// and its warm-start table (float16).
 std::uint64_t TrunkParameterBytes(const SensorTrunk& trunk);
 
 // The trunk's description, or for a trunk without one the built-in description of its
