@@ -27,6 +27,13 @@
 //   knn+meta_sgd:K, knn+ceres:N
 //                   the same refinements started from the k-NN estimate (the paper's
 //                   "initialize z_new close to known solutions").
+//   adam:N, knn+adam:N
+//                   the photometric trunk's fits (not LatentFitter's: FitPhotometricLatent,
+//                   estimation/training/photometric_trainer.h): N Adam steps per start from
+//                   the contact's moment pose and its turn by pi, or from the best of the
+//                   trunk's warm-start table's neighbours
+//                   (estimation/training/photometric_warm_start.h); knn alone takes that
+//                   neighbour's latent as it is.
 //
 // Errors (docs/ARCHITECTURE.md, three tiers): a bad Options, or a knn strategy without an
 // index, throws std::invalid_argument from the constructor; a problem of another latent
@@ -53,7 +60,7 @@
 namespace tactfunc {
 
 // What a fit does; see the header comment. Parsed from and printed as
-// "knn", "meta_sgd:K", "ceres:N", "knn+meta_sgd:K", "knn+ceres:N".
+// "knn", "meta_sgd:K", "ceres:N", "knn+meta_sgd:K", "knn+ceres:N", "adam:N", "knn+adam:N".
 struct FitStrategy {
   enum class Refinement {
     kNone,     // knn alone

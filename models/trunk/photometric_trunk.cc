@@ -3,6 +3,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
+#include <mutex>
 #include <sstream>
 #include <stdexcept>
 #include <type_traits>
@@ -47,7 +49,71 @@ S SiluSlope(S a) {
   return sigma * (S(1) + a * (S(1) - sigma));
 }
 
+// The shading network (header comment) on inputs `in` (5 x N), keeping its
+// pre-activations and activations (each may be null) for the reverse pass: C x N.
+template <typename S>
+Eigen::Matrix<S, Eigen::Dynamic, Eigen::Dynamic> ShadingNetwork(
+    const Eigen::Matrix<S, Eigen::Dynamic, 1>& head, int h, int c,
+    const Eigen::Matrix<S, Eigen::Dynamic, Eigen::Dynamic>& in,
+    Eigen::Matrix<S, Eigen::Dynamic, Eigen::Dynamic>* a1,
+    Eigen::Matrix<S, Eigen::Dynamic, Eigen::Dynamic>* h1,
+    Eigen::Matrix<S, Eigen::Dynamic, Eigen::Dynamic>* a2,
+    Eigen::Matrix<S, Eigen::Dynamic, Eigen::Dynamic>* h2) {
+  using Matrix = Eigen::Matrix<S, Eigen::Dynamic, Eigen::Dynamic>;
+  using Vector = Eigen::Matrix<S, Eigen::Dynamic, 1>;
+  const HeadLayout layout(h, c);
+  const Eigen::Map<const Matrix> W1(head.data() + layout.w1, h, 5);
+  const Eigen::Map<const Vector> b1(head.data() + layout.b1, h);
+  const Eigen::Map<const Matrix> W2(head.data() + layout.w2, h, h);
+  const Eigen::Map<const Vector> b2(head.data() + layout.b2, h);
+  const Eigen::Map<const Matrix> W3(head.data() + layout.w3, c, h);
+  const Eigen::Map<const Vector> b3(head.data() + layout.b3, c);
+  Matrix a1_local, h1_local, a2_local, h2_local;
+  if (a1 == nullptr) a1 = &a1_local;
+  if (h1 == nullptr) h1 = &h1_local;
+  if (a2 == nullptr) a2 = &a2_local;
+  if (h2 == nullptr) h2 = &h2_local;
+  *a1 = (W1 * in).colwise() + b1;
+  *h1 = a1->unaryExpr([](S v) { return Silu(v); });
+  *a2 = (W2 * *h1).colwise() + b2;
+  *h2 = a2->unaryExpr([](S v) { return Silu(v); });
+  return Matrix((W3 * *h2).colwise() + b3);
+}
+
 }  // namespace
+
+// The shading network's output for the flat input (no slope, no depth) at every pixel
+// of the grid, C x rows cols: constant for a given head. Computed on the first
+// whole-grid pass (once per scalar type, thread-safely) and shared by copies of the
+// trunk; SetHeadParameters starts a new one.
+struct PhotometricTrunk::AtRestShading {
+  std::once_flag once_float, once_double;
+  Eigen::MatrixXf shading_float;
+  Eigen::MatrixXd shading_double;
+};
+
+template <typename Scalar>
+const PhotometricTrunk::MatrixX<Scalar>& PhotometricTrunk::AtRestShadingOf() const {
+  AtRestShading& cache = *at_rest_shading_;
+  auto compute = [this](MatrixX<Scalar>* out) {
+    const int n = options_.rows * options_.cols;
+    MatrixX<Scalar> input = MatrixX<Scalar>::Zero(5, n);
+    for (int j = 0; j < n; ++j) {
+      const Eigen::Vector2d p = PixelCoordinate(j);
+      input(3, j) = static_cast<Scalar>(p[0]);
+      input(4, j) = static_cast<Scalar>(p[1]);
+    }
+    *out = ShadingNetwork<Scalar>(head_.cast<Scalar>(), options_.shading_width,
+                                  options_.channels, input, nullptr, nullptr, nullptr, nullptr);
+  };
+  if constexpr (std::is_same<Scalar, float>::value) {
+    std::call_once(cache.once_float, compute, &cache.shading_float);
+    return cache.shading_float;
+  } else {
+    std::call_once(cache.once_double, compute, &cache.shading_double);
+    return cache.shading_double;
+  }
+}
 
 bool PhotometricTrunk::Options::IsValid(std::string* error) const {
   std::ostringstream message;
@@ -180,6 +246,7 @@ void PhotometricTrunk::InitializeHead(std::uint64_t seed) {
     for (int i = starts[block]; i < starts[block + 1]; ++i) head_[i] = uniform(rng);
   }
   head_[layout.m] = 0.0;  // m: the markers start at rest
+  at_rest_shading_ = std::make_shared<AtRestShading>();
 }
 
 void PhotometricTrunk::SetHeadParameters(const Eigen::VectorXd& head) {
@@ -189,6 +256,7 @@ void PhotometricTrunk::SetHeadParameters(const Eigen::VectorXd& head) {
                                 std::to_string(head.size()));
   }
   head_ = head;
+  at_rest_shading_ = std::make_shared<AtRestShading>();
 }
 
 Eigen::Vector2d PhotometricTrunk::PixelCoordinate(int pixel) const {
@@ -253,7 +321,8 @@ void PhotometricTrunk::SampleMarkers(double row, double col, double* value, doub
 
 template <typename Scalar>
 void PhotometricTrunk::RunForward(const std::vector<int>& pixels, const VectorX<Scalar>& z,
-                                  Pass* pass_holder, MatrixX<Scalar>* outputs) const {
+                                  Pass* pass_holder, MatrixX<Scalar>* outputs,
+                                  bool dense) const {
   PhotometricTrunkPass<Scalar>& pass = pass_holder->get<Scalar>();
   if (z.size() != options_.latent_dim) {
     throw std::invalid_argument("PhotometricTrunk: expected a latent of " +
@@ -277,16 +346,49 @@ void PhotometricTrunk::RunForward(const std::vector<int>& pixels, const VectorX<
   const double offsets[kSets][2] = {{0, 0}, {step, 0}, {-step, 0}, {0, step}, {0, -step}};
   std::vector<Eigen::Vector2d> p(n);
   for (int i = 0; i < n; ++i) p[i] = PixelCoordinate(pixels[i]);
-  pass.coords.resize(kSets * n, 2);
-  for (int k = 0; k < kSets; ++k) {
-    for (int i = 0; i < n; ++i) {
-      const double d0 = p[i][0] + offsets[k][0] - t0, d1 = p[i][1] + offsets[k][1] - t1;
-      pass.coords(k * n + i, 0) = static_cast<Scalar>(cs * d0 + sn * d1);
-      pass.coords(k * n + i, 1) = static_cast<Scalar>(-sn * d0 + cs * d1);
-    }
-  }
   const VectorX<Scalar> code = z.tail(options_.latent_dim - kPoseValues);
-  pass.siren_out = siren_.Forward<Scalar>(pass.coords, code);
+  // The whole grid in order, with no reverse pass to follow: the four neighbours of a
+  // pixel are pixels too, so the SIREN runs once per pixel of the grid and its one-pixel
+  // border ((rows + 2) x (cols + 2) coordinates instead of 5 rows cols) and the five
+  // sets are gathered from it. A neighbour's coordinate is then computed from its own
+  // index rather than as p + e, which can differ in the last bit of a double.
+  bool whole_grid = dense && n == num_pixels;
+  for (int i = 0; whole_grid && i < n; ++i) whole_grid = pixels[i] == i;
+  if (whole_grid) {
+    const int rows = options_.rows, cols = options_.cols;
+    const int er = rows + 2, ec = cols + 2;
+    MatrixX<Scalar> grid(er * ec, 2);
+    for (int r = -1; r <= rows; ++r) {
+      for (int col = -1; col <= cols; ++col) {
+        const double d0 = (2.0 * col + 1.0 - cols) / rows - t0;
+        const double d1 = (2.0 * r + 1.0) / rows - 1.0 - t1;
+        const int e = (r + 1) * ec + (col + 1);
+        grid(e, 0) = static_cast<Scalar>(cs * d0 + sn * d1);
+        grid(e, 1) = static_cast<Scalar>(-sn * d0 + cs * d1);
+      }
+    }
+    const MatrixX<Scalar> extended = siren_.Forward<Scalar>(grid, code);
+    pass.siren_out.resize(kSets * n, extended.cols());
+    // Set k's neighbour (offsets above): +-one column for sets 1 and 2, +-one row for 3, 4.
+    const int shift[kSets][2] = {{0, 0}, {0, 1}, {0, -1}, {1, 0}, {-1, 0}};
+    for (int k = 0; k < kSets; ++k) {
+      for (int i = 0; i < n; ++i) {
+        const int r = i / cols + 1 + shift[k][0], col = i % cols + 1 + shift[k][1];
+        pass.siren_out.row(k * n + i) = extended.row(r * ec + col);
+      }
+    }
+    pass.coords.resize(0, 2);  // no reverse pass reads them
+  } else {
+    pass.coords.resize(kSets * n, 2);
+    for (int k = 0; k < kSets; ++k) {
+      for (int i = 0; i < n; ++i) {
+        const double d0 = p[i][0] + offsets[k][0] - t0, d1 = p[i][1] + offsets[k][1] - t1;
+        pass.coords(k * n + i, 0) = static_cast<Scalar>(cs * d0 + sn * d1);
+        pass.coords(k * n + i, 1) = static_cast<Scalar>(-sn * d0 + cs * d1);
+      }
+    }
+    pass.siren_out = siren_.Forward<Scalar>(pass.coords, code);
+  }
   const MatrixX<Scalar>& s = pass.siren_out;
 
   pass.input.resize(5, n);
@@ -298,27 +400,16 @@ void PhotometricTrunk::RunForward(const std::vector<int>& pixels, const VectorX<
     pass.input(3, i) = pass.input0(3, i) = static_cast<Scalar>(p[i][0]);
     pass.input(4, i) = pass.input0(4, i) = static_cast<Scalar>(p[i][1]);
   }
-  // The shading network on the contact's and the flat input.
+  // The shading network on the contact's and the flat input (the latter cached over
+  // the whole grid: it depends on the head alone).
   const int h = options_.shading_width;
-  const HeadLayout layout(h, c);
   const VectorX<Scalar> head = head_.cast<Scalar>();
-  const Eigen::Map<const MatrixX<Scalar>> W1(head.data() + layout.w1, h, 5);
-  const Eigen::Map<const VectorX<Scalar>> b1(head.data() + layout.b1, h);
-  const Eigen::Map<const MatrixX<Scalar>> W2(head.data() + layout.w2, h, h);
-  const Eigen::Map<const VectorX<Scalar>> b2(head.data() + layout.b2, h);
-  const Eigen::Map<const MatrixX<Scalar>> W3(head.data() + layout.w3, c, h);
-  const Eigen::Map<const VectorX<Scalar>> b3(head.data() + layout.b3, c);
-  auto network = [&](const MatrixX<Scalar>& in, MatrixX<Scalar>* a1, MatrixX<Scalar>* h1,
-                     MatrixX<Scalar>* a2, MatrixX<Scalar>* h2) {
-    *a1 = (W1 * in).colwise() + b1;
-    *h1 = a1->unaryExpr([](Scalar v) { return Silu(v); });
-    *a2 = (W2 * *h1).colwise() + b2;
-    *h2 = a2->unaryExpr([](Scalar v) { return Silu(v); });
-    return MatrixX<Scalar>((W3 * *h2).colwise() + b3);
-  };
-  const MatrixX<Scalar> shade = network(pass.input, &pass.a1, &pass.h1, &pass.a2, &pass.h2);
+  const MatrixX<Scalar> shade =
+      ShadingNetwork<Scalar>(head, h, c, pass.input, &pass.a1, &pass.h1, &pass.a2, &pass.h2);
   const MatrixX<Scalar> shade0 =
-      network(pass.input0, &pass.a1f, &pass.h1f, &pass.a2f, &pass.h2f);
+      whole_grid ? AtRestShadingOf<Scalar>()
+                 : ShadingNetwork<Scalar>(head, h, c, pass.input0, &pass.a1f, &pass.h1f,
+                                          &pass.a2f, &pass.h2f);
 
   // The markers moved by u = m g.
   const double m = marker_scale();
@@ -450,7 +541,7 @@ PhotometricTrunk::MatrixX<Scalar> PhotometricTrunk::Forward(const std::vector<in
                                                             const VectorX<Scalar>& z) const {
   Pass pass;
   MatrixX<Scalar> outputs;
-  RunForward<Scalar>(pixels, z, &pass, &outputs);
+  RunForward<Scalar>(pixels, z, &pass, &outputs, /*dense=*/true);
   return outputs;
 }
 
@@ -481,7 +572,8 @@ Scalar PhotometricTrunk::LossAndGradient(const std::vector<int>& pixels,
   }
   Pass pass;
   MatrixX<Scalar> y;
-  RunForward<Scalar>(pixels, z, &pass, &y);
+  const bool backward = dL_dz != nullptr || dL_dsiren != nullptr || dL_dhead != nullptr;
+  RunForward<Scalar>(pixels, z, &pass, &y, /*dense=*/!backward);
   double weight_sum = 0.0;
   for (int i = 0; i < n; ++i) weight_sum += weights.size() == 0 ? 1.0 : weights[i];
   MatrixX<Scalar> dY = MatrixX<Scalar>::Zero(n, c);
@@ -498,7 +590,7 @@ Scalar PhotometricTrunk::LossAndGradient(const std::vector<int>& pixels,
       }
     }
   }
-  if (dL_dz != nullptr || dL_dsiren != nullptr || dL_dhead != nullptr) {
+  if (backward) {
     RunBackward<Scalar>(pass, pixels, z, dY, dL_dz, dL_dsiren, dL_dhead);
   }
   if (outputs != nullptr) *outputs = std::move(y);

@@ -61,6 +61,7 @@
 #define TACTFUNC_MODELS_TRUNK_PHOTOMETRIC_TRUNK_H_
 
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -145,7 +146,10 @@ class PhotometricTrunk {
   std::vector<int> AllPixels() const;
 
   // Outputs, N x C, for the N pixels named. Throws std::invalid_argument for a latent
-  // of the wrong size or a pixel index outside the grid.
+  // of the wrong size or a pixel index outside the grid. AllPixels() (and
+  // LossAndGradient over them without gradients) runs the SIREN once per pixel and
+  // border pixel instead of five times per pixel, a neighbour's coordinate then taken
+  // from its own index: equal to the per-pixel pass up to the last bits of float.
   template <typename Scalar>
   MatrixX<Scalar> Forward(const std::vector<int>& pixels, const VectorX<Scalar>& z) const;
 
@@ -167,9 +171,11 @@ class PhotometricTrunk {
 
  private:
   struct Pass;  // the forward pass's intermediate values, defined in the .cc
+  // `dense`: no reverse pass follows, so the whole grid may share the SIREN's
+  // evaluations between neighbours (the .cc says how).
   template <typename Scalar>
   void RunForward(const std::vector<int>& pixels, const VectorX<Scalar>& z,
-                  Pass* pass, MatrixX<Scalar>* outputs) const;
+                  Pass* pass, MatrixX<Scalar>* outputs, bool dense = false) const;
   template <typename Scalar>
   void RunBackward(const Pass& pass, const std::vector<int>& pixels,
                    const VectorX<Scalar>& z, const MatrixX<Scalar>& dL_dY,
@@ -180,6 +186,9 @@ class PhotometricTrunk {
   void SampleMarkers(double row, double col, double* value, double* d_row,
                      double* d_col) const;
   void InitializeHead(std::uint64_t seed);
+  struct AtRestShading;  // the .cc's cache of the flat input's shading
+  template <typename Scalar>
+  const MatrixX<Scalar>& AtRestShadingOf() const;
 
   Options options_;
   LatentModulatedSiren siren_;
@@ -188,6 +197,7 @@ class PhotometricTrunk {
   MarkerSampling marker_sampling_ = MarkerSampling::kSensorResolution;
   int num_head_parameters_ = 0;
   Eigen::VectorXd head_;
+  std::shared_ptr<AtRestShading> at_rest_shading_;
 };
 
 }  // namespace tactfunc

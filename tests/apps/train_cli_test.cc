@@ -127,6 +127,27 @@ TEST_F(TrainCliTest, ThePhotometricHeadTrainsEncodesAndReconstructsAnOpticalSens
   ASSERT_EQ(recon.exit_code, 0) << recon.err;
   EXPECT_TRUE(fs::exists(Root("pr/recon_gelslim.png")));
 
+  // The model carries the training latents as its fits' warm-start table, one row per
+  // training frame; knn+adam:N and knn start from it.
+  ASSERT_NE(trunk.warm_start, nullptr);
+  EXPECT_EQ(trunk.warm_start->latents.rows(), train.LastJson()["sensors"]["gelslim"]["train_frames"].get<int>());
+  EXPECT_EQ(trunk.warm_start->latents.cols(), 8);
+  for (const char* strategy : {"knn+adam:3", "knn"}) {
+    const Result warm = Run("encode --model " + Root("p.tfm") + " --data " + Root("g") +
+                            " --out " + Root("w.tfs") + " --strategy " + strategy +
+                            " --threads 2 --json");
+    ASSERT_EQ(warm.exit_code, 0) << warm.err;
+    EXPECT_EQ(Functaset::Load(Root("w.tfs")).fit_strategy(SensorKind::kGelSlim), strategy);
+  }
+  // A model without the table (trained before tables) refuses them by name.
+  FunctaModel without = model;
+  without.MutableTrunk(SensorKind::kGelSlim).warm_start = nullptr;
+  without.Save(Root("p_old.tfm"));
+  const Result old = Run("encode --model " + Root("p_old.tfm") + " --data " + Root("g") +
+                         " --out " + Root("w.tfs") + " --strategy knn+adam:3");
+  EXPECT_NE(old.exit_code, 0);
+  EXPECT_THAT(old.err, HasSubstr("warm-start table"));
+
   // The direct trunk's strategies do not fit a photometric trunk, nor adam:N a direct one.
   const Result meta = Run("encode --model " + Root("p.tfm") + " --data " + Root("g") +
                           " --out " + Root("q.tfs") + " --strategy meta_sgd:3");
@@ -137,6 +158,10 @@ TEST_F(TrainCliTest, ThePhotometricHeadTrainsEncodesAndReconstructsAnOpticalSens
                           Root("d") + " --out " + Root("q.tfs") + " --strategy adam:3");
   EXPECT_NE(adam.exit_code, 0);
   EXPECT_THAT(adam.err, HasSubstr("adam:3"));
+  const Result knn_adam = Run("encode --model " + Root("direct_for_adam.tfm") + " --data " +
+                              Root("d") + " --out " + Root("q.tfs") + " --strategy knn+adam:3");
+  EXPECT_NE(knn_adam.exit_code, 0);
+  EXPECT_THAT(knn_adam.err, HasSubstr("knn+adam:3"));
   // A depth sensor and the direct trunk's knobs are refused by name.
   const Result bubble = Run("train --data " + Root("d") + " --out " + Root("b.tfm") +
                             " --head photometric --sensors bubble --steps 2");

@@ -161,7 +161,7 @@ TEST(LatentFitterOptions, BadOptionsNameTheFieldAndTheConstructorThrows) {
 
 TEST(LatentFitterStrategy, ParsesEveryFormAndPrintsItBack) {
   for (const char* text : {"knn", "meta_sgd:3", "meta_sgd:0", "ceres:10", "knn+meta_sgd:2",
-                           "knn+ceres:15", "adam:400"}) {
+                           "knn+ceres:15", "adam:400", "knn+adam:5"}) {
     FitStrategy strategy;
     std::string error;
     ASSERT_TRUE(FitStrategy::Parse(text, &strategy, &error)) << text << ": " << error;
@@ -179,7 +179,7 @@ TEST(LatentFitterStrategy, BadStringsGiveClearErrors) {
       {"ceres:-2", "not a non-negative integer"}, {"lbfgs:3", "unknown method 'lbfgs'"},
       {"knn+", "no method"},                    {"", "no method"},
       {"ceres:1x", "not a non-negative integer"}, {"knn+knn", "unknown method 'knn'"},
-      {"adam:0", "N >= 1"},                     {"knn+adam:5", "no k-NN start"},
+      {"adam:0", "N >= 1"},                     {"knn+adam:0", "N >= 1"},
   };
   for (const auto& [text, expected] : cases) {
     FitStrategy strategy;

@@ -221,6 +221,45 @@ TEST(PhotometricTrunkTest, FloatAgreesWithDouble) {
   EXPECT_LT((dzf.cast<double>() - dz).norm(), 1e-4 * dz.norm());
 }
 
+TEST(PhotometricTrunkTest, TheWholeGridSharesNeighboursAndAgreesWithThePerPixelPass) {
+  // Forward over AllPixels() evaluates the SIREN once per pixel and border pixel; the
+  // same pixels in another order (or with a reverse pass to follow) take the per-pixel
+  // pass with five evaluations each. Both draw the same frame, border pixels included.
+  for (int channels : {1, 3}) {
+    const PhotometricTrunk trunk =
+        MovingTrunk(PhotometricTrunk::MarkerSampling::kSensorResolution, channels);
+    const Problem p = MakeProblem(trunk);
+    const std::vector<int> all = trunk.AllPixels();
+    std::vector<int> reversed(all.rbegin(), all.rend());
+    const MatrixXd dense = trunk.Forward<double>(all, p.z);
+    const MatrixXd per_pixel = trunk.Forward<double>(reversed, p.z).colwise().reverse();
+    ASSERT_EQ(dense.rows(), static_cast<Eigen::Index>(all.size()));
+    EXPECT_GT(dense.cwiseAbs().maxCoeff(), 1e-2);
+    EXPECT_LT((dense - per_pixel).cwiseAbs().maxCoeff(), 1e-9) << channels << " channel(s)";
+    // The loss over the whole grid without gradients takes the shared pass too.
+    const MatrixXd targets = MatrixXd::Constant(all.size(), channels, 0.05);
+    const VectorXd weights = VectorXd::Ones(all.size());
+    VectorXd dz;
+    MatrixXd outputs;
+    const double shared = trunk.LossAndGradient<double>(all, p.z, targets, weights, nullptr,
+                                                        nullptr, nullptr);
+    const double with_gradient = trunk.LossAndGradient<double>(all, p.z, targets, weights, &dz,
+                                                               nullptr, nullptr, &outputs);
+    EXPECT_NEAR(shared, with_gradient, 1e-12 * with_gradient);
+    EXPECT_LT((outputs - per_pixel).cwiseAbs().maxCoeff(), 1e-9);
+    // The whole-grid pass caches the flat input's shading; a new head starts afresh.
+    PhotometricTrunk changed = trunk;
+    VectorXd head = changed.head_parameters();
+    head.head(head.size() - 1) *= 1.3;
+    changed.SetHeadParameters(head);
+    const MatrixXd dense_changed = changed.Forward<double>(all, p.z);
+    const MatrixXd per_pixel_changed =
+        changed.Forward<double>(reversed, p.z).colwise().reverse();
+    EXPECT_GT((dense_changed - dense).cwiseAbs().maxCoeff(), 1e-3);
+    EXPECT_LT((dense_changed - per_pixel_changed).cwiseAbs().maxCoeff(), 1e-9);
+  }
+}
+
 TEST(PhotometricTrunkTest, RefusesBadOptionsAndReferences) {
   PhotometricTrunk::Options o = SmallOptions();
   o.latent_dim = 3;
