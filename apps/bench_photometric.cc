@@ -99,7 +99,8 @@ struct FitRun {
 // Noise-free PSNR against seconds per frame (log scale), one line per step size through
 // its step counts, and same-bits PCA as a dashed line.
 cv::Mat FitTradePicture(const std::vector<FitRun>& fits, double pca_db,
-                        const std::string& pca_name, int threads, int frames, int bytes) {
+                        const std::string& pca_name, int threads, int frames, int bytes,
+                        int knn) {
   double x_lo = std::numeric_limits<double>::infinity(), x_hi = 0;
   double y_lo = pca_db, y_hi = pca_db;
   std::map<double, std::vector<const FitRun*>> by_rate;
@@ -119,7 +120,10 @@ cv::Mat FitTradePicture(const std::vector<FitRun>& fits, double pca_db,
                  "mean noise-free PSNR, dB",
                  "Photometric fit: steps and step size against time",
                  std::to_string(frames) + " test frames, " + std::to_string(bytes) +
-                     " B per frame (float16 latents); labels: Adam steps per start");
+                     " B per frame (float16 latents); labels: Adam steps " +
+                     (knn > 0 ? "from the best of " + std::to_string(knn) +
+                                    " training latents (0: that latent as it is)"
+                              : std::string("per start")));
   cv::Mat& canvas = plot.canvas();
   const cv::Scalar colours[] = {cv::Scalar(200, 110, 30), cv::Scalar(40, 120, 220),
                                 cv::Scalar(60, 160, 60), cv::Scalar(150, 60, 170),
@@ -449,7 +453,7 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
   if (!flags.trade_picture.empty()) {
     WritePicture(flags.trade_picture,
                  FitTradePicture(fits, Mean(rows[1].clean), rows[1].name, flags.threads,
-                                 static_cast<int>(test.size()), bytes));
+                                 static_cast<int>(test.size()), bytes, flags.fit_knn));
   }
 
   if (!flags.picture.empty()) {

@@ -63,6 +63,7 @@ struct TrainFlags {
   bool json = false;
   std::string head = "direct";  // "direct" or "photometric"
   int marker_warmup = 1000;
+  bool no_warm_start = false;
   // Set after parsing: which overrides were given.
   CLI::Option *latent_dim_option = nullptr, *width_option = nullptr, *layers_option = nullptr,
               *steps_option = nullptr, *batch_option = nullptr, *pixels_option = nullptr,
@@ -402,8 +403,11 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
     trunk.photometric = std::make_shared<PhotometricTrunk>(result.trunk);
     // The fits' warm starts (encode --strategy knn+adam:N): the training latents, looked
     // up by each frame's descriptor in its moment frame.
-    trunk.warm_start = std::make_shared<WarmStartTable>(PhotometricWarmStart::BuildTable(
-        *trunk.photometric, frames, result.latents, PhotometricWarmStart::Options(), o.threads));
+    if (!flags.no_warm_start) {
+      trunk.warm_start = std::make_shared<WarmStartTable>(
+          PhotometricWarmStart::BuildTable(*trunk.photometric, frames, result.latents,
+                                           PhotometricWarmStart::Options(), o.threads));
+    }
     trunk.residual_sigma = std::sqrt(mse_sum / checked);
     trunk.description = TrainedDescription(dataset, sensor, format);
     std::cout << "train " << name << ": " << result.summary.steps << " steps in "
@@ -524,6 +528,7 @@ void RunTrain(const TrainFlags& flags) {
   if (flags.marker_warmup_option->count()) {
     throw UsageError("--marker-warmup applies to --head photometric");
   }
+  if (flags.no_warm_start) throw UsageError("--no-warm-start applies to --head photometric");
   if (flags.resume) {
     // Every process reads the checkpoints (rank 0 writes them): they must see the same.
     for (SensorKind s : sensors) RefuseUnsharedFile(processes, CheckpointPath(flags.out, s));
@@ -832,6 +837,9 @@ void RegisterTrain(CLI::App& app, CommandBody* selected) {
                       "--head photometric: steps with the markers moved at the working "
                       "resolution before the sensor's (default 1000)")
           ->check(CLI::Range(0, 100000000));
+  sub->add_flag("--no-warm-start", flags->no_warm_start,
+                "--head photometric: leave the training latents' warm-start table out of the "
+                "model (a smaller file; encode then fits with adam:N only)");
   sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
   sub->callback([flags, selected]() { *selected = [flags]() { RunTrain(*flags); }; });
 }

@@ -17,6 +17,11 @@
 // of the same loop) or ceres:N (Sec. III-C's "until convergence": at most N
 // Levenberg-Marquardt iterations on the frame's LatentProblem, estimation/fitting/
 // latent_problem.h, from z = 0, with Options::problem's sigma, sigma_z and robust loss).
+// A photometric trunk (models/trunk/photometric_trunk.h) is fitted by FitPhotometricLatent
+// instead: knn+adam:N (the default where the model holds a warm-start table, N = 20: the
+// best of 4 neighbours among the training latents, then N Adam steps from 1e-2,
+// estimation/training/photometric_warm_start.h), knn (that neighbour as it is) or adam:N
+// (N steps from the moment pose and its turn by pi; the default without a table, N = 200).
 // The functaset records the strategy of each sensor (Functaset::fit_strategy).
 //
 // Parallelism and determinism. Frames are independent; `threads` workers take them

@@ -139,10 +139,13 @@ TEST_F(TrainCliTest, ThePhotometricHeadTrainsEncodesAndReconstructsAnOpticalSens
     ASSERT_EQ(warm.exit_code, 0) << warm.err;
     EXPECT_EQ(Functaset::Load(Root("w.tfs")).fit_strategy(SensorKind::kGelSlim), strategy);
   }
-  // A model without the table (trained before tables) refuses them by name.
-  FunctaModel without = model;
-  without.MutableTrunk(SensorKind::kGelSlim).warm_start = nullptr;
-  without.Save(Root("p_old.tfm"));
+  // A model without the table (--no-warm-start, or trained before tables) refuses them
+  // by name, and is smaller by the table.
+  ASSERT_EQ(Run("train --data " + Root("g") + " --out " + Root("p_old.tfm") +
+                " --head photometric --steps 4 --marker-warmup 2 --latent-dim 8 --width 8 "
+                "--layers 2 --threads 1 --seed 1 --no-warm-start").exit_code, 0);
+  EXPECT_EQ(FunctaModel::Load(Root("p_old.tfm")).Trunk(SensorKind::kGelSlim).warm_start, nullptr);
+  EXPECT_LT(fs::file_size(Root("p_old.tfm")), fs::file_size(Root("p.tfm")));
   const Result old = Run("encode --model " + Root("p_old.tfm") + " --data " + Root("g") +
                          " --out " + Root("w.tfs") + " --strategy knn+adam:3");
   EXPECT_NE(old.exit_code, 0);

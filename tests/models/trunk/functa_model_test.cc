@@ -171,6 +171,59 @@ TEST(FunctaModel, RoundTripsAPhotometricTrunkWithItsHeadAndReference) {
   }
 }
 
+TEST(FunctaModel, RoundTripsAWarmStartTableInFloat16AndRefusesABadOne) {
+  FunctaModel model;
+  SensorTrunk trunk = PhotometricSensorTrunk();
+  const std::uint64_t bytes_without = TrunkParameterBytes(trunk);
+  auto table = std::make_shared<WarmStartTable>();
+  table->grid = 3;
+  table->extent = 0.75;
+  table->supersample = 2;
+  table->descriptors = Eigen::MatrixXf::Random(4, 9);  // 3 x 3 cells, one channel
+  table->latents = Eigen::MatrixXf::Random(4, 7);
+  table->latents(2, 5) = 1.0f / 3.0f;  // not a float16 value
+  trunk.warm_start = table;
+  model.SetTrunk(trunk);
+  EXPECT_EQ(TrunkParameterBytes(trunk), bytes_without + 2 * (36 + 28));
+  const std::string bytes = model.Serialize();
+  const SensorTrunk read = FunctaModel::Parse(bytes, "m.tfm").Trunk(SensorKind::kGelSlim);
+  ASSERT_NE(read.warm_start, nullptr);
+  EXPECT_EQ(read.warm_start->grid, 3);
+  EXPECT_EQ(read.warm_start->extent, 0.75);
+  EXPECT_EQ(read.warm_start->supersample, 2);
+  ASSERT_EQ(read.warm_start->descriptors.rows(), 4);
+  EXPECT_LT((read.warm_start->descriptors - table->descriptors).cwiseAbs().maxCoeff(), 1e-3);
+  EXPECT_LT((read.warm_start->latents - table->latents).cwiseAbs().maxCoeff(), 1e-3);
+  EXPECT_NE(read.warm_start->latents(2, 5), 1.0f / 3.0f);  // stored as float16
+  // A trunk without a table writes none and reads back without one.
+  EXPECT_EQ(FunctaModel::Parse(
+                [] {
+                  FunctaModel m;
+                  m.SetTrunk(PhotometricSensorTrunk());
+                  return m.Serialize();
+                }(),
+                "n.tfm")
+                .Trunk(SensorKind::kGelSlim)
+                .warm_start,
+            nullptr);
+  // A grid that does not match the descriptors' shape is refused naming the tensor.
+  const TensorFile file = TensorFile::Parse(bytes, "m.tfm", "model");
+  std::string meta = file.meta_json();
+  const std::string from = "\"grid\":3";
+  ASSERT_NE(meta.find(from), std::string::npos) << meta;
+  meta.replace(meta.find(from), from.size(), "\"grid\":4");
+  TensorFile edited("model");
+  edited.set_meta_json(meta);
+  for (const TensorFile::Tensor& t : file.tensors()) edited.Add(t.name, t.dtype, t.shape, t.values);
+  try {
+    FunctaModel::Parse(edited.Serialize(), "edited.tfm");
+    FAIL() << "a table of another grid accepted";
+  } catch (const TensorFileError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("warm_start")) << e.what();
+    EXPECT_THAT(e.what(), HasSubstr("edited.tfm")) << e.what();
+  }
+}
+
 TEST(FunctaModel, DifferentParametersGiveDifferentChecksums) {
   FunctaModel a = TwoSensorModel();
   FunctaModel b = TwoSensorModel();
