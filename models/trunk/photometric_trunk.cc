@@ -463,16 +463,21 @@ void PhotometricTrunk::RunBackward(const Pass& pass_holder, const std::vector<in
     const MatrixX<Scalar> dh1 = W2.transpose() * da2;
     const MatrixX<Scalar> da1 =
         dh1.cwiseProduct(a1.unaryExpr([](Scalar v) { return SiluSlope(v); }));
-    Eigen::Map<MatrixX<Scalar>>(dhead.data() + layout.w1, h, 5) += da1 * in.transpose();
-    Eigen::Map<VectorX<Scalar>>(dhead.data() + layout.b1, h) += da1.rowwise().sum();
-    Eigen::Map<MatrixX<Scalar>>(dhead.data() + layout.w2, h, h) += da2 * h1.transpose();
-    Eigen::Map<VectorX<Scalar>>(dhead.data() + layout.b2, h) += da2.rowwise().sum();
-    Eigen::Map<MatrixX<Scalar>>(dhead.data() + layout.w3, c, h) += dout * h2.transpose();
-    Eigen::Map<VectorX<Scalar>>(dhead.data() + layout.b3, c) += dout.rowwise().sum();
+    if (dL_dhead != nullptr) {
+      Eigen::Map<MatrixX<Scalar>>(dhead.data() + layout.w1, h, 5) += da1 * in.transpose();
+      Eigen::Map<VectorX<Scalar>>(dhead.data() + layout.b1, h) += da1.rowwise().sum();
+      Eigen::Map<MatrixX<Scalar>>(dhead.data() + layout.w2, h, h) += da2 * h1.transpose();
+      Eigen::Map<VectorX<Scalar>>(dhead.data() + layout.b2, h) += da2.rowwise().sum();
+      Eigen::Map<MatrixX<Scalar>>(dhead.data() + layout.w3, c, h) += dout * h2.transpose();
+      Eigen::Map<VectorX<Scalar>>(dhead.data() + layout.b3, c) += dout.rowwise().sum();
+    }
     return MatrixX<Scalar>(W1.transpose() * da1);
   };
   MatrixX<Scalar> dinput = network_back(pass.input, pass.a1, pass.h1, pass.a2, pass.h2, dshade);
-  network_back(pass.input0, pass.a1f, pass.h1f, pass.a2f, pass.h2f, -dshade);
+  // The flat input does not depend on z or the SIREN: its pass only has head gradients.
+  if (dL_dhead != nullptr) {
+    network_back(pass.input0, pass.a1f, pass.h1f, pass.a2f, pass.h2f, -dshade);
+  }
 
   // The markers: sampled at (r - m g_1, c - m g_0).
   const double m = marker_scale();

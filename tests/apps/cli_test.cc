@@ -281,6 +281,22 @@ TEST_F(CliTest, BenchPhotometricTrainsFitsAndScoresAgainstPcaAtTheSameBits) {
                            Path("p.tfm") + " --latent-dim 8 --fit-steps 3 --fit-probe 4");
   EXPECT_NE(probe.exit_code, 0);
   EXPECT_THAT(probe.err, HasSubstr("--fit-probe 4"));
+  // From the model's warm-start table: 0 steps scores the neighbour as it is, and more
+  // steps from it fit the same frames (one start: no turned start kept).
+  const Result warm = Run("bench photometric --data " + Path("d") + " --model " +
+                          Path("p.tfm") + " --latent-dim 8 --fit-knn 2 --fit-steps 0,3 "
+                          "--fit-rate 1e-2 --max-test-frames 2 --json");
+  ASSERT_EQ(warm.exit_code, 0) << warm.err;
+  const nlohmann::json w = warm.LastJson();
+  ASSERT_EQ(w["fits"].size(), 2u) << w.dump();
+  EXPECT_EQ(w["fits"][0]["steps"], 0);
+  EXPECT_TRUE(std::isfinite(w["fits"][0]["psnr_clean"].get<double>())) << w.dump();
+  EXPECT_NE(w["fits"][0]["psnr_clean"], w["fits"][1]["psnr_clean"]);
+  EXPECT_EQ(w["fits"][1]["flipped_starts_kept"], 0);
+  const Result cold_zero = Run("bench photometric --data " + Path("d") + " --model " +
+                               Path("p.tfm") + " --latent-dim 8 --fit-steps 0");
+  EXPECT_NE(cold_zero.exit_code, 0);
+  EXPECT_THAT(cold_zero.err, HasSubstr("--fit-knn"));
 
   // Data without noise-free frames is refused naming it.
   ASSERT_EQ(Run("synth --out " + Path("n") + " --frames-per-tool 2 --tools rod --sensors gelslim")
