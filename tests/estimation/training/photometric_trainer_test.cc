@@ -15,42 +15,19 @@
 #include <vector>
 
 #include "gtest/gtest.h"
+#include "tests/support/photometric_test_util.h"
 
 namespace tactfunc {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
-PhotometricTrunk::Options SmallTrunk() {
-  PhotometricTrunk::Options o;
-  o.rows = 12;
-  o.cols = 16;
-  o.channels = 1;
-  o.width = 16;
-  o.num_hidden_layers = 2;
-  o.latent_dim = 8;
-  o.shading_width = 8;
-  o.supersample = 2;
-  return o;
-}
+PhotometricTrunk::Options SmallTrunk() { return testing_util::SmallPhotometricOptions(12, 16); }
 
-Image Reference(int rows, int cols) {
-  Image image(rows, cols, 1);
-  for (int r = 0; r < rows; ++r) {
-    for (int c = 0; c < cols; ++c) {
-      image.at(r, c) = (r % 4 == 1 && c % 4 == 2) ? 0.2f : 0.6f;
-    }
-  }
-  return image;
-}
+Image Reference(int rows, int cols) { return testing_util::MarkerReference(rows, cols); }
 
 TrunkTargets Targets(const Eigen::MatrixXf& values, int rows, int cols) {
-  TrunkTargets t;
-  t.values = values;
-  t.weights = Eigen::VectorXf::Ones(values.rows());
-  t.rows = rows;
-  t.cols = cols;
-  return t;
+  return testing_util::WholeFrameTargets(values, rows, cols);
 }
 
 // Frames drawn by a teacher trunk (its markers moving) from latents with varied poses.

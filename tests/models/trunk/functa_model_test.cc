@@ -109,6 +109,20 @@ TEST(FunctaModel, RoundTripsASpatialLatentTrunkAndRecordsItsGrid) {
   }
 }
 
+// The model file `bytes` with the first `from` of its meta JSON replaced by `to`, its
+// tensors unchanged ("" if the meta has no `from`).
+std::string WithMetaEdited(const std::string& bytes, const std::string& from,
+                           const std::string& to) {
+  const TensorFile file = TensorFile::Parse(bytes, "m.tfm", "model");
+  std::string meta = file.meta_json();
+  if (meta.find(from) == std::string::npos) return "";
+  meta.replace(meta.find(from), from.size(), to);
+  TensorFile edited("model");
+  edited.set_meta_json(meta);
+  for (const TensorFile::Tensor& t : file.tensors()) edited.Add(t.name, t.dtype, t.shape, t.values);
+  return edited.Serialize();
+}
+
 // A GelSlim trunk with the photometric head: 10 x 12 working frames, a 20 x 24 reference.
 SensorTrunk PhotometricSensorTrunk() {
   PhotometricTrunk::Options o;
@@ -154,16 +168,10 @@ TEST(FunctaModel, RoundTripsAPhotometricTrunkWithItsHeadAndReference) {
               ::testing::Not(HasSubstr("photometric")));
   EXPECT_EQ(TrunkLatentDim(TwoSensorModel().Trunk(SensorKind::kGelSlim)), 4);
   // A head whose latent size does not match its SIREN is refused naming the field.
-  const TensorFile file = TensorFile::Parse(bytes, "m.tfm", "model");
-  std::string meta = file.meta_json();
-  const std::string from = "\"latent_dim\":7";
-  ASSERT_NE(meta.find(from), std::string::npos) << meta;
-  meta.replace(meta.find(from), from.size(), "\"latent_dim\":9");
-  TensorFile edited("model");
-  edited.set_meta_json(meta);
-  for (const TensorFile::Tensor& t : file.tensors()) edited.Add(t.name, t.dtype, t.shape, t.values);
+  const std::string edited = WithMetaEdited(bytes, "\"latent_dim\":7", "\"latent_dim\":9");
+  ASSERT_FALSE(edited.empty());
   try {
-    FunctaModel::Parse(edited.Serialize(), "edited.tfm");
+    FunctaModel::Parse(edited, "edited.tfm");
     FAIL() << "a mismatched head accepted";
   } catch (const TensorFileError& e) {
     EXPECT_THAT(e.what(), HasSubstr("gelslim.photometric")) << e.what();
@@ -207,16 +215,10 @@ TEST(FunctaModel, RoundTripsAWarmStartTableInFloat16AndRefusesABadOne) {
                 .warm_start,
             nullptr);
   // A grid that does not match the descriptors' shape is refused naming the tensor.
-  const TensorFile file = TensorFile::Parse(bytes, "m.tfm", "model");
-  std::string meta = file.meta_json();
-  const std::string from = "\"grid\":3";
-  ASSERT_NE(meta.find(from), std::string::npos) << meta;
-  meta.replace(meta.find(from), from.size(), "\"grid\":4");
-  TensorFile edited("model");
-  edited.set_meta_json(meta);
-  for (const TensorFile::Tensor& t : file.tensors()) edited.Add(t.name, t.dtype, t.shape, t.values);
+  const std::string edited = WithMetaEdited(bytes, "\"grid\":3", "\"grid\":4");
+  ASSERT_FALSE(edited.empty());
   try {
-    FunctaModel::Parse(edited.Serialize(), "edited.tfm");
+    FunctaModel::Parse(edited, "edited.tfm");
     FAIL() << "a table of another grid accepted";
   } catch (const TensorFileError& e) {
     EXPECT_THAT(e.what(), HasSubstr("warm_start")) << e.what();
