@@ -53,8 +53,8 @@ class PhotometricWarmStart {
   };
 
   // Builds the table of `frames` and their fitted `latents` (one row per frame, the
-  // trunk's d columns: PhotometricTrainer::Result::latents). Throws std::invalid_argument for invalid options, no frames, or
-  // latents of another shape.
+  // trunk's d columns: PhotometricTrainer::Result::latents). Throws std::invalid_argument
+  // for invalid options, no frames, or latents of another shape.
   static WarmStartTable BuildTable(const PhotometricTrunk& trunk,
                                    const std::vector<TrunkTargets>& frames,
                                    const Eigen::MatrixXd& latents, const Options& options,

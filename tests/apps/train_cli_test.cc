@@ -130,7 +130,8 @@ TEST_F(TrainCliTest, ThePhotometricHeadTrainsEncodesAndReconstructsAnOpticalSens
   // The model carries the training latents as its fits' warm-start table, one row per
   // training frame; knn+adam:N and knn start from it.
   ASSERT_NE(trunk.warm_start, nullptr);
-  EXPECT_EQ(trunk.warm_start->latents.rows(), train.LastJson()["sensors"]["gelslim"]["train_frames"].get<int>());
+  EXPECT_EQ(trunk.warm_start->latents.rows(),
+            train.LastJson()["sensors"]["gelslim"]["train_frames"].get<int>());
   EXPECT_EQ(trunk.warm_start->latents.cols(), 8);
   for (const char* strategy : {"knn+adam:3", "knn"}) {
     const Result warm = Run("encode --model " + Root("p.tfm") + " --data " + Root("g") +

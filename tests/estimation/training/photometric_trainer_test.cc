@@ -24,11 +24,8 @@ constexpr double kPi = 3.14159265358979323846;
 
 PhotometricTrunk::Options SmallTrunk() { return testing_util::SmallPhotometricOptions(12, 16); }
 
-Image Reference(int rows, int cols) { return testing_util::MarkerReference(rows, cols); }
-
-TrunkTargets Targets(const Eigen::MatrixXf& values, int rows, int cols) {
-  return testing_util::WholeFrameTargets(values, rows, cols);
-}
+using testing_util::MarkerReference;
+using testing_util::WholeFrameTargets;
 
 // Frames drawn by a teacher trunk (its markers moving) from latents with varied poses.
 struct Teacher {
@@ -39,7 +36,7 @@ struct Teacher {
 
 Teacher MakeTeacher(int count) {
   const PhotometricTrunk::Options o = SmallTrunk();
-  Teacher t{PhotometricTrunk(o, Reference(2 * o.rows, 2 * o.cols), 42), {}, {}};
+  Teacher t{PhotometricTrunk(o, MarkerReference(2 * o.rows, 2 * o.cols), 42), {}, {}};
   Eigen::VectorXd head = t.trunk.head_parameters();
   head[head.size() - 1] = 0.8;
   t.trunk.SetHeadParameters(head);
@@ -53,8 +50,8 @@ Teacher MakeTeacher(int count) {
     for (int k = 0; k < z.size(); ++k) z[k] = 0.5 * uniform();
     z[2] = kPi * uniform();
     t.latents.push_back(z);
-    t.frames.push_back(Targets(t.trunk.Forward<float>(t.trunk.AllPixels(), z.cast<float>()),
-                               o.rows, o.cols));
+    t.frames.push_back(WholeFrameTargets(
+        t.trunk.Forward<float>(t.trunk.AllPixels(), z.cast<float>()), o.rows, o.cols));
   }
   return t;
 }
@@ -219,22 +216,22 @@ TEST(PhotometricTrainerTest, AProbeKeepsTheStartAheadAndOtherwiseChangesNothing)
 }
 
 TEST(PhotometricTrainerTest, MomentPoseFindsTheCentreAndTheAxis) {
-  const PhotometricTrunk trunk(SmallTrunk(), Reference(24, 32));
+  const PhotometricTrunk trunk(SmallTrunk(), MarkerReference(24, 32));
   // A bar along the columns, rows 5-6, columns 4-11: centre between pixels (5, 4) and
   // (6, 11), axis along x_0 (phi = 0); then the same bar along the rows (phi = pi / 2).
   Eigen::MatrixXf values = Eigen::MatrixXf::Zero(12 * 16, 1);
   for (int r = 5; r <= 6; ++r) {
     for (int c = 4; c <= 11; ++c) values(r * 16 + c, 0) = 1.0f;
   }
-  const Eigen::Vector3d pose = MomentPose(trunk, Targets(values, 12, 16));
+  const Eigen::Vector3d pose = MomentPose(trunk, WholeFrameTargets(values, 12, 16));
   const Eigen::Vector2d a = trunk.PixelCoordinate(5 * 16 + 4), b = trunk.PixelCoordinate(6 * 16 + 11);
   EXPECT_NEAR(pose[0], (a[0] + b[0]) / 2, 1e-9);
   EXPECT_NEAR(pose[1], (a[1] + b[1]) / 2, 1e-9);
   EXPECT_NEAR(pose[2], 0.0, 1e-9);
   Eigen::MatrixXf column = Eigen::MatrixXf::Zero(12 * 16, 1);
   for (int r = 2; r <= 9; ++r) column(r * 16 + 7, 0) = -1.0f;  // energy: the sign is squared
-  EXPECT_NEAR(std::abs(MomentPose(trunk, Targets(column, 12, 16))[2]), kPi / 2, 1e-9);
-  EXPECT_EQ(MomentPose(trunk, Targets(Eigen::MatrixXf::Zero(12 * 16, 1), 12, 16)),
+  EXPECT_NEAR(std::abs(MomentPose(trunk, WholeFrameTargets(column, 12, 16))[2]), kPi / 2, 1e-9);
+  EXPECT_EQ(MomentPose(trunk, WholeFrameTargets(Eigen::MatrixXf::Zero(12 * 16, 1), 12, 16)),
             Eigen::Vector3d::Zero());
 }
 
@@ -248,10 +245,10 @@ TEST(PhotometricTrainerTest, RefusesBadOptionsAndFrames) {
     EXPECT_NE(std::string(e.what()).find("batch_pixels"), std::string::npos) << e.what();
   }
   const PhotometricTrainer trainer(QuickOptions(1));
-  EXPECT_THROW(trainer.Train({}, Reference(24, 32)), std::invalid_argument);
+  EXPECT_THROW(trainer.Train({}, MarkerReference(24, 32)), std::invalid_argument);
   const Teacher teacher = MakeTeacher(2);
   std::vector<TrunkTargets> mixed = teacher.frames;
-  mixed.push_back(Targets(Eigen::MatrixXf::Zero(10 * 16, 1), 10, 16));
+  mixed.push_back(WholeFrameTargets(Eigen::MatrixXf::Zero(10 * 16, 1), 10, 16));
   try {
     trainer.Train(mixed, teacher.trunk.reference());
     FAIL() << "a frame of another size accepted";

@@ -25,11 +25,8 @@ constexpr double kPi = 3.14159265358979323846;
 
 PhotometricTrunk::Options SmallTrunk() { return testing_util::SmallPhotometricOptions(24, 32); }
 
-Image Reference(int rows, int cols) { return testing_util::MarkerReference(rows, cols); }
-
-TrunkTargets Targets(const Eigen::MatrixXf& values, int rows, int cols) {
-  return testing_util::WholeFrameTargets(values, rows, cols);
-}
+using testing_util::MarkerReference;
+using testing_util::WholeFrameTargets;
 
 // An elongated blob (3 x 1 pixels' scale) centred at (row0, col0), its long axis along
 // the columns, with a bump at its right end so that the two turns differ.
@@ -43,7 +40,7 @@ TrunkTargets Blob(int rows, int cols, double row0, double col0) {
                              0.5 * std::exp(-((dc - 3) * (dc - 3) + dr * dr) / 1.5));
     }
   }
-  return Targets(values, rows, cols);
+  return WholeFrameTargets(values, rows, cols);
 }
 
 // The same frame turned by pi about the grid's centre (pixel (r, c) -> (R-1-r, C-1-c)).
@@ -56,7 +53,7 @@ TrunkTargets TurnedByPi(const TrunkTargets& frame) {
 
 TEST(PhotometricWarmStartTest, TheDescriptorFollowsTheContactAcrossTheGrid) {
   const PhotometricTrunk::Options o = SmallTrunk();
-  const PhotometricTrunk trunk(o, Reference(2 * o.rows, 2 * o.cols), 1);
+  const PhotometricTrunk trunk(o, MarkerReference(2 * o.rows, 2 * o.cols), 1);
   PhotometricWarmStart::Options options;
   options.grid = 8;
   options.extent = 0.6;
@@ -88,7 +85,7 @@ struct Table {
 
 Table MakeTable() {
   const PhotometricTrunk::Options o = SmallTrunk();
-  Table t{PhotometricTrunk(o, Reference(2 * o.rows, 2 * o.cols), 7), {}, {}};
+  Table t{PhotometricTrunk(o, MarkerReference(2 * o.rows, 2 * o.cols), 7), {}, {}};
   const int n = 6;
   t.latents.resize(n, o.latent_dim);
   for (int i = 0; i < n; ++i) {
@@ -96,7 +93,9 @@ Table MakeTable() {
     TrunkTargets frame = Blob(o.rows, o.cols, 8.0 + 2 * i, 10.0 + 3 * i);
     frame.values *= 1.0f + 0.5f * i;
     t.frames.push_back(frame);
-    for (int k = 0; k < o.latent_dim; ++k) t.latents(i, k) = 0.1 * (k + 1) * (i % 2 ? -1 : 1) + 0.05 * i;
+    for (int k = 0; k < o.latent_dim; ++k) {
+      t.latents(i, k) = 0.1 * (k + 1) * (i % 2 ? -1 : 1) + 0.05 * i;
+    }
     t.latents(i, 2) = -2.5 + 0.9 * i;
   }
   return t;
@@ -135,12 +134,12 @@ TEST(PhotometricWarmStartTest, BestStartPicksTheCandidateWithTheLowerLoss) {
   // the frame exactly, so among the candidates it has the lowest loss even where another
   // frame's descriptor were nearer.
   const PhotometricTrunk::Options o = SmallTrunk();
-  PhotometricTrunk trunk(o, Reference(2 * o.rows, 2 * o.cols), 3);
+  PhotometricTrunk trunk(o, MarkerReference(2 * o.rows, 2 * o.cols), 3);
   std::vector<TrunkTargets> frames;
   Eigen::MatrixXd latents(5, o.latent_dim);
   for (int i = 0; i < 5; ++i) {
     for (int k = 0; k < o.latent_dim; ++k) latents(i, k) = 0.3 * std::sin(1.7 * i + 0.9 * k);
-    frames.push_back(Targets(
+    frames.push_back(WholeFrameTargets(
         trunk.Forward<float>(trunk.AllPixels(), latents.row(i).transpose().cast<float>()),
         o.rows, o.cols));
   }
