@@ -500,6 +500,7 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
               {"fit_seconds", fit_seconds},
               {"fit_steps", fits[0].options.steps},
               {"fit_probe", flags.fit_probe},
+              {"fit_knn", flags.fit_knn},
               {"fit_batch", flags.fit_batch},
               {"fit_rate", fits[0].options.learning_rate},
               {"fits", json_fits},

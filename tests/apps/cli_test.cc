@@ -289,6 +289,7 @@ TEST_F(CliTest, BenchPhotometricTrainsFitsAndScoresAgainstPcaAtTheSameBits) {
   ASSERT_EQ(warm.exit_code, 0) << warm.err;
   const nlohmann::json w = warm.LastJson();
   ASSERT_EQ(w["fits"].size(), 2u) << w.dump();
+  EXPECT_EQ(w["fit_knn"], 2);
   EXPECT_EQ(w["fits"][0]["steps"], 0);
   EXPECT_TRUE(std::isfinite(w["fits"][0]["psnr_clean"].get<double>())) << w.dump();
   EXPECT_NE(w["fits"][0]["psnr_clean"], w["fits"][1]["psnr_clean"]);
