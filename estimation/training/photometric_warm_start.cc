@@ -215,6 +215,12 @@ std::vector<Eigen::VectorXd> PhotometricWarmStart::Starts(const TrunkTargets& fr
 Eigen::VectorXd PhotometricWarmStart::BestStart(const TrunkTargets& frame, int k,
                                                 int pixels) const {
   std::vector<Eigen::VectorXd> starts = Starts(frame, k);
+  if (starts.empty()) {
+    // No neighbour (a descriptor that is not finite): the cold fit's moment start.
+    Eigen::VectorXd start = Eigen::VectorXd::Zero(trunk_->latent_dim());
+    start.head<PhotometricTrunk::kPoseValues>() = MomentPose(*trunk_, frame);
+    return start;
+  }
   if (starts.size() == 1) return starts[0];
   const int n = static_cast<int>(frame.values.rows());
   const int count = std::max(1, std::min(pixels, n));

@@ -72,11 +72,13 @@ class PhotometricWarmStart {
                                     const Eigen::Vector3d& moment, const Options& options);
 
   // Up to k starts for `frame`, nearest neighbour first (over both turns of the moment
-  // frame). k >= 1. Throws std::invalid_argument for a frame of another size.
+  // frame); none for a descriptor that is not finite. k >= 1. Throws
+  // std::invalid_argument for a frame of another size.
   std::vector<Eigen::VectorXd> Starts(const TrunkTargets& frame, int k) const;
 
   // The start of Starts(frame, k) with the lowest loss on `pixels` of the frame's pixels
-  // evenly spaced (one forward pass of them per start; k = 1 passes none).
+  // evenly spaced (one forward pass of them per start; k = 1 passes none); the moment
+  // pose and a zero code where Starts finds none.
   Eigen::VectorXd BestStart(const TrunkTargets& frame, int k, int pixels = 512) const;
 
   const WarmStartTable& table() const { return *table_; }

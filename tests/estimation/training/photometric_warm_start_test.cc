@@ -9,6 +9,7 @@
 #include "estimation/training/photometric_warm_start.h"
 
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -187,6 +188,11 @@ TEST(PhotometricWarmStartTest, BadOptionsLatentsAndTablesAreRefusedByName) {
   TrunkTargets small = t.frames[0];
   small.rows = 12;
   EXPECT_THROW(warm.Starts(small, 1), std::invalid_argument);
+  // A frame with a NaN has no neighbour; BestStart falls back to a finite start.
+  TrunkTargets broken = t.frames[0];
+  broken.values(5, 0) = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_TRUE(warm.Starts(broken, 2).empty());
+  EXPECT_EQ(warm.BestStart(broken, 2).size(), t.trunk.latent_dim());
 }
 
 }  // namespace
