@@ -334,8 +334,6 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
       FitRun run;
       run.options.steps = steps;
       run.options.probe_steps = flags.fit_probe;
-      run.options.flipped_start = flags.fit_knn == 0;
-      run.options.score = flags.fit_knn == 0;
       run.options.batch_pixels = flags.fit_batch;
       run.options.learning_rate = rate;
       run.options.final_learning_rate = std::min(run.options.final_learning_rate, rate);
@@ -350,19 +348,10 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
     const auto fit_start = std::chrono::steady_clock::now();
     std::atomic<int> done{0};
     internal::ParallelFor(static_cast<int>(test.size()), flags.threads, [&](int i) {
-      PhotometricFit fit;
-      if (warm_start) {
-        const Eigen::VectorXd start = warm_start->BestStart(test[i], flags.fit_knn);
-        if (run.options.steps == 0) {
-          fit.latent = start;
-        } else {
-          fit = FitPhotometricLatent(trunk, test[i], run.options,
-                                     DeriveSeed(flags.seed, 7000000 + i), &start);
-        }
-      } else {
-        fit = FitPhotometricLatent(trunk, test[i], run.options,
-                                   DeriveSeed(flags.seed, 7000000 + i));
-      }
+      const std::uint64_t seed = DeriveSeed(flags.seed, 7000000 + i);
+      const PhotometricFit fit =
+          warm_start ? warm_start->Fit(test[i], flags.fit_knn, run.options, seed)
+                     : FitPhotometricLatent(trunk, test[i], run.options, seed);
       latents[i] = fit.latent.unaryExpr([](double v) { return static_cast<double>(Half(v)); });
       flipped[i] = fit.flipped;
       const int n = ++done;

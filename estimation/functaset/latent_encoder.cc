@@ -208,18 +208,11 @@ LatentEncoder::EncodedFrame LatentEncoder::EncodeTargets(SensorKind sensor,
     fit.steps = state.strategy.steps;
     if (state.warm_start != nullptr) {
       // One start, the best of the table's nearest neighbours, refined by a short fit
-      // (docs/REPRESENTATION.md, "A warm start from the training latents").
-      const Eigen::VectorXd start = state.warm_start->BestStart(targets, kWarmStartCandidates);
-      if (state.strategy.refinement == FitStrategy::Refinement::kNone) {
-        out.latent = start.cast<float>();
-      } else {
-        fit.flipped_start = false;
-        fit.score = false;
-        fit.learning_rate = kWarmStartRate;
-        out.latent = FitPhotometricLatent(*state.trunk->photometric, targets, fit,
-                                          kPhotometricFitSeed, &start)
-                         .latent.cast<float>();
-      }
+      // (docs/REPRESENTATION.md, "A warm start from the training latents"); knn alone
+      // has 0 steps and keeps that start.
+      fit.learning_rate = kWarmStartRate;
+      out.latent = state.warm_start->Fit(targets, kWarmStartCandidates, fit, kPhotometricFitSeed)
+                       .latent.cast<float>();
     } else {
       out.latent = FitPhotometricLatent(*state.trunk->photometric, targets, fit,
                                         kPhotometricFitSeed)

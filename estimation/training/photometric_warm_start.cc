@@ -9,7 +9,6 @@
 #include <utility>
 
 #include "estimation/knn/knn_index.h"
-#include "estimation/training/photometric_trainer.h"
 #include "models/core/parallel_for.h"
 #include "models/core/se2.h"
 
@@ -243,6 +242,21 @@ Eigen::VectorXd PhotometricWarmStart::BestStart(const TrunkTargets& frame, int k
     }
   }
   return starts[best];
+}
+
+PhotometricFit PhotometricWarmStart::Fit(const TrunkTargets& frame, int k,
+                                         PhotometricFitOptions options,
+                                         std::uint64_t seed) const {
+  const Eigen::VectorXd start = BestStart(frame, k);
+  if (options.steps == 0) {
+    PhotometricFit fit;
+    fit.latent = start;
+    fit.loss = std::numeric_limits<double>::quiet_NaN();
+    return fit;
+  }
+  options.flipped_start = false;
+  options.score = false;
+  return FitPhotometricLatent(*trunk_, frame, options, seed, &start);
 }
 
 }  // namespace tactfunc

@@ -30,12 +30,14 @@
 #ifndef TACTFUNC_ESTIMATION_TRAINING_PHOTOMETRIC_WARM_START_H_
 #define TACTFUNC_ESTIMATION_TRAINING_PHOTOMETRIC_WARM_START_H_
 
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
 
 #include "Eigen/Core"
 #include "estimation/data/trunk_targets.h"
+#include "estimation/training/photometric_trainer.h"
 #include "models/trunk/functa_model.h"
 #include "models/trunk/photometric_trunk.h"
 
@@ -80,6 +82,12 @@ class PhotometricWarmStart {
   // evenly spaced (one forward pass of them per start; k = 1 passes none); the moment
   // pose and a zero code where Starts finds none.
   Eigen::VectorXd BestStart(const TrunkTargets& frame, int k, int pixels = 512) const;
+
+  // The fit from BestStart(frame, k): options.steps Adam steps from it with one start
+  // and no full-frame scoring (options' flipped_start and score are overridden), or
+  // that start as it is for options.steps == 0. `seed` draws the pixel subsets.
+  PhotometricFit Fit(const TrunkTargets& frame, int k, PhotometricFitOptions options,
+                     std::uint64_t seed) const;
 
   const WarmStartTable& table() const { return *table_; }
 

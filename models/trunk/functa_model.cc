@@ -19,6 +19,18 @@ constexpr int kVersion = 1;
 // naming another layout is refused.
 constexpr const char* kSpatialLayout = "z=[global,grid node-major row-major]; A=[A_g|A_s]";
 
+// A matrix's values row after row (a warm-start table: one training frame after another),
+// and back.
+using RowMajorMatrixXd = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+std::vector<double> RowMajorValues(const Eigen::MatrixXf& m) {
+  const RowMajorMatrixXd rows = m.cast<double>();
+  return std::vector<double>(rows.data(), rows.data() + rows.size());
+}
+Eigen::MatrixXf FromRowMajorValues(const std::vector<double>& values, std::int64_t rows,
+                                   std::int64_t cols) {
+  return Eigen::Map<const RowMajorMatrixXd>(values.data(), rows, cols).cast<float>();
+}
+
 std::vector<double> ToVector(const Eigen::VectorXd& v) {
   return std::vector<double>(v.data(), v.data() + v.size());
 }
@@ -209,18 +221,10 @@ std::string FunctaModel::Serialize() const {
                                                               {"grid", w.grid},
                                                               {"extent", w.extent},
                                                               {"supersample", w.supersample}};
-        // Row-major: one training frame after another.
-        auto rows_of = [](const Eigen::MatrixXf& m) {
-          std::vector<double> out(static_cast<std::size_t>(m.size()));
-          for (Eigen::Index r = 0; r < m.rows(); ++r) {
-            for (Eigen::Index c = 0; c < m.cols(); ++c) out[r * m.cols() + c] = m(r, c);
-          }
-          return out;
-        };
         file.Add(name + "/warm_start/descriptors", TensorFile::DType::kFloat16,
-                 {w.descriptors.rows(), w.descriptors.cols()}, rows_of(w.descriptors));
+                 {w.descriptors.rows(), w.descriptors.cols()}, RowMajorValues(w.descriptors));
         file.Add(name + "/warm_start/latents", TensorFile::DType::kFloat16,
-                 {w.latents.rows(), w.latents.cols()}, rows_of(w.latents));
+                 {w.latents.rows(), w.latents.cols()}, RowMajorValues(w.latents));
       }
     }
     file.Add(name + "/theta", TensorFile::DType::kFloat32, {t.siren.NumParameters()},
@@ -402,16 +406,8 @@ FunctaModel FunctaModel::FromTensorFile(const TensorFile& file, const std::strin
               static_cast<std::int64_t>(table->grid) * table->grid * po.channels;
           const auto& descriptors = file.Get(name + "/warm_start/descriptors", {rows, columns});
           const auto& latents = file.Get(name + "/warm_start/latents", {rows, po.latent_dim});
-          table->descriptors.resize(rows, columns);
-          table->latents.resize(rows, po.latent_dim);
-          for (std::int64_t r = 0; r < rows; ++r) {
-            for (std::int64_t c = 0; c < columns; ++c) {
-              table->descriptors(r, c) = static_cast<float>(descriptors.values[r * columns + c]);
-            }
-            for (int c = 0; c < po.latent_dim; ++c) {
-              table->latents(r, c) = static_cast<float>(latents.values[r * po.latent_dim + c]);
-            }
-          }
+          table->descriptors = FromRowMajorValues(descriptors.values, rows, columns);
+          table->latents = FromRowMajorValues(latents.values, rows, po.latent_dim);
           trunk.warm_start = std::move(table);
         }
         trunk.photometric = std::move(photometric);
