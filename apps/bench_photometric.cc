@@ -120,7 +120,9 @@ cv::Mat FitTradePicture(const std::vector<FitRun>& fits, double pca_db,
                  "mean noise-free PSNR, dB",
                  "Photometric fit: steps and step size against time",
                  std::to_string(frames) + " test frames, " + std::to_string(bytes) +
-                     " B per frame (float16 latents); labels: Adam steps " +
+                     " B per frame (float16 latents), " +
+                     std::to_string(fits.front().options.batch_pixels) +
+                     " pixels a step; labels: Adam steps " +
                      (knn > 0 ? "from the best of " + std::to_string(knn) +
                                     " training latents (0: that latent as it is)"
                               : std::string("per start")));

@@ -24,13 +24,15 @@ namespace {
 // its pixel subsets.
 const int kPhotometricFitSteps = PhotometricFitOptions().steps;
 constexpr std::uint64_t kPhotometricFitSeed = 0x70686f746f;
-// knn+adam:N: the neighbours scored per frame, the fit's first step size from the start
-// and the default N for a trunk with a warm-start table: the fewest steps that cleared
-// same-bits PCA by 3.5 dB on a selection set no other row uses (docs/REPRESENTATION.md,
-// "A warm start from the training latents").
+// knn+adam:N: the neighbours scored per frame, the fit's first step size from the start,
+// its pixels per step, and the default N for a trunk with a warm-start table: of the
+// (pixels, steps) pairs tried, the fastest that cleared same-bits PCA by 3.5 dB on a
+// selection set no other row uses (docs/REPRESENTATION.md, "A warm start from the
+// training latents").
 constexpr int kWarmStartCandidates = 4;
 constexpr double kWarmStartRate = 1e-2;
-constexpr int kWarmStartFitSteps = 20;
+constexpr int kWarmStartBatchPixels = 64;
+constexpr int kWarmStartFitSteps = 40;
 
 }  // namespace
 
@@ -211,6 +213,7 @@ LatentEncoder::EncodedFrame LatentEncoder::EncodeTargets(SensorKind sensor,
       // (docs/REPRESENTATION.md, "A warm start from the training latents"); knn alone
       // has 0 steps and keeps that start.
       fit.learning_rate = kWarmStartRate;
+      fit.batch_pixels = kWarmStartBatchPixels;
       out.latent = state.warm_start->Fit(targets, kWarmStartCandidates, fit, kPhotometricFitSeed)
                        .latent.cast<float>();
     } else {
