@@ -12,8 +12,10 @@
 # Targets: tensor_file model functaset pose_model knn_index labels_csv dataset image
 # (default: all). Corpora grow in build-fuzz/corpus/<target>/; a crash is saved in
 # build-fuzz/findings/<target>/ (with the run's log, last_run.log) and ends the script
-# with exit 1. The smoke keeps its corpora and logs in build-fuzz/smoke/. Each finished
-# run's count and last libFuzzer line (coverage) is appended to build-fuzz/fuzz.log.
+# with exit 1. The smoke builds its own tree at -O0, build-fuzz-smoke/ (about half the
+# compile time of -O2, which is all a few seconds of fuzzing need; docs/BUILD.md, "Build
+# time"), and keeps its corpora and logs in build-fuzz-smoke/smoke/. Each finished
+# long run's count and last libFuzzer line (coverage) is appended to build-fuzz/fuzz.log.
 # Exit 77 (a skip for ctest) if clang++ is not installed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -27,7 +29,7 @@ while [[ $# -gt 0 ]]; do
     --runs) runs="$2"; shift 2 ;;
     --seconds) seconds="$2"; shift 2 ;;
     --smoke) smoke=1; seconds=4; shift ;;
-    -h|--help) sed -n '2,16p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,18p' "$0"; exit 0 ;;
     -*) echo "fuzz.sh: unknown flag $1" >&2; exit 2 ;;
     *) targets+=("$1"); shift ;;
   esac
@@ -41,12 +43,17 @@ if ! command -v clang++ >/dev/null 2>&1; then
 fi
 
 build=build-fuzz
+optimisation=()
+if [[ $smoke -eq 1 ]]; then
+  build=build-fuzz-smoke
+  optimisation=("-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O0 -DNDEBUG")
+fi
 launcher=()
 command -v ccache >/dev/null 2>&1 && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
 if [[ ! -f $build/CMakeCache.txt ]]; then
   CC=clang CXX=clang++ cmake -S . -B $build -DCMAKE_BUILD_TYPE=RelWithDebInfo \
     -DTACTFUNC_FUZZ=ON -DTACTFUNC_NATIVE=OFF -DTACTFUNC_BUILD_TESTS=OFF \
-    -DTACTFUNC_BUILD_APPS=OFF -DTACTFUNC_BUILD_EXAMPLES=OFF "${launcher[@]}" \
+    -DTACTFUNC_BUILD_APPS=OFF -DTACTFUNC_BUILD_EXAMPLES=OFF "${optimisation[@]}" "${launcher[@]}" \
     >$build.configure.log 2>&1 || { cat $build.configure.log; exit 1; }
 fi
 nice -n 15 cmake --build $build --target tactfunc_fuzzers -j"$(nproc)" 2>&1 |

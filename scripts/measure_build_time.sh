@@ -6,7 +6,7 @@
 # Configures a fresh Release build in OUT_DIR (which must not exist) with a compiler
 # launcher that records each object's wall time, builds it with -j$(nproc), then prints
 # the build's wall time and the compile seconds summed per part: the libraries, the
-# `tactfunc` program, the test suites, the precompiled headers, the rest; and the ten
+# `tactfunc` program, the test suites, the examples; and the ten
 # slowest objects. The log is OUT_DIR/compile_times.log ("seconds object" per line).
 # Extra arguments go to the configure step, e.g. -DTACTFUNC_PCH=OFF.
 set -euo pipefail
@@ -42,9 +42,8 @@ wall=$(( $(date +%s) - start ))
 echo "build: ${wall} s wall on $(nproc) cores, $(wc -l <"$log") objects"
 awk '{
   part = "libraries";
-  if ($2 ~ /cmake_pch/) part = "precompiled headers";
-  else if ($2 ~ /CMakeFiles\/tactfunc\.dir\//) part = "program (apps/)";
-  else if ($2 ~ /_test\.dir\// || $2 ~ /^tests\// || $2 ~ /tactfunc_test_pch/) part = "test suites";
+  if ($2 ~ /CMakeFiles\/tactfunc\.dir\//) part = "program (apps/)";
+  else if ($2 ~ /_test\.dir\// || $2 ~ /^tests\//) part = "test suites";
   else if ($2 ~ /example/) part = "examples";
   sum[part] += $1; n[part]++; total += $1
 } END {
