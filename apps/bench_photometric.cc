@@ -62,6 +62,7 @@ struct PhotometricBenchFlags {
   int fit_probe = 0;
   int fit_knn = 0;
   int fit_batch = PhotometricFitOptions().batch_pixels;
+  int fit_block = PhotometricFitOptions().pixel_block;
   std::vector<double> fit_rate{PhotometricFitOptions().learning_rate};
   std::string trade_picture;
   std::string model;
@@ -122,7 +123,12 @@ cv::Mat FitTradePicture(const std::vector<FitRun>& fits, double pca_db,
                  std::to_string(frames) + " test frames, " + std::to_string(bytes) +
                      " B per frame (float16 latents), " +
                      std::to_string(fits.front().options.batch_pixels) +
-                     " pixels a step; labels: Adam steps " +
+                     " pixels a step" +
+                     (fits.front().options.pixel_block > 1
+                          ? " in " + std::to_string(fits.front().options.pixel_block) + "x" +
+                                std::to_string(fits.front().options.pixel_block) + " blocks"
+                          : std::string()) +
+                     "; labels: Adam steps " +
                      (knn > 0 ? "from the best of " + std::to_string(knn) +
                                     " training latents (0: that latent as it is)"
                               : std::string("per start")));
@@ -337,6 +343,7 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
       run.options.steps = steps;
       run.options.probe_steps = flags.fit_probe;
       run.options.batch_pixels = flags.fit_batch;
+      run.options.pixel_block = flags.fit_block;
       run.options.learning_rate = rate;
       run.options.final_learning_rate = std::min(run.options.final_learning_rate, rate);
       fits.push_back(std::move(run));
@@ -410,10 +417,11 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
   }
   const int num_flipped = fits[0].flipped;
   std::printf("marker scale %.3f px per unit slope; training %.0f s, fits %.0f s (adam:%d, "
-              "probe %d, %d pixels a step; %.3f s per frame on %d thread(s); %d of %zu kept the "
-              "start turned by pi)\n",
+              "probe %d, %d pixels a step in blocks of side %d; %.3f s per frame on %d "
+              "thread(s); %d of %zu kept the start turned by pi)\n",
               trunk.marker_scale(), train_seconds, fit_seconds, fits[0].options.steps,
-              flags.fit_probe, flags.fit_batch, fit_seconds / test.size(), flags.threads,
+              flags.fit_probe, flags.fit_batch, flags.fit_block, fit_seconds / test.size(),
+              flags.threads,
               num_flipped, test.size());
   // The fit's trade of time against PSNR, where more than one setting was asked for.
   nlohmann::json json_fits = nlohmann::json::array();
@@ -429,8 +437,8 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
                          {"flipped_starts_kept", run.flipped}});
   }
   if (fits.size() > 1) {
-    std::printf("fit trade (probe %d, %d pixels a step, %d thread(s)):\n", flags.fit_probe,
-                flags.fit_batch, flags.threads);
+    std::printf("fit trade (probe %d, %d pixels a step in blocks of side %d, %d thread(s)):\n",
+                flags.fit_probe, flags.fit_batch, flags.fit_block, flags.threads);
     std::printf("  %-22s  %10s  %8s  %11s\n", "fit", "noise-free", "vs PCA", "s per frame");
     for (const FitRun& run : fits) {
       char name[64];
@@ -493,6 +501,7 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
               {"fit_probe", flags.fit_probe},
               {"fit_knn", flags.fit_knn},
               {"fit_batch", flags.fit_batch},
+              {"fit_block", flags.fit_block},
               {"fit_rate", fits[0].options.learning_rate},
               {"fits", json_fits},
               {"threads", flags.threads},
@@ -544,6 +553,11 @@ void RegisterPhotometricBenchmark(CLI::App* bench, CommandBody* selected) {
   sub->add_option("--fit-batch", flags->fit_batch,
                   "Pixels per fit step (PhotometricFitOptions::batch_pixels; default 512)")
       ->check(CLI::Range(1, 1000000));
+  sub->add_option("--fit-block", flags->fit_block,
+                  "Fit steps draw their pixels in square blocks of this side, --fit-batch "
+                  "/ side^2 blocks (PhotometricFitOptions::pixel_block; default 1: "
+                  "independent pixels)")
+      ->check(CLI::Range(1, 16));
   sub->add_option("--fit-rate", flags->fit_rate,
                   "Adam's first step size in a fit, falling by a cosine to 1e-4 "
                   "(PhotometricFitOptions::learning_rate; default 5e-2); a comma-separated "

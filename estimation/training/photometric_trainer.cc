@@ -1,6 +1,7 @@
 // Copyright 2026 The tactfunc Authors.
 #include "estimation/training/photometric_trainer.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -54,6 +55,37 @@ void DrawPixels(const TrunkTargets& frame, int count, boost::random::mt19937_64*
     (*pixels)[i] = j;
     targets->row(i) = frame.values.row(j);
     (*weights)[i] = frame.weights.size() == 0 ? 1.0f : frame.weights[j];
+  }
+}
+
+// DrawPixels in square blocks of side `block` (PhotometricFitOptions::pixel_block):
+// count / block^2 blocks (at least one), each block's rows in order.
+void DrawPixelBlocks(const TrunkTargets& frame, int count, int block,
+                     boost::random::mt19937_64* rng, std::vector<int>* pixels,
+                     Eigen::MatrixXf* targets, Eigen::VectorXf* weights) {
+  if (block == 1) {
+    DrawPixels(frame, count, rng, pixels, targets, weights);
+    return;
+  }
+  const int blocks = std::max(1, count / (block * block));
+  const int size = blocks * block * block;
+  boost::random::uniform_int_distribution<int> pick_row(0, frame.rows - block);
+  boost::random::uniform_int_distribution<int> pick_col(0, frame.cols - block);
+  pixels->resize(size);
+  targets->resize(size, frame.values.cols());
+  weights->resize(size);
+  int i = 0;
+  for (int b = 0; b < blocks; ++b) {
+    const int r0 = pick_row(*rng);
+    const int c0 = pick_col(*rng);
+    for (int r = r0; r < r0 + block; ++r) {
+      for (int c = c0; c < c0 + block; ++c, ++i) {
+        const int j = r * frame.cols + c;
+        (*pixels)[i] = j;
+        targets->row(i) = frame.values.row(j);
+        (*weights)[i] = frame.weights.size() == 0 ? 1.0f : frame.weights[j];
+      }
+    }
   }
 }
 
@@ -125,6 +157,8 @@ bool PhotometricFitOptions::IsValid(std::string* error) const {
   if (steps < 1 || batch_pixels < 1) {
     message << "steps and batch_pixels must be >= 1, found " << steps << " and "
             << batch_pixels;
+  } else if (pixel_block < 1 || pixel_block > 16) {
+    message << "pixel_block must be in [1, 16], found " << pixel_block;
   } else if (probe_steps < 0 || probe_steps > steps) {
     message << "probe_steps must be in [0, steps = " << steps << "], found " << probe_steps;
   } else if (!(learning_rate > 0 && std::isfinite(learning_rate)) ||
@@ -369,6 +403,12 @@ PhotometricFit FitPhotometricLatent(const PhotometricTrunk& trunk, const TrunkTa
     throw std::invalid_argument("PhotometricFitOptions: " + error);
   }
   CheckFrame(trunk, frame);
+  if (options.pixel_block > std::min(frame.rows, frame.cols)) {
+    throw std::invalid_argument("PhotometricFitOptions: pixel_block " +
+                                std::to_string(options.pixel_block) + " exceeds the " +
+                                std::to_string(frame.rows) + " x " +
+                                std::to_string(frame.cols) + " frame");
+  }
   if (start_latent != nullptr && start_latent->size() != trunk.latent_dim()) {
     throw std::invalid_argument("FitPhotometricLatent: expected a start of " +
                                 std::to_string(trunk.latent_dim()) + " values, found " +
@@ -401,7 +441,8 @@ PhotometricFit FitPhotometricLatent(const PhotometricTrunk& trunk, const TrunkTa
   Eigen::VectorXf weights, dz;
   auto advance = [&](Start* s, int last_step) {
     for (int step = s->step + 1; step <= last_step; ++step) {
-      DrawPixels(frame, options.batch_pixels, &s->rng, &pixels, &targets, &weights);
+      DrawPixelBlocks(frame, options.batch_pixels, options.pixel_block, &s->rng, &pixels,
+                      &targets, &weights);
       trunk.LossAndGradient<float>(pixels, s->z.cast<float>(), targets, weights, &dz, nullptr,
                                    nullptr);
       const double rate =

@@ -149,6 +149,13 @@ struct PhotometricFitOptions {
   // always scored (the lower loss wins); a single start's full-frame pass (as costly as
   // about 17 steps of 512 pixels) can be left out: its loss is then NaN.
   bool score = true;
+  // Side of the square blocks a step's pixels come in: batch_pixels / block^2 blocks
+  // (at least one), each block's corner drawn uniformly (with replacement) so that it
+  // lies inside the frame. Pixels of a block are each other's neighbours, so the trunk
+  // evaluates its SIREN about (block + 2)^2 - 4 times per block instead of 5 block^2
+  // (PhotometricTrunk::Forward). 1: independent pixels. In [1, 16] and at most the
+  // frame's rows and columns.
+  int pixel_block = 1;
   bool IsValid(std::string* error) const;
 };
 

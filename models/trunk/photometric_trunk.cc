@@ -8,6 +8,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <type_traits>
+#include <utility>
 
 #include "boost/random/mersenne_twister.hpp"
 #include "boost/random/uniform_real_distribution.hpp"
@@ -144,7 +145,10 @@ bool PhotometricTrunk::Options::IsValid(std::string* error) const {
 template <typename Scalar>
 struct PhotometricTrunkPass {
   using Matrix = Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic>;
-  Matrix coords;          // kSets N x 2, the SIREN's coordinates
+  // The SIREN's coordinates: kSets N rows, or one row per distinct grid position
+  // when the sets share positions (then `slot` names each set row's coordinate row).
+  Matrix coords;
+  std::vector<int> slot;  // kSets N, or empty when coords has a row per set row
   Matrix siren_out;       // kSets N x (1 + C)
   Matrix input, input0;   // 5 x N: (g_0, g_1, w, x_0, x_1) and the flat (0, 0, 0, x)
   Matrix a1, a2, h1, h2;  // H x N pre-activations and activations (contact)
@@ -378,16 +382,47 @@ void PhotometricTrunk::RunForward(const std::vector<int>& pixels, const VectorX<
       }
     }
     pass.coords.resize(0, 2);  // no reverse pass reads them
+    pass.slot.clear();
   } else {
-    pass.coords.resize(kSets * n, 2);
+    // Any other pixel set: the SIREN runs once per distinct grid position its five sets
+    // name. Where pixels are neighbours (blocks of pixels, repeats) they share
+    // evaluations, and the reverse pass sums the shared rows' gradients, as the five
+    // separate rows would have contributed; with no position shared the pass is the
+    // plain one, row for row. A shared position takes the coordinate of its first use.
+    const int cols = options_.cols, ec = cols + 2;
+    std::vector<int> slot_of(static_cast<std::size_t>(options_.rows + 2) * ec, -1);
+    pass.slot.resize(static_cast<std::size_t>(kSets) * n);
+    std::vector<int> first_use;  // the set row of each slot's first use
+    const int shift[kSets][2] = {{0, 0}, {0, 1}, {0, -1}, {1, 0}, {-1, 0}};
     for (int k = 0; k < kSets; ++k) {
       for (int i = 0; i < n; ++i) {
-        const double d0 = p[i][0] + offsets[k][0] - t0, d1 = p[i][1] + offsets[k][1] - t1;
-        pass.coords(k * n + i, 0) = static_cast<Scalar>(cs * d0 + sn * d1);
-        pass.coords(k * n + i, 1) = static_cast<Scalar>(-sn * d0 + cs * d1);
+        const int e = (pixels[i] / cols + 1 + shift[k][0]) * ec + pixels[i] % cols + 1 +
+                      shift[k][1];
+        if (slot_of[e] < 0) {
+          slot_of[e] = static_cast<int>(first_use.size());
+          first_use.push_back(k * n + i);
+        }
+        pass.slot[k * n + i] = slot_of[e];
       }
     }
-    pass.siren_out = siren_.Forward<Scalar>(pass.coords, code);
+    const int distinct = static_cast<int>(first_use.size());
+    if (distinct == kSets * n) pass.slot.clear();
+    pass.coords.resize(distinct, 2);
+    for (int u = 0; u < distinct; ++u) {
+      const int k = first_use[u] / n, i = first_use[u] % n;
+      const double d0 = p[i][0] + offsets[k][0] - t0, d1 = p[i][1] + offsets[k][1] - t1;
+      pass.coords(u, 0) = static_cast<Scalar>(cs * d0 + sn * d1);
+      pass.coords(u, 1) = static_cast<Scalar>(-sn * d0 + cs * d1);
+    }
+    if (pass.slot.empty()) {
+      pass.siren_out = siren_.Forward<Scalar>(pass.coords, code);
+    } else {
+      const MatrixX<Scalar> shared = siren_.Forward<Scalar>(pass.coords, code);
+      pass.siren_out.resize(kSets * n, shared.cols());
+      for (int row = 0; row < kSets * n; ++row) {
+        pass.siren_out.row(row) = shared.row(pass.slot[row]);
+      }
+    }
   }
   const MatrixX<Scalar>& s = pass.siren_out;
 
@@ -507,6 +542,12 @@ void PhotometricTrunk::RunBackward(const Pass& pass_holder, const std::vector<in
     ds(2 * n + i, 0) = -dinput(0, i) / Scalar(2);
     ds(3 * n + i, 0) = dinput(1, i) / Scalar(2);
     ds(4 * n + i, 0) = -dinput(1, i) / Scalar(2);
+  }
+  if (!pass.slot.empty()) {
+    // Shared positions (RunForward): each coordinate row gets the sum of its uses.
+    MatrixX<Scalar> shared = MatrixX<Scalar>::Zero(pass.coords.rows(), 1 + c);
+    for (int row = 0; row < kSets * n; ++row) shared.row(pass.slot[row]) += ds.row(row);
+    ds = std::move(shared);
   }
   const VectorX<Scalar> code = z.tail(options_.latent_dim - kPoseValues);
   VectorX<Scalar> dcode, dtheta;

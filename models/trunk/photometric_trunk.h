@@ -149,7 +149,11 @@ class PhotometricTrunk {
   // of the wrong size or a pixel index outside the grid. AllPixels() (and
   // LossAndGradient over them without gradients) runs the SIREN once per pixel and
   // border pixel instead of five times per pixel, a neighbour's coordinate then taken
-  // from its own index: equal to the per-pixel pass up to the last bits of float.
+  // from its own index: equal to the per-pixel pass up to the last bits of float. Any
+  // other pixel set (here and in the reverse pass) runs the SIREN once per distinct
+  // grid position its pixels and their four neighbours name, so neighbouring or
+  // repeated pixels share evaluations (a training step's 512 random pixels of an
+  // 80 x 107 frame: about 13% fewer); with none shared it is the per-pixel pass.
   template <typename Scalar>
   MatrixX<Scalar> Forward(const std::vector<int>& pixels, const VectorX<Scalar>& z) const;
 

@@ -215,6 +215,39 @@ TEST(PhotometricTrainerTest, AProbeKeepsTheStartAheadAndOtherwiseChangesNothing)
                std::invalid_argument);
 }
 
+TEST(PhotometricTrainerTest, AFitOnPixelBlocksLowersItsLossAndRefusesBlocksLargerThanTheFrame) {
+  const Teacher teacher = MakeTeacher(2);
+  PhotometricFitOptions options;
+  options.steps = 300;
+  options.batch_pixels = 192;
+  options.pixel_block = 4;  // 12 blocks of 4 x 4 a step
+  for (int i = 0; i < 2; ++i) {
+    const TrunkTargets& frame = teacher.frames[i];
+    Eigen::VectorXd start = Eigen::VectorXd::Zero(8);
+    start.head<3>() = teacher.latents[i].head<3>();
+    const double start_loss = teacher.trunk.LossAndGradient<float>(
+        teacher.trunk.AllPixels(), start.cast<float>(), frame.values, frame.weights, nullptr,
+        nullptr, nullptr);
+    const PhotometricFit fit = FitPhotometricLatent(teacher.trunk, frame, options, 11 + i,
+                                                    &start);
+    EXPECT_LT(fit.loss, 0.1 * start_loss) << "frame " << i;
+    // The blocks come from the seed: the same seed, the same latent.
+    EXPECT_EQ(FitPhotometricLatent(teacher.trunk, frame, options, 11 + i, &start).latent,
+              fit.latent);
+  }
+  PhotometricFitOptions wide = options;
+  wide.pixel_block = teacher.frames[0].rows + 1;
+  try {
+    FitPhotometricLatent(teacher.trunk, teacher.frames[0], wide, 1);
+    FAIL() << "a block larger than the frame accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("pixel_block"), std::string::npos) << e.what();
+  }
+  wide.pixel_block = 0;
+  EXPECT_THROW(FitPhotometricLatent(teacher.trunk, teacher.frames[0], wide, 1),
+               std::invalid_argument);
+}
+
 TEST(PhotometricTrainerTest, MomentPoseFindsTheCentreAndTheAxis) {
   const PhotometricTrunk trunk(SmallTrunk(), MarkerReference(24, 32));
   // A bar along the columns, rows 5-6, columns 4-11: centre between pixels (5, 4) and

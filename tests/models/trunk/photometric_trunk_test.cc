@@ -260,6 +260,46 @@ TEST(PhotometricTrunkTest, TheWholeGridSharesNeighboursAndAgreesWithThePerPixelP
   }
 }
 
+TEST(PhotometricTrunkTest, NeighbouringAndRepeatedPixelsShareEvaluationsWithTheSameGradients) {
+  // A 3 x 3 block, a pixel drawn twice and a pixel on the grid's edge: their five
+  // coordinate sets share grid positions, which the pass evaluates once and whose
+  // gradients it sums. Each pixel alone shares nothing; the outputs must agree with the
+  // single-pixel passes and the gradients with their sums (the loss is a sum over pixels).
+  const PhotometricTrunk trunk =
+      MovingTrunk(PhotometricTrunk::MarkerSampling::kSensorResolution, 1);
+  const Problem p = MakeProblem(trunk);
+  const int cols = trunk.options().cols;
+  std::vector<int> pixels;
+  for (int r = 4; r < 7; ++r) {
+    for (int c = 5; c < 8; ++c) pixels.push_back(r * cols + c);
+  }
+  pixels.push_back(5 * cols + 6);  // again
+  pixels.push_back(0);             // the corner
+  const int n = static_cast<int>(pixels.size());
+  MatrixXd dY(n, 1);
+  for (int i = 0; i < n; ++i) dY(i, 0) = 0.3 - 0.07 * i;
+  const MatrixXd shared = trunk.Forward<double>(pixels, p.z);
+  VectorXd dz, dsiren, dhead;
+  trunk.Backward<double>(pixels, p.z, dY, &dz, &dsiren, &dhead);
+  VectorXd sum_dz = VectorXd::Zero(dz.size()), sum_dsiren = VectorXd::Zero(dsiren.size()),
+           sum_dhead = VectorXd::Zero(dhead.size());
+  for (int i = 0; i < n; ++i) {
+    const std::vector<int> one{pixels[i]};
+    const MatrixXd alone = trunk.Forward<double>(one, p.z);
+    EXPECT_NEAR(shared(i, 0), alone(0, 0), 1e-10) << "pixel " << pixels[i];
+    VectorXd a, b, c;
+    trunk.Backward<double>(one, p.z, dY.row(i), &a, &b, &c);
+    sum_dz += a;
+    sum_dsiren += b;
+    sum_dhead += c;
+  }
+  EXPECT_GT(dz.cwiseAbs().maxCoeff(), 1e-4);
+  EXPECT_LT((dz - sum_dz).cwiseAbs().maxCoeff(), 1e-10 * (1 + dz.cwiseAbs().maxCoeff()));
+  EXPECT_LT((dsiren - sum_dsiren).cwiseAbs().maxCoeff(),
+            1e-10 * (1 + dsiren.cwiseAbs().maxCoeff()));
+  EXPECT_LT((dhead - sum_dhead).cwiseAbs().maxCoeff(), 1e-10 * (1 + dhead.cwiseAbs().maxCoeff()));
+}
+
 TEST(PhotometricTrunkTest, RefusesBadOptionsAndReferences) {
   PhotometricTrunk::Options o = SmallOptions();
   o.latent_dim = 3;
