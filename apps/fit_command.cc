@@ -19,10 +19,18 @@
 // and parameters; otherwise (missing, stale, corrupt or other parameters) it is rebuilt
 // and saved atomically, so a crash never leaves a half-written index.
 //
+// A photometric trunk (train --head photometric; models/trunk/photometric_trunk.h) is
+// fitted as `encode` fits it, by the same LatentEncoder code, so a frame gets the latent
+// encode would give it: knn+adam:N (the default where the model holds a warm-start
+// table), knn or adam:N (the default without one); its k-NN runs over the model's own
+// table, so --functaset, --precision, --jacobian, --sigma, --sigma-z and --max-pixels
+// (the direct trunk's Ceres and meta-SGD problem) do not apply and are refused.
+//
 // With --out DIR it writes DIR/latent.json ({sensor, latent, strategy, psnr, ms,
 // termination, ...}) and DIR/fit.png (target | reconstruction | error, labelled with the
 // PSNR and time).
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -39,6 +47,7 @@
 #include "estimation/data/dataset.h"
 #include "estimation/data/image_io.h"
 #include "estimation/functaset/functaset.h"
+#include "estimation/functaset/latent_encoder.h"
 #include "estimation/knn/knn_index.h"
 #include "estimation/fitting/latent_fitter.h"
 #include "estimation/evaluation/reconstruction.h"
@@ -60,7 +69,7 @@ struct FitFlags {
   std::string sensor;
   std::string sensor_file;
   bool allow_other_frames = false;
-  std::string strategy = "ceres:10";
+  std::string strategy;  // "": ceres:10, or the encoder's default for a photometric trunk
   std::string out;
   std::string precision = "float";
   std::string jacobian = "analytic";
@@ -167,15 +176,56 @@ nlohmann::json FiniteOrNull(double value) {
 
 // ---- The command -------------------------------------------------------------------------
 
+// The photometric trunk's fit (header comment): `encode`'s own per-frame fit. Fills the
+// parts of a LatentFitter::Summary that describe it (no Ceres stage, no costs).
+LatentFitter::Summary FitPhotometric(const FunctaModel& model, SensorKind sensor,
+                                     const TrunkTargets& targets, const FitFlags& flags,
+                                     Eigen::VectorXd* latent) {
+  std::vector<std::string> direct_only;
+  if (!flags.functaset.empty()) direct_only.push_back("--functaset");
+  if (flags.precision != "float") direct_only.push_back("--precision");
+  if (flags.jacobian != "analytic") direct_only.push_back("--jacobian");
+  if (flags.sigma != 0) direct_only.push_back("--sigma");
+  if (flags.sigma_z != FitFlags().sigma_z) direct_only.push_back("--sigma-z");
+  if (flags.max_pixels != 0) direct_only.push_back("--max-pixels");
+  if (!direct_only.empty()) {
+    std::string names;
+    for (const std::string& name : direct_only) names += (names.empty() ? "" : ", ") + name;
+    throw UsageError(names + ": the " + ToString(sensor) + " trunk of '" + flags.model +
+                     "' is photometric; its latents are fitted with adam:N, knn+adam:N or "
+                     "knn (k-NN over the model's own warm-start table), which these options "
+                     "do not apply to");
+  }
+  LatentEncoder::Options options;
+  options.strategy = flags.strategy;
+  options.sensors = {sensor};
+  std::optional<LatentEncoder> encoder;
+  try {
+    encoder.emplace(model, options);
+  } catch (const std::invalid_argument& e) {
+    throw UsageError("--strategy " + flags.strategy + ": " + e.what());
+  }
+  const auto start = std::chrono::steady_clock::now();
+  const LatentEncoder::EncodedFrame fitted = encoder->EncodeTargets(sensor, targets);
+  LatentFitter::Summary summary;
+  summary.total_time_ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+          .count();
+  summary.strategy = encoder->StrategyOf(sensor);
+  summary.termination_type = FitTermination::kCompleted;
+  summary.psnr = fitted.psnr;
+  summary.iterations = summary.strategy.steps;
+  summary.initial_cost = summary.final_cost = std::numeric_limits<double>::quiet_NaN();
+  *latent = fitted.latent.cast<double>();
+  return summary;
+}
+
 void RunFit(const FitFlags& flags) {
   FitStrategy strategy;
   std::string error;
-  if (!FitStrategy::Parse(flags.strategy, &strategy, &error))
+  if (!flags.strategy.empty() && !FitStrategy::Parse(flags.strategy, &strategy, &error))
     throw UsageError("--strategy: " + error);
-  if (strategy.knn && flags.functaset.empty()) {
-    throw UsageError("--strategy " + flags.strategy +
-                     " needs --functaset (the k-NN search runs over its latents)");
-  }
+  if (flags.strategy.empty()) strategy = FitStrategy::FromString("ceres:10");
   LatentFitter::Options options;
   options.strategy = strategy;
   options.knn_k = flags.knn_k;
@@ -194,27 +244,6 @@ void RunFit(const FitFlags& flags) {
     throw UsageError("--jacobian: expected analytic or autodiff, got '" + flags.jacobian + "'");
   }
   if (!problem_options.IsValid(&error) || !options.IsValid(&error)) throw UsageError(error);
-
-  // Nothing fit writes -- --out's files, the k-NN index cached beside the functaset --
-  // may be a file it reads.
-  std::vector<NamedPath> inputs = {{"--model", flags.model},
-                                   {"--functaset", flags.functaset},
-                                   {"--frame", flags.frame},
-                                   {"--reference", flags.reference}};
-  if (!flags.sensor_file.empty()) inputs.push_back({"--sensor-file", flags.sensor_file});
-  std::vector<NamedPath> knn_files;
-  if (strategy.knn) {
-    for (const char* name : {"bubble", "gelslim"}) {
-      knn_files.push_back({"the k-NN index", flags.functaset + "." + name + ".knn"});
-    }
-    RefuseOutputsThatAreInputs(knn_files, inputs);
-  }
-  if (!flags.out.empty()) {
-    std::vector<NamedPath> outputs = FilesIn("--out", flags.out, {"latent.json", "fit.png"});
-    outputs.push_back({"--out", flags.out});
-    inputs.insert(inputs.end(), knn_files.begin(), knn_files.end());
-    RefuseOutputsThatAreInputs(outputs, inputs);
-  }
 
   // --sensor-file: the frames are raw camera frames of that sensor; its kind is the
   // sensor and its geometry is applied to both before they are compared.
@@ -240,6 +269,33 @@ void RunFit(const FitFlags& flags) {
                           "--allow-other-frames", flags.allow_other_frames);
   }
   const SensorTrunk& trunk = model.Trunk(sensor);
+  const bool photometric = trunk.photometric != nullptr;
+  if (photometric) strategy = FitStrategy();  // the k-NN below is the direct trunk's
+  if (strategy.knn && flags.functaset.empty()) {
+    throw UsageError("--strategy " + flags.strategy +
+                     " needs --functaset (the k-NN search runs over its latents)");
+  }
+  // Nothing fit writes -- --out's files, the k-NN index cached beside the functaset --
+  // may be a file it reads.
+  std::vector<NamedPath> inputs = {{"--model", flags.model},
+                                   {"--functaset", flags.functaset},
+                                   {"--frame", flags.frame},
+                                   {"--reference", flags.reference}};
+  if (!flags.sensor_file.empty()) inputs.push_back({"--sensor-file", flags.sensor_file});
+  std::vector<NamedPath> knn_files;
+  if (strategy.knn) {
+    for (const char* name : {"bubble", "gelslim"}) {
+      knn_files.push_back({"the k-NN index", flags.functaset + "." + name + ".knn"});
+    }
+    RefuseOutputsThatAreInputs(knn_files, inputs);
+  }
+  if (!flags.out.empty()) {
+    std::vector<NamedPath> outputs = FilesIn("--out", flags.out, {"latent.json", "fit.png"});
+    outputs.push_back({"--out", flags.out});
+    inputs.insert(inputs.end(), knn_files.begin(), knn_files.end());
+    RefuseOutputsThatAreInputs(outputs, inputs);
+  }
+
   const TrunkTargets targets = MakeTrunkTargets(frame, reference, sensor, trunk.format);
 
   // k-NN: the functaset's latents of this sensor and the index beside the functaset.
@@ -260,18 +316,27 @@ void RunFit(const FitFlags& flags) {
     latents = rows;  // LatentFitter takes the column-major M x d matrix
   }
 
-  const LatentFitter fitter = strategy.knn ? LatentFitter(trunk, options, index.get(), &latents)
-                                           : LatentFitter(trunk, options);
   Eigen::VectorXd latent;
-  const LatentProblem problem(trunk, targets, problem_options);
-  const LatentFitter::Summary summary = fitter.Fit(problem, &latent);
-
-  std::cout << (flags.full_report ? summary.FullReport() : summary.BriefReport() + "\n");
-  std::cout << "fit: " << ToString(sensor) << " " << targets.rows << "x" << targets.cols
-            << ", PSNR " << FormatFixed(summary.psnr, 2) << " dB in "
-            << FormatFixed(summary.total_time_ms, 1) << " ms (" << summary.strategy.ToString()
-            << ", " << ToString(problem_options.precision) << ", " << ToString(options.jacobian)
-            << ")\n";
+  LatentFitter::Summary summary;
+  if (photometric) {
+    summary = FitPhotometric(model, sensor, targets, flags, &latent);
+    std::cout << "fit: " << ToString(sensor) << " " << targets.rows << "x" << targets.cols
+              << ", PSNR " << FormatFixed(summary.psnr, 2) << " dB in "
+              << FormatFixed(summary.total_time_ms, 1) << " ms (" << summary.strategy.ToString()
+              << ", photometric trunk)\n";
+  } else {
+    const LatentFitter fitter = strategy.knn
+                                    ? LatentFitter(trunk, options, index.get(), &latents)
+                                    : LatentFitter(trunk, options);
+    const LatentProblem problem(trunk, targets, problem_options);
+    summary = fitter.Fit(problem, &latent);
+    std::cout << (flags.full_report ? summary.FullReport() : summary.BriefReport() + "\n");
+    std::cout << "fit: " << ToString(sensor) << " " << targets.rows << "x" << targets.cols
+              << ", PSNR " << FormatFixed(summary.psnr, 2) << " dB in "
+              << FormatFixed(summary.total_time_ms, 1) << " ms ("
+              << summary.strategy.ToString() << ", " << ToString(problem_options.precision)
+              << ", " << ToString(options.jacobian) << ")\n";
+  }
   if (strategy.knn && !summary.neighbor_labels.empty()) {
     const auto& entries = functaset.entries(sensor);
     std::cout << "fit: nearest functaset frame " << entries[summary.neighbor_labels[0]].id
@@ -296,10 +361,13 @@ void RunFit(const FitFlags& flags) {
         {"termination", ToString(summary.termination_type)},
         {"message", summary.message},
         {"iterations", summary.iterations},
-        {"initial_cost", summary.initial_cost},
-        {"final_cost", summary.final_cost},
-        {"precision", ToString(problem_options.precision)},
-        {"jacobian", ToString(options.jacobian)},
+        {"initial_cost", FiniteOrNull(summary.initial_cost)},
+        {"final_cost", FiniteOrNull(summary.final_cost)},
+        {"trunk", photometric ? "photometric" : "direct"},
+        {"precision", photometric ? nlohmann::json(nullptr)
+                                  : nlohmann::json(ToString(problem_options.precision))},
+        {"jacobian", photometric ? nlohmann::json(nullptr)
+                                 : nlohmann::json(ToString(options.jacobian))},
         {"frame", flags.frame},
         {"reference", flags.reference},
         {"model", flags.model},
@@ -331,8 +399,8 @@ void RegisterFit(CLI::App& app, CommandBody* selected) {
   CLI::App* sub = app.add_subcommand(
       "fit",
       "Fit the latent of one new frame with a trained model (meta-SGD, Ceres LM, k-NN over a "
-      "functaset, or k-NN refined); prints PSNR and time, optionally writes latent.json and "
-      "fit.png.");
+      "functaset, or k-NN refined; a photometric trunk as encode fits it); prints PSNR and "
+      "time, optionally writes latent.json and fit.png.");
   sub->add_option("--model", flags->model, "Model file (.tfm) from `tactfunc train`")->required();
   sub->add_option("--functaset", flags->functaset,
                   "Functaset (.tfs) of the model, for the knn strategies; its k-NN index is "
@@ -353,7 +421,10 @@ void RegisterFit(CLI::App& app, CommandBody* selected) {
                 "Fit even when --sensor-file is not the description the model's trunk was "
                 "trained on (a warning instead of an error)");
   sub->add_option("--strategy", flags->strategy,
-                  "knn, meta_sgd:K, ceres:N, knn+meta_sgd:K or knn+ceres:N (default ceres:10)");
+                  "knn, meta_sgd:K, ceres:N, knn+meta_sgd:K or knn+ceres:N (default ceres:10); "
+                  "for a photometric trunk adam:N, knn+adam:N or knn over the model's "
+                  "warm-start table (default: encode's, knn+adam:40 with a table, adam:200 "
+                  "without)");
   sub->add_option("--out", flags->out, "Folder for latent.json and fit.png (created)");
   sub->add_option("--precision", flags->precision, "float (default) or double trunk evaluations");
   sub->add_option("--jacobian", flags->jacobian,

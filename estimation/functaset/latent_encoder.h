@@ -18,9 +18,9 @@
 // Levenberg-Marquardt iterations on the frame's LatentProblem, estimation/fitting/
 // latent_problem.h, from z = 0, with Options::problem's sigma, sigma_z and robust loss).
 // A photometric trunk (models/trunk/photometric_trunk.h) is fitted by FitPhotometricLatent
-// instead: knn+adam:N (the default where the model holds a warm-start table, N = 20: the
-// best of 4 neighbours among the training latents, then N Adam steps from 1e-2,
-// estimation/training/photometric_warm_start.h), knn (that neighbour as it is) or adam:N
+// instead: knn+adam:N (the default where the model holds a warm-start table, N = 40: the
+// best of 4 neighbours among the training latents, then N Adam steps from 1e-2 on 64
+// pixels a step, estimation/training/photometric_warm_start.h), knn (that neighbour as it is) or adam:N
 // (N steps from the moment pose and its turn by pi; the default without a table, N = 200).
 // The functaset records the strategy of each sensor (Functaset::fit_strategy).
 //
@@ -186,6 +186,10 @@ class LatentEncoder {
   // frame format). Throws std::invalid_argument if the model has no trunk for the
   // sensor or the targets are not N x C of the trunk's working resolution.
   EncodedFrame EncodeTargets(SensorKind sensor, const TrunkTargets& targets) const;
+
+  // The fit a sensor's frames get (Options::strategy, or the trunk's default when it is
+  // ""). Throws std::invalid_argument if the model has no trunk for the sensor.
+  const FitStrategy& StrategyOf(SensorKind sensor) const { return State(sensor).strategy; }
 
  private:
   struct SensorState {

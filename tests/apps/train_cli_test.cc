@@ -140,6 +140,37 @@ TEST_F(TrainCliTest, ThePhotometricHeadTrainsEncodesAndReconstructsAnOpticalSens
     ASSERT_EQ(warm.exit_code, 0) << warm.err;
     EXPECT_EQ(Functaset::Load(Root("w.tfs")).fit_strategy(SensorKind::kGelSlim), strategy);
   }
+  // `fit` on one frame runs encode's own fit: the same latent, to the bit, for the same
+  // strategy; by default encode's default. The direct trunk's Ceres knobs are refused.
+  const Result warm = Run("encode --model " + Root("p.tfm") + " --data " + Root("g") +
+                          " --out " + Root("fw.tfs") + " --strategy knn+adam:3 --threads 1 "
+                          "--latent-precision float32");
+  ASSERT_EQ(warm.exit_code, 0) << warm.err;
+  const Functaset warm_set = Functaset::Load(Root("fw.tfs"));
+  const FunctasetEntry& first = warm_set.entries(SensorKind::kGelSlim)[0];
+  const std::string fit_args = "fit --model " + Root("p.tfm") + " --frame " + Root("g/gelslim/") +
+                               first.id + ".png --reference " + Root("g/gelslim/reference.png");
+  const Result fit = Run(fit_args + " --strategy knn+adam:3 --out " + Root("pf") + " --json");
+  ASSERT_EQ(fit.exit_code, 0) << fit.err;
+  EXPECT_EQ(fit.LastJson()["strategy"], "knn+adam:3");
+  EXPECT_NEAR(fit.LastJson()["psnr"].get<double>(), first.psnr, 1e-4);
+  const nlohmann::json record = nlohmann::json::parse(testing_util::Slurp(Root("pf/latent.json")));
+  EXPECT_EQ(record["trunk"], "photometric");
+  ASSERT_EQ(record["latent"].size(), 8u);
+  for (int k = 0; k < 8; ++k) {
+    EXPECT_EQ(static_cast<float>(record["latent"][k].get<double>()), first.latent[k]) << k;
+  }
+  EXPECT_TRUE(fs::exists(Root("pf/fit.png")));
+  const Result fit_default = Run(fit_args + " --json");
+  ASSERT_EQ(fit_default.exit_code, 0) << fit_default.err;
+  EXPECT_THAT(fit_default.LastJson()["strategy"].get<std::string>(), HasSubstr("knn+adam:"));
+  const Result knobs = Run(fit_args + " --max-pixels 100");
+  EXPECT_EQ(knobs.exit_code, 2);
+  EXPECT_THAT(knobs.err, HasSubstr("--max-pixels"));
+  const Result ceres = Run(fit_args + " --strategy ceres:3");
+  EXPECT_EQ(ceres.exit_code, 2);
+  EXPECT_THAT(ceres.err, HasSubstr("photometric"));
+
   // A model without the table (--no-warm-start, or trained before tables) refuses them
   // by name, and is smaller by the table.
   ASSERT_EQ(Run("train --data " + Root("g") + " --out " + Root("p_old.tfm") +
