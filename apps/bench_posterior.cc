@@ -16,7 +16,9 @@
 // of one posterior (fit + sampling + pose MLP, what PosePosterior::Summary::total_time_ms
 // measures). The pose MLP's point estimate g_phi(z*) at the latent fit z* (ceres:10, the
 // posterior's own fit settings) is reported beside, as the baseline the posterior mean
-// should not be worse than.
+// should not be worse than. A photometric trunk's frames are fitted as encode fits
+// them (LatentEncoder, the latents train-pose saw); that one fit is the point estimate's
+// latent and every sampler's start, and its time counts in each posterior's.
 //
 // Coverage bounds (decision): "coverage_bounds_99" is the central 99% interval of the
 // coverage a CALIBRATED sampler would show on N frames, [q_0.005, q_0.995] of
@@ -50,6 +52,7 @@
 #include "apps/progress_bar.h"
 #include "estimation/data/dataset.h"
 #include "estimation/functaset/functaset.h"
+#include "estimation/functaset/latent_encoder.h"
 #include "estimation/fitting/latent_fitter.h"
 #include "estimation/data/trunk_targets.h"
 #include "models/trunk/functa_model.h"
@@ -169,8 +172,11 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
   options.knn.k = flags.knn_k;
   options.sgld.minibatch_size = flags.sgld_minibatch;
   options.problem.max_pixels = flags.max_pixels;
-  // Centre on the latent map the pose MLP was trained on (estimation/posterior/pose_posterior.h).
-  options.fit.strategy = LatentMapOfPoseModel(pose_model, trunk);
+  // Centre on the latent map the pose MLP was trained on (estimation/posterior/pose_posterior.h);
+  // a photometric trunk's latent is fitted as encode fits it (LatentEncoder), and every
+  // sampler starts from that fit, whose time counts in each posterior's.
+  const bool photometric = trunk.photometric != nullptr;
+  if (!photometric) options.fit.strategy = LatentMapOfPoseModel(pose_model, trunk);
   options.model_error = !flags.no_model_error;
   options.sgld.num_threads = 1;  // one core, as the header says (chains run serially)
   if (flags.sigma_z > 0) options.problem.sigma_z = flags.sigma_z;
@@ -187,7 +193,7 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
   std::unique_ptr<KnnPoseStarts> knn_starts;
   std::unique_ptr<GeneratorPosterior> generator_posterior;
   if (!flags.generator.empty()) {
-    if (sensor != SensorKind::kSoftBubble) {
+    if (sensor != SensorKind::kSoftBubble || photometric) {
       throw UsageError("--generator: the generator path models Soft Bubble frames, not " +
                        std::string(ToString(sensor)));
     }
@@ -210,14 +216,22 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
   // calibration).
   const PosePosterior::Options& resolved = posteriors.front()->options();
   const LatentFitter::Options& fit_options = resolved.fit;
-  const LatentFitter fitter(trunk, fit_options);
-  // ... and at the functaset's own latent map, K meta-SGD steps from 0 (what `encode`
-  // stores and train-pose trains on): the gap between the two is the pose MLP's
-  // sensitivity to which latent estimate it is given.
-  LatentFitter::Options meta_options = fit_options;
-  meta_options.strategy =
-      FitStrategy::FromString("meta_sgd:" + std::to_string(trunk.meta_sgd.inner_steps));
-  const LatentFitter meta_fitter(trunk, meta_options);
+  std::optional<LatentFitter> fitter, meta_fitter;
+  std::optional<LatentEncoder> encoder;
+  if (photometric) {
+    LatentEncoder::Options encoder_options;
+    encoder_options.sensors = {sensor};
+    encoder.emplace(model, encoder_options);
+  } else {
+    fitter.emplace(trunk, fit_options);
+    // ... and at the functaset's own latent map, K meta-SGD steps from 0 (what `encode`
+    // stores and train-pose trains on): the gap between the two is the pose MLP's
+    // sensitivity to which latent estimate it is given.
+    LatentFitter::Options meta_options = fit_options;
+    meta_options.strategy =
+        FitStrategy::FromString("meta_sgd:" + std::to_string(trunk.meta_sgd.inner_steps));
+    meta_fitter.emplace(trunk, meta_options);
+  }
 
   std::cout << "bench posterior: " << num_frames << " labelled " << ToString(sensor)
             << " test frames of " << flags.data << ", " << flags.samples << " samples, samplers "
@@ -248,14 +262,26 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
     const PoseLabel& label = *dataset.frames()[index].label;
     const int n = dataset.ToolSymmetryOrder(label.tool);
     const TrunkTargets targets = LoadTrunkTargets(dataset, index, trunk.format);
-    const LatentProblem problem(trunk, targets, resolved.problem);
     ByteWriter record;
     Eigen::VectorXd latent;
-    fitter.Fit(problem, &latent);
-    PutPose(pose_model.Predict(latent, n), &record);
-    Eigen::VectorXd meta_latent;
-    meta_fitter.Fit(problem, &meta_latent);
-    PutPose(pose_model.Predict(meta_latent, n), &record);
+    double fit_ms = 0;  // the photometric fit's, added to each posterior's time
+    if (photometric) {
+      // encode's fit is both the point estimate's latent and the functaset's map.
+      const auto start = std::chrono::steady_clock::now();
+      latent = encoder->EncodeTargets(sensor, targets).latent.cast<double>();
+      fit_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() -
+                                                         start)
+                   .count();
+      PutPose(pose_model.Predict(latent, n), &record);
+      PutPose(pose_model.Predict(latent, n), &record);
+    } else {
+      const LatentProblem problem(trunk, targets, resolved.problem);
+      fitter->Fit(problem, &latent);
+      PutPose(pose_model.Predict(latent, n), &record);
+      Eigen::VectorXd meta_latent;
+      meta_fitter->Fit(problem, &meta_latent);
+      PutPose(pose_model.Predict(meta_latent, n), &record);
+    }
     if (generator_posterior) {
       const SE2d& label_pose = label.sensor_T_object;
       PoseMixture mixture;
@@ -279,7 +305,14 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
     }
     for (std::size_t s = 0; s < num_latent; ++s) {
       std::optional<PoseDistribution> distribution;
-      const PosePosterior::Summary summary = posteriors[s]->Estimate(targets, n, &distribution);
+      PosePosterior::Summary summary;
+      if (photometric) {
+        summary = posteriors[s]->Estimate(targets, latent, n, &distribution);
+        summary.fit_time_ms = fit_ms;
+        summary.total_time_ms += fit_ms;
+      } else {
+        summary = posteriors[s]->Estimate(targets, n, &distribution);
+      }
       record.Put(summary.total_time_ms);
       record.Put(summary.total_time_ms - summary.fit_time_ms);
       const bool usable = summary.IsSolutionUsable() && distribution.has_value();

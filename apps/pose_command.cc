@@ -68,6 +68,7 @@
 #include "estimation/data/image_io.h"
 #include "estimation/data/preprocess.h"
 #include "estimation/functaset/functaset.h"
+#include "estimation/functaset/latent_encoder.h"
 #include "estimation/data/trunk_targets.h"
 #include "models/core/atomic_file.h"
 #include "models/trunk/functa_model.h"
@@ -791,9 +792,16 @@ void RunLatentPose(const PoseFlags& flags, PosteriorSampler sampler, const Funct
   options.seed = flags.seed;
   options.knn.k = flags.knn_k;
   options.sgld.minibatch_size = flags.sgld_minibatch;
+  const SensorTrunk& trunk = model.Trunk(sensor);
+  const bool photometric = trunk.photometric != nullptr;
+  if (photometric && flags.max_pixels >= 0) {
+    throw UsageError("--max-pixels: the " + std::string(ToString(sensor)) + " trunk of '" +
+                     flags.model + "' is photometric; its posterior uses every valid pixel");
+  }
   if (flags.max_pixels >= 0) options.problem.max_pixels = flags.max_pixels;
-  // Centre on the latent map the pose MLP was trained on (estimation/posterior/pose_posterior.h).
-  options.fit.strategy = LatentMapOfPoseModel(pose_model, model.Trunk(sensor));
+  // Centre on the latent map the pose MLP was trained on (estimation/posterior/pose_posterior.h);
+  // a photometric trunk's latent is fitted below as encode fits it.
+  if (!photometric) options.fit.strategy = LatentMapOfPoseModel(pose_model, trunk);
   options.model_error = !flags.no_model_error;
   std::string error;
   if (!options.IsValid(&error)) throw UsageError(error);
@@ -803,9 +811,30 @@ void RunLatentPose(const PoseFlags& flags, PosteriorSampler sampler, const Funct
     functaset.CheckModel(model, flags.model, flags.functaset);
     knn = MakeFunctasetKnn(functaset, sensor, /*train_only=*/true, options.knn, flags.functaset);
   }
-  const PosePosterior posterior(model.Trunk(sensor), pose_model, options, knn.posterior.get());
+  const PosePosterior posterior(trunk, pose_model, options, knn.posterior.get());
   std::optional<PoseDistribution> distribution;
-  const PosePosterior::Summary summary = posterior.Estimate(targets, n, &distribution);
+  PosePosterior::Summary summary;
+  if (photometric) {
+    // encode's own fit of the frame (the latents train-pose saw), then the posterior
+    // about it; the fit's time counts in the total.
+    LatentEncoder::Options encoder_options;
+    encoder_options.sensors = {sensor};
+    const LatentEncoder encoder(model, encoder_options);
+    const auto start = std::chrono::steady_clock::now();
+    const Eigen::VectorXd latent =
+        encoder.EncodeTargets(sensor, targets).latent.cast<double>();
+    const double fit_ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+            .count();
+    summary = posterior.Estimate(targets, latent, n, &distribution);
+    summary.fit_time_ms = fit_ms;
+    summary.total_time_ms += fit_ms;
+    std::cout << "pose: the latent fitted as encode fits it ("
+              << encoder.StrategyOf(sensor).ToString() << ", " << FormatFixed(fit_ms, 1)
+              << " ms); " << ToString(sampler) << " samples the photometric trunk's posterior\n";
+  } else {
+    summary = posterior.Estimate(targets, n, &distribution);
+  }
   std::cout << summary.BriefReport() << "\n";
   if (!summary.IsSolutionUsable() || !distribution) {
     throw std::runtime_error("the " + flags.sampler + " posterior failed: " + summary.message);

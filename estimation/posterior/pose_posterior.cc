@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <memory>
 #include <sstream>
 #include <stdexcept>
 #include <utility>
@@ -15,6 +16,7 @@
 #include <nlohmann/json.hpp>
 
 #include "models/core/seed.h"
+#include "samplers/photometric_potential.h"
 #include "models/pose/pose_model_provenance.h"
 #include "models/simulator/tool.h"
 
@@ -162,13 +164,17 @@ PosePosterior::PosePosterior(const SensorTrunk& trunk, const PoseMlp& pose_mlp,
     : trunk_(&trunk),
       pose_mlp_(&pose_mlp),
       options_(WithPoseModelSigma(options, pose_mlp)),
-      knn_(knn),
-      fitter_(trunk, FitOptions(options_)),
-      query_fitter_(trunk, QueryOptions(options_, trunk)) {
-  if (pose_mlp.input_dim() != trunk.siren.latent_dim()) {
+      knn_(knn) {
+  if (trunk.photometric == nullptr) {
+    fitter_.emplace(trunk, FitOptions(options_));
+    query_fitter_.emplace(trunk, QueryOptions(options_, trunk));
+  } else {
+    FitOptions(options_);  // validates the options
+  }
+  if (pose_mlp.input_dim() != TrunkLatentDim(trunk)) {
     throw std::invalid_argument("PosePosterior: the pose MLP takes latents of size " +
                                 std::to_string(pose_mlp.input_dim()) + ", the trunk makes " +
-                                std::to_string(trunk.siren.latent_dim()));
+                                std::to_string(TrunkLatentDim(trunk)));
   }
   if (options.sampler == PosteriorSampler::kKnn && knn == nullptr) {
     throw std::invalid_argument("PosePosterior: the knn sampler needs a KnnPosterior");
@@ -185,7 +191,7 @@ PosePosterior::Summary PosePosterior::Estimate(const TrunkTargets& targets,
                                                const Eigen::VectorXd& latent, int symmetry_order,
                                                std::optional<PoseDistribution>* posterior,
                                                Eigen::MatrixXd* latent_samples) const {
-  const int d = trunk_->siren.latent_dim();
+  const int d = TrunkLatentDim(*trunk_);
   if (latent.size() != d || !latent.allFinite()) {
     throw std::invalid_argument("PosePosterior::Estimate: expected a finite latent of size " +
                                 std::to_string(d) + ", got size " + std::to_string(latent.size()));
@@ -207,7 +213,13 @@ PosePosterior::Summary PosePosterior::EstimateImpl(const TrunkTargets& targets,
                                 std::to_string(symmetry_order));
   }
   posterior->reset();
-  const int d = trunk_->siren.latent_dim();
+  const int d = TrunkLatentDim(*trunk_);
+  const bool photometric = trunk_->photometric != nullptr;
+  if (photometric && latent == nullptr) {
+    throw std::invalid_argument(
+        "PosePosterior::Estimate: a photometric trunk's latent must be given (fit it as "
+        "encode does, LatentEncoder::EncodeTargets)");
+  }
   Summary summary;
   summary.sampler = options_.sampler;
   summary.symmetry_order = symmetry_order;
@@ -219,8 +231,19 @@ PosePosterior::Summary PosePosterior::EstimateImpl(const TrunkTargets& targets,
     return summary;
   };
 
-  // The frame's one latent problem: the fit finds its mode, the samplers sample it.
-  const LatentProblem problem(*trunk_, targets, options_.problem);
+  // The frame's one latent problem: the fit finds its mode, the samplers sample it (a
+  // photometric trunk: its potential, header comment).
+  std::optional<LatentProblem> problem;
+  std::unique_ptr<LatentPotential> potential;
+  if (photometric) {
+    const double sigma = options_.problem.sigma > 0 ? options_.problem.sigma
+                                                    : LatentProblem::AutomaticSigma(*trunk_);
+    potential = std::make_unique<PhotometricPotential>(*trunk_->photometric, targets, sigma,
+                                                       options_.problem.sigma_z);
+  } else {
+    problem.emplace(*trunk_, targets, options_.problem);
+    potential = std::make_unique<TrunkPotential>(*problem);
+  }
 
   // The latent the sampler starts from: given, or fitted.
   auto t = std::chrono::steady_clock::now();
@@ -229,8 +252,8 @@ PosePosterior::Summary PosePosterior::EstimateImpl(const TrunkTargets& targets,
     z0 = *latent;
   } else {
     const LatentFitter& fitter =
-        options_.sampler == PosteriorSampler::kKnn ? query_fitter_ : fitter_;
-    summary.fit_summary = fitter.Fit(problem, &z0);
+        options_.sampler == PosteriorSampler::kKnn ? *query_fitter_ : *fitter_;
+    summary.fit_summary = fitter.Fit(*problem, &z0);
     summary.fit_ran = true;
     if (!summary.fit_summary.IsSolutionUsable() &&
         summary.fit_summary.termination_type != FitTermination::kNoValidPixels) {
@@ -253,14 +276,13 @@ PosePosterior::Summary PosePosterior::EstimateImpl(const TrunkTargets& targets,
     poses = neighbours->samples();
     weights = neighbours->weights();
   } else {
-    const TrunkPotential potential(problem);
     if (options_.sampler == PosteriorSampler::kSgld) {
       Sgld::Options sgld_options = options_.sgld;
       sgld_options.seed = options_.seed;
       sgld_options.num_samples_per_chain =
           (options_.num_samples + sgld_options.num_chains - 1) / sgld_options.num_chains;
       const Sgld sgld(sgld_options);
-      summary.sgld_summary = sgld.Sample(potential, z0, &z_samples);
+      summary.sgld_summary = sgld.Sample(*potential, z0, &z_samples);
       summary.sample_time_ms = MsSince(t);
       if (!summary.sgld_summary.IsSolutionUsable()) {
         return fail("SGLD: " + summary.sgld_summary.message);
@@ -273,7 +295,7 @@ PosePosterior::Summary PosePosterior::EstimateImpl(const TrunkTargets& targets,
       laplace_options.seed = options_.seed;
       laplace_options.num_samples = options_.num_samples;
       const LaplaceSampler laplace(laplace_options);
-      summary.laplace_summary = laplace.Sample(potential, z0, &z_samples);
+      summary.laplace_summary = laplace.Sample(*potential, z0, &z_samples);
       summary.sample_time_ms = MsSince(t);
       if (!summary.laplace_summary.IsSolutionUsable()) {
         return fail("Laplace: " + summary.laplace_summary.message);

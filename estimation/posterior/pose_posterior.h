@@ -26,6 +26,13 @@
 // With Estimate(targets, latent, ...) the given latent replaces the fit (the mode for
 // laplace, the start for sgld, the query for knn).
 //
+// A photometric trunk (models/trunk/photometric_trunk.h) has no LatentProblem: its
+// latent must be given (fitted as `encode` fits it, LatentEncoder::EncodeTargets), and
+// sgld and laplace sample samplers/photometric_potential.h's U over every valid pixel
+// with the same sigma rule (Options::problem's sigma and sigma_z; its other fields do
+// not apply). Its Laplace Hessian comes from 2 d whole-frame passes (central
+// differences), far slower than the direct trunk's analytic one.
+//
 // Each frame has one LatentProblem (estimation/fitting/latent_problem.h, Options::problem):
 // the fit finds its mode and the samplers sample it, so z* is the mode of the U sampled.
 //
@@ -170,8 +177,9 @@ class PosePosterior {
   const PoseMlp* pose_mlp_;
   Options options_;
   const KnnPosterior* knn_;
-  LatentFitter fitter_;
-  LatentFitter query_fitter_;  // meta-SGD query of the knn sampler
+  // The direct trunk's fits (none for a photometric trunk, whose latent is given).
+  std::optional<LatentFitter> fitter_;
+  std::optional<LatentFitter> query_fitter_;  // meta-SGD query of the knn sampler
 };
 
 // The calibration residuals of `model` (PoseMlp::calibration_residuals: R x 3,

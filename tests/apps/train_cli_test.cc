@@ -171,6 +171,27 @@ TEST_F(TrainCliTest, ThePhotometricHeadTrainsEncodesAndReconstructsAnOpticalSens
   EXPECT_EQ(ceres.exit_code, 2);
   EXPECT_THAT(ceres.err, HasSubstr("photometric"));
 
+  // Pose posteriors on photometric latents: a pose MLP on the functaset, then each
+  // latent sampler about encode's fit of one frame.
+  const Result pose_train = Run("train-pose --functaset " + Root("fw.tfs") + " --out " +
+                                Root("p.tpm") + " --epochs 2 --hidden 8 --batch 4");
+  ASSERT_EQ(pose_train.exit_code, 0) << pose_train.err;
+  for (const char* sampler : {"laplace", "sgld", "knn"}) {
+    const Result pose = Run("pose --model " + Root("p.tfm") + " --pose-model " + Root("p.tpm") +
+                            " --functaset " + Root("fw.tfs") + " --data " + Root("g") +
+                            " --id " + first.id + " --sampler " + sampler +
+                            " --samples 8 --json");
+    ASSERT_EQ(pose.exit_code, 0) << sampler << ": " << pose.err;
+    EXPECT_EQ(pose.LastJson()["sampler"], sampler);
+    EXPECT_THAT(pose.out, HasSubstr("the latent fitted as encode fits it (knn+adam:"))
+        << sampler;
+  }
+  const Result pose_pixels = Run("pose --model " + Root("p.tfm") + " --pose-model " +
+                                 Root("p.tpm") + " --data " + Root("g") + " --id " + first.id +
+                                 " --sampler laplace --max-pixels 10");
+  EXPECT_EQ(pose_pixels.exit_code, 2);
+  EXPECT_THAT(pose_pixels.err, HasSubstr("photometric"));
+
   // A model without the table (--no-warm-start, or trained before tables) refuses them
   // by name, and is smaller by the table.
   ASSERT_EQ(Run("train --data " + Root("g") + " --out " + Root("p_old.tfm") +

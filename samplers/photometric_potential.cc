@@ -1,0 +1,133 @@
+// Copyright 2026 The tactfunc Authors.
+#include "samplers/photometric_potential.h"
+
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+namespace tactfunc {
+
+PhotometricPotential::PhotometricPotential(const PhotometricTrunk& trunk,
+                                           const TrunkTargets& targets, double sigma,
+                                           double sigma_z)
+    : trunk_(&trunk), sigma_(sigma), sigma_z_(sigma_z) {
+  const int rows = trunk.options().rows, cols = trunk.options().cols;
+  const int channels = trunk.channels();
+  const Eigen::Index n = static_cast<Eigen::Index>(rows) * cols;
+  if (targets.values.rows() != n || targets.values.cols() != channels ||
+      (targets.weights.size() != 0 && targets.weights.size() != n)) {
+    throw std::invalid_argument(
+        "PhotometricPotential: the trunk expects " + std::to_string(n) + " x " +
+        std::to_string(channels) + " targets (" + std::to_string(rows) + " x " +
+        std::to_string(cols) + " pixels) and as many weights, found " +
+        std::to_string(targets.values.rows()) + " x " + std::to_string(targets.values.cols()) +
+        " and " + std::to_string(targets.weights.size()));
+  }
+  if (!(sigma > 0) || !std::isfinite(sigma) || !(sigma_z > 0) || !std::isfinite(sigma_z)) {
+    throw std::invalid_argument("PhotometricPotential: sigma and sigma_z must be finite and > 0, "
+                                "found " + std::to_string(sigma) + " and " +
+                                std::to_string(sigma_z));
+  }
+  for (Eigen::Index j = 0; j < n; ++j) {
+    const float w = targets.weights.size() == 0 ? 1.0f : targets.weights[j];
+    if (!(w >= 0) || !std::isfinite(w)) {
+      throw std::invalid_argument("PhotometricPotential: weight " + std::to_string(j) +
+                                  " is " + std::to_string(w) + ", expected finite and >= 0");
+    }
+    if (w > 0) pixels_.push_back(static_cast<int>(j));
+  }
+  const Eigen::Index m = static_cast<Eigen::Index>(pixels_.size());
+  values_.resize(m, channels);
+  weights_.resize(m);
+  for (Eigen::Index i = 0; i < m; ++i) {
+    values_.row(i) = targets.values.row(pixels_[i]);
+    weights_[i] = targets.weights.size() == 0 ? 1.0f : targets.weights[pixels_[i]];
+  }
+}
+
+double PhotometricPotential::EvaluateOn(const Eigen::VectorXd& z, const std::vector<int>& subset,
+                                        double scale, Eigen::VectorXd* gradient) const {
+  if (z.size() != dim()) {
+    throw std::invalid_argument("PhotometricPotential: expected a latent of " +
+                                std::to_string(dim()) + " values, found " +
+                                std::to_string(z.size()));
+  }
+  double u = 0.5 * z.squaredNorm() / (sigma_z_ * sigma_z_);
+  if (gradient != nullptr) *gradient = z / (sigma_z_ * sigma_z_);
+  if (subset.empty()) return u;
+  std::vector<int> pixels(subset.size());
+  Eigen::MatrixXf values(static_cast<Eigen::Index>(subset.size()), values_.cols());
+  Eigen::VectorXf weights(static_cast<Eigen::Index>(subset.size()));
+  double weight_sum = 0;
+  for (std::size_t i = 0; i < subset.size(); ++i) {
+    pixels[i] = pixels_[subset[i]];
+    values.row(static_cast<Eigen::Index>(i)) = values_.row(subset[i]);
+    weights[static_cast<Eigen::Index>(i)] = weights_[subset[i]];
+    weight_sum += weights_[subset[i]];
+  }
+  // LossAndGradient's loss is sum_j w_j ||y_j - t_j||^2 / (C sum_j w_j).
+  const double to_u = scale * values_.cols() * weight_sum / (2.0 * sigma_ * sigma_);
+  Eigen::VectorXf dz;
+  const double loss = trunk_->LossAndGradient<float>(
+      pixels, z.cast<float>(), values, weights, gradient != nullptr ? &dz : nullptr, nullptr,
+      nullptr);
+  u += to_u * loss;
+  if (gradient != nullptr) *gradient += to_u * dz.cast<double>();
+  return u;
+}
+
+double PhotometricPotential::Evaluate(const Eigen::VectorXd& z,
+                                      Eigen::VectorXd* gradient) const {
+  std::vector<int> all(pixels_.size());
+  for (std::size_t i = 0; i < all.size(); ++i) all[i] = static_cast<int>(i);
+  return EvaluateOn(z, all, 1.0, gradient);
+}
+
+double PhotometricPotential::EvaluateMinibatch(const Eigen::VectorXd& z,
+                                               const std::vector<int>& indices,
+                                               Eigen::VectorXd* gradient) const {
+  for (int i : indices) {
+    if (i < 0 || i >= NumDataTerms()) {
+      throw std::invalid_argument("PhotometricPotential: data term " + std::to_string(i) +
+                                  " is outside [0, " + std::to_string(NumDataTerms()) + ")");
+    }
+  }
+  const double scale =
+      indices.empty() ? 0.0 : static_cast<double>(NumDataTerms()) / indices.size();
+  return EvaluateOn(z, indices, scale, gradient);
+}
+
+bool PhotometricPotential::GaussNewtonHessian(const Eigen::VectorXd& z,
+                                              Eigen::MatrixXd* hessian) const {
+  if (z.size() != dim()) {
+    throw std::invalid_argument("PhotometricPotential: expected a latent of " +
+                                std::to_string(dim()) + " values, found " +
+                                std::to_string(z.size()));
+  }
+  const int d = dim();
+  const Eigen::Index rows = values_.rows() * values_.cols();
+  // J with each row scaled by sqrt(w_j) / sigma: H = J^T J + I / sigma_z^2.
+  Eigen::MatrixXd J(rows, d);
+  Eigen::VectorXd row_scale(rows);
+  for (Eigen::Index i = 0; i < values_.rows(); ++i) {
+    for (Eigen::Index c = 0; c < values_.cols(); ++c) {
+      row_scale[c * values_.rows() + i] = std::sqrt(static_cast<double>(weights_[i])) / sigma_;
+    }
+  }
+  for (int k = 0; k < d; ++k) {
+    Eigen::VectorXd up = z, down = z;
+    up[k] += kJacobianStep;
+    down[k] -= kJacobianStep;
+    const Eigen::MatrixXf y_up = trunk_->Forward<float>(pixels_, up.cast<float>());
+    const Eigen::MatrixXf y_down = trunk_->Forward<float>(pixels_, down.cast<float>());
+    // Column-major N x C flattened: channel c's pixels are rows c N .. (c + 1) N - 1.
+    const Eigen::Map<const Eigen::VectorXf> a(y_up.data(), rows), b(y_down.data(), rows);
+    J.col(k) = (a - b).cast<double>().cwiseProduct(row_scale) / (2.0 * kJacobianStep);
+  }
+  if (!J.allFinite()) return false;
+  hessian->noalias() = J.transpose() * J;
+  hessian->diagonal().array() += 1.0 / (sigma_z_ * sigma_z_);
+  return true;
+}
+
+}  // namespace tactfunc
