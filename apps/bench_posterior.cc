@@ -468,11 +468,17 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
     }
     std::printf("\n");
   }
-  std::printf("pose MLP point estimate g(z*), z* = the posterior's fit: %.3f mm, %.2f deg\n",
-              point_mm, point_deg);
-  std::printf("pose MLP point estimate g(z_K), z_K = %d meta-SGD steps (the functaset's latent "
-              "map): %.3f mm, %.2f deg\n",
-              trunk.meta_sgd.inner_steps, meta_mm, meta_deg);
+  if (photometric) {
+    std::printf("pose MLP point estimate g(z*), z* = encode's %s fit (the functaset's latent "
+                "map and every sampler's start): %.3f mm, %.2f deg\n",
+                encoder->StrategyOf(sensor).ToString().c_str(), point_mm, point_deg);
+  } else {
+    std::printf("pose MLP point estimate g(z*), z* = the posterior's fit: %.3f mm, %.2f deg\n",
+                point_mm, point_deg);
+    std::printf("pose MLP point estimate g(z_K), z_K = %d meta-SGD steps (the functaset's "
+                "latent map): %.3f mm, %.2f deg\n",
+                trunk.meta_sgd.inner_steps, meta_mm, meta_deg);
+  }
   std::printf("(coverage: fraction of frames whose true pose lies in the nominal region; "
               "[band] = central 99%% range for a calibrated sampler on %d frames, '!' = outside; "
               "RMSE of the posterior mean, yaw modulo symmetry)\n",
