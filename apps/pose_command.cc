@@ -115,7 +115,7 @@ struct PoseFlags {
   std::string id;
   std::string sensor;
   std::string tool;
-  std::string sampler = "sgld";
+  std::string sampler;  // "": sgld, or laplace for a photometric trunk
   std::string method = "latent";
   std::string generator;
   int samples = 100;
@@ -623,7 +623,7 @@ void RunPose(const PoseFlags& flags) {
     throw UsageError("--method both: give --generator (the generator path's model)");
   }
   PosteriorSampler sampler = PosteriorSampler::kSgld;
-  if (!PosteriorSamplerFromString(flags.sampler, &sampler)) {
+  if (!flags.sampler.empty() && !PosteriorSamplerFromString(flags.sampler, &sampler)) {
     MetropolisKernel kernel;
     if (!ParseMetropolisKernel(flags.sampler, &kernel)) {
       throw UsageError("--sampler: expected sgld, laplace or knn (--method latent) or mala, rwm "
@@ -794,6 +794,9 @@ void RunLatentPose(const PoseFlags& flags, PosteriorSampler sampler, const Funct
   options.sgld.minibatch_size = flags.sgld_minibatch;
   const SensorTrunk& trunk = model.Trunk(sensor);
   const bool photometric = trunk.photometric != nullptr;
+  // A photometric trunk's default is laplace: its sgld chains wander off the fit with
+  // the contact's pose values (docs/POSES.md, "Pose posteriors on a photometric trunk").
+  if (photometric && flags.sampler.empty()) sampler = PosteriorSampler::kLaplace;
   if (photometric && flags.max_pixels >= 0) {
     throw UsageError("--max-pixels: the " + std::string(ToString(sensor)) + " trunk of '" +
                      flags.model + "' is photometric; its posterior uses every valid pixel");
@@ -837,7 +840,8 @@ void RunLatentPose(const PoseFlags& flags, PosteriorSampler sampler, const Funct
   }
   std::cout << summary.BriefReport() << "\n";
   if (!summary.IsSolutionUsable() || !distribution) {
-    throw std::runtime_error("the " + flags.sampler + " posterior failed: " + summary.message);
+    throw std::runtime_error(std::string("the ") + ToString(sampler) +
+                             " posterior failed: " + summary.message);
   }
 
   const SE2d& mean = summary.mean;
@@ -954,7 +958,8 @@ void RegisterPose(CLI::App& app, CommandBody* selected) {
   sub->add_flag("--unknown-tool", flags->unknown_tool,
                 "--method generator: ignore the label's tool and fit every tool");
   sub->add_option("--sampler", flags->sampler,
-                  "sgld (default, the paper's), laplace or knn (--method latent); mala or rwm "
+                  "sgld (default, the paper's; laplace for a photometric trunk), laplace or "
+                  "knn (--method latent); mala or rwm "
                   "(--method generator: MCMC over the pose instead of draws from the Laplace "
                   "mixture)");
   sub->add_option("--samples", flags->samples,

@@ -186,6 +186,11 @@ TEST_F(TrainCliTest, ThePhotometricHeadTrainsEncodesAndReconstructsAnOpticalSens
     EXPECT_THAT(pose.out, HasSubstr("the latent fitted as encode fits it (knn+adam:"))
         << sampler;
   }
+  const Result pose_default = Run("pose --model " + Root("p.tfm") + " --pose-model " +
+                                  Root("p.tpm") + " --data " + Root("g") + " --id " + first.id +
+                                  " --samples 8 --json");
+  ASSERT_EQ(pose_default.exit_code, 0) << pose_default.err;
+  EXPECT_EQ(pose_default.LastJson()["sampler"], "laplace");
   const Result pose_pixels = Run("pose --model " + Root("p.tfm") + " --pose-model " +
                                  Root("p.tpm") + " --data " + Root("g") + " --id " + first.id +
                                  " --sampler laplace --max-pixels 10");
