@@ -533,14 +533,22 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
       }
       // The pose model reads the kind of latent it was trained on (its latent map,
       // PosePosterior's rule): the functaset's own latents if they were fitted that way,
-      // else the frames re-fitted with that map, as train-pose --refit fitted them.
+      // else the frames re-fitted with that map, as train-pose --refit fitted them. A
+      // photometric trunk's latents are encode's fits, which train-pose trains on; no
+      // other map exists for it (train-pose --refit fits the direct trunk's problem).
+      const bool photometric = trunk.photometric != nullptr;
+      if (photometric && provenance.latent_map != "functaset") {
+        throw DatasetError("the pose model reads " + provenance.latent_map + " latents, which "
+                           "the photometric " + ToString(sensor) + " trunk does not fit; train "
+                           "it on the functaset's latents (train-pose without --refit)");
+      }
       const FitStrategy latent_map = LatentMapOfPoseModel(pose_model, trunk);
       const std::string stored =
           functaset.fit_strategy(sensor).empty()
               ? "meta_sgd:" + std::to_string(trunk.meta_sgd.inner_steps)
               : functaset.fit_strategy(sensor);
       Eigen::MatrixXf latents(static_cast<Eigen::Index>(m), d);
-      if (latent_map.ToString() == stored) {
+      if (photometric || latent_map.ToString() == stored) {
         for (std::size_t i = 0; i < m; ++i) latents.row(i) = s.entries[i]->latent.transpose();
       } else {
         LatentFitter::Options fit;
@@ -573,7 +581,7 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
         message("eval: the pose model reads " + latent_map.ToString() + " latents, the functaset holds " +
                 stored + " ones: re-fitted every " + ToString(sensor) + " frame for the pose rows\n");
       }
-      tf_pose_latents = latent_map.ToString();
+      tf_pose_latents = photometric ? stored : latent_map.ToString();
       const Eigen::MatrixXf codes = full_codes.leftCols(pca_n);
       const int factor = options.raw_downsample;
       Eigen::MatrixXf pixels;

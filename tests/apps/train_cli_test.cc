@@ -186,6 +186,13 @@ TEST_F(TrainCliTest, ThePhotometricHeadTrainsEncodesAndReconstructsAnOpticalSens
     EXPECT_THAT(pose.out, HasSubstr("the latent fitted as encode fits it (knn+adam:"))
         << sampler;
   }
+  // eval's pose rows read the functaset's own latents (encode's fits, what train-pose saw).
+  const Result eval = Run("eval --data " + Root("g") + " --model " + Root("p.tfm") +
+                          " --functaset " + Root("fw.tfs") + " --pose-model " + Root("p.tpm") +
+                          " --out " + Root("pe") + " --threads 1");
+  ASSERT_EQ(eval.exit_code, 0) << eval.err;
+  EXPECT_THAT(testing_util::Slurp(Root("pe/table.md")),
+              HasSubstr("pose MLP on knn+adam:3 latents"));
   const Result pose_default = Run("pose --model " + Root("p.tfm") + " --pose-model " +
                                   Root("p.tpm") + " --data " + Root("g") + " --id " + first.id +
                                   " --samples 8 --json");
