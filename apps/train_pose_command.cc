@@ -212,6 +212,12 @@ void RunTrainPose(const TrainPoseFlags& flags) {
       throw UsageError("--refit: expected meta_sgd:K or ceres:N, got '" + flags.refit + "'");
     }
     const SensorTrunk& trunk = model.Trunk(sensor);
+    if (trunk.photometric != nullptr) {
+      throw UsageError("--refit: the " + std::string(ToString(sensor)) + " trunk of '" +
+                       flags.model + "' is photometric; its latents are encode's fits, which "
+                       "the functaset already holds (train without --refit, or encode again "
+                       "with another --strategy)");
+    }
     const LatentFitter fitter(trunk, fit);
     refitted = Functaset(functaset.model_checksum(), functaset.dataset());
     refitted.AddSensor(sensor, functaset.latent_dim(sensor));

@@ -176,6 +176,12 @@ TEST_F(TrainCliTest, ThePhotometricHeadTrainsEncodesAndReconstructsAnOpticalSens
   const Result pose_train = Run("train-pose --functaset " + Root("fw.tfs") + " --out " +
                                 Root("p.tpm") + " --epochs 2 --hidden 8 --batch 4");
   ASSERT_EQ(pose_train.exit_code, 0) << pose_train.err;
+  const Result refit = Run("train-pose --functaset " + Root("fw.tfs") + " --out " +
+                           Root("p2.tpm") + " --model " + Root("p.tfm") + " --data " +
+                           Root("g") + " --refit ceres:3");
+  EXPECT_EQ(refit.exit_code, 2);
+  EXPECT_THAT(refit.err, HasSubstr("photometric"));
+  EXPECT_FALSE(fs::exists(Root("p2.tpm")));
   for (const char* sampler : {"laplace", "sgld", "knn"}) {
     const Result pose = Run("pose --model " + Root("p.tfm") + " --pose-model " + Root("p.tpm") +
                             " --functaset " + Root("fw.tfs") + " --data " + Root("g") +
