@@ -89,6 +89,16 @@ void RunFitBench(const FitBenchFlags& flags) {
       }
       continue;
     }
+    if (model.Trunk(sensor).photometric != nullptr) {
+      // The variants are LatentFitter's strategies on the direct trunk's problem.
+      const std::string why = std::string("the ") + ToString(sensor) + " trunk of '" +
+                              flags.model + "' is photometric: its fits (adam:N, knn+adam:N) "
+                              "are timed by `tactfunc bench photometric --model` "
+                              "(--fit-steps, --fit-knn)";
+      if (!flags.sensors.empty()) throw UsageError("--sensors: " + why);
+      std::cerr << "bench fit: note: " << why << "; skipped\n";
+      continue;
+    }
     SensorFitData s;
     s.sensor = sensor;
     s.trunk = &model.Trunk(sensor);

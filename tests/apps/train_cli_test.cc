@@ -182,6 +182,10 @@ TEST_F(TrainCliTest, ThePhotometricHeadTrainsEncodesAndReconstructsAnOpticalSens
   EXPECT_EQ(refit.exit_code, 2);
   EXPECT_THAT(refit.err, HasSubstr("photometric"));
   EXPECT_FALSE(fs::exists(Root("p2.tpm")));
+  const Result bench_fit = Run("bench fit --model " + Root("p.tfm") + " --data " + Root("g") +
+                               " --functaset " + Root("fw.tfs") + " --sensors gelslim");
+  EXPECT_EQ(bench_fit.exit_code, 2);
+  EXPECT_THAT(bench_fit.err, HasSubstr("bench photometric"));
   for (const char* sampler : {"laplace", "sgld", "knn"}) {
     const Result pose = Run("pose --model " + Root("p.tfm") + " --pose-model " + Root("p.tpm") +
                             " --functaset " + Root("fw.tfs") + " --data " + Root("g") +
