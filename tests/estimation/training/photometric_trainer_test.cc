@@ -160,19 +160,26 @@ TEST(PhotometricTrainerTest, AFitOfAFrameTheTrunkDrewLowersItsLossTenfold) {
   PhotometricFitOptions options;
   options.steps = 300;
   options.batch_pixels = 192;
-  for (int i = 0; i < 3; ++i) {
-    const TrunkTargets& frame = teacher.frames[i];
-    // From the true pose and a zero code (a random teacher's frames are no contacts:
-    // their moment pose says little about the pose that drew them).
-    Eigen::VectorXd start = Eigen::VectorXd::Zero(8);
-    start.head<3>() = teacher.latents[i].head<3>();
-    const double start_loss = teacher.trunk.LossAndGradient<float>(
-        teacher.trunk.AllPixels(), start.cast<float>(), frame.values, frame.weights, nullptr,
-        nullptr, nullptr);
-    const PhotometricFit fit = FitPhotometricLatent(teacher.trunk, frame, options, 11 + i,
-                                                    &start);
-    EXPECT_LT(fit.loss, 0.1 * start_loss) << "frame " << i;
-    EXPECT_EQ(fit.latent.size(), 8);
+  // Independent pixels, then 12 blocks of 4 x 4 a step (PhotometricFitOptions::pixel_block).
+  for (int block : {1, 4}) {
+    options.pixel_block = block;
+    for (int i = 0; i < 3; ++i) {
+      const TrunkTargets& frame = teacher.frames[i];
+      // From the true pose and a zero code (a random teacher's frames are no contacts:
+      // their moment pose says little about the pose that drew them).
+      Eigen::VectorXd start = Eigen::VectorXd::Zero(8);
+      start.head<3>() = teacher.latents[i].head<3>();
+      const double start_loss = teacher.trunk.LossAndGradient<float>(
+          teacher.trunk.AllPixels(), start.cast<float>(), frame.values, frame.weights, nullptr,
+          nullptr, nullptr);
+      const PhotometricFit fit = FitPhotometricLatent(teacher.trunk, frame, options, 11 + i,
+                                                      &start);
+      EXPECT_LT(fit.loss, 0.1 * start_loss) << "frame " << i << ", block " << block;
+      EXPECT_EQ(fit.latent.size(), 8);
+      // The pixels come from the seed: the same seed, the same latent.
+      EXPECT_EQ(FitPhotometricLatent(teacher.trunk, frame, options, 11 + i, &start).latent,
+                fit.latent);
+    }
   }
 }
 
@@ -215,26 +222,10 @@ TEST(PhotometricTrainerTest, AProbeKeepsTheStartAheadAndOtherwiseChangesNothing)
                std::invalid_argument);
 }
 
-TEST(PhotometricTrainerTest, AFitOnPixelBlocksLowersItsLossAndRefusesBlocksLargerThanTheFrame) {
-  const Teacher teacher = MakeTeacher(2);
+TEST(PhotometricTrainerTest, AFitRefusesPixelBlocksLargerThanTheFrameOrBelowOne) {
+  const Teacher teacher = MakeTeacher(1);
   PhotometricFitOptions options;
-  options.steps = 300;
-  options.batch_pixels = 192;
-  options.pixel_block = 4;  // 12 blocks of 4 x 4 a step
-  for (int i = 0; i < 2; ++i) {
-    const TrunkTargets& frame = teacher.frames[i];
-    Eigen::VectorXd start = Eigen::VectorXd::Zero(8);
-    start.head<3>() = teacher.latents[i].head<3>();
-    const double start_loss = teacher.trunk.LossAndGradient<float>(
-        teacher.trunk.AllPixels(), start.cast<float>(), frame.values, frame.weights, nullptr,
-        nullptr, nullptr);
-    const PhotometricFit fit = FitPhotometricLatent(teacher.trunk, frame, options, 11 + i,
-                                                    &start);
-    EXPECT_LT(fit.loss, 0.1 * start_loss) << "frame " << i;
-    // The blocks come from the seed: the same seed, the same latent.
-    EXPECT_EQ(FitPhotometricLatent(teacher.trunk, frame, options, 11 + i, &start).latent,
-              fit.latent);
-  }
+  options.steps = 3;
   PhotometricFitOptions wide = options;
   wide.pixel_block = teacher.frames[0].rows + 1;
   try {
