@@ -42,6 +42,7 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <utility>
 
 #include "apps/bench.h"
 #include "apps/bench/fit_common.h"
@@ -267,11 +268,9 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
     double fit_ms = 0;  // the photometric fit's, added to each posterior's time
     if (photometric) {
       // encode's fit is both the point estimate's latent and the functaset's map.
-      const auto start = std::chrono::steady_clock::now();
-      latent = encoder->EncodeTargets(sensor, targets).latent.cast<double>();
-      fit_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() -
-                                                         start)
-                   .count();
+      EncodedFrameFit fit = EncodeFrame(*encoder, sensor, targets);
+      latent = std::move(fit.latent);
+      fit_ms = fit.ms;
       PutPose(pose_model.Predict(latent, n), &record);
       PutPose(pose_model.Predict(latent, n), &record);
     } else {

@@ -30,7 +30,6 @@
 // termination, ...}) and DIR/fit.png (target | reconstruction | error, labelled with the
 // PSNR and time).
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -38,6 +37,7 @@
 #include <limits>
 #include <memory>
 #include <optional>
+#include <utility>
 #include <opencv2/imgproc.hpp>
 
 #include "apps/command.h"
@@ -205,18 +205,15 @@ LatentFitter::Summary FitPhotometric(const FunctaModel& model, SensorKind sensor
   } catch (const std::invalid_argument& e) {
     throw UsageError("--strategy " + flags.strategy + ": " + e.what());
   }
-  const auto start = std::chrono::steady_clock::now();
-  const LatentEncoder::EncodedFrame fitted = encoder->EncodeTargets(sensor, targets);
+  EncodedFrameFit fitted = EncodeFrame(*encoder, sensor, targets);
   LatentFitter::Summary summary;
-  summary.total_time_ms =
-      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-          .count();
+  summary.total_time_ms = fitted.ms;
   summary.strategy = encoder->StrategyOf(sensor);
   summary.termination_type = FitTermination::kCompleted;
   summary.psnr = fitted.psnr;
   summary.iterations = summary.strategy.steps;
   summary.initial_cost = summary.final_cost = std::numeric_limits<double>::quiet_NaN();
-  *latent = fitted.latent.cast<double>();
+  *latent = std::move(fitted.latent);
   return summary;
 }
 

@@ -2,6 +2,7 @@
 #include "apps/model_inputs.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -117,6 +118,18 @@ double DatasetPixelPitch(const std::string& frame_path, SensorKind sensor) {
   } catch (const std::exception&) {
     return 0;  // not a dataset we can read: the pitch stays unknown
   }
+}
+
+EncodedFrameFit EncodeFrame(const LatentEncoder& encoder, SensorKind sensor,
+                            const TrunkTargets& targets) {
+  const auto start = std::chrono::steady_clock::now();
+  const LatentEncoder::EncodedFrame fitted = encoder.EncodeTargets(sensor, targets);
+  EncodedFrameFit out;
+  out.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+               .count();
+  out.latent = fitted.latent.cast<double>();
+  out.psnr = fitted.psnr;
+  return out;
 }
 
 FunctasetKnn MakeFunctasetKnn(const Functaset& functaset, SensorKind sensor, bool train_only,

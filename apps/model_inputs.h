@@ -2,8 +2,8 @@
 //
 // Inputs the model-using subcommands share (fit, pose, bench posterior): reading one
 // frame and its reference from the command line (sensor inferred from the file as
-// Dataset::Open infers a user folder's), and the
-// k-NN pose posterior over a functaset's labelled training latents.
+// Dataset::Open infers a user folder's), encode's fit of one frame, and the k-NN pose
+// posterior over a functaset's labelled training latents.
 #ifndef TACTFUNC_APPS_MODEL_INPUTS_H_
 #define TACTFUNC_APPS_MODEL_INPUTS_H_
 
@@ -15,6 +15,7 @@
 
 #include "estimation/data/dataset.h"
 #include "estimation/functaset/functaset.h"
+#include "estimation/functaset/latent_encoder.h"
 #include "estimation/knn/knn_index.h"
 #include "models/trunk/functa_model.h"
 #include "models/core/image.h"
@@ -60,6 +61,17 @@ FramePair ReadFramePair(const std::string& frame_path, const std::string& refere
 // Pixel pitch (m) of `sensor` in the tactfunc dataset a frame file lies in
 // (<dataset>/<sensor>/<id>.png with <dataset>/dataset.json), or 0 if it is not in one.
 double DatasetPixelPitch(const std::string& frame_path, SensorKind sensor);
+
+// One frame's latent fitted as `encode` fits it (LatentEncoder::EncodeTargets, with the
+// encoder's strategy), the PSNR that fit reports, and its wall time: how fit, pose and
+// bench posterior fit a photometric trunk's frame.
+struct EncodedFrameFit {
+  Eigen::VectorXd latent;
+  double psnr = 0;
+  double ms = 0;
+};
+EncodedFrameFit EncodeFrame(const LatentEncoder& encoder, SensorKind sensor,
+                            const TrunkTargets& targets);
 
 // A k-NN pose posterior over the labelled latents of one sensor of a functaset, with
 // the brute-force index it searches (exact; copying the latents is the whole build, so

@@ -823,17 +823,12 @@ void RunLatentPose(const PoseFlags& flags, PosteriorSampler sampler, const Funct
     LatentEncoder::Options encoder_options;
     encoder_options.sensors = {sensor};
     const LatentEncoder encoder(model, encoder_options);
-    const auto start = std::chrono::steady_clock::now();
-    const Eigen::VectorXd latent =
-        encoder.EncodeTargets(sensor, targets).latent.cast<double>();
-    const double fit_ms =
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-            .count();
-    summary = posterior.Estimate(targets, latent, n, &distribution);
-    summary.fit_time_ms = fit_ms;
-    summary.total_time_ms += fit_ms;
+    const EncodedFrameFit fit = EncodeFrame(encoder, sensor, targets);
+    summary = posterior.Estimate(targets, fit.latent, n, &distribution);
+    summary.fit_time_ms = fit.ms;
+    summary.total_time_ms += fit.ms;
     std::cout << "pose: the latent fitted as encode fits it ("
-              << encoder.StrategyOf(sensor).ToString() << ", " << FormatFixed(fit_ms, 1)
+              << encoder.StrategyOf(sensor).ToString() << ", " << FormatFixed(fit.ms, 1)
               << " ms); " << ToString(sampler) << " samples the photometric trunk's posterior\n";
   } else {
     summary = posterior.Estimate(targets, n, &distribution);

@@ -5,8 +5,8 @@ include(CMakePackageConfigHelpers)
 set(TACTFUNC_CMAKE_DIR ${CMAKE_INSTALL_LIBDIR}/cmake/tactfunc)
 install(TARGETS tactfunc_build_flags tactfunc_models tactfunc_samplers tactfunc_data
                 tactfunc_knn tactfunc_pose tactfunc_fitting tactfunc_training
-                tactfunc_functaset tactfunc_encoding tactfunc_posterior tactfunc_evaluation tactfunc_synthesis
-                tactfunc_estimation
+                tactfunc_functaset tactfunc_encoding tactfunc_posterior tactfunc_evaluation
+                tactfunc_synthesis tactfunc_estimation
         EXPORT tactfuncTargets
         ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}
         LIBRARY DESTINATION ${CMAKE_INSTALL_LIBDIR}

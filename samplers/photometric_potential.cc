@@ -45,8 +45,10 @@ PhotometricPotential::PhotometricPotential(const PhotometricTrunk& trunk,
   }
 }
 
-double PhotometricPotential::EvaluateOn(const Eigen::VectorXd& z, const std::vector<int>& subset,
-                                        double scale, Eigen::VectorXd* gradient) const {
+double PhotometricPotential::EvaluateOn(const Eigen::VectorXd& z, const std::vector<int>& pixels,
+                                        const Eigen::MatrixXf& values,
+                                        const Eigen::VectorXf& weights, double scale,
+                                        Eigen::VectorXd* gradient) const {
   if (z.size() != dim()) {
     throw std::invalid_argument("PhotometricPotential: expected a latent of " +
                                 std::to_string(dim()) + " values, found " +
@@ -54,19 +56,11 @@ double PhotometricPotential::EvaluateOn(const Eigen::VectorXd& z, const std::vec
   }
   double u = 0.5 * z.squaredNorm() / (sigma_z_ * sigma_z_);
   if (gradient != nullptr) *gradient = z / (sigma_z_ * sigma_z_);
-  if (subset.empty()) return u;
-  std::vector<int> pixels(subset.size());
-  Eigen::MatrixXf values(static_cast<Eigen::Index>(subset.size()), values_.cols());
-  Eigen::VectorXf weights(static_cast<Eigen::Index>(subset.size()));
+  if (pixels.empty()) return u;
   double weight_sum = 0;
-  for (std::size_t i = 0; i < subset.size(); ++i) {
-    pixels[i] = pixels_[subset[i]];
-    values.row(static_cast<Eigen::Index>(i)) = values_.row(subset[i]);
-    weights[static_cast<Eigen::Index>(i)] = weights_[subset[i]];
-    weight_sum += weights_[subset[i]];
-  }
+  for (Eigen::Index i = 0; i < weights.size(); ++i) weight_sum += weights[i];
   // LossAndGradient's loss is sum_j w_j ||y_j - t_j||^2 / (C sum_j w_j).
-  const double to_u = scale * values_.cols() * weight_sum / (2.0 * sigma_ * sigma_);
+  const double to_u = scale * values.cols() * weight_sum / (2.0 * sigma_ * sigma_);
   Eigen::VectorXf dz;
   const double loss = trunk_->LossAndGradient<float>(
       pixels, z.cast<float>(), values, weights, gradient != nullptr ? &dz : nullptr, nullptr,
@@ -78,23 +72,28 @@ double PhotometricPotential::EvaluateOn(const Eigen::VectorXd& z, const std::vec
 
 double PhotometricPotential::Evaluate(const Eigen::VectorXd& z,
                                       Eigen::VectorXd* gradient) const {
-  std::vector<int> all(pixels_.size());
-  for (std::size_t i = 0; i < all.size(); ++i) all[i] = static_cast<int>(i);
-  return EvaluateOn(z, all, 1.0, gradient);
+  return EvaluateOn(z, pixels_, values_, weights_, 1.0, gradient);
 }
 
 double PhotometricPotential::EvaluateMinibatch(const Eigen::VectorXd& z,
                                                const std::vector<int>& indices,
                                                Eigen::VectorXd* gradient) const {
-  for (int i : indices) {
-    if (i < 0 || i >= NumDataTerms()) {
-      throw std::invalid_argument("PhotometricPotential: data term " + std::to_string(i) +
+  const Eigen::Index n = static_cast<Eigen::Index>(indices.size());
+  std::vector<int> pixels(indices.size());
+  Eigen::MatrixXf values(n, values_.cols());
+  Eigen::VectorXf weights(n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const int term = indices[static_cast<std::size_t>(i)];
+    if (term < 0 || term >= NumDataTerms()) {
+      throw std::invalid_argument("PhotometricPotential: data term " + std::to_string(term) +
                                   " is outside [0, " + std::to_string(NumDataTerms()) + ")");
     }
+    pixels[static_cast<std::size_t>(i)] = pixels_[term];
+    values.row(i) = values_.row(term);
+    weights[i] = weights_[term];
   }
-  const double scale =
-      indices.empty() ? 0.0 : static_cast<double>(NumDataTerms()) / indices.size();
-  return EvaluateOn(z, indices, scale, gradient);
+  const double scale = n == 0 ? 0.0 : static_cast<double>(NumDataTerms()) / n;
+  return EvaluateOn(z, pixels, values, weights, scale, gradient);
 }
 
 bool PhotometricPotential::GaussNewtonHessian(const Eigen::VectorXd& z,

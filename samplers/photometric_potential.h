@@ -54,10 +54,11 @@ class PhotometricPotential : public LatentPotential {
   bool GaussNewtonHessian(const Eigen::VectorXd& z, Eigen::MatrixXd* hessian) const override;
 
  private:
-  // U's data part over the valid pixels `subset` (indices into pixels_), scaled by
-  // `scale`, plus the prior; gradient as Evaluate's.
-  double EvaluateOn(const Eigen::VectorXd& z, const std::vector<int>& subset, double scale,
-                    Eigen::VectorXd* gradient) const;
+  // U's data part over `pixels` (grid indices) with their targets and weights, scaled
+  // by `scale`, plus the prior; gradient as Evaluate's.
+  double EvaluateOn(const Eigen::VectorXd& z, const std::vector<int>& pixels,
+                    const Eigen::MatrixXf& values, const Eigen::VectorXf& weights,
+                    double scale, Eigen::VectorXd* gradient) const;
 
   const PhotometricTrunk* trunk_;
   std::vector<int> pixels_;   // the valid pixels, in grid order

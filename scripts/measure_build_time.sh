@@ -8,7 +8,7 @@
 # the build's wall time and the compile seconds summed per part: the libraries, the
 # `tactfunc` program, the test suites, the examples; and the ten
 # slowest objects. The log is OUT_DIR/compile_times.log ("seconds object" per line).
-# Extra arguments go to the configure step, e.g. -DTACTFUNC_PCH=OFF.
+# Extra arguments go to the configure step, e.g. -DTACTFUNC_NATIVE=OFF.
 set -euo pipefail
 if [[ ${1:-} == --wrap ]]; then  # the launcher: --wrap LOG COMPILER ARGS...
   log=$2; shift 2
