@@ -786,17 +786,17 @@ void RunLatentPose(const PoseFlags& flags, PosteriorSampler sampler, const Funct
               << "': symmetry order 1 assumed (nothing folded)\n";
   }
 
+  const SensorTrunk& trunk = model.Trunk(sensor);
+  const bool photometric = trunk.photometric != nullptr;
+  // A photometric trunk's default is laplace: its sgld chains wander off the fit with
+  // the contact's pose values (docs/POSES.md, "Pose posteriors on a photometric trunk").
+  if (photometric && flags.sampler.empty()) sampler = PosteriorSampler::kLaplace;
   PosePosterior::Options options;
   options.sampler = sampler;
   options.num_samples = flags.samples;
   options.seed = flags.seed;
   options.knn.k = flags.knn_k;
   options.sgld.minibatch_size = flags.sgld_minibatch;
-  const SensorTrunk& trunk = model.Trunk(sensor);
-  const bool photometric = trunk.photometric != nullptr;
-  // A photometric trunk's default is laplace: its sgld chains wander off the fit with
-  // the contact's pose values (docs/POSES.md, "Pose posteriors on a photometric trunk").
-  if (photometric && flags.sampler.empty()) sampler = PosteriorSampler::kLaplace;
   if (photometric && flags.max_pixels >= 0) {
     throw UsageError("--max-pixels: the " + std::string(ToString(sensor)) + " trunk of '" +
                      flags.model + "' is photometric; its posterior uses every valid pixel");

@@ -208,6 +208,10 @@ TEST_F(TrainCliTest, ThePhotometricHeadTrainsEncodesAndReconstructsAnOpticalSens
                                   " --samples 8 --json");
   ASSERT_EQ(pose_default.exit_code, 0) << pose_default.err;
   EXPECT_EQ(pose_default.LastJson()["sampler"], "laplace");
+  // The sampler that ran, not only the label: the posterior's own report names it, and
+  // laplace leaves no sgld record.
+  EXPECT_THAT(pose_default.out, HasSubstr("Pose posterior (laplace)"));
+  EXPECT_FALSE(pose_default.LastJson().contains("sgld"));
   const Result pose_pixels = Run("pose --model " + Root("p.tfm") + " --pose-model " +
                                  Root("p.tpm") + " --data " + Root("g") + " --id " + first.id +
                                  " --sampler laplace --max-pixels 10");
