@@ -103,28 +103,19 @@ bool PhotometricPotential::GaussNewtonHessian(const Eigen::VectorXd& z,
                                 std::to_string(dim()) + " values, found " +
                                 std::to_string(z.size()));
   }
-  const int d = dim();
-  const Eigen::Index rows = values_.rows() * values_.cols();
-  // J with each row scaled by sqrt(w_j) / sigma: H = J^T J + I / sigma_z^2.
-  Eigen::MatrixXd J(rows, d);
-  Eigen::VectorXd row_scale(rows);
+  // The trunk's exact Jacobian (pixel-major rows i C + c), each row scaled by
+  // sqrt(w_i) / sigma: H = J^T J + I / sigma_z^2.
+  Eigen::MatrixXf J;
+  trunk_->ForwardAndLatentJacobian<float>(pixels_, z.cast<float>(), nullptr, &J);
+  const Eigen::Index channels = values_.cols();
   for (Eigen::Index i = 0; i < values_.rows(); ++i) {
-    for (Eigen::Index c = 0; c < values_.cols(); ++c) {
-      row_scale[c * values_.rows() + i] = std::sqrt(static_cast<double>(weights_[i])) / sigma_;
-    }
-  }
-  for (int k = 0; k < d; ++k) {
-    Eigen::VectorXd up = z, down = z;
-    up[k] += kJacobianStep;
-    down[k] -= kJacobianStep;
-    const Eigen::MatrixXf y_up = trunk_->Forward<float>(pixels_, up.cast<float>());
-    const Eigen::MatrixXf y_down = trunk_->Forward<float>(pixels_, down.cast<float>());
-    // Column-major N x C flattened: channel c's pixels are rows c N .. (c + 1) N - 1.
-    const Eigen::Map<const Eigen::VectorXf> a(y_up.data(), rows), b(y_down.data(), rows);
-    J.col(k) = (a - b).cast<double>().cwiseProduct(row_scale) / (2.0 * kJacobianStep);
+    const float scale = std::sqrt(weights_[i]) / static_cast<float>(sigma_);
+    J.middleRows(i * channels, channels) *= scale;
   }
   if (!J.allFinite()) return false;
-  hessian->noalias() = J.transpose() * J;
+  // Accumulated in double: the sum runs over thousands of rows.
+  const Eigen::MatrixXd Jd = J.cast<double>();
+  hessian->noalias() = Jd.transpose() * Jd;
   hessian->diagonal().array() += 1.0 / (sigma_z_ * sigma_z_);
   return true;
 }

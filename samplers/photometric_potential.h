@@ -8,11 +8,11 @@
 //   U(z) = sum_j w_j ||y_j(z) - t_j||^2 / (2 sigma^2) + ||z||^2 / (2 sigma_z^2)
 //
 // the LatentProblem's U (estimation/fitting/latent_problem.h) without a robust loss,
-// over every valid pixel. grad U comes from the trunk's reverse pass. The trunk has no
-// forward-mode pass, so the Gauss-Newton Hessian J^T W J / sigma^2 + I / sigma_z^2
-// takes the latent Jacobian J from central differences of the whole-frame forward pass
-// (2 d passes, each sharing the SIREN's neighbour evaluations; step kJacobianStep in
-// latent units). The pose values (t_0, t_1, phi) are latent values like the others, so
+// over every valid pixel. grad U comes from the trunk's reverse pass; the Gauss-Newton
+// Hessian J^T W J / sigma^2 + I / sigma_z^2 takes the latent Jacobian J from the trunk's
+// exact Jacobian (PhotometricTrunk::ForwardAndLatentJacobian: 2 + C batched SIREN passes
+// over the frame's positions, where central differences took 2 d whole-frame forward
+// passes). The pose values (t_0, t_1, phi) are latent values like the others, so
 // the prior also holds the contact near the frame's centre at sigma_z; at sigma_z = 1
 // (two working-frame heights) that says almost nothing.
 //
@@ -33,12 +33,6 @@ namespace tactfunc {
 
 class PhotometricPotential : public LatentPotential {
  public:
-  // The central differences' step in latent units: small against the SIREN's curvature
-  // (their error is of order step^2; at 1e-3 the pose's columns were a few percent off
-  // on a grid of 4 pixels a unit), large against float's rounding of the latent and the
-  // outputs (relative 6e-8).
-  static constexpr double kJacobianStep = 1e-4;
-
   // Throws std::invalid_argument for targets that are not rows * cols x C of the
   // trunk's grid and channels, weights of another size or negative, or sigma, sigma_z
   // not finite and > 0.

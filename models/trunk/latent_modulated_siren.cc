@@ -1171,9 +1171,19 @@ template <typename Scalar>
 void LatentModulatedSiren::ForwardAndLatentJacobian(const MatrixX<Scalar>& coords,
                                                     const VectorX<Scalar>& z,
                                                     MatrixX<Scalar>* outputs,
-                                                    MatrixX<Scalar>* J_y_z) const {
+                                                    MatrixX<Scalar>* J_y_z,
+                                                    MatrixX<Scalar>* J_y_x) const {
   CheckShape("coords", coords.rows(), coords.cols(), coords.rows(), 2);
   CheckShape("z", z.rows(), 1, options_.latent_dim, 1);
+  if (J_y_x != nullptr && (has_readout() || has_spatial())) {
+    throw std::invalid_argument(
+        "LatentModulatedSiren::ForwardAndLatentJacobian: the coordinate Jacobian needs a "
+        "trunk without the readout branch and spatial latents, found " +
+        std::string(has_readout() ? "a readout branch" : "spatial latents"));
+  }
+  // The coordinate Jacobian comes from the latent Jacobian's reverse passes.
+  MatrixX<Scalar> J_z_local;
+  if (J_y_x != nullptr && J_y_z == nullptr) J_y_z = &J_z_local;
   const int num_layers = options_.num_hidden_layers;
   const long width = options_.width;
   const long n = coords.rows();
@@ -1191,6 +1201,7 @@ void LatentModulatedSiren::ForwardAndLatentJacobian(const MatrixX<Scalar>& coord
   // A.cols() x B: d y_c / d z per pixel (d = A.cols() without spatial latents; with them
   // d y_c / d [z_g, z_s(x)], scattered onto the nodes below).
   MatrixX<Scalar> g, g_below, J_channel;
+  if (J_y_x != nullptr) J_y_x->resize(n * channels, 2);
   if (J_y_z != nullptr) {
     J_y_z->resize(n * channels, d);
     g.resize(width, capacity);
@@ -1245,6 +1256,9 @@ void LatentModulatedSiren::ForwardAndLatentJacobian(const MatrixX<Scalar>& coord
         if (l > 0) {
           below->leftCols(m).noalias() = net.W[l].transpose() * dl;
           std::swap(delta, below);
+        } else if (J_y_x != nullptr) {
+          J_y_x->operator()(Eigen::seqN(begin * channels + ch, m, channels), Eigen::all) =
+              (net.W[0].transpose() * dl).transpose();
         }
       }
       if (spatial) {
@@ -1504,7 +1518,7 @@ LatentModulatedSiren::VectorX<Scalar> LatentModulatedSiren::StartLatent(
       const MatrixX<S>&, const VectorX<S>&, const MatrixX<S>&, VectorX<S>*, VectorX<S>*, \
       WeightGradients) const;                                                            \
   template void LatentModulatedSiren::ForwardAndLatentJacobian<S>(                       \
-      const MatrixX<S>&, const VectorX<S>&, MatrixX<S>*, MatrixX<S>*) const;             \
+      const MatrixX<S>&, const VectorX<S>&, MatrixX<S>*, MatrixX<S>*, MatrixX<S>*) const; \
   template LatentModulatedSiren::VectorX<S> LatentModulatedSiren::StartLatent<S>(        \
       const MatrixX<S>&, const MatrixX<S>&, const VectorX<S>&) const;                    \
   template S LatentModulatedSiren::Loss<S>(const MatrixX<S>&, const VectorX<S>&,         \

@@ -308,10 +308,15 @@ class LatentModulatedSiren {
   // Outputs (N x C, may be null) and the Jacobian of every output w.r.t. z,
   // J_y_z: (N*C) x d with row j*C + c holding d y_jc / d z (pixel-major, channels
   // interleaved as in Image). Computed as one batched reverse pass per output
-  // channel w.r.t. the shifts gamma, then times A.
+  // channel w.r.t. the shifts gamma, then times A. J_y_x (may be null) receives the
+  // Jacobian w.r.t. each pixel's own coordinates, (N*C) x 2 in the same row order, from
+  // the same passes (d y / d x_j = W_0^T d y / d pre_0(j)); it needs a trunk without the
+  // readout branch and spatial latents (std::invalid_argument otherwise), whose
+  // coordinates also move their interpolation.
   template <typename Scalar>
   void ForwardAndLatentJacobian(const MatrixX<Scalar>& coords, const VectorX<Scalar>& z,
-                                MatrixX<Scalar>* outputs, MatrixX<Scalar>* J_y_z) const;
+                                MatrixX<Scalar>* outputs, MatrixX<Scalar>* J_y_z,
+                                MatrixX<Scalar>* J_y_x = nullptr) const;
 
   // The weighted MSE of the header comment; targets N x C, weights N or empty.
   template <typename Scalar>

@@ -150,6 +150,9 @@ struct PhotometricTrunkPass {
   Matrix coords;
   std::vector<int> slot;  // kSets N, or empty when coords has a row per set row
   Matrix siren_out;       // kSets N x (1 + C)
+  // With PassUse::jacobian: d s / d code and d s / d q at each coordinate row, in
+  // LatentModulatedSiren::ForwardAndLatentJacobian's layout.
+  Matrix siren_J_code, siren_J_q;
   Matrix input, input0;   // 5 x N: (g_0, g_1, w, x_0, x_1) and the flat (0, 0, 0, x)
   Matrix a1, a2, h1, h2;  // H x N pre-activations and activations (contact)
   Matrix a1f, a2f, h1f, h2f;  // the same for the flat input
@@ -326,7 +329,7 @@ void PhotometricTrunk::SampleMarkers(double row, double col, double* value, doub
 template <typename Scalar>
 void PhotometricTrunk::RunForward(const std::vector<int>& pixels, const VectorX<Scalar>& z,
                                   Pass* pass_holder, MatrixX<Scalar>* outputs,
-                                  bool dense) const {
+                                  const PassUse& use) const {
   PhotometricTrunkPass<Scalar>& pass = pass_holder->get<Scalar>();
   if (z.size() != options_.latent_dim) {
     throw std::invalid_argument("PhotometricTrunk: expected a latent of " +
@@ -356,7 +359,7 @@ void PhotometricTrunk::RunForward(const std::vector<int>& pixels, const VectorX<
   // border ((rows + 2) x (cols + 2) coordinates instead of 5 rows cols) and the five
   // sets are gathered from it. A neighbour's coordinate is then computed from its own
   // index rather than as p + e, which can differ in the last bit of a double.
-  bool whole_grid = dense && n == num_pixels;
+  bool whole_grid = !use.reverse && n == num_pixels;
   for (int i = 0; whole_grid && i < n; ++i) whole_grid = pixels[i] == i;
   if (whole_grid) {
     const int rows = options_.rows, cols = options_.cols;
@@ -414,10 +417,16 @@ void PhotometricTrunk::RunForward(const std::vector<int>& pixels, const VectorX<
       pass.coords(u, 0) = static_cast<Scalar>(cs * d0 + sn * d1);
       pass.coords(u, 1) = static_cast<Scalar>(-sn * d0 + cs * d1);
     }
-    if (pass.slot.empty()) {
-      pass.siren_out = siren_.Forward<Scalar>(pass.coords, code);
+    MatrixX<Scalar> shared;
+    if (use.jacobian) {
+      siren_.ForwardAndLatentJacobian<Scalar>(pass.coords, code, &shared, &pass.siren_J_code,
+                                              &pass.siren_J_q);
     } else {
-      const MatrixX<Scalar> shared = siren_.Forward<Scalar>(pass.coords, code);
+      shared = siren_.Forward<Scalar>(pass.coords, code);
+    }
+    if (pass.slot.empty()) {
+      pass.siren_out = std::move(shared);
+    } else {
       pass.siren_out.resize(kSets * n, shared.cols());
       for (int row = 0; row < kSets * n; ++row) {
         pass.siren_out.row(row) = shared.row(pass.slot[row]);
@@ -441,10 +450,20 @@ void PhotometricTrunk::RunForward(const std::vector<int>& pixels, const VectorX<
   const VectorX<Scalar> head = head_.cast<Scalar>();
   const MatrixX<Scalar> shade =
       ShadingNetwork<Scalar>(head, h, c, pass.input, &pass.a1, &pass.h1, &pass.a2, &pass.h2);
-  const MatrixX<Scalar> shade0 =
-      whole_grid ? AtRestShadingOf<Scalar>()
-                 : ShadingNetwork<Scalar>(head, h, c, pass.input0, &pass.a1f, &pass.h1f,
-                                          &pass.a2f, &pass.h2f);
+  // Without the head's gradient to follow, the flat input's shading of any pixel set
+  // is read from the whole grid's cache.
+  MatrixX<Scalar> gathered;
+  const MatrixX<Scalar>* shade0 = &gathered;
+  if (whole_grid) {
+    shade0 = &AtRestShadingOf<Scalar>();
+  } else if (!use.head_gradient) {
+    const MatrixX<Scalar>& cache = AtRestShadingOf<Scalar>();
+    gathered.resize(c, n);
+    for (int i = 0; i < n; ++i) gathered.col(i) = cache.col(pixels[i]);
+  } else {
+    gathered = ShadingNetwork<Scalar>(head, h, c, pass.input0, &pass.a1f, &pass.h1f,
+                                      &pass.a2f, &pass.h2f);
+  }
 
   // The markers moved by u = m g.
   const double m = marker_scale();
@@ -460,7 +479,7 @@ void PhotometricTrunk::RunForward(const std::vector<int>& pixels, const VectorX<
                   pass.marker_d_col.col(i).data());
     if (outputs == nullptr) continue;
     for (int ch = 0; ch < c; ++ch) {
-      (*outputs)(i, ch) = shade(ch, i) - shade0(ch, i) +
+      (*outputs)(i, ch) = shade(ch, i) - (*shade0)(ch, i) +
                           static_cast<Scalar>(value[ch] - at_rest_.at(r, col, ch)) +
                           s(i, 1 + ch);
     }
@@ -587,7 +606,8 @@ PhotometricTrunk::MatrixX<Scalar> PhotometricTrunk::Forward(const std::vector<in
                                                             const VectorX<Scalar>& z) const {
   Pass pass;
   MatrixX<Scalar> outputs;
-  RunForward<Scalar>(pixels, z, &pass, &outputs, /*dense=*/true);
+  RunForward<Scalar>(pixels, z, &pass, &outputs,
+                     PassUse{/*reverse=*/false, /*head_gradient=*/false, /*jacobian=*/false});
   return outputs;
 }
 
@@ -596,8 +616,81 @@ void PhotometricTrunk::Backward(const std::vector<int>& pixels, const VectorX<Sc
                                 const MatrixX<Scalar>& dL_dY, VectorX<Scalar>* dL_dz,
                                 VectorX<Scalar>* dL_dsiren, VectorX<Scalar>* dL_dhead) const {
   Pass pass;
-  RunForward<Scalar>(pixels, z, &pass, nullptr);
+  RunForward<Scalar>(pixels, z, &pass, nullptr,
+                     PassUse{/*reverse=*/true, /*head_gradient=*/dL_dhead != nullptr,
+                             /*jacobian=*/false});
   RunBackward<Scalar>(pass, pixels, z, dL_dY, dL_dz, dL_dsiren, dL_dhead);
+}
+
+template <typename Scalar>
+void PhotometricTrunk::ForwardAndLatentJacobian(const std::vector<int>& pixels,
+                                                const VectorX<Scalar>& z,
+                                                MatrixX<Scalar>* outputs,
+                                                MatrixX<Scalar>* J) const {
+  Pass pass_holder;
+  // The pass keeps the distinct positions, their slots and the SIREN's Jacobians there.
+  RunForward<Scalar>(pixels, z, &pass_holder, outputs,
+                     PassUse{/*reverse=*/J != nullptr, /*head_gradient=*/false,
+                             /*jacobian=*/J != nullptr});
+  if (J == nullptr) return;
+  const PhotometricTrunkPass<Scalar>& pass = pass_holder.get<Scalar>();
+  const int n = static_cast<int>(pixels.size());
+  const int c = options_.channels;
+  const int h = options_.shading_width;
+  const int d = options_.latent_dim;
+  const int outs = 1 + c;  // the SIREN's outputs: w, then s_1 .. s_C
+
+  // The SIREN's rows at every position: d s_k / d code and d s_k / d q.
+  const MatrixX<Scalar>& J_code = pass.siren_J_code;
+  const MatrixX<Scalar>& J_q = pass.siren_J_q;
+  const long positions = pass.coords.rows();
+  const double cs = std::cos(static_cast<double>(z[2]));
+  const double sn = std::sin(static_cast<double>(z[2]));
+  MatrixX<Scalar> J_pos(positions * outs, d);
+  J_pos.rightCols(d - kPoseValues) = J_code;
+  for (long u = 0; u < positions; ++u) {
+    const double q0 = static_cast<double>(pass.coords(u, 0));
+    const double q1 = static_cast<double>(pass.coords(u, 1));
+    for (int k = 0; k < outs; ++k) {
+      const long row = u * outs + k;
+      const double a = static_cast<double>(J_q(row, 0)), b = static_cast<double>(J_q(row, 1));
+      // d s / d t = d s / d q (-R^T), R^T = [[cs, sn], [-sn, cs]]; d q / d phi = (q1, -q0).
+      J_pos(row, 0) = static_cast<Scalar>(-(a * cs - b * sn));
+      J_pos(row, 1) = static_cast<Scalar>(-(a * sn + b * cs));
+      J_pos(row, 2) = static_cast<Scalar>(a * q1 - b * q0);
+    }
+  }
+  auto slot = [&](int set_row) {
+    return pass.slot.empty() ? static_cast<long>(set_row)
+                             : static_cast<long>(pass.slot[static_cast<std::size_t>(set_row)]);
+  };
+
+  // The head's derivatives w.r.t. (g_0, g_1, w) for each channel: the shading network's
+  // reverse pass seeded with one channel, plus the moved markers' slope.
+  const HeadLayout layout(h, c);
+  const VectorX<Scalar> head = head_.cast<Scalar>();
+  const Eigen::Map<const MatrixX<Scalar>> W1(head.data() + layout.w1, h, 5);
+  const Eigen::Map<const MatrixX<Scalar>> W2(head.data() + layout.w2, h, h);
+  const Eigen::Map<const MatrixX<Scalar>> W3(head.data() + layout.w3, c, h);
+  const MatrixX<Scalar> slope1 = pass.a1.unaryExpr([](Scalar v) { return SiluSlope(v); });
+  const MatrixX<Scalar> slope2 = pass.a2.unaryExpr([](Scalar v) { return SiluSlope(v); });
+  const double m = marker_scale();
+  J->resize(static_cast<Eigen::Index>(n) * c, d);
+  for (int ch = 0; ch < c; ++ch) {
+    const MatrixX<Scalar> da2 = slope2.array().colwise() * W3.row(ch).transpose().array();
+    const MatrixX<Scalar> da1 = (W2.transpose() * da2).cwiseProduct(slope1);
+    const MatrixX<Scalar> dinput = W1.transpose() * da1;  // 5 x N
+    for (int i = 0; i < n; ++i) {
+      const Scalar dg0 = dinput(0, i) - static_cast<Scalar>(m * pass.marker_d_col(ch, i));
+      const Scalar dg1 = dinput(1, i) - static_cast<Scalar>(m * pass.marker_d_row(ch, i));
+      auto row = J->row(static_cast<Eigen::Index>(i) * c + ch);
+      row = dinput(2, i) * J_pos.row(slot(i) * outs) + J_pos.row(slot(i) * outs + 1 + ch);
+      row += (dg0 / Scalar(2)) *
+             (J_pos.row(slot(n + i) * outs) - J_pos.row(slot(2 * n + i) * outs));
+      row += (dg1 / Scalar(2)) *
+             (J_pos.row(slot(3 * n + i) * outs) - J_pos.row(slot(4 * n + i) * outs));
+    }
+  }
 }
 
 template <typename Scalar>
@@ -619,7 +712,9 @@ Scalar PhotometricTrunk::LossAndGradient(const std::vector<int>& pixels,
   Pass pass;
   MatrixX<Scalar> y;
   const bool backward = dL_dz != nullptr || dL_dsiren != nullptr || dL_dhead != nullptr;
-  RunForward<Scalar>(pixels, z, &pass, &y, /*dense=*/!backward);
+  RunForward<Scalar>(pixels, z, &pass, &y,
+                     PassUse{/*reverse=*/backward, /*head_gradient=*/dL_dhead != nullptr,
+                             /*jacobian=*/false});
   double weight_sum = 0.0;
   for (int i = 0; i < n; ++i) weight_sum += weights.size() == 0 ? 1.0 : weights[i];
   MatrixX<Scalar> dY = MatrixX<Scalar>::Zero(n, c);
@@ -649,6 +744,8 @@ Scalar PhotometricTrunk::LossAndGradient(const std::vector<int>& pixels,
   template void PhotometricTrunk::Backward<S>(const std::vector<int>&, const VectorX<S>&, \
                                               const MatrixX<S>&, VectorX<S>*,             \
                                               VectorX<S>*, VectorX<S>*) const;            \
+  template void PhotometricTrunk::ForwardAndLatentJacobian<S>(                            \
+      const std::vector<int>&, const VectorX<S>&, MatrixX<S>*, MatrixX<S>*) const;        \
   template S PhotometricTrunk::LossAndGradient<S>(                                        \
       const std::vector<int>&, const VectorX<S>&, const MatrixX<S>&, const VectorX<S>&,   \
       VectorX<S>*, VectorX<S>*, VectorX<S>*, MatrixX<S>*) const;

@@ -167,6 +167,20 @@ class PhotometricTrunk {
                          VectorX<Scalar>* dL_dz, VectorX<Scalar>* dL_dsiren,
                          VectorX<Scalar>* dL_dhead, MatrixX<Scalar>* outputs = nullptr) const;
 
+  // Outputs (N x C, may be null) and the Jacobian of every output w.r.t. z, J: (N*C) x d
+  // with row i*C + c holding d y_ic / d z (pixel-major, channels interleaved, as
+  // LatentModulatedSiren::ForwardAndLatentJacobian), exact, from 2 + C batched passes of
+  // the SIREN over the distinct grid positions the pixels and their neighbours name
+  // (one forward, one reverse per SIREN output) instead of 2 d forward passes of central
+  // differences. Each position's row is d s / d [t, phi, code]: the code's columns from
+  // the shifts, the pose's from the coordinate Jacobian d s / d q through q = R^T (p - t)
+  // (d q / d t = -R^T, d q / d phi = G q); a pixel's row then mixes its five positions'
+  // rows with the head's derivatives w.r.t. the slope, the depth and s_c. Throws
+  // std::invalid_argument as Forward.
+  template <typename Scalar>
+  void ForwardAndLatentJacobian(const std::vector<int>& pixels, const VectorX<Scalar>& z,
+                                MatrixX<Scalar>* outputs, MatrixX<Scalar>* J) const;
+
   // The reverse pass for any dL/dY (N x C): gradients as LossAndGradient's.
   template <typename Scalar>
   void Backward(const std::vector<int>& pixels, const VectorX<Scalar>& z,
@@ -175,11 +189,21 @@ class PhotometricTrunk {
 
  private:
   struct Pass;  // the forward pass's intermediate values, defined in the .cc
-  // `dense`: no reverse pass follows, so the whole grid may share the SIREN's
-  // evaluations between neighbours (the .cc says how).
+  // What follows a forward pass, and so what it keeps.
+  struct PassUse {
+    // A reverse pass or a Jacobian follows. If not, the whole grid may share the
+    // SIREN's evaluations between neighbours (the .cc says how).
+    bool reverse = true;
+    // The reverse pass differentiates the head: the flat input's shading is then run
+    // and kept for it; otherwise it is read from the whole grid's cache.
+    bool head_gradient = true;
+    // ForwardAndLatentJacobian: the SIREN's Jacobians at the positions are kept, from
+    // the same pass that gives its outputs.
+    bool jacobian = false;
+  };
   template <typename Scalar>
   void RunForward(const std::vector<int>& pixels, const VectorX<Scalar>& z,
-                  Pass* pass, MatrixX<Scalar>* outputs, bool dense = false) const;
+                  Pass* pass, MatrixX<Scalar>* outputs, const PassUse& use) const;
   template <typename Scalar>
   void RunBackward(const Pass& pass, const std::vector<int>& pixels,
                    const VectorX<Scalar>& z, const MatrixX<Scalar>& dL_dY,

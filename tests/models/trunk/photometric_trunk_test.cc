@@ -7,6 +7,7 @@
 // options and references are refused by name.
 #include "models/trunk/photometric_trunk.h"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -298,6 +299,54 @@ TEST(PhotometricTrunkTest, NeighbouringAndRepeatedPixelsShareEvaluationsWithTheS
   EXPECT_LT((dsiren - sum_dsiren).cwiseAbs().maxCoeff(),
             1e-10 * (1 + dsiren.cwiseAbs().maxCoeff()));
   EXPECT_LT((dhead - sum_dhead).cwiseAbs().maxCoeff(), 1e-10 * (1 + dhead.cwiseAbs().maxCoeff()));
+}
+
+TEST(PhotometricTrunkTest, TheLatentJacobianHasTheReversePassesRows) {
+  // Every row of ForwardAndLatentJacobian against the reverse pass of that one output
+  // (dL/dY = e_c at pixel i alone), with three channels, moving markers, a turned
+  // contact, pixels whose neighbours are other pixels of the set (shared positions) and
+  // the grid's corner. The pose's columns come from the SIREN's coordinate Jacobian and
+  // the code's from its shifts, so a wrong sign or a missed neighbour fails.
+  for (const auto sampling : {PhotometricTrunk::MarkerSampling::kSensorResolution,
+                              PhotometricTrunk::MarkerSampling::kWorkingResolution}) {
+    const PhotometricTrunk trunk = MovingTrunk(sampling, 3);
+    const Problem p = MakeProblem(trunk);
+    const int cols = trunk.options().cols, c = trunk.channels();
+    std::vector<int> pixels = p.pixels;
+    for (int r = 4; r < 6; ++r) {
+      for (int col = 5; col < 7; ++col) pixels.push_back(r * cols + col);
+    }
+    const int n = static_cast<int>(pixels.size());
+    MatrixXd y, J;
+    trunk.ForwardAndLatentJacobian<double>(pixels, p.z, &y, &J);
+    const MatrixXd expected_y = trunk.Forward<double>(pixels, p.z);
+    EXPECT_LT((y - expected_y).cwiseAbs().maxCoeff(), 1e-12);
+    ASSERT_EQ(J.rows(), n * c);
+    ASSERT_EQ(J.cols(), trunk.latent_dim());
+    double largest_pose = 0;
+    for (int i = 0; i < n; ++i) {
+      for (int ch = 0; ch < c; ++ch) {
+        MatrixXd dY = MatrixXd::Zero(1, c);
+        dY(0, ch) = 1.0;
+        VectorXd row;
+        trunk.Backward<double>({pixels[i]}, p.z, dY, &row, nullptr, nullptr);
+        const VectorXd got = J.row(i * c + ch).transpose();
+        EXPECT_LT((got - row).cwiseAbs().maxCoeff(), 1e-9 * (1 + row.cwiseAbs().maxCoeff()))
+            << "pixel " << pixels[i] << " channel " << ch;
+        largest_pose = std::max(largest_pose, row.head(3).cwiseAbs().maxCoeff());
+      }
+    }
+    EXPECT_GT(largest_pose, 1e-3);  // the pose's columns are tested, not all zero
+  }
+  // Without a Jacobian asked for it is Forward's pass.
+  const PhotometricTrunk trunk =
+      MovingTrunk(PhotometricTrunk::MarkerSampling::kSensorResolution, 1);
+  const Problem p = MakeProblem(trunk);
+  MatrixXd y;
+  trunk.ForwardAndLatentJacobian<double>(p.pixels, p.z, &y, nullptr);
+  EXPECT_LT((y - trunk.Forward<double>(p.pixels, p.z)).cwiseAbs().maxCoeff(), 1e-12);
+  EXPECT_THROW(trunk.ForwardAndLatentJacobian<double>({-1}, p.z, &y, nullptr),
+               std::invalid_argument);
 }
 
 TEST(PhotometricTrunkTest, RefusesBadOptionsAndReferences) {
