@@ -113,9 +113,11 @@ bool PhotometricPotential::GaussNewtonHessian(const Eigen::VectorXd& z,
     J.middleRows(i * channels, channels) *= scale;
   }
   if (!J.allFinite()) return false;
-  // Accumulated in double: the sum runs over thousands of rows.
+  // Accumulated in double (the sum runs over thousands of rows), one triangle.
   const Eigen::MatrixXd Jd = J.cast<double>();
-  hessian->noalias() = Jd.transpose() * Jd;
+  hessian->setZero(dim(), dim());
+  hessian->selfadjointView<Eigen::Lower>().rankUpdate(Jd.transpose());
+  *hessian = hessian->selfadjointView<Eigen::Lower>();
   hessian->diagonal().array() += 1.0 / (sigma_z_ * sigma_z_);
   return true;
 }

@@ -646,23 +646,26 @@ void PhotometricTrunk::ForwardAndLatentJacobian(const std::vector<int>& pixels,
   const long positions = pass.coords.rows();
   const double cs = std::cos(static_cast<double>(z[2]));
   const double sn = std::sin(static_cast<double>(z[2]));
-  MatrixX<Scalar> J_pos(positions * outs, d);
-  J_pos.rightCols(d - kPoseValues) = J_code;
+  // Transposed, so that each position's row is a contiguous column: d x (positions outs).
+  MatrixX<Scalar> J_posT(d, positions * outs);
+  J_posT.bottomRows(d - kPoseValues) = J_code.transpose();
   for (long u = 0; u < positions; ++u) {
     const double q0 = static_cast<double>(pass.coords(u, 0));
     const double q1 = static_cast<double>(pass.coords(u, 1));
     for (int k = 0; k < outs; ++k) {
-      const long row = u * outs + k;
-      const double a = static_cast<double>(J_q(row, 0)), b = static_cast<double>(J_q(row, 1));
+      const long col = u * outs + k;
+      const double a = static_cast<double>(J_q(col, 0)), b = static_cast<double>(J_q(col, 1));
       // d s / d t = d s / d q (-R^T), R^T = [[cs, sn], [-sn, cs]]; d q / d phi = (q1, -q0).
-      J_pos(row, 0) = static_cast<Scalar>(-(a * cs - b * sn));
-      J_pos(row, 1) = static_cast<Scalar>(-(a * sn + b * cs));
-      J_pos(row, 2) = static_cast<Scalar>(a * q1 - b * q0);
+      J_posT(0, col) = static_cast<Scalar>(-(a * cs - b * sn));
+      J_posT(1, col) = static_cast<Scalar>(-(a * sn + b * cs));
+      J_posT(2, col) = static_cast<Scalar>(a * q1 - b * q0);
     }
   }
-  auto slot = [&](int set_row) {
-    return pass.slot.empty() ? static_cast<long>(set_row)
-                             : static_cast<long>(pass.slot[static_cast<std::size_t>(set_row)]);
+  auto position = [&](int set_row, int k) {
+    const long u = pass.slot.empty()
+                       ? static_cast<long>(set_row)
+                       : static_cast<long>(pass.slot[static_cast<std::size_t>(set_row)]);
+    return J_posT.col(u * outs + k);
   };
 
   // The head's derivatives w.r.t. (g_0, g_1, w) for each channel: the shading network's
@@ -675,7 +678,7 @@ void PhotometricTrunk::ForwardAndLatentJacobian(const std::vector<int>& pixels,
   const MatrixX<Scalar> slope1 = pass.a1.unaryExpr([](Scalar v) { return SiluSlope(v); });
   const MatrixX<Scalar> slope2 = pass.a2.unaryExpr([](Scalar v) { return SiluSlope(v); });
   const double m = marker_scale();
-  J->resize(static_cast<Eigen::Index>(n) * c, d);
+  MatrixX<Scalar> JT(d, static_cast<Eigen::Index>(n) * c);
   for (int ch = 0; ch < c; ++ch) {
     const MatrixX<Scalar> da2 = slope2.array().colwise() * W3.row(ch).transpose().array();
     const MatrixX<Scalar> da1 = (W2.transpose() * da2).cwiseProduct(slope1);
@@ -683,14 +686,13 @@ void PhotometricTrunk::ForwardAndLatentJacobian(const std::vector<int>& pixels,
     for (int i = 0; i < n; ++i) {
       const Scalar dg0 = dinput(0, i) - static_cast<Scalar>(m * pass.marker_d_col(ch, i));
       const Scalar dg1 = dinput(1, i) - static_cast<Scalar>(m * pass.marker_d_row(ch, i));
-      auto row = J->row(static_cast<Eigen::Index>(i) * c + ch);
-      row = dinput(2, i) * J_pos.row(slot(i) * outs) + J_pos.row(slot(i) * outs + 1 + ch);
-      row += (dg0 / Scalar(2)) *
-             (J_pos.row(slot(n + i) * outs) - J_pos.row(slot(2 * n + i) * outs));
-      row += (dg1 / Scalar(2)) *
-             (J_pos.row(slot(3 * n + i) * outs) - J_pos.row(slot(4 * n + i) * outs));
+      auto col = JT.col(static_cast<Eigen::Index>(i) * c + ch);
+      col = dinput(2, i) * position(i, 0) + position(i, 1 + ch) +
+            (dg0 / Scalar(2)) * (position(n + i, 0) - position(2 * n + i, 0)) +
+            (dg1 / Scalar(2)) * (position(3 * n + i, 0) - position(4 * n + i, 0));
     }
   }
+  *J = JT.transpose();
 }
 
 template <typename Scalar>
