@@ -39,6 +39,7 @@
 #include "estimation/data/dataset.h"
 #include "estimation/data/trunk_targets.h"
 #include "estimation/evaluation/baselines.h"
+#include "estimation/fitting/photometric_ceres_fit.h"
 #include "estimation/training/photometric_trainer.h"
 #include "estimation/training/photometric_warm_start.h"
 #include "estimation/training/trunk_trainer.h"
@@ -64,6 +65,8 @@ struct PhotometricBenchFlags {
   int fit_batch = PhotometricFitOptions().batch_pixels;
   int fit_block = PhotometricFitOptions().pixel_block;
   std::vector<double> fit_rate{PhotometricFitOptions().learning_rate};
+  std::vector<int> fit_ceres;  // Ceres iteration counts fitted beside the Adam settings
+  int fit_pixels = PhotometricCeresOptions().pixels;
   std::string trade_picture;
   std::string model;
   bool allow_other_frames = false;
@@ -92,6 +95,7 @@ double Mean(const std::vector<double>& v) {
 // One fit setting of the bench and what it measured.
 struct FitRun {
   PhotometricFitOptions options;
+  bool ceres = false;  // Ceres' Levenberg-Marquardt (options.steps iterations), not Adam
   double seconds = 0;
   int flipped = 0;
   Row row;
@@ -104,6 +108,7 @@ cv::Mat FitTradePicture(const std::vector<FitRun>& fits, double pca_db,
                         int knn) {
   double x_lo = std::numeric_limits<double>::infinity(), x_hi = 0;
   double y_lo = pca_db, y_hi = pca_db;
+  // One line per Adam step size (key: the rate) and one for Ceres (key: -1).
   std::map<double, std::vector<const FitRun*>> by_rate;
   for (const FitRun& run : fits) {
     const double x = run.seconds / frames;
@@ -111,7 +116,7 @@ cv::Mat FitTradePicture(const std::vector<FitRun>& fits, double pca_db,
     x_hi = std::max(x_hi, x);
     y_lo = std::min(y_lo, Mean(run.row.clean));
     y_hi = std::max(y_hi, Mean(run.row.clean));
-    by_rate[run.options.learning_rate].push_back(&run);
+    by_rate[run.ceres ? -1.0 : run.options.learning_rate].push_back(&run);
   }
   if (!(x_hi > x_lo)) x_hi = 2 * x_lo;
   LogXPlot::Layout layout;
@@ -128,7 +133,7 @@ cv::Mat FitTradePicture(const std::vector<FitRun>& fits, double pca_db,
                           ? " in " + std::to_string(fits.front().options.pixel_block) + "x" +
                                 std::to_string(fits.front().options.pixel_block) + " blocks"
                           : std::string()) +
-                     "; labels: Adam steps " +
+                     "; labels: Adam steps or Ceres iterations " +
                      (knn > 0 ? "from the best of " + std::to_string(knn) +
                                     " training latents (0: that latent as it is)"
                               : std::string("per start")));
@@ -153,7 +158,11 @@ cv::Mat FitTradePicture(const std::vector<FitRun>& fits, double pca_db,
                 colour * 0.7);
     }
     char name[64];
-    std::snprintf(name, sizeof(name), "Adam from %g", rate);
+    if (rate < 0) {
+      std::snprintf(name, sizeof(name), "Ceres LM (iterations)");
+    } else {
+      std::snprintf(name, sizeof(name), "Adam from %g", rate);
+    }
     const int y = ly + 20 * k;
     cv::line(canvas, {lx, y}, {lx + 14, y}, colour, 2, cv::LINE_AA);
     PlainText(canvas, name, {lx + 20, y + 5}, 0.42);
@@ -349,6 +358,15 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
       fits.push_back(std::move(run));
     }
   }
+  if (!flags.fit_ceres.empty() && flags.fit_knn == 0) {
+    throw UsageError("--fit-ceres starts from the best neighbour: it needs --fit-knn");
+  }
+  for (int iterations : flags.fit_ceres) {
+    FitRun run;
+    run.ceres = true;
+    run.options.steps = iterations;
+    fits.push_back(std::move(run));
+  }
   const std::vector<int> all_pixels = trunk.AllPixels();
   std::vector<Eigen::MatrixXf> predictions(test.size());  // the first setting's, for --picture
   for (FitRun& run : fits) {
@@ -358,9 +376,18 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
     std::atomic<int> done{0};
     internal::ParallelFor(static_cast<int>(test.size()), flags.threads, [&](int i) {
       const std::uint64_t seed = DeriveSeed(flags.seed, 7000000 + i);
-      const PhotometricFit fit =
-          warm_start ? warm_start->Fit(test[i], flags.fit_knn, run.options, seed)
-                     : FitPhotometricLatent(trunk, test[i], run.options, seed);
+      PhotometricFit fit;
+      if (run.ceres) {
+        // Ceres from the best neighbour, as encode's knn+ceres:N.
+        const Eigen::VectorXd start = warm_start->BestStart(test[i], flags.fit_knn);
+        PhotometricCeresOptions ceres_options;
+        ceres_options.iterations = run.options.steps;
+        ceres_options.pixels = flags.fit_pixels;
+        fit.latent = FitPhotometricLatentCeres(trunk, test[i], start, ceres_options).latent;
+      } else {
+        fit = warm_start ? warm_start->Fit(test[i], flags.fit_knn, run.options, seed)
+                         : FitPhotometricLatent(trunk, test[i], run.options, seed);
+      }
       latents[i] = fit.latent.unaryExpr([](double v) { return static_cast<double>(Half(v)); });
       flipped[i] = fit.flipped;
       const int n = ++done;
@@ -427,6 +454,7 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
   nlohmann::json json_fits = nlohmann::json::array();
   for (const FitRun& run : fits) {
     json_fits.push_back({{"steps", run.options.steps},
+                         {"solver", run.ceres ? "ceres" : "adam"},
                          {"learning_rate", run.options.learning_rate},
                          {"psnr_clean", Mean(run.row.clean)},
                          {"psnr", Mean(run.row.noisy)},
@@ -442,8 +470,13 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
     std::printf("  %-22s  %10s  %8s  %11s\n", "fit", "noise-free", "vs PCA", "s per frame");
     for (const FitRun& run : fits) {
       char name[64];
-      std::snprintf(name, sizeof(name), "adam:%d from %g", run.options.steps,
-                    run.options.learning_rate);
+      if (run.ceres) {
+        std::snprintf(name, sizeof(name), "ceres:%d on %d px", run.options.steps,
+                      flags.fit_pixels);
+      } else {
+        std::snprintf(name, sizeof(name), "adam:%d from %g", run.options.steps,
+                      run.options.learning_rate);
+      }
       std::printf("  %-22s  %10.2f  %+8.2f  %11.3f\n", name, Mean(run.row.clean),
                   Mean(run.row.clean) - Mean(rows[1].clean), run.seconds / test.size());
     }
@@ -564,6 +597,17 @@ void RegisterPhotometricBenchmark(CLI::App* bench, CommandBody* selected) {
                   "list as --fit-steps, every rate with every count")
       ->delimiter(',')
       ->check(CLI::Range(1e-8, 10.0));
+  sub->add_option("--fit-ceres", flags->fit_ceres,
+                  "Also fit the test frames by Levenberg-Marquardt in Ceres from the best "
+                  "neighbour (needs --fit-knn; encode's knn+ceres:N; estimation/fitting/"
+                  "photometric_ceres_fit.h), once per iteration count of this comma-separated "
+                  "list: rows of the fit trade table and a line of its picture")
+      ->delimiter(',')
+      ->check(CLI::Range(1, 1000000));
+  sub->add_option("--fit-pixels", flags->fit_pixels,
+                  "With --fit-ceres: the residuals' pixels, evenly spaced over the frame's "
+                  "valid ones (0 = all, the default and encode's)")
+      ->check(CLI::Range(0, 100000000));
   sub->add_option("--trade-picture", flags->trade_picture,
                   "Write a PNG of the fit trade: noise-free PSNR against seconds per frame, "
                   "one line per --fit-rate, PCA at the same bits as a dashed line");

@@ -22,9 +22,10 @@
 // A photometric trunk (train --head photometric; models/trunk/photometric_trunk.h) is
 // fitted as `encode` fits it, by the same LatentEncoder code, so a frame gets the latent
 // encode would give it: knn+adam:N (the default where the model holds a warm-start
-// table), knn or adam:N (the default without one); its k-NN runs over the model's own
-// table, so --functaset, --precision, --jacobian, --sigma, --sigma-z and --max-pixels
-// (the direct trunk's Ceres and meta-SGD problem) do not apply and are refused.
+// table), knn+ceres:N, knn or adam:N (the default without one); its k-NN runs over the
+// model's own table, so --functaset, --precision, --jacobian, --sigma, --sigma-z and
+// --max-pixels (the direct trunk's Ceres and meta-SGD problem) do not apply and are
+// refused.
 //
 // With --out DIR it writes DIR/latent.json ({sensor, latent, strategy, psnr, ms,
 // termination, ...}) and DIR/fit.png (target | reconstruction | error, labelled with the
@@ -192,9 +193,9 @@ LatentFitter::Summary FitPhotometric(const FunctaModel& model, SensorKind sensor
     std::string names;
     for (const std::string& name : direct_only) names += (names.empty() ? "" : ", ") + name;
     throw UsageError(names + ": the " + ToString(sensor) + " trunk of '" + flags.model +
-                     "' is photometric; its latents are fitted with adam:N, knn+adam:N or "
-                     "knn (k-NN over the model's own warm-start table), which these options "
-                     "do not apply to");
+                     "' is photometric; its latents are fitted with adam:N, knn+adam:N, "
+                     "knn+ceres:N or knn (k-NN over the model's own warm-start table), which "
+                     "these options do not apply to");
   }
   LatentEncoder::Options options;
   options.strategy = flags.strategy;
@@ -419,9 +420,9 @@ void RegisterFit(CLI::App& app, CommandBody* selected) {
                 "trained on (a warning instead of an error)");
   sub->add_option("--strategy", flags->strategy,
                   "knn, meta_sgd:K, ceres:N, knn+meta_sgd:K or knn+ceres:N (default ceres:10); "
-                  "for a photometric trunk adam:N, knn+adam:N or knn over the model's "
-                  "warm-start table (default: encode's, knn+adam:40 with a table, adam:200 "
-                  "without)");
+                  "for a photometric trunk adam:N, knn+adam:N, knn+ceres:N or knn over the "
+                  "model's warm-start table (default: encode's, knn+adam:40 with a table, "
+                  "adam:200 without)");
   sub->add_option("--out", flags->out, "Folder for latent.json and fit.png (created)");
   sub->add_option("--precision", flags->precision, "float (default) or double trunk evaluations");
   sub->add_option("--jacobian", flags->jacobian,

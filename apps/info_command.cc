@@ -130,14 +130,15 @@ nlohmann::json DescribeModel(const std::string& bytes, const std::string& path) 
       const PhotometricTrunk& p = *t.photometric;
       std::printf("           photometric head: latent %d = rigid motion 3 + code %d, shading "
                   "network of %d, markers moved at the sensor's %dx%d (%d x %d samples a "
-                  "pixel), %.3f px per unit slope; fitted with adam:N or knn+adam:N\n",
+                  "pixel), %.3f px per unit slope; fitted with adam:N, knn+adam:N or "
+                  "knn+ceres:N\n",
                   p.latent_dim(), p.latent_dim() - PhotometricTrunk::kPoseValues,
                   p.options().shading_width, p.reference().rows, p.reference().cols,
                   p.options().supersample, p.options().supersample, p.marker_scale());
       if (t.warm_start != nullptr) {
         const WarmStartTable& w = *t.warm_start;
         std::printf("           warm-start table: %lld training latents, descriptors of %d x "
-                    "%d cells (%s, float16), for knn+adam:N and knn\n",
+                    "%d cells (%s, float16), for knn+adam:N, knn+ceres:N and knn\n",
                     static_cast<long long>(w.latents.rows()), w.grid, w.grid,
                     FormatBytes(2ull * static_cast<std::uint64_t>(w.descriptors.size() +
                                                                   w.latents.size()))

@@ -33,7 +33,9 @@
 //                   the contact's moment pose and its turn by pi, or from the best of the
 //                   trunk's warm-start table's neighbours
 //                   (estimation/training/photometric_warm_start.h); knn alone takes that
-//                   neighbour's latent as it is.
+//                   neighbour's latent as it is, and knn+ceres:N refines it by at most N
+//                   Levenberg-Marquardt iterations on every valid pixel
+//                   (FitPhotometricLatentCeres, estimation/fitting/photometric_ceres_fit.h).
 //
 // Errors (docs/ARCHITECTURE.md, three tiers): a bad Options, or a knn strategy without an
 // index, throws std::invalid_argument from the constructor; a problem of another latent

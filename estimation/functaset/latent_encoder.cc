@@ -13,6 +13,7 @@
 #include <thread>
 #include <utility>
 
+#include "estimation/fitting/photometric_ceres_fit.h"
 #include "estimation/training/photometric_trainer.h"
 
 namespace tactfunc {
@@ -58,11 +59,11 @@ bool LatentEncoder::Options::IsValid(std::string* error) const {
   } else if (FitStrategy parsed; !strategy.empty() && !FitStrategy::Parse(strategy, &parsed, &why)) {
     message << "strategy: " << why;
   } else if (!strategy.empty() && parsed.knn &&
-             (parsed.refinement == FitStrategy::Refinement::kMetaSgd ||
-              parsed.refinement == FitStrategy::Refinement::kCeres)) {
+             parsed.refinement == FitStrategy::Refinement::kMetaSgd) {
     message << "strategy '" << strategy
             << "': the k-NN strategies need a functaset to search; use meta_sgd:K or ceres:N "
-               "(a photometric trunk's knn and knn+adam:N search its own warm-start table)";
+               "(a photometric trunk's knn, knn+adam:N and knn+ceres:N search its own "
+               "warm-start table)";
   } else if (!problem.IsValid(&why)) {
     message << "problem: " << why;
   } else if (share_rest_latent && !contact.IsValid(&why)) {
@@ -140,12 +141,15 @@ LatentEncoder::LatentEncoder(const FunctaModel& model, const Options& options)
     const bool adam = state.strategy.refinement == FitStrategy::Refinement::kAdam;
     const bool knn_alone =
         state.strategy.knn && state.strategy.refinement == FitStrategy::Refinement::kNone;
-    if (photometric ? !(adam || knn_alone) : (adam || state.strategy.knn)) {
+    const bool ceres = state.strategy.refinement == FitStrategy::Refinement::kCeres;
+    if (photometric ? !(adam || knn_alone || (ceres && state.strategy.knn))
+                    : (adam || state.strategy.knn)) {
       throw std::invalid_argument(
           std::string("LatentEncoder: the ") + ToString(sensor) + " trunk is " +
-          (photometric ? "photometric: its latents are fitted with adam:N, knn+adam:N or knn, "
-                         "not "
-                       : "direct: its latents are fitted with meta_sgd:K or ceres:N, not ") +
+          (photometric ? "photometric: its latents are fitted with adam:N, knn+adam:N, "
+                         "knn+ceres:N or knn, not "
+                       : "direct: its latents are fitted with meta_sgd:K or ceres:N (the k-NN "
+                         "strategies need a functaset to search), not ") +
           state.strategy.ToString());
     }
     if (photometric && state.strategy.knn) {
@@ -158,7 +162,7 @@ LatentEncoder::LatentEncoder(const FunctaModel& model, const Options& options)
       state.warm_start =
           std::make_shared<const PhotometricWarmStart>(*trunk.photometric, trunk.warm_start);
     }
-    if (state.strategy.refinement == FitStrategy::Refinement::kCeres) {
+    if (ceres && !photometric) {
       LatentFitter::Options fit;
       fit.strategy = state.strategy;
       state.fitter.emplace(trunk, fit);
@@ -208,7 +212,17 @@ LatentEncoder::EncodedFrame LatentEncoder::EncodeTargets(SensorKind sensor,
     // fixed seed, so a frame's latent depends on the frame alone.
     PhotometricFitOptions fit;
     fit.steps = state.strategy.steps;
-    if (state.warm_start != nullptr) {
+    if (state.strategy.refinement == FitStrategy::Refinement::kCeres) {
+      // knn+ceres:N: Levenberg-Marquardt on every valid pixel from the best neighbour
+      // (estimation/fitting/photometric_ceres_fit.h).
+      PhotometricCeresOptions ceres;
+      ceres.iterations = state.strategy.steps;
+      ceres.pixels = 0;
+      out.latent = FitPhotometricLatentCeres(
+                       *state.trunk->photometric, targets,
+                       state.warm_start->BestStart(targets, kWarmStartCandidates), ceres)
+                       .latent.cast<float>();
+    } else if (state.warm_start != nullptr) {
       // One start, the best of the table's nearest neighbours, refined by a short fit
       // (docs/REPRESENTATION.md, "A warm start from the training latents"); knn alone
       // has 0 steps and keeps that start.

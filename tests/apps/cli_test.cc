@@ -285,10 +285,15 @@ TEST_F(CliTest, BenchPhotometricTrainsFitsAndScoresAgainstPcaAtTheSameBits) {
   // steps from it fit the same frames (one start: no turned start kept).
   const Result warm = Run("bench photometric --data " + Path("d") + " --model " +
                           Path("p.tfm") + " --latent-dim 8 --fit-knn 2 --fit-steps 0,3 "
-                          "--fit-rate 1e-2 --max-test-frames 2 --json");
+                          "--fit-rate 1e-2 --fit-ceres 2 --max-test-frames 2 --json");
   ASSERT_EQ(warm.exit_code, 0) << warm.err;
   const nlohmann::json w = warm.LastJson();
-  ASSERT_EQ(w["fits"].size(), 2u) << w.dump();
+  ASSERT_EQ(w["fits"].size(), 3u) << w.dump();
+  // The Ceres row (encode's knn+ceres:2) fits from the same neighbour as the 0-step row.
+  EXPECT_EQ(w["fits"][2]["solver"], "ceres");
+  EXPECT_EQ(w["fits"][2]["steps"], 2);
+  EXPECT_GT(w["fits"][2]["psnr_clean"].get<double>(), w["fits"][0]["psnr_clean"].get<double>())
+      << w.dump();
   EXPECT_EQ(w["fit_knn"], 2);
   EXPECT_EQ(w["fits"][0]["steps"], 0);
   EXPECT_TRUE(std::isfinite(w["fits"][0]["psnr_clean"].get<double>())) << w.dump();
@@ -298,6 +303,10 @@ TEST_F(CliTest, BenchPhotometricTrainsFitsAndScoresAgainstPcaAtTheSameBits) {
                                Path("p.tfm") + " --latent-dim 8 --fit-steps 0");
   EXPECT_NE(cold_zero.exit_code, 0);
   EXPECT_THAT(cold_zero.err, HasSubstr("--fit-knn"));
+  const Result cold_ceres = Run("bench photometric --data " + Path("d") + " --model " +
+                                Path("p.tfm") + " --latent-dim 8 --fit-ceres 2");
+  EXPECT_NE(cold_ceres.exit_code, 0);
+  EXPECT_THAT(cold_ceres.err, HasSubstr("--fit-knn"));
 
   // Data without noise-free frames is refused naming it.
   ASSERT_EQ(Run("synth --out " + Path("n") + " --frames-per-tool 2 --tools rod --sensors gelslim")

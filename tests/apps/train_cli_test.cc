@@ -133,7 +133,7 @@ TEST_F(TrainCliTest, ThePhotometricHeadTrainsEncodesAndReconstructsAnOpticalSens
   EXPECT_EQ(trunk.warm_start->latents.rows(),
             train.LastJson()["sensors"]["gelslim"]["train_frames"].get<int>());
   EXPECT_EQ(trunk.warm_start->latents.cols(), 8);
-  for (const char* strategy : {"knn+adam:3", "knn"}) {
+  for (const char* strategy : {"knn+adam:3", "knn", "knn+ceres:2"}) {
     const Result warm = Run("encode --model " + Root("p.tfm") + " --data " + Root("g") +
                             " --out " + Root("w.tfs") + " --strategy " + strategy +
                             " --threads 2 --json");

@@ -196,9 +196,11 @@ TEST(LatentEncoder, StrategiesAreValidatedByName) {
   options.strategy = "lbfgs:3";
   EXPECT_FALSE(options.IsValid(&error));
   EXPECT_THAT(error, HasSubstr("strategy"));
-  options.strategy = "knn+ceres:5";
+  options.strategy = "knn+meta_sgd:5";
   EXPECT_FALSE(options.IsValid(&error));
   EXPECT_THAT(error, HasSubstr("k-NN"));
+  options.strategy = "knn+ceres:5";  // a photometric trunk's; a direct trunk refuses it
+  EXPECT_TRUE(options.IsValid(&error)) << error;
   options.strategy = "ceres:5";
   options.problem.sigma_z = 0;
   EXPECT_FALSE(options.IsValid(&error));
