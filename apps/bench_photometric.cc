@@ -392,8 +392,13 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
       flipped[i] = fit.flipped;
       const int n = ++done;
       if (n % 20 == 0 || n == static_cast<int>(test.size())) {
-        std::fprintf(stderr, "  adam:%d from %g: fitted %d/%zu test latents\n",
-                     run.options.steps, run.options.learning_rate, n, test.size());
+        if (run.ceres) {
+          std::fprintf(stderr, "  ceres:%d: fitted %d/%zu test latents\n", run.options.steps, n,
+                       test.size());
+        } else {
+          std::fprintf(stderr, "  adam:%d from %g: fitted %d/%zu test latents\n",
+                       run.options.steps, run.options.learning_rate, n, test.size());
+        }
       }
     });
     run.seconds =
