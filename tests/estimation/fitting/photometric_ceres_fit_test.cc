@@ -10,17 +10,14 @@
 #include <stdexcept>
 
 #include "gtest/gtest.h"
+#include "tests/support/photometric_test_util.h"
 
 namespace tactfunc {
 namespace {
 
-double Uniform(unsigned* state) {
-  *state = *state * 1664525u + 1013904223u;
-  return 2.0 * (*state >> 8) / double(1u << 24) - 1.0;
-}
-
-// A 12 x 14 photometric trunk with moving markers, the frame it draws at `z` (a few
-// pixels invalid) and z itself.
+// A 12 x 14 photometric trunk (the support's small one, at a low omega_0 so that the
+// start below lies in the frame's basin) with moving markers, the frame it draws at z
+// (every 17th pixel invalid, holding 0) and z itself.
 struct Drawn {
   PhotometricTrunk trunk;
   TrunkTargets frame;
@@ -28,40 +25,27 @@ struct Drawn {
 };
 
 Drawn Draw() {
-  PhotometricTrunk::Options o;
-  o.rows = 12;
-  o.cols = 14;
-  o.width = 16;
-  o.num_hidden_layers = 2;
-  o.latent_dim = 8;
-  o.shading_width = 8;
-  o.supersample = 2;
-  o.omega_0 = 6.0;  // a smooth trunk: the start below lies in the frame's basin
-  unsigned state = 11;
-  Image reference(24, 28, 1);
-  for (float& v : reference.data) v = static_cast<float>(0.5 + 0.2 * Uniform(&state));
-  Drawn d{PhotometricTrunk(o, reference, 4), {}, Eigen::VectorXd(o.latent_dim)};
+  PhotometricTrunk::Options o = testing_util::SmallPhotometricOptions(12, 14);
+  o.omega_0 = 6.0;
+  Drawn d{PhotometricTrunk(o, testing_util::MarkerReference(24, 28), 4), {},
+          Eigen::VectorXd(o.latent_dim)};
   Eigen::VectorXd head = d.trunk.head_parameters();
   head[head.size() - 1] = 1.0;
   d.trunk.SetHeadParameters(head);
-  for (int k = 0; k < o.latent_dim; ++k) d.z[k] = 0.5 * Uniform(&state);
-  const int n = o.rows * o.cols;
-  d.frame.rows = o.rows;
-  d.frame.cols = o.cols;
-  d.frame.values = d.trunk.Forward<float>(d.trunk.AllPixels(), d.z.cast<float>());
-  d.frame.weights = Eigen::VectorXf::Ones(n);
-  for (int j = 5; j < n; j += 17) {
+  d.z = 0.5 * Eigen::VectorXd::LinSpaced(o.latent_dim, -1.0, 1.0).array().sin();
+  d.frame = testing_util::WholeFrameTargets(
+      d.trunk.Forward<float>(d.trunk.AllPixels(), d.z.cast<float>()), o.rows, o.cols);
+  for (int j = 5; j < o.rows * o.cols; j += 17) {
     d.frame.weights[j] = 0.0f;
-    d.frame.values(j, 0) = 0.0f;  // an invalid pixel holds 0 and must not count
+    d.frame.values(j, 0) = 0.0f;
   }
   return d;
 }
 
 TEST(PhotometricCeresFit, RecoversTheLatentThatDrewTheFrame) {
   const Drawn d = Draw();
-  Eigen::VectorXd start = d.z;
-  unsigned state = 5;
-  for (int k = 0; k < start.size(); ++k) start[k] += 0.05 * Uniform(&state);
+  const Eigen::VectorXd start =
+      d.z + 0.05 * Eigen::VectorXd::LinSpaced(d.z.size(), 0.0, 3.0).array().cos().matrix();
   for (int pixels : {0, 60}) {
     PhotometricCeresOptions options;
     options.pixels = pixels;
