@@ -218,11 +218,9 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
   const PosePosterior::Options& resolved = posteriors.front()->options();
   const LatentFitter::Options& fit_options = resolved.fit;
   std::optional<LatentFitter> fitter, meta_fitter;
-  std::optional<LatentEncoder> encoder;
+  std::unique_ptr<LatentEncoder> encoder;
   if (photometric) {
-    LatentEncoder::Options encoder_options;
-    encoder_options.sensors = {sensor};
-    encoder.emplace(model, encoder_options);
+    encoder = PhotometricPoseEncoder(model, flags.model, sensor, pose_model, flags.pose_model);
   } else {
     fitter.emplace(trunk, fit_options);
     // ... and at the functaset's own latent map, K meta-SGD steps from 0 (what `encode`

@@ -12,6 +12,7 @@
 #include "apps/command.h"
 #include "estimation/data/image_io.h"
 #include "models/simulator/tool.h"
+#include "estimation/posterior/pose_posterior.h"
 #include "models/pose/pose_model_provenance.h"
 
 namespace tactfunc::apps {
@@ -130,6 +131,24 @@ EncodedFrameFit EncodeFrame(const LatentEncoder& encoder, SensorKind sensor,
   out.latent = fitted.latent.cast<double>();
   out.psnr = fitted.psnr;
   return out;
+}
+
+std::unique_ptr<LatentEncoder> PhotometricPoseEncoder(const FunctaModel& model,
+                                                      const std::string& model_path,
+                                                      SensorKind sensor,
+                                                      const PoseMlp& pose_model,
+                                                      const std::string& pose_model_path) {
+  LatentEncoder::Options options;
+  options.sensors = {sensor};
+  options.strategy = PhotometricLatentMapOfPoseModel(pose_model);
+  try {
+    return std::make_unique<LatentEncoder>(model, options);
+  } catch (const std::invalid_argument& e) {
+    throw DatasetError("--pose-model '" + pose_model_path + "' was trained on " +
+                       options.strategy + " latents, which the photometric " +
+                       ToString(sensor) + " trunk of '" + model_path +
+                       "' does not fit (" + e.what() + ")");
+  }
 }
 
 FunctasetKnn MakeFunctasetKnn(const Functaset& functaset, SensorKind sensor, bool train_only,

@@ -73,6 +73,17 @@ struct EncodedFrameFit {
 EncodedFrameFit EncodeFrame(const LatentEncoder& encoder, SensorKind sensor,
                             const TrunkTargets& targets);
 
+// The encoder of a photometric trunk's frames for pose posteriors under `pose_model`
+// (from `pose_model_path`): the strategy of the functaset the pose MLP was trained on
+// (PhotometricLatentMapOfPoseModel), so that it reads the kind of latent it saw. A pose
+// model whose latent map the photometric trunk does not fit (a direct trunk's
+// meta_sgd:K or ceres:N) throws DatasetError naming both files and the map.
+std::unique_ptr<LatentEncoder> PhotometricPoseEncoder(const FunctaModel& model,
+                                                      const std::string& model_path,
+                                                      SensorKind sensor,
+                                                      const PoseMlp& pose_model,
+                                                      const std::string& pose_model_path);
+
 // A k-NN pose posterior over the labelled latents of one sensor of a functaset, with
 // the brute-force index it searches (exact; copying the latents is the whole build, so
 // it is built in memory rather than cached beside the functaset as fit's FLANN indexes

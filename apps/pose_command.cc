@@ -820,9 +820,9 @@ void RunLatentPose(const PoseFlags& flags, PosteriorSampler sampler, const Funct
   if (photometric) {
     // encode's own fit of the frame (the latents train-pose saw), then the posterior
     // about it; the fit's time counts in the total.
-    LatentEncoder::Options encoder_options;
-    encoder_options.sensors = {sensor};
-    const LatentEncoder encoder(model, encoder_options);
+    const std::unique_ptr<LatentEncoder> encoder_holder =
+        PhotometricPoseEncoder(model, flags.model, sensor, pose_model, flags.pose_model);
+    const LatentEncoder& encoder = *encoder_holder;
     const EncodedFrameFit fit = EncodeFrame(encoder, sensor, targets);
     summary = posterior.Estimate(targets, fit.latent, n, &distribution);
     summary.fit_time_ms = fit.ms;

@@ -397,8 +397,12 @@ void RunTrainPose(const TrainPoseFlags& flags) {
        {{"train", NumberOrNull(all_train.RmseDeg())}, {"test", NumberOrNull(all_test.RmseDeg())}}}};
   // The latent map the MLP was trained on: what the posteriors must centre on
   // (LatentMapOfPoseModel, estimation/posterior/pose_posterior.h).
-  // "functaset" = encode's K meta-SGD steps of the trunk.
-  const std::string latent_map = flags.refit.empty() ? "functaset" : flags.refit;
+  // Without --refit, the functaset's own strategy as encode recorded it ("functaset",
+  // the trunk's K meta-SGD steps, for a functaset that records none).
+  const std::string latent_map =
+      !flags.refit.empty() ? flags.refit
+      : functaset.fit_strategy(sensor).empty() ? std::string("functaset")
+                                               : functaset.fit_strategy(sensor);
   PoseModelProvenance provenance;
   provenance.sensor = ToString(sensor);
   provenance.functaset = flags.functaset;

@@ -537,16 +537,21 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
       // photometric trunk's latents are encode's fits, which train-pose trains on; no
       // other map exists for it (train-pose --refit fits the direct trunk's problem).
       const bool photometric = trunk.photometric != nullptr;
-      if (photometric && provenance.latent_map != "functaset") {
-        throw DatasetError("the pose model reads " + provenance.latent_map + " latents, which "
-                           "the photometric " + ToString(sensor) + " trunk does not fit; train "
-                           "it on the functaset's latents (train-pose without --refit)");
-      }
-      const FitStrategy latent_map = LatentMapOfPoseModel(pose_model, trunk);
       const std::string stored =
           functaset.fit_strategy(sensor).empty()
               ? "meta_sgd:" + std::to_string(trunk.meta_sgd.inner_steps)
               : functaset.fit_strategy(sensor);
+      // A photometric pose model records its functaset's strategy (or "functaset", from
+      // before it did): the functaset must hold latents of that fit.
+      if (photometric && provenance.latent_map != "functaset" &&
+          provenance.latent_map != stored) {
+        throw DatasetError("the pose model reads " + provenance.latent_map + " latents, the "
+                           "functaset holds " + stored + " ones, and eval does not re-fit the "
+                           "photometric " + ToString(sensor) + " trunk: encode with --strategy " +
+                           provenance.latent_map + ", or train the pose model on this "
+                           "functaset");
+      }
+      const FitStrategy latent_map = LatentMapOfPoseModel(pose_model, trunk);
       Eigen::MatrixXf latents(static_cast<Eigen::Index>(m), d);
       if (photometric || latent_map.ToString() == stored) {
         for (std::size_t i = 0; i < m; ++i) latents.row(i) = s.entries[i]->latent.transpose();

@@ -376,6 +376,12 @@ FitStrategy LatentMapOfPoseModel(const PoseMlp& pose_model, const SensorTrunk& t
   return strategy;
 }
 
+std::string PhotometricLatentMapOfPoseModel(const PoseMlp& pose_model) {
+  const std::string map =
+      PoseModelProvenance::FromJson(pose_model.info_json(), "pose model").latent_map;
+  return map == "functaset" ? std::string() : map;
+}
+
 PosePosterior::Summary EstimatePosePosterior(const SensorTrunk& trunk, const PoseMlp& pose_mlp,
                                              const TrunkTargets& targets, int symmetry_order,
                                              const PosePosterior::Options& options,

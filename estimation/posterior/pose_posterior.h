@@ -199,6 +199,13 @@ Eigen::MatrixXd CalibrationResiduals(const PoseMlp& model, const Eigen::MatrixXf
 // std::invalid_argument naming a field of the wrong type.
 FitStrategy LatentMapOfPoseModel(const PoseMlp& pose_model, const SensorTrunk& trunk);
 
+// The fit a photometric trunk's frame gets for `pose_model`: the strategy of the
+// functaset it was trained on, which train-pose records as its "latent_map" (e.g.
+// "knn+adam:40"), or "" -- the encoder's default -- for a model that records
+// "functaset" (written before train-pose recorded the functaset's strategy). Read as
+// PoseModelProvenance; throws std::invalid_argument as it does.
+std::string PhotometricLatentMapOfPoseModel(const PoseMlp& pose_model);
+
 // The pixel sigma the pose model was calibrated with (its info's "posterior_sigma",
 // `train-pose --posterior-sigma`, read as PoseModelProvenance), or 0 if it has none.
 // PosePosterior uses it when Options::problem.sigma is 0 (automatic) -- see

@@ -26,6 +26,8 @@
 #include "gmock/gmock.h"
 #include "estimation/functaset/functaset.h"
 #include "gtest/gtest.h"
+#include "models/pose/pose_mlp.h"
+#include "models/pose/pose_model_provenance.h"
 #include "models/trunk/functa_model.h"
 #include "nlohmann/json.hpp"
 #include "tests/apps/cli_test_util.h"
@@ -176,6 +178,9 @@ TEST_F(TrainCliTest, ThePhotometricHeadTrainsEncodesAndReconstructsAnOpticalSens
   const Result pose_train = Run("train-pose --functaset " + Root("fw.tfs") + " --out " +
                                 Root("p.tpm") + " --epochs 2 --hidden 8 --batch 4");
   ASSERT_EQ(pose_train.exit_code, 0) << pose_train.err;
+  EXPECT_EQ(PoseModelProvenance::FromJson(PoseMlp::Load(Root("p.tpm")).info_json(), "p.tpm")
+                .latent_map,
+            "knn+adam:3");
   const Result refit = Run("train-pose --functaset " + Root("fw.tfs") + " --out " +
                            Root("p2.tpm") + " --model " + Root("p.tfm") + " --data " +
                            Root("g") + " --refit ceres:3");
@@ -193,7 +198,9 @@ TEST_F(TrainCliTest, ThePhotometricHeadTrainsEncodesAndReconstructsAnOpticalSens
                             " --samples 8 --json");
     ASSERT_EQ(pose.exit_code, 0) << sampler << ": " << pose.err;
     EXPECT_EQ(pose.LastJson()["sampler"], sampler);
-    EXPECT_THAT(pose.out, HasSubstr("the latent fitted as encode fits it (knn+adam:"))
+    // The pose MLP saw the functaset's knn+adam:3 latents, so the frame is fitted so,
+    // not with encode's default knn+adam:40.
+    EXPECT_THAT(pose.out, HasSubstr("the latent fitted as encode fits it (knn+adam:3,"))
         << sampler;
   }
   // eval's pose rows read the functaset's own latents (encode's fits, what train-pose saw).
