@@ -41,9 +41,6 @@ struct HeadLayout {
 };
 
 // SiLU a / (1 + e^-a) and its slope sigma (1 + a (1 - sigma)), sigma = 1 / (1 + e^-a),
-// elementwise over a matrix: Eigen's packet exp vectorises them (a scalar std::exp per
-// element was a tenth of an encode's time).
-// SiLU a / (1 + e^-a) and its slope sigma (1 + a (1 - sigma)), sigma = 1 / (1 + e^-a),
 // elementwise: Eigen's packet exp vectorises them (a scalar std::exp per element took
 // about a tenth of an encode).
 template <typename S>
@@ -523,11 +520,9 @@ void PhotometricTrunk::RunBackward(const Pass& pass_holder, const std::vector<in
                           const MatrixX<Scalar>& h1, const MatrixX<Scalar>& a2,
                           const MatrixX<Scalar>& h2, const MatrixX<Scalar>& dout) {
     const MatrixX<Scalar> dh2 = W3.transpose() * dout;
-    const MatrixX<Scalar> da2 =
-        dh2.cwiseProduct(SiluSlope(a2));
+    const MatrixX<Scalar> da2 = dh2.cwiseProduct(SiluSlope(a2));
     const MatrixX<Scalar> dh1 = W2.transpose() * da2;
-    const MatrixX<Scalar> da1 =
-        dh1.cwiseProduct(SiluSlope(a1));
+    const MatrixX<Scalar> da1 = dh1.cwiseProduct(SiluSlope(a1));
     if (dL_dhead != nullptr) {
       Eigen::Map<MatrixX<Scalar>>(dhead.data() + layout.w1, h, 5) += da1 * in.transpose();
       Eigen::Map<VectorX<Scalar>>(dhead.data() + layout.b1, h) += da1.rowwise().sum();

@@ -2,8 +2,8 @@
 //
 // PhotometricPotential against what it defines: U and its gradient against central
 // differences, the minibatch estimate over every pixel against U, and the Gauss-Newton
-// Hessian of central differences against J^T W J / sigma^2 + I / sigma_z^2 with J built
-// row by row from the trunk's exact reverse pass.
+// Hessian (from the trunk's batched Jacobian) against J^T W J / sigma^2 + I / sigma_z^2
+// with J built row by row from the trunk's reverse pass, in double.
 #include "samplers/photometric_potential.h"
 
 #include <cmath>
