@@ -217,6 +217,19 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
       model ? model->Trunk(sensor).format
             : TrunkTrainer(TrunkTrainer::Options()).ResolveFormat(sensor, scale);
 
+  // The bench draws every frame against one reference and scores against noise-free
+  // frames: simulated data. A set of clips (each with its own reference) is for train,
+  // encode and eval, which draw each frame against its own clip's.
+  for (const auto& [set, path] : {std::pair<const Dataset*, std::string>{&train_data, train_path},
+                                  {&data, flags.data}}) {
+    if (!set->clips().empty()) {
+      throw DatasetError(path + ": a set of " + std::to_string(set->clips().size()) +
+                         " clips, each with its own reference; bench photometric measures "
+                         "datasets of one reference (simulated ones: it scores against the "
+                         "noise-free frames). train --head photometric, encode and eval draw "
+                         "each clip's frames against its own reference");
+    }
+  }
   const auto train_indices = train_data.FrameIndices(sensor, Split::kTrain);
   const auto pca_indices = data.FrameIndices(sensor, Split::kTrain);
   auto test_indices = data.FrameIndices(sensor, Split::kTest);

@@ -52,6 +52,7 @@
 #include "apps/model_inputs.h"
 #include "apps/progress_bar.h"
 #include "estimation/data/dataset.h"
+#include "estimation/data/photometric_markers.h"
 #include "estimation/functaset/functaset.h"
 #include "estimation/functaset/latent_encoder.h"
 #include "estimation/fitting/latent_fitter.h"
@@ -255,6 +256,8 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
       ticked += n;
     }
   };
+  std::optional<DatasetMarkers> frame_markers;
+  if (photometric) frame_markers.emplace(dataset, trunk);
   std::vector<Bytes> measured;
   for (const std::int64_t k : own) {
     const std::size_t index = frames[static_cast<std::size_t>(k)];
@@ -264,9 +267,12 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
     ByteWriter record;
     Eigen::VectorXd latent;
     double fit_ms = 0;  // the photometric fit's, added to each posterior's time
+    // A photometric trunk draws each frame against its own reference (its clip's).
+    const PhotometricTrunk::Markers* markers =
+        frame_markers ? frame_markers->Of(index) : nullptr;
     if (photometric) {
       // encode's fit is both the point estimate's latent and the functaset's map.
-      EncodedFrameFit fit = EncodeFrame(*encoder, sensor, targets);
+      EncodedFrameFit fit = EncodeFrame(*encoder, sensor, targets, markers);
       latent = std::move(fit.latent);
       fit_ms = fit.ms;
       PutPose(pose_model.Predict(latent, n), &record);
@@ -304,7 +310,7 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
       std::optional<PoseDistribution> distribution;
       PosePosterior::Summary summary;
       if (photometric) {
-        summary = posteriors[s]->Estimate(targets, latent, n, &distribution);
+        summary = posteriors[s]->Estimate(targets, latent, n, &distribution, nullptr, markers);
         summary.fit_time_ms = fit_ms;
         summary.total_time_ms += fit_ms;
       } else {

@@ -47,6 +47,7 @@
 #include "apps/pictures.h"
 #include "estimation/data/dataset.h"
 #include "estimation/data/image_io.h"
+#include "estimation/data/photometric_markers.h"
 #include "estimation/functaset/functaset.h"
 #include "estimation/functaset/latent_encoder.h"
 #include "estimation/knn/knn_index.h"
@@ -180,8 +181,9 @@ nlohmann::json FiniteOrNull(double value) {
 // The photometric trunk's fit (header comment): `encode`'s own per-frame fit. Fills the
 // parts of a LatentFitter::Summary that describe it (no Ceres stage, no costs).
 LatentFitter::Summary FitPhotometric(const FunctaModel& model, SensorKind sensor,
-                                     const TrunkTargets& targets, const FitFlags& flags,
-                                     Eigen::VectorXd* latent) {
+                                     const TrunkTargets& targets,
+                                     const PhotometricTrunk::Markers& markers,
+                                     const FitFlags& flags, Eigen::VectorXd* latent) {
   std::vector<std::string> direct_only;
   if (!flags.functaset.empty()) direct_only.push_back("--functaset");
   if (flags.precision != "float") direct_only.push_back("--precision");
@@ -206,7 +208,7 @@ LatentFitter::Summary FitPhotometric(const FunctaModel& model, SensorKind sensor
   } catch (const std::invalid_argument& e) {
     throw UsageError("--strategy " + flags.strategy + ": " + e.what());
   }
-  EncodedFrameFit fitted = EncodeFrame(*encoder, sensor, targets);
+  EncodedFrameFit fitted = EncodeFrame(*encoder, sensor, targets, &markers);
   LatentFitter::Summary summary;
   summary.total_time_ms = fitted.ms;
   summary.strategy = encoder->StrategyOf(sensor);
@@ -316,8 +318,11 @@ void RunFit(const FitFlags& flags) {
 
   Eigen::VectorXd latent;
   LatentFitter::Summary summary;
+  // A photometric trunk draws the frame against its own reference (--reference).
+  std::shared_ptr<const PhotometricTrunk::Markers> markers;
   if (photometric) {
-    summary = FitPhotometric(model, sensor, targets, flags, &latent);
+    markers = trunk.photometric->MakeMarkers(PhotometricReference(reference, trunk.format));
+    summary = FitPhotometric(model, sensor, targets, *markers, flags, &latent);
     std::cout << "fit: " << ToString(sensor) << " " << targets.rows << "x" << targets.cols
               << ", PSNR " << FormatFixed(summary.psnr, 2) << " dB in "
               << FormatFixed(summary.total_time_ms, 1) << " ms (" << summary.strategy.ToString()
@@ -374,8 +379,8 @@ void RunFit(const FitFlags& flags) {
     const std::string json_path = (fs::path(flags.out) / "latent.json").string();
     const std::string png_path = (fs::path(flags.out) / "fit.png").string();
     WriteFileAtomically(json_path, record.dump(2) + "\n");
-    WriteFitPicture(png_path, targets, Reconstruct(trunk, latent.cast<float>()), summary, sensor,
-                    flags.tile_height);
+    WriteFitPicture(png_path, targets, Reconstruct(trunk, latent.cast<float>(), markers.get()),
+                    summary, sensor, flags.tile_height);
     std::cout << "fit: wrote " << json_path << " and " << png_path << "\n";
   }
 

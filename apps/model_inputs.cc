@@ -122,9 +122,10 @@ double DatasetPixelPitch(const std::string& frame_path, SensorKind sensor) {
 }
 
 EncodedFrameFit EncodeFrame(const LatentEncoder& encoder, SensorKind sensor,
-                            const TrunkTargets& targets) {
+                            const TrunkTargets& targets,
+                            const PhotometricTrunk::Markers* markers) {
   const auto start = std::chrono::steady_clock::now();
-  const LatentEncoder::EncodedFrame fitted = encoder.EncodeTargets(sensor, targets);
+  const LatentEncoder::EncodedFrame fitted = encoder.EncodeTargets(sensor, targets, markers);
   EncodedFrameFit out;
   out.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
                .count();

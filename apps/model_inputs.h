@@ -71,7 +71,8 @@ struct EncodedFrameFit {
   double ms = 0;
 };
 EncodedFrameFit EncodeFrame(const LatentEncoder& encoder, SensorKind sensor,
-                            const TrunkTargets& targets);
+                            const TrunkTargets& targets,
+                            const PhotometricTrunk::Markers* markers = nullptr);
 
 // The encoder of a photometric trunk's frames for pose posteriors under `pose_model`
 // (from `pose_model_path`): the strategy of the functaset the pose MLP was trained on

@@ -65,6 +65,7 @@
 #include "apps/pictures.h"
 #include "estimation/data/codecs.h"
 #include "estimation/data/dataset.h"
+#include "estimation/data/photometric_markers.h"
 #include "estimation/data/image_io.h"
 #include "estimation/data/preprocess.h"
 #include "estimation/functaset/functaset.h"
@@ -143,6 +144,7 @@ const cv::Scalar kModeColour(255, 80, 255);   // magenta
 struct Input {
   SensorKind sensor = SensorKind::kSoftBubble;
   Image difference;     // Difference (estimation/data/preprocess.h), physical units
+  Image reference;      // the frame's own no-contact reference, physical units
   double pitch_m = 0;   // 0 = unknown
   std::optional<PoseLabel> label;
   std::string name;     // for titles
@@ -698,8 +700,8 @@ void RunPose(const PoseFlags& flags) {
     CheckModelMatchesData(model, flags.model, dataset, flags.data, sensor, "pose",
                           "--allow-other-frames", flags.allow_other_frames);
     targets = LoadTrunkTargets(dataset, *index, model.Trunk(sensor).format);
-    input.difference =
-        Difference(dataset.LoadFrame(*index), dataset.FrameReference(*index), sensor);
+    input.reference = dataset.FrameReference(*index);
+    input.difference = Difference(dataset.LoadFrame(*index), input.reference, sensor);
     input.pitch_m = dataset.sensor_info(sensor).pixel_pitch_m;
     input.label = dataset.frames()[*index].label;
     input.name = "frame " + flags.id;
@@ -720,6 +722,7 @@ void RunPose(const PoseFlags& flags) {
                             "--allow-other-frames", flags.allow_other_frames);
     }
     targets = MakeTrunkTargets(pair.frame, pair.reference, sensor, model.Trunk(sensor).format);
+    input.reference = pair.reference;
     input.difference = Difference(pair.frame, pair.reference, sensor);
     input.pitch_m = pair.description && pair.description->pixel_pitch_m > 0
                         ? pair.description->pixel_pitch_m
@@ -823,8 +826,11 @@ void RunLatentPose(const PoseFlags& flags, PosteriorSampler sampler, const Funct
     const std::unique_ptr<LatentEncoder> encoder_holder =
         PhotometricPoseEncoder(model, flags.model, sensor, pose_model, flags.pose_model);
     const LatentEncoder& encoder = *encoder_holder;
-    const EncodedFrameFit fit = EncodeFrame(encoder, sensor, targets);
-    summary = posterior.Estimate(targets, fit.latent, n, &distribution);
+    // The frame is drawn against its own reference.
+    const std::shared_ptr<const PhotometricTrunk::Markers> markers =
+        trunk.photometric->MakeMarkers(PhotometricReference(input.reference, trunk.format));
+    const EncodedFrameFit fit = EncodeFrame(encoder, sensor, targets, markers.get());
+    summary = posterior.Estimate(targets, fit.latent, n, &distribution, nullptr, markers.get());
     summary.fit_time_ms = fit.ms;
     summary.total_time_ms += fit.ms;
     std::cout << "pose: the latent fitted as encode fits it ("

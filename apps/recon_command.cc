@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <iostream>
 #include <limits>
+#include <optional>
 #include <thread>
 
 #include <opencv2/imgproc.hpp>
@@ -24,6 +25,7 @@
 #include "apps/output_paths.h"
 #include "apps/pictures.h"
 #include "estimation/data/dataset.h"
+#include "estimation/data/photometric_markers.h"
 #include "estimation/functaset/functaset.h"
 #include "estimation/evaluation/reconstruction.h"
 #include "estimation/data/trunk_targets.h"
@@ -112,17 +114,23 @@ std::vector<std::string> WriteExamples(const ReconFlags& flags, const FunctaMode
   const SensorTrunk& trunk = model.Trunk(sensor);
   const int rows = trunk.format.rows, cols = trunk.format.cols, h = flags.tile_height;
   const int w = std::max(1, static_cast<int>(std::lround(cols * double(h) / rows)));
-  const Eigen::MatrixXf zero = Reconstruct(trunk, Eigen::VectorXf::Zero(TrunkLatentDim(trunk)));
+  // A photometric trunk draws each frame against its own reference (its clip's).
+  std::optional<DatasetMarkers> markers;
+  if (trunk.photometric != nullptr) markers.emplace(dataset, trunk);
   struct Example {
     const ReconstructionEvaluator::FrameResult* result;
     TrunkTargets target;
     Eigen::MatrixXf recon;
+    Eigen::MatrixXf zero;  // what the trunk draws for a zero latent
   };
   std::vector<Example> examples;
   double error_scale = 0;
   for (const auto* r : PickExamples(summary, sensor, flags.examples, flags.worst)) {
+    const PhotometricTrunk::Markers* own = markers ? markers->Of(r->dataset_index) : nullptr;
     Example e{r, LoadTrunkTargets(dataset, r->dataset_index, trunk.format),
-              Reconstruct(trunk, functaset.entries(sensor)[*functaset.Find(sensor, r->id)].latent)};
+              Reconstruct(trunk, functaset.entries(sensor)[*functaset.Find(sensor, r->id)].latent,
+                          own),
+              Reconstruct(trunk, Eigen::VectorXf::Zero(TrunkLatentDim(trunk)), own)};
     for (int j = 0; j < rows * cols; ++j) {
       if (e.target.weights[j] > 0) {
         error_scale = std::max<double>(error_scale,
@@ -165,7 +173,7 @@ std::vector<std::string> WriteExamples(const ReconFlags& flags, const FunctaMode
          "z=0 " + Db(r.psnr_zero) + " dB",
          std::isfinite(r.psnr_clean) ? "clean " + Db(r.psnr_clean) + " dB" : std::string()}));
     row.push_back(FitHeight(ValueTile(e.target.values, e.target.weights, rows, cols, lo, hi), h));
-    row.push_back(FitHeight(ValueTile(zero, e.target.weights, rows, cols, lo, hi), h));
+    row.push_back(FitHeight(ValueTile(e.zero, e.target.weights, rows, cols, lo, hi), h));
     row.push_back(FitHeight(ValueTile(e.recon, e.target.weights, rows, cols, lo, hi), h));
     row.push_back(FitHeight(ErrorTile(e.recon, e.target, error_scale), h));
     grid.push_back(std::move(row));

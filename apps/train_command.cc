@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <iostream>
 #include <limits>
+#include <map>
 #include <memory>
 #include <sstream>
 #include <thread>
@@ -305,15 +306,6 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
     if (indices.empty()) {
       throw DatasetError(flags.data + ": no train-split " + std::string(name) + " frames");
     }
-    for (std::size_t i : indices) {
-      // Each clip of a clip set has its own reference.
-      if (dataset.frames()[i].clip != dataset.frames()[indices[0]].clip) {
-        throw DatasetError(flags.data + ": --head photometric draws every frame against one "
-                           "reference, but the train frames come from several clips, each "
-                           "with its own (" + dataset.frames()[indices[0]].id + ", " +
-                           dataset.frames()[i].id + ")");
-      }
-    }
     PhotometricTrainer::Options o;
     o.trunk.width = flags.width_option->count() ? flags.width : 64;
     o.trunk.num_hidden_layers = flags.layers_option->count() ? flags.layers : 3;
@@ -350,14 +342,27 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
     WarnIfStretched(dataset, flags.data, sensor, format.rows, format.cols, "train");
     const std::vector<TrunkTargets> frames =
         LoadTrunkTargets(dataset, indices, format, /*clean=*/false, o.threads);
-    const Image reference = PhotometricReference(dataset.FrameReference(indices[0]), format);
+    // Each frame is drawn against its own reference: its clip's in a set of clips.
+    std::vector<Image> references;
+    std::vector<int> frame_reference;
+    std::map<int, int> reference_of_clip;
+    for (std::size_t i : indices) {
+      const auto [it, added] = reference_of_clip.emplace(dataset.frames()[i].clip,
+                                                         static_cast<int>(references.size()));
+      if (added) references.push_back(PhotometricReference(dataset.FrameReference(i), format));
+      frame_reference.push_back(it->second);
+    }
+    if (references.size() > 1) {
+      std::cout << "train " << name << ": " << references.size()
+                << " clips, each frame drawn against its own clip's reference" << std::endl;
+    }
     auto bar = std::make_unique<ProgressBar>(std::string("train ") + name, o.steps, "steps");
     const bool bar_enabled = ProgressBar::Enabled();
     const int every = std::max(1, o.steps / 20);
     const auto started = std::chrono::steady_clock::now();
     bool first = true;
     const PhotometricTrainer::Result result =
-        trainer.Train(frames, reference, [&](int step, double loss) {
+        trainer.Train(frames, references, frame_reference, [&](int step, double loss) {
           bar->Tick(first ? step : 1);  // a resumed run starts with the bar part-way
           first = false;
           bar->SetStatus("loss " + FormatFixed(loss * 1e3, 3) + "e-3");
@@ -386,12 +391,15 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
     // The likelihood scale of the samplers: the RMS residual of the training latents over
     // up to 64 evenly spaced training frames, whole frames.
     const int checked = std::min<int>(64, static_cast<int>(frames.size()));
+    std::vector<std::shared_ptr<const PhotometricTrunk::Markers>> markers;
+    for (const Image& reference : references) markers.push_back(result.trunk.MakeMarkers(reference));
     std::vector<double> mse(checked);
     internal::ParallelFor(checked, o.threads, [&](int k) {
       const std::size_t i = static_cast<std::size_t>(k) * frames.size() / checked;
       mse[k] = result.trunk.LossAndGradient<float>(
           result.trunk.AllPixels(), result.latents.row(i).transpose().cast<float>(),
-          frames[i].values, frames[i].weights, nullptr, nullptr, nullptr);
+          frames[i].values, frames[i].weights, nullptr, nullptr, nullptr, nullptr,
+          markers[frame_reference[i]].get());
     });
     double mse_sum = 0;
     for (double m : mse) mse_sum += m;

@@ -9,8 +9,9 @@ namespace tactfunc {
 
 PhotometricPotential::PhotometricPotential(const PhotometricTrunk& trunk,
                                            const TrunkTargets& targets, double sigma,
-                                           double sigma_z)
-    : trunk_(&trunk), sigma_(sigma), sigma_z_(sigma_z) {
+                                           double sigma_z,
+                                           const PhotometricTrunk::Markers* markers)
+    : trunk_(&trunk), markers_(markers), sigma_(sigma), sigma_z_(sigma_z) {
   const int rows = trunk.options().rows, cols = trunk.options().cols;
   const int channels = trunk.channels();
   const Eigen::Index n = static_cast<Eigen::Index>(rows) * cols;
@@ -64,7 +65,7 @@ double PhotometricPotential::EvaluateOn(const Eigen::VectorXd& z, const std::vec
   Eigen::VectorXf dz;
   const double loss = trunk_->LossAndGradient<float>(
       pixels, z.cast<float>(), values, weights, gradient != nullptr ? &dz : nullptr, nullptr,
-      nullptr);
+      nullptr, nullptr, markers_);
   u += to_u * loss;
   if (gradient != nullptr) *gradient += to_u * dz.cast<double>();
   return u;
@@ -106,7 +107,7 @@ bool PhotometricPotential::GaussNewtonHessian(const Eigen::VectorXd& z,
   // The trunk's exact Jacobian (pixel-major rows i C + c), each row scaled by
   // sqrt(w_i) / sigma: H = J^T J + I / sigma_z^2.
   Eigen::MatrixXf J;
-  trunk_->ForwardAndLatentJacobian<float>(pixels_, z.cast<float>(), nullptr, &J);
+  trunk_->ForwardAndLatentJacobian<float>(pixels_, z.cast<float>(), nullptr, &J, markers_);
   const Eigen::Index channels = values_.cols();
   for (Eigen::Index i = 0; i < values_.rows(); ++i) {
     const float scale = std::sqrt(weights_[i]) / static_cast<float>(sigma_);

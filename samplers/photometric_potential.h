@@ -36,8 +36,10 @@ class PhotometricPotential : public LatentPotential {
   // Throws std::invalid_argument for targets that are not rows * cols x C of the
   // trunk's grid and channels, weights of another size or negative, or sigma, sigma_z
   // not finite and > 0.
+  // `markers` (may be null: the trunk's own reference) are the frame's own reference's
+  // (PhotometricTrunk::MakeMarkers) and must outlive the potential.
   PhotometricPotential(const PhotometricTrunk& trunk, const TrunkTargets& targets, double sigma,
-                       double sigma_z);
+                       double sigma_z, const PhotometricTrunk::Markers* markers = nullptr);
 
   int dim() const override { return trunk_->latent_dim(); }
   double Evaluate(const Eigen::VectorXd& z, Eigen::VectorXd* gradient) const override;
@@ -55,6 +57,7 @@ class PhotometricPotential : public LatentPotential {
                     double scale, Eigen::VectorXd* gradient) const;
 
   const PhotometricTrunk* trunk_;
+  const PhotometricTrunk::Markers* markers_;
   std::vector<int> pixels_;   // the valid pixels, in grid order
   Eigen::MatrixXf values_;    // their targets, pixels_.size() x C
   Eigen::VectorXf weights_;   // their weights

@@ -6,10 +6,12 @@
 #include <cmath>
 #include <cstdio>
 #include <map>
+#include <memory>
 #include <sstream>
 #include <stdexcept>
 
 #include "models/core/parallel_for.h"
+#include "estimation/data/photometric_markers.h"
 #include "estimation/data/trunk_targets.h"
 
 namespace tactfunc {
@@ -77,13 +79,14 @@ RepresentationSize ComputeRepresentationSize(const FunctaModel& model, const Fun
   return size;
 }
 
-Eigen::MatrixXf Reconstruct(const SensorTrunk& trunk, const Eigen::VectorXf& latent) {
+Eigen::MatrixXf Reconstruct(const SensorTrunk& trunk, const Eigen::VectorXf& latent,
+                            const PhotometricTrunk::Markers* markers) {
   if (latent.size() != TrunkLatentDim(trunk)) {
     throw std::invalid_argument("Reconstruct: latent has " + std::to_string(latent.size()) +
                                 " values, the " + ToString(trunk.sensor) +
                                 " trunk's latent_dim is " + std::to_string(TrunkLatentDim(trunk)));
   }
-  return TrunkDecode(trunk, latent);
+  return TrunkDecode(trunk, latent, markers);
 }
 
 bool ReconstructionEvaluator::Options::IsValid(std::string* error) const {
@@ -228,6 +231,8 @@ ReconstructionEvaluator::Summary ReconstructionEvaluator::Evaluate(const FunctaM
     const SensorTrunk* trunk = nullptr;
     Eigen::MatrixXf grid;
     Eigen::MatrixXf zero_prediction;  // f(grid; 0), the same for every frame
+    // A photometric trunk's markers of each frame's own reference.
+    std::unique_ptr<DatasetMarkers> markers;
   };
   std::map<SensorKind, SensorState> states;
   std::vector<SensorInfo> infos;
@@ -239,6 +244,9 @@ ReconstructionEvaluator::Summary ReconstructionEvaluator::Evaluate(const FunctaM
     }
     SensorState& state = states[sensor];
     state.trunk = &model.Trunk(sensor);
+    if (state.trunk->photometric != nullptr) {
+      state.markers = std::make_unique<DatasetMarkers>(dataset, *state.trunk);
+    }
     state.grid = state.trunk->siren.Grid<float>(state.trunk->format.rows, state.trunk->format.cols);
     state.zero_prediction =
         TrunkDecode(*state.trunk, Eigen::VectorXf::Zero(TrunkLatentDim(*state.trunk)));
@@ -284,7 +292,9 @@ ReconstructionEvaluator::Summary ReconstructionEvaluator::Evaluate(const FunctaM
     FrameResult& r = summary.frames[i];
     const SensorState& state = states.at(r.sensor);
     const FrameFormat& format = state.trunk->format;
-    const Eigen::MatrixXf prediction = TrunkDecode(*state.trunk, entries[i]->latent);
+    const PhotometricTrunk::Markers* markers =
+        state.markers ? state.markers->Of(r.dataset_index) : nullptr;
+    const Eigen::MatrixXf prediction = TrunkDecode(*state.trunk, entries[i]->latent, markers);
     const Image frame = dataset.LoadFrame(r.dataset_index);
     const TrunkTargets targets = DatasetFrameTargets(dataset, r.dataset_index, frame, format);
     const ContactReport contact =
@@ -300,7 +310,13 @@ ReconstructionEvaluator::Summary ReconstructionEvaluator::Evaluate(const FunctaM
     r.target_range = TargetRange(targets);
     r.source_range = targets.source_range;
     r.rmse = Rmse(prediction, targets);
-    r.psnr_zero = Psnr(state.zero_prediction, targets);
+    // A photometric trunk's zero latent still moves the frame's own markers.
+    r.psnr_zero = Psnr(markers != nullptr
+                           ? TrunkDecode(*state.trunk,
+                                         Eigen::VectorXf::Zero(TrunkLatentDim(*state.trunk)),
+                                         markers)
+                           : state.zero_prediction,
+                       targets);
     if (summary.has_clean && !dataset.frames()[r.dataset_index].clean_path.empty()) {
       r.psnr_clean = Psnr(prediction, LoadTrunkTargets(dataset, r.dataset_index, format, true));
     }

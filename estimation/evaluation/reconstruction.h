@@ -84,8 +84,10 @@ RepresentationSize ComputeRepresentationSize(const FunctaModel& model, const Fun
 
 // f(grid; latent) of a trunk on its working-resolution grid, N x C (float): the
 // reconstruction of a frame from its latent. Throws std::invalid_argument if the latent
-// does not have latent_dim entries.
-Eigen::MatrixXf Reconstruct(const SensorTrunk& trunk, const Eigen::VectorXf& latent);
+// does not have latent_dim entries. A photometric trunk draws the markers of `markers`
+// (the frame's own reference, estimation/data/photometric_markers.h) if given.
+Eigen::MatrixXf Reconstruct(const SensorTrunk& trunk, const Eigen::VectorXf& latent,
+                            const PhotometricTrunk::Markers* markers = nullptr);
 
 class ReconstructionEvaluator {
  public:

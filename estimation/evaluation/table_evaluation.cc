@@ -5,12 +5,14 @@
 #include <atomic>
 #include <cmath>
 #include <map>
+#include <optional>
 #include <set>
 #include <stdexcept>
 #include <utility>
 
 #include "estimation/data/contact.h"
 #include "estimation/data/image_io.h"
+#include "estimation/data/photometric_markers.h"
 #include "estimation/data/trunk_targets.h"
 #include "estimation/evaluation/reconstruction.h"
 #include "estimation/fitting/latent_fitter.h"
@@ -215,7 +217,8 @@ SensorFrames LoadSensorFrames(const TableEvaluation::Inputs& in, const SensorTru
 
 // Per-frame PSNR of f(grid; z) for every entry of `frames` with the latents of `entries`,
 // and, if `clean` is given, against the noise-free frames it holds (NaN where none).
-std::vector<double> LatentPsnrs(const SensorTrunk& trunk,
+// A photometric trunk draws each entry against its own frame's reference in `dataset`.
+std::vector<double> LatentPsnrs(const SensorTrunk& trunk, const Dataset& dataset,
                                 const std::vector<const FunctasetEntry*>& entries,
                                 const std::vector<const TrunkTargets*>& targets,
                                 const ProcessGroup& group, int threads,
@@ -224,11 +227,23 @@ std::vector<double> LatentPsnrs(const SensorTrunk& trunk,
                                 std::vector<double>* psnr_clean = nullptr) {
   std::vector<double> psnr(entries.size(), kNan);
   if (psnr_clean != nullptr) psnr_clean->assign(entries.size(), kNan);
+  std::optional<DatasetMarkers> markers;
+  if (trunk.photometric != nullptr) markers.emplace(dataset, trunk);
+  auto markers_of = [&](const FunctasetEntry& entry) -> const PhotometricTrunk::Markers* {
+    if (!markers) return nullptr;
+    const std::optional<std::size_t> index = dataset.FindFrame(entry.id, trunk.sensor);
+    if (!index) {
+      throw DatasetError("the dataset has no " + std::string(ToString(trunk.sensor)) +
+                         " frame '" + entry.id + "' to draw the markers of");
+    }
+    return markers->Of(*index);
+  };
   if (observer) observer->BeginTask(label, static_cast<std::int64_t>(entries.size()), "frames");
   ShardedFor(
       group, entries.size(), threads, observer,
       [&](std::size_t i, ByteWriter* out) {
-        const Eigen::MatrixXf prediction = Reconstruct(trunk, entries[i]->latent);
+        const Eigen::MatrixXf prediction =
+            Reconstruct(trunk, entries[i]->latent, markers_of(*entries[i]));
         out->Put(Psnr(prediction, *targets[i]));
         out->Put(clean != nullptr && (*clean)[i] ? Psnr(prediction, *(*clean)[i]) : kNan);
       },
@@ -373,7 +388,7 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
     for (const TrunkTargets& t : s.targets) frame_targets.push_back(&t);
     std::vector<double> tf_psnr_clean;
     const std::vector<double> tf_psnr =
-        LatentPsnrs(trunk, s.entries, frame_targets, group, threads,
+        LatentPsnrs(trunk, dataset, s.entries, frame_targets, group, threads,
                     std::string("eval: TactFunc ") + ToString(sensor), observer, &s.clean,
                     &tf_psnr_clean);
     const std::uint64_t trunk_bytes = TrunkParameterBytes(trunk);
@@ -514,7 +529,7 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
       }
       const int d2 = e.functaset->latent_dim(sensor);
       const std::vector<double> psnr =
-          LatentPsnrs(t2, test_entries, t_targets, group, threads,
+          LatentPsnrs(t2, dataset, test_entries, t_targets, group, threads,
                       "eval: TactFunc d=" + std::to_string(d2) + " " + ToString(sensor), observer);
       curves.tactfunc.push_back(
           {e.functaset->BytesPerFrame(sensor), MeanPsnr(psnr), "d=" + std::to_string(d2)});

@@ -14,9 +14,11 @@ namespace {
 // The residuals of the header comment over `pixels`, one parameter block of d values.
 class PhotometricResiduals : public ceres::CostFunction {
  public:
-  PhotometricResiduals(const PhotometricTrunk& trunk, std::vector<int> pixels,
-                       Eigen::MatrixXf targets, Eigen::VectorXf sqrt_weights)
+  PhotometricResiduals(const PhotometricTrunk& trunk, const PhotometricTrunk::Markers* markers,
+                       std::vector<int> pixels, Eigen::MatrixXf targets,
+                       Eigen::VectorXf sqrt_weights)
       : trunk_(trunk),
+        markers_(markers),
         pixels_(std::move(pixels)),
         targets_(std::move(targets)),
         sqrt_weights_(std::move(sqrt_weights)) {
@@ -31,9 +33,9 @@ class PhotometricResiduals : public ceres::CostFunction {
     Eigen::MatrixXf y, J;
     const bool want_jacobian = jacobians != nullptr && jacobians[0] != nullptr;
     if (want_jacobian) {
-      trunk_.ForwardAndLatentJacobian<float>(pixels_, z, &y, &J);
+      trunk_.ForwardAndLatentJacobian<float>(pixels_, z, &y, &J, markers_);
     } else {
-      y = trunk_.Forward<float>(pixels_, z);
+      y = trunk_.Forward<float>(pixels_, z, markers_);
     }
     const int n = static_cast<int>(pixels_.size());
     for (int i = 0; i < n; ++i) {
@@ -62,6 +64,7 @@ class PhotometricResiduals : public ceres::CostFunction {
 
  private:
   const PhotometricTrunk& trunk_;
+  const PhotometricTrunk::Markers* markers_;
   const std::vector<int> pixels_;
   const Eigen::MatrixXf targets_;
   const Eigen::VectorXf sqrt_weights_;
@@ -133,7 +136,7 @@ PhotometricCeresFit FitPhotometricLatentCeres(const PhotometricTrunk& trunk,
   problem_options.cost_function_ownership = ceres::TAKE_OWNERSHIP;
   ceres::Problem problem(problem_options);
   problem.AddResidualBlock(
-      new PhotometricResiduals(trunk, std::move(pixels), std::move(targets),
+      new PhotometricResiduals(trunk, options.markers, std::move(pixels), std::move(targets),
                                std::move(sqrt_weights)),
       nullptr, fit.latent.data());
   ceres::Solver::Options solver;

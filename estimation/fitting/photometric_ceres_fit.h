@@ -34,6 +34,9 @@ struct PhotometricCeresOptions {
   // costs less per iteration but its fit is worse for the same time
   // (docs/REPRESENTATION.md, "A photometric latent fitted in Ceres").
   int pixels = 0;
+  // The frame's own markers (PhotometricTrunk::MakeMarkers of its reference; not owned,
+  // must outlive the fit), or null for the trunk's own reference.
+  const PhotometricTrunk::Markers* markers = nullptr;
   bool IsValid(std::string* error) const;
 };
 

@@ -6,13 +6,16 @@
 #include <cmath>
 #include <condition_variable>
 #include <exception>
+#include <map>
 #include <filesystem>
 #include <mutex>
 #include <sstream>
 #include <stdexcept>
 #include <thread>
+#include <tuple>
 #include <utility>
 
+#include "estimation/data/photometric_markers.h"
 #include "estimation/fitting/photometric_ceres_fit.h"
 #include "estimation/training/photometric_trainer.h"
 
@@ -190,8 +193,9 @@ const LatentEncoder::SensorState& LatentEncoder::State(SensorKind sensor) const 
                               ToString(sensor) + "'");
 }
 
-LatentEncoder::EncodedFrame LatentEncoder::EncodeTargets(SensorKind sensor,
-                                                         const TrunkTargets& targets) const {
+LatentEncoder::EncodedFrame LatentEncoder::EncodeTargets(
+    SensorKind sensor, const TrunkTargets& targets,
+    const PhotometricTrunk::Markers* markers) const {
   const SensorState& state = State(sensor);
   const LatentModulatedSiren& siren = state.trunk->siren;
   const int channels = TrunkOutputChannels(*state.trunk);
@@ -212,15 +216,19 @@ LatentEncoder::EncodedFrame LatentEncoder::EncodeTargets(SensorKind sensor,
     // fixed seed, so a frame's latent depends on the frame alone.
     PhotometricFitOptions fit;
     fit.steps = state.strategy.steps;
+    fit.markers = markers;
     if (state.strategy.refinement == FitStrategy::Refinement::kCeres) {
       // knn+ceres:N: Levenberg-Marquardt on every valid pixel from the best neighbour
       // (estimation/fitting/photometric_ceres_fit.h).
       PhotometricCeresOptions ceres;
       ceres.iterations = state.strategy.steps;
       ceres.pixels = 0;
+      ceres.markers = markers;
       out.latent = FitPhotometricLatentCeres(
                        *state.trunk->photometric, targets,
-                       state.warm_start->BestStart(targets, kWarmStartCandidates), ceres)
+                       state.warm_start->BestStart(targets, kWarmStartCandidates,
+                                                   PhotometricWarmStart::kScoredPixels, markers),
+                       ceres)
                        .latent.cast<float>();
     } else if (state.warm_start != nullptr) {
       // One start, the best of the table's nearest neighbours, refined by a short fit
@@ -235,7 +243,7 @@ LatentEncoder::EncodedFrame LatentEncoder::EncodeTargets(SensorKind sensor,
                                         kPhotometricFitSeed)
                        .latent.cast<float>();
     }
-    out.psnr = Psnr(TrunkDecode(*state.trunk, out.latent), targets);
+    out.psnr = Psnr(TrunkDecode(*state.trunk, out.latent, markers), targets);
     return out;
   }
   if (state.fitter) {
@@ -543,6 +551,14 @@ Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
       ++psnr_count;
     }
   }
+  // A photometric trunk draws each frame against its own reference (its clip's).
+  std::map<SensorKind, DatasetMarkers> frame_markers;
+  for (const SensorState& state : states_) {
+    if (state.trunk->photometric != nullptr) {
+      frame_markers.emplace(std::piecewise_construct, std::forward_as_tuple(state.sensor),
+                            std::forward_as_tuple(dataset, *state.trunk));
+    }
+  }
   auto interrupted = [&]() { return interrupt != nullptr && interrupt->load(); };
   auto last_report = std::chrono::steady_clock::now() - std::chrono::seconds(1);
 
@@ -576,7 +592,10 @@ Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
             job.entry.psnr = static_cast<float>(
                 Psnr(TrunkDecode(*state.trunk, state.rest_latent), targets));
           } else {
-            EncodedFrame frame = EncodeTargets(job.sensor, targets);
+            const auto own = frame_markers.find(job.sensor);
+            EncodedFrame frame =
+                EncodeTargets(job.sensor, targets,
+                              own == frame_markers.end() ? nullptr : own->second.Of(job.frame));
             job.entry.latent = std::move(frame.latent);
             job.entry.psnr = static_cast<float>(frame.psnr);
           }

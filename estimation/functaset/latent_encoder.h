@@ -184,8 +184,12 @@ class LatentEncoder {
 
   // The fit of one frame's targets (as LoadTrunkTargets makes them with the sensor's
   // frame format). Throws std::invalid_argument if the model has no trunk for the
-  // sensor or the targets are not N x C of the trunk's working resolution.
-  EncodedFrame EncodeTargets(SensorKind sensor, const TrunkTargets& targets) const;
+  // sensor or the targets are not N x C of the trunk's working resolution. A
+  // photometric trunk draws the frame against `markers` (its own reference's,
+  // PhotometricTrunk::MakeMarkers) if given, else against the trunk's own reference;
+  // Encode gives every frame its own (estimation/data/photometric_markers.h).
+  EncodedFrame EncodeTargets(SensorKind sensor, const TrunkTargets& targets,
+                             const PhotometricTrunk::Markers* markers = nullptr) const;
 
   // The fit a sensor's frames get (Options::strategy, or the trunk's default when it is
   // ""). Throws std::invalid_argument if the model has no trunk for the sensor.

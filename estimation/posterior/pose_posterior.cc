@@ -184,26 +184,28 @@ PosePosterior::PosePosterior(const SensorTrunk& trunk, const PoseMlp& pose_mlp,
 PosePosterior::Summary PosePosterior::Estimate(const TrunkTargets& targets, int symmetry_order,
                                                std::optional<PoseDistribution>* posterior,
                                                Eigen::MatrixXd* latent_samples) const {
-  return EstimateImpl(targets, nullptr, symmetry_order, posterior, latent_samples);
+  return EstimateImpl(targets, nullptr, symmetry_order, posterior, latent_samples, nullptr);
 }
 
 PosePosterior::Summary PosePosterior::Estimate(const TrunkTargets& targets,
                                                const Eigen::VectorXd& latent, int symmetry_order,
                                                std::optional<PoseDistribution>* posterior,
-                                               Eigen::MatrixXd* latent_samples) const {
+                                               Eigen::MatrixXd* latent_samples,
+                                               const PhotometricTrunk::Markers* markers) const {
   const int d = TrunkLatentDim(*trunk_);
   if (latent.size() != d || !latent.allFinite()) {
     throw std::invalid_argument("PosePosterior::Estimate: expected a finite latent of size " +
                                 std::to_string(d) + ", got size " + std::to_string(latent.size()));
   }
-  return EstimateImpl(targets, &latent, symmetry_order, posterior, latent_samples);
+  return EstimateImpl(targets, &latent, symmetry_order, posterior, latent_samples, markers);
 }
 
 PosePosterior::Summary PosePosterior::EstimateImpl(const TrunkTargets& targets,
                                                    const Eigen::VectorXd* latent,
                                                    int symmetry_order,
                                                    std::optional<PoseDistribution>* posterior,
-                                                   Eigen::MatrixXd* latent_samples) const {
+                                                   Eigen::MatrixXd* latent_samples,
+                                                   const PhotometricTrunk::Markers* markers) const {
   const auto start = std::chrono::steady_clock::now();
   if (posterior == nullptr) {
     throw std::invalid_argument("PosePosterior::Estimate: posterior must not be null");
@@ -239,7 +241,7 @@ PosePosterior::Summary PosePosterior::EstimateImpl(const TrunkTargets& targets,
     const double sigma = options_.problem.sigma > 0 ? options_.problem.sigma
                                                     : LatentProblem::AutomaticSigma(*trunk_);
     potential = std::make_unique<PhotometricPotential>(*trunk_->photometric, targets, sigma,
-                                                       options_.problem.sigma_z);
+                                                       options_.problem.sigma_z, markers);
   } else {
     problem.emplace(*trunk_, targets, options_.problem);
     potential = std::make_unique<TrunkPotential>(*problem);

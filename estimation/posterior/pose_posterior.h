@@ -161,17 +161,21 @@ class PosePosterior {
   Summary Estimate(const TrunkTargets& targets, int symmetry_order,
                    std::optional<PoseDistribution>* posterior,
                    Eigen::MatrixXd* latent_samples = nullptr) const;
-  // The same with `latent` (size d, finite) in place of the fit.
+  // The same with `latent` (size d, finite) in place of the fit. A photometric trunk
+  // draws the frame against `markers` (its own reference's, PhotometricTrunk::MakeMarkers)
+  // if given, else against the trunk's own reference.
   Summary Estimate(const TrunkTargets& targets, const Eigen::VectorXd& latent,
                    int symmetry_order, std::optional<PoseDistribution>* posterior,
-                   Eigen::MatrixXd* latent_samples = nullptr) const;
+                   Eigen::MatrixXd* latent_samples = nullptr,
+                   const PhotometricTrunk::Markers* markers = nullptr) const;
 
   const Options& options() const { return options_; }
 
  private:
   Summary EstimateImpl(const TrunkTargets& targets, const Eigen::VectorXd* latent,
                        int symmetry_order, std::optional<PoseDistribution>* posterior,
-                       Eigen::MatrixXd* latent_samples) const;
+                       Eigen::MatrixXd* latent_samples,
+                       const PhotometricTrunk::Markers* markers) const;
 
   const SensorTrunk* trunk_;
   const PoseMlp* pose_mlp_;

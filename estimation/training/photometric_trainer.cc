@@ -6,6 +6,7 @@
 #include <cmath>
 #include <filesystem>
 #include <limits>
+#include <memory>
 #include <sstream>
 #include <stdexcept>
 
@@ -179,31 +180,6 @@ PhotometricTrainer::PhotometricTrainer(const Options& options) : options_(option
   }
 }
 
-Image PhotometricReference(const Image& reference, const FrameFormat& format) {
-  if (format.per_image_min_max || !(format.scale > 0)) {
-    throw std::invalid_argument(
-        "PhotometricReference: the photometric trunk needs a fixed-scale frame format");
-  }
-  const bool luma = format.grayscale && reference.channels == 3;
-  Image out(reference.rows, reference.cols, luma ? 1 : reference.channels);
-  for (int r = 0; r < reference.rows; ++r) {
-    for (int c = 0; c < reference.cols; ++c) {
-      if (luma) {
-        // ITU-R BT.601 luma, as estimation/data/preprocess.h converts differences.
-        out.at(r, c) = static_cast<float>((0.299 * reference.at(r, c, 0) +
-                                           0.587 * reference.at(r, c, 1) +
-                                           0.114 * reference.at(r, c, 2)) /
-                                          format.scale);
-      } else {
-        for (int ch = 0; ch < out.channels; ++ch) {
-          out.at(r, c, ch) = static_cast<float>(reference.at(r, c, ch) / format.scale);
-        }
-      }
-    }
-  }
-  return out;
-}
-
 Eigen::Vector3d MomentPose(const PhotometricTrunk& trunk, const TrunkTargets& frame) {
   CheckFrame(trunk, frame);
   const Eigen::Index n = frame.values.rows();
@@ -232,7 +208,30 @@ Eigen::Vector3d MomentPose(const PhotometricTrunk& trunk, const TrunkTargets& fr
 PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTargets>& frames,
                                                      const Image& reference,
                                                      const Callback& callback) const {
+  return Train(frames, std::vector<Image>{reference}, std::vector<int>(frames.size(), 0),
+               callback);
+}
+
+PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTargets>& frames,
+                                                     const std::vector<Image>& references,
+                                                     const std::vector<int>& frame_reference,
+                                                     const Callback& callback) const {
   if (frames.empty()) throw std::invalid_argument("PhotometricTrainer: no training frames");
+  if (references.empty()) throw std::invalid_argument("PhotometricTrainer: no reference");
+  if (frame_reference.size() != frames.size()) {
+    throw std::invalid_argument("PhotometricTrainer: " + std::to_string(frames.size()) +
+                                " frames but " + std::to_string(frame_reference.size()) +
+                                " reference indices");
+  }
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    if (frame_reference[i] < 0 || frame_reference[i] >= static_cast<int>(references.size())) {
+      throw std::invalid_argument("PhotometricTrainer: frame " + std::to_string(i) +
+                                  ": reference index " + std::to_string(frame_reference[i]) +
+                                  " outside the " + std::to_string(references.size()) +
+                                  " references");
+    }
+  }
+  const Image& reference = references[0];
   const auto start = std::chrono::steady_clock::now();
   const Options& o = options_;
   PhotometricTrunk::Options trunk_options = o.trunk;
@@ -241,6 +240,9 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
   trunk_options.channels = static_cast<int>(frames[0].values.cols());
   PhotometricTrunk trunk(trunk_options, reference, o.seed);
   for (const TrunkTargets& frame : frames) CheckFrame(trunk, frame);
+  // Each reference's markers (the trunk's own for the first).
+  std::vector<std::shared_ptr<const PhotometricTrunk::Markers>> markers(references.size());
+  for (std::size_t k = 1; k < references.size(); ++k) markers[k] = trunk.MakeMarkers(references[k]);
   const int num_frames = static_cast<int>(frames.size());
   const int d = trunk.latent_dim();
   Eigen::MatrixXd latents = Eigen::MatrixXd::Zero(d, num_frames);  // one column per frame
@@ -267,8 +269,14 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
       hash = internal::Fnv1a(frame.values.data(), sizeof(float) * frame.values.size(), hash);
       hash = internal::Fnv1a(frame.weights.data(), sizeof(float) * frame.weights.size(), hash);
     }
-    run.fingerprint =
-        internal::Fnv1a(reference.data.data(), sizeof(float) * reference.data.size(), hash);
+    // One reference hashes as before several could be given, so its checkpoints resume.
+    for (const Image& r : references) {
+      hash = internal::Fnv1a(r.data.data(), sizeof(float) * r.data.size(), hash);
+    }
+    if (references.size() > 1) {
+      hash = internal::Fnv1a(frame_reference.data(), sizeof(int) * frame_reference.size(), hash);
+    }
+    run.fingerprint = hash;
   }
   int first_step = 1;
   if (o.resume && std::filesystem::exists(o.checkpoint_path)) {
@@ -353,7 +361,8 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
       DrawPixels(frames[slot.frame], o.batch_pixels, &rng, &pixels, &targets, &weights);
       const Eigen::VectorXf z = latents.col(slot.frame).cast<float>();
       slot.loss = trunk.LossAndGradient<float>(pixels, z, targets, weights, &slot.dz,
-                                               &slot.dsiren, &slot.dhead);
+                                               &slot.dsiren, &slot.dhead, nullptr,
+                                               markers[frame_reference[slot.frame]].get());
     });
     Eigen::VectorXd g_siren = Eigen::VectorXd::Zero(siren_theta.size());
     Eigen::VectorXd g_head = Eigen::VectorXd::Zero(head.size());
@@ -444,7 +453,7 @@ PhotometricFit FitPhotometricLatent(const PhotometricTrunk& trunk, const TrunkTa
       DrawPixelBlocks(frame, options.batch_pixels, options.pixel_block, &s->rng, &pixels,
                       &targets, &weights);
       trunk.LossAndGradient<float>(pixels, s->z.cast<float>(), targets, weights, &dz, nullptr,
-                                   nullptr);
+                                   nullptr, nullptr, options.markers);
       const double rate =
           options.final_learning_rate + (options.learning_rate - options.final_learning_rate) *
                                             0.5 * (1 + std::cos(kPi * (step - 1) / options.steps));
@@ -454,7 +463,8 @@ PhotometricFit FitPhotometricLatent(const PhotometricTrunk& trunk, const TrunkTa
     s->loss = num_starts == 1 && !options.score
                   ? std::numeric_limits<double>::quiet_NaN()
                   : trunk.LossAndGradient<float>(all, s->z.cast<float>(), frame.values,
-                                                 frame.weights, nullptr, nullptr, nullptr);
+                                                 frame.weights, nullptr, nullptr, nullptr,
+                                                 nullptr, options.markers);
   };
   std::vector<int> running(num_starts);
   for (int start = 0; start < num_starts; ++start) running[start] = start;

@@ -55,6 +55,7 @@
 #include <vector>
 
 #include "Eigen/Core"
+#include "estimation/data/photometric_markers.h"
 #include "estimation/data/trunk_targets.h"
 #include "models/core/image.h"
 #include "models/trunk/photometric_trunk.h"
@@ -125,6 +126,13 @@ class PhotometricTrainer {
   // std::runtime_error (naming the field) for a checkpoint that cannot be resumed.
   Result Train(const std::vector<TrunkTargets>& frames, const Image& reference,
                const Callback& callback = {}) const;
+  // The same for frames of several recordings ("clips"), each with its own reference:
+  // frame i is drawn against references[frame_reference[i]]
+  // (PhotometricTrunk::Markers); the trunk keeps references[0] as its own. Throws
+  // std::invalid_argument as above, and for no references, references of other
+  // channels, or an index outside them (naming the frame).
+  Result Train(const std::vector<TrunkTargets>& frames, const std::vector<Image>& references,
+               const std::vector<int>& frame_reference, const Callback& callback = {}) const;
 
  private:
   Options options_;
@@ -156,6 +164,9 @@ struct PhotometricFitOptions {
   // (PhotometricTrunk::Forward). 1: independent pixels. In [1, 16] and at most the
   // frame's rows and columns.
   int pixel_block = 1;
+  // The frame's own markers (PhotometricTrunk::MakeMarkers of its reference; not owned,
+  // must outlive the fit), or null for the trunk's own reference.
+  const PhotometricTrunk::Markers* markers = nullptr;
   bool IsValid(std::string* error) const;
 };
 
@@ -165,12 +176,6 @@ struct PhotometricFit {
                           // for one start without PhotometricFitOptions::score)
   bool flipped = false;   // the start turned by pi won
 };
-
-// The sensor-resolution reference in the targets' units under `format`: the luma of an
-// RGB reference if the format is grayscale (the luma of a difference is the difference of
-// the lumas), divided by the format's fixed scale; not resized. Throws
-// std::invalid_argument for a per-image min-max format (no fixed units).
-Image PhotometricReference(const Image& reference, const FrameFormat& format);
 
 // The moment pose of the header comment, (t_0, t_1, phi).
 Eigen::Vector3d MomentPose(const PhotometricTrunk& trunk, const TrunkTargets& frame);

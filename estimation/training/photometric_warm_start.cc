@@ -211,8 +211,8 @@ std::vector<Eigen::VectorXd> PhotometricWarmStart::Starts(const TrunkTargets& fr
   return starts;
 }
 
-Eigen::VectorXd PhotometricWarmStart::BestStart(const TrunkTargets& frame, int k,
-                                                int pixels) const {
+Eigen::VectorXd PhotometricWarmStart::BestStart(const TrunkTargets& frame, int k, int pixels,
+                                                const PhotometricTrunk::Markers* markers) const {
   std::vector<Eigen::VectorXd> starts = Starts(frame, k);
   if (starts.empty()) {
     // No neighbour (a descriptor that is not finite): the cold fit's moment start.
@@ -235,7 +235,8 @@ Eigen::VectorXd PhotometricWarmStart::BestStart(const TrunkTargets& frame, int k
   double best_loss = std::numeric_limits<double>::infinity();
   for (std::size_t i = 0; i < starts.size(); ++i) {
     const double loss = trunk_->LossAndGradient<float>(subset, starts[i].cast<float>(), targets,
-                                                       weights, nullptr, nullptr, nullptr);
+                                                       weights, nullptr, nullptr, nullptr,
+                                                       nullptr, markers);
     if (loss < best_loss) {
       best_loss = loss;
       best = i;
@@ -247,7 +248,7 @@ Eigen::VectorXd PhotometricWarmStart::BestStart(const TrunkTargets& frame, int k
 PhotometricFit PhotometricWarmStart::Fit(const TrunkTargets& frame, int k,
                                          PhotometricFitOptions options,
                                          std::uint64_t seed) const {
-  const Eigen::VectorXd start = BestStart(frame, k);
+  const Eigen::VectorXd start = BestStart(frame, k, kScoredPixels, options.markers);
   if (options.steps == 0) {
     PhotometricFit fit;
     fit.latent = start;

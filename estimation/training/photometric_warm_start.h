@@ -80,12 +80,16 @@ class PhotometricWarmStart {
 
   // The start of Starts(frame, k) with the lowest loss on `pixels` of the frame's pixels
   // evenly spaced (one forward pass of them per start; k = 1 passes none); the moment
-  // pose and a zero code where Starts finds none.
-  Eigen::VectorXd BestStart(const TrunkTargets& frame, int k, int pixels = 512) const;
+  // pose and a zero code where Starts finds none. `markers`: the frame's own
+  // (PhotometricTrunk::MakeMarkers), or null for the trunk's own reference.
+  static constexpr int kScoredPixels = 512;
+  Eigen::VectorXd BestStart(const TrunkTargets& frame, int k, int pixels = kScoredPixels,
+                            const PhotometricTrunk::Markers* markers = nullptr) const;
 
   // The fit from BestStart(frame, k): options.steps Adam steps from it with one start
   // and no full-frame scoring (options' flipped_start and score are overridden), or
-  // that start as it is for options.steps == 0. `seed` draws the pixel subsets.
+  // that start as it is for options.steps == 0. `seed` draws the pixel subsets; the
+  // start is scored against options.markers, as the fit runs.
   PhotometricFit Fit(const TrunkTargets& frame, int k, PhotometricFitOptions options,
                      std::uint64_t seed) const;
 

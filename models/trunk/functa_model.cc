@@ -85,14 +85,15 @@ int TrunkOutputChannels(const SensorTrunk& trunk) {
                                       : trunk.siren.output_channels();
 }
 
-Eigen::MatrixXf TrunkDecode(const SensorTrunk& trunk, const Eigen::VectorXf& latent) {
+Eigen::MatrixXf TrunkDecode(const SensorTrunk& trunk, const Eigen::VectorXf& latent,
+                            const PhotometricTrunk::Markers* markers) {
   if (latent.size() != TrunkLatentDim(trunk)) {
     throw std::invalid_argument("TrunkDecode: expected a latent of " +
                                 std::to_string(TrunkLatentDim(trunk)) + " values, found " +
                                 std::to_string(latent.size()));
   }
   if (trunk.photometric != nullptr) {
-    return trunk.photometric->Forward<float>(trunk.photometric->AllPixels(), latent);
+    return trunk.photometric->Forward<float>(trunk.photometric->AllPixels(), latent, markers);
   }
   return trunk.siren.Forward<float>(trunk.siren.Grid<float>(trunk.format.rows, trunk.format.cols),
                                     latent);

@@ -110,8 +110,10 @@ int TrunkLatentDim(const SensorTrunk& trunk);
 int TrunkOutputChannels(const SensorTrunk& trunk);
 // The whole working-resolution frame the trunk draws for `latent` (TrunkLatentDim
 // values): rows * cols x C, pixel j = row * cols + col. Throws std::invalid_argument for
-// a latent of another size.
-Eigen::MatrixXf TrunkDecode(const SensorTrunk& trunk, const Eigen::VectorXf& latent);
+// a latent of another size. A photometric head draws the markers of `markers` (its
+// frame's own reference, PhotometricTrunk::MakeMarkers) if given, else its own.
+Eigen::MatrixXf TrunkDecode(const SensorTrunk& trunk, const Eigen::VectorXf& latent,
+                            const PhotometricTrunk::Markers* markers = nullptr);
 // Bytes of the trunk as stored: its parameters and rates (float32), and with the
 // photometric head the head's parameters and its sensor-resolution reference (float32)
 // and its warm-start table (float16).

@@ -198,12 +198,7 @@ PhotometricTrunk::PhotometricTrunk(const Options& options, const Image& referenc
                                    std::uint64_t seed)
     : options_(options),
       siren_(ValidatedSirenOptions(options), DeriveSeed(seed, 0)),
-      reference_(reference) {
-  if (reference.empty() || reference.channels != options.channels) {
-    throw std::invalid_argument(
-        "PhotometricTrunk: the reference must be a non-empty image with " +
-        std::to_string(options.channels) + " channel(s), found " + reference.ShapeString());
-  }
+      markers_(nullptr) {
   const int c = options.channels;
   num_head_parameters_ = HeadParameterCount(options.shading_width, c);
   InitializeHead(DeriveSeed(seed, 1));
@@ -226,18 +221,30 @@ PhotometricTrunk::PhotometricTrunk(const Options& options, const Image& referenc
     }
     siren_.SetParameters(theta);
   }
+  markers_ = MakeMarkers(reference);
+}
+
+std::shared_ptr<const PhotometricTrunk::Markers> PhotometricTrunk::MakeMarkers(
+    const Image& reference) const {
+  const int c = options_.channels;
+  if (reference.empty() || reference.channels != c) {
+    throw std::invalid_argument(
+        "PhotometricTrunk: the reference must be a non-empty image with " +
+        std::to_string(c) + " channel(s), found " + reference.ShapeString());
+  }
+  auto markers = std::make_shared<Markers>();
+  markers->reference = reference;
   // The at-rest markers: the K x K average of the reference at zero shift.
-  at_rest_ = Image(options.rows, options.cols, c);
+  markers->at_rest = Image(options_.rows, options_.cols, c);
   std::vector<double> value(c);
-  const MarkerSampling keep = marker_sampling_;
-  marker_sampling_ = MarkerSampling::kSensorResolution;
-  for (int r = 0; r < options.rows; ++r) {
-    for (int col = 0; col < options.cols; ++col) {
-      SampleMarkers(r, col, value.data(), nullptr, nullptr);
-      for (int ch = 0; ch < c; ++ch) at_rest_.at(r, col, ch) = static_cast<float>(value[ch]);
+  for (int r = 0; r < options_.rows; ++r) {
+    for (int col = 0; col < options_.cols; ++col) {
+      SampleMarkers(*markers, MarkerSampling::kSensorResolution, r, col, value.data(), nullptr,
+                    nullptr);
+      for (int ch = 0; ch < c; ++ch) markers->at_rest.at(r, col, ch) = static_cast<float>(value[ch]);
     }
   }
-  marker_sampling_ = keep;
+  return markers;
 }
 
 int PhotometricTrunk::HeadParameterCount(int shading_width, int channels) {
@@ -285,7 +292,8 @@ std::vector<int> PhotometricTrunk::AllPixels() const {
   return pixels;
 }
 
-void PhotometricTrunk::SampleMarkers(double row, double col, double* value, double* d_row,
+void PhotometricTrunk::SampleMarkers(const Markers& markers, MarkerSampling sampling,
+                                     double row, double col, double* value, double* d_row,
                                      double* d_col) const {
   const int c = options_.channels;
   std::fill(value, value + c, 0.0);
@@ -316,18 +324,19 @@ void PhotometricTrunk::SampleMarkers(double row, double col, double* value, doub
       }
     }
   };
-  if (marker_sampling_ == MarkerSampling::kWorkingResolution) {
-    sample(at_rest_, row, col, 1.0, 1.0, 1.0);
+  if (sampling == MarkerSampling::kWorkingResolution) {
+    sample(markers.at_rest, row, col, 1.0, 1.0, 1.0);
     return;
   }
+  const Image& reference = markers.reference;
   const int k = options_.supersample;
-  const double sr = static_cast<double>(reference_.rows) / options_.rows;
-  const double sc = static_cast<double>(reference_.cols) / options_.cols;
+  const double sr = static_cast<double>(reference.rows) / options_.rows;
+  const double sc = static_cast<double>(reference.cols) / options_.cols;
   const double weight = 1.0 / (k * k);
   for (int a = 0; a < k; ++a) {
     const double y = (row + (a + 0.5) / k) * sr - 0.5;
     for (int b = 0; b < k; ++b) {
-      sample(reference_, y, (col + (b + 0.5) / k) * sc - 0.5, weight, sr, sc);
+      sample(reference, y, (col + (b + 0.5) / k) * sc - 0.5, weight, sr, sc);
     }
   }
 }
@@ -335,7 +344,17 @@ void PhotometricTrunk::SampleMarkers(double row, double col, double* value, doub
 template <typename Scalar>
 void PhotometricTrunk::RunForward(const std::vector<int>& pixels, const VectorX<Scalar>& z,
                                   Pass* pass_holder, MatrixX<Scalar>* outputs,
-                                  const PassUse& use) const {
+                                  const PassUse& use, const Markers* markers_given) const {
+  const Markers& markers = markers_given != nullptr ? *markers_given : *markers_;
+  if (markers.at_rest.rows != options_.rows || markers.at_rest.cols != options_.cols ||
+      markers.at_rest.channels != options_.channels ||
+      markers.reference.channels != options_.channels) {
+    throw std::invalid_argument("PhotometricTrunk: markers of a " +
+                                markers.at_rest.ShapeString() + " grid given to a trunk of " +
+                                std::to_string(options_.rows) + "x" +
+                                std::to_string(options_.cols) + "x" +
+                                std::to_string(options_.channels) + " (MakeMarkers makes them)");
+  }
   PhotometricTrunkPass<Scalar>& pass = pass_holder->get<Scalar>();
   if (z.size() != options_.latent_dim) {
     throw std::invalid_argument("PhotometricTrunk: expected a latent of " +
@@ -482,13 +501,13 @@ void PhotometricTrunk::RunForward(const std::vector<int>& pixels, const VectorX<
     const double u0 = m * static_cast<double>(pass.input(0, i));
     const double u1 = m * static_cast<double>(pass.input(1, i));
     // The markers' slopes only serve a reverse pass or a Jacobian.
-    SampleMarkers(r - u1, col - u0, value.data(),
+    SampleMarkers(markers, marker_sampling_, r - u1, col - u0, value.data(),
                   use.reverse ? pass.marker_d_row.col(i).data() : nullptr,
                   use.reverse ? pass.marker_d_col.col(i).data() : nullptr);
     if (outputs == nullptr) continue;
     for (int ch = 0; ch < c; ++ch) {
       (*outputs)(i, ch) = shade(ch, i) - (*shade0)(ch, i) +
-                          static_cast<Scalar>(value[ch] - at_rest_.at(r, col, ch)) +
+                          static_cast<Scalar>(value[ch] - markers.at_rest.at(r, col, ch)) +
                           s(i, 1 + ch);
     }
   }
@@ -609,22 +628,26 @@ void PhotometricTrunk::RunBackward(const Pass& pass_holder, const std::vector<in
 
 template <typename Scalar>
 PhotometricTrunk::MatrixX<Scalar> PhotometricTrunk::Forward(const std::vector<int>& pixels,
-                                                            const VectorX<Scalar>& z) const {
+                                                            const VectorX<Scalar>& z,
+                                                            const Markers* markers) const {
   Pass pass;
   MatrixX<Scalar> outputs;
   RunForward<Scalar>(pixels, z, &pass, &outputs,
-                     PassUse{/*reverse=*/false, /*head_gradient=*/false, /*jacobian=*/false});
+                     PassUse{/*reverse=*/false, /*head_gradient=*/false, /*jacobian=*/false},
+                     markers);
   return outputs;
 }
 
 template <typename Scalar>
 void PhotometricTrunk::Backward(const std::vector<int>& pixels, const VectorX<Scalar>& z,
                                 const MatrixX<Scalar>& dL_dY, VectorX<Scalar>* dL_dz,
-                                VectorX<Scalar>* dL_dsiren, VectorX<Scalar>* dL_dhead) const {
+                                VectorX<Scalar>* dL_dsiren, VectorX<Scalar>* dL_dhead,
+                                const Markers* markers) const {
   Pass pass;
   RunForward<Scalar>(pixels, z, &pass, nullptr,
                      PassUse{/*reverse=*/true, /*head_gradient=*/dL_dhead != nullptr,
-                             /*jacobian=*/false});
+                             /*jacobian=*/false},
+                     markers);
   RunBackward<Scalar>(pass, pixels, z, dL_dY, dL_dz, dL_dsiren, dL_dhead);
 }
 
@@ -632,12 +655,14 @@ template <typename Scalar>
 void PhotometricTrunk::ForwardAndLatentJacobian(const std::vector<int>& pixels,
                                                 const VectorX<Scalar>& z,
                                                 MatrixX<Scalar>* outputs,
-                                                MatrixX<Scalar>* J) const {
+                                                MatrixX<Scalar>* J,
+                                                const Markers* markers) const {
   Pass pass_holder;
   // The pass keeps the distinct positions, their slots and the SIREN's Jacobians there.
   RunForward<Scalar>(pixels, z, &pass_holder, outputs,
                      PassUse{/*reverse=*/J != nullptr, /*head_gradient=*/false,
-                             /*jacobian=*/J != nullptr});
+                             /*jacobian=*/J != nullptr},
+                     markers);
   if (J == nullptr) return;
   const PhotometricTrunkPass<Scalar>& pass = pass_holder.get<Scalar>();
   const int n = static_cast<int>(pixels.size());
@@ -708,7 +733,8 @@ Scalar PhotometricTrunk::LossAndGradient(const std::vector<int>& pixels,
                                          const VectorX<Scalar>& weights,
                                          VectorX<Scalar>* dL_dz, VectorX<Scalar>* dL_dsiren,
                                          VectorX<Scalar>* dL_dhead,
-                                         MatrixX<Scalar>* outputs) const {
+                                         MatrixX<Scalar>* outputs,
+                                         const Markers* markers) const {
   const int n = static_cast<int>(pixels.size());
   const int c = options_.channels;
   if (targets.rows() != n || targets.cols() != c ||
@@ -722,7 +748,8 @@ Scalar PhotometricTrunk::LossAndGradient(const std::vector<int>& pixels,
   const bool backward = dL_dz != nullptr || dL_dsiren != nullptr || dL_dhead != nullptr;
   RunForward<Scalar>(pixels, z, &pass, &y,
                      PassUse{/*reverse=*/backward, /*head_gradient=*/dL_dhead != nullptr,
-                             /*jacobian=*/false});
+                             /*jacobian=*/false},
+                     markers);
   double weight_sum = 0.0;
   for (int i = 0; i < n; ++i) weight_sum += weights.size() == 0 ? 1.0 : weights[i];
   MatrixX<Scalar> dY = MatrixX<Scalar>::Zero(n, c);
@@ -748,15 +775,17 @@ Scalar PhotometricTrunk::LossAndGradient(const std::vector<int>& pixels,
 
 #define TACTFUNC_INSTANTIATE(S)                                                           \
   template PhotometricTrunk::MatrixX<S> PhotometricTrunk::Forward<S>(                     \
-      const std::vector<int>&, const VectorX<S>&) const;                                  \
+      const std::vector<int>&, const VectorX<S>&, const Markers*) const;                  \
   template void PhotometricTrunk::Backward<S>(const std::vector<int>&, const VectorX<S>&, \
                                               const MatrixX<S>&, VectorX<S>*,             \
-                                              VectorX<S>*, VectorX<S>*) const;            \
+                                              VectorX<S>*, VectorX<S>*,                   \
+                                              const Markers*) const;                      \
   template void PhotometricTrunk::ForwardAndLatentJacobian<S>(                            \
-      const std::vector<int>&, const VectorX<S>&, MatrixX<S>*, MatrixX<S>*) const;        \
+      const std::vector<int>&, const VectorX<S>&, MatrixX<S>*, MatrixX<S>*,               \
+      const Markers*) const;                                                              \
   template S PhotometricTrunk::LossAndGradient<S>(                                        \
       const std::vector<int>&, const VectorX<S>&, const MatrixX<S>&, const VectorX<S>&,   \
-      VectorX<S>*, VectorX<S>*, VectorX<S>*, MatrixX<S>*) const;
+      VectorX<S>*, VectorX<S>*, VectorX<S>*, MatrixX<S>*, const Markers*) const;
 TACTFUNC_INSTANTIATE(float)
 TACTFUNC_INSTANTIATE(double)
 #undef TACTFUNC_INSTANTIATE

@@ -113,20 +113,38 @@ class PhotometricTrunk {
     bool IsValid(std::string* error) const;
   };
 
+  // The markers M of one no-contact reference: the reference at the SENSOR's resolution
+  // in the targets' units, and its at-rest table (rows x cols x C, the K x K average at
+  // zero shift). A trunk draws against its own reference (the one it was built with)
+  // unless a call names other markers: frames of a set of recordings ("clips"), each
+  // with its own reference, are drawn against their own clip's markers, made once per
+  // clip by MakeMarkers. They depend on the trunk's grid, channels and K, not on its
+  // parameters, so they stay valid while a trunk trains.
+  struct Markers {
+    Image reference;
+    Image at_rest;
+  };
+
   // `reference` is the no-contact reference at the SENSOR's resolution, in the targets'
   // units (the frame format's grayscale conversion and scale applied, not resized), with
   // Options::channels channels; any size >= 1 x 1. Throws std::invalid_argument for
   // invalid options or a reference with other channels.
   PhotometricTrunk(const Options& options, const Image& reference, std::uint64_t seed = 0);
 
+  // The markers of `reference` (as the constructor's) on this trunk's grid. Throws
+  // std::invalid_argument for an empty reference or one with other channels.
+  std::shared_ptr<const Markers> MakeMarkers(const Image& reference) const;
+
   const Options& options() const { return options_; }
   int latent_dim() const { return options_.latent_dim; }
   int channels() const { return options_.channels; }
   const LatentModulatedSiren& siren() const { return siren_; }
   LatentModulatedSiren& mutable_siren() { return siren_; }
-  // The at-rest markers M(p): rows x cols x C, the K x K average of the reference.
-  const Image& at_rest() const { return at_rest_; }
-  const Image& reference() const { return reference_; }
+  // The trunk's own markers; at_rest() is M(p) at rest, rows x cols x C, the K x K
+  // average of reference().
+  const Markers& markers() const { return *markers_; }
+  const Image& at_rest() const { return markers_->at_rest; }
+  const Image& reference() const { return markers_->reference; }
 
   int NumHeadParameters() const { return num_head_parameters_; }
   // The head's parameter count for a shading width H and C channels.
@@ -154,8 +172,12 @@ class PhotometricTrunk {
   // grid position its pixels and their four neighbours name, so neighbouring or
   // repeated pixels share evaluations (a training step's 512 random pixels of an
   // 80 x 107 frame: about 13% fewer); with none shared it is the per-pixel pass.
+  //
+  // Every pass below draws the markers from `markers` if given (MakeMarkers of the
+  // frame's own reference), else from the trunk's own reference.
   template <typename Scalar>
-  MatrixX<Scalar> Forward(const std::vector<int>& pixels, const VectorX<Scalar>& z) const;
+  MatrixX<Scalar> Forward(const std::vector<int>& pixels, const VectorX<Scalar>& z,
+                          const Markers* markers = nullptr) const;
 
   // The weighted MSE against targets (N x C) with weights (N, or empty for all ones),
   // and its gradients w.r.t. z (d values, the pose first), the SIREN's flat parameters
@@ -165,7 +187,8 @@ class PhotometricTrunk {
   Scalar LossAndGradient(const std::vector<int>& pixels, const VectorX<Scalar>& z,
                          const MatrixX<Scalar>& targets, const VectorX<Scalar>& weights,
                          VectorX<Scalar>* dL_dz, VectorX<Scalar>* dL_dsiren,
-                         VectorX<Scalar>* dL_dhead, MatrixX<Scalar>* outputs = nullptr) const;
+                         VectorX<Scalar>* dL_dhead, MatrixX<Scalar>* outputs = nullptr,
+                         const Markers* markers = nullptr) const;
 
   // Outputs (N x C, may be null) and the Jacobian of every output w.r.t. z, J: (N*C) x d
   // with row i*C + c holding d y_ic / d z (pixel-major, channels interleaved, as
@@ -179,13 +202,15 @@ class PhotometricTrunk {
   // std::invalid_argument as Forward.
   template <typename Scalar>
   void ForwardAndLatentJacobian(const std::vector<int>& pixels, const VectorX<Scalar>& z,
-                                MatrixX<Scalar>* outputs, MatrixX<Scalar>* J) const;
+                                MatrixX<Scalar>* outputs, MatrixX<Scalar>* J,
+                                const Markers* markers = nullptr) const;
 
   // The reverse pass for any dL/dY (N x C): gradients as LossAndGradient's.
   template <typename Scalar>
   void Backward(const std::vector<int>& pixels, const VectorX<Scalar>& z,
                 const MatrixX<Scalar>& dL_dY, VectorX<Scalar>* dL_dz,
-                VectorX<Scalar>* dL_dsiren, VectorX<Scalar>* dL_dhead) const;
+                VectorX<Scalar>* dL_dsiren, VectorX<Scalar>* dL_dhead,
+                const Markers* markers = nullptr) const;
 
  private:
   struct Pass;  // the forward pass's intermediate values, defined in the .cc
@@ -203,16 +228,18 @@ class PhotometricTrunk {
   };
   template <typename Scalar>
   void RunForward(const std::vector<int>& pixels, const VectorX<Scalar>& z,
-                  Pass* pass, MatrixX<Scalar>* outputs, const PassUse& use) const;
+                  Pass* pass, MatrixX<Scalar>* outputs, const PassUse& use,
+                  const Markers* markers) const;
   template <typename Scalar>
   void RunBackward(const Pass& pass, const std::vector<int>& pixels,
                    const VectorX<Scalar>& z, const MatrixX<Scalar>& dL_dY,
                    VectorX<Scalar>* dL_dz, VectorX<Scalar>* dL_dsiren,
                    VectorX<Scalar>* dL_dhead) const;
-  // The markers at working-pixel position (row, col) (fractional), C values, and
-  // their derivatives along rows and columns (C values each; may be null).
-  void SampleMarkers(double row, double col, double* value, double* d_row,
-                     double* d_col) const;
+  // The markers of `markers` at working-pixel position (row, col) (fractional) under
+  // `sampling`, C values, and their derivatives along rows and columns (C values each;
+  // may be null).
+  void SampleMarkers(const Markers& markers, MarkerSampling sampling, double row, double col,
+                     double* value, double* d_row, double* d_col) const;
   void InitializeHead(std::uint64_t seed);
   struct AtRestShading;  // the .cc's cache of the flat input's shading
   template <typename Scalar>
@@ -220,8 +247,7 @@ class PhotometricTrunk {
 
   Options options_;
   LatentModulatedSiren siren_;
-  Image reference_;
-  Image at_rest_;
+  std::shared_ptr<const Markers> markers_;
   MarkerSampling marker_sampling_ = MarkerSampling::kSensorResolution;
   int num_head_parameters_ = 0;
   Eigen::VectorXd head_;

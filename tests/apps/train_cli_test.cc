@@ -99,6 +99,59 @@ TEST_F(TrainCliTest, TheInnerLoopKnobsReachTheModelAndEncodeUsesIt) {
 }
 
 
+TEST_F(TrainCliTest, ThePhotometricHeadDrawsEachClipAgainstItsOwnReference) {
+  // A set of two clips: a, the simulated frames with their reference; b, the same
+  // frames and reference mirrored, so that b's markers lie elsewhere.
+  ASSERT_EQ(Run("synth --out " + Root("g") + " --frames-per-tool 2 --tools rod,square "
+                "--sensors gelslim --seed 4").exit_code, 0);
+  std::vector<std::string> stems;
+  for (const auto& entry : fs::directory_iterator(Root("g/gelslim"))) {
+    if (entry.path().extension() == ".png") stems.push_back(entry.path().stem().string());
+  }
+  std::sort(stems.begin(), stems.end());
+  ASSERT_GE(stems.size(), 3u);
+  for (const std::string clip : {"a", "b"}) {
+    fs::create_directories(Root("clips/" + clip));
+    for (const std::string& stem : stems) {
+      cv::Mat image = cv::imread(Root("g/gelslim/" + stem + ".png"), cv::IMREAD_UNCHANGED);
+      ASSERT_FALSE(image.empty()) << stem;
+      if (clip == "b") cv::flip(image, image, 1);
+      ASSERT_TRUE(cv::imwrite(Root("clips/" + clip + "/" + stem + ".png"), image));
+    }
+  }
+  const Result train = Run("train --data " + Root("clips") + " --out " + Root("c.tfm") +
+                           " --head photometric --steps 4 --marker-warmup 2 --latent-dim 8 "
+                           "--width 8 --layers 2 --threads 1 --seed 1");
+  ASSERT_EQ(train.exit_code, 0) << train.err;
+  EXPECT_THAT(train.out, HasSubstr("2 clips, each frame drawn against its own clip's reference"));
+  const Result encode = Run("encode --model " + Root("c.tfm") + " --data " + Root("clips") +
+                            " --out " + Root("c.tfs") + " --strategy adam:5 --threads 2");
+  ASSERT_EQ(encode.exit_code, 0) << encode.err;
+  const Result recon = Run("recon --model " + Root("c.tfm") + " --data " + Root("clips") +
+                           " --functaset " + Root("c.tfs") + " --out " + Root("cr"));
+  ASSERT_EQ(recon.exit_code, 0) << recon.err;
+  // A frame of clip b: encode fitted it against b's reference, as fit does given it, and
+  // fit given clip a's reference instead fits another latent.
+  const std::string frame = Root("clips/b/" + stems[1] + ".png");
+  const std::string fit = "fit --model " + Root("c.tfm") + " --frame " + frame +
+                          " --sensor gelslim --strategy adam:5 --json --reference ";
+  const Result own = Run(fit + Root("clips/b/reference.png") + " --out " + Root("fit_b"));
+  ASSERT_EQ(own.exit_code, 0) << own.err;
+  const Result other = Run(fit + Root("clips/a/reference.png") + " --out " + Root("fit_a"));
+  ASSERT_EQ(other.exit_code, 0) << other.err;
+  const auto latent = [&](const std::string& dir) {
+    return nlohmann::json::parse(testing_util::Slurp(Root(dir + "/latent.json")))["latent"];
+  };
+  ASSERT_EQ(latent("fit_b").size(), 8u);
+  EXPECT_NE(latent("fit_b"), latent("fit_a"));
+  const Functaset functaset = Functaset::Load(Root("c.tfs"));
+  const auto index = functaset.Find(SensorKind::kGelSlim, "b/" + stems[1]);
+  ASSERT_TRUE(index.has_value());
+  const FunctasetEntry& entry = functaset.entries(SensorKind::kGelSlim)[*index];
+  EXPECT_EQ(entry.psnr, static_cast<float>(own.LastJson()["psnr"].get<double>()));
+  EXPECT_NE(entry.psnr, static_cast<float>(other.LastJson()["psnr"].get<double>()));
+}
+
 TEST_F(TrainCliTest, ThePhotometricHeadTrainsEncodesAndReconstructsAnOpticalSensor) {
   ASSERT_EQ(Run("synth --out " + Root("g") + " --frames-per-tool 2 --tools rod,square "
                 "--sensors gelslim --seed 4").exit_code, 0);

@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <memory>
 #include <iterator>
 #include <limits>
 #include <random>
@@ -15,8 +16,10 @@
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "estimation/training/photometric_warm_start.h"
 #include "models/trunk/meta_sgd.h"
 #include "tests/support/functa_test_util.h"
+#include "tests/support/photometric_test_util.h"
 #include "tests/support/test_dir.h"
 
 namespace tactfunc {
@@ -735,6 +738,73 @@ TEST(LatentEncoder, DatasetExtremesEncodeWithoutNan) {
       std::isnan(Functaset::Load(dir / "set.tfs")
                      .entries(SensorKind::kSoftBubble)[*f.Find(SensorKind::kSoftBubble, "dropout")]
                      .psnr));
+}
+
+// A photometric model whose trunk draws against `reference`, its markers moving
+// (m = 0.8), with a warm-start table of frames it drew against `table_reference`.
+FunctaModel PhotometricModel(const Image& reference, const Image& table_reference) {
+  const PhotometricTrunk::Options o = testing_util::SmallPhotometricOptions(12, 16);
+  auto trunk = std::make_shared<PhotometricTrunk>(o, reference, 21);
+  Eigen::VectorXd head = trunk->head_parameters();
+  head[head.size() - 1] = 0.8;
+  trunk->SetHeadParameters(head);
+  const auto table_markers = trunk->MakeMarkers(table_reference);
+  std::vector<TrunkTargets> frames;
+  Eigen::MatrixXd latents(4, o.latent_dim);
+  for (int i = 0; i < 4; ++i) {
+    for (int k = 0; k < o.latent_dim; ++k) latents(i, k) = 0.3 * std::sin(1.3 * i + 0.7 * k);
+    frames.push_back(testing_util::WholeFrameTargets(
+        trunk->Forward<float>(trunk->AllPixels(), latents.row(i).transpose().cast<float>(),
+                              table_markers.get()),
+        o.rows, o.cols));
+  }
+  SensorTrunk sensor_trunk;
+  sensor_trunk.sensor = SensorKind::kGelSlim;
+  sensor_trunk.format.rows = o.rows;
+  sensor_trunk.format.cols = o.cols;
+  sensor_trunk.format.grayscale = true;
+  sensor_trunk.format.scale = 1.0;
+  sensor_trunk.siren = trunk->siren();
+  sensor_trunk.alpha = Eigen::VectorXd::Zero(trunk->siren().latent_dim());
+  sensor_trunk.warm_start = std::make_shared<WarmStartTable>(PhotometricWarmStart::BuildTable(
+      *trunk, frames, latents, PhotometricWarmStart::Options()));
+  sensor_trunk.photometric = trunk;
+  FunctaModel model;
+  model.SetTrunk(sensor_trunk);
+  return model;
+}
+
+TEST(LatentEncoder, APhotometricFrameIsFittedAgainstTheMarkersItIsGiven) {
+  // The same trunk on two references: encoding with the other reference's markers is,
+  // bit for bit, encoding with a trunk built on that reference, for every strategy.
+  const Image a = testing_util::MarkerReference(24, 32);
+  Image b(24, 32, 1);
+  for (int r = 0; r < 24; ++r) {
+    for (int c = 0; c < 32; ++c) b.at(r, c) = a.at((r + 2) % 24, (c + 1) % 32);
+  }
+  const FunctaModel on_a = PhotometricModel(a, a);
+  const FunctaModel on_b = PhotometricModel(b, a);  // the same table
+  const PhotometricTrunk& trunk_a = *on_a.Trunk(SensorKind::kGelSlim).photometric;
+  const PhotometricTrunk& trunk_b = *on_b.Trunk(SensorKind::kGelSlim).photometric;
+  ASSERT_EQ(trunk_a.siren().parameters(), trunk_b.siren().parameters());
+  const auto markers_b = trunk_a.MakeMarkers(b);
+  Eigen::VectorXf z(8);
+  for (int k = 0; k < 8; ++k) z[k] = static_cast<float>(0.25 * std::cos(0.9 * k + 0.4));
+  const TrunkTargets frame = testing_util::WholeFrameTargets(
+      trunk_b.Forward<float>(trunk_b.AllPixels(), z), 12, 16);
+  for (const char* strategy : {"adam:20", "knn+adam:10", "knn", "knn+ceres:2"}) {
+    LatentEncoder::Options options;
+    options.strategy = strategy;
+    const LatentEncoder encoder_a(on_a, options), encoder_b(on_b, options);
+    const LatentEncoder::EncodedFrame given =
+        encoder_a.EncodeTargets(SensorKind::kGelSlim, frame, markers_b.get());
+    const LatentEncoder::EncodedFrame built = encoder_b.EncodeTargets(SensorKind::kGelSlim, frame);
+    EXPECT_TRUE((given.latent.array() == built.latent.array()).all()) << strategy;
+    EXPECT_EQ(given.psnr, built.psnr) << strategy;
+    // Against the trunk's own reference the fit is another one.
+    const LatentEncoder::EncodedFrame wrong = encoder_a.EncodeTargets(SensorKind::kGelSlim, frame);
+    EXPECT_NE(wrong.psnr, given.psnr) << strategy;
+  }
 }
 
 }  // namespace

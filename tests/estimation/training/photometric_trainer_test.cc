@@ -92,6 +92,44 @@ TEST(PhotometricTrainerTest, TrainingLowersTheLossAndIsTheSameForAnyThreadCount)
   EXPECT_EQ(one.trunk.marker_sampling(), PhotometricTrunk::MarkerSampling::kSensorResolution);
 }
 
+TEST(PhotometricTrainerTest, EachFrameIsDrawnAgainstItsOwnClipsReference) {
+  // Frames of two clips: training with a reference per frame is, bit for bit, training
+  // on the reference the frames are drawn against; a frame's reference changes the run.
+  const Teacher teacher = MakeTeacher(6);
+  const Image a = teacher.trunk.reference();
+  Image b(a.rows, a.cols, 1);
+  for (int r = 0; r < a.rows; ++r) {
+    for (int c = 0; c < a.cols; ++c) b.at(r, c) = a.at((r + 1) % a.rows, (c + 2) % a.cols);
+  }
+  PhotometricTrainer::Options options = QuickOptions(1);
+  options.steps = 40;
+  const PhotometricTrainer trainer(options);
+  const PhotometricTrainer::Result all_b =
+      trainer.Train(teacher.frames, std::vector<Image>{a, b}, std::vector<int>(6, 1));
+  const PhotometricTrainer::Result on_b = trainer.Train(teacher.frames, b);
+  EXPECT_EQ(all_b.summary.loss, on_b.summary.loss);
+  EXPECT_EQ(all_b.trunk.head_parameters(), on_b.trunk.head_parameters());
+  EXPECT_EQ(all_b.latents, on_b.latents);
+  // The trunk keeps the first reference as its own.
+  EXPECT_EQ(all_b.trunk.reference().data, a.data);
+  const PhotometricTrainer::Result mixed =
+      trainer.Train(teacher.frames, std::vector<Image>{a, b}, std::vector<int>{0, 1, 0, 1, 0, 1});
+  const PhotometricTrainer::Result on_a = trainer.Train(teacher.frames, a);
+  EXPECT_NE(mixed.summary.loss, on_a.summary.loss);
+  EXPECT_NE(mixed.summary.loss, on_b.summary.loss);
+  // Bad references and indices are refused by name.
+  EXPECT_THROW(trainer.Train(teacher.frames, std::vector<Image>{}, std::vector<int>(6, 0)),
+               std::invalid_argument);
+  EXPECT_THROW(trainer.Train(teacher.frames, std::vector<Image>{a}, std::vector<int>(5, 0)),
+               std::invalid_argument);
+  try {
+    trainer.Train(teacher.frames, std::vector<Image>{a, b}, std::vector<int>{0, 1, 2, 0, 0, 0});
+    FAIL() << "accepted a reference index outside the references";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("frame 2"), std::string::npos) << e.what();
+  }
+}
+
 TEST(PhotometricTrainerTest, TheCallbackStopsTraining) {
   const Teacher teacher = MakeTeacher(4);
   const PhotometricTrainer::Result result = PhotometricTrainer(QuickOptions(1)).Train(

@@ -175,6 +175,57 @@ TEST(PhotometricTrunkTest, MarkersMoveTheOutput) {
   EXPECT_GT((a - b).cwiseAbs().maxCoeff(), 1e-3);
 }
 
+TEST(PhotometricTrunkTest, AFramesOwnMarkersDrawItAsATrunkOfThatReference) {
+  // A trunk drawing against other markers (MakeMarkers of a clip's reference) equals,
+  // in every pass, the same trunk built on that reference: to the bit.
+  for (const auto sampling : {PhotometricTrunk::MarkerSampling::kSensorResolution,
+                              PhotometricTrunk::MarkerSampling::kWorkingResolution}) {
+    const PhotometricTrunk trunk = MovingTrunk(sampling);
+    // Another reference: the markers shifted by two sensor pixels, another brightness.
+    const Image own = trunk.reference();
+    Image other(own.rows, own.cols, 1);
+    for (int r = 0; r < own.rows; ++r) {
+      for (int c = 0; c < own.cols; ++c) other.at(r, c) = 0.8f * own.at(r, (c + 2) % own.cols);
+    }
+    PhotometricTrunk built(trunk.options(), other);
+    built.mutable_siren().SetParameters(trunk.siren().parameters());
+    built.SetHeadParameters(trunk.head_parameters());
+    built.set_marker_sampling(sampling);
+    const auto markers = trunk.MakeMarkers(other);
+    const Problem p = MakeProblem(trunk);
+    const MatrixXd a = trunk.Forward<double>(trunk.AllPixels(), p.z, markers.get());
+    EXPECT_EQ(a, built.Forward<double>(built.AllPixels(), p.z));
+    // The frame's own markers matter: its own reference draws another frame.
+    EXPECT_GT((a - trunk.Forward<double>(trunk.AllPixels(), p.z)).cwiseAbs().maxCoeff(), 1e-3);
+    VectorXd dz_a, ds_a, dh_a, dz_b, ds_b, dh_b;
+    const double la = trunk.LossAndGradient<double>(p.pixels, p.z, p.targets, p.weights, &dz_a,
+                                                    &ds_a, &dh_a, nullptr, markers.get());
+    const double lb =
+        built.LossAndGradient<double>(p.pixels, p.z, p.targets, p.weights, &dz_b, &ds_b, &dh_b);
+    EXPECT_EQ(la, lb);
+    EXPECT_EQ(dz_a, dz_b);
+    EXPECT_EQ(ds_a, ds_b);
+    EXPECT_EQ(dh_a, dh_b);
+    MatrixXd ya, Ja, yb, Jb;
+    trunk.ForwardAndLatentJacobian<double>(p.pixels, p.z, &ya, &Ja, markers.get());
+    built.ForwardAndLatentJacobian<double>(p.pixels, p.z, &yb, &Jb);
+    EXPECT_EQ(ya, yb);
+    EXPECT_EQ(Ja, Jb);
+  }
+}
+
+TEST(PhotometricTrunkTest, MarkersOfAnotherGridOrChannelsAreRefused) {
+  const PhotometricTrunk trunk = MovingTrunk(PhotometricTrunk::MarkerSampling::kSensorResolution);
+  PhotometricTrunk::Options o = trunk.options();
+  o.cols += 1;
+  const PhotometricTrunk wider(o, trunk.reference());
+  const auto foreign = wider.MakeMarkers(trunk.reference());
+  const Problem p = MakeProblem(trunk);
+  EXPECT_THROW(trunk.Forward<double>(p.pixels, p.z, foreign.get()), std::invalid_argument);
+  EXPECT_THROW(trunk.MakeMarkers(DottedReference(4, 4, 3)), std::invalid_argument);
+  EXPECT_THROW(trunk.MakeMarkers(Image()), std::invalid_argument);
+}
+
 TEST(PhotometricTrunkTest, AtRestMarkersAreTheAreaResizedReference) {
   // K = 2 at a 2x reference samples each sensor pixel's centre exactly: the at-rest
   // table is the 2 x 2 block mean.
