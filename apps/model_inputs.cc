@@ -142,6 +142,7 @@ std::unique_ptr<LatentEncoder> PhotometricPoseEncoder(const FunctaModel& model,
   LatentEncoder::Options options;
   options.sensors = {sensor};
   options.strategy = PhotometricLatentMapOfPoseModel(pose_model);
+  options.score_targets = false;  // the posterior needs the latent alone
   try {
     return std::make_unique<LatentEncoder>(model, options);
   } catch (const std::invalid_argument& e) {

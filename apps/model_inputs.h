@@ -78,7 +78,8 @@ EncodedFrameFit EncodeFrame(const LatentEncoder& encoder, SensorKind sensor,
 // (from `pose_model_path`): the strategy of the functaset the pose MLP was trained on
 // (PhotometricLatentMapOfPoseModel), so that it reads the kind of latent it saw. A pose
 // model whose latent map the photometric trunk does not fit (a direct trunk's
-// meta_sgd:K or ceres:N) throws DatasetError naming both files and the map.
+// meta_sgd:K or ceres:N) throws DatasetError naming both files and the map. Its fits
+// are not scored (EncodedFrameFit::psnr is NaN): a posterior needs the latent alone.
 std::unique_ptr<LatentEncoder> PhotometricPoseEncoder(const FunctaModel& model,
                                                       const std::string& model_path,
                                                       SensorKind sensor,

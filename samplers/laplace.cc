@@ -89,11 +89,10 @@ LaplaceSampler::Summary LaplaceSampler::Sample(const LatentPotential& potential,
   summary.dim = d;
   summary.mode = mode;
   samples->resize(0, d);
-  summary.potential_at_mode = potential.Evaluate(mode, nullptr);
-
   auto t = std::chrono::steady_clock::now();
   Eigen::MatrixXd hessian;
-  const bool have_hessian = potential.GaussNewtonHessian(mode, &hessian);
+  const bool have_hessian =
+      potential.PotentialAndGaussNewtonHessian(mode, &summary.potential_at_mode, &hessian);
   summary.hessian_time_ms = MsSince(t);
   if (!have_hessian) {
     summary.termination_type = LaplaceTermination::kNotPositiveDefinite;

@@ -70,7 +70,7 @@ class LaplaceSampler {
     double log_det_covariance = 0;      // log det H^-1
     double min_relative_pivot = 0;      // smallest / largest LDLT pivot
     double fit_time_ms = 0;
-    double hessian_time_ms = 0;         // Jacobian and J^T J
+    double hessian_time_ms = 0;         // Jacobian and J^T J (and U(z*) with them)
     double factor_time_ms = 0;          // LDLT, inverse
     double sample_time_ms = 0;
     double total_time_ms = 0;

@@ -12,18 +12,10 @@ PhotometricPotential::PhotometricPotential(const PhotometricTrunk& trunk,
                                            double sigma_z,
                                            const PhotometricTrunk::Markers* markers)
     : trunk_(&trunk), markers_(markers), sigma_(sigma), sigma_z_(sigma_z) {
-  const int rows = trunk.options().rows, cols = trunk.options().cols;
   const int channels = trunk.channels();
-  const Eigen::Index n = static_cast<Eigen::Index>(rows) * cols;
-  if (targets.values.rows() != n || targets.values.cols() != channels ||
-      (targets.weights.size() != 0 && targets.weights.size() != n)) {
-    throw std::invalid_argument(
-        "PhotometricPotential: the trunk expects " + std::to_string(n) + " x " +
-        std::to_string(channels) + " targets (" + std::to_string(rows) + " x " +
-        std::to_string(cols) + " pixels) and as many weights, found " +
-        std::to_string(targets.values.rows()) + " x " + std::to_string(targets.values.cols()) +
-        " and " + std::to_string(targets.weights.size()));
-  }
+  const Eigen::Index n = static_cast<Eigen::Index>(trunk.options().rows) * trunk.options().cols;
+  CheckTargetsShape(targets, trunk.options().rows, trunk.options().cols, channels,
+                    "PhotometricPotential");
   if (!(sigma > 0) || !std::isfinite(sigma) || !(sigma_z > 0) || !std::isfinite(sigma_z)) {
     throw std::invalid_argument("PhotometricPotential: sigma and sigma_z must be finite and > 0, "
                                 "found " + std::to_string(sigma) + " and " +
@@ -99,6 +91,17 @@ double PhotometricPotential::EvaluateMinibatch(const Eigen::VectorXd& z,
 
 bool PhotometricPotential::GaussNewtonHessian(const Eigen::VectorXd& z,
                                               Eigen::MatrixXd* hessian) const {
+  return HessianPass(z, nullptr, hessian);
+}
+
+bool PhotometricPotential::PotentialAndGaussNewtonHessian(const Eigen::VectorXd& z,
+                                                          double* potential,
+                                                          Eigen::MatrixXd* hessian) const {
+  return HessianPass(z, potential, hessian);
+}
+
+bool PhotometricPotential::HessianPass(const Eigen::VectorXd& z, double* potential,
+                                       Eigen::MatrixXd* hessian) const {
   if (z.size() != dim()) {
     throw std::invalid_argument("PhotometricPotential: expected a latent of " +
                                 std::to_string(dim()) + " values, found " +
@@ -106,9 +109,23 @@ bool PhotometricPotential::GaussNewtonHessian(const Eigen::VectorXd& z,
   }
   // The trunk's exact Jacobian (pixel-major rows i C + c), each row scaled by
   // sqrt(w_i) / sigma: H = J^T J + I / sigma_z^2.
-  Eigen::MatrixXf J;
-  trunk_->ForwardAndLatentJacobian<float>(pixels_, z.cast<float>(), nullptr, &J, markers_);
+  Eigen::MatrixXf y, J;
+  trunk_->ForwardAndLatentJacobian<float>(pixels_, z.cast<float>(),
+                                          potential != nullptr ? &y : nullptr, &J, markers_);
   const Eigen::Index channels = values_.cols();
+  if (potential != nullptr) {
+    // U = sum_i w_i ||y_i - t_i||^2 / (2 sigma^2) + ||z||^2 / (2 sigma_z^2), as Evaluate.
+    double data = 0;
+    for (Eigen::Index i = 0; i < values_.rows(); ++i) {
+      double e2 = 0;
+      for (Eigen::Index c = 0; c < channels; ++c) {
+        const double e = static_cast<double>(y(i, c)) - static_cast<double>(values_(i, c));
+        e2 += e * e;
+      }
+      data += static_cast<double>(weights_[i]) * e2;
+    }
+    *potential = 0.5 * z.squaredNorm() / (sigma_z_ * sigma_z_) + data / (2.0 * sigma_ * sigma_);
+  }
   for (Eigen::Index i = 0; i < values_.rows(); ++i) {
     const float scale = std::sqrt(weights_[i]) / static_cast<float>(sigma_);
     J.middleRows(i * channels, channels) *= scale;

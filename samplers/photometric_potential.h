@@ -42,6 +42,9 @@ class PhotometricPotential : public LatentPotential {
                        double sigma_z, const PhotometricTrunk::Markers* markers = nullptr);
 
   int dim() const override { return trunk_->latent_dim(); }
+  // U from the outputs of the Jacobian's own pass (no second forward pass).
+  bool PotentialAndGaussNewtonHessian(const Eigen::VectorXd& z, double* potential,
+                                      Eigen::MatrixXd* hessian) const override;
   double Evaluate(const Eigen::VectorXd& z, Eigen::VectorXd* gradient) const override;
   // The valid pixels are the data terms.
   int NumDataTerms() const override { return static_cast<int>(pixels_.size()); }
@@ -55,6 +58,9 @@ class PhotometricPotential : public LatentPotential {
   double EvaluateOn(const Eigen::VectorXd& z, const std::vector<int>& pixels,
                     const Eigen::MatrixXf& values, const Eigen::VectorXf& weights,
                     double scale, Eigen::VectorXd* gradient) const;
+
+  // GaussNewtonHessian, and U(z) from the same pass if potential is not null.
+  bool HessianPass(const Eigen::VectorXd& z, double* potential, Eigen::MatrixXd* hessian) const;
 
   const PhotometricTrunk* trunk_;
   const PhotometricTrunk::Markers* markers_;

@@ -126,6 +126,14 @@ class LatentPotential {
   virtual bool GaussNewtonHessian(const Eigen::VectorXd& z, Eigen::MatrixXd* hessian) const {
     return false;
   }
+  // U(z) into *potential and the Gauss-Newton Hessian at z, for a potential that gets
+  // both from one pass (its U then agrees with Evaluate's up to the last bits of the
+  // trunk's float passes). Default: Evaluate, then GaussNewtonHessian.
+  virtual bool PotentialAndGaussNewtonHessian(const Eigen::VectorXd& z, double* potential,
+                                              Eigen::MatrixXd* hessian) const {
+    *potential = Evaluate(z, nullptr);
+    return GaussNewtonHessian(z, hessian);
+  }
   // Its diagonal (size d). Default: the diagonal of GaussNewtonHessian.
   virtual bool GaussNewtonDiagonal(const Eigen::VectorXd& z, Eigen::VectorXd* diagonal) const;
   // Each data term at z: values u_j (size NumDataTerms()) and gradients (N x d, row j =

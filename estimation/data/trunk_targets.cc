@@ -142,4 +142,31 @@ Image TargetsToImage(const Eigen::MatrixXf& values, int rows, int cols) {
   return image;
 }
 
+void CheckTargetsShape(const TrunkTargets& targets, int rows, int cols, int channels,
+                       const std::string& who) {
+  const Eigen::Index n = static_cast<Eigen::Index>(rows) * cols;
+  if (targets.rows != rows || targets.cols != cols || targets.values.rows() != n ||
+      targets.values.cols() != channels ||
+      (targets.weights.size() != 0 && targets.weights.size() != n)) {
+    throw std::invalid_argument(
+        who + ": expected the targets of a " + std::to_string(rows) + " x " +
+        std::to_string(cols) + " frame (" + std::to_string(n) + " x " +
+        std::to_string(channels) + " values and as many weights), found a " +
+        std::to_string(targets.rows) + " x " + std::to_string(targets.cols) + " frame of " +
+        std::to_string(targets.values.rows()) + " x " + std::to_string(targets.values.cols()) +
+        " values and " + std::to_string(targets.weights.size()) + " weights");
+  }
+}
+
+std::vector<int> ValidPixels(const TrunkTargets& targets) {
+  std::vector<int> valid;
+  const Eigen::Index n = targets.values.rows();
+  for (Eigen::Index j = 0; j < n; ++j) {
+    if (targets.weights.size() == 0 || targets.weights[j] > 0) {
+      valid.push_back(static_cast<int>(j));
+    }
+  }
+  return valid;
+}
+
 }  // namespace tactfunc

@@ -25,6 +25,7 @@
 #define TACTFUNC_ESTIMATION_DATA_TRUNK_TARGETS_H_
 
 #include <cstddef>
+#include <string>
 #include <vector>
 
 #include <Eigen/Core>
@@ -82,6 +83,15 @@ double TargetRange(const TrunkTargets& target);
 // in normalised units (Psnr = 20 log10(R / Rmse) for R >= 1e-9); NaN without valid
 // pixels.
 double Rmse(const Eigen::MatrixXf& prediction, const TrunkTargets& target);
+
+// Throws std::invalid_argument, message starting with `who`, unless `targets` are the
+// frame of a rows x cols grid with `channels` channels: rows * cols x channels values,
+// rows * cols weights (or none), and rows, cols as stated.
+void CheckTargetsShape(const TrunkTargets& targets, int rows, int cols, int channels,
+                       const std::string& who);
+// The indices of the target's valid pixels (weight > 0; every pixel without weights),
+// in grid order.
+std::vector<int> ValidPixels(const TrunkTargets& targets);
 
 // The prediction back as a normalised Image (rows x cols x C), for pictures.
 Image TargetsToImage(const Eigen::MatrixXf& values, int rows, int cols);

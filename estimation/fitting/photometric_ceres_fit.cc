@@ -92,26 +92,16 @@ PhotometricCeresFit FitPhotometricLatentCeres(const PhotometricTrunk& trunk,
   if (!options.IsValid(&error)) {
     throw std::invalid_argument("PhotometricCeresOptions: " + error);
   }
-  const int rows = trunk.options().rows, cols = trunk.options().cols, c = trunk.channels();
-  const Eigen::Index n = static_cast<Eigen::Index>(rows) * cols;
-  if (frame.values.rows() != n || frame.values.cols() != c ||
-      (frame.weights.size() != 0 && frame.weights.size() != n)) {
-    throw std::invalid_argument(
-        "FitPhotometricLatentCeres: the trunk expects " + std::to_string(n) + " x " +
-        std::to_string(c) + " targets (" + std::to_string(rows) + " x " +
-        std::to_string(cols) + " pixels), found " + std::to_string(frame.values.rows()) +
-        " x " + std::to_string(frame.values.cols()));
-  }
+  const int c = trunk.channels();
+  CheckTargetsShape(frame, trunk.options().rows, trunk.options().cols, c,
+                    "FitPhotometricLatentCeres");
   if (start.size() != trunk.latent_dim() || !start.allFinite()) {
     throw std::invalid_argument("FitPhotometricLatentCeres: expected a finite start of " +
                                 std::to_string(trunk.latent_dim()) + " values, found " +
                                 std::to_string(start.size()) +
                                 (start.allFinite() ? "" : " with non-finite entries"));
   }
-  std::vector<int> valid;
-  for (Eigen::Index j = 0; j < n; ++j) {
-    if (frame.weights.size() == 0 || frame.weights[j] > 0) valid.push_back(static_cast<int>(j));
-  }
+  const std::vector<int> valid = ValidPixels(frame);
   PhotometricCeresFit fit;
   fit.latent = start;
   if (valid.empty()) {

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <condition_variable>
 #include <exception>
+#include <limits>
 #include <map>
 #include <filesystem>
 #include <mutex>
@@ -180,7 +181,7 @@ LatentEncoder::LatentEncoder(const FunctaModel& model, const Options& options)
       rest.cols = state.trunk->format.cols;
       rest.values = Eigen::MatrixXf::Zero(state.grid.rows(), TrunkOutputChannels(*state.trunk));
       rest.weights = Eigen::VectorXf::Ones(state.grid.rows());
-      state.rest_latent = EncodeTargets(state.sensor, rest).latent;
+      state.rest_latent = EncodeTargetsImpl(state.sensor, rest, nullptr, true).latent;
     }
   }
 }
@@ -196,6 +197,12 @@ const LatentEncoder::SensorState& LatentEncoder::State(SensorKind sensor) const 
 LatentEncoder::EncodedFrame LatentEncoder::EncodeTargets(
     SensorKind sensor, const TrunkTargets& targets,
     const PhotometricTrunk::Markers* markers) const {
+  return EncodeTargetsImpl(sensor, targets, markers, options_.score_targets);
+}
+
+LatentEncoder::EncodedFrame LatentEncoder::EncodeTargetsImpl(
+    SensorKind sensor, const TrunkTargets& targets, const PhotometricTrunk::Markers* markers,
+    bool score) const {
   const SensorState& state = State(sensor);
   const LatentModulatedSiren& siren = state.trunk->siren;
   const int channels = TrunkOutputChannels(*state.trunk);
@@ -243,7 +250,8 @@ LatentEncoder::EncodedFrame LatentEncoder::EncodeTargets(
                                         kPhotometricFitSeed)
                        .latent.cast<float>();
     }
-    out.psnr = Psnr(TrunkDecode(*state.trunk, out.latent, markers), targets);
+    out.psnr = score ? Psnr(TrunkDecode(*state.trunk, out.latent, markers), targets)
+                     : std::numeric_limits<double>::quiet_NaN();
     return out;
   }
   if (state.fitter) {
@@ -559,6 +567,10 @@ Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
                             std::forward_as_tuple(dataset, *state.trunk));
     }
   }
+  auto markers_of = [&](const Job& job) -> const PhotometricTrunk::Markers* {
+    const auto own = frame_markers.find(job.sensor);
+    return own == frame_markers.end() ? nullptr : own->second.Of(job.frame);
+  };
   auto interrupted = [&]() { return interrupt != nullptr && interrupt->load(); };
   auto last_report = std::chrono::steady_clock::now() - std::chrono::seconds(1);
 
@@ -590,12 +602,9 @@ Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
             job.entry.at_rest = true;
             job.entry.latent = state.rest_latent;
             job.entry.psnr = static_cast<float>(
-                Psnr(TrunkDecode(*state.trunk, state.rest_latent), targets));
+                Psnr(TrunkDecode(*state.trunk, state.rest_latent, markers_of(job)), targets));
           } else {
-            const auto own = frame_markers.find(job.sensor);
-            EncodedFrame frame =
-                EncodeTargets(job.sensor, targets,
-                              own == frame_markers.end() ? nullptr : own->second.Of(job.frame));
+            EncodedFrame frame = EncodeTargetsImpl(job.sensor, targets, markers_of(job), true);
             job.entry.latent = std::move(frame.latent);
             job.entry.psnr = static_cast<float>(frame.psnr);
           }

@@ -134,6 +134,10 @@ class LatentEncoder {
     // same choice.
     bool share_rest_latent = false;
     ContactOptions contact;
+    // EncodeTargets scores a photometric trunk's fit (EncodedFrame::psnr, one more
+    // whole-frame pass); false leaves psnr NaN, for callers that need the latent alone
+    // (pose posteriors). Encode always scores: the functaset records every PSNR.
+    bool score_targets = true;
     // The processes sharing the run (models/core/process_group.h); null = this process
     // alone. Every process calls Encode with the same dataset and options; see
     // "Several processes" above. Does not change the result.
@@ -164,7 +168,7 @@ class LatentEncoder {
   // One frame's fit.
   struct EncodedFrame {
     Eigen::VectorXf latent;  // z_K, latent_dim
-    double psnr = 0;         // Psnr(f(grid; z_K), targets), dB
+    double psnr = 0;         // Psnr(f(grid; z_K), targets), dB (NaN unscored)
   };
 
   using ProgressCallback = std::function<void(const EncodeProgress&)>;
@@ -209,6 +213,8 @@ class LatentEncoder {
     Eigen::VectorXf rest_latent;  // with Options::share_rest_latent: the fit of no change
   };
   const SensorState& State(SensorKind sensor) const;
+  EncodedFrame EncodeTargetsImpl(SensorKind sensor, const TrunkTargets& targets,
+                                 const PhotometricTrunk::Markers* markers, bool score) const;
 
   const FunctaModel& model_;
   Options options_;

@@ -92,15 +92,7 @@ void DrawPixelBlocks(const TrunkTargets& frame, int count, int block,
 
 void CheckFrame(const PhotometricTrunk& trunk, const TrunkTargets& frame) {
   const auto& o = trunk.options();
-  if (frame.rows != o.rows || frame.cols != o.cols ||
-      frame.values.rows() != static_cast<Eigen::Index>(o.rows) * o.cols ||
-      frame.values.cols() != o.channels) {
-    std::ostringstream message;
-    message << "photometric trunk: expected frames of " << o.rows << " x " << o.cols << " x "
-            << o.channels << ", found " << frame.rows << " x " << frame.cols << " x "
-            << frame.values.cols();
-    throw std::invalid_argument(message.str());
-  }
+  CheckTargetsShape(frame, o.rows, o.cols, o.channels, "photometric trunk");
 }
 
 }  // namespace

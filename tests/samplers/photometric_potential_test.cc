@@ -113,6 +113,15 @@ TEST(PhotometricPotentialTest, GaussNewtonHessianMatchesTheExactJacobian) {
   EXPECT_GT(expected.norm(), 10.0 * d / (sigma_z * sigma_z));  // the data dominate
   EXPECT_LT((hessian - expected).norm(), 1e-3 * expected.norm());
   EXPECT_LT((hessian - hessian.transpose()).norm(), 1e-12 * hessian.norm());
+  // U from the Jacobian's own pass: Evaluate's U up to the float passes' last bits, and
+  // the same Hessian.
+  double u = 0;
+  Eigen::MatrixXd with_u;
+  ASSERT_TRUE(potential.PotentialAndGaussNewtonHessian(f.z, &u, &with_u));
+  EXPECT_EQ(with_u, hessian);
+  const double evaluated = potential.Evaluate(f.z, nullptr);
+  EXPECT_GT(evaluated, 0.0);
+  EXPECT_NEAR(u, evaluated, 1e-5 * evaluated);
 }
 
 TEST(PhotometricPotentialTest, RefusesTargetsOfAnotherShapeAndBadSigmas) {

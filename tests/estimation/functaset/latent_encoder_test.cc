@@ -804,6 +804,12 @@ TEST(LatentEncoder, APhotometricFrameIsFittedAgainstTheMarkersItIsGiven) {
     // Against the trunk's own reference the fit is another one.
     const LatentEncoder::EncodedFrame wrong = encoder_a.EncodeTargets(SensorKind::kGelSlim, frame);
     EXPECT_NE(wrong.psnr, given.psnr) << strategy;
+    // Unscored (for a posterior): the same latent, no PSNR.
+    options.score_targets = false;
+    const LatentEncoder::EncodedFrame unscored = LatentEncoder(on_a, options).EncodeTargets(
+        SensorKind::kGelSlim, frame, markers_b.get());
+    EXPECT_TRUE((unscored.latent.array() == given.latent.array()).all()) << strategy;
+    EXPECT_TRUE(std::isnan(unscored.psnr)) << strategy;
   }
 }
 
