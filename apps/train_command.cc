@@ -392,7 +392,9 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
     // up to 64 evenly spaced training frames, whole frames.
     const int checked = std::min<int>(64, static_cast<int>(frames.size()));
     std::vector<std::shared_ptr<const PhotometricTrunk::Markers>> markers;
-    for (const Image& reference : references) markers.push_back(result.trunk.MakeMarkers(reference));
+    for (const Image& reference : references) {
+      markers.push_back(result.trunk.MakeMarkers(reference));
+    }
     std::vector<double> mse(checked);
     internal::ParallelFor(checked, o.threads, [&](int k) {
       const std::size_t i = static_cast<std::size_t>(k) * frames.size() / checked;

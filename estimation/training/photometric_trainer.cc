@@ -234,7 +234,9 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
   for (const TrunkTargets& frame : frames) CheckFrame(trunk, frame);
   // Each reference's markers (the trunk's own for the first).
   std::vector<std::shared_ptr<const PhotometricTrunk::Markers>> markers(references.size());
-  for (std::size_t k = 1; k < references.size(); ++k) markers[k] = trunk.MakeMarkers(references[k]);
+  for (std::size_t k = 1; k < references.size(); ++k) {
+    markers[k] = trunk.MakeMarkers(references[k]);
+  }
   const int num_frames = static_cast<int>(frames.size());
   const int d = trunk.latent_dim();
   Eigen::MatrixXd latents = Eigen::MatrixXd::Zero(d, num_frames);  // one column per frame

@@ -241,7 +241,9 @@ std::shared_ptr<const PhotometricTrunk::Markers> PhotometricTrunk::MakeMarkers(
     for (int col = 0; col < options_.cols; ++col) {
       SampleMarkers(*markers, MarkerSampling::kSensorResolution, r, col, value.data(), nullptr,
                     nullptr);
-      for (int ch = 0; ch < c; ++ch) markers->at_rest.at(r, col, ch) = static_cast<float>(value[ch]);
+      for (int ch = 0; ch < c; ++ch) {
+        markers->at_rest.at(r, col, ch) = static_cast<float>(value[ch]);
+      }
     }
   }
   return markers;
