@@ -102,8 +102,9 @@ TEST_F(TrainCliTest, TheInnerLoopKnobsReachTheModelAndEncodeUsesIt) {
 TEST_F(TrainCliTest, ThePhotometricHeadDrawsEachClipAgainstItsOwnReference) {
   // A set of two clips: a, the simulated frames with their reference; b, the same
   // frames and reference mirrored, so that b's markers lie elsewhere.
-  ASSERT_EQ(Run("synth --out " + Root("clip_source") + " --frames-per-tool 2 --tools rod,square "
-                "--sensors gelslim --seed 4").exit_code, 0);
+  ASSERT_EQ(Run("synth --out " + Root("clip_source") +
+                " --frames-per-tool 2 --tools rod,square --sensors gelslim --seed 4")
+                .exit_code, 0);
   std::vector<std::string> stems;
   for (const auto& entry : fs::directory_iterator(Root("clip_source/gelslim"))) {
     if (entry.path().extension() == ".png") stems.push_back(entry.path().stem().string());
@@ -113,7 +114,8 @@ TEST_F(TrainCliTest, ThePhotometricHeadDrawsEachClipAgainstItsOwnReference) {
   for (const std::string clip : {"a", "b"}) {
     fs::create_directories(Root("clips/" + clip));
     for (const std::string& stem : stems) {
-      cv::Mat image = cv::imread(Root("clip_source/gelslim/" + stem + ".png"), cv::IMREAD_UNCHANGED);
+      cv::Mat image =
+          cv::imread(Root("clip_source/gelslim/" + stem + ".png"), cv::IMREAD_UNCHANGED);
       ASSERT_FALSE(image.empty()) << stem;
       if (clip == "b") cv::flip(image, image, 1);
       ASSERT_TRUE(cv::imwrite(Root("clips/" + clip + "/" + stem + ".png"), image));
