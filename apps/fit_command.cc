@@ -321,7 +321,7 @@ void RunFit(const FitFlags& flags) {
   // A photometric trunk draws the frame against its own reference (--reference).
   std::shared_ptr<const PhotometricTrunk::Markers> markers;
   if (photometric) {
-    markers = trunk.photometric->MakeMarkers(PhotometricReference(reference, trunk.format));
+    markers = FrameMarkers(trunk, reference);
     summary = FitPhotometric(model, sensor, targets, *markers, flags, &latent);
     std::cout << "fit: " << ToString(sensor) << " " << targets.rows << "x" << targets.cols
               << ", PSNR " << FormatFixed(summary.psnr, 2) << " dB in "

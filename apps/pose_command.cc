@@ -828,7 +828,7 @@ void RunLatentPose(const PoseFlags& flags, PosteriorSampler sampler, const Funct
     const LatentEncoder& encoder = *encoder_holder;
     // The frame is drawn against its own reference.
     const std::shared_ptr<const PhotometricTrunk::Markers> markers =
-        trunk.photometric->MakeMarkers(PhotometricReference(input.reference, trunk.format));
+        FrameMarkers(trunk, input.reference);
     const EncodedFrameFit fit = EncodeFrame(encoder, sensor, targets, markers.get());
     summary = posterior.Estimate(targets, fit.latent, n, &distribution, nullptr, markers.get());
     summary.fit_time_ms = fit.ms;

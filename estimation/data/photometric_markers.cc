@@ -33,6 +33,15 @@ Image PhotometricReference(const Image& reference, const FrameFormat& format) {
   return out;
 }
 
+std::shared_ptr<const PhotometricTrunk::Markers> FrameMarkers(const SensorTrunk& trunk,
+                                                              const Image& reference) {
+  if (trunk.photometric == nullptr) {
+    throw std::invalid_argument("FrameMarkers: the " + std::string(ToString(trunk.sensor)) +
+                                " trunk has no photometric head");
+  }
+  return trunk.photometric->MakeMarkers(PhotometricReference(reference, trunk.format));
+}
+
 DatasetMarkers::DatasetMarkers(const Dataset& dataset, const SensorTrunk& trunk)
     : dataset_(dataset), trunk_(trunk) {
   if (trunk.photometric == nullptr) {
@@ -51,8 +60,7 @@ const PhotometricTrunk::Markers* DatasetMarkers::Of(std::size_t index) const {
   const std::lock_guard<std::mutex> lock(mutex_);
   auto& markers = by_clip_[record.clip];
   if (markers == nullptr) {
-    markers = trunk_.photometric->MakeMarkers(
-        PhotometricReference(dataset_.FrameReference(index), trunk_.format));
+    markers = FrameMarkers(trunk_, dataset_.FrameReference(index));
   }
   return markers.get();
 }

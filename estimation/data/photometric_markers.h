@@ -28,8 +28,16 @@ class Dataset;
 // std::invalid_argument for a per-image min-max format (no fixed units).
 Image PhotometricReference(const Image& reference, const FrameFormat& format);
 
+// The markers a photometric `trunk` draws a frame against whose no-contact reference
+// (physical units, as the dataset or --reference gives it) is `reference`:
+// PhotometricTrunk::MakeMarkers of PhotometricReference under the trunk's format.
+// Throws std::invalid_argument if the trunk has no photometric head, as
+// PhotometricReference does, or for a reference of other channels than the trunk's.
+std::shared_ptr<const PhotometricTrunk::Markers> FrameMarkers(const SensorTrunk& trunk,
+                                                              const Image& reference);
+
 // The markers of each frame's own reference in `dataset` for one photometric trunk,
-// made on first use (PhotometricTrunk::MakeMarkers of PhotometricReference) and kept,
+// made on first use (FrameMarkers) and kept,
 // one per clip (or one per sensor outside a clip set).
 //
 // Thread safety: Of() may be called concurrently. The dataset and the trunk must
