@@ -230,9 +230,11 @@ ReconstructionEvaluator::Summary ReconstructionEvaluator::Evaluate(const FunctaM
   struct SensorState {
     const SensorTrunk* trunk = nullptr;
     Eigen::MatrixXf grid;
-    Eigen::MatrixXf zero_prediction;  // f(grid; 0), the same for every frame
     // A photometric trunk's markers of each frame's own reference.
     std::unique_ptr<DatasetMarkers> markers;
+    // f(grid; 0) for each set of markers the frames are drawn against (the key null for
+    // a direct trunk): the same for every frame of a clip.
+    std::map<const PhotometricTrunk::Markers*, Eigen::MatrixXf> zero_prediction;
   };
   std::map<SensorKind, SensorState> states;
   std::vector<SensorInfo> infos;
@@ -248,8 +250,6 @@ ReconstructionEvaluator::Summary ReconstructionEvaluator::Evaluate(const FunctaM
       state.markers = std::make_unique<DatasetMarkers>(dataset, *state.trunk);
     }
     state.grid = state.trunk->siren.Grid<float>(state.trunk->format.rows, state.trunk->format.cols);
-    state.zero_prediction =
-        TrunkDecode(*state.trunk, Eigen::VectorXf::Zero(TrunkLatentDim(*state.trunk)));
     infos.push_back(dataset.sensor_info(sensor));
   }
   for (SensorKind sensor : functaset.sensors()) {
@@ -286,14 +286,25 @@ ReconstructionEvaluator::Summary ReconstructionEvaluator::Evaluate(const FunctaM
       options_.processes != nullptr ? *options_.processes : SingleProcess();
   const std::int64_t count = static_cast<std::int64_t>(entries.size());
   const std::vector<std::int64_t> own = group.OwnItems(count);
+  // Each of this process's frames' markers, and the zero latent's frame under each.
+  std::vector<const PhotometricTrunk::Markers*> frame_markers(own.size(), nullptr);
+  for (std::size_t k = 0; k < own.size(); ++k) {
+    const FrameResult& r = summary.frames[static_cast<std::size_t>(own[k])];
+    SensorState& state = states.at(r.sensor);
+    if (state.markers) frame_markers[k] = state.markers->Of(r.dataset_index);
+    if (state.zero_prediction.count(frame_markers[k]) == 0) {
+      state.zero_prediction[frame_markers[k]] =
+          TrunkDecode(*state.trunk, Eigen::VectorXf::Zero(TrunkLatentDim(*state.trunk)),
+                      frame_markers[k]);
+    }
+  }
   std::vector<Bytes> computed(own.size());
   internal::ParallelFor(static_cast<int>(own.size()), options_.threads, [&](int k) {
     const std::size_t i = static_cast<std::size_t>(own[k]);
     FrameResult& r = summary.frames[i];
     const SensorState& state = states.at(r.sensor);
     const FrameFormat& format = state.trunk->format;
-    const PhotometricTrunk::Markers* markers =
-        state.markers ? state.markers->Of(r.dataset_index) : nullptr;
+    const PhotometricTrunk::Markers* markers = frame_markers[k];
     const Eigen::MatrixXf prediction = TrunkDecode(*state.trunk, entries[i]->latent, markers);
     const Image frame = dataset.LoadFrame(r.dataset_index);
     const TrunkTargets targets = DatasetFrameTargets(dataset, r.dataset_index, frame, format);
@@ -311,12 +322,7 @@ ReconstructionEvaluator::Summary ReconstructionEvaluator::Evaluate(const FunctaM
     r.source_range = targets.source_range;
     r.rmse = Rmse(prediction, targets);
     // A photometric trunk's zero latent still moves the frame's own markers.
-    r.psnr_zero = Psnr(markers != nullptr
-                           ? TrunkDecode(*state.trunk,
-                                         Eigen::VectorXf::Zero(TrunkLatentDim(*state.trunk)),
-                                         markers)
-                           : state.zero_prediction,
-                       targets);
+    r.psnr_zero = Psnr(state.zero_prediction.at(markers), targets);
     if (summary.has_clean && !dataset.frames()[r.dataset_index].clean_path.empty()) {
       r.psnr_clean = Psnr(prediction, LoadTrunkTargets(dataset, r.dataset_index, format, true));
     }
