@@ -1,7 +1,8 @@
 // Copyright 2026 The tactfunc Authors.
 //
 // Compiled with -ffast-math (models/CMakeLists.txt). Keep sin and cos in separate
-// loops: GCC 12 stops vectorising a loop that calls both (docs/BUILD.md).
+// loops: GCC 12 stops vectorising a loop that calls both (docs/BUILD.md). The float
+// ScaledSinCos is in fast_sincos_float.cc, compiled without -ffast-math.
 #include "models/trunk/internal/fast_sincos.h"
 
 #include <cmath>
@@ -30,7 +31,8 @@ void ScaledSinCosImpl(long n, Scalar scale, const Scalar* x, Scalar* sin_out,
 
 }  // namespace
 
-void ScaledSinCos(long n, float scale, const float* x, float* sin_out, float* cos_out) {
+void LibmvecScaledSinCos(long n, float scale, const float* x, float* sin_out,
+                         float* cos_out) {
   ScaledSinCosImpl(n, scale, x, sin_out, cos_out);
 }
 

@@ -1,11 +1,20 @@
 // Copyright 2026 The tactfunc Authors.
 //
-// Vectorised sin / cos for the SIREN's batched passes. Eigen 3.4 evaluates double sin
-// and cos one element at a time; fast_sincos.cc is compiled with -ffast-math (see
-// models/CMakeLists.txt), under which glibc declares SIMD variants of sin/cos
-// (libmvec, <= 4 ulp) and GCC vectorises the plain loops below (docs/BUILD.md: about
-// 25x faster for double). That TU includes only <cmath> so no inline function built
-// with -ffast-math can be merged into the rest of the program (ODR).
+// Vectorised sin / cos for the SIREN's batched passes.
+//
+// - Double, and float sine alone: Eigen 3.4 evaluates sin and cos one element at a
+//   time; fast_sincos.cc is compiled with -ffast-math (see models/CMakeLists.txt), under
+//   which glibc declares SIMD variants of sin/cos (libmvec, <= 4 ulp) and GCC vectorises
+//   the plain loops there (docs/BUILD.md: about 25x faster for double). That TU
+//   includes only <cmath> so no inline function built with -ffast-math can be merged
+//   into the rest of the program (ODR).
+// - Float sine and cosine together (the passes that keep the cosines for a reverse
+//   pass): fast_sincos_float.cc reduces each argument once, by pi/2 in three parts
+//   (Cody-Waite), and evaluates both minimax polynomials on the reduced argument
+//   (Cephes' sinf/cosf coefficients), about twice as fast as libmvec's sinf and cosf
+//   called one after the other, within 1e-7 of the exact values (libmvec's: the same
+//   order). A block with any |scale * x| > 8192 (where the three-part reduction loses
+//   bits) or a non-finite value goes through libmvec instead, whole.
 #ifndef TACTFUNC_MODELS_TRUNK_INTERNAL_FAST_SINCOS_H_
 #define TACTFUNC_MODELS_TRUNK_INTERNAL_FAST_SINCOS_H_
 
@@ -13,11 +22,16 @@ namespace tactfunc {
 namespace internal {
 
 // sin_out[i] = sin(scale * x[i]) and, if cos_out is not null,
-// cos_out[i] = cos(scale * x[i]), for i in [0, n). x may equal sin_out (in place;
-// cos is computed first); otherwise the three buffers must not overlap.
+// cos_out[i] = cos(scale * x[i]), for i in [0, n). x may equal sin_out (in place);
+// otherwise the three buffers must not overlap.
 void ScaledSinCos(long n, float scale, const float* x, float* sin_out, float* cos_out);
 void ScaledSinCos(long n, double scale, const double* x, double* sin_out,
                   double* cos_out);
+
+// The libmvec loops of fast_sincos.cc, which ScaledSinCos(float) uses for the sine
+// alone and for blocks outside the polynomial's range. Same contract as ScaledSinCos.
+void LibmvecScaledSinCos(long n, float scale, const float* x, float* sin_out,
+                         float* cos_out);
 
 }  // namespace internal
 }  // namespace tactfunc

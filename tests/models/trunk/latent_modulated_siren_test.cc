@@ -6,21 +6,27 @@
 // random ones, in double precision. Nets are tiny (width 8-12, 2-3 layers). Products
 // from a Tape must equal the untaped ones bit for bit, in float and double.
 //
+// The float sine-and-cosine kernel (internal/fast_sincos.h) is checked against double
+// std::sin / std::cos and against libmvec over the arguments the trunk meets.
+//
 // Tolerances: analytic vs Jet and vs 4th-order central differences must agree to a
 // relative error of 1e-6 per parameter block (max-norm of the difference over the
 // max-norm of the reference), with an absolute floor of 1e-10 (finite differences)
 // or 1e-13 (Jet) for blocks whose exact derivative is 0 (dL/dA at z = 0).
 #include "models/trunk/latent_modulated_siren.h"
 
+#include <algorithm>
 #include <cmath>
 #include <functional>
 #include <limits>
+#include <random>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "ceres/jet.h"
 #include "gtest/gtest.h"
+#include "models/trunk/internal/fast_sincos.h"
 
 namespace tactfunc {
 namespace {
@@ -1112,6 +1118,87 @@ TEST(LatentModulatedSirenSpatial, StartLatentIsZeroWithoutTheReadoutBranch) {
   const Frame frame = Frames(siren)[2];
   EXPECT_EQ(siren.StartLatent<double>(frame.coords, frame.targets, frame.weights),
             VectorXd::Zero(15));
+}
+
+// ---- The float sine-and-cosine kernel (models/trunk/internal/fast_sincos.h) ----
+
+// Arguments spread over |scale * x| <= 7,500 (a trained trunk's omega_0 pre-activations
+// stay far inside), an odd count so that the vector loops' remainders run too.
+std::vector<float> SinCosArguments(int n, float limit, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(-limit, limit);
+  std::vector<float> x(n);
+  for (float& v : x) v = u(rng);
+  return x;
+}
+
+TEST(FastSinCos, SineAndCosineAreWithinTwoUlpOfOneOfTheExactValues) {
+  const float scale = 30.0f;
+  const std::vector<float> x = SinCosArguments(4099, 250.0f, 3);
+  std::vector<float> s(x.size()), c(x.size()), ls(x.size()), lc(x.size());
+  internal::ScaledSinCos(static_cast<long>(x.size()), scale, x.data(), s.data(), c.data());
+  internal::LibmvecScaledSinCos(static_cast<long>(x.size()), scale, x.data(), ls.data(),
+                                lc.data());
+  double worst = 0, worst_libmvec = 0;
+  for (std::size_t i = 0; i < x.size(); ++i) {
+    const double y = static_cast<double>(scale * x[i]);  // the float product, as the kernel
+    worst = std::max({worst, std::abs(s[i] - std::sin(y)), std::abs(c[i] - std::cos(y))});
+    worst_libmvec = std::max(
+        {worst_libmvec, std::abs(ls[i] - std::sin(y)), std::abs(lc[i] - std::cos(y))});
+  }
+  EXPECT_LE(worst, 2.4e-7);  // two float ulps of 1
+  EXPECT_LE(worst_libmvec, 2.4e-7);
+}
+
+TEST(FastSinCos, QuadrantsAndTheirBoundariesHaveTheRightSigns) {
+  // Arguments just either side of k pi/2, k in [-40, 40]: every quadrant's swap and sign.
+  std::vector<float> x;
+  for (int k = -40; k <= 40; ++k) {
+    for (double offset : {-1e-3, -1e-6, 0.0, 1e-6, 1e-3, 0.3, 0.7}) {
+      x.push_back(static_cast<float>(k * M_PI / 2 + offset));
+    }
+  }
+  std::vector<float> s(x.size()), c(x.size());
+  internal::ScaledSinCos(static_cast<long>(x.size()), 1.0f, x.data(), s.data(), c.data());
+  for (std::size_t i = 0; i < x.size(); ++i) {
+    const double y = x[i];
+    EXPECT_NEAR(s[i], std::sin(y), 2.4e-7) << "sin(" << y << ")";
+    EXPECT_NEAR(c[i], std::cos(y), 2.4e-7) << "cos(" << y << ")";
+  }
+}
+
+TEST(FastSinCos, InPlaceEqualsOutOfPlaceAndTheSineAloneIsLibmvecs) {
+  const std::vector<float> x = SinCosArguments(1027, 3.0f, 5);
+  std::vector<float> s(x.size()), c(x.size()), inplace = x, c2(x.size());
+  const long n = static_cast<long>(x.size());
+  internal::ScaledSinCos(n, 30.0f, x.data(), s.data(), c.data());
+  internal::ScaledSinCos(n, 30.0f, inplace.data(), inplace.data(), c2.data());
+  EXPECT_EQ(s, inplace);
+  EXPECT_EQ(c, c2);
+  std::vector<float> alone(x.size()), libmvec(x.size());
+  internal::ScaledSinCos(n, 30.0f, x.data(), alone.data(), nullptr);
+  internal::LibmvecScaledSinCos(n, 30.0f, x.data(), libmvec.data(), nullptr);
+  EXPECT_EQ(alone, libmvec);
+}
+
+TEST(FastSinCos, ABlockOutsideTheReducedRangeOrWithANanGoesThroughLibmvecWhole) {
+  for (float odd : {1.0e4f, -3.0e5f, std::numeric_limits<float>::quiet_NaN(),
+                    std::numeric_limits<float>::infinity()}) {
+    std::vector<float> x = SinCosArguments(37, 3.0f, 7);
+    x[11] = odd;
+    const long n = static_cast<long>(x.size());
+    std::vector<float> s(x.size()), c(x.size()), ls(x.size()), lc(x.size());
+    internal::ScaledSinCos(n, 1.0f, x.data(), s.data(), c.data());
+    internal::LibmvecScaledSinCos(n, 1.0f, x.data(), ls.data(), lc.data());
+    for (std::size_t i = 0; i < x.size(); ++i) {
+      if (std::isnan(ls[i])) {
+        EXPECT_TRUE(std::isnan(s[i]) && std::isnan(c[i])) << "argument " << odd;
+      } else {
+        EXPECT_EQ(s[i], ls[i]) << "argument " << odd << ", element " << i;
+        EXPECT_EQ(c[i], lc[i]) << "argument " << odd << ", element " << i;
+      }
+    }
+  }
 }
 
 }  // namespace
