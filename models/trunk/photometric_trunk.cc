@@ -234,6 +234,21 @@ std::shared_ptr<const PhotometricTrunk::Markers> PhotometricTrunk::MakeMarkers(
   }
   auto markers = std::make_shared<Markers>();
   markers->reference = reference;
+  const int k = options_.supersample;
+  if (reference.rows % options_.rows == 0 && (reference.rows / options_.rows) % k == 0) {
+    const int step = reference.rows / options_.rows / k;
+    markers->row_sum_step = step;
+    markers->row_sums = Image(reference.rows - (k - 1) * step, reference.cols, c);
+    for (int y = 0; y < markers->row_sums.rows; ++y) {
+      for (int x = 0; x < reference.cols; ++x) {
+        for (int ch = 0; ch < c; ++ch) {
+          double sum = 0;
+          for (int a = 0; a < k; ++a) sum += reference.at(y + a * step, x, ch);
+          markers->row_sums.at(y, x, ch) = static_cast<float>(sum);
+        }
+      }
+    }
+  }
   // The at-rest markers: the K x K average of the reference at zero shift.
   markers->at_rest = Image(options_.rows, options_.cols, c);
   std::vector<double> value(c);
@@ -335,6 +350,16 @@ void PhotometricTrunk::SampleMarkers(const Markers& markers, MarkerSampling samp
   const double sr = static_cast<double>(reference.rows) / options_.rows;
   const double sc = static_cast<double>(reference.cols) / options_.cols;
   const double weight = 1.0 / (k * k);
+  // Every sample row strictly inside the reference (no clamp, each with its row slope):
+  // one sample of the row sums per column of samples (Markers::row_sums).
+  const double y_first = (row + 0.5 / k) * sr - 0.5;
+  if (!markers.row_sums.empty() && y_first > 0 &&
+      y_first < markers.row_sums.rows - 1) {
+    for (int b = 0; b < k; ++b) {
+      sample(markers.row_sums, y_first, (col + (b + 0.5) / k) * sc - 0.5, weight, sr, sc);
+    }
+    return;
+  }
   for (int a = 0; a < k; ++a) {
     const double y = (row + (a + 0.5) / k) * sr - 0.5;
     for (int b = 0; b < k; ++b) {

@@ -123,6 +123,14 @@ class PhotometricTrunk {
   struct Markers {
     Image reference;
     Image at_rest;
+    // Where the reference has exactly s K rows per working row (s an integer, the
+    // GelSlim's 320 rows over 80 with K = 4: s = 1), the K samples of one column of a
+    // pixel's K x K lie s reference rows apart and share their fraction: their sum is
+    // one bilinear sample of row_sums(y, x) = sum_{a < K} reference(y + a s, x)
+    // (reference.rows - (K - 1) s rows), which SampleMarkers reads away from the
+    // borders (K samples a pixel instead of K^2). Empty otherwise; MakeMarkers fills it.
+    Image row_sums;
+    int row_sum_step = 0;
   };
 
   // `reference` is the no-contact reference at the SENSOR's resolution, in the targets'

@@ -214,6 +214,63 @@ TEST(PhotometricTrunkTest, AFramesOwnMarkersDrawItAsATrunkOfThatReference) {
   }
 }
 
+TEST(PhotometricTrunkTest, RowSummedMarkersEqualTheirSamplesTakenOneByOne) {
+  // K = 3 rows of samples one reference row apart (3x the working rows) and a column
+  // ratio that is not a whole number, as the GelSlim's 320 x 427 over 80 x 107: each
+  // pixel reads K sums of K reference rows instead of K^2 samples, away from the
+  // borders. Against the same markers without the sums, every pass agrees to float
+  // rounding of the sums, the border pixels included.
+  PhotometricTrunk::Options o = SmallOptions();
+  o.supersample = 3;
+  const Image reference = DottedReference(3 * o.rows, 3 * o.cols + 1, 1);
+  PhotometricTrunk trunk(o, reference, 5);
+  VectorXd head = trunk.head_parameters();
+  head[head.size() - 1] = 1.5;
+  trunk.SetHeadParameters(head);
+  const auto summed = trunk.MakeMarkers(reference);
+  ASSERT_FALSE(summed->row_sums.empty());
+  EXPECT_EQ(summed->row_sum_step, 1);
+  EXPECT_EQ(summed->row_sums.rows, 3 * o.rows - 2);
+  PhotometricTrunk::Markers one_by_one = *summed;
+  one_by_one.row_sums = Image();
+  one_by_one.row_sum_step = 0;
+  const Problem p = MakeProblem(trunk);
+  const MatrixXd a = trunk.Forward<double>(trunk.AllPixels(), p.z, summed.get());
+  const MatrixXd b = trunk.Forward<double>(trunk.AllPixels(), p.z, &one_by_one);
+  EXPECT_LT((a - b).cwiseAbs().maxCoeff(), 1e-6);
+  EXPECT_GT((a - trunk.Forward<double>(trunk.AllPixels(), VectorXd::Zero(p.z.size()),
+                                       summed.get()))
+                .cwiseAbs()
+                .maxCoeff(),
+            1e-3);  // the contact moves the markers: the sums are read, not skipped
+  VectorXd dz_a, ds_a, dh_a, dz_b, ds_b, dh_b;
+  trunk.LossAndGradient<double>(p.pixels, p.z, p.targets, p.weights, &dz_a, &ds_a, &dh_a,
+                                nullptr, summed.get());
+  trunk.LossAndGradient<double>(p.pixels, p.z, p.targets, p.weights, &dz_b, &ds_b, &dh_b,
+                                nullptr, &one_by_one);
+  EXPECT_LT((dz_a - dz_b).cwiseAbs().maxCoeff(), 1e-6);
+  EXPECT_LT((ds_a - ds_b).cwiseAbs().maxCoeff(), 1e-6);
+  EXPECT_LT((dh_a - dh_b).cwiseAbs().maxCoeff(), 1e-6);
+  MatrixXd ya, Ja, yb, Jb;
+  trunk.ForwardAndLatentJacobian<double>(p.pixels, p.z, &ya, &Ja, summed.get());
+  trunk.ForwardAndLatentJacobian<double>(p.pixels, p.z, &yb, &Jb, &one_by_one);
+  EXPECT_LT((Ja - Jb).cwiseAbs().maxCoeff(), 1e-6);
+  // Other shapes keep the samples one by one: K = 3 at twice the working rows.
+  const PhotometricTrunk two(o, DottedReference(2 * o.rows, 2 * o.cols, 1));
+  EXPECT_TRUE(two.markers().row_sums.empty());
+}
+
+TEST(PhotometricTrunkTest, GradientsMatchCentralDifferencesWithRowSummedMarkers) {
+  PhotometricTrunk::Options o = SmallOptions();
+  o.supersample = 2;  // twice the working rows: the sums of 2 rows, one row apart
+  PhotometricTrunk trunk(o, DottedReference(2 * o.rows, 2 * o.cols + 1, 1), 5);
+  ASSERT_FALSE(trunk.markers().row_sums.empty());
+  VectorXd head = trunk.head_parameters();
+  head[head.size() - 1] = 1.5;
+  trunk.SetHeadParameters(head);
+  ExpectGradientsMatchDifferences(trunk);
+}
+
 TEST(PhotometricTrunkTest, MarkersOfAnotherGridOrChannelsAreRefused) {
   const PhotometricTrunk trunk = MovingTrunk(PhotometricTrunk::MarkerSampling::kSensorResolution);
   PhotometricTrunk::Options o = trunk.options();
