@@ -2,7 +2,8 @@
 //
 // `tactfunc bench kernels`: Google Benchmark programs of the kernels one fit is made of
 // (trunk forward, forward + latent Jacobian, the autodiff Jacobian, one LM iteration,
-// one meta-SGD step, an Eigen float GEMM), and the Jacobian timings of `bench fit`.
+// one meta-SGD step, an Eigen float GEMM, the SIREN's float sine and cosine kernel
+// against libmvec's), and the Jacobian timings of `bench fit`.
 // The latent cost functions (estimation/fitting/latent_costs.h) are timed directly here.
 #include <algorithm>
 #include <chrono>
@@ -23,6 +24,7 @@
 #include "estimation/fitting/latent_fitter.h"
 #include "estimation/data/trunk_targets.h"
 #include "models/trunk/functa_model.h"
+#include "models/trunk/internal/fast_sincos.h"
 
 namespace tactfunc::apps::bench {
 namespace {
@@ -210,6 +212,32 @@ void RegisterGemmBenchmark() {
   })->Unit(benchmark::kMillisecond);
 }
 
+// The SIREN's element-wise step for one block of 256 pixels of a width-64 layer: sin and
+// cos of omega_0 = 30 times pre-activations in [-3, 3], by the kernel the passes use
+// (one argument reduction for both) and by libmvec's sinf and cosf one after the other.
+constexpr long kSinCosValues = 64 * 256;
+
+void RegisterSinCosBenchmarks() {
+  for (const bool libmvec : {false, true}) {
+    const std::string name =
+        std::string("sincos/float/") + (libmvec ? "libmvec" : "one_reduction") + "/16384";
+    benchmark::RegisterBenchmark(name.c_str(), [libmvec](benchmark::State& state) {
+      constexpr long kValues = kSinCosValues;
+      const Eigen::VectorXf x = 3.0f * Eigen::VectorXf::Random(kValues);
+      Eigen::VectorXf s(kValues), c(kValues);
+      for (auto _ : state) {
+        if (libmvec) {
+          internal::LibmvecScaledSinCos(kValues, 30.0f, x.data(), s.data(), c.data());
+        } else {
+          internal::ScaledSinCos(kValues, 30.0f, x.data(), s.data(), c.data());
+        }
+        benchmark::DoNotOptimize(s.data());
+        benchmark::DoNotOptimize(c.data());
+      }
+    })->Unit(benchmark::kMicrosecond);
+  }
+}
+
 void RunKernelBench(const KernelFlags& flags) {
   std::vector<std::shared_ptr<KernelSetup>> setups;
   if (!flags.model.empty()) {
@@ -235,6 +263,7 @@ void RunKernelBench(const KernelFlags& flags) {
     RegisterKernelBenchmarks(s);
   }
   RegisterGemmBenchmark();
+  RegisterSinCosBenchmarks();
   const std::vector<BenchResult> results = RunRegisteredBenchmarks(flags.extra);
   auto find = [&](const std::string& name) -> const BenchResult* {
     for (const BenchResult& r : results) {
