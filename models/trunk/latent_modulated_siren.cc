@@ -208,8 +208,11 @@ void RunForward(const Net<S>& net, double omega_0, const Eigen::MatrixBase<Coord
   trace->h[0].leftCols(m) = coords.transpose();
   for (int l = 0; l < num_layers; ++l) {
     auto pre = trace->h[l + 1].leftCols(m);
-    pre.noalias() = net.W[l] * trace->h[l].leftCols(m);
-    pre.colwise() += net.b[l].col(0) + gamma.segment(l * width, width);
+    // The shifts first, then the product added onto them: Eigen's "=" of a matrix
+    // product zeroes its destination before adding the product, one more pass over it.
+    // The sum is the same either way (one rounded addition per value).
+    pre.colwise() = net.b[l].col(0) + gamma.segment(l * width, width);
+    pre.noalias() += net.W[l] * trace->h[l].leftCols(m);
     if (spatial != nullptr) spatial->Blend(spatial->P, l * width, pre);
     S* cosine = keep_cosine ? trace->cosine[l].data() : nullptr;
     internal::ScaledSinCos(width * m, static_cast<S>(omega_0), pre.data(), pre.data(),
