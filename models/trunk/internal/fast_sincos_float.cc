@@ -68,6 +68,13 @@ inline void Rotate(std::uint32_t quadrant, float s, float c, float* sin_out, flo
   *cos_out = FromBits(((sb & odd) | (cb & ~odd)) ^ (((quadrant + 1u) & 2u) << 30));
 }
 
+inline void SinCosOf(float y, float* sin_out, float* cos_out) {
+  std::uint32_t quadrant;
+  const float r = Reduce(y, &quadrant);
+  const float z = r * r;
+  Rotate(quadrant, SinOfReduced(r, z), CosOfReduced(z), sin_out, cos_out);
+}
+
 // True if every |scale * x[i]| <= kLargestReduced (false for NaN).
 bool InRange(long n, float scale, const float* x) {
   unsigned outside = 0;
@@ -85,22 +92,12 @@ void ScaledSinCos(long n, float scale, const float* x, float* sin_out, float* co
   if (x == sin_out) {
     float* __restrict inout = sin_out;
     float* __restrict cosine = cos_out;
-    for (long i = 0; i < n; ++i) {
-      std::uint32_t quadrant;
-      const float r = Reduce(scale * inout[i], &quadrant);
-      const float z = r * r;
-      Rotate(quadrant, SinOfReduced(r, z), CosOfReduced(z), &inout[i], &cosine[i]);
-    }
+    for (long i = 0; i < n; ++i) SinCosOf(scale * inout[i], &inout[i], &cosine[i]);
   } else {
     const float* __restrict in = x;
     float* __restrict sine = sin_out;
     float* __restrict cosine = cos_out;
-    for (long i = 0; i < n; ++i) {
-      std::uint32_t quadrant;
-      const float r = Reduce(scale * in[i], &quadrant);
-      const float z = r * r;
-      Rotate(quadrant, SinOfReduced(r, z), CosOfReduced(z), &sine[i], &cosine[i]);
-    }
+    for (long i = 0; i < n; ++i) SinCosOf(scale * in[i], &sine[i], &cosine[i]);
   }
 }
 
