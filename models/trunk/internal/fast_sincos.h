@@ -13,8 +13,9 @@
 //   (Cody-Waite), and evaluates both minimax polynomials on the reduced argument
 //   (Cephes' sinf/cosf coefficients): 1.3-2.4x as fast as libmvec's sinf and cosf
 //   called one after the other (docs/BUILD.md), within two float ulps of the exact
-//   values, as libmvec's are. A block with any |scale * x| > 8192 (where the three-part reduction loses
-//   bits) or a non-finite value goes through libmvec instead, whole.
+//   values, as libmvec's are. A block with any |scale * x| > 8192 (where the
+//   three-part reduction loses bits) or a non-finite value goes through libmvec
+//   instead, whole.
 #ifndef TACTFUNC_MODELS_TRUNK_INTERNAL_FAST_SINCOS_H_
 #define TACTFUNC_MODELS_TRUNK_INTERNAL_FAST_SINCOS_H_
 
