@@ -222,14 +222,13 @@ void RegisterSinCosBenchmarks() {
     const std::string name =
         std::string("sincos/float/") + (libmvec ? "libmvec" : "one_reduction") + "/16384";
     benchmark::RegisterBenchmark(name.c_str(), [libmvec](benchmark::State& state) {
-      constexpr long kValues = kSinCosValues;
-      const Eigen::VectorXf x = 3.0f * Eigen::VectorXf::Random(kValues);
-      Eigen::VectorXf s(kValues), c(kValues);
+      const Eigen::VectorXf x = 3.0f * Eigen::VectorXf::Random(kSinCosValues);
+      Eigen::VectorXf s(kSinCosValues), c(kSinCosValues);
       for (auto _ : state) {
         if (libmvec) {
-          internal::LibmvecScaledSinCos(kValues, 30.0f, x.data(), s.data(), c.data());
+          internal::LibmvecScaledSinCos(kSinCosValues, 30.0f, x.data(), s.data(), c.data());
         } else {
-          internal::ScaledSinCos(kValues, 30.0f, x.data(), s.data(), c.data());
+          internal::ScaledSinCos(kSinCosValues, 30.0f, x.data(), s.data(), c.data());
         }
         benchmark::DoNotOptimize(s.data());
         benchmark::DoNotOptimize(c.data());

@@ -237,7 +237,6 @@ std::shared_ptr<const PhotometricTrunk::Markers> PhotometricTrunk::MakeMarkers(
   const int k = options_.supersample;
   if (reference.rows % options_.rows == 0 && (reference.rows / options_.rows) % k == 0) {
     const int step = reference.rows / options_.rows / k;
-    markers->row_sum_step = step;
     markers->row_sums = Image(reference.rows - (k - 1) * step, reference.cols, c);
     for (int y = 0; y < markers->row_sums.rows; ++y) {
       for (int x = 0; x < reference.cols; ++x) {

@@ -130,7 +130,6 @@ class PhotometricTrunk {
     // (reference.rows - (K - 1) s rows), which SampleMarkers reads away from the
     // borders (K samples a pixel instead of K^2). Empty otherwise; MakeMarkers fills it.
     Image row_sums;
-    int row_sum_step = 0;
   };
 
   // `reference` is the no-contact reference at the SENSOR's resolution, in the targets'
