@@ -214,26 +214,31 @@ void RegisterGemmBenchmark() {
 
 // The SIREN's element-wise step for one block of 256 pixels of a width-64 layer: sin and
 // cos of omega_0 = 30 times pre-activations in [-3, 3], by the kernel the passes use
-// (one argument reduction for both) and by libmvec's sinf and cosf one after the other.
+// (one argument reduction for both) and by libmvec's sinf and cosf one after the other;
+// and the sine alone (forward-only passes), by the kernel (one reduction by pi, one
+// polynomial) and by libmvec's sinf.
 constexpr long kSinCosValues = 64 * 256;
 
 void RegisterSinCosBenchmarks() {
-  for (const bool libmvec : {false, true}) {
-    const std::string name =
-        std::string("sincos/float/") + (libmvec ? "libmvec" : "one_reduction") + "/16384";
-    benchmark::RegisterBenchmark(name.c_str(), [libmvec](benchmark::State& state) {
-      const Eigen::VectorXf x = 3.0f * Eigen::VectorXf::Random(kSinCosValues);
-      Eigen::VectorXf s(kSinCosValues), c(kSinCosValues);
-      for (auto _ : state) {
-        if (libmvec) {
-          internal::LibmvecScaledSinCos(kSinCosValues, 30.0f, x.data(), s.data(), c.data());
-        } else {
-          internal::ScaledSinCos(kSinCosValues, 30.0f, x.data(), s.data(), c.data());
+  for (const bool with_cosine : {true, false}) {
+    for (const bool libmvec : {false, true}) {
+      const std::string name = std::string(with_cosine ? "sincos" : "sin") + "/float/" +
+                               (libmvec ? "libmvec" : "one_reduction") + "/16384";
+      benchmark::RegisterBenchmark(name.c_str(), [libmvec, with_cosine](benchmark::State& state) {
+        const Eigen::VectorXf x = 3.0f * Eigen::VectorXf::Random(kSinCosValues);
+        Eigen::VectorXf s(kSinCosValues), c(kSinCosValues);
+        float* cosine = with_cosine ? c.data() : nullptr;
+        for (auto _ : state) {
+          if (libmvec) {
+            internal::LibmvecScaledSinCos(kSinCosValues, 30.0f, x.data(), s.data(), cosine);
+          } else {
+            internal::ScaledSinCos(kSinCosValues, 30.0f, x.data(), s.data(), cosine);
+          }
+          benchmark::DoNotOptimize(s.data());
+          benchmark::DoNotOptimize(c.data());
         }
-        benchmark::DoNotOptimize(s.data());
-        benchmark::DoNotOptimize(c.data());
-      }
-    })->Unit(benchmark::kMicrosecond);
+      })->Unit(benchmark::kMicrosecond);
+    }
   }
 }
 

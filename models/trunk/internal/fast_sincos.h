@@ -2,20 +2,23 @@
 //
 // Vectorised sin / cos for the SIREN's batched passes.
 //
-// - Double, and float sine alone: Eigen 3.4 evaluates sin and cos one element at a
-//   time; fast_sincos.cc is compiled with -ffast-math (see models/CMakeLists.txt), under
-//   which glibc declares SIMD variants of sin/cos (libmvec, <= 4 ulp) and GCC vectorises
-//   the plain loops there (docs/BUILD.md: about 25x faster for double). That TU
-//   includes only <cmath> so no inline function built with -ffast-math can be merged
-//   into the rest of the program (ODR).
-// - Float sine and cosine together (the passes that keep the cosines for a reverse
-//   pass): fast_sincos_float.cc reduces each argument once, by pi/2 in three parts
-//   (Cody-Waite), and evaluates both minimax polynomials on the reduced argument
+// - Double: Eigen 3.4 evaluates sin and cos one element at a time; fast_sincos.cc is
+//   compiled with -ffast-math (see models/CMakeLists.txt), under which glibc declares
+//   SIMD variants of sin/cos (libmvec, <= 4 ulp) and GCC vectorises the plain loops there
+//   (docs/BUILD.md: about 25x faster for double). That TU includes only <cmath> so no
+//   inline function built with -ffast-math can be merged into the rest of the program
+//   (ODR).
+// - Float (fast_sincos_float.cc), sine and cosine together (the passes that keep the
+//   cosines for a reverse pass): each argument reduced once, by pi/2 in three parts
+//   (Cody-Waite), and both minimax polynomials evaluated on the reduced argument
 //   (Cephes' sinf/cosf coefficients): 1.3-2.4x as fast as libmvec's sinf and cosf
 //   called one after the other (docs/BUILD.md), within two float ulps of the exact
-//   values, as libmvec's are. A block with any |scale * x| > 8192 (where the
-//   three-part reduction loses bits) or a non-finite value goes through libmvec
-//   instead, whole.
+//   values, as libmvec's are.
+// - Float sine alone (forward-only passes): reduced by pi in three parts, one odd
+//   polynomial of degree 9 over [-pi/2, pi/2]; within one float ulp of 1 of the exact
+//   sine, as libmvec's sinf, and faster (docs/BUILD.md).
+// - Float blocks with any |scale * x| > 8192 (where the three-part reductions lose
+//   bits) or a non-finite value go through libmvec instead, whole.
 #ifndef TACTFUNC_MODELS_TRUNK_INTERNAL_FAST_SINCOS_H_
 #define TACTFUNC_MODELS_TRUNK_INTERNAL_FAST_SINCOS_H_
 
@@ -29,8 +32,8 @@ void ScaledSinCos(long n, float scale, const float* x, float* sin_out, float* co
 void ScaledSinCos(long n, double scale, const double* x, double* sin_out,
                   double* cos_out);
 
-// The libmvec loops of fast_sincos.cc, which ScaledSinCos(float) uses for the sine
-// alone and for blocks outside the polynomial's range. Same contract as ScaledSinCos.
+// The libmvec loops of fast_sincos.cc, which ScaledSinCos(float) uses for blocks
+// outside the polynomials' range. Same contract as ScaledSinCos.
 void LibmvecScaledSinCos(long n, float scale, const float* x, float* sin_out,
                          float* cos_out);
 

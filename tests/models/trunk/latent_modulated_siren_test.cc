@@ -1167,7 +1167,7 @@ TEST(FastSinCos, QuadrantsAndTheirBoundariesHaveTheRightSigns) {
   }
 }
 
-TEST(FastSinCos, InPlaceEqualsOutOfPlaceAndTheSineAloneIsLibmvecs) {
+TEST(FastSinCos, InPlaceEqualsOutOfPlace) {
   const std::vector<float> x = SinCosArguments(1027, 3.0f, 5);
   std::vector<float> s(x.size()), c(x.size()), inplace = x, c2(x.size());
   const long n = static_cast<long>(x.size());
@@ -1175,10 +1175,41 @@ TEST(FastSinCos, InPlaceEqualsOutOfPlaceAndTheSineAloneIsLibmvecs) {
   internal::ScaledSinCos(n, 30.0f, inplace.data(), inplace.data(), c2.data());
   EXPECT_EQ(s, inplace);
   EXPECT_EQ(c, c2);
-  std::vector<float> alone(x.size()), libmvec(x.size());
+  std::vector<float> alone(x.size()), alone_inplace = x;
   internal::ScaledSinCos(n, 30.0f, x.data(), alone.data(), nullptr);
-  internal::LibmvecScaledSinCos(n, 30.0f, x.data(), libmvec.data(), nullptr);
-  EXPECT_EQ(alone, libmvec);
+  internal::ScaledSinCos(n, 30.0f, alone_inplace.data(), alone_inplace.data(), nullptr);
+  EXPECT_EQ(alone, alone_inplace);
+}
+
+// The sine alone (reduced by pi, one polynomial): within 1.5e-7 (1.25 float ulps of 1)
+// of the exact sine over |scale * x| <= 7,500, and at arguments just either side of
+// k pi (k up to 2,000), where the reduced argument is smallest and the sign flips.
+TEST(FastSin, TheSineAloneIsWithinAFloatUlpOfOneOfTheExactSine) {
+  std::vector<float> x = SinCosArguments(40001, 250.0f, 11);
+  const float scale = 30.0f;
+  std::vector<float> s(x.size());
+  internal::ScaledSinCos(static_cast<long>(x.size()), scale, x.data(), s.data(), nullptr);
+  double worst = 0;
+  for (std::size_t i = 0; i < x.size(); ++i) {
+    worst = std::max(worst, std::abs(s[i] - std::sin(static_cast<double>(scale * x[i]))));
+  }
+  EXPECT_LE(worst, 1.5e-7);
+
+  std::vector<float> near;
+  for (int k = -2000; k <= 2000; k += 7) {
+    float y = static_cast<float>(k * M_PI);
+    for (int step = 0; step < 3; ++step) y = std::nextafter(y, -1e9f);
+    for (int step = 0; step < 7; ++step, y = std::nextafter(y, 1e9f)) near.push_back(y);
+    for (double offset : {-0.3, 0.3, M_PI / 2 - 1e-4}) {
+      near.push_back(static_cast<float>(k * M_PI + offset));
+    }
+  }
+  std::vector<float> sn(near.size());
+  internal::ScaledSinCos(static_cast<long>(near.size()), 1.0f, near.data(), sn.data(), nullptr);
+  for (std::size_t i = 0; i < near.size(); ++i) {
+    EXPECT_NEAR(sn[i], std::sin(static_cast<double>(near[i])), 1.5e-7)
+        << "sin(" << near[i] << ")";
+  }
 }
 
 TEST(FastSinCos, ABlockOutsideTheReducedRangeOrWithANanGoesThroughLibmvecWhole) {
@@ -1190,6 +1221,16 @@ TEST(FastSinCos, ABlockOutsideTheReducedRangeOrWithANanGoesThroughLibmvecWhole) 
     std::vector<float> s(x.size()), c(x.size()), ls(x.size()), lc(x.size());
     internal::ScaledSinCos(n, 1.0f, x.data(), s.data(), c.data());
     internal::LibmvecScaledSinCos(n, 1.0f, x.data(), ls.data(), lc.data());
+    std::vector<float> alone(x.size()), libmvec_alone(x.size());
+    internal::ScaledSinCos(n, 1.0f, x.data(), alone.data(), nullptr);
+    internal::LibmvecScaledSinCos(n, 1.0f, x.data(), libmvec_alone.data(), nullptr);
+    for (std::size_t i = 0; i < x.size(); ++i) {
+      if (std::isnan(libmvec_alone[i])) {
+        EXPECT_TRUE(std::isnan(alone[i])) << "argument " << odd;
+      } else {
+        EXPECT_EQ(alone[i], libmvec_alone[i]) << "argument " << odd << ", element " << i;
+      }
+    }
     for (std::size_t i = 0; i < x.size(); ++i) {
       if (std::isnan(ls[i])) {
         EXPECT_TRUE(std::isnan(s[i]) && std::isnan(c[i])) << "argument " << odd;
