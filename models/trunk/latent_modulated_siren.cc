@@ -5,6 +5,7 @@
 #include <atomic>
 #include <cmath>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 #include <utility>
@@ -1086,9 +1087,55 @@ LatentModulatedSiren::MatrixX<Scalar> LatentModulatedSiren::Grid(int rows,
 
 // ---- Batched passes ----------------------------------------------------------------
 
+// ---- Forward records -----------------------------------------------------------------
+
+// What Forward records: the inputs and every block's trace (pixels [b kPixelBlock, ...)
+// in blocks[b]), cosines included.
+template <typename Scalar>
+struct LatentModulatedSiren::ForwardRecord<Scalar>::Record {
+  std::uint64_t parameters_generation = 0;
+  MatrixX<Scalar> coords;
+  VectorX<Scalar> z;
+  std::vector<Trace<Scalar>> blocks;
+};
+
+template <typename Scalar>
+LatentModulatedSiren::ForwardRecord<Scalar>::ForwardRecord() = default;
+template <typename Scalar>
+LatentModulatedSiren::ForwardRecord<Scalar>::~ForwardRecord() = default;
+template <typename Scalar>
+LatentModulatedSiren::ForwardRecord<Scalar>::ForwardRecord(ForwardRecord&& other) noexcept =
+    default;
+template <typename Scalar>
+LatentModulatedSiren::ForwardRecord<Scalar>& LatentModulatedSiren::ForwardRecord<Scalar>::operator=(
+    ForwardRecord&& other) noexcept = default;
+
 template <typename Scalar>
 LatentModulatedSiren::MatrixX<Scalar> LatentModulatedSiren::Forward(
     const MatrixX<Scalar>& coords, const VectorX<Scalar>& z) const {
+  return ForwardPasses<Scalar>(coords, z, nullptr);
+}
+
+template <typename Scalar>
+LatentModulatedSiren::MatrixX<Scalar> LatentModulatedSiren::Forward(
+    const MatrixX<Scalar>& coords, const VectorX<Scalar>& z,
+    ForwardRecord<Scalar>* record) const {
+  if (record == nullptr) {
+    throw std::invalid_argument("LatentModulatedSiren::Forward: record must not be null");
+  }
+  auto kept = std::make_unique<typename ForwardRecord<Scalar>::Record>();
+  MatrixX<Scalar> outputs = ForwardPasses<Scalar>(coords, z, kept.get());
+  kept->parameters_generation = parameters_generation_;
+  kept->coords = coords;
+  kept->z = z;
+  record->record_ = std::move(kept);
+  return outputs;
+}
+
+template <typename Scalar>
+LatentModulatedSiren::MatrixX<Scalar> LatentModulatedSiren::ForwardPasses(
+    const MatrixX<Scalar>& coords, const VectorX<Scalar>& z,
+    typename ForwardRecord<Scalar>::Record* record) const {
   CheckShape("coords", coords.rows(), coords.cols(), coords.rows(), 2);
   CheckShape("z", z.rows(), 1, options_.latent_dim, 1);
   const long n = coords.rows();
@@ -1096,8 +1143,16 @@ LatentModulatedSiren::MatrixX<Scalar> LatentModulatedSiren::Forward(
   std::unique_ptr<Spatial<Scalar>> spatial;
   if (has_spatial()) spatial = std::make_unique<Spatial<Scalar>>(options_, BlockCapacity(n));
   const VectorX<Scalar> gamma = SharedShifts(net, z, spatial.get());
-  Trace<Scalar> trace(options_.num_hidden_layers, options_.width, options_.output_channels,
-                      BlockCapacity(n), /*keep_cosine=*/false);
+  // Without a record one trace serves every block; with one, each block keeps its own,
+  // with the cosines the reverse pass reads.
+  const bool keep = record != nullptr;
+  std::optional<Trace<Scalar>> shared;
+  if (!keep) {
+    shared.emplace(options_.num_hidden_layers, options_.width, options_.output_channels,
+                   BlockCapacity(n), /*keep_cosine=*/false);
+  } else {
+    record->blocks.reserve((n + kPixelBlock - 1) / kPixelBlock);
+  }
   MatrixX<Scalar> outputs(n, options_.output_channels);
   VectorX<Scalar> u;
   if (has_readout()) {
@@ -1107,6 +1162,11 @@ LatentModulatedSiren::MatrixX<Scalar> LatentModulatedSiren::Forward(
   }
   for (long begin = 0; begin < n; begin += kPixelBlock) {
     const long m = std::min(kPixelBlock, n - begin);
+    if (keep) {
+      record->blocks.emplace_back(options_.num_hidden_layers, options_.width,
+                                  options_.output_channels, m, /*keep_cosine=*/true);
+    }
+    Trace<Scalar>& trace = keep ? record->blocks.back() : *shared;
     if (spatial) spatial->Locate(*this, coords.middleRows(begin, m));
     RunForward(net, options_.omega_0, coords.middleRows(begin, m), gamma, spatial.get(),
                &trace);
@@ -1127,6 +1187,29 @@ void LatentModulatedSiren::Backward(const MatrixX<Scalar>& coords,
                                     WeightGradients weights) const {
   CheckShape("coords", coords.rows(), coords.cols(), coords.rows(), 2);
   CheckShape("z", z.rows(), 1, options_.latent_dim, 1);
+  BackwardPasses<Scalar>(coords, z, dL_dY, dL_dz, dL_dtheta, weights, nullptr);
+}
+
+template <typename Scalar>
+void LatentModulatedSiren::Backward(const ForwardRecord<Scalar>& record,
+                                    const MatrixX<Scalar>& dL_dY, VectorX<Scalar>* dL_dz,
+                                    VectorX<Scalar>* dL_dtheta,
+                                    WeightGradients weights) const {
+  if (record.empty() || record.record_->parameters_generation != parameters_generation_) {
+    throw std::invalid_argument(
+        std::string("LatentModulatedSiren::Backward: ") +
+        (record.empty() ? "the forward record is empty"
+                        : "the forward record was made with other parameters than this trunk's"));
+  }
+  const typename ForwardRecord<Scalar>::Record& kept = *record.record_;
+  BackwardPasses<Scalar>(kept.coords, kept.z, dL_dY, dL_dz, dL_dtheta, weights, &kept);
+}
+
+template <typename Scalar>
+void LatentModulatedSiren::BackwardPasses(
+    const MatrixX<Scalar>& coords, const VectorX<Scalar>& z, const MatrixX<Scalar>& dL_dY,
+    VectorX<Scalar>* dL_dz, VectorX<Scalar>* dL_dtheta, WeightGradients weights,
+    const typename ForwardRecord<Scalar>::Record* record) const {
   CheckShape("dL_dY", dL_dY.rows(), dL_dY.cols(), coords.rows(),
              options_.output_channels);
   const long n = coords.rows();
@@ -1139,8 +1222,12 @@ void LatentModulatedSiren::Backward(const MatrixX<Scalar>& coords,
     dP.setZero(net.A.rows(), spatial->nodes);
   }
   const VectorX<Scalar> gamma = SharedShifts(net, z, spatial.get());
-  Trace<Scalar> trace(options_.num_hidden_layers, options_.width, options_.output_channels,
-                      capacity, /*keep_cosine=*/true);
+  // Without a record one trace serves every block, filled by the block's forward pass.
+  std::optional<Trace<Scalar>> own;
+  if (record == nullptr) {
+    own.emplace(options_.num_hidden_layers, options_.width, options_.output_channels,
+                capacity, /*keep_cosine=*/true);
+  }
   std::vector<MatrixX<Scalar>> g(1, MatrixX<Scalar>(options_.width, capacity));
   MatrixX<Scalar> delta(options_.width, capacity);
   VectorX<Scalar> dgamma = VectorX<Scalar>::Zero(net.A.rows());
@@ -1151,8 +1238,11 @@ void LatentModulatedSiren::Backward(const MatrixX<Scalar>& coords,
     const long m = std::min(kPixelBlock, n - begin);
     // The readout adds to y but not to the SIREN's reverse pass (y is linear in both).
     if (spatial) spatial->Locate(*this, coords.middleRows(begin, m));
-    RunForward(net, options_.omega_0, coords.middleRows(begin, m), gamma, spatial.get(),
-               &trace);
+    if (record == nullptr) {
+      RunForward(net, options_.omega_0, coords.middleRows(begin, m), gamma, spatial.get(),
+                 &*own);
+    }
+    const Trace<Scalar>& trace = record == nullptr ? *own : record->blocks[begin / kPixelBlock];
     RunBackwardBlock(net, blocks_, options_.omega_0, trace,
                      dL_dY.middleRows(begin, m).transpose(), &g, &delta, spatial.get(),
                      &dgamma, &dP, dL_dtheta, weights == WeightGradients::kFirstLayer);
@@ -1519,6 +1609,12 @@ LatentModulatedSiren::VectorX<Scalar> LatentModulatedSiren::StartLatent(
       const MatrixX<S>&, const VectorX<S>&) const;                                       \
   template void LatentModulatedSiren::Backward<S>(                                       \
       const MatrixX<S>&, const VectorX<S>&, const MatrixX<S>&, VectorX<S>*, VectorX<S>*, \
+      WeightGradients) const;                                                            \
+  template class LatentModulatedSiren::ForwardRecord<S>;                                 \
+  template LatentModulatedSiren::MatrixX<S> LatentModulatedSiren::Forward<S>(            \
+      const MatrixX<S>&, const VectorX<S>&, ForwardRecord<S>*) const;                    \
+  template void LatentModulatedSiren::Backward<S>(                                       \
+      const ForwardRecord<S>&, const MatrixX<S>&, VectorX<S>*, VectorX<S>*,              \
       WeightGradients) const;                                                            \
   template void LatentModulatedSiren::ForwardAndLatentJacobian<S>(                       \
       const MatrixX<S>&, const VectorX<S>&, MatrixX<S>*, MatrixX<S>*, MatrixX<S>*) const; \

@@ -299,10 +299,47 @@ class LatentModulatedSiren {
   // Exact reverse pass: given dL/dY (N x C) returns dL/dz (size d) and dL/dtheta
   // (size NumParameters(), flat layout; use View() for W_l, b_l, A, c, W_out, b_out).
   // Either output may be null. One GEMM per layer and gradient per block of pixels.
+  // It runs the forward pass again, block by block, keeping only one block's values.
   template <typename Scalar>
   void Backward(const MatrixX<Scalar>& coords, const VectorX<Scalar>& z,
                 const MatrixX<Scalar>& dL_dY, VectorX<Scalar>* dL_dz,
                 VectorX<Scalar>* dL_dtheta,
+                WeightGradients weights = WeightGradients::kAll) const;
+
+  // What a forward pass keeps for a reverse pass at the same coords and z, so that the
+  // reverse pass need not run it again: every block's activations and cosines, about
+  // (2 L + 1) x width x N values for N pixels, and copies of coords and z. For callers
+  // that need the outputs before they know dL/dY (a head on the trunk's outputs, as the
+  // photometric trunk's). Opaque; recorded by the Forward overload below, read by the
+  // Backward overload below; valid until the parameters change, as a Tape. Movable.
+  template <typename Scalar>
+  class ForwardRecord {
+   public:
+    ForwardRecord();
+    ~ForwardRecord();
+    ForwardRecord(ForwardRecord&& other) noexcept;
+    ForwardRecord& operator=(ForwardRecord&& other) noexcept;
+    bool empty() const { return record_ == nullptr; }
+
+   private:
+    friend class LatentModulatedSiren;
+    struct Record;  // defined in the .cc
+    std::unique_ptr<Record> record_;
+  };
+
+  // Forward that also records *record (not null; its previous content is replaced).
+  // The outputs are those of the forward pass the Backward above runs, bit for bit;
+  // they differ from Forward's without a record by float rounding at most (that pass
+  // keeps no cosines and takes its sines from the sine-alone kernel, fast_sincos.h).
+  template <typename Scalar>
+  MatrixX<Scalar> Forward(const MatrixX<Scalar>& coords, const VectorX<Scalar>& z,
+                          ForwardRecord<Scalar>* record) const;
+  // Backward at the record's coords and z, bit-identical to Backward(coords, z, ...)
+  // there, without its forward pass. Throws std::invalid_argument for an empty record,
+  // one of other parameters, or dL/dY of the wrong shape.
+  template <typename Scalar>
+  void Backward(const ForwardRecord<Scalar>& record, const MatrixX<Scalar>& dL_dY,
+                VectorX<Scalar>* dL_dz, VectorX<Scalar>* dL_dtheta,
                 WeightGradients weights = WeightGradients::kAll) const;
 
   // Outputs (N x C, may be null) and the Jacobian of every output w.r.t. z,
@@ -430,6 +467,16 @@ class LatentModulatedSiren {
   }
   template <typename P, typename T>
   void EvaluateImpl(const P* theta, const T* coord2, const T* z, T* out) const;
+  // Forward's passes; with record not null every block's trace is kept in it.
+  template <typename Scalar>
+  MatrixX<Scalar> ForwardPasses(const MatrixX<Scalar>& coords, const VectorX<Scalar>& z,
+                                typename ForwardRecord<Scalar>::Record* record) const;
+  // Backward's passes; with record not null its traces stand in for the forward pass.
+  template <typename Scalar>
+  void BackwardPasses(const MatrixX<Scalar>& coords, const VectorX<Scalar>& z,
+                      const MatrixX<Scalar>& dL_dY, VectorX<Scalar>* dL_dz,
+                      VectorX<Scalar>* dL_dtheta, WeightGradients weights,
+                      const typename ForwardRecord<Scalar>::Record* record) const;
   // LossGradientAndHessianProduct's passes; outputs (may be null) receives Y.
   template <typename Scalar>
   Scalar LossPasses(const MatrixX<Scalar>& coords, const VectorX<Scalar>& z,

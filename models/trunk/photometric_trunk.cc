@@ -163,6 +163,9 @@ struct PhotometricTrunkPass {
   Matrix a1, a2, h1, h2;  // H x N pre-activations and activations (contact)
   Matrix a1f, a2f, h1f, h2f;  // the same for the flat input
   Eigen::MatrixXd marker_d_row, marker_d_col;  // C x N
+  // With PassUse::reverse (and no Jacobian): the SIREN's forward pass over `coords`,
+  // kept for the reverse pass so that it does not run again.
+  LatentModulatedSiren::ForwardRecord<Scalar> siren_record;
 };
 
 struct PhotometricTrunk::Pass {
@@ -472,6 +475,8 @@ void PhotometricTrunk::RunForward(const std::vector<int>& pixels, const VectorX<
     if (use.jacobian) {
       siren_.ForwardAndLatentJacobian<Scalar>(pass.coords, code, &shared, &pass.siren_J_code,
                                               &pass.siren_J_q);
+    } else if (use.reverse) {
+      shared = siren_.Forward<Scalar>(pass.coords, code, &pass.siren_record);
     } else {
       shared = siren_.Forward<Scalar>(pass.coords, code);
     }
@@ -619,10 +624,10 @@ void PhotometricTrunk::RunBackward(const Pass& pass_holder, const std::vector<in
     for (int row = 0; row < kSets * n; ++row) shared.row(pass.slot[row]) += ds.row(row);
     ds = std::move(shared);
   }
-  const VectorX<Scalar> code = z.tail(options_.latent_dim - kPoseValues);
   VectorX<Scalar> dcode, dtheta;
   // Without dL/dsiren (a fit) the pose needs only the first layer's weight gradients.
-  siren_.Backward<Scalar>(pass.coords, code, ds, dL_dz != nullptr ? &dcode : nullptr, &dtheta,
+  // The SIREN's forward pass is the one RunForward recorded.
+  siren_.Backward<Scalar>(pass.siren_record, ds, dL_dz != nullptr ? &dcode : nullptr, &dtheta,
                           dL_dsiren != nullptr
                               ? LatentModulatedSiren::WeightGradients::kAll
                               : LatentModulatedSiren::WeightGradients::kFirstLayer);

@@ -22,6 +22,7 @@
 #include <random>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "ceres/jet.h"
@@ -899,6 +900,79 @@ TEST(LatentModulatedSirenTape, RefusesAnEmptyTapeAndOneOfOtherParameters) {
   siren.Initialize(3);
   EXPECT_THROW(siren.HessianProduct<double>(moved, nullptr, frame.z, &hz, nullptr),
                std::invalid_argument);
+}
+
+
+// ---- Forward records -------------------------------------------------------------------
+
+// Forward with a record, then Backward from it, against Backward(coords, z, ...), in
+// scalar S: the same dL/dz and dL/dtheta bit for bit, for every weight selection; the
+// recorded outputs within float rounding of Forward's without a record (bit for bit in
+// double, where both passes take the same sines).
+template <typename S>
+void ExpectRecordedBackwardBitIdentical(const Siren& siren, const MatrixXd& coords_d,
+                                        unsigned seed) {
+  using MatrixS = Siren::MatrixX<S>;
+  using VectorS = Siren::VectorX<S>;
+  const MatrixS coords = coords_d.cast<S>();
+  const VectorS z = (0.5 * Uniform(siren.latent_dim(), 1, seed)).cast<S>();
+  const MatrixS dY =
+      Uniform(static_cast<int>(coords.rows()), siren.output_channels(), seed + 1).cast<S>();
+  Siren::ForwardRecord<S> record;
+  EXPECT_TRUE(record.empty());
+  const MatrixS recorded = siren.Forward<S>(coords, z, &record);
+  EXPECT_FALSE(record.empty());
+  const MatrixS plain = siren.Forward<S>(coords, z);
+  if constexpr (std::is_same_v<S, double>) {
+    EXPECT_EQ(recorded, plain);
+  } else {
+    EXPECT_LE((recorded - plain).cwiseAbs().maxCoeff(), 1e-5f);
+  }
+  for (auto weights : {Siren::WeightGradients::kAll, Siren::WeightGradients::kFirstLayer}) {
+    VectorS dz, dtheta, ref_dz, ref_dtheta;
+    siren.Backward<S>(record, dY, &dz, &dtheta, weights);
+    siren.Backward<S>(coords, z, dY, &ref_dz, &ref_dtheta, weights);
+    EXPECT_EQ(dz, ref_dz);
+    EXPECT_EQ(dtheta, ref_dtheta);
+    EXPECT_GT(dz.norm(), S(0));
+  }
+}
+
+// Global, deeper, readout and every spatial variant; 7 random pixels (one block) and a
+// 20 x 30 grid (600 pixels: blocks of 256, 256 and 88); float and double.
+TEST(LatentModulatedSirenForwardRecord, BackwardFromARecordIsBitIdenticalToTheOneThatReruns) {
+  const std::vector<Siren::Options> variants =
+      With({SmallOptions(), DeeperOptions(), ReadoutOptions()}, SpatialVariants());
+  for (std::size_t i = 0; i < variants.size(); ++i) {
+    const Siren siren = PerturbedSiren(variants[i], 170 + static_cast<unsigned>(i));
+    SCOPED_TRACE(Describe(siren.options()));
+    for (const MatrixXd& coords : {Uniform(7, 2, 180), siren.Grid<double>(20, 30)}) {
+      SCOPED_TRACE(std::to_string(coords.rows()) + " pixels");
+      ExpectRecordedBackwardBitIdentical<double>(siren, coords, 181);
+      ExpectRecordedBackwardBitIdentical<float>(siren, coords, 182);
+    }
+  }
+}
+
+TEST(LatentModulatedSirenForwardRecord, RefusesAnEmptyRecordOneOfOtherParametersAndBadShapes) {
+  Siren siren = PerturbedSiren(SmallOptions(), 190);
+  const Frame frame = Frames(siren)[1];
+  const MatrixXd dY = Uniform(static_cast<int>(frame.coords.rows()), siren.output_channels(), 191);
+  VectorXd dz;
+  Siren::ForwardRecord<double> record;
+  EXPECT_THROW(siren.Backward<double>(record, dY, &dz, nullptr), std::invalid_argument);
+  EXPECT_THROW(siren.Forward<double>(frame.coords, frame.z, nullptr), std::invalid_argument);
+  siren.Forward<double>(frame.coords, frame.z, &record);
+  EXPECT_NO_THROW(siren.Backward<double>(record, dY, &dz, nullptr));
+  EXPECT_THROW(siren.Backward<double>(record, dY.topRows(dY.rows() - 1), &dz, nullptr),
+               std::invalid_argument);
+  const Siren copy = siren;  // the same parameters: the record holds for it
+  EXPECT_NO_THROW(copy.Backward<double>(record, dY, &dz, nullptr));
+  siren.SetParameters(siren.parameters());  // any change of theta invalidates it
+  EXPECT_THROW(siren.Backward<double>(record, dY, &dz, nullptr), std::invalid_argument);
+  Siren::ForwardRecord<double> moved = std::move(record);
+  EXPECT_FALSE(moved.empty());
+  EXPECT_NO_THROW(copy.Backward<double>(moved, dY, &dz, nullptr));
 }
 
 
