@@ -80,11 +80,21 @@ Eigen::Matrix<S, Eigen::Dynamic, Eigen::Dynamic> ShadingNetwork(
   if (h1 == nullptr) h1 = &h1_local;
   if (a2 == nullptr) a2 = &a2_local;
   if (h2 == nullptr) h2 = &h2_local;
-  *a1 = (W1 * in).colwise() + b1;
+  // Each layer's biases first, then its product added onto them: Eigen's "=" of a
+  // matrix product zeroes its destination before adding the product, one more pass
+  // over it. The sums are the same either way (one rounded addition per value).
+  a1->resize(h, in.cols());
+  a1->colwise() = b1;
+  a1->noalias() += W1 * in;
   *h1 = Silu(*a1);
-  *a2 = (W2 * *h1).colwise() + b2;
+  a2->resize(h, in.cols());
+  a2->colwise() = b2;
+  a2->noalias() += W2 * *h1;
   *h2 = Silu(*a2);
-  return Matrix((W3 * *h2).colwise() + b3);
+  Matrix out(c, in.cols());
+  out.colwise() = b3;
+  out.noalias() += W3 * *h2;
+  return out;
 }
 
 }  // namespace
