@@ -1087,8 +1087,6 @@ LatentModulatedSiren::MatrixX<Scalar> LatentModulatedSiren::Grid(int rows,
 
 // ---- Batched passes ----------------------------------------------------------------
 
-// ---- Forward records -----------------------------------------------------------------
-
 // What Forward records: the inputs and every block's trace (pixels [b kPixelBlock, ...)
 // in blocks[b]), cosines included.
 template <typename Scalar>

@@ -3,8 +3,8 @@
 // Float sine and cosine from one argument reduction, and the sine alone from one
 // reduction by pi (fast_sincos.h). Compiled WITHOUT -ffast-math: the reductions'
 // rounding trick (adding and subtracting 1.5 * 2^23) and their three-part subtractions
-// must not be reassociated. The loops are written without
-// branches (selects as bit masks) so that GCC vectorises them.
+// must not be reassociated. The loops are written without branches (selects as bit
+// masks) so that GCC vectorises them.
 #include <cmath>
 #include <cstdint>
 #include <cstring>
