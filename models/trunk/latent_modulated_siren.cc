@@ -754,7 +754,46 @@ struct TangentPass {
   }
 };
 
+// What each kind of Recording (header) holds.
+template <typename Scalar, typename Kind>
+struct RecordOf;
+
+// Forward's: the inputs and every block's trace, cosines included.
+template <typename Scalar>
+struct RecordOf<Scalar, LatentModulatedSiren::ForwardKind> {
+  std::uint64_t parameters_generation = 0;
+  MatrixX<Scalar> coords;
+  VectorX<Scalar> z;
+  std::vector<Trace<Scalar>> blocks;  // pixels [b kPixelBlock, ...) in blocks[b]
+};
+
+// LossAndGradient's (a Tape): the inputs the tangent pass reads again, every block's
+// primal values (every layer's dL/dh kept) and the reverse pass's sums.
+template <typename Scalar>
+struct RecordOf<Scalar, LatentModulatedSiren::TapeKind> {
+  std::uint64_t parameters_generation = 0;
+  MatrixX<Scalar> coords;
+  VectorX<Scalar> z, weights;
+  Scalar scale = 0;
+  std::vector<BlockRecord<Scalar>> blocks;  // pixels [b kPixelBlock, ...) in blocks[b]
+  VectorX<Scalar> dgamma, scatter;
+  MatrixX<Scalar> dP;
+};
+
 }  // namespace
+
+template <typename Scalar, typename Kind>
+struct LatentModulatedSiren::Recording<Scalar, Kind>::Record : RecordOf<Scalar, Kind> {};
+
+template <typename Scalar, typename Kind>
+LatentModulatedSiren::Recording<Scalar, Kind>::Recording() = default;
+template <typename Scalar, typename Kind>
+LatentModulatedSiren::Recording<Scalar, Kind>::~Recording() = default;
+template <typename Scalar, typename Kind>
+LatentModulatedSiren::Recording<Scalar, Kind>::Recording(Recording&& other) noexcept = default;
+template <typename Scalar, typename Kind>
+LatentModulatedSiren::Recording<Scalar, Kind>& LatentModulatedSiren::Recording<Scalar, Kind>::
+operator=(Recording&& other) noexcept = default;
 
 // ---- Names -----------------------------------------------------------------------
 
@@ -1086,27 +1125,6 @@ LatentModulatedSiren::MatrixX<Scalar> LatentModulatedSiren::Grid(int rows,
 }
 
 // ---- Batched passes ----------------------------------------------------------------
-
-// What Forward records: the inputs and every block's trace (pixels [b kPixelBlock, ...)
-// in blocks[b]), cosines included.
-template <typename Scalar>
-struct LatentModulatedSiren::ForwardRecord<Scalar>::Record {
-  std::uint64_t parameters_generation = 0;
-  MatrixX<Scalar> coords;
-  VectorX<Scalar> z;
-  std::vector<Trace<Scalar>> blocks;
-};
-
-template <typename Scalar>
-LatentModulatedSiren::ForwardRecord<Scalar>::ForwardRecord() = default;
-template <typename Scalar>
-LatentModulatedSiren::ForwardRecord<Scalar>::~ForwardRecord() = default;
-template <typename Scalar>
-LatentModulatedSiren::ForwardRecord<Scalar>::ForwardRecord(ForwardRecord&& other) noexcept =
-    default;
-template <typename Scalar>
-LatentModulatedSiren::ForwardRecord<Scalar>& LatentModulatedSiren::ForwardRecord<Scalar>::operator=(
-    ForwardRecord&& other) noexcept = default;
 
 template <typename Scalar>
 LatentModulatedSiren::MatrixX<Scalar> LatentModulatedSiren::Forward(
@@ -1469,28 +1487,6 @@ Scalar LatentModulatedSiren::LossPasses(
 
 // ---- Tapes -------------------------------------------------------------------------
 
-// What LossAndGradient records: the inputs the tangent pass reads again, every block's
-// primal values (every layer's dL/dh kept) and the reverse pass's sums.
-template <typename Scalar>
-struct LatentModulatedSiren::Tape<Scalar>::Record {
-  std::uint64_t parameters_generation = 0;
-  MatrixX<Scalar> coords;
-  VectorX<Scalar> z, weights;
-  Scalar scale = 0;
-  std::vector<BlockRecord<Scalar>> blocks;  // pixels [b kPixelBlock, ...) in blocks[b]
-  VectorX<Scalar> dgamma, scatter;
-  MatrixX<Scalar> dP;
-};
-
-template <typename Scalar>
-LatentModulatedSiren::Tape<Scalar>::Tape() = default;
-template <typename Scalar>
-LatentModulatedSiren::Tape<Scalar>::~Tape() = default;
-template <typename Scalar>
-LatentModulatedSiren::Tape<Scalar>::Tape(Tape&& other) noexcept = default;
-template <typename Scalar>
-LatentModulatedSiren::Tape<Scalar>& LatentModulatedSiren::Tape<Scalar>::operator=(
-    Tape&& other) noexcept = default;
 
 template <typename Scalar>
 Scalar LatentModulatedSiren::LossAndGradient(const MatrixX<Scalar>& coords,
@@ -1608,7 +1604,7 @@ LatentModulatedSiren::VectorX<Scalar> LatentModulatedSiren::StartLatent(
   template void LatentModulatedSiren::Backward<S>(                                       \
       const MatrixX<S>&, const VectorX<S>&, const MatrixX<S>&, VectorX<S>*, VectorX<S>*, \
       WeightGradients) const;                                                            \
-  template class LatentModulatedSiren::ForwardRecord<S>;                                 \
+  template class LatentModulatedSiren::Recording<S, LatentModulatedSiren::ForwardKind>;  \
   template LatentModulatedSiren::MatrixX<S> LatentModulatedSiren::Forward<S>(            \
       const MatrixX<S>&, const VectorX<S>&, ForwardRecord<S>*) const;                    \
   template void LatentModulatedSiren::Backward<S>(                                       \
@@ -1630,7 +1626,7 @@ LatentModulatedSiren::VectorX<Scalar> LatentModulatedSiren::StartLatent(
       const MatrixX<S>&, const VectorX<S>&, const MatrixX<S>&, const VectorX<S>&,        \
       const VectorX<S>*, const VectorX<S>&, VectorX<S>*, VectorX<S>*, VectorX<S>*,       \
       VectorX<S>*) const;                                                                \
-  template class LatentModulatedSiren::Tape<S>;                                          \
+  template class LatentModulatedSiren::Recording<S, LatentModulatedSiren::TapeKind>;     \
   template S LatentModulatedSiren::LossAndGradient<S>(                                   \
       const MatrixX<S>&, const VectorX<S>&, const MatrixX<S>&, const VectorX<S>&,        \
       VectorX<S>*, VectorX<S>*, Tape<S>*) const;                                         \

@@ -306,19 +306,18 @@ class LatentModulatedSiren {
                 VectorX<Scalar>* dL_dtheta,
                 WeightGradients weights = WeightGradients::kAll) const;
 
-  // What a forward pass keeps for a reverse pass at the same coords and z, so that the
-  // reverse pass need not run it again: every block's activations and cosines, about
-  // (2 L + 1) x width x N values for N pixels, and copies of coords and z. For callers
-  // that need the outputs before they know dL/dY (a head on the trunk's outputs, as the
-  // photometric trunk's). Opaque; recorded by the Forward overload below, read by the
-  // Backward overload below; valid until the parameters change, as a Tape. Movable.
-  template <typename Scalar>
-  class ForwardRecord {
+  // A movable owner of what a pass recorded for a later pass at the same point (a
+  // ForwardRecord or a Tape, below): opaque, its content defined in the .cc per kind;
+  // empty until recorded.
+  struct ForwardKind;  // tags naming the kinds
+  struct TapeKind;
+  template <typename Scalar, typename Kind>
+  class Recording {
    public:
-    ForwardRecord();
-    ~ForwardRecord();
-    ForwardRecord(ForwardRecord&& other) noexcept;
-    ForwardRecord& operator=(ForwardRecord&& other) noexcept;
+    Recording();
+    ~Recording();
+    Recording(Recording&& other) noexcept;
+    Recording& operator=(Recording&& other) noexcept;
     bool empty() const { return record_ == nullptr; }
 
    private:
@@ -326,6 +325,15 @@ class LatentModulatedSiren {
     struct Record;  // defined in the .cc
     std::unique_ptr<Record> record_;
   };
+
+  // What a forward pass keeps for a reverse pass at the same coords and z, so that the
+  // reverse pass need not run it again: every block's activations and cosines, about
+  // (2 L + 1) x width x N values for N pixels, and copies of coords and z. For callers
+  // that need the outputs before they know dL/dY (a head on the trunk's outputs, as the
+  // photometric trunk's). Opaque; recorded by the Forward overload below, read by the
+  // Backward overload below; valid until the parameters change, as a Tape. Movable.
+  template <typename Scalar>
+  using ForwardRecord = Recording<Scalar, ForwardKind>;
 
   // Forward that also records *record (not null; its previous content is replaced).
   // The outputs are those of the forward pass the Backward above runs, bit for bit;
@@ -397,19 +405,7 @@ class LatentModulatedSiren {
   // with the parameters (and options) of the one that recorded it, until they change:
   // SetParameters and Initialize invalidate it (HessianProduct then throws). Movable.
   template <typename Scalar>
-  class Tape {
-   public:
-    Tape();
-    ~Tape();
-    Tape(Tape&& other) noexcept;
-    Tape& operator=(Tape&& other) noexcept;
-    bool empty() const { return record_ == nullptr; }
-
-   private:
-    friend class LatentModulatedSiren;
-    struct Record;  // defined in the .cc
-    std::unique_ptr<Record> record_;
-  };
+  using Tape = Recording<Scalar, TapeKind>;
 
   // LossAndGradient that also records *tape (not null; its previous content is
   // replaced). Loss and gradients are bit-identical to the overload without a tape.

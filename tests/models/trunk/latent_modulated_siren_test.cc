@@ -849,24 +849,33 @@ void ExpectTapedPassesBitIdentical(const Siren& siren, const MatrixXd& coords_d,
   }
 }
 
-// Global, deeper, readout (also frozen) and every spatial variant; 7 random pixels (one
-// block) and a 20 x 30 grid (600 pixels: blocks of 256, 256 and 88, and runs of pixels
-// sharing their spatial corners); float and double.
-TEST(LatentModulatedSirenTape, HessianProductFromATapeIsBitIdenticalToTheUntapedOne) {
-  std::vector<Siren::Options> variants =
+// check(siren, coords) for global, deeper, readout (also frozen) and every spatial
+// variant of the trunk (seeded from `seed`), each on 7 random pixels (one block) and on
+// a 20 x 30 grid (600 pixels: blocks of 256, 256 and 88, and runs of pixels sharing
+// their spatial corners).
+template <typename Check>
+void ForEachTrunkAndPixelSet(unsigned seed, const Check& check) {
+  const std::vector<Siren::Options> variants =
       With({SmallOptions(), DeeperOptions(), ReadoutOptions()}, SpatialVariants());
   for (std::size_t i = 0; i <= variants.size(); ++i) {
     const bool frozen = i == variants.size();  // the readout branch once more, frozen
-    Siren siren =
-        PerturbedSiren(frozen ? ReadoutOptions() : variants[i], 70 + static_cast<unsigned>(i));
+    Siren siren = PerturbedSiren(frozen ? ReadoutOptions() : variants[i],
+                                 seed + static_cast<unsigned>(i));
     siren.set_readout_frozen(frozen);
     SCOPED_TRACE(Describe(siren.options()) + (frozen ? " (frozen)" : ""));
-    for (const MatrixXd& coords : {Uniform(7, 2, 80), siren.Grid<double>(20, 30)}) {
+    for (const MatrixXd& coords : {Uniform(7, 2, seed + 10), siren.Grid<double>(20, 30)}) {
       SCOPED_TRACE(std::to_string(coords.rows()) + " pixels");
-      ExpectTapedPassesBitIdentical<double>(siren, coords, 81);
-      ExpectTapedPassesBitIdentical<float>(siren, coords, 82);
+      check(siren, coords);
     }
   }
+}
+
+// Float and double, on every trunk and pixel set of ForEachTrunkAndPixelSet.
+TEST(LatentModulatedSirenTape, HessianProductFromATapeIsBitIdenticalToTheUntapedOne) {
+  ForEachTrunkAndPixelSet(70, [](const Siren& siren, const MatrixXd& coords) {
+    ExpectTapedPassesBitIdentical<double>(siren, coords, 81);
+    ExpectTapedPassesBitIdentical<float>(siren, coords, 82);
+  });
 }
 
 TEST(LatentModulatedSirenTape, RefusesAnEmptyTapeAndOneOfOtherParameters) {
@@ -938,20 +947,12 @@ void ExpectRecordedBackwardBitIdentical(const Siren& siren, const MatrixXd& coor
   }
 }
 
-// Global, deeper, readout and every spatial variant; 7 random pixels (one block) and a
-// 20 x 30 grid (600 pixels: blocks of 256, 256 and 88); float and double.
+// Float and double, on every trunk and pixel set of ForEachTrunkAndPixelSet.
 TEST(LatentModulatedSirenForwardRecord, BackwardFromARecordIsBitIdenticalToTheOneThatReruns) {
-  const std::vector<Siren::Options> variants =
-      With({SmallOptions(), DeeperOptions(), ReadoutOptions()}, SpatialVariants());
-  for (std::size_t i = 0; i < variants.size(); ++i) {
-    const Siren siren = PerturbedSiren(variants[i], 170 + static_cast<unsigned>(i));
-    SCOPED_TRACE(Describe(siren.options()));
-    for (const MatrixXd& coords : {Uniform(7, 2, 180), siren.Grid<double>(20, 30)}) {
-      SCOPED_TRACE(std::to_string(coords.rows()) + " pixels");
-      ExpectRecordedBackwardBitIdentical<double>(siren, coords, 181);
-      ExpectRecordedBackwardBitIdentical<float>(siren, coords, 182);
-    }
-  }
+  ForEachTrunkAndPixelSet(170, [](const Siren& siren, const MatrixXd& coords) {
+    ExpectRecordedBackwardBitIdentical<double>(siren, coords, 181);
+    ExpectRecordedBackwardBitIdentical<float>(siren, coords, 182);
+  });
 }
 
 TEST(LatentModulatedSirenForwardRecord, RefusesAnEmptyRecordOneOfOtherParametersAndBadShapes) {
