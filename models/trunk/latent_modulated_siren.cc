@@ -754,6 +754,16 @@ struct TangentPass {
   }
 };
 
+// A Recording (header) serves `caller` only if it holds a record, made with the
+// parameters the trunk has now (`generation`).
+void CheckRecording(bool empty, std::uint64_t recorded_generation, std::uint64_t generation,
+                    const char* caller, const char* what) {
+  if (!empty && recorded_generation == generation) return;
+  throw std::invalid_argument(std::string("LatentModulatedSiren::") + caller + ": the " + what +
+                              (empty ? " is empty"
+                                     : " was recorded with other parameters than this trunk's"));
+}
+
 // What each kind of Recording (header) holds.
 template <typename Scalar, typename Kind>
 struct RecordOf;
@@ -1211,12 +1221,8 @@ void LatentModulatedSiren::Backward(const ForwardRecord<Scalar>& record,
                                     const MatrixX<Scalar>& dL_dY, VectorX<Scalar>* dL_dz,
                                     VectorX<Scalar>* dL_dtheta,
                                     WeightGradients weights) const {
-  if (record.empty() || record.record_->parameters_generation != parameters_generation_) {
-    throw std::invalid_argument(
-        std::string("LatentModulatedSiren::Backward: ") +
-        (record.empty() ? "the forward record is empty"
-                        : "the forward record was made with other parameters than this trunk's"));
-  }
+  CheckRecording(record.empty(), record.empty() ? 0 : record.record_->parameters_generation,
+                 parameters_generation_, "Backward", "forward record");
   const typename ForwardRecord<Scalar>::Record& kept = *record.record_;
   BackwardPasses<Scalar>(kept.coords, kept.z, dL_dY, dL_dz, dL_dtheta, weights, &kept);
 }
@@ -1487,7 +1493,6 @@ Scalar LatentModulatedSiren::LossPasses(
 
 // ---- Tapes -------------------------------------------------------------------------
 
-
 template <typename Scalar>
 Scalar LatentModulatedSiren::LossAndGradient(const MatrixX<Scalar>& coords,
                                              const VectorX<Scalar>& z,
@@ -1531,12 +1536,8 @@ void LatentModulatedSiren::HessianProduct(const Tape<Scalar>& tape,
                                           const VectorX<Scalar>* v_theta,
                                           const VectorX<Scalar>& v_z, VectorX<Scalar>* Hv_z,
                                           VectorX<Scalar>* Hv_theta) const {
-  if (tape.empty() || tape.record_->parameters_generation != parameters_generation_) {
-    throw std::invalid_argument(
-        std::string("LatentModulatedSiren::HessianProduct: ") +
-        (tape.empty() ? "the tape is empty"
-                      : "the tape was recorded with other parameters than this trunk's"));
-  }
+  CheckRecording(tape.empty(), tape.empty() ? 0 : tape.record_->parameters_generation,
+                 parameters_generation_, "HessianProduct", "tape");
   CheckDirection(*this, v_theta, v_z);
   if (Hv_z == nullptr && Hv_theta == nullptr) return;
   const typename Tape<Scalar>::Record& record = *tape.record_;
