@@ -3,7 +3,8 @@
 # (tests/fuzz/, docs/RELIABILITY.md).
 #
 #   scripts/fuzz.sh [--runs N | --seconds S] [TARGET ...]
-#   scripts/fuzz.sh --smoke        # what ctest runs: every target for a few seconds
+#   scripts/fuzz.sh --smoke        # every target for a few seconds (ctest's fuzz.smoke
+#                                  # when configured with -DTACTFUNC_FUZZ_SMOKE=ON)
 #
 # Configures and builds build-fuzz/ with clang (-DTACTFUNC_FUZZ=ON; only the fuzz
 # targets and the libraries they need), writes the seed corpora with tactfunc's own
@@ -29,7 +30,7 @@ while [[ $# -gt 0 ]]; do
     --runs) runs="$2"; shift 2 ;;
     --seconds) seconds="$2"; shift 2 ;;
     --smoke) smoke=1; seconds=4; shift ;;
-    -h|--help) sed -n '2,18p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,20p' "$0"; exit 0 ;;
     -*) echo "fuzz.sh: unknown flag $1" >&2; exit 2 ;;
     *) targets+=("$1"); shift ;;
   esac

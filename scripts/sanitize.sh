@@ -7,8 +7,8 @@
 # Configures and builds build-sanitize/ with -DTACTFUNC_SANITIZE=ON (gcc or clang, -O1;
 # MPI off, the codecs linked in; every target, or the test executables TARGETS names
 # and what they link), then runs ctest there with CTEST_ARGS (default: every
-# test but the fuzz smoke, which has its own sanitized build (scripts/fuzz.sh), and the
-# install test, whose consumer is not sanitized). A heap read after free, an overflow
+# test but the install test, whose consumer is not sanitized; the fuzz targets' replays,
+# fuzz.replay.*, run sanitized too). A heap read after free, an overflow
 # or undefined behaviour stops the test with the sanitizer's report and fails it. This
 # run looks for memory errors, not leaks: leak checking is off unless ASAN_OPTIONS says
 # otherwise. Everything runs under `nice -n 10`.
@@ -29,5 +29,5 @@ fi
 export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=0:abort_on_error=1}
 export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
 cd build-sanitize
-if [[ $# -eq 0 ]]; then set -- -E '^(fuzz|install)\.'; fi
+if [[ $# -eq 0 ]]; then set -- -E '^install\.'; fi
 nice -n 10 ctest --output-on-failure -j"$jobs" --timeout 3600 "$@"
