@@ -6,6 +6,7 @@
 #include <iostream>
 #include <thread>
 
+#include "CLI/CLI.hpp"
 #include "apps/bench.h"
 #include "apps/command.h"
 #include "benchmark/benchmark.h"

@@ -31,6 +31,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "CLI/CLI.hpp"
 #include "apps/bench.h"
 #include "apps/command.h"
 #include "apps/dataset_flags.h"

@@ -23,6 +23,7 @@
 #include <iostream>
 #include <memory>
 
+#include "CLI/CLI.hpp"
 #include "apps/bench.h"
 #include "apps/bench/fit_common.h"
 #include "apps/command.h"

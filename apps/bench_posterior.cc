@@ -44,6 +44,7 @@
 #include <optional>
 #include <utility>
 
+#include "CLI/CLI.hpp"
 #include "apps/bench.h"
 #include "apps/bench/fit_common.h"
 #include "apps/command.h"

@@ -29,6 +29,7 @@
 #include <string>
 #include <vector>
 
+#include "CLI/CLI.hpp"
 #include "apps/bench.h"
 #include "apps/command.h"
 #include "estimation/data/codecs.h"

@@ -15,8 +15,11 @@
 #include <string>
 #include <vector>
 
-#include "CLI/CLI.hpp"
 #include "nlohmann/json.hpp"
+
+namespace CLI {
+class App;  // CLI11; a subcommand's registration includes "CLI/CLI.hpp"
+}  // namespace CLI
 
 namespace tactfunc::apps {
 

@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <iostream>
 
+#include "CLI/CLI.hpp"
 #include "apps/command.h"
 
 namespace tactfunc::apps {

@@ -9,8 +9,11 @@
 #include <string>
 #include <vector>
 
-#include "CLI/CLI.hpp"
 #include "estimation/data/dataset.h"
+
+namespace CLI {
+class App;  // CLI11; a subcommand's registration includes "CLI/CLI.hpp"
+}  // namespace CLI
 
 namespace tactfunc::apps {
 

@@ -17,6 +17,7 @@
 #include <sstream>
 #include <thread>
 
+#include "CLI/CLI.hpp"
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
 #include "apps/distributed.h"

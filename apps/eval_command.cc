@@ -33,6 +33,7 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "CLI/CLI.hpp"
 #include "apps/bench.h"
 #include "apps/command.h"
 #include "apps/dataset_flags.h"

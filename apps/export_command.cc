@@ -20,6 +20,7 @@
 #include <string>
 #include <vector>
 
+#include "CLI/CLI.hpp"
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
 #include "apps/model_inputs.h"

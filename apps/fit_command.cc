@@ -41,6 +41,7 @@
 #include <utility>
 #include <opencv2/imgproc.hpp>
 
+#include "CLI/CLI.hpp"
 #include "apps/command.h"
 #include "apps/model_inputs.h"
 #include "apps/output_paths.h"

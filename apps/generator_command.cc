@@ -33,6 +33,7 @@
 #include <memory>
 #include <numeric>
 
+#include "CLI/CLI.hpp"
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
 #include "apps/model_inputs.h"

@@ -14,6 +14,7 @@
 #include <map>
 #include <vector>
 
+#include "CLI/CLI.hpp"
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
 #include "estimation/data/dataset.h"

@@ -10,6 +10,7 @@
 #include <mutex>
 #include <thread>
 
+#include "CLI/CLI.hpp"
 #include "apps/command.h"
 #include "apps/model_inputs.h"
 #include "apps/progress_bar.h"

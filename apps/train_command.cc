@@ -20,6 +20,7 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "CLI/CLI.hpp"
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
 #include "apps/distributed.h"

@@ -32,6 +32,7 @@
 #include <random>
 #include <set>
 
+#include "CLI/CLI.hpp"
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
 #include "apps/model_inputs.h"

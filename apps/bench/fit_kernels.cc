@@ -13,6 +13,7 @@
 #include <random>
 #include <sstream>
 
+#include "CLI/CLI.hpp"
 #include "apps/bench.h"
 #include "apps/bench/fit_common.h"
 #include "apps/bench/fit_suite.h"

@@ -12,6 +12,7 @@
 #include <memory>
 #include <sstream>
 
+#include "CLI/CLI.hpp"
 #include "apps/bench.h"
 #include "apps/bench/fit_common.h"
 #include "apps/bench/fit_suite.h"

@@ -11,6 +11,7 @@
 #include <random>
 #include <sstream>
 
+#include "CLI/CLI.hpp"
 #include "apps/bench.h"
 #include "apps/bench/fit_common.h"
 #include "apps/command.h"
