@@ -70,8 +70,6 @@ namespace {
 using bench::Median;
 using bench::Quantile;
 
-constexpr double kDeg = 180.0 / M_PI;
-
 struct PosteriorBenchFlags {
   std::string model;
   std::string pose_model;

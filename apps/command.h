@@ -43,6 +43,9 @@ void RegisterTrainGenerator(CLI::App& app, CommandBody* selected);  // apps/gene
 void RegisterEvalGenerator(CLI::App& app, CommandBody* selected);   // apps/generator_command.cc
 void RegisterExport(CLI::App& app, CommandBody* selected);         // apps/export_command.cc
 
+// Degrees per radian, for what the commands print.
+inline constexpr double kDeg = 57.29577951308232;
+
 // Bad user input that the command detected itself (flag values, lists).
 class UsageError : public std::runtime_error {
  public:

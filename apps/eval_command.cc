@@ -77,11 +77,11 @@ std::string Sci(double v) {
   return buffer;
 }
 
-using Row = TableEvaluation::Row;
+using TableRow = TableEvaluation::Row;
 using RdPoint = TableEvaluation::RdPoint;
 using RdCurves = TableEvaluation::RdCurves;
 
-nlohmann::json RowJson(const Row& r) {
+nlohmann::json RowJson(const TableRow& r) {
   const bool has_pose = r.pose.count > 0;
   return {{"approach", r.approach},
           {"pose_from", r.pose_from.empty() ? nlohmann::json(nullptr) : nlohmann::json(r.pose_from)},
@@ -419,7 +419,7 @@ void RunEval(const EvalFlags& flags) {
   ConsoleObserver observer;
   const TableEvaluation::Result evaluation = TableEvaluation::Evaluate(inputs, options, &observer);
   if (processes.rank() != 0) return;
-  const std::vector<Row>& rows = evaluation.rows;
+  const std::vector<TableRow>& rows = evaluation.rows;
   const bool all_met = evaluation.all_targets_met;
   std::map<SensorKind, RdCurves> curves;
   nlohmann::json targets = nlohmann::json::object();
@@ -441,9 +441,9 @@ void RunEval(const EvalFlags& flags) {
   }
   // The clean-PSNR column only for data with noise-free frames (simulated, synth --clean).
   const bool any_clean = std::any_of(rows.begin(), rows.end(),
-                                     [](const Row& r) { return std::isfinite(r.psnr_clean); });
+                                     [](const TableRow& r) { return std::isfinite(r.psnr_clean); });
   // Contact and rest columns only when some frame is at rest (else they repeat PSNR).
-  const bool any_rest = std::any_of(rows.begin(), rows.end(), [](const Row& r) {
+  const bool any_rest = std::any_of(rows.begin(), rows.end(), [](const TableRow& r) {
     return r.psnr_applicable && r.contact_frames < r.frames;
   });
   // Without a pose model the pose columns are left out.
@@ -456,7 +456,7 @@ void RunEval(const EvalFlags& flags) {
      << "|---|" << (has_pose ? "---|" : "") << "---|---|---:|---:|---:|"
      << (any_clean ? "---:|" : "") << (any_rest ? "---:|---:|---:|" : "")
      << (has_pose ? "---:|---:|---:|" : "") << "\n";
-  for (const Row& r : rows) {
+  for (const TableRow& r : rows) {
     const bool row_pose = r.pose.count > 0;
     md << "| " << r.approach << (r.note.empty() ? "" : " (" + r.note + ")") << " | ";
     if (has_pose) md << (r.pose_from.empty() ? "-" : r.pose_from) << " | ";
@@ -575,7 +575,7 @@ void RunEval(const EvalFlags& flags) {
   WritePicture(plot_path, picture);
 
   nlohmann::json rows_json = nlohmann::json::array();
-  for (const Row& r : rows) rows_json.push_back(RowJson(r));
+  for (const TableRow& r : rows) rows_json.push_back(RowJson(r));
   nlohmann::json result = {{"rows", rows_json},
                            {"targets", targets},
                            {"all_targets_met", all_met},

@@ -130,8 +130,6 @@ std::unique_ptr<KnnIndex> LoadOrBuildIndex(const std::string& functaset_path, Se
 
 // ---- The picture -------------------------------------------------------------------------
 
-const cv::Scalar kBackground(32, 32, 32);
-
 void WriteFitPicture(const std::string& path, const TrunkTargets& target,
                      const Eigen::MatrixXf& recon, const LatentFitter::Summary& summary,
                      SensorKind sensor, int height) {

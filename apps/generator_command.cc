@@ -54,8 +54,6 @@
 namespace tactfunc::apps {
 namespace {
 
-constexpr double kDeg = 180.0 / M_PI;
-
 struct TrainGeneratorFlags {
   std::string model, functaset, data, out;
   DatasetFlags dataset;  // data without metadata (a video, a user's folder)

@@ -17,6 +17,9 @@
 
 namespace tactfunc::apps {
 
+// The dark grey behind the pictures' tiles and titles.
+inline const cv::Scalar kBackground(32, 32, 32);
+
 // A raw frame as a BGR 8-bit picture: depth through a perceptual colour map (near =
 // bright, NaN = red), RGB as is.
 cv::Mat RawTile(const Image& frame, SensorKind sensor, const Image& reference);

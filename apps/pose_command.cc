@@ -134,8 +134,6 @@ struct PoseFlags {
   int symmetry_order = -1;  // -1 = from the tool
 };
 
-constexpr double kDeg = 180.0 / M_PI;
-const cv::Scalar kBackground(32, 32, 32);
 const cv::Scalar kSampleColour(0, 165, 255);  // orange (BGR)
 const cv::Scalar kMeanColour(255, 255, 0);    // cyan
 const cv::Scalar kTruthColour(80, 255, 80);   // green

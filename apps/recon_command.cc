@@ -50,8 +50,6 @@ struct ReconFlags {
   DatasetFlags dataset;
 };
 
-const cv::Scalar kBackground(32, 32, 32);
-
 // prediction - target (mean over channels) through a diverging map in [-scale, scale]
 // (DifferenceTile: 0 is the map's centre); invalid pixels red.
 cv::Mat ErrorTile(const Eigen::MatrixXf& prediction, const TrunkTargets& target, double scale) {
