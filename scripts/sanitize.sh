@@ -2,7 +2,7 @@
 # Runs the test suite under AddressSanitizer and UBSan (docs/RELIABILITY.md).
 #
 #   scripts/sanitize.sh [CTEST_ARGS ...]      e.g. scripts/sanitize.sh -R 'estimation\.'
-#   TARGETS="samplers_sgld_test ..." scripts/sanitize.sh -R samplers   # build only those
+#   TARGETS="samplers_tests ..." scripts/sanitize.sh -R samplers   # build only those
 #
 # Configures and builds build-sanitize/ with -DTACTFUNC_SANITIZE=ON (gcc or clang, -O1;
 # MPI off, the codecs linked in; every target, or the test executables TARGETS names

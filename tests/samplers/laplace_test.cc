@@ -14,7 +14,7 @@
 namespace tactfunc {
 namespace {
 
-constexpr double kSigmas = 4.5;
+using testing_util::kSigmas;
 
 // A linear-Gaussian model through the LatentPotential interface: residuals
 // r(z) = (A z - y) / sigma, prior N(0, sigma_z^2 I). Its posterior is exactly Gaussian.

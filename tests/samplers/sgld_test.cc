@@ -23,7 +23,7 @@
 namespace tactfunc {
 namespace {
 
-constexpr double kSigmas = 4.5;
+using testing_util::kSigmas;
 
 Eigen::MatrixXd Precision3() {
   Eigen::MatrixXd cov(3, 3);

@@ -1,13 +1,17 @@
 // Copyright 2026 The tactfunc Authors.
 //
-// Image bytes for tests of the image readers.
+// Image bytes and values for tests of the image readers and frame preprocessing.
 #ifndef TACTFUNC_TESTS_SUPPORT_IMAGE_TEST_UTIL_H_
 #define TACTFUNC_TESTS_SUPPORT_IMAGE_TEST_UTIL_H_
 
 #include <cstdint>
+#include <limits>
 #include <string>
 
 namespace tactfunc::testing_util {
+
+// A missing reading (a depth dropout, an invalid pixel).
+inline constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 
 // The first 33 bytes of a PNG: signature and an IHDR chunk claiming `width` x `height`
 // (the chunk CRC is not checked by the header reader; OpenCV would check it).

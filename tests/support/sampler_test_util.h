@@ -17,6 +17,10 @@
 
 namespace tactfunc::testing_util {
 
+// How far, in standard errors, the samplers' tests let a sample moment stray from its
+// exact value.
+inline constexpr double kSigmas = 4.5;
+
 inline SensorTrunk MakeTinyTrunk(int rows, int cols, int width, int layers, int latent_dim,
                                  std::uint64_t seed, double residual_sigma = 0.05) {
   LatentModulatedSiren::Options options;

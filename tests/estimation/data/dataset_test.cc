@@ -15,6 +15,7 @@
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "tests/support/image_test_util.h"
 #include "tests/support/dataset_test_util.h"
 #include "tests/support/test_dir.h"
 
@@ -26,7 +27,7 @@ using ::testing::HasSubstr;
 using testing_util::TestDir;
 using testing_util::WriteText;
 
-constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+using testing_util::kNaN;
 constexpr int kBubbleRows = 12;
 constexpr int kBubbleCols = 15;
 constexpr double kBubblePitch = 0.0004;  // half extent: 3 mm x 2.4 mm

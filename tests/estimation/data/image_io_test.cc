@@ -24,7 +24,7 @@ using testing_util::ListDir;
 using testing_util::TestDir;
 using testing_util::WriteText;
 
-constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+using testing_util::kNaN;
 
 using testing_util::BitIdentical;
 

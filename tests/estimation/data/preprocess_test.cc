@@ -11,6 +11,7 @@
 #include "estimation/data/dataset.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "tests/support/image_test_util.h"
 #include "tests/support/test_dir.h"
 
 namespace tactfunc {
@@ -19,7 +20,7 @@ namespace {
 using ::testing::HasSubstr;
 using Normalization = PreprocessOptions::Normalization;
 
-constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+using testing_util::kNaN;
 
 Image FlatDepth(int rows, int cols, float depth_m) { return Image(rows, cols, 1, depth_m); }
 

@@ -11,10 +11,12 @@
 
 #include "gtest/gtest.h"
 
+#include "tests/support/image_test_util.h"
+
 namespace tactfunc {
 namespace {
 
-constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+using testing_util::kNaN;
 
 // One-channel targets holding `values`, every pixel valid.
 TrunkTargets Targets(std::initializer_list<float> values) {
