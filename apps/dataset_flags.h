@@ -9,11 +9,8 @@
 #include <string>
 #include <vector>
 
+#include "apps/command.h"  // CLI::App, declared
 #include "estimation/data/dataset.h"
-
-namespace CLI {
-class App;  // CLI11; a subcommand's registration includes "CLI/CLI.hpp"
-}  // namespace CLI
 
 namespace tactfunc::apps {
 

@@ -119,7 +119,7 @@ cv::Mat ValueTile(const Eigen::MatrixXf& values, const Eigen::VectorXf& weights,
 }
 
 cv::Mat Caption(int width, const std::string& text) {
-  cv::Mat cell(24, width, CV_8UC3, cv::Scalar(32, 32, 32));
+  cv::Mat cell(24, width, CV_8UC3, kBackground);
   PutLabel(cell, text, {6, 17}, 0.45);
   return cell;
 }
@@ -174,7 +174,7 @@ cv::Mat TileGrid(const std::vector<std::vector<cv::Mat>>& rows, int gap) {
     width = std::max(width, row_width);
     height += row_height + gap;
   }
-  cv::Mat canvas(std::max(height, 1), std::max(width, 1), CV_8UC3, cv::Scalar(32, 32, 32));
+  cv::Mat canvas(std::max(height, 1), std::max(width, 1), CV_8UC3, kBackground);
   int y = gap;
   for (const auto& row : rows) {
     int x = gap, row_height = 0;

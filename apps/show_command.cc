@@ -80,12 +80,12 @@ void RunShow(const ShowFlags& flags) {
   // Header: column titles.
   {
     std::vector<cv::Mat> header;
-    header.push_back(cv::Mat(28, 150, CV_8UC3, cv::Scalar(32, 32, 32)));
+    header.push_back(cv::Mat(28, 150, CV_8UC3, kBackground));
     for (SensorKind sensor : sensors) {
       const SensorInfo& info = dataset.sensor_info(sensor);
       const int w = static_cast<int>(std::lround(info.cols * double(h) / info.rows));
       for (const char* title : {"raw", "reference", "difference"}) {
-        cv::Mat cell(28, w, CV_8UC3, cv::Scalar(32, 32, 32));
+        cv::Mat cell(28, w, CV_8UC3, kBackground);
         PutLabel(cell, std::string(ToString(sensor)) + " " + title, {6, 19}, 0.5);
         header.push_back(cell);
       }
@@ -95,7 +95,7 @@ void RunShow(const ShowFlags& flags) {
   int shown = 0;
   for (const std::string& id : ids) {
     std::vector<cv::Mat> row;
-    cv::Mat caption(h, 150, CV_8UC3, cv::Scalar(32, 32, 32));
+    cv::Mat caption(h, 150, CV_8UC3, kBackground);
     PutLabel(caption, "frame " + id, {6, 22}, 0.5);
     bool any = false;
     for (SensorKind sensor : sensors) {
@@ -131,7 +131,7 @@ void RunShow(const ShowFlags& flags) {
           std::snprintf(text, sizeof(text), "x=%.1f y=%.1f mm", pose.x() * 1e3,
                         pose.y() * 1e3);
           PutLabel(caption, text, {6, 64}, 0.42);
-          std::snprintf(text, sizeof(text), "yaw=%.0f deg", pose.yaw() * 180 / M_PI);
+          std::snprintf(text, sizeof(text), "yaw=%.0f deg", pose.yaw() * kDeg);
           PutLabel(caption, text, {6, 82}, 0.42);
         }
       }
