@@ -5,7 +5,7 @@ set -euo pipefail
 PACKAGES=(
   g++ cmake make pkg-config
   libeigen3-dev libceres-dev libflann-dev liblz4-dev
-  libopencv-dev libboost-dev libpng-dev zlib1g-dev
+  libopencv-dev libboost-dev libpng-dev zlib1g-dev libdeflate-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev nlohmann-json3-dev
   libopenmpi-dev openmpi-bin

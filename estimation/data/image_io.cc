@@ -14,7 +14,6 @@
 #include <functional>
 #include <limits>
 #include <opencv2/core.hpp>
-#include <opencv2/imgproc.hpp>
 #include <sstream>
 #include <vector>
 
@@ -385,28 +384,27 @@ Image ImageFromRgb8Mat(const cv::Mat& input, const std::string& name) {
     throw DatasetError(name + ": rgb8 expects an 8-bit image, got " + DepthName(input.depth()) +
                        " with " + std::to_string(input.channels()) + " channel(s)");
   }
-  cv::Mat mat;
-  switch (input.channels()) {
-    case 1:
-      mat = input;
-      break;
-    case 3:
-      cv::cvtColor(input, mat, cv::COLOR_BGR2RGB);
-      break;
-    case 4:
-      cv::cvtColor(input, mat, cv::COLOR_BGRA2RGB);
-      break;
-    default:
-      throw DatasetError(name + ": rgb8 expects 1, 3 or 4 channels, got " +
-                         std::to_string(input.channels()));
+  const int in_channels = input.channels();
+  if (in_channels != 1 && in_channels != 3 && in_channels != 4) {
+    throw DatasetError(name + ": rgb8 expects 1, 3 or 4 channels, got " +
+                       std::to_string(in_channels));
   }
-  const int channels = mat.channels();
-  Image image(mat.rows, mat.cols, channels);
-  const std::size_t row_values = static_cast<std::size_t>(mat.cols) * channels;
-  for (int r = 0; r < mat.rows; ++r) {
-    const auto* row = mat.ptr<std::uint8_t>(r);
+  // B, G, R (and A) samples to R, G, B values in [0, 1], alpha dropped, in one pass.
+  const int channels = in_channels == 1 ? 1 : 3;
+  Image image(input.rows, input.cols, channels);
+  const std::size_t row_values = static_cast<std::size_t>(input.cols) * channels;
+  for (int r = 0; r < input.rows; ++r) {
+    const auto* row = input.ptr<std::uint8_t>(r);
     float* out = image.data.data() + r * row_values;
-    for (std::size_t i = 0; i < row_values; ++i) out[i] = row[i] / 255.0f;
+    if (channels == 1) {
+      for (std::size_t i = 0; i < row_values; ++i) out[i] = row[i] / 255.0f;
+      continue;
+    }
+    for (int c = 0; c < input.cols; ++c, row += in_channels, out += 3) {
+      out[0] = row[2] / 255.0f;
+      out[1] = row[1] / 255.0f;
+      out[2] = row[0] / 255.0f;
+    }
   }
   return image;
 }

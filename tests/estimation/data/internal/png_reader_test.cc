@@ -54,9 +54,12 @@ TEST(PngReader, DecodesWhatOpenCvWritesAsOpenCvReadsIt) {
 }
 
 // A PNG written by libpng directly, for the layouts OpenCV does not write.
+// `filters`: libpng's PNG_FILTER_* mask (its default choice if 0); `transparent`
+// writes a tRNS chunk (gray or RGB).
 std::vector<std::uint8_t> WriteWithLibpng(int rows, int cols, int color_type, int bit_depth,
                                           const std::vector<std::uint8_t>& packed_rows,
-                                          bool interlaced) {
+                                          bool interlaced, int filters = 0,
+                                          bool transparent = false) {
   std::vector<std::uint8_t> out;
   png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
   png_infop info = png_create_info_struct(png);
@@ -72,6 +75,9 @@ std::vector<std::uint8_t> WriteWithLibpng(int rows, int cols, int color_type, in
                PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
   png_color palette[3] = {{255, 0, 0}, {0, 255, 0}, {10, 20, 30}};
   if (color_type == PNG_COLOR_TYPE_PALETTE) png_set_PLTE(png, info, palette, 3);
+  png_color_16 transparent_colour{};
+  if (transparent) png_set_tRNS(png, info, nullptr, 0, &transparent_colour);
+  if (filters != 0) png_set_filter(png, PNG_FILTER_TYPE_BASE, filters);
   png_write_info(png, info);
   const std::size_t row_bytes = packed_rows.size() / rows;
   std::vector<png_bytep> pointers(rows);
@@ -103,6 +109,70 @@ TEST(PngReader, ExpandsPalettesLowBitDepthsAndInterlacingLikeOpenCv) {
   // The palette's third colour (10, 20, 30) arrives as B, G, R = 30, 20, 10.
   const cv::Mat palette = Decode(WriteWithLibpng(4, 8, PNG_COLOR_TYPE_PALETTE, 8, indices, false));
   EXPECT_EQ(palette.at<cv::Vec3b>(0, 2), cv::Vec3b(30, 20, 10));
+}
+
+// Every filter type, alone and mixed, for every layout the libdeflate path takes: the
+// same samples as OpenCV's decoder (libpng), and the path is taken.
+TEST(PngReader, CommonFramesDecodeOnTheLibdeflatePathAsLibpngDoes) {
+  const int rows = 9, cols = 13;
+  struct Layout {
+    int color_type, bit_depth, channels;
+  };
+  for (const Layout& layout : {Layout{PNG_COLOR_TYPE_GRAY, 8, 1}, Layout{PNG_COLOR_TYPE_RGB, 8, 3},
+                               Layout{PNG_COLOR_TYPE_RGB_ALPHA, 8, 4},
+                               Layout{PNG_COLOR_TYPE_GRAY, 16, 1},
+                               Layout{PNG_COLOR_TYPE_RGB, 16, 3},
+                               Layout{PNG_COLOR_TYPE_RGB_ALPHA, 16, 4}}) {
+    // A smooth ramp plus noise, so that every predictor has work to do.
+    std::mt19937 rng(layout.color_type * 100 + layout.bit_depth);
+    const int bytes = layout.channels * layout.bit_depth / 8;
+    std::vector<std::uint8_t> packed(static_cast<std::size_t>(rows) * cols * bytes);
+    for (std::size_t i = 0; i < packed.size(); ++i) {
+      packed[i] = static_cast<std::uint8_t>(3 * (i % (cols * bytes)) + 5 * (i / (cols * bytes)) +
+                                            rng() % 17);
+    }
+    for (int filters : {PNG_FILTER_NONE, PNG_FILTER_SUB, PNG_FILTER_UP, PNG_FILTER_AVG,
+                        PNG_FILTER_PAETH, PNG_ALL_FILTERS}) {
+      const auto png = WriteWithLibpng(rows, cols, layout.color_type, layout.bit_depth, packed,
+                                       false, filters);
+      const cv::Mat fast = DecodeCommonPng(png.data(), png.size());
+      const cv::Mat opencv = cv::imdecode(png, cv::IMREAD_UNCHANGED);
+      ASSERT_FALSE(fast.empty()) << "colour type " << layout.color_type << ", "
+                                 << layout.bit_depth << " bits, filters " << filters;
+      EXPECT_TRUE(Identical(fast, opencv)) << "colour type " << layout.color_type << ", "
+                                           << layout.bit_depth << " bits, filters " << filters;
+      EXPECT_TRUE(Identical(Decode(png), opencv));
+    }
+  }
+}
+
+// Interlacing, palettes, low bit depths, transparency and damaged files are left to
+// libpng (an empty Mat from the libdeflate path), which decodes them as before.
+TEST(PngReader, TheLibdeflatePathLeavesEverythingElseToLibpng) {
+  std::vector<std::uint8_t> gray(32);
+  for (std::size_t i = 0; i < gray.size(); ++i) gray[i] = static_cast<std::uint8_t>(7 * i);
+  std::vector<std::uint8_t> indices(32, 1), bits(4, 0xA5);
+  for (const auto& png : {WriteWithLibpng(4, 8, PNG_COLOR_TYPE_GRAY, 8, gray, true),
+                          WriteWithLibpng(4, 8, PNG_COLOR_TYPE_PALETTE, 8, indices, false),
+                          WriteWithLibpng(4, 8, PNG_COLOR_TYPE_GRAY, 1, bits, false),
+                          WriteWithLibpng(4, 8, PNG_COLOR_TYPE_GRAY, 8, gray, false, 0, true)}) {
+    EXPECT_TRUE(DecodeCommonPng(png.data(), png.size()).empty());
+    EXPECT_FALSE(Decode(png).empty());
+  }
+  // The transparent gray frame: libpng's alpha channel (gray with alpha becomes BGRA).
+  EXPECT_EQ(Decode(WriteWithLibpng(4, 8, PNG_COLOR_TYPE_GRAY, 8, gray, false, 0, true)).channels(),
+            4);
+  const auto plain = WriteWithLibpng(4, 8, PNG_COLOR_TYPE_GRAY, 8, gray, false);
+  ASSERT_FALSE(DecodeCommonPng(plain.data(), plain.size()).empty());
+  // Any byte changed after the signature breaks a CRC (or the header): libpng's turn.
+  for (std::size_t at = 8; at < plain.size(); at += 5) {
+    std::vector<std::uint8_t> damaged = plain;
+    damaged[at] ^= 0x10;
+    EXPECT_TRUE(DecodeCommonPng(damaged.data(), damaged.size()).empty()) << "byte " << at;
+  }
+  for (std::size_t size = 0; size < plain.size(); size += 7) {
+    EXPECT_TRUE(DecodeCommonPng(plain.data(), size).empty()) << size << " bytes";
+  }
 }
 
 TEST(PngReader, DamagedDataIsAnEmptyMatWithTheReason) {
