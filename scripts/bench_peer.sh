@@ -74,6 +74,32 @@ EOF
   exit 0
 fi
 
+# OpenBLAS picks its kernels from the CPU's model number. A virtual machine that hides
+# the model (e.g. "Intel(R) Xeon(R) Processor") makes OpenBLAS 0.3.21 fall back to its
+# Prescott (SSE3) kernels, a third of the float GEMM rate its AVX-512 ones reach on the
+# same core (34 against 109 GFLOP/s for 4096x256 times 256x256 on such a machine). The
+# peer is compared at its best: on that fallback the core type is set from the CPU's
+# flags (SkylakeX with AVX-512, Haswell with AVX2 and FMA), unless OPENBLAS_CORETYPE is
+# already set.
+openblas_core() {
+  OPENBLAS_VERBOSE=2 "$python" -c 'import torch; torch.ones(2, 2) @ torch.ones(2, 2)' 2>&1 |
+    sed -n 's/^Core: //p' | head -n 1
+}
+if [[ -d "$openblas_dir" && -z "${OPENBLAS_CORETYPE:-}" ]]; then
+  core="$(openblas_core)"
+  if [[ "$core" == "Prescott" || "$core" == "Core2" || "$core" == "Nehalem" ]]; then
+    flags="$(grep -m1 '^flags' /proc/cpuinfo 2>/dev/null || true)"
+    if [[ " $flags " == *" avx512f "* ]]; then
+      export OPENBLAS_CORETYPE=SkylakeX
+    elif [[ " $flags " == *" avx2 "* && " $flags " == *" fma "* ]]; then
+      export OPENBLAS_CORETYPE=Haswell
+    fi
+    [[ -n "${OPENBLAS_CORETYPE:-}" ]] &&
+      echo "bench_peer: OpenBLAS chose its $core kernels for this CPU; set OPENBLAS_CORETYPE=$OPENBLAS_CORETYPE from the CPU's flags"
+  fi
+fi
+echo "bench_peer: OpenBLAS kernels: $(openblas_core || true)"
+
 tactfunc="${TACTFUNC:-build/bin/tactfunc}"
 if [[ ! -x "$tactfunc" ]]; then
   echo "bench_peer: $tactfunc not found; build first (scripts/build.sh)" >&2
