@@ -9,6 +9,9 @@
 #include <png.h>
 
 #include <cstdint>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <random>
@@ -144,6 +147,25 @@ TEST(PngReader, CommonFramesDecodeOnTheLibdeflatePathAsLibpngDoes) {
       EXPECT_TRUE(Identical(Decode(png), opencv));
     }
   }
+}
+
+// Real sensor frames (the GelSight presses of tests/data/taxim_ballpress, written by
+// another program than tactfunc): every one on the libdeflate path, as OpenCV reads it.
+TEST(PngReader, RealGelSightFramesDecodeOnTheLibdeflatePathAsOpenCvReadsThem) {
+  const std::filesystem::path dir =
+      std::filesystem::path(TACTFUNC_SOURCE_DIR) / "tests/data/taxim_ballpress";
+  int frames = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(dir)) {
+    if (entry.path().extension() != ".png") continue;
+    std::ifstream in(entry.path(), std::ios::binary);
+    const std::vector<std::uint8_t> png((std::istreambuf_iterator<char>(in)),
+                                        std::istreambuf_iterator<char>());
+    const cv::Mat fast = DecodeCommonPng(png.data(), png.size());
+    ASSERT_FALSE(fast.empty()) << entry.path();
+    EXPECT_TRUE(Identical(fast, cv::imdecode(png, cv::IMREAD_UNCHANGED))) << entry.path();
+    ++frames;
+  }
+  EXPECT_EQ(frames, 50);  // 49 presses and their reference
 }
 
 // Interlacing, palettes, low bit depths, transparency and damaged files are left to
