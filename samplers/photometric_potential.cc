@@ -107,11 +107,12 @@ bool PhotometricPotential::HessianPass(const Eigen::VectorXd& z, double* potenti
                                 std::to_string(dim()) + " values, found " +
                                 std::to_string(z.size()));
   }
-  // The trunk's exact Jacobian (pixel-major rows i C + c), each row scaled by
-  // sqrt(w_i) / sigma: H = J^T J + I / sigma_z^2.
-  Eigen::MatrixXf y, J;
+  // The trunk's exact Jacobian, transposed (pixel-major columns i C + c), each column
+  // scaled by sqrt(w_i) / sigma: H = J^T J + I / sigma_z^2.
+  Eigen::MatrixXf y, JT;
   trunk_->ForwardAndLatentJacobian<float>(pixels_, z.cast<float>(),
-                                          potential != nullptr ? &y : nullptr, &J, markers_);
+                                          potential != nullptr ? &y : nullptr, &JT, markers_,
+                                          JacobianLayout::kOutputColumns);
   const Eigen::Index channels = values_.cols();
   if (potential != nullptr) {
     // U = sum_i w_i ||y_i - t_i||^2 / (2 sigma^2) + ||z||^2 / (2 sigma_z^2), as Evaluate.
@@ -128,13 +129,13 @@ bool PhotometricPotential::HessianPass(const Eigen::VectorXd& z, double* potenti
   }
   for (Eigen::Index i = 0; i < values_.rows(); ++i) {
     const float scale = std::sqrt(weights_[i]) / static_cast<float>(sigma_);
-    J.middleRows(i * channels, channels) *= scale;
+    JT.middleCols(i * channels, channels) *= scale;
   }
-  if (!J.allFinite()) return false;
-  // Accumulated in double (the sum runs over thousands of rows), one triangle.
-  const Eigen::MatrixXd Jd = J.cast<double>();
+  if (!JT.allFinite()) return false;
+  // Accumulated in double (the sum runs over thousands of outputs), one triangle.
+  const Eigen::MatrixXd JTd = JT.cast<double>();
   hessian->setZero(dim(), dim());
-  hessian->selfadjointView<Eigen::Lower>().rankUpdate(Jd.transpose());
+  hessian->selfadjointView<Eigen::Lower>().rankUpdate(JTd);
   *hessian = hessian->selfadjointView<Eigen::Lower>();
   hessian->diagonal().array() += 1.0 / (sigma_z_ * sigma_z_);
   return true;

@@ -33,7 +33,8 @@ class PhotometricResiduals : public ceres::CostFunction {
     Eigen::MatrixXf y, J;
     const bool want_jacobian = jacobians != nullptr && jacobians[0] != nullptr;
     if (want_jacobian) {
-      trunk_.ForwardAndLatentJacobian<float>(pixels_, z, &y, &J, markers_);
+      trunk_.ForwardAndLatentJacobian<float>(pixels_, z, &y, &J, markers_,
+                                             JacobianLayout::kOutputColumns);
     } else {
       y = trunk_.Forward<float>(pixels_, z, markers_);
     }
@@ -46,12 +47,12 @@ class PhotometricResiduals : public ceres::CostFunction {
       }
     }
     if (want_jacobian) {
-      // Ceres' Jacobian is row-major, rows i C + ch as the trunk's.
-      Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> out(
-          jacobians[0], static_cast<Eigen::Index>(n) * c, d);
+      // Ceres' Jacobian is row-major, rows i C + ch as the trunk's: in memory, the
+      // trunk's output-column layout (J is d x n C), so the copy is contiguous.
+      Eigen::Map<Eigen::MatrixXd> out(jacobians[0], d, static_cast<Eigen::Index>(n) * c);
       out = J.cast<double>();
       for (int i = 0; i < n; ++i) {
-        out.middleRows(static_cast<Eigen::Index>(i) * c, c) *=
+        out.middleCols(static_cast<Eigen::Index>(i) * c, c) *=
             static_cast<double>(sqrt_weights_[i]);
       }
       if (!out.allFinite()) return false;

@@ -1287,8 +1287,16 @@ void LatentModulatedSiren::ForwardAndLatentJacobian(const MatrixX<Scalar>& coord
                                                     const VectorX<Scalar>& z,
                                                     MatrixX<Scalar>* outputs,
                                                     MatrixX<Scalar>* J_y_z,
-                                                    MatrixX<Scalar>* J_y_x) const {
+                                                    MatrixX<Scalar>* J_y_x,
+                                                    JacobianLayout layout) const {
   CheckShape("coords", coords.rows(), coords.cols(), coords.rows(), 2);
+  const bool columns = layout == JacobianLayout::kOutputColumns;
+  if (columns && (has_readout() || has_spatial())) {
+    throw std::invalid_argument(
+        "LatentModulatedSiren::ForwardAndLatentJacobian: the output-column layout needs a "
+        "trunk without the readout branch and spatial latents, found " +
+        std::string(has_readout() ? "a readout branch" : "spatial latents"));
+  }
   CheckShape("z", z.rows(), 1, options_.latent_dim, 1);
   if (J_y_x != nullptr && (has_readout() || has_spatial())) {
     throw std::invalid_argument(
@@ -1318,7 +1326,11 @@ void LatentModulatedSiren::ForwardAndLatentJacobian(const MatrixX<Scalar>& coord
   MatrixX<Scalar> g, g_below, J_channel;
   if (J_y_x != nullptr) J_y_x->resize(n * channels, 2);
   if (J_y_z != nullptr) {
-    J_y_z->resize(n * channels, d);
+    if (columns) {
+      J_y_z->resize(d, n * channels);
+    } else {
+      J_y_z->resize(n * channels, d);
+    }
     g.resize(width, capacity);
     g_below.resize(width, capacity);
     J_channel.resize(net.A.cols(), capacity);
@@ -1361,7 +1373,8 @@ void LatentModulatedSiren::ForwardAndLatentJacobian(const MatrixX<Scalar>& coord
       // column j of each delta is then d y_{j,ch} / d pre_l(j) = d y_{j,ch} / d gamma_l.
       MatrixX<Scalar>* delta = &g;
       MatrixX<Scalar>* below = &g_below;
-      delta->leftCols(m) = net.W_out.row(ch).transpose().replicate(1, m);
+      // (A column broadcast: replicate() would take a modulo per value.)
+      delta->leftCols(m).colwise() = net.W_out.row(ch).transpose();
       auto J = J_channel.leftCols(m);
       J.setZero();
       for (int l = num_layers - 1; l >= 0; --l) {
@@ -1376,7 +1389,12 @@ void LatentModulatedSiren::ForwardAndLatentJacobian(const MatrixX<Scalar>& coord
               (net.W[0].transpose() * dl).transpose();
         }
       }
-      if (spatial) {
+      if (columns) {
+        // Column of pixel j, channel ch: J's column j (no readout, no spatial latents),
+        // copied column by column (an indexed view of strided columns is copied value by
+        // value).
+        for (long j = 0; j < m; ++j) J_y_z->col((begin + j) * channels + ch) = J.col(j);
+      } else if (spatial) {
         // Row of pixel j, channel ch: the global columns from J's first d_g rows, each
         // corner node's c_s columns from its last c_s rows times the corner's weight.
         const long dg = spatial->d_global, cs = spatial->channels;
@@ -1612,7 +1630,8 @@ LatentModulatedSiren::VectorX<Scalar> LatentModulatedSiren::StartLatent(
       const ForwardRecord<S>&, const MatrixX<S>&, VectorX<S>*, VectorX<S>*,              \
       WeightGradients) const;                                                            \
   template void LatentModulatedSiren::ForwardAndLatentJacobian<S>(                       \
-      const MatrixX<S>&, const VectorX<S>&, MatrixX<S>*, MatrixX<S>*, MatrixX<S>*) const; \
+      const MatrixX<S>&, const VectorX<S>&, MatrixX<S>*, MatrixX<S>*, MatrixX<S>*,        \
+      JacobianLayout) const;                                                              \
   template LatentModulatedSiren::VectorX<S> LatentModulatedSiren::StartLatent<S>(        \
       const MatrixX<S>&, const MatrixX<S>&, const VectorX<S>&) const;                    \
   template S LatentModulatedSiren::Loss<S>(const MatrixX<S>&, const VectorX<S>&,         \

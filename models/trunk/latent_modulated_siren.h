@@ -129,6 +129,15 @@ const char* ToString(CoordinateConvention convention);
 bool CoordinateConventionFromString(const std::string& name,
                                     CoordinateConvention* convention);
 
+// How a latent Jacobian is laid out: one row per output (N*C) x d, pixel-major with the
+// channels interleaved, or its transpose, one column per output, d x (N*C): the layout
+// a reader that scales or sums whole outputs (a Gauss-Newton Hessian, Ceres' row-major
+// Jacobian blocks) takes without a strided copy.
+enum class JacobianLayout {
+  kOutputRows,
+  kOutputColumns,
+};
+
 // The six kinds of parameter block in theta.
 enum class ParameterGroup {
   kHiddenWeight,      // W_l, width x fan_in_l (one block per hidden layer)
@@ -357,11 +366,14 @@ class LatentModulatedSiren {
   // Jacobian w.r.t. each pixel's own coordinates, (N*C) x 2 in the same row order, from
   // the same passes (d y / d x_j = W_0^T d y / d pre_0(j)); it needs a trunk without the
   // readout branch and spatial latents (std::invalid_argument otherwise), whose
-  // coordinates also move their interpolation.
+  // coordinates also move their interpolation. `layout` kOutputColumns gives J_y_z
+  // transposed, d x (N*C) (the same values), for a trunk without the readout branch and
+  // spatial latents (std::invalid_argument otherwise); J_y_x keeps its rows.
   template <typename Scalar>
   void ForwardAndLatentJacobian(const MatrixX<Scalar>& coords, const VectorX<Scalar>& z,
                                 MatrixX<Scalar>* outputs, MatrixX<Scalar>* J_y_z,
-                                MatrixX<Scalar>* J_y_x = nullptr) const;
+                                MatrixX<Scalar>* J_y_x = nullptr,
+                                JacobianLayout layout = JacobianLayout::kOutputRows) const;
 
   // The weighted MSE of the header comment; targets N x C, weights N or empty.
   template <typename Scalar>

@@ -484,7 +484,7 @@ void PhotometricTrunk::RunForward(const std::vector<int>& pixels, const VectorX<
     MatrixX<Scalar> shared;
     if (use.jacobian) {
       siren_.ForwardAndLatentJacobian<Scalar>(pass.coords, code, &shared, &pass.siren_J_code,
-                                              &pass.siren_J_q);
+                                              &pass.siren_J_q, JacobianLayout::kOutputColumns);
     } else if (use.reverse) {
       shared = siren_.Forward<Scalar>(pass.coords, code, &pass.siren_record);
     } else {
@@ -697,7 +697,8 @@ void PhotometricTrunk::ForwardAndLatentJacobian(const std::vector<int>& pixels,
                                                 const VectorX<Scalar>& z,
                                                 MatrixX<Scalar>* outputs,
                                                 MatrixX<Scalar>* J,
-                                                const Markers* markers) const {
+                                                const Markers* markers,
+                                                JacobianLayout jacobian_layout) const {
   Pass pass_holder;
   // The pass keeps the distinct positions, their slots and the SIREN's Jacobians there.
   RunForward<Scalar>(pixels, z, &pass_holder, outputs,
@@ -712,7 +713,8 @@ void PhotometricTrunk::ForwardAndLatentJacobian(const std::vector<int>& pixels,
   const int d = options_.latent_dim;
   const int outs = 1 + c;  // the SIREN's outputs: w, then s_1 .. s_C
 
-  // The SIREN's rows at every position: d s_k / d code and d s_k / d q.
+  // The SIREN's derivatives at every position: d s_k / d code (one column per output)
+  // and d s_k / d q (one row per output).
   const MatrixX<Scalar>& J_code = pass.siren_J_code;
   const MatrixX<Scalar>& J_q = pass.siren_J_q;
   const long positions = pass.coords.rows();
@@ -720,7 +722,7 @@ void PhotometricTrunk::ForwardAndLatentJacobian(const std::vector<int>& pixels,
   const double sn = std::sin(static_cast<double>(z[2]));
   // Transposed, so that each position's row is a contiguous column: d x (positions outs).
   MatrixX<Scalar> J_posT(d, positions * outs);
-  J_posT.bottomRows(d - kPoseValues) = J_code.transpose();
+  J_posT.bottomRows(d - kPoseValues) = J_code;
   for (long u = 0; u < positions; ++u) {
     const double q0 = static_cast<double>(pass.coords(u, 0));
     const double q1 = static_cast<double>(pass.coords(u, 1));
@@ -764,7 +766,11 @@ void PhotometricTrunk::ForwardAndLatentJacobian(const std::vector<int>& pixels,
             (dg1 / Scalar(2)) * (position(3 * n + i, 0) - position(4 * n + i, 0));
     }
   }
-  *J = JT.transpose();
+  if (jacobian_layout == JacobianLayout::kOutputColumns) {
+    *J = std::move(JT);
+  } else {
+    *J = JT.transpose();
+  }
 }
 
 template <typename Scalar>
@@ -823,7 +829,7 @@ Scalar PhotometricTrunk::LossAndGradient(const std::vector<int>& pixels,
                                               const Markers*) const;                      \
   template void PhotometricTrunk::ForwardAndLatentJacobian<S>(                            \
       const std::vector<int>&, const VectorX<S>&, MatrixX<S>*, MatrixX<S>*,               \
-      const Markers*) const;                                                              \
+      const Markers*, JacobianLayout) const;                                              \
   template S PhotometricTrunk::LossAndGradient<S>(                                        \
       const std::vector<int>&, const VectorX<S>&, const MatrixX<S>&, const VectorX<S>&,   \
       VectorX<S>*, VectorX<S>*, VectorX<S>*, MatrixX<S>*, const Markers*) const;

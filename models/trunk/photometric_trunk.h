@@ -205,12 +205,14 @@ class PhotometricTrunk {
   // differences. Each position's row is d s / d [t, phi, code]: the code's columns from
   // the shifts, the pose's from the coordinate Jacobian d s / d q through q = R^T (p - t)
   // (d q / d t = -R^T, d q / d phi = G q); a pixel's row then mixes its five positions'
-  // rows with the head's derivatives w.r.t. the slope, the depth and s_c. Throws
+  // rows with the head's derivatives w.r.t. the slope, the depth and s_c. `layout`
+  // kOutputColumns gives J transposed, d x (N*C), with the same values. Throws
   // std::invalid_argument as Forward.
   template <typename Scalar>
   void ForwardAndLatentJacobian(const std::vector<int>& pixels, const VectorX<Scalar>& z,
                                 MatrixX<Scalar>* outputs, MatrixX<Scalar>* J,
-                                const Markers* markers = nullptr) const;
+                                const Markers* markers = nullptr,
+                                JacobianLayout layout = JacobianLayout::kOutputRows) const;
 
   // The reverse pass for any dL/dY (N x C): gradients as LossAndGradient's.
   template <typename Scalar>

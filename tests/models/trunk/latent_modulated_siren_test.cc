@@ -511,12 +511,23 @@ TEST(LatentModulatedSiren, CoordinateJacobianMatchesCentralDifferences) {
     MatrixXd J_x_alone;
     siren.ForwardAndLatentJacobian<double>(coords, z, nullptr, nullptr, &J_x_alone);
     EXPECT_EQ(J_x, J_x_alone) << Describe(options);
+    // One column per output: the same values, transposed; J_y_x keeps its rows.
+    MatrixXd J_z_columns, J_x_columns;
+    siren.ForwardAndLatentJacobian<double>(coords, z, nullptr, &J_z_columns, &J_x_columns,
+                                           JacobianLayout::kOutputColumns);
+    EXPECT_EQ(J_z_columns, J_z.transpose()) << Describe(options);
+    EXPECT_EQ(J_x_columns, J_x) << Describe(options);
   }
-  // The readout branch and spatial latents move with the coordinates too: refused.
+  // The readout branch and spatial latents move with the coordinates too: refused, and
+  // the output-column layout is refused with them.
   const Siren readout(ReadoutOptions(), 1);
-  MatrixXd J_x;
+  MatrixXd J_x, J_z;
   EXPECT_THROW(readout.ForwardAndLatentJacobian<double>(
                    Uniform(3, 2, 1), VectorXd::Zero(4), nullptr, nullptr, &J_x),
+               std::invalid_argument);
+  EXPECT_THROW(readout.ForwardAndLatentJacobian<double>(Uniform(3, 2, 1), VectorXd::Zero(4),
+                                                        nullptr, &J_z, nullptr,
+                                                        JacobianLayout::kOutputColumns),
                std::invalid_argument);
 }
 

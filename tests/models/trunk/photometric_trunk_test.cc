@@ -443,6 +443,11 @@ TEST(PhotometricTrunkTest, TheLatentJacobianHasTheReversePassesRows) {
       }
     }
     EXPECT_GT(largest_pose, 1e-3);  // the pose's columns are tested, not all zero
+    // The output-column layout holds the same values, transposed.
+    MatrixXd JT;
+    trunk.ForwardAndLatentJacobian<double>(pixels, p.z, nullptr, &JT, nullptr,
+                                           JacobianLayout::kOutputColumns);
+    EXPECT_EQ(JT, J.transpose());
   }
   // Without a Jacobian asked for it is Forward's pass.
   const PhotometricTrunk trunk =
