@@ -211,9 +211,14 @@ bool LatentProblem::ResidualsAndJacobian(const double* z_data, double* residuals
     }
     const LatentModulatedSiren::VectorX<Scalar> z =
         Eigen::Map<const Eigen::VectorXd>(z_data, d).cast<Scalar>();
+    // Ceres wants the (N C) x d Jacobian row-major, which in memory is the trunk's
+    // output-column layout (d x N C, column-major): taken where the trunk has it (no
+    // readout branch, no spatial latents), so the copy below runs down columns.
+    const bool columns = !trunk_->siren.has_readout() && !trunk_->siren.has_spatial();
     Matrix outputs, J;
-    trunk_->siren.ForwardAndLatentJacobian<Scalar>(*coords, z, &outputs,
-                                                   jacobian != nullptr ? &J : nullptr);
+    trunk_->siren.ForwardAndLatentJacobian<Scalar>(
+        *coords, z, &outputs, jacobian != nullptr ? &J : nullptr, nullptr,
+        columns ? JacobianLayout::kOutputColumns : JacobianLayout::kOutputRows);
     for (long j = 0; j < n; ++j) {
       for (int c = 0; c < c_count; ++c) {
         const long i = j * c_count + c;
@@ -222,8 +227,11 @@ bool LatentProblem::ResidualsAndJacobian(const double* z_data, double* residuals
         finite = finite && std::isfinite(residuals[i]);
       }
     }
-    if (jacobian != nullptr) {
-      // Ceres wants the (N C) x d Jacobian row-major; the trunk's is column-major.
+    if (jacobian != nullptr && columns) {
+      Eigen::Map<Eigen::MatrixXd> out(jacobian, d, n * c_count);
+      out = J.template cast<double>() * residual_scale_.asDiagonal();
+      finite = finite && out.allFinite();
+    } else if (jacobian != nullptr) {
       Eigen::Map<RowMajorMatrixXd> out(jacobian, n * c_count, d);
       out = residual_scale_.asDiagonal() * J.template cast<double>();
       finite = finite && out.allFinite();
