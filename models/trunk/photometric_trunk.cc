@@ -166,8 +166,8 @@ struct PhotometricTrunkPass {
   Matrix coords;
   std::vector<int> slot;  // kSets N, or empty when coords has a row per set row
   Matrix siren_out;       // kSets N x (1 + C)
-  // With PassUse::jacobian: d s / d code and d s / d q at each coordinate row, in
-  // LatentModulatedSiren::ForwardAndLatentJacobian's layout.
+  // With PassUse::jacobian: d s / d code at each coordinate row, one column per output
+  // (JacobianLayout::kOutputColumns), and d s / d q, one row per output.
   Matrix siren_J_code, siren_J_q;
   Matrix input, input0;   // 5 x N: (g_0, g_1, w, x_0, x_1) and the flat (0, 0, 0, x)
   Matrix a1, a2, h1, h2;  // H x N pre-activations and activations (contact)
