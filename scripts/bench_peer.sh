@@ -94,8 +94,9 @@ if [[ -d "$openblas_dir" && -z "${OPENBLAS_CORETYPE:-}" ]]; then
     elif [[ " $flags " == *" avx2 "* && " $flags " == *" fma "* ]]; then
       export OPENBLAS_CORETYPE=Haswell
     fi
-    [[ -n "${OPENBLAS_CORETYPE:-}" ]] &&
+    if [[ -n "${OPENBLAS_CORETYPE:-}" ]]; then
       echo "bench_peer: OpenBLAS chose its $core kernels for this CPU; set OPENBLAS_CORETYPE=$OPENBLAS_CORETYPE from the CPU's flags"
+    fi
   fi
 fi
 echo "bench_peer: OpenBLAS kernels: $(openblas_core || true)"
