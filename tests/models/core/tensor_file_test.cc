@@ -30,6 +30,15 @@ std::string TempPath(const std::string& name) {
   return (std::filesystem::path(testing::TempDir()) / name).string();
 }
 
+// The files these suites write under testing::TempDir() go to a directory of this test
+// process's own (tests/support/unique_temp_dir.cc), never to the shared /tmp itself.
+TEST(TensorFile, TestsWriteIntoTheirProcesssOwnTemporaryDirectory) {
+  const std::string dir = testing::TempDir();
+  EXPECT_NE(dir, "/tmp/");
+  EXPECT_THAT(dir, HasSubstr("tactfunc_test_"));
+  EXPECT_TRUE(std::filesystem::is_directory(dir)) << dir;
+}
+
 TEST(TensorFile, RoundTripsTensorsAndMetaExactly) {
   const TensorFile original = Example();
   const std::string path = TempPath("round_trip.tfm");

@@ -139,7 +139,7 @@ TEST(PoseGenerator, FileRoundTripIsExactAndCorruptFieldsAreNamed) {
   EXPECT_EQ(back.info_json(), g.info_json());
 
   const std::string path =
-      (std::filesystem::temp_directory_path() / "pose_generator_test.tpg").string();
+      (std::filesystem::path(testing::TempDir()) / "pose_generator_test.tpg").string();
   g.Save(path);
   EXPECT_EQ(PoseGenerator::Load(path).parameters(), g.parameters());
   std::filesystem::remove(path);
