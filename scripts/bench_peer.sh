@@ -85,8 +85,8 @@ openblas_core() {
   OPENBLAS_VERBOSE=2 "$python" -c 'import torch; torch.ones(2, 2) @ torch.ones(2, 2)' 2>&1 |
     sed -n 's/^Core: //p' | head -n 1
 }
+core="$(openblas_core || true)"
 if [[ -d "$openblas_dir" && -z "${OPENBLAS_CORETYPE:-}" ]]; then
-  core="$(openblas_core)"
   if [[ "$core" == "Prescott" || "$core" == "Core2" || "$core" == "Nehalem" ]]; then
     flags="$(grep -m1 '^flags' /proc/cpuinfo 2>/dev/null || true)"
     if [[ " $flags " == *" avx512f "* ]]; then
@@ -96,10 +96,11 @@ if [[ -d "$openblas_dir" && -z "${OPENBLAS_CORETYPE:-}" ]]; then
     fi
     if [[ -n "${OPENBLAS_CORETYPE:-}" ]]; then
       echo "bench_peer: OpenBLAS chose its $core kernels for this CPU; set OPENBLAS_CORETYPE=$OPENBLAS_CORETYPE from the CPU's flags"
+      core="$(openblas_core || true)"  # what it runs with now
     fi
   fi
 fi
-echo "bench_peer: OpenBLAS kernels: $(openblas_core || true)"
+echo "bench_peer: OpenBLAS kernels: $core"
 
 tactfunc="${TACTFUNC:-build/bin/tactfunc}"
 if [[ ! -x "$tactfunc" ]]; then

@@ -1290,19 +1290,14 @@ void LatentModulatedSiren::ForwardAndLatentJacobian(const MatrixX<Scalar>& coord
                                                     MatrixX<Scalar>* J_y_x,
                                                     JacobianLayout layout) const {
   CheckShape("coords", coords.rows(), coords.cols(), coords.rows(), 2);
-  const bool columns = layout == JacobianLayout::kOutputColumns;
-  if (columns && (has_readout() || has_spatial())) {
-    throw std::invalid_argument(
-        "LatentModulatedSiren::ForwardAndLatentJacobian: the output-column layout needs a "
-        "trunk without the readout branch and spatial latents, found " +
-        std::string(has_readout() ? "a readout branch" : "spatial latents"));
-  }
   CheckShape("z", z.rows(), 1, options_.latent_dim, 1);
-  if (J_y_x != nullptr && (has_readout() || has_spatial())) {
+  const bool columns = layout == JacobianLayout::kOutputColumns;
+  if ((J_y_x != nullptr || columns) && (has_readout() || has_spatial())) {
     throw std::invalid_argument(
-        "LatentModulatedSiren::ForwardAndLatentJacobian: the coordinate Jacobian needs a "
-        "trunk without the readout branch and spatial latents, found " +
-        std::string(has_readout() ? "a readout branch" : "spatial latents"));
+        std::string("LatentModulatedSiren::ForwardAndLatentJacobian: the ") +
+        (J_y_x != nullptr ? "coordinate Jacobian" : "output-column layout") +
+        " needs a trunk without the readout branch and spatial latents, found " +
+        (has_readout() ? "a readout branch" : "spatial latents"));
   }
   // The coordinate Jacobian comes from the latent Jacobian's reverse passes.
   MatrixX<Scalar> J_z_local;

@@ -174,16 +174,16 @@ TEST(PngReader, TheLibdeflatePathLeavesEverythingElseToLibpng) {
   std::vector<std::uint8_t> gray(32);
   for (std::size_t i = 0; i < gray.size(); ++i) gray[i] = static_cast<std::uint8_t>(7 * i);
   std::vector<std::uint8_t> indices(32, 1), bits(4, 0xA5);
+  const auto transparent = WriteWithLibpng(4, 8, PNG_COLOR_TYPE_GRAY, 8, gray, false, 0, true);
   for (const auto& png : {WriteWithLibpng(4, 8, PNG_COLOR_TYPE_GRAY, 8, gray, true),
                           WriteWithLibpng(4, 8, PNG_COLOR_TYPE_PALETTE, 8, indices, false),
                           WriteWithLibpng(4, 8, PNG_COLOR_TYPE_GRAY, 1, bits, false),
-                          WriteWithLibpng(4, 8, PNG_COLOR_TYPE_GRAY, 8, gray, false, 0, true)}) {
+                          transparent}) {
     EXPECT_TRUE(DecodeCommonPng(png.data(), png.size()).empty());
     EXPECT_FALSE(Decode(png).empty());
   }
   // The transparent gray frame: libpng's alpha channel (gray with alpha becomes BGRA).
-  EXPECT_EQ(Decode(WriteWithLibpng(4, 8, PNG_COLOR_TYPE_GRAY, 8, gray, false, 0, true)).channels(),
-            4);
+  EXPECT_EQ(Decode(transparent).channels(), 4);
   const auto plain = WriteWithLibpng(4, 8, PNG_COLOR_TYPE_GRAY, 8, gray, false);
   ASSERT_FALSE(DecodeCommonPng(plain.data(), plain.size()).empty());
   // Any byte changed after the signature breaks a CRC (or the header): libpng's turn.
