@@ -14,6 +14,7 @@
 
 #include "ceres/problem.h"
 #include "estimation/fitting/latent_costs.h"
+#include "estimation/fitting/square_root_cost.h"
 
 namespace tactfunc {
 namespace {
@@ -173,6 +174,9 @@ bool LatentFitter::Options::IsValid(std::string* error) const {
     message << "strategy: " << why;
   } else if (jacobian != JacobianMode::kAnalytic && jacobian != JacobianMode::kAutoDiff) {
     message << "jacobian is not a JacobianMode, found " << static_cast<int>(jacobian);
+  } else if (residual_form != ResidualForm::kSquareRoot &&
+             residual_form != ResidualForm::kPerPixel) {
+    message << "residual_form is not a ResidualForm, found " << static_cast<int>(residual_form);
   } else if (knn_k < 1) {
     message << "knn_k must be >= 1, found " << knn_k;
   } else if (solver_options.minimizer_type != ceres::TRUST_REGION) {
@@ -222,7 +226,13 @@ std::string LatentFitter::Summary::FullReport() const {
   }
   // Ceres' own full report: its iterations and where its time went (residual and
   // Jacobian evaluations, the linear solver).
-  if (ceres_ran) out << "  ceres: " << solver_summary.FullReport() << "\n";
+  if (ceres_ran) {
+    if (ceres_residual_form == ResidualForm::kSquareRoot) {
+      out << "  ceres saw U as " << solver_summary.num_residuals
+          << " residuals, its square-root information form (same steps as per pixel)\n";
+    }
+    out << "  ceres: " << solver_summary.FullReport() << "\n";
+  }
   return out.str();
 }
 
@@ -430,8 +440,17 @@ LatentFitter::Summary LatentFitter::FitImpl(const LatentProblem& problem,
     problem_options.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
     problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
     ceres::Problem ceres_problem(problem_options);
-    ceres_problem.AddResidualBlock(data_cost.get(), nullptr, parameters.data());
-    ceres_problem.AddResidualBlock(&prior_cost, nullptr, parameters.data());
+    std::unique_ptr<SquareRootCost> square_root;
+    if (options_.residual_form == ResidualForm::kSquareRoot &&
+        options_.jacobian == JacobianMode::kAnalytic &&
+        !options_.solver_options.check_gradients) {
+      square_root = std::make_unique<SquareRootCost>(data_cost.get(), 1.0 / problem.sigma_z());
+      ceres_problem.AddResidualBlock(square_root.get(), nullptr, parameters.data());
+      summary.ceres_residual_form = ResidualForm::kSquareRoot;
+    } else {
+      ceres_problem.AddResidualBlock(data_cost.get(), nullptr, parameters.data());
+      ceres_problem.AddResidualBlock(&prior_cost, nullptr, parameters.data());
+    }
     ceres::Solver::Options solver_options = options_.solver_options;
     solver_options.max_num_iterations = steps;
     ceres::Solve(solver_options, &ceres_problem, &summary.solver_summary);

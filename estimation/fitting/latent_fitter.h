@@ -100,6 +100,15 @@ const char* ToString(FitTermination termination);
 class LatentFitter {
  public:
   enum class JacobianMode { kAnalytic, kAutoDiff };
+  // How the ceres stage hands U to Ceres (estimation/fitting/latent_costs.h,
+  // estimation/fitting/square_root_cost.h).
+  enum class ResidualForm {
+    kSquareRoot,  // one block of d + 1 residuals, U's square-root information form: the
+                  // same steps as kPerPixel up to rounding, without Ceres forming the
+                  // normal equations of N C rows (the default; about 1.7x faster fits
+                  // on the 70x88 Soft Bubble, docs/FITTING.md)
+    kPerPixel,    // the N C data residuals and the d prior residuals as two blocks
+  };
 
   struct Options {
     Options();  // sets the solver_options defaults documented below
@@ -110,6 +119,10 @@ class LatentFitter {
     // Data-term Jacobian: analytic (batched, the default) or ceres::Jet autodiff (the
     // reference; 60-150x slower than analytic at d = 64, for checks).
     JacobianMode jacobian = JacobianMode::kAnalytic;
+    // kSquareRoot applies with the analytic Jacobian; the autodiff reference, and
+    // solver_options.check_gradients (which differentiates the residual vector, defined
+    // per pixel only), always use kPerPixel.
+    ResidualForm residual_form = ResidualForm::kSquareRoot;
     // k of the knn strategies, >= 1. 8: the paper does not give k; 8 neighbours average
     // out the query's error while staying in one cluster of a 30,000-frame functaset.
     int knn_k = 8;
@@ -140,6 +153,8 @@ class LatentFitter {
     // The Ceres summary of the ceres stage (ceres_ran = false: default-constructed).
     bool ceres_ran = false;
     ceres::Solver::Summary solver_summary;
+    // The form Ceres saw U in (kSquareRoot: its d + 1 residuals are solver_summary's).
+    ResidualForm ceres_residual_form = ResidualForm::kPerPixel;
     std::vector<Stage> stages;
     // The objective U(z) = 1/2 sum rho(r^2) + 1/2 ||z / sigma_z||^2 over the selected
     // pixels (LatentProblem), at the starting latent (0 or the warm start) and at the

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "ceres/ceres.h"
+#include "estimation/fitting/square_root_cost.h"
 
 namespace tactfunc {
 namespace {
@@ -124,12 +125,14 @@ PhotometricCeresFit FitPhotometricLatentCeres(const PhotometricTrunk& trunk,
         frame.weights.size() == 0 ? 1.0f : std::sqrt(frame.weights[pixels[i]]);
   }
   ceres::Problem::Options problem_options;
-  problem_options.cost_function_ownership = ceres::TAKE_OWNERSHIP;
+  problem_options.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   ceres::Problem problem(problem_options);
-  problem.AddResidualBlock(
-      new PhotometricResiduals(trunk, options.markers, std::move(pixels), std::move(targets),
-                               std::move(sqrt_weights)),
-      nullptr, fit.latent.data());
+  const PhotometricResiduals residuals(trunk, options.markers, std::move(pixels),
+                                       std::move(targets), std::move(sqrt_weights));
+  // Ceres sees the residuals' square-root information form, d + 1 of them: the same steps
+  // without Ceres forming normal equations of N C rows (estimation/fitting/square_root_cost.h).
+  SquareRootCost square_root(&residuals, /*prior_precision=*/0.0);
+  problem.AddResidualBlock(&square_root, nullptr, fit.latent.data());
   ceres::Solver::Options solver;
   solver.linear_solver_type = ceres::DENSE_NORMAL_CHOLESKY;  // one dense block of d values
   solver.max_num_iterations = options.iterations;

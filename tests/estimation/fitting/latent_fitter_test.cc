@@ -382,6 +382,42 @@ TEST(LatentFitter, AutodiffAndAnalyticFitsAgree) {
   EXPECT_LE((za - zd).norm(), 1e-8 * za.norm()) << sa.FullReport() << sd.FullReport();
 }
 
+TEST_F(LatentFitterCostTest, SquareRootAndPerPixelResidualsGiveTheSameFit) {
+  // Masked pixels, a fractional weight, noise, two channels; plain and robust; double and
+  // float: Ceres must take the same steps on U's d + 1 square-root residuals as on its
+  // N C + d residuals.
+  for (const auto loss : {LatentProblem::RobustLoss::kNone, LatentProblem::RobustLoss::kHuber}) {
+    for (const auto precision : {LatentProblem::Precision::kDouble, LatentProblem::Precision::kFloat}) {
+      SCOPED_TRACE(std::string(ToString(loss)) + " " + ToString(precision));
+      const LatentProblem problem = Problem(precision, loss);
+      Fitter::Options options = CeresOptions(20);
+      VectorXd zq, zp;
+      const Fitter::Summary q = Fitter(trunk_, options).Fit(problem, &zq);
+      options.residual_form = Fitter::ResidualForm::kPerPixel;
+      const Fitter::Summary p = Fitter(trunk_, options).Fit(problem, &zp);
+      EXPECT_EQ(q.ceres_residual_form, Fitter::ResidualForm::kSquareRoot);
+      EXPECT_EQ(q.solver_summary.num_residuals, 6);
+      EXPECT_EQ(p.ceres_residual_form, Fitter::ResidualForm::kPerPixel);
+      EXPECT_EQ(q.iterations, p.iterations) << q.FullReport() << p.FullReport();
+      EXPECT_NEAR(q.final_cost, p.final_cost, 1e-9 * p.final_cost);
+      EXPECT_LE((zq - zp).norm(), 1e-7 * zp.norm()) << q.FullReport() << p.FullReport();
+      EXPECT_LT(q.final_cost, 0.99 * q.initial_cost);  // the fit did move
+    }
+  }
+}
+
+TEST_F(LatentFitterCostTest, GradientCheckingUsesThePerPixelResiduals) {
+  // Ceres' gradient checker differentiates the residual vector, which the square-root
+  // form defines at Jacobian evaluations only.
+  const LatentProblem problem = Problem();
+  Fitter::Options options = CeresOptions(3);
+  options.solver_options.check_gradients = true;
+  VectorXd z;
+  const Fitter::Summary summary = Fitter(trunk_, options).Fit(problem, &z);
+  EXPECT_EQ(summary.ceres_residual_form, Fitter::ResidualForm::kPerPixel);
+  EXPECT_NE(summary.termination_type, FitTermination::kFailure) << summary.FullReport();
+}
+
 TEST(LatentFitter, MetaSgdFromZeroIsTheTrunksInnerLoop) {
   const SensorTrunk trunk = MakeTrunk();
   const TrunkTargets targets = Generate(trunk, TrueLatent(8));
