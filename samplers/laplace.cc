@@ -5,6 +5,8 @@
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
+#include <string>
+#include <utility>
 
 #include <Eigen/Cholesky>
 #include <boost/random/mersenne_twister.hpp>
@@ -72,24 +74,35 @@ std::string LaplaceSampler::Summary::FullReport() const {
   return s.str();
 }
 
+namespace {
+
+void CheckSampleArguments(int d, const Eigen::VectorXd& mode, const Eigen::MatrixXd* samples,
+                          const char* where) {
+  if (samples == nullptr) {
+    throw std::invalid_argument(std::string("LaplaceSampler::") + where +
+                                ": samples must not be null");
+  }
+  if (mode.size() != d || !mode.allFinite()) {
+    throw std::invalid_argument(std::string("LaplaceSampler::") + where +
+                                ": expected a finite mode of size " + std::to_string(d) +
+                                ", got size " + std::to_string(mode.size()) +
+                                (mode.allFinite() ? "" : " with non-finite entries"));
+  }
+}
+
+}  // namespace
+
 LaplaceSampler::Summary LaplaceSampler::Sample(const LatentPotential& potential,
                                                const Eigen::VectorXd& mode,
                                                Eigen::MatrixXd* samples) const {
   const auto start = std::chrono::steady_clock::now();
   const int d = potential.dim();
-  if (samples == nullptr) {
-    throw std::invalid_argument("LaplaceSampler::Sample: samples must not be null");
-  }
-  if (mode.size() != d || !mode.allFinite()) {
-    throw std::invalid_argument("LaplaceSampler::Sample: expected a finite mode of size " +
-                                std::to_string(d) + ", got size " + std::to_string(mode.size()) +
-                                (mode.allFinite() ? "" : " with non-finite entries"));
-  }
+  CheckSampleArguments(d, mode, samples, "Sample");
   Summary summary;
   summary.dim = d;
   summary.mode = mode;
   samples->resize(0, d);
-  auto t = std::chrono::steady_clock::now();
+  const auto t = std::chrono::steady_clock::now();
   Eigen::MatrixXd hessian;
   const bool have_hessian =
       potential.PotentialAndGaussNewtonHessian(mode, &summary.potential_at_mode, &hessian);
@@ -100,6 +113,35 @@ LaplaceSampler::Summary LaplaceSampler::Sample(const LatentPotential& potential,
     summary.total_time_ms = MsSince(start);
     return summary;
   }
+  return FromHessian(start, hessian, std::move(summary), samples);
+}
+
+LaplaceSampler::Summary LaplaceSampler::SampleWithHessian(const Eigen::VectorXd& mode,
+                                                          double potential_at_mode,
+                                                          const Eigen::MatrixXd& hessian,
+                                                          Eigen::MatrixXd* samples) const {
+  const auto start = std::chrono::steady_clock::now();
+  const int d = static_cast<int>(hessian.rows());
+  if (hessian.cols() != d || d == 0) {
+    throw std::invalid_argument("LaplaceSampler::SampleWithHessian: expected a square, non-empty "
+                                "Hessian, got " + std::to_string(hessian.rows()) + " x " +
+                                std::to_string(hessian.cols()));
+  }
+  CheckSampleArguments(d, mode, samples, "SampleWithHessian");
+  Summary summary;
+  summary.dim = d;
+  summary.mode = mode;
+  summary.potential_at_mode = potential_at_mode;
+  samples->resize(0, d);
+  return FromHessian(start, hessian, std::move(summary), samples);
+}
+
+LaplaceSampler::Summary LaplaceSampler::FromHessian(
+    std::chrono::steady_clock::time_point start, const Eigen::MatrixXd& hessian,
+    Summary summary, Eigen::MatrixXd* samples) const {
+  const int d = summary.dim;
+  const Eigen::VectorXd& mode = summary.mode;
+  auto t = std::chrono::steady_clock::now();
   if (!hessian.allFinite()) {
     summary.termination_type = LaplaceTermination::kNotPositiveDefinite;
     summary.message = "the Gauss-Newton Hessian at the mode has non-finite entries";
@@ -176,7 +218,10 @@ LaplaceSampler::Summary LaplaceSampler::Sample(const LatentProblem& problem,
     summary.total_time_ms = MsSince(start);
     return summary;
   }
-  Summary summary = Sample(potential, mode, samples);
+  // The fit's own H_GN at the mode when it formed one (LatentFitter::Summary).
+  Summary summary = fit.gauss_newton_hessian.size() > 0
+                        ? SampleWithHessian(mode, fit.final_cost, fit.gauss_newton_hessian, samples)
+                        : Sample(potential, mode, samples);
   summary.fit_ran = true;
   summary.fit_summary = std::move(fit);
   summary.fit_time_ms = fit_ms;

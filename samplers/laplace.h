@@ -24,6 +24,7 @@
 #ifndef TACTFUNC_SAMPLERS_LAPLACE_H_
 #define TACTFUNC_SAMPLERS_LAPLACE_H_
 
+#include <chrono>
 #include <cstdint>
 #include <string>
 
@@ -88,12 +89,23 @@ class LaplaceSampler {
   // not finite.
   Summary Sample(const LatentPotential& potential, const Eigen::VectorXd& mode,
                  Eigen::MatrixXd* samples) const;
+  // The same where U(mode) and H_GN(mode) are already known -- a LatentFitter::Summary's
+  // final_cost and gauss_newton_hessian -- without a pass over the pixels (then
+  // hessian_time_ms is 0). Throws std::invalid_argument for a null samples, a Hessian
+  // that is not square and non-empty, or a mode of another size or not finite.
+  Summary SampleWithHessian(const Eigen::VectorXd& mode, double potential_at_mode,
+                            const Eigen::MatrixXd& hessian, Eigen::MatrixXd* samples) const;
   // The same for a frame's LatentProblem at the mode `fitter` finds for it (so the
-  // Gaussian is centred at U's mode by construction).
+  // Gaussian is centred at U's mode by construction), with the fit's H_GN when it has one.
   Summary Sample(const LatentProblem& problem, const LatentFitter& fitter,
                  Eigen::MatrixXd* samples) const;
 
  private:
+  // Factors `hessian` and draws; `summary` carries dim, mode and potential_at_mode.
+  Summary FromHessian(std::chrono::steady_clock::time_point start,
+                      const Eigen::MatrixXd& hessian, Summary summary,
+                      Eigen::MatrixXd* samples) const;
+
   Options options_;
 };
 

@@ -74,7 +74,13 @@ std::unique_ptr<ceres::CostFunction> MakeDynamic(const LatentProblem* problem) {
 
 // ---- Analytic -----------------------------------------------------------------------------
 
-AnalyticLatentCost::AnalyticLatentCost(const LatentProblem* problem) : problem_(problem) {
+AnalyticLatentCost::AnalyticLatentCost(const LatentProblem* problem, const StartPass* start)
+    : problem_(problem), start_(start) {
+  if (start != nullptr && !problem->CanUse(*start)) {
+    throw std::invalid_argument(
+        "AnalyticLatentCost: the start pass is not of this problem's trunk, frame size and "
+        "precision");
+  }
   mutable_parameter_block_sizes()->push_back(problem->dim());
   set_num_residuals(problem->num_residuals());
 }
@@ -82,8 +88,24 @@ AnalyticLatentCost::AnalyticLatentCost(const LatentProblem* problem) : problem_(
 bool AnalyticLatentCost::Evaluate(double const* const* parameters, double* residuals,
                                   double** jacobians) const {
   const bool want_jacobian = jacobians != nullptr && jacobians[0] != nullptr;
-  return problem_->ResidualsAndJacobian(parameters[0], residuals,
-                                        want_jacobian ? jacobians[0] : nullptr);
+  if (start_ != nullptr &&
+      Eigen::Map<const Eigen::VectorXd>(parameters[0], problem_->dim()).isZero(0.0)) {
+    return problem_->ResidualsAndJacobianAtStart(*start_, residuals,
+                                                 want_jacobian ? jacobians[0] : nullptr);
+  }
+  if (!want_jacobian) return problem_->ResidualsAndJacobian(parameters[0], residuals, nullptr);
+  last_z_.resize(0);
+  if (!problem_->ResidualsAndJacobian(parameters[0], residuals, jacobians[0], &last_outputs_)) {
+    return false;
+  }
+  last_z_ = Eigen::Map<const Eigen::VectorXd>(parameters[0], problem_->dim());
+  return true;
+}
+
+const Eigen::MatrixXd* AnalyticLatentCost::OutputsAt(const double* z) const {
+  const int d = problem_->dim();
+  if (last_z_.size() != d || last_z_ != Eigen::Map<const Eigen::VectorXd>(z, d)) return nullptr;
+  return &last_outputs_;
 }
 
 // ---- Autodiff ----------------------------------------------------------------------------

@@ -32,13 +32,24 @@ namespace tactfunc {
 // The analytic batched data residuals. `problem` must outlive the object.
 class AnalyticLatentCost : public ceres::CostFunction {
  public:
-  explicit AnalyticLatentCost(const LatentProblem* problem);
+  // With `start` (not owned; problem->CanUse(*start)), evaluations at exactly z = 0 come
+  // from it without a trunk pass.
+  explicit AnalyticLatentCost(const LatentProblem* problem, const StartPass* start = nullptr);
   // Returns false (Ceres then rejects the step) if a residual or Jacobian entry is not finite.
   bool Evaluate(double const* const* parameters, double* residuals,
                 double** jacobians) const override;
 
+  // The trunk's outputs over the selected pixels (N x C) from the last Jacobian
+  // evaluation's pass if it was at exactly z (d values), else null: the cost at a solver's
+  // result (LatentProblem::DataCostOfOutputs) without a pass of its own. The record makes
+  // one object serve one solve at a time.
+  const Eigen::MatrixXd* OutputsAt(const double* z) const;
+
  private:
   const LatentProblem* problem_;
+  const StartPass* start_;
+  mutable Eigen::VectorXd last_z_;
+  mutable Eigen::MatrixXd last_outputs_;
 };
 
 // The autodiff reference. `stride` is the Jet width of DynamicAutoDiffCostFunction

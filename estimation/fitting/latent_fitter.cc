@@ -7,10 +7,12 @@
 #include <cstdio>
 #include <limits>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <sstream>
 #include <stdexcept>
 #include <utility>
+#include <vector>
 
 #include "ceres/problem.h"
 #include "estimation/fitting/latent_costs.h"
@@ -241,9 +243,35 @@ std::string LatentFitter::Summary::FullReport() const {
 LatentFitter::LatentFitter(const SensorTrunk& trunk, const Options& options)
     : LatentFitter(trunk, options, nullptr, nullptr) {}
 
+struct LatentFitter::StartPasses {
+  // A handful of frame sizes per trunk at most; beyond that fits evaluate as usual.
+  static constexpr std::size_t kMaxSizes = 4;
+  std::mutex mutex;
+  std::vector<std::unique_ptr<const StartPass>> passes;
+};
+
+const StartPass* LatentFitter::StartPassFor(const LatentProblem& problem) const {
+  if (!StartPass::Applies(problem.trunk()) ||
+      problem.options().precision != LatentProblem::Precision::kFloat) {
+    return nullptr;
+  }
+  const std::lock_guard<std::mutex> lock(start_passes_->mutex);
+  for (const auto& pass : start_passes_->passes) {
+    if (problem.CanUse(*pass)) return pass.get();
+  }
+  if (start_passes_->passes.size() >= StartPasses::kMaxSizes) return nullptr;
+  start_passes_->passes.push_back(std::make_unique<const StartPass>(
+      problem.trunk(), problem.targets().rows, problem.targets().cols));
+  return start_passes_->passes.back().get();
+}
+
 LatentFitter::LatentFitter(const SensorTrunk& trunk, const Options& options,
                            const KnnIndex* index, const Eigen::MatrixXf* latents)
-    : trunk_(&trunk), options_(options), index_(index), latents_(latents) {
+    : start_passes_(std::make_shared<StartPasses>()),
+      trunk_(&trunk),
+      options_(options),
+      index_(index),
+      latents_(latents) {
   std::string error;
   if (!options_.IsValid(&error)) throw std::invalid_argument(error);
   if (trunk.photometric != nullptr || options_.strategy.refinement == FitStrategy::Refinement::kAdam) {
@@ -326,11 +354,18 @@ LatentFitter::Summary LatentFitter::FitImpl(const LatentProblem& problem,
 
   // The Ceres stage's data residuals: U as Ceres sees it (the robust loss is inside the
   // data residuals, LatentProblem).
+  // A Ceres fit from z = 0 takes its start from the trunk's pass at z = 0 (StartPass).
+  const StartPass* start_pass =
+      initial == nullptr && !options_.strategy.knn &&
+              options_.strategy.refinement == FitStrategy::Refinement::kCeres &&
+              options_.jacobian == JacobianMode::kAnalytic && z.isZero(0.0)
+          ? StartPassFor(problem)
+          : nullptr;
   std::unique_ptr<ceres::CostFunction> data_cost;
   if (options_.jacobian == JacobianMode::kAutoDiff) {
     data_cost = MakeAutoDiffLatentCost(&problem);
   } else {
-    data_cost = std::make_unique<AnalyticLatentCost>(&problem);
+    data_cost = std::make_unique<AnalyticLatentCost>(&problem, start_pass);
   }
   LatentPriorCost prior_cost(d, problem.sigma_z());
   // U at a latent and, when the problem covers the whole frame, its PSNR from the same
@@ -360,6 +395,9 @@ LatentFitter::Summary LatentFitter::FitImpl(const LatentProblem& problem,
     meta_sgd_latent = problem.MetaSgdSteps(z, steps, &data_cost, &psnr);
     cost = data_cost + HalfSquaredNorm(prior_cost, z.data());
     summary.stages.back().cost = cost;
+  } else if (start_pass != nullptr) {
+    cost = problem.DataCostAtStart(*start_pass, &psnr);  // the prior is 0 at z = 0
+    add_stage("start", cost, start_time, 0);
   } else {
     cost = objective(z, &psnr);
     add_stage("start", cost, start_time, 0);
@@ -368,10 +406,15 @@ LatentFitter::Summary LatentFitter::FitImpl(const LatentProblem& problem,
   summary.termination_type = FitTermination::kCompleted;
 
   // A stage whose result is not finite is undone: the fit keeps the last finite latent.
-  auto accept = [&](const Eigen::VectorXd& candidate, const char* stage) {
+  // `outputs`, if not null, are the trunk's outputs at the candidate (no pass then).
+  auto accept = [&](const Eigen::VectorXd& candidate, const char* stage,
+                    const Eigen::MatrixXd* outputs = nullptr) {
     std::optional<double> candidate_psnr;
-    const double candidate_cost = candidate.allFinite() ? objective(candidate, &candidate_psnr)
-                                                        : std::numeric_limits<double>::quiet_NaN();
+    const double candidate_cost =
+        !candidate.allFinite() ? std::numeric_limits<double>::quiet_NaN()
+        : outputs != nullptr   ? problem.DataCostOfOutputs(*outputs, &candidate_psnr) +
+                                   HalfSquaredNorm(prior_cost, candidate.data())
+                               : objective(candidate, &candidate_psnr);
     if (!std::isfinite(candidate_cost)) {
       summary.termination_type = FitTermination::kFailure;
       summary.message = std::string("the ") + stage +
@@ -475,13 +518,20 @@ LatentFitter::Summary LatentFitter::FitImpl(const LatentProblem& problem,
     const Eigen::VectorXd before = z;
     const double cost_before = cost;
     const std::optional<double> psnr_before = psnr;
-    if (accept(parameters, "ceres")) {
+    // The result's outputs from Ceres' last Jacobian evaluation there, if it was (analytic).
+    const auto* analytic = dynamic_cast<const AnalyticLatentCost*>(data_cost.get());
+    if (accept(parameters, "ceres",
+               analytic != nullptr ? analytic->OutputsAt(parameters.data()) : nullptr)) {
       // Ceres keeps the best point it accepted, so the cost cannot rise; if rounding in
       // a float evaluation made it, the previous latent is kept.
       if (cost > cost_before) {
         z = before;
         cost = cost_before;
         psnr = psnr_before;
+      } else if (square_root != nullptr) {
+        if (const Eigen::MatrixXd* g = square_root->GaussNewtonMatrixAt(z.data())) {
+          summary.gauss_newton_hessian = *g;
+        }
       }
       if (summary.termination_type != FitTermination::kFailure && summary.message.empty() &&
           summary.termination_type == FitTermination::kNoConvergence) {

@@ -44,11 +44,17 @@
 // happen while fitting (no valid pixel, the solver failing, a step producing NaN) comes back
 // in the Summary's termination type and message -- Fit never returns a NaN latent.
 //
+// A ceres strategy without knn or warm start begins at z = 0, where the trunk's outputs and
+// latent Jacobian do not depend on the frame: the fitter computes them once per frame size
+// (StartPass, estimation/fitting/latent_problem.h) and every such fit takes its start's
+// cost and first Jacobian from them, with no trunk pass.
+//
 // Thread safety: Fit is const and may run concurrently on one LatentFitter.
 #ifndef TACTFUNC_ESTIMATION_FITTING_LATENT_FITTER_H_
 #define TACTFUNC_ESTIMATION_FITTING_LATENT_FITTER_H_
 
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -155,6 +161,12 @@ class LatentFitter {
     ceres::Solver::Summary solver_summary;
     // The form Ceres saw U in (kSquareRoot: its d + 1 residuals are solver_summary's).
     ResidualForm ceres_residual_form = ResidualForm::kPerPixel;
+    // H_GN at the returned latent (d x d; LatentProblem::GaussNewtonHessian's matrix,
+    // accumulated in double from the problem's Jacobian) when the fit formed it anyway:
+    // a ceres stage in square-root form whose last Jacobian evaluation was at the
+    // result. Empty otherwise. A Laplace approximation at the result takes it as it is
+    // (samplers/laplace.h) instead of a Jacobian pass of its own.
+    Eigen::MatrixXd gauss_newton_hessian;
     std::vector<Stage> stages;
     // The objective U(z) = 1/2 sum rho(r^2) + 1/2 ||z / sigma_z||^2 over the selected
     // pixels (LatentProblem), at the starting latent (0 or the warm start) and at the
@@ -207,7 +219,12 @@ class LatentFitter {
  private:
   Summary FitImpl(const LatentProblem& problem, const Eigen::VectorXd* initial,
                   Eigen::VectorXd* latent) const;
+  // The trunk's pass at z = 0 over the problem's frame size (made on first use, kept for
+  // a few sizes), or null if the problem cannot use one.
+  const StartPass* StartPassFor(const LatentProblem& problem) const;
 
+  struct StartPasses;  // the cache behind StartPassFor, shared by copies of the fitter
+  std::shared_ptr<StartPasses> start_passes_;
   const SensorTrunk* trunk_;
   Options options_;
   const KnnIndex* index_ = nullptr;

@@ -196,6 +196,11 @@ void LatentProblem::CheckLatent(const Eigen::VectorXd& z, const char* where) con
 
 bool LatentProblem::ResidualsAndJacobian(const double* z_data, double* residuals,
                                          double* jacobian) const {
+  return ResidualsAndJacobian(z_data, residuals, jacobian, nullptr);
+}
+
+bool LatentProblem::ResidualsAndJacobian(const double* z_data, double* residuals,
+                                         double* jacobian, Eigen::MatrixXd* outputs_out) const {
   const int d = dim();
   const int c_count = channels();
   const long n = num_pixels();
@@ -227,6 +232,7 @@ bool LatentProblem::ResidualsAndJacobian(const double* z_data, double* residuals
         finite = finite && std::isfinite(residuals[i]);
       }
     }
+    if (outputs_out != nullptr) *outputs_out = outputs.template cast<double>();
     if (jacobian != nullptr && columns) {
       Eigen::Map<Eigen::MatrixXd> out(jacobian, d, n * c_count);
       out = J.template cast<double>() * residual_scale_.asDiagonal();
@@ -244,6 +250,75 @@ bool LatentProblem::ResidualsAndJacobian(const double* z_data, double* residuals
   }
   Robustify(static_cast<int>(n * c_count), residuals, jacobian, d);
   return finite;
+}
+
+// ---- The pass at z = 0 ------------------------------------------------------------------------
+
+bool StartPass::Applies(const SensorTrunk& trunk) {
+  return !trunk.siren.has_readout() && !trunk.siren.has_spatial();
+}
+
+StartPass::StartPass(const SensorTrunk& trunk_in, int rows_in, int cols_in)
+    : trunk(&trunk_in), rows(rows_in), cols(cols_in) {
+  if (!Applies(trunk_in)) {
+    throw std::invalid_argument(
+        "StartPass: the trunk has a readout branch or spatial latents, whose fits do not "
+        "start at z = 0");
+  }
+  if (rows < 1 || cols < 1) {
+    throw std::invalid_argument("StartPass: expected a frame of at least 1 x 1 pixels, found " +
+                                std::to_string(rows) + " x " + std::to_string(cols));
+  }
+  const LatentModulatedSiren& siren = trunk_in.siren;
+  // The coordinates exactly as LatentProblem makes them: the double grid, cast to float.
+  const Eigen::MatrixXf coords = siren.Grid<double>(rows, cols).cast<float>();
+  siren.ForwardAndLatentJacobian<float>(coords, Eigen::VectorXf::Zero(siren.latent_dim()),
+                                        &outputs, &jacobian, nullptr,
+                                        JacobianLayout::kOutputColumns);
+}
+
+bool LatentProblem::CanUse(const StartPass& pass) const {
+  return pass.trunk == trunk_ && pass.rows == frame_->rows && pass.cols == frame_->cols &&
+         options_.precision == Precision::kFloat;
+}
+
+bool LatentProblem::ResidualsAndJacobianAtStart(const StartPass& pass, double* residuals,
+                                                double* jacobian) const {
+  const int d = dim();
+  const int c_count = channels();
+  const long n = num_pixels();
+  bool finite = true;
+  for (long j = 0; j < n; ++j) {
+    for (int c = 0; c < c_count; ++c) {
+      const long i = j * c_count + c;
+      residuals[i] = residual_scale_[i] * (static_cast<double>(pass.outputs(pixel_index_[j], c)) -
+                                           pixel_targets_(j, c));
+      finite = finite && std::isfinite(residuals[i]);
+    }
+  }
+  if (jacobian != nullptr) {
+    // Ceres' row-major (N C) x d block is d x (N C) column-major in memory.
+    Eigen::Map<Eigen::MatrixXd> out(jacobian, d, n * c_count);
+    for (long j = 0; j < n; ++j) {
+      for (int c = 0; c < c_count; ++c) {
+        const long i = j * c_count + c;
+        out.col(i) = pass.jacobian.col(static_cast<long>(pixel_index_[j]) * c_count + c)
+                         .cast<double>() *
+                     residual_scale_[i];
+      }
+    }
+    finite = finite && out.allFinite();
+  }
+  Robustify(static_cast<int>(n * c_count), residuals, jacobian, d);
+  return finite;
+}
+
+double LatentProblem::DataCostAtStart(const StartPass& pass, std::optional<double>* psnr) const {
+  Eigen::MatrixXd outputs(num_pixels(), channels());
+  for (long j = 0; j < num_pixels(); ++j) {
+    outputs.row(j) = pass.outputs.row(pixel_index_[j]).cast<double>();
+  }
+  return DataCostOfOutputs(outputs, psnr);
 }
 
 void LatentProblem::Robustify(int num_residuals, double* residuals, double* jacobian,
@@ -458,7 +533,7 @@ Eigen::VectorXd LatentProblem::MetaSgdSteps(const Eigen::VectorXd& z0, int steps
       throw std::invalid_argument("LatentProblem::MetaSgdSteps: start_psnr must not be null "
                                   "when start_cost is asked for");
     }
-    *start_cost = CostOfOutputs(outputs, start_psnr);
+    *start_cost = DataCostOfOutputs(outputs, start_psnr);
   }
   return z;
 }
@@ -488,13 +563,13 @@ double LatentProblem::DataCost(const Eigen::VectorXd& z, std::optional<double>* 
   CheckLatent(z, "DataCost");
   const LatentModulatedSiren& siren = trunk_->siren;
   if (options_.precision == Precision::kFloat) {
-    return CostOfOutputs(siren.Forward<float>(coords_float_, z.cast<float>()).cast<double>(),
+    return DataCostOfOutputs(siren.Forward<float>(coords_float_, z.cast<float>()).cast<double>(),
                          psnr);
   }
-  return CostOfOutputs(siren.Forward<double>(coords_, z), psnr);
+  return DataCostOfOutputs(siren.Forward<double>(coords_, z), psnr);
 }
 
-double LatentProblem::CostOfOutputs(const Eigen::MatrixXd& outputs,
+double LatentProblem::DataCostOfOutputs(const Eigen::MatrixXd& outputs,
                                     std::optional<double>* psnr) const {
   const int c_count = channels();
   const long n = num_pixels();

@@ -61,6 +61,24 @@ class LossFunction;
 
 namespace tactfunc {
 
+// The trunk at z = 0 over every pixel of a rows x cols frame: its outputs and latent
+// Jacobian, which do not depend on the frame's values. A fit that starts at z = 0 (the
+// StartLatent of a trunk without readout branch or spatial latents) takes its first
+// residuals, Jacobian and cost from it instead of a trunk pass (LatentFitter keeps one per
+// frame size). Float, the default precision: problems in double evaluate as before.
+struct StartPass {
+  // True if `trunk` starts every fit at z = 0 and gives its Jacobian in output columns.
+  static bool Applies(const SensorTrunk& trunk);
+  // One ForwardAndLatentJacobian over the frame's grid (the coordinates LatentProblem
+  // uses). Throws std::invalid_argument unless Applies(trunk) and rows, cols >= 1.
+  StartPass(const SensorTrunk& trunk, int rows, int cols);
+
+  const SensorTrunk* trunk;  // what it was computed for (not owned)
+  int rows = 0, cols = 0;
+  Eigen::MatrixXf outputs;   // rows*cols x C
+  Eigen::MatrixXf jacobian;  // d x rows*cols*C: column j*C + c = d y_{j,c} / d z at z = 0
+};
+
 class LatentProblem {
  public:
   enum class RobustLoss { kNone, kHuber, kCauchy };
@@ -126,6 +144,17 @@ class LatentProblem {
   // wants them: one batched trunk pass and one reverse pass per channel. z has d entries.
   // Returns false if a residual or Jacobian entry is not finite.
   bool ResidualsAndJacobian(const double* z, double* residuals, double* jacobian) const;
+  // The same, and the trunk's outputs over the selected pixels (N x C) from the same pass
+  // when outputs is not null (DataCostOfOutputs takes them).
+  bool ResidualsAndJacobian(const double* z, double* residuals, double* jacobian,
+                            Eigen::MatrixXd* outputs) const;
+  // True if `pass` was computed for this problem's trunk and frame size and the problem
+  // evaluates in float: then the two calls below equal ResidualsAndJacobian(0, ...) and
+  // DataCost(0, psnr) up to rounding, without a trunk pass.
+  bool CanUse(const StartPass& pass) const;
+  bool ResidualsAndJacobianAtStart(const StartPass& pass, double* residuals,
+                                   double* jacobian) const;
+  double DataCostAtStart(const StartPass& pass, std::optional<double>* psnr) const;
   // The robust transform of the header comment applied in place to whitened residuals
   // (and, if not null, their row-major Jacobian rows of `cols` entries). No-op without a
   // robust loss. Public for the autodiff reference cost, which must robustify the same way.
@@ -172,14 +201,15 @@ class LatentProblem {
   // PSNR reads valid pixels only); otherwise *psnr is reset (Psnr needs its own pass
   // over the valid pixels). psnr must not be null.
   double DataCost(const Eigen::VectorXd& z, std::optional<double>* psnr) const;
+  // DataCost (and *psnr as DataCost gives it) from the trunk's outputs over the selected
+  // pixels at z (N x C), e.g. those a Jacobian evaluation at z returned: no pass.
+  double DataCostOfOutputs(const Eigen::MatrixXd& outputs, std::optional<double>* psnr) const;
 
  private:
   // U over the selected pixels (rows == nullptr) or the minibatch `rows` (scaled by N / n).
   double EvaluateRows(const Eigen::VectorXd& z, const std::vector<int>* rows,
                       Eigen::VectorXd* gradient) const;
   Eigen::MatrixXf FramePrediction(const Eigen::VectorXd& z) const;
-  // DataCost from the trunk's outputs over the selected pixels (N x C).
-  double CostOfOutputs(const Eigen::MatrixXd& outputs, std::optional<double>* psnr) const;
   template <typename Scalar>
   double DataTermAndGradient(const Eigen::VectorXd& z, const std::vector<int>* rows,
                              double scale, Eigen::VectorXd* gradient) const;

@@ -98,7 +98,17 @@ bool SquareRootCost::Evaluate(double const* const* parameters, double* residuals
     if (explained > total && explained > 0) q *= std::sqrt(total / explained);
   }
   residuals[d] = std::sqrt(std::max(0.0, total - q.squaredNorm()));
-  return q.allFinite() && jacobian.allFinite();
+  last_x_.resize(0);
+  if (!q.allFinite() || !jacobian.allFinite()) return false;
+  last_g_ = g.selfadjointView<Eigen::Lower>();
+  last_x_ = x;
+  return true;
+}
+
+const Eigen::MatrixXd* SquareRootCost::GaussNewtonMatrixAt(const double* x) const {
+  const int d = parameter_block_sizes()[0];
+  if (last_x_.size() != d || last_x_ != Eigen::Map<const Eigen::VectorXd>(x, d)) return nullptr;
+  return &last_g_;
 }
 
 }  // namespace tactfunc

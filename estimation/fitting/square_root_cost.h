@@ -36,8 +36,8 @@
 // parameter block or a negative prior precision. Evaluate returns false (Ceres rejects
 // the point) if the source fails or anything is not finite.
 //
-// Thread safety: one object keeps the source's n residuals and Jacobian between calls;
-// use one per solve (Ceres evaluates a single residual block serially).
+// Thread safety: one object keeps the source's n residuals and Jacobian, and the last G,
+// between calls; use one per solve (Ceres evaluates a single residual block serially).
 #ifndef TACTFUNC_ESTIMATION_FITTING_SQUARE_ROOT_COST_H_
 #define TACTFUNC_ESTIMATION_FITTING_SQUARE_ROOT_COST_H_
 
@@ -58,12 +58,20 @@ class SquareRootCost : public ceres::CostFunction {
   bool Evaluate(double const* const* parameters, double* residuals,
                 double** jacobians) const override;
 
+  // G = J_a^T J_a (d x d, symmetric) of the last successful Jacobian evaluation if it was
+  // at exactly x (d values), else null: the Gauss-Newton matrix at a solver's result,
+  // with no pass of its own (a Laplace approximation's Hessian).
+  const Eigen::MatrixXd* GaussNewtonMatrixAt(const double* x) const;
+
  private:
   const ceres::CostFunction* source_;
   double prior_precision_;
   // The source's residuals and row-major Jacobian (n x d: in memory J^T, d x n).
   mutable std::vector<double> source_residuals_;
   mutable std::vector<double> source_jacobian_;
+  // The last successful Jacobian evaluation's point and G (both sides of the diagonal).
+  mutable Eigen::VectorXd last_x_;
+  mutable Eigen::MatrixXd last_g_;
 };
 
 }  // namespace tactfunc

@@ -2,6 +2,7 @@
 #include "samplers/laplace.h"
 
 #include <cmath>
+#include <stdexcept>
 #include <string>
 
 #include <Eigen/Dense>
@@ -147,6 +148,28 @@ TEST(LaplaceSampler, CovarianceOnATinyTrunkIsSymmetricPositiveDefinite) {
   potential.Evaluate(summary.mode, &g);
   potential.Evaluate(Eigen::VectorXd::Zero(z_true.size()), &g_start);
   EXPECT_LT(g.norm(), 1e-2 * g_start.norm());
+}
+
+TEST(LaplaceSampler, AGivenHessianGivesTheSamplesTheMatrixWouldGive) {
+  const Eigen::MatrixXd A = Eigen::MatrixXd::Random(20, 3);
+  const LinearPotential potential(A, Eigen::VectorXd::Random(20), 0.1, 2.0);
+  const Eigen::VectorXd mode = Eigen::Vector3d(0.1, -0.2, 0.3);
+  Eigen::MatrixXd hessian;
+  ASSERT_TRUE(potential.GaussNewtonHessian(mode, &hessian));
+  const LaplaceSampler laplace{LaplaceSampler::Options()};
+  Eigen::MatrixXd a, b;
+  const LaplaceSampler::Summary sa = laplace.Sample(potential, mode, &a);
+  const LaplaceSampler::Summary sb =
+      laplace.SampleWithHessian(mode, potential.Evaluate(mode, nullptr), hessian, &b);
+  ASSERT_TRUE(sb.IsSolutionUsable()) << sb.FullReport();
+  EXPECT_EQ(a, b);
+  EXPECT_EQ(sa.covariance, sb.covariance);
+  EXPECT_DOUBLE_EQ(sa.potential_at_mode, sb.potential_at_mode);
+  EXPECT_THROW(laplace.SampleWithHessian(mode, 0.0, Eigen::MatrixXd(3, 2), &b),
+               std::invalid_argument);
+  EXPECT_THROW(laplace.SampleWithHessian(Eigen::Vector2d(0, 0), 0.0, hessian, &b),
+               std::invalid_argument);
+  EXPECT_THROW(laplace.SampleWithHessian(mode, 0.0, hessian, nullptr), std::invalid_argument);
 }
 
 TEST(LaplaceSampler, SameSeedSameSamples) {

@@ -418,6 +418,50 @@ TEST_F(LatentFitterCostTest, GradientCheckingUsesThePerPixelResiduals) {
   EXPECT_NE(summary.termination_type, FitTermination::kFailure) << summary.FullReport();
 }
 
+TEST_F(LatentFitterCostTest, AFitFromZeroThroughTheStartPassIsTheFitFromAZeroWarmStart) {
+  // Without a warm start a ceres fit takes its start from the fitter's StartPass; a warm
+  // start of zeros evaluates the trunk there. Same steps, same latent, same costs.
+  const LatentProblem problem = Problem(LatentProblem::Precision::kFloat);
+  const Fitter fitter(trunk_, CeresOptions(20));
+  VectorXd za, zb;
+  const Fitter::Summary a = fitter.Fit(problem, &za);
+  const Fitter::Summary b = fitter.Fit(problem, VectorXd::Zero(5), &zb);
+  EXPECT_EQ(a.iterations, b.iterations) << a.FullReport() << b.FullReport();
+  EXPECT_NEAR(a.initial_cost, b.initial_cost, 1e-5 * b.initial_cost);
+  EXPECT_NEAR(a.final_cost, b.final_cost, 1e-6 * b.final_cost);
+  EXPECT_LE((za - zb).norm(), 1e-4 * zb.norm());
+  EXPECT_NEAR(a.psnr, b.psnr, 1e-3);
+  EXPECT_LT(a.final_cost, 0.99 * a.initial_cost);  // the fit did move
+}
+
+TEST_F(LatentFitterCostTest, TheFitHandsOutTheGaussNewtonHessianAtItsResult) {
+  for (const auto precision : {LatentProblem::Precision::kDouble, LatentProblem::Precision::kFloat}) {
+    SCOPED_TRACE(ToString(precision));
+    const LatentProblem problem = Problem(precision);
+    VectorXd z;
+    const Fitter::Summary summary = Fitter(trunk_, CeresOptions(20)).Fit(problem, &z);
+    ASSERT_EQ(summary.gauss_newton_hessian.rows(), 5) << summary.FullReport();
+    MatrixXd expected;
+    problem.GaussNewtonHessian(z, &expected);
+    const double tolerance = precision == LatentProblem::Precision::kDouble ? 1e-10 : 1e-5;
+    EXPECT_LE(RelativeDifference(summary.gauss_newton_hessian, expected), tolerance);
+    // The result's cost and PSNR came from Ceres' last pass there: the same as a new pass.
+    std::optional<double> psnr;
+    const double data_cost = problem.DataCost(z, &psnr);
+    EXPECT_NEAR(summary.final_cost, data_cost + 0.5 * z.squaredNorm(), 1e-6 * summary.final_cost);
+    ASSERT_TRUE(psnr.has_value());
+    EXPECT_NEAR(summary.psnr, *psnr, 1e-4);
+  }
+  // Per-pixel residuals and meta-SGD fits form no Hessian.
+  Fitter::Options per_pixel = CeresOptions(20);
+  per_pixel.residual_form = Fitter::ResidualForm::kPerPixel;
+  VectorXd z;
+  EXPECT_EQ(Fitter(trunk_, per_pixel).Fit(Problem(), &z).gauss_newton_hessian.size(), 0);
+  Fitter::Options meta = CeresOptions(1);
+  meta.strategy = FitStrategy::FromString("meta_sgd:3");
+  EXPECT_EQ(Fitter(trunk_, meta).Fit(Problem(), &z).gauss_newton_hessian.size(), 0);
+}
+
 TEST(LatentFitter, MetaSgdFromZeroIsTheTrunksInnerLoop) {
   const SensorTrunk trunk = MakeTrunk();
   const TrunkTargets targets = Generate(trunk, TrueLatent(8));

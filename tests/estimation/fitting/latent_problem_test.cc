@@ -158,6 +158,54 @@ TEST(LatentProblem, DataCostIsTheCeresDataCostAndGivesThePsnrOnlyOverTheWholeFra
   }
 }
 
+// The pass at z = 0 (StartPass) stands in for the trunk's pass there: residuals,
+// Jacobian and DataCost (with its PSNR) equal those of a pass at z = 0 up to float
+// rounding, with masked pixels, a fractional weight, thinning and a robust loss.
+TEST(LatentProblem, TheStartPassGivesTheResidualsJacobianAndCostAtZero) {
+  const SensorTrunk trunk = Trunk();
+  TrunkTargets targets = testing_util::MakeTargets(trunk, kTrue, 0.05, 3);
+  targets.weights[4] = 0;
+  targets.weights[9] = 0.3f;
+  const StartPass pass(trunk, kRows, kCols);
+  ASSERT_EQ(pass.jacobian.rows(), 4);
+  ASSERT_EQ(pass.jacobian.cols(), kRows * kCols * trunk.siren.output_channels());
+  const VectorXd zero = VectorXd::Zero(4);
+  for (const auto loss : {LatentProblem::RobustLoss::kNone, LatentProblem::RobustLoss::kCauchy}) {
+    for (const int stride : {1, 2}) {
+      SCOPED_TRACE(std::string(ToString(loss)) + " stride " + std::to_string(stride));
+      LatentProblem::Options options;
+      options.robust_loss = loss;
+      options.pixel_stride = stride;
+      const LatentProblem problem(trunk, targets, options);
+      ASSERT_TRUE(problem.CanUse(pass));
+      const int n = problem.num_residuals();
+      VectorXd r(n), r0(n);
+      RowMajor J(n, 4), J0(n, 4);
+      ASSERT_TRUE(problem.ResidualsAndJacobian(zero.data(), r.data(), J.data()));
+      ASSERT_TRUE(problem.ResidualsAndJacobianAtStart(pass, r0.data(), J0.data()));
+      EXPECT_LE((r0 - r).cwiseAbs().maxCoeff(), 1e-5 * r.cwiseAbs().maxCoeff());
+      EXPECT_LE((J0 - J).cwiseAbs().maxCoeff(), 1e-5 * J.cwiseAbs().maxCoeff());
+      std::optional<double> psnr, psnr0;
+      const double cost = problem.DataCost(zero, &psnr);
+      const double cost0 = problem.DataCostAtStart(pass, &psnr0);
+      EXPECT_NEAR(cost0, cost, 1e-5 * cost);
+      ASSERT_EQ(psnr0.has_value(), psnr.has_value());
+      if (psnr) EXPECT_NEAR(*psnr0, *psnr, 1e-4);
+    }
+  }
+}
+
+TEST(LatentProblem, AStartPassOfAnotherSizeTrunkOrPrecisionIsNotUsed) {
+  const SensorTrunk trunk = Trunk(), other = Trunk();
+  const TrunkTargets targets = testing_util::MakeTargets(trunk, kTrue, 0.0, 1);
+  const LatentProblem problem(trunk, targets, {});
+  EXPECT_TRUE(problem.CanUse(StartPass(trunk, kRows, kCols)));
+  EXPECT_FALSE(problem.CanUse(StartPass(trunk, kRows + 1, kCols)));
+  EXPECT_FALSE(problem.CanUse(StartPass(other, kRows, kCols)));
+  EXPECT_FALSE(LatentProblem(trunk, targets, DoubleOptions()).CanUse(StartPass(trunk, kRows, kCols)));
+  EXPECT_THROW(StartPass(trunk, 0, kCols), std::invalid_argument);
+}
+
 TEST(LatentProblem, GradientMatchesCentralDifferencesWithAndWithoutRobustLoss) {
   const SensorTrunk trunk = Trunk();
   TrunkTargets targets = testing_util::MakeTargets(trunk, kTrue, 0.05, 1);
