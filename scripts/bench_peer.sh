@@ -150,7 +150,7 @@ out, rounds, sizes = sys.argv[1], int(sys.argv[2]), sys.argv[3].split(",")
 def load(name):
     with open(f"{out}/{name}.json") as f:
         return json.loads(f.read().strip().splitlines()[-1])
-rows, blas, torch_version, summary = [], set(), "", []
+rows, blas, torch_version, summary, fixed = [], set(), "", [], []
 print()
 print("| trunk | workload | tactfunc ms (median of rounds) | PyTorch ms | PyTorch / tactfunc, median | range | GEMM GFLOP tactfunc | GEMM GFLOP PyTorch (profiled) |")
 print("|---|---|---:|---:|---:|---|---:|---:|")
@@ -170,6 +170,9 @@ for size in sizes:
         for k, (a, b) in pairs.items():
             per[k].append(b / a)
             times[k][0].append(a); times[k][1].append(b)
+        # tactfunc's fixed costs: its whole fit over the steps as that fit runs them.
+        fixed.append((size, tf["fit"]["full_ms_median"] / tf["fit"]["fit_steps_ms_median"] - 1,
+                      tf["fit"]["start_pass_ms"]))
         tf_flops = {"fit core": tf["fit"]["core_gemm_gflop"], "full fit": tf["fit"]["full_gemm_gflop"],
                     "meta step": tfm["meta_step"]["gemm_gflop"]}
     pt_flops = {"fit core": flops["profiled_fit_core_gemm_gflop"],
@@ -186,6 +189,15 @@ for size in sizes:
                         "pytorch_ms_median": statistics.median(times[k][1]),
                         "tactfunc_gemm_gflop": tf_flops[k], "pytorch_gemm_gflop": pt_flops[k]})
 print()
+print("fit core: the K steps, each a full trunk pass in both programs; full fit: everything a fit does,")
+print("tactfunc's first step from its pass at z = 0 (outputs and latent Jacobian, frame-independent,")
+print("made once per frame size; not in the fit's time, like the peer's model set-up)")
+for size in sizes:
+    shares = [f for s2, f, _ in fixed if s2 == size]
+    passes = [p for s2, _, p in fixed if s2 == size]
+    print(f"tactfunc {size}: fixed costs (whole fit over its steps, minus one) "
+          f"{100 * statistics.median(shares):.0f} % ({100 * min(shares):.0f}-{100 * max(shares):.0f}); "
+          f"the pass at z = 0 {statistics.median(passes):.3g} ms once")
 print(f"PyTorch {torch_version}; BLAS mapped by the PyTorch process: {', '.join(sorted(blas)) or 'none found'}")
 print(f"rounds: {rounds}; ratio = PyTorch time / tactfunc time per round (each time a median over its run's repeats)")
 print(json.dumps({"bench": "peer", "torch": torch_version, "blas": sorted(blas), "rounds": rounds,

@@ -354,18 +354,22 @@ LatentFitter::Summary LatentFitter::FitImpl(const LatentProblem& problem,
 
   // The Ceres stage's data residuals: U as Ceres sees it (the robust loss is inside the
   // data residuals, LatentProblem).
-  // A Ceres fit from z = 0 takes its start from the trunk's pass at z = 0 (StartPass).
+  // A fit from z = 0 takes its start from the trunk's pass at z = 0 (StartPass): a Ceres
+  // fit its start's cost and first Jacobian, meta-SGD steps (alone, or as the knn query)
+  // their first step.
   const StartPass* start_pass =
-      initial == nullptr && !options_.strategy.knn &&
-              options_.strategy.refinement == FitStrategy::Refinement::kCeres &&
-              options_.jacobian == JacobianMode::kAnalytic && z.isZero(0.0)
+      initial == nullptr && options_.jacobian == JacobianMode::kAnalytic && z.isZero(0.0)
           ? StartPassFor(problem)
+          : nullptr;
+  const StartPass* ceres_start_pass =
+      !options_.strategy.knn && options_.strategy.refinement == FitStrategy::Refinement::kCeres
+          ? start_pass
           : nullptr;
   std::unique_ptr<ceres::CostFunction> data_cost;
   if (options_.jacobian == JacobianMode::kAutoDiff) {
     data_cost = MakeAutoDiffLatentCost(&problem);
   } else {
-    data_cost = std::make_unique<AnalyticLatentCost>(&problem, start_pass);
+    data_cost = std::make_unique<AnalyticLatentCost>(&problem, ceres_start_pass);
   }
   LatentPriorCost prior_cost(d, problem.sigma_z());
   // U at a latent and, when the problem covers the whole frame, its PSNR from the same
@@ -392,11 +396,11 @@ LatentFitter::Summary LatentFitter::FitImpl(const LatentProblem& problem,
     summary.stages.push_back(Stage{"start", 0, MsSince(start_time), 0});
     meta_sgd_began = Clock::now();
     double data_cost = 0;
-    meta_sgd_latent = problem.MetaSgdSteps(z, steps, &data_cost, &psnr);
+    meta_sgd_latent = problem.MetaSgdSteps(z, steps, &data_cost, &psnr, start_pass);
     cost = data_cost + HalfSquaredNorm(prior_cost, z.data());
     summary.stages.back().cost = cost;
-  } else if (start_pass != nullptr) {
-    cost = problem.DataCostAtStart(*start_pass, &psnr);  // the prior is 0 at z = 0
+  } else if (ceres_start_pass != nullptr) {
+    cost = problem.DataCostAtStart(*ceres_start_pass, &psnr);  // the prior is 0 at z = 0
     add_stage("start", cost, start_time, 0);
   } else {
     cost = objective(z, &psnr);
@@ -432,7 +436,8 @@ LatentFitter::Summary LatentFitter::FitImpl(const LatentProblem& problem,
     Eigen::VectorXd query =
         initial != nullptr
             ? *initial
-            : problem.MetaSgdSteps(problem.StartLatent(), problem.trunk().meta_sgd.inner_steps);
+            : problem.MetaSgdSteps(z, problem.trunk().meta_sgd.inner_steps, nullptr, nullptr,
+                                   start_pass);
     if (!query.allFinite()) query.setZero();
     const Eigen::VectorXf query_float = query.cast<float>();
     const int k = options_.knn_k;

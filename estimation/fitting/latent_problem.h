@@ -182,8 +182,12 @@ class LatentProblem {
   // and the robust loss do not enter. If start_cost is not null it receives DataCost(z0)
   // and *start_psnr (not null then) its PSNR as DataCost gives it, both from the first
   // step's own forward pass (no extra pass).
+  // With `start` (CanUse(*start)) and z0 = 0, the first step's outputs and gradient come
+  // from the pass at z = 0 (the gradient is J_0 times the weighted residuals, one
+  // matrix-vector product) instead of a trunk pass; the other steps run as usual.
   Eigen::VectorXd MetaSgdSteps(const Eigen::VectorXd& z0, int steps, double* start_cost = nullptr,
-                               std::optional<double>* start_psnr = nullptr) const;
+                               std::optional<double>* start_psnr = nullptr,
+                               const StartPass* start = nullptr) const;
 
   // Where every fit of this frame starts without a warm start: the trunk's StartLatent
   // over the selected pixels (z = 0, or the readout branch's projection;

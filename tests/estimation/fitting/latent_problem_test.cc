@@ -195,6 +195,37 @@ TEST(LatentProblem, TheStartPassGivesTheResidualsJacobianAndCostAtZero) {
   }
 }
 
+TEST(LatentProblem, MetaSgdStepsThroughTheStartPassAreTheTrunksSteps) {
+  SensorTrunk trunk = Trunk();
+  trunk.meta_sgd.latent_l2_weight = 0.01;  // its gradient is 0 at z = 0, not later
+  TrunkTargets targets = testing_util::MakeTargets(trunk, kTrue, 0.05, 4);
+  targets.weights[3] = 0;
+  targets.weights[8] = 0.5f;
+  const StartPass pass(trunk, kRows, kCols);
+  for (const int stride : {1, 2}) {
+    SCOPED_TRACE(stride);
+    LatentProblem::Options options;
+    options.pixel_stride = stride;
+    const LatentProblem problem(trunk, targets, options);
+    const VectorXd zero = VectorXd::Zero(4);
+    for (const int steps : {1, 3}) {
+      double cost = 0, cost_pass = 0;
+      std::optional<double> psnr, psnr_pass;
+      const VectorXd z = problem.MetaSgdSteps(zero, steps, &cost, &psnr);
+      const VectorXd z_pass = problem.MetaSgdSteps(zero, steps, &cost_pass, &psnr_pass, &pass);
+      EXPECT_LE((z_pass - z).norm(), 1e-5 * z.norm()) << steps;
+      EXPECT_GT(z.norm(), 0.0);
+      EXPECT_NEAR(cost_pass, cost, 1e-5 * cost);
+      ASSERT_EQ(psnr_pass.has_value(), psnr.has_value());
+      if (psnr) EXPECT_NEAR(*psnr_pass, *psnr, 1e-4);
+    }
+    // Away from z = 0 the pass is not used: the same steps exactly.
+    const VectorXd start = 0.1 * VectorXd::Ones(4);
+    EXPECT_EQ(problem.MetaSgdSteps(start, 2, nullptr, nullptr, &pass),
+              problem.MetaSgdSteps(start, 2));
+  }
+}
+
 TEST(LatentProblem, AStartPassOfAnotherSizeTrunkOrPrecisionIsNotUsed) {
   const SensorTrunk trunk = Trunk(), other = Trunk();
   const TrunkTargets targets = testing_util::MakeTargets(trunk, kTrue, 0.0, 1);
