@@ -26,6 +26,7 @@
 #include "estimation/knn/knn_index.h"
 #include "gtest/gtest.h"
 #include "models/trunk/meta_sgd.h"
+#include "tests/support/uniform_numbers.h"
 
 namespace tactfunc {
 namespace {
@@ -38,16 +39,7 @@ using Fitter = LatentFitter;
 
 constexpr int kRows = 16, kCols = 20;
 
-// Deterministic numbers in [-1, 1].
-MatrixXd Uniform(int rows, int cols, unsigned seed) {
-  MatrixXd m(rows, cols);
-  unsigned state = seed * 2654435761u + 12345u;
-  for (int i = 0; i < m.size(); ++i) {
-    state = state * 1664525u + 1013904223u;
-    m.data()[i] = 2.0 * (state >> 8) / double(1u << 24) - 1.0;
-  }
-  return m;
-}
+using testing_util::Uniform;  // deterministic numbers in [-1, 1)
 
 SensorTrunk MakeTrunk(int channels = 1, int width = 32, int latent_dim = 8, unsigned seed = 1) {
   LatentModulatedSiren::Options options;
@@ -387,7 +379,8 @@ TEST_F(LatentFitterCostTest, SquareRootAndPerPixelResidualsGiveTheSameFit) {
   // float: Ceres must take the same steps on U's d + 1 square-root residuals as on its
   // N C + d residuals.
   for (const auto loss : {LatentProblem::RobustLoss::kNone, LatentProblem::RobustLoss::kHuber}) {
-    for (const auto precision : {LatentProblem::Precision::kDouble, LatentProblem::Precision::kFloat}) {
+    for (const auto precision :
+         {LatentProblem::Precision::kDouble, LatentProblem::Precision::kFloat}) {
       SCOPED_TRACE(std::string(ToString(loss)) + " " + ToString(precision));
       const LatentProblem problem = Problem(precision, loss);
       Fitter::Options options = CeresOptions(20);
@@ -435,7 +428,8 @@ TEST_F(LatentFitterCostTest, AFitFromZeroThroughTheStartPassIsTheFitFromAZeroWar
 }
 
 TEST_F(LatentFitterCostTest, TheFitHandsOutTheGaussNewtonHessianAtItsResult) {
-  for (const auto precision : {LatentProblem::Precision::kDouble, LatentProblem::Precision::kFloat}) {
+  for (const auto precision :
+       {LatentProblem::Precision::kDouble, LatentProblem::Precision::kFloat}) {
     SCOPED_TRACE(ToString(precision));
     const LatentProblem problem = Problem(precision);
     VectorXd z;
@@ -490,7 +484,8 @@ TEST(LatentFitter, AMetaSgdFitReportsTheCostsAndPsnrOfSeparatePasses) {
   Fitter::Options options;
   options.strategy = FitStrategy::FromString("meta_sgd:3");
   for (const int max_pixels : {0, 100}) {
-    for (const auto precision : {LatentProblem::Precision::kFloat, LatentProblem::Precision::kDouble}) {
+    for (const auto precision :
+         {LatentProblem::Precision::kFloat, LatentProblem::Precision::kDouble}) {
       LatentProblem::Options problem_options;
       problem_options.precision = precision;
       problem_options.max_pixels = max_pixels;

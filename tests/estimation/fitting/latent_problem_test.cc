@@ -233,7 +233,8 @@ TEST(LatentProblem, AStartPassOfAnotherSizeTrunkOrPrecisionIsNotUsed) {
   EXPECT_TRUE(problem.CanUse(StartPass(trunk, kRows, kCols)));
   EXPECT_FALSE(problem.CanUse(StartPass(trunk, kRows + 1, kCols)));
   EXPECT_FALSE(problem.CanUse(StartPass(other, kRows, kCols)));
-  EXPECT_FALSE(LatentProblem(trunk, targets, DoubleOptions()).CanUse(StartPass(trunk, kRows, kCols)));
+  EXPECT_FALSE(
+      LatentProblem(trunk, targets, DoubleOptions()).CanUse(StartPass(trunk, kRows, kCols)));
   EXPECT_THROW(StartPass(trunk, 0, kCols), std::invalid_argument);
 }
 

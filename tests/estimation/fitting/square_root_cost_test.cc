@@ -15,6 +15,7 @@
 #include "ceres/sized_cost_function.h"
 #include "ceres/solver.h"
 #include "gtest/gtest.h"
+#include "tests/support/uniform_numbers.h"
 
 namespace tactfunc {
 namespace {
@@ -22,16 +23,7 @@ namespace {
 using Eigen::MatrixXd;
 using Eigen::VectorXd;
 using RowMajor = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
-
-MatrixXd Numbers(int rows, int cols, unsigned seed) {
-  MatrixXd m(rows, cols);
-  unsigned state = seed * 2654435761u + 7u;
-  for (int i = 0; i < m.size(); ++i) {
-    state = state * 1664525u + 1013904223u;
-    m.data()[i] = 2.0 * (state >> 8) / double(1u << 24) - 1.0;
-  }
-  return m;
-}
+using testing_util::Uniform;  // deterministic numbers in [-1, 1)
 
 // r(x) = tanh(A x) - y: smooth, nonlinear, with the Jacobian's rank that of A.
 class TanhResiduals : public ceres::CostFunction {
@@ -97,11 +89,11 @@ void ExpectSameTerm(const ceres::CostFunction& source, double precision, const V
 }
 
 TEST(SquareRootCost, KeepsCostGradientAndGaussNewtonMatrixOfAFullRankTerm) {
-  const TanhResiduals source(0.7 * Numbers(300, 6, 1), 0.5 * Numbers(300, 1, 2));
+  const TanhResiduals source(0.7 * Uniform(300, 6, 1), 0.5 * Uniform(300, 1, 2));
   for (double precision : {0.0, 0.3, 10.0}) {
     for (unsigned seed : {3u, 4u}) {
       SCOPED_TRACE(precision);
-      ExpectSameTerm(source, precision, Numbers(6, 1, seed));
+      ExpectSameTerm(source, precision, Uniform(6, 1, seed));
     }
   }
 }
@@ -109,18 +101,18 @@ TEST(SquareRootCost, KeepsCostGradientAndGaussNewtonMatrixOfAFullRankTerm) {
 TEST(SquareRootCost, KeepsThemWhenTheJacobianIsRankDeficient) {
   // A of rank 3 in 6 columns and no prior: J^T J is singular, Cholesky fails, and the
   // eigen square root must still reproduce cost, gradient and J^T J.
-  const MatrixXd a = Numbers(200, 3, 5) * Numbers(3, 6, 6);
-  const TanhResiduals source(0.3 * a, 0.5 * Numbers(200, 1, 7));
-  ExpectSameTerm(source, 0.0, Numbers(6, 1, 8));
+  const MatrixXd a = Uniform(200, 3, 5) * Uniform(3, 6, 6);
+  const TanhResiduals source(0.3 * a, 0.5 * Uniform(200, 1, 7));
+  ExpectSameTerm(source, 0.0, Uniform(6, 1, 8));
   // Exactly zero Jacobian (x in the flat part): all the cost in the remainder.
-  const TanhResiduals flat(MatrixXd::Zero(50, 4), Numbers(50, 1, 9));
-  ExpectSameTerm(flat, 0.0, Numbers(4, 1, 10));
+  const TanhResiduals flat(MatrixXd::Zero(50, 4), Uniform(50, 1, 9));
+  ExpectSameTerm(flat, 0.0, Uniform(4, 1, 10));
 }
 
 TEST(SquareRootCost, CeresTakesTheSameStepsAsOnTheSourceResiduals) {
   // Targets from a true x plus noise, so that the minimum is far below the start.
-  const MatrixXd a = 0.8 * Numbers(400, 5, 11);
-  const VectorXd y = (a * Numbers(5, 1, 13)).array().tanh().matrix() + 0.05 * Numbers(400, 1, 12);
+  const MatrixXd a = 0.8 * Uniform(400, 5, 11);
+  const VectorXd y = (a * Uniform(5, 1, 13)).array().tanh().matrix() + 0.05 * Uniform(400, 1, 12);
   const TanhResiduals source(a, y);
   const double precision = 0.5;
   auto solve = [&](bool square_root, VectorXd* x) {
@@ -172,14 +164,14 @@ TEST(SquareRootCost, RefusesSeveralParameterBlocksAndABadPriorPrecision) {
     bool Evaluate(double const* const*, double*, double**) const override { return true; }
   } two;
   EXPECT_THROW(SquareRootCost(&two, 0.0), std::invalid_argument);
-  const TanhResiduals source(Numbers(4, 2, 1), Numbers(4, 1, 2));
+  const TanhResiduals source(Uniform(4, 2, 1), Uniform(4, 1, 2));
   EXPECT_THROW(SquareRootCost(&source, -1.0), std::invalid_argument);
   EXPECT_THROW(SquareRootCost(&source, std::nan("")), std::invalid_argument);
   EXPECT_THROW(SquareRootCost(nullptr, 1.0), std::invalid_argument);
 }
 
 TEST(SquareRootCost, ANonFiniteSourceIsRejected) {
-  const TanhResiduals source(Numbers(10, 2, 1), Numbers(10, 1, 2));
+  const TanhResiduals source(Uniform(10, 2, 1), Uniform(10, 1, 2));
   const SquareRootCost cost(&source, 1.0);
   const VectorXd x = VectorXd::Constant(2, std::nan(""));
   VectorXd residuals(3);

@@ -28,6 +28,7 @@
 #include "ceres/jet.h"
 #include "gtest/gtest.h"
 #include "models/trunk/internal/fast_sincos.h"
+#include "tests/support/uniform_numbers.h"
 
 namespace tactfunc {
 namespace {
@@ -100,16 +101,7 @@ std::string Describe(const Siren::Options& o) {
          (o.has_readout() ? " readout" : "");
 }
 
-// Deterministic pseudo-random numbers in [-1, 1] (Eigen's Random uses rand()).
-MatrixXd Uniform(int rows, int cols, unsigned seed) {
-  MatrixXd m(rows, cols);
-  unsigned state = seed * 2654435761u + 12345u;
-  for (int i = 0; i < m.size(); ++i) {
-    state = state * 1664525u + 1013904223u;
-    m.data()[i] = 2.0 * (state >> 8) / double(1u << 24) - 1.0;
-  }
-  return m;
-}
+using testing_util::Uniform;  // deterministic numbers in [-1, 1)
 
 // A trunk whose c and every other block are generic (c = 0 at initialisation would
 // hide mistakes in dL/dc-dependent terms).

@@ -13,6 +13,7 @@
 
 #include "gtest/gtest.h"
 #include "models/trunk/latent_modulated_siren.h"
+#include "tests/support/uniform_numbers.h"
 
 namespace tactfunc {
 namespace {
@@ -23,15 +24,7 @@ using Eigen::MatrixXf;
 using Eigen::VectorXd;
 using Eigen::VectorXf;
 
-MatrixXd Uniform(int rows, int cols, unsigned seed) {
-  MatrixXd m(rows, cols);
-  unsigned state = seed * 2654435761u + 12345u;
-  for (int i = 0; i < m.size(); ++i) {
-    state = state * 1664525u + 1013904223u;
-    m.data()[i] = 2.0 * (state >> 8) / double(1u << 24) - 1.0;
-  }
-  return m;
-}
+using testing_util::Uniform;  // deterministic numbers in [-1, 1)
 
 Siren SmallSiren(int layers, unsigned seed) {
   Siren::Options options;
