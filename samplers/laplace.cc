@@ -136,6 +136,15 @@ LaplaceSampler::Summary LaplaceSampler::SampleWithHessian(const Eigen::VectorXd&
   return FromHessian(start, hessian, std::move(summary), samples);
 }
 
+LaplaceSampler::Summary LaplaceSampler::SampleAtFit(const LatentPotential& potential,
+                                                    const LatentFitter::Summary& fit,
+                                                    const Eigen::VectorXd& mode,
+                                                    Eigen::MatrixXd* samples) const {
+  return fit.gauss_newton_hessian.size() > 0
+             ? SampleWithHessian(mode, fit.final_cost, fit.gauss_newton_hessian, samples)
+             : Sample(potential, mode, samples);
+}
+
 LaplaceSampler::Summary LaplaceSampler::FromHessian(
     std::chrono::steady_clock::time_point start, const Eigen::MatrixXd& hessian,
     Summary summary, Eigen::MatrixXd* samples) const {
@@ -218,10 +227,7 @@ LaplaceSampler::Summary LaplaceSampler::Sample(const LatentProblem& problem,
     summary.total_time_ms = MsSince(start);
     return summary;
   }
-  // The fit's own H_GN at the mode when it formed one (LatentFitter::Summary).
-  Summary summary = fit.gauss_newton_hessian.size() > 0
-                        ? SampleWithHessian(mode, fit.final_cost, fit.gauss_newton_hessian, samples)
-                        : Sample(potential, mode, samples);
+  Summary summary = SampleAtFit(potential, fit, mode, samples);
   summary.fit_ran = true;
   summary.fit_summary = std::move(fit);
   summary.fit_time_ms = fit_ms;

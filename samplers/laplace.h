@@ -95,6 +95,10 @@ class LaplaceSampler {
   // that is not square and non-empty, or a mode of another size or not finite.
   Summary SampleWithHessian(const Eigen::VectorXd& mode, double potential_at_mode,
                             const Eigen::MatrixXd& hessian, Eigen::MatrixXd* samples) const;
+  // At the result `mode` of a fit whose summary is `fit`: SampleWithHessian with the fit's
+  // final cost and Gauss-Newton Hessian when it formed one, else Sample(potential, ...).
+  Summary SampleAtFit(const LatentPotential& potential, const LatentFitter::Summary& fit,
+                      const Eigen::VectorXd& mode, Eigen::MatrixXd* samples) const;
   // The same for a frame's LatentProblem at the mode `fitter` finds for it (so the
   // Gaussian is centred at U's mode by construction), with the fit's H_GN when it has one.
   Summary Sample(const LatentProblem& problem, const LatentFitter& fitter,

@@ -244,15 +244,24 @@ LatentFitter::LatentFitter(const SensorTrunk& trunk, const Options& options)
     : LatentFitter(trunk, options, nullptr, nullptr) {}
 
 struct LatentFitter::StartPasses {
-  // A handful of frame sizes per trunk at most; beyond that fits evaluate as usual.
+  // A handful of frame sizes per trunk at most, each at most 2^24 Jacobian values (64 MB;
+  // the 70 x 88 Soft Bubble at d = 64 needs 0.39 M); beyond that fits evaluate as usual.
   static constexpr std::size_t kMaxSizes = 4;
+  static constexpr long kMaxJacobianValues = 1L << 24;
   std::mutex mutex;
   std::vector<std::unique_ptr<const StartPass>> passes;
 };
 
 const StartPass* LatentFitter::StartPassFor(const LatentProblem& problem) const {
-  if (!StartPass::Applies(problem.trunk()) ||
+  // Only the fitter's own trunk, which outlives it unchanged: a pass of another trunk
+  // object could outlive that object.
+  if (&problem.trunk() != trunk_ || !StartPass::Applies(problem.trunk()) ||
       problem.options().precision != LatentProblem::Precision::kFloat) {
+    return nullptr;
+  }
+  if (static_cast<long>(problem.targets().rows) * problem.targets().cols * problem.channels() *
+          problem.dim() >
+      StartPasses::kMaxJacobianValues) {
     return nullptr;
   }
   const std::lock_guard<std::mutex> lock(start_passes_->mutex);
@@ -352,8 +361,6 @@ LatentFitter::Summary LatentFitter::FitImpl(const LatentProblem& problem,
     return summary;
   }
 
-  // The Ceres stage's data residuals: U as Ceres sees it (the robust loss is inside the
-  // data residuals, LatentProblem).
   // A fit from z = 0 takes its start from the trunk's pass at z = 0 (StartPass): a Ceres
   // fit its start's cost and first Jacobian, meta-SGD steps (alone, or as the knn query)
   // their first step.
@@ -365,6 +372,8 @@ LatentFitter::Summary LatentFitter::FitImpl(const LatentProblem& problem,
       !options_.strategy.knn && options_.strategy.refinement == FitStrategy::Refinement::kCeres
           ? start_pass
           : nullptr;
+  // The Ceres stage's data residuals: U as Ceres sees it (the robust loss is inside the
+  // data residuals, LatentProblem).
   std::unique_ptr<ceres::CostFunction> data_cost;
   if (options_.jacobian == JacobianMode::kAutoDiff) {
     data_cost = MakeAutoDiffLatentCost(&problem);

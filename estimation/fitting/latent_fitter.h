@@ -197,7 +197,8 @@ class LatentFitter {
     std::string FullReport() const;
   };
 
-  // `trunk` must outlive the fitter. Throws std::invalid_argument if !options.IsValid or
+  // `trunk` must outlive the fitter and not change while it lives (the fitter keeps its
+  // passes at z = 0). Throws std::invalid_argument if !options.IsValid or
   // the strategy needs k-NN (use the other constructor).
   LatentFitter(const SensorTrunk& trunk, const Options& options);
   // For knn strategies: `index` over the functaset latents (dim() == latent_dim) and

@@ -602,13 +602,13 @@ double LatentProblem::DataCost(const Eigen::VectorXd& z, std::optional<double>* 
   const LatentModulatedSiren& siren = trunk_->siren;
   if (options_.precision == Precision::kFloat) {
     return DataCostOfOutputs(siren.Forward<float>(coords_float_, z.cast<float>()).cast<double>(),
-                         psnr);
+                             psnr);
   }
   return DataCostOfOutputs(siren.Forward<double>(coords_, z), psnr);
 }
 
 double LatentProblem::DataCostOfOutputs(const Eigen::MatrixXd& outputs,
-                                    std::optional<double>* psnr) const {
+                                        std::optional<double>* psnr) const {
   const int c_count = channels();
   const long n = num_pixels();
   Eigen::VectorXd residuals(n * c_count);

@@ -297,12 +297,11 @@ PosePosterior::Summary PosePosterior::EstimateImpl(const TrunkTargets& targets,
       laplace_options.seed = options_.seed;
       laplace_options.num_samples = options_.num_samples;
       const LaplaceSampler laplace(laplace_options);
-      // The fit's own H_GN at z0 when it formed one (LatentFitter::Summary): no pass.
-      const LatentFitter::Summary& fit = summary.fit_summary;
-      summary.laplace_summary =
-          summary.fit_ran && fit.gauss_newton_hessian.size() > 0
-              ? laplace.SampleWithHessian(z0, fit.final_cost, fit.gauss_newton_hessian, &z_samples)
-              : laplace.Sample(*potential, z0, &z_samples);
+      // At a fit's result, the Hessian the fit formed there (no pass of its own).
+      summary.laplace_summary = summary.fit_ran
+                                    ? laplace.SampleAtFit(*potential, summary.fit_summary, z0,
+                                                          &z_samples)
+                                    : laplace.Sample(*potential, z0, &z_samples);
       summary.sample_time_ms = MsSince(t);
       if (!summary.laplace_summary.IsSolutionUsable()) {
         return fail("Laplace: " + summary.laplace_summary.message);

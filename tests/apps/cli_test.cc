@@ -171,10 +171,15 @@ TEST_F(CliTest, BenchTrunkTimesTheFitAndTheMetaStepAndCountsTheirFlops) {
   const nlohmann::json& fit = j["fit"];
   EXPECT_EQ(fit["pixels"], 42);
   EXPECT_NEAR(fit["core_gemm_gflop"].get<double>(), 2.0 * 2 * 42 * 160 / 1e9, 1e-15);
-  // The whole fit adds one forward pass (88) at z_K: the start's cost comes from the
-  // first step's pass.
-  EXPECT_NEAR(fit["full_gemm_gflop"].get<double>(), (2.0 * 2 * 42 * 160 + 2.0 * 42 * 88) / 1e9,
+  // The fit runs its first step from the pass at z = 0 (one d x n product: 4 x 42) and
+  // the other K - 1 in full; the whole fit adds one forward pass (88) at z_K (the start's
+  // cost comes from the pass).
+  EXPECT_NEAR(fit["fit_steps_gemm_gflop"].get<double>(), (2.0 * 42 * 160 + 2.0 * 4 * 42) / 1e9,
               1e-15);
+  EXPECT_NEAR(fit["full_gemm_gflop"].get<double>(),
+              (2.0 * 42 * 160 + 2.0 * 4 * 42 + 2.0 * 42 * 88) / 1e9, 1e-15);
+  EXPECT_GT(fit["start_pass_ms"].get<double>(), 0.0);
+  EXPECT_EQ(fit["fit_steps_ms"].size(), 2u);
   EXPECT_EQ(fit["core_ms"].size(), 2u);
   EXPECT_EQ(fit["full_ms"].size(), 2u);
   EXPECT_LE(fit["full_ms_min"].get<double>(), fit["full_ms_median"].get<double>());
