@@ -538,12 +538,15 @@ TEST(LatentFitter, SubsamplingUsesTheRequestedPixels) {
   EXPECT_EQ(summary.num_pixels_used, 100);
   EXPECT_EQ(summary.num_valid_pixels, kRows * kCols);
   EXPECT_GT(summary.psnr, 60.0) << summary.FullReport();  // PSNR over all pixels
-  // The fit's costs are over its 100 pixels; its PSNR over the whole frame.
+  // The fit's costs are over its 100 pixels; its PSNR over the whole frame. The closing
+  // cost may come from Ceres' last Jacobian pass, whose sines round differently from a
+  // forward pass's in the last float bit: at this exact fit the cost is itself rounding,
+  // so the bound is relative to the starting cost.
   const LatentProblem thinned(trunk, targets, problem);
   std::optional<double> no_psnr;
   const double data_cost = thinned.DataCost(z, &no_psnr);
   EXPECT_NEAR(summary.final_cost, data_cost + 0.5 * (z / 1e4).squaredNorm(),
-              1e-9 * summary.final_cost + 1e-300);
+              1e-12 * summary.initial_cost);
   EXPECT_EQ(summary.psnr, thinned.Psnr(z));
 }
 
