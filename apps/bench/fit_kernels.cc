@@ -22,6 +22,7 @@
 #include "ceres/problem.h"
 #include "ceres/solver.h"
 #include "estimation/fitting/latent_costs.h"
+#include "estimation/fitting/square_root_cost.h"
 #include "estimation/fitting/latent_fitter.h"
 #include "estimation/data/trunk_targets.h"
 #include "models/trunk/functa_model.h"
@@ -164,30 +165,42 @@ void RegisterKernelBenchmarks(const std::shared_ptr<KernelSetup>& s) {
       ->Repetitions(1);
   // A Ceres LM solve of exactly 1 and 3 iterations (tolerances 0), analytic float, from z
   // = 0: (t3 - t1) / 2 is the marginal cost of one LM iteration, reported as lm_iteration.
-  for (const int iterations : {1, 3}) {
-    benchmark::RegisterBenchmark(
-        (p + "lm_solve/float/iterations:" + std::to_string(iterations)).c_str(),
-        [s, d, iterations](benchmark::State& state) {
-          AnalyticLatentCost cost(s->problem_float.get());
-          LatentPriorCost prior(d, 1.0);
-          ceres::Solver::Options options = LatentFitter::Options().solver_options;
-          options.max_num_iterations = iterations;
-          options.function_tolerance = 0;
-          options.gradient_tolerance = 0;
-          options.parameter_tolerance = 0;
-          for (auto _ : state) {
-            Eigen::VectorXd z = Eigen::VectorXd::Zero(d);
-            ceres::Problem::Options po;
-            po.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
-            ceres::Problem problem(po);
-            problem.AddResidualBlock(&cost, nullptr, z.data());
-            problem.AddResidualBlock(&prior, nullptr, z.data());
-            ceres::Solver::Summary summary;
-            ceres::Solve(options, &problem, &summary);
-            benchmark::DoNotOptimize(z.data());
-          }
-        })
-        ->Unit(benchmark::kMillisecond);
+  // lm_solve hands Ceres the N C data and d prior residuals; lm_solve_square_root their
+  // square-root information form, d + 1 residuals (SquareRootCost), as LatentFitter does.
+  for (const bool square_root : {false, true}) {
+    for (const int iterations : {1, 3}) {
+      benchmark::RegisterBenchmark(
+          (p + (square_root ? "lm_solve_square_root" : "lm_solve") +
+           "/float/iterations:" + std::to_string(iterations))
+              .c_str(),
+          [s, d, iterations, square_root](benchmark::State& state) {
+            AnalyticLatentCost cost(s->problem_float.get());
+            LatentPriorCost prior(d, 1.0);
+            ceres::Solver::Options options = LatentFitter::Options().solver_options;
+            options.max_num_iterations = iterations;
+            options.function_tolerance = 0;
+            options.gradient_tolerance = 0;
+            options.parameter_tolerance = 0;
+            for (auto _ : state) {
+              Eigen::VectorXd z = Eigen::VectorXd::Zero(d);
+              ceres::Problem::Options po;
+              po.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+              ceres::Problem problem(po);
+              const SquareRootCost compressed(&cost, 1.0);
+              if (square_root) {
+                problem.AddResidualBlock(const_cast<SquareRootCost*>(&compressed), nullptr,
+                                         z.data());
+              } else {
+                problem.AddResidualBlock(&cost, nullptr, z.data());
+                problem.AddResidualBlock(&prior, nullptr, z.data());
+              }
+              ceres::Solver::Summary summary;
+              ceres::Solve(options, &problem, &summary);
+              benchmark::DoNotOptimize(z.data());
+            }
+          })
+          ->Unit(benchmark::kMillisecond);
+    }
   }
   benchmark::RegisterBenchmark((p + "meta_sgd_step/float").c_str(), [s,
                                                                      d](benchmark::State& state) {
@@ -284,16 +297,24 @@ void RunKernelBench(const KernelFlags& flags) {
     const BenchResult* jf = find(p + "forward_latent_jacobian_analytic/float");
     const BenchResult* jd = find(p + "forward_latent_jacobian_analytic/double");
     const BenchResult* ad = find(p + "jacobian_autodiff/double");
+    const BenchResult* one_sr = find(p + "lm_solve_square_root/float/iterations:1");
+    const BenchResult* three_sr = find(p + "lm_solve_square_root/float/iterations:3");
     nlohmann::json t;
     if (one != nullptr && three != nullptr)
       t["lm_iteration_ms"] = (three->real_ms - one->real_ms) / 2;
+    if (one_sr != nullptr && three_sr != nullptr)
+      t["lm_iteration_square_root_ms"] = (three_sr->real_ms - one_sr->real_ms) / 2;
     if (jf != nullptr && ad != nullptr)
       t["autodiff_over_analytic_float"] = ad->real_ms / jf->real_ms;
     if (jd != nullptr && ad != nullptr)
       t["autodiff_over_analytic_double"] = ad->real_ms / jd->real_ms;
     std::cout << "bench kernels: " << s->label << ": one LM iteration (marginal) "
               << (t.contains("lm_iteration_ms") ? Ms(t["lm_iteration_ms"].get<double>()) : "n/a")
-              << " ms; autodiff / analytic Jacobian "
+              << " ms (square-root form "
+              << (t.contains("lm_iteration_square_root_ms")
+                      ? Ms(t["lm_iteration_square_root_ms"].get<double>())
+                      : "n/a")
+              << " ms); autodiff / analytic Jacobian "
               << (t.contains("autodiff_over_analytic_float")
                       ? FormatFixed(t["autodiff_over_analytic_float"].get<double>(), 0)
                       : "n/a")
