@@ -186,10 +186,9 @@ void RegisterKernelBenchmarks(const std::shared_ptr<KernelSetup>& s) {
               ceres::Problem::Options po;
               po.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
               ceres::Problem problem(po);
-              const SquareRootCost compressed(&cost, 1.0);
+              SquareRootCost compressed(&cost, 1.0);
               if (square_root) {
-                problem.AddResidualBlock(const_cast<SquareRootCost*>(&compressed), nullptr,
-                                         z.data());
+                problem.AddResidualBlock(&compressed, nullptr, z.data());
               } else {
                 problem.AddResidualBlock(&cost, nullptr, z.data());
                 problem.AddResidualBlock(&prior, nullptr, z.data());

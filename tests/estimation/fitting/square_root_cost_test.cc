@@ -113,14 +113,14 @@ TEST(SquareRootCost, CeresTakesTheSameStepsAsOnTheSourceResiduals) {
   // Targets from a true x plus noise, so that the minimum is far below the start.
   const MatrixXd a = 0.8 * Uniform(400, 5, 11);
   const VectorXd y = (a * Uniform(5, 1, 13)).array().tanh().matrix() + 0.05 * Uniform(400, 1, 12);
-  const TanhResiduals source(a, y);
+  TanhResiduals source(a, y);
   const double precision = 0.5;
   auto solve = [&](bool square_root, VectorXd* x) {
     *x = VectorXd::Zero(5);
     ceres::Problem::Options options;
     options.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
     ceres::Problem problem(options);
-    const SquareRootCost compressed(&source, precision);
+    SquareRootCost compressed(&source, precision);
     // The prior as a linear block of its own for the source form: x * precision.
     class Prior : public ceres::SizedCostFunction<5, 5> {
      public:
@@ -138,9 +138,9 @@ TEST(SquareRootCost, CeresTakesTheSameStepsAsOnTheSourceResiduals) {
       double p_;
     } prior(precision);
     if (square_root) {
-      problem.AddResidualBlock(const_cast<SquareRootCost*>(&compressed), nullptr, x->data());
+      problem.AddResidualBlock(&compressed, nullptr, x->data());
     } else {
-      problem.AddResidualBlock(const_cast<TanhResiduals*>(&source), nullptr, x->data());
+      problem.AddResidualBlock(&source, nullptr, x->data());
       problem.AddResidualBlock(&prior, nullptr, x->data());
     }
     ceres::Solver::Options solver;
