@@ -22,8 +22,8 @@
 #include "ceres/problem.h"
 #include "ceres/solver.h"
 #include "estimation/fitting/latent_costs.h"
-#include "estimation/fitting/square_root_cost.h"
 #include "estimation/fitting/latent_fitter.h"
+#include "estimation/fitting/square_root_cost.h"
 #include "estimation/data/trunk_targets.h"
 #include "models/trunk/functa_model.h"
 #include "models/trunk/internal/fast_sincos.h"
@@ -176,6 +176,7 @@ void RegisterKernelBenchmarks(const std::shared_ptr<KernelSetup>& s) {
           [s, d, iterations, square_root](benchmark::State& state) {
             AnalyticLatentCost cost(s->problem_float.get());
             LatentPriorCost prior(d, 1.0);
+            SquareRootCost compressed(&cost, 1.0);
             ceres::Solver::Options options = LatentFitter::Options().solver_options;
             options.max_num_iterations = iterations;
             options.function_tolerance = 0;
@@ -186,7 +187,6 @@ void RegisterKernelBenchmarks(const std::shared_ptr<KernelSetup>& s) {
               ceres::Problem::Options po;
               po.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
               ceres::Problem problem(po);
-              SquareRootCost compressed(&cost, 1.0);
               if (square_root) {
                 problem.AddResidualBlock(&compressed, nullptr, z.data());
               } else {
