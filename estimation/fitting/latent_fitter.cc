@@ -375,10 +375,13 @@ LatentFitter::Summary LatentFitter::FitImpl(const LatentProblem& problem,
   // The Ceres stage's data residuals: U as Ceres sees it (the robust loss is inside the
   // data residuals, LatentProblem).
   std::unique_ptr<ceres::CostFunction> data_cost;
+  const AnalyticLatentCost* analytic = nullptr;  // data_cost when analytic
   if (options_.jacobian == JacobianMode::kAutoDiff) {
     data_cost = MakeAutoDiffLatentCost(&problem);
   } else {
-    data_cost = std::make_unique<AnalyticLatentCost>(&problem, ceres_start_pass);
+    auto cost = std::make_unique<AnalyticLatentCost>(&problem, ceres_start_pass);
+    analytic = cost.get();
+    data_cost = std::move(cost);
   }
   LatentPriorCost prior_cost(d, problem.sigma_z());
   // U at a latent and, when the problem covers the whole frame, its PSNR from the same
@@ -533,7 +536,6 @@ LatentFitter::Summary LatentFitter::FitImpl(const LatentProblem& problem,
     const double cost_before = cost;
     const std::optional<double> psnr_before = psnr;
     // The result's outputs from Ceres' last Jacobian evaluation there, if it was (analytic).
-    const auto* analytic = dynamic_cast<const AnalyticLatentCost*>(data_cost.get());
     if (accept(parameters, "ceres",
                analytic != nullptr ? analytic->OutputsAt(parameters.data()) : nullptr)) {
       // Ceres keeps the best point it accepted, so the cost cannot rise; if rounding in

@@ -513,20 +513,20 @@ Eigen::VectorXd LatentProblem::MetaSgdSteps(const Eigen::VectorXd& z0, int steps
                                             std::optional<double>* start_psnr,
                                             const StartPass* start) const {
   CheckLatent(z0, "MetaSgdSteps");
+  if (start_cost != nullptr && start_psnr == nullptr) {
+    throw std::invalid_argument("LatentProblem::MetaSgdSteps: start_psnr must not be null "
+                                "when start_cost is asked for");
+  }
   const MetaSgd meta_sgd(trunk_->meta_sgd);
   Eigen::VectorXd z;
   Eigen::MatrixXd outputs;
   if (start != nullptr && CanUse(*start) && steps >= 1 && z0.isZero(0.0)) {
     // The first step at z = 0: dL/dz = J_0 v with v_{j,c} = s w_j (y_{j,c} - t_{j,c}) on
-    // the selected pixels, s = 2 / (C sum w) -- the trunk's weighted MSE, as its reverse
-    // pass forms it (MseNormaliser, models/trunk/latent_modulated_siren.cc) -- and the
-    // latent penalty's gradient 2 lambda z = 0.
+    // the selected pixels, s = 2 / (C sum w) -- the trunk's weighted MSE, normalised as
+    // its own passes normalise it -- and the latent penalty's gradient 2 lambda z = 0.
     const int c_count = channels();
-    double weight_sum = 0;
-    for (long j = 0; j < num_pixels(); ++j) {
-      if (weights_float_[j] != 0.0f) weight_sum += weights_float_[j];
-    }
-    const float scale = weight_sum > 0 ? static_cast<float>(2.0 / (c_count * weight_sum)) : 0.0f;
+    float scale = 0;
+    LatentModulatedSiren::MseNormaliser<float>(weights_float_, num_pixels(), c_count, &scale);
     Eigen::VectorXf v = Eigen::VectorXf::Zero(start->jacobian.cols());
     if (scale != 0.0f) {
       for (long j = 0; j < num_pixels(); ++j) {
@@ -544,13 +544,7 @@ Eigen::VectorXd LatentProblem::MetaSgdSteps(const Eigen::VectorXd& z0, int steps
             .InnerLoop<float>(trunk_->siren, coords_float_, targets_float_, weights_float_,
                               trunk_->alpha.cast<float>(), z1, steps - 1)
             .cast<double>();
-    if (start_cost != nullptr) {
-      if (start_psnr == nullptr) {
-        throw std::invalid_argument("LatentProblem::MetaSgdSteps: start_psnr must not be null "
-                                    "when start_cost is asked for");
-      }
-      *start_cost = DataCostAtStart(*start, start_psnr);
-    }
+    if (start_cost != nullptr) *start_cost = DataCostAtStart(*start, start_psnr);
     return z;
   }
   if (options_.precision == Precision::kFloat) {
@@ -567,10 +561,6 @@ Eigen::VectorXd LatentProblem::MetaSgdSteps(const Eigen::VectorXd& z0, int steps
                                    start_cost != nullptr ? &outputs : nullptr);
   }
   if (start_cost != nullptr) {
-    if (start_psnr == nullptr) {
-      throw std::invalid_argument("LatentProblem::MetaSgdSteps: start_psnr must not be null "
-                                  "when start_cost is asked for");
-    }
     *start_cost = DataCostOfOutputs(outputs, start_psnr);
   }
   return z;

@@ -16,6 +16,27 @@
 #include "models/trunk/internal/fast_sincos.h"
 
 namespace tactfunc {
+
+template <typename Scalar>
+double LatentModulatedSiren::MseNormaliser(const VectorX<Scalar>& weights, long n, long channels,
+                                           Scalar* gradient_scale) {
+  double weight_sum = 0.0;
+  if (weights.size() == 0) {
+    weight_sum = static_cast<double>(n);
+  } else {
+    for (long j = 0; j < n; ++j) {
+      if (weights[j] != Scalar(0)) weight_sum += weights[j];
+    }
+  }
+  if (weight_sum <= 0.0) {
+    *gradient_scale = Scalar(0);
+    return 0.0;
+  }
+  const double normaliser = static_cast<double>(channels) * weight_sum;
+  *gradient_scale = static_cast<Scalar>(2.0 / normaliser);
+  return 1.0 / normaliser;
+}
+
 namespace {
 
 template <typename S>
@@ -388,29 +409,9 @@ void FinishReadoutGradient(const ReadoutMaps<S>& readout,
   if (dL_dz != nullptr) dL_dz->noalias() += readout.R * s;
 }
 
-// The weighted MSE's normaliser over ALL pixels: *scale = 2 / (C sum_j w_j) and the
-// returned 1 / (C sum_j w_j) (both 0 when sum_j w_j <= 0).
-template <typename S>
-double MseNormaliser(const VectorX<S>& weights, long n, long channels, S* scale) {
-  double weight_sum = 0.0;
-  if (weights.size() == 0) {
-    weight_sum = static_cast<double>(n);
-  } else {
-    for (long j = 0; j < n; ++j) {
-      if (weights[j] != S(0)) weight_sum += weights[j];
-    }
-  }
-  if (weight_sum <= 0.0) {
-    *scale = S(0);
-    return 0.0;
-  }
-  const double normaliser = static_cast<double>(channels) * weight_sum;
-  *scale = static_cast<S>(2.0 / normaliser);
-  return 1.0 / normaliser;
-}
-
 // One block's dL/dY^T (C x m) of the weighted MSE into G's first m columns, given the
-// global *scale of MseNormaliser; returns the block's sum_j w_j ||r_j||^2 (unnormalised).
+// global *scale of LatentModulatedSiren::MseNormaliser; returns the block's
+// sum_j w_j ||r_j||^2 (unnormalised).
 // w_j = 0 pixels get exactly 0, whatever their target (NaN included); so does every
 // pixel when scale = 0 (no valid pixel at all).
 template <typename S>
@@ -511,7 +512,7 @@ struct LossPass {
   VectorX<S>* const dL_dtheta;
   VectorX<S> gamma;  // the shifts every pixel shares (SharedShifts)
   VectorX<S> u;      // the readout's node values R^T z + m
-  S scale = 0;       // MseNormaliser's
+  S scale = 0;       // LatentModulatedSiren::MseNormaliser's
   double inverse_normaliser = 0;
   double loss = 0;   // sum_j w_j ||r_j||^2 so far
   VectorX<S> dgamma, scatter;
@@ -522,7 +523,7 @@ struct LossPass {
       : context(c), reverse(reverse_pass), dL_dtheta(theta_gradient) {
     gamma = SharedShifts(c.net, z, c.spatial.get());
     if (c.readout) u = c.readout->R.transpose() * z + c.readout->m;
-    inverse_normaliser = MseNormaliser(weights, n, c.channels, &scale);
+    inverse_normaliser = LatentModulatedSiren::MseNormaliser(weights, n, c.channels, &scale);
     if (dL_dtheta != nullptr) dL_dtheta->setZero(c.siren.NumParameters());
     if (!reverse) return;
     dgamma.setZero(c.num_layers * c.width);
@@ -1624,6 +1625,8 @@ LatentModulatedSiren::VectorX<Scalar> LatentModulatedSiren::StartLatent(
   template void LatentModulatedSiren::Backward<S>(                                       \
       const ForwardRecord<S>&, const MatrixX<S>&, VectorX<S>*, VectorX<S>*,              \
       WeightGradients) const;                                                            \
+  template double LatentModulatedSiren::MseNormaliser<S>(const VectorX<S>&, long, long,  \
+                                                        S*);                           \
   template void LatentModulatedSiren::ForwardAndLatentJacobian<S>(                       \
       const MatrixX<S>&, const VectorX<S>&, MatrixX<S>*, MatrixX<S>*, MatrixX<S>*,        \
       JacobianLayout) const;                                                              \

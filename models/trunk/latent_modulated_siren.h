@@ -375,6 +375,14 @@ class LatentModulatedSiren {
                                 MatrixX<Scalar>* J_y_x = nullptr,
                                 JacobianLayout layout = JacobianLayout::kOutputRows) const;
 
+  // The weighted MSE's normaliser over n pixels of C channels: returns 1 / (C sum_j w_j)
+  // (w_j = 1 for every pixel when weights is empty) and sets *gradient_scale to
+  // 2 / (C sum_j w_j), so that dL / dy_{j,c} = *gradient_scale w_j (y_{j,c} - t_{j,c});
+  // both 0 when sum_j w_j <= 0. Every loss pass of the trunk normalises with it.
+  template <typename Scalar>
+  static double MseNormaliser(const VectorX<Scalar>& weights, long n, long channels,
+                              Scalar* gradient_scale);
+
   // The weighted MSE of the header comment; targets N x C, weights N or empty.
   template <typename Scalar>
   Scalar Loss(const MatrixX<Scalar>& coords, const VectorX<Scalar>& z,

@@ -797,12 +797,12 @@ Scalar PhotometricTrunk::LossAndGradient(const std::vector<int>& pixels,
                      PassUse{/*reverse=*/backward, /*head_gradient=*/dL_dhead != nullptr,
                              /*jacobian=*/false},
                      markers);
-  double weight_sum = 0.0;
-  for (int i = 0; i < n; ++i) weight_sum += weights.size() == 0 ? 1.0 : weights[i];
+  // Normalised as the SIREN's own weighted MSE.
+  Scalar gradient_scale = 0;
+  const double norm = LatentModulatedSiren::MseNormaliser<Scalar>(weights, n, c, &gradient_scale);
   MatrixX<Scalar> dY = MatrixX<Scalar>::Zero(n, c);
   double loss = 0.0;
-  if (weight_sum > 0) {
-    const double norm = 1.0 / (c * weight_sum);
+  if (norm > 0) {
     for (int i = 0; i < n; ++i) {
       const double w = weights.size() == 0 ? 1.0 : static_cast<double>(weights[i]);
       if (w == 0.0) continue;
