@@ -263,6 +263,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
   std::vector<double> mean_yaw_errors;
   int wrong = 0, search_failures = 0, model_failures = 0;
   std::vector<double> yaw_errors;
+  std::vector<double> position_errors;  // of the mode, metres
   std::vector<double> times, cpu_times;
   std::map<std::string, std::pair<double, int>> per_tool_pos;
   const std::vector<std::string>& tools = generator.options().tools;
@@ -297,6 +298,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
       }
       const double dp = std::pow(mode.x() - truth.x(), 2) + std::pow(mode.y() - truth.y(), 2);
       pos_sq += dp;
+      position_errors.push_back(std::sqrt(dp));
       // And the posterior mean of the true tool's components (PoseMixture::Mean).
       const SE2d mean = mixture.Mean(tools[t]);
       mean_pos_sq += std::pow(mean.x() - truth.x(), 2) + std::pow(mean.y() - truth.y(), 2);
@@ -362,6 +364,13 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
               flags.unknown_tool ? "unknown (every tool fitted)" : "given");
   std::printf("  position RMSE %.3f mm, yaw RMSE %.2f deg (modulo symmetry, hemisphere left out)\n",
               rmse_mm, rmse_deg);
+  std::sort(position_errors.begin(), position_errors.end());
+  const double position_median_mm =
+      position_errors.empty() ? 0 : 1e3 * position_errors[position_errors.size() / 2];
+  const double position_p90_mm =
+      position_errors.empty() ? 0 : 1e3 * position_errors[position_errors.size() * 9 / 10];
+  std::printf("  position error median %.3f mm, 90th percentile %.3f mm\n", position_median_mm,
+              position_p90_mm);
   std::sort(yaw_errors.begin(), yaw_errors.end());
   const double yaw_median = yaw_errors.empty() ? 0 : kDeg * yaw_errors[yaw_errors.size() / 2];
   const double yaw_within5 =
@@ -404,6 +413,8 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
               {"mean_rmse_deg", mean_rmse_deg},
               {"mean_yaw_median_deg", mean_yaw_median},
               {"yaw_median_deg", yaw_median},
+              {"position_median_mm", position_median_mm},
+              {"position_p90_mm", position_p90_mm},
               {"yaw_within_5deg", yaw_within5},
               {"coverage_50", static_cast<double>(c50) / std::max(1, ok)},
               {"coverage_90", static_cast<double>(c90) / std::max(1, ok)},

@@ -108,6 +108,28 @@ double PoseCost(const LatentProblem& problem, const PoseGenerator& generator, in
   return 0.5 * r.squaredNorm();
 }
 
+std::vector<double> PoseCosts(const LatentProblem& problem, const PoseGenerator& generator,
+                              int tool_index, const std::vector<PoseStart>& starts) {
+  std::vector<SE2d> poses;
+  std::vector<double> depths;
+  poses.reserve(starts.size());
+  depths.reserve(starts.size());
+  for (const PoseStart& s : starts) {
+    poses.push_back(s.sensor_T_object);
+    depths.push_back(s.depth_m);
+  }
+  const Eigen::MatrixXd Z = generator.GenerateMany(tool_index, poses, depths);
+  std::vector<double> costs(starts.size(), std::numeric_limits<double>::infinity());
+  Eigen::VectorXd z(problem.dim()), r(problem.num_residuals());
+  for (std::size_t i = 0; i < starts.size(); ++i) {
+    z = Z.row(static_cast<Eigen::Index>(i)).transpose();
+    if (!problem.ResidualsAndJacobian(z.data(), r.data(), nullptr)) continue;
+    const double cost = 0.5 * r.squaredNorm();
+    if (std::isfinite(cost)) costs[i] = cost;
+  }
+  return costs;
+}
+
 namespace {
 
 bool Same(const SE2d& a, const SE2d& b, int n, const PoseFitOptions& o) {
@@ -182,12 +204,9 @@ std::vector<PoseFit> FitPoseModes(const LatentProblem& problem, const PoseGenera
   for (PoseStart& s : starts) s.depth_m = std::clamp(s.depth_m, options.depth_min_m, options.depth_max_m);
   // Score every start (one forward pass each); sort by cost.
   auto score = [&](const std::vector<PoseStart>& list) {
+    const std::vector<double> costs = PoseCosts(scoring, generator, tool_index, list);
     std::vector<std::pair<double, int>> scored;
-    for (std::size_t i = 0; i < list.size(); ++i) {
-      scored.emplace_back(
-          PoseCost(scoring, generator, tool_index, list[i].sensor_T_object, list[i].depth_m),
-          static_cast<int>(i));
-    }
+    for (std::size_t i = 0; i < list.size(); ++i) scored.emplace_back(costs[i], static_cast<int>(i));
     std::stable_sort(scored.begin(), scored.end(),
                      [](const auto& a, const auto& b) { return a.first < b.first; });
     return scored;

@@ -112,6 +112,10 @@ std::vector<PoseFit> FitPoseModes(const LatentProblem& problem, const PoseGenera
 // 1/2 ||r||^2 (problem sigma) at one pose, one forward pass; +inf if not finite.
 double PoseCost(const LatentProblem& problem, const PoseGenerator& generator, int tool_index,
                 const SE2d& sensor_T_object, double depth_m);
+// PoseCost at every start (its pose and depth as given), the latents of all of them
+// rendered by one batched generator pass (PoseGenerator::GenerateMany).
+std::vector<double> PoseCosts(const LatentProblem& problem, const PoseGenerator& generator,
+                              int tool_index, const std::vector<PoseStart>& starts);
 
 }  // namespace tactfunc
 

@@ -120,6 +120,12 @@ class PoseGenerator {
   // z = h(tool, T, depth) (size d) and optionally J_z_pose (d x 4, coordinates).
   Eigen::VectorXd Generate(int tool_index, const SE2d& sensor_T_object, double depth_m,
                            PoseJacobian* J_z_pose = nullptr) const;
+  // The latents of many hypotheses of one tool at once, N x d (row i: poses[i],
+  // depths[i]): one matrix product per layer instead of N matrix-vector products, the
+  // same values as Generate up to rounding. Throws std::invalid_argument if the two
+  // lists differ in length.
+  Eigen::MatrixXd GenerateMany(int tool_index, const std::vector<SE2d>& sensor_T_objects,
+                               const std::vector<double>& depths_m) const;
 
   // Any scalar type (ceres::Jet for autodiff checks): z[0 .. d) from pose[0..3] =
   // (x, y, yaw) and depth. O(P) per call.

@@ -1,11 +1,11 @@
 // Copyright 2026 The tactfunc Authors.
 #include "estimation/synthesis/pose_fitter.h"
 
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <memory>
 #include <vector>
-
-#include <gtest/gtest.h>
 
 #include "ceres/autodiff_cost_function.h"
 #include "ceres/dynamic_autodiff_cost_function.h"
@@ -30,7 +30,8 @@ PoseGenerator Generator() {
   o.hidden_sizes = {12};
   o.yaw_harmonics = 2;
   PoseGenerator g(o, 5);
-  g.SetLatentStandardization(Eigen::VectorXd::Zero(kLatent), Eigen::VectorXd::Constant(kLatent, 0.6));
+  g.SetLatentStandardization(Eigen::VectorXd::Zero(kLatent),
+                             Eigen::VectorXd::Constant(kLatent, 0.6));
   return g;
 }
 
@@ -113,11 +114,13 @@ TEST(GeneratorPoseCost, AnalyticJacobianMatchesAutodiffAndNumericDifferentiation
 
   struct Numeric {
     const GeneratorPoseCost* cost;
-    bool operator()(double const* const* p, double* r) const { return cost->Evaluate(p, r, nullptr); }
+    bool operator()(double const* const* p, double* r) const {
+      return cost->Evaluate(p, r, nullptr);
+    }
   };
   ceres::NumericDiffOptions nd;
-  ceres::DynamicNumericDiffCostFunction<Numeric, ceres::CENTRAL> numeric(
-      new Numeric{&analytic}, ceres::TAKE_OWNERSHIP, nd);
+  ceres::DynamicNumericDiffCostFunction<Numeric, ceres::CENTRAL> numeric(new Numeric{&analytic},
+                                                                         ceres::TAKE_OWNERSHIP, nd);
   numeric.AddParameterBlock(3);
   numeric.AddParameterBlock(1);
   numeric.SetNumResiduals(n);
@@ -138,6 +141,27 @@ TEST(GeneratorPoseCost, AnalyticJacobianMatchesAutodiffAndNumericDifferentiation
   }
 }
 
+TEST(PoseCosts, EqualPoseCostAtEveryStart) {
+  const SensorTrunk trunk = Trunk();
+  const PoseGenerator g = Generator();
+  const TrunkTargets targets = Render(trunk, g, 1, SE2d::FromXYYaw(-1e-3, 2e-3, 0.3), 0.01, 0.01);
+  LatentProblem::Options po;
+  po.precision = LatentProblem::Precision::kDouble;
+  const LatentProblem problem(trunk, targets, po);
+  const std::vector<PoseStart> starts = {{SE2d::FromXYYaw(-1e-3, 2e-3, 0.3), 0.01, "a"},
+                                         {SE2d::FromXYYaw(2e-3, 0, -2.5), 0.004, "b"},
+                                         {SE2d::FromXYYaw(0, -3e-3, 1.9), 0.015, "c"}};
+  for (int tool = 0; tool < 2; ++tool) {
+    const std::vector<double> costs = PoseCosts(problem, g, tool, starts);
+    ASSERT_EQ(costs.size(), starts.size());
+    for (std::size_t i = 0; i < starts.size(); ++i) {
+      const double one = PoseCost(problem, g, tool, starts[i].sensor_T_object, starts[i].depth_m);
+      EXPECT_NEAR(costs[i], one, 1e-10 * one) << "tool " << tool << " start " << i;
+    }
+  }
+  EXPECT_TRUE(PoseCosts(problem, g, 0, {}).empty());
+}
+
 TEST(FitPoseModes, RecoversTheRenderedPoseFromNearbyStartsAndKeepsDistinctModes) {
   const SensorTrunk trunk = Trunk();
   const PoseGenerator g = Generator();
@@ -148,9 +172,8 @@ TEST(FitPoseModes, RecoversTheRenderedPoseFromNearbyStartsAndKeepsDistinctModes)
   const LatentProblem problem(trunk, targets, po);
   PoseFitOptions options;
   options.max_iterations = 50;
-  const std::vector<PoseStart> starts = {
-      {SE2d::FromXYYaw(1.0e-3, -0.6e-3, 0.5), 0.0085, "near"},
-      {SE2d::FromXYYaw(1.3e-3, -0.9e-3, 0.65), 0.0095, "near2"}};
+  const std::vector<PoseStart> starts = {{SE2d::FromXYYaw(1.0e-3, -0.6e-3, 0.5), 0.0085, "near"},
+                                         {SE2d::FromXYYaw(1.3e-3, -0.9e-3, 0.65), 0.0095, "near2"}};
   const std::vector<PoseFit> modes = FitPoseModes(problem, g, 0, starts, options);
   ASSERT_FALSE(modes.empty());
   EXPECT_TRUE(modes[0].usable);
@@ -162,8 +185,8 @@ TEST(FitPoseModes, RecoversTheRenderedPoseFromNearbyStartsAndKeepsDistinctModes)
   // The two nearby starts reach one mode.
   EXPECT_EQ(modes.size(), 1u);
   // The depth stays inside its bounds from a start outside them.
-  const std::vector<PoseFit> bounded = FitPoseModes(
-      problem, g, 0, {{SE2d::FromXYYaw(1.2e-3, -0.8e-3, 0.6), 0.5, "deep"}}, options);
+  const std::vector<PoseFit> bounded =
+      FitPoseModes(problem, g, 0, {{SE2d::FromXYYaw(1.2e-3, -0.8e-3, 0.6), 0.5, "deep"}}, options);
   ASSERT_FALSE(bounded.empty());
   EXPECT_LE(bounded[0].depth_m, options.depth_max_m);
 }
@@ -181,10 +204,10 @@ LaplaceComponent Component(const std::string& tool, int n, double weight, const 
 TEST(PoseMixture, MeanWeighsTheModesOfOneToolAfterFoldingItsSymmetry) {
   // A C4 tool's two modes at yaw 0.1 and 0.1 + pi / 2 + 0.2 are 0.2 rad apart once
   // folded: their weighted mean lies 3/4 of the way towards the heavier one.
-  const PoseMixture mixture({Component("square", 4, 0.45, SE2d::FromXYYaw(1e-3, 0, 0.1)),
-                             Component("square", 4, 0.15,
-                                       SE2d::FromXYYaw(3e-3, 0, 0.1 + M_PI / 2 + 0.2)),
-                             Component("rod", 2, 0.4, SE2d::FromXYYaw(-5e-3, 0, 1.0))});
+  const PoseMixture mixture(
+      {Component("square", 4, 0.45, SE2d::FromXYYaw(1e-3, 0, 0.1)),
+       Component("square", 4, 0.15, SE2d::FromXYYaw(3e-3, 0, 0.1 + M_PI / 2 + 0.2)),
+       Component("rod", 2, 0.4, SE2d::FromXYYaw(-5e-3, 0, 1.0))});
   const SE2d square = mixture.Mean("square");
   EXPECT_NEAR(square.x(), 1.5e-3, 1e-5);
   EXPECT_NEAR(YawErrorModuloSymmetry(square.yaw(), 0.15, 4), 0, 1e-3);

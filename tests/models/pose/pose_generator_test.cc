@@ -4,6 +4,7 @@
 #include <cmath>
 #include <filesystem>
 #include <string>
+#include <vector>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -46,6 +47,19 @@ TEST(PoseGenerator, RejectsBadOptionsNamingTheField) {
   EXPECT_THAT(error, ::testing::HasSubstr("twice"));
 }
 
+// Layers wider than the Jacobian pass's blocks of 32 rows, with remainders (70 = 2 x 32 + 6,
+// 40 = 32 + 8, 33 = 32 + 1).
+PoseGenerator Wide() {
+  PoseGenerator::Options o = SmallOptions();
+  o.latent_dim = 33;
+  o.hidden_sizes = {70, 40};
+  PoseGenerator g(o, 5);
+  Eigen::VectorXd mean = Eigen::VectorXd::LinSpaced(33, -0.5, 0.5);
+  Eigen::VectorXd stddev = Eigen::VectorXd::LinSpaced(33, 0.5, 2.0);
+  g.SetLatentStandardization(mean, stddev);
+  return g;
+}
+
 TEST(PoseGenerator, IsInvariantUnderTheToolsSymmetryAndDeterministicFromItsSeed) {
   const PoseGenerator g = Trained();
   const SE2d a = SE2d::FromXYYaw(1e-3, -2e-3, 0.4);
@@ -70,8 +84,31 @@ TEST(PoseGenerator, BatchedForwardAndTheJetPathAgreeWithGenerate) {
   EXPECT_TRUE(zt.isApprox(z, 1e-12));
 }
 
+TEST(PoseGenerator, GenerateManyAndTheJacobianPassGiveGeneratesLatents) {
+  for (const PoseGenerator& g : {Trained(), Wide()}) {
+    const std::vector<SE2d> poses = {SE2d::FromXYYaw(2e-3, 1e-3, -1.1),
+                                     SE2d::FromXYYaw(-3e-3, 0.5e-3, 2.9),
+                                     SE2d::FromXYYaw(0, 0, 0)};
+    const std::vector<double> depths = {0.01, 0.004, 0.016};
+    for (int tool = 0; tool < 3; ++tool) {
+      const Eigen::MatrixXd Z = g.GenerateMany(tool, poses, depths);
+      ASSERT_EQ(Z.rows(), 3);
+      ASSERT_EQ(Z.cols(), g.latent_dim());
+      for (int i = 0; i < 3; ++i) {
+        const Eigen::VectorXd z = g.Generate(tool, poses[i], depths[i]);
+        EXPECT_TRUE(Z.row(i).transpose().isApprox(z, 1e-12)) << "tool " << tool << " row " << i;
+        PoseGenerator::PoseJacobian J;
+        EXPECT_TRUE(g.Generate(tool, poses[i], depths[i], &J).isApprox(z, 1e-12));
+      }
+    }
+    EXPECT_EQ(g.GenerateMany(0, {}, {}).rows(), 0);
+    EXPECT_THROW(g.GenerateMany(0, poses, {0.01}), std::invalid_argument);
+    EXPECT_THROW(g.GenerateMany(7, poses, depths), std::invalid_argument);
+  }
+}
+
 TEST(PoseGenerator, PoseJacobianMatchesAutodiffAndCentralDifferences) {
-  const PoseGenerator g = Trained();
+  for (const PoseGenerator& g : {Trained(), Wide()}) {
   for (int tool = 0; tool < 3; ++tool) {
     const SE2d pose = SE2d::FromXYYaw(-1e-3, 2.5e-3, 2.3);
     const double depth = 0.007;
@@ -79,10 +116,10 @@ TEST(PoseGenerator, PoseJacobianMatchesAutodiffAndCentralDifferences) {
     g.Generate(tool, pose, depth, &J);
     using Jet = ceres::Jet<double, 4>;
     Jet p[3] = {Jet(pose.x(), 0), Jet(pose.y(), 1), Jet(pose.yaw(), 2)};
-    Jet zj[5];
-    g.GenerateT<Jet>(tool, p, Jet(depth, 3), zj);
+    std::vector<Jet> zj(g.latent_dim());
+    g.GenerateT<Jet>(tool, p, Jet(depth, 3), zj.data());
     const double h[4] = {1e-7, 1e-7, 1e-6, 1e-7};
-    for (int k = 0; k < 5; ++k) {
+    for (int k = 0; k < g.latent_dim(); ++k) {
       for (int c = 0; c < 4; ++c) EXPECT_NEAR(J(k, c), zj[k].v[c], 1e-9 * (1 + std::abs(J(k, c))));
     }
     for (int c = 0; c < 4; ++c) {
@@ -95,6 +132,7 @@ TEST(PoseGenerator, PoseJacobianMatchesAutodiffAndCentralDifferences) {
            g.Generate(tool, SE2d::FromXYYaw(w[0], w[1], w[2]), w[3])) / (2 * h[c]);
       EXPECT_TRUE(d.isApprox(J.col(c), 1e-5)) << "tool " << tool << " column " << c;
     }
+  }
   }
 }
 
