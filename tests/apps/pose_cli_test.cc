@@ -8,11 +8,13 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include "estimation/data/image_io.h"
 #include "gmock/gmock.h"
@@ -309,6 +311,37 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
   ASSERT_GE(unknown["tool_probabilities"].size(), 2u);
   for (const auto& p : unknown["tool_probabilities"]) total += p.get<double>();
   EXPECT_NEAR(total, 1.0, 1e-9);
+  // eval-generator on fresh contacts, one row per contact in --contacts-csv.
+  const std::string contacts = Root("contacts.csv");
+  r = Run("eval-generator --model " + Root("m.tfm") + " --generator " + Root("g.tpg") +
+          " --contacts-per-tool 1 --contacts-csv " + contacts + " --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json eval = r.LastJson();
+  for (const char* key : {"rmse_mm", "position_median_mm", "position_p90_mm", "coverage_90"}) {
+    EXPECT_TRUE(eval.contains(key)) << key;
+  }
+  std::istringstream rows(Slurp(contacts));
+  std::string line;
+  ASSERT_TRUE(std::getline(rows, line));
+  EXPECT_THAT(line, HasSubstr("truth_x_mm,truth_y_mm,truth_yaw_deg"));
+  EXPECT_THAT(line, HasSubstr("position_error_mm,yaw_error_deg"));
+  int count = 0;
+  double sum_sq = 0;
+  while (std::getline(rows, line)) {
+    std::vector<double> v;
+    std::istringstream cells(line);
+    std::string cell;
+    while (std::getline(cells, cell, ',')) v.push_back(std::atof(cell.c_str()));
+    ASSERT_EQ(v.size(), 18u) << line;
+    // position_error_mm is the distance between the truth's and the mode's positions.
+    EXPECT_NEAR(v[14], std::hypot(v[7] - v[3], v[8] - v[4]), 2e-4) << line;
+    sum_sq += v[14] * v[14];
+    ++count;
+  }
+  EXPECT_EQ(count, eval["contacts"].get<int>() - eval["failures"].get<int>());  // usable ones
+  EXPECT_GT(count, 0);
+  EXPECT_NEAR(std::sqrt(sum_sq / count), eval["rmse_mm"].get<double>(),
+              1e-3 * (1 + eval["rmse_mm"].get<double>()));
   // Errors name the flag.
   r = Run(args);
   EXPECT_EQ(r.exit_code, 2);

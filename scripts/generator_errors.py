@@ -1,0 +1,118 @@
+#!/usr/bin/env python3
+"""Where the generator path's pose errors are: reads the per-contact rows that
+`tactfunc eval-generator --contacts-csv FILE` writes and prints the mode's position and yaw
+errors split by contact depth, by distance from the sensor's centre and by tool, the
+contacts whose yaw is off by a large angle (mirrored or flipped modes), and the mean error
+vector (a systematic bias would show there). docs/POSES.md quotes its output.
+
+Usage: python3 scripts/generator_errors.py CONTACTS.csv [--flip-deg 30]
+       [--depth-edges-mm 6,10] [--radius-edges-mm 1.5,3]
+
+Pure Python (no third-party modules). Yaw statistics leave out tools of symmetry order 0
+(the hemisphere), as eval-generator does.
+"""
+import argparse
+import collections
+import csv
+import math
+import sys
+
+
+def rms(values):
+    return math.sqrt(sum(v * v for v in values) / len(values)) if values else float("nan")
+
+
+def median(values):
+    s = sorted(values)
+    return s[len(s) // 2] if s else float("nan")
+
+
+def edges(text):
+    try:
+        return [float(v) for v in text.split(",") if v]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated millimetres, got '{text}'")
+
+
+def bins(rows, key, cuts):
+    bounds = [-math.inf] + cuts + [math.inf]
+    for lo, hi in zip(bounds[:-1], bounds[1:]):
+        chosen = [r for r in rows if lo <= key(r) < hi]
+        label = (f"< {hi:g}" if lo == -math.inf else f">= {lo:g}" if hi == math.inf
+                 else f"{lo:g}-{hi:g}")
+        yield label, chosen
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("contacts", help="eval-generator --contacts-csv output")
+    parser.add_argument("--flip-deg", type=float, default=30.0,
+                        help="yaw errors at least this large count as flips (default 30)")
+    parser.add_argument("--depth-edges-mm", type=edges, default=[6.0, 10.0])
+    parser.add_argument("--radius-edges-mm", type=edges, default=[1.5, 3.0])
+    args = parser.parse_args()
+    required = ["tool", "symmetry_order", "truth_x_mm", "truth_y_mm", "truth_depth_mm",
+                "mode_x_mm", "mode_y_mm", "position_error_mm", "yaw_error_deg"]
+    try:
+        with open(args.contacts, newline="") as f:
+            reader = csv.DictReader(f)
+            missing = [k for k in required if k not in (reader.fieldnames or [])]
+            if missing:
+                sys.exit(f"generator_errors: {args.contacts}: missing column(s) "
+                         f"{', '.join(missing)} (expected eval-generator --contacts-csv output)")
+            rows = []
+            for line, r in enumerate(reader, start=2):
+                try:
+                    rows.append({
+                        "id": len(rows), "tool": r["tool"], "n": int(r["symmetry_order"]),
+                        "tx": float(r["truth_x_mm"]), "ty": float(r["truth_y_mm"]),
+                        "depth": float(r["truth_depth_mm"]),
+                        "ex": float(r["mode_x_mm"]) - float(r["truth_x_mm"]),
+                        "ey": float(r["mode_y_mm"]) - float(r["truth_y_mm"]),
+                        "pos": float(r["position_error_mm"]),
+                        "yaw": float(r["yaw_error_deg"]) if r["yaw_error_deg"] not in ("", "nan")
+                        else float("nan"),
+                    })
+                except ValueError as e:
+                    sys.exit(f"generator_errors: {args.contacts}, line {line}: {e}")
+    except OSError as e:
+        sys.exit(f"generator_errors: cannot read {args.contacts}: {e.strerror}")
+    if not rows:
+        sys.exit(f"generator_errors: {args.contacts} has no contacts")
+
+    yawed = [r for r in rows if r["n"] != 0 and not math.isnan(r["yaw"])]
+    flips = [r for r in yawed if r["yaw"] >= args.flip_deg]
+    print(f"contacts: {len(rows)}; mode position RMSE {rms([r['pos'] for r in rows]):.3f} mm, "
+          f"median {median([r['pos'] for r in rows]):.3f} mm; yaw RMSE "
+          f"{rms([r['yaw'] for r in yawed]):.2f} deg over {len(yawed)} contacts with a yaw")
+    print(f"mean error vector (bias): x {sum(r['ex'] for r in rows) / len(rows):+.3f} mm, "
+          f"y {sum(r['ey'] for r in rows) / len(rows):+.3f} mm")
+    kept = [r for r in yawed if r["yaw"] < args.flip_deg]
+    flip_ids = {r["id"] for r in flips}
+    kept_ids = {r["id"] for r in kept}
+    print(f"yaw off by >= {args.flip_deg:g} deg: {len(flips)} contacts "
+          f"({dict(collections.Counter(r['tool'] for r in flips))}); without them: yaw RMSE "
+          f"{rms([r['yaw'] for r in kept]):.2f} deg, position RMSE "
+          f"{rms([r['pos'] for r in rows if r['id'] not in flip_ids]):.3f} mm")
+    print("by true depth (mm):")
+    for label, chosen in bins(rows, lambda r: r["depth"], args.depth_edges_mm):
+        yaws = [r["yaw"] for r in chosen if r["id"] in kept_ids]
+        print(f"  {label:>8}: {len(chosen):5d} contacts, position RMSE "
+              f"{rms([r['pos'] for r in chosen]):.3f} mm, median "
+              f"{median([r['pos'] for r in chosen]):.3f} mm, yaw RMSE without flips "
+              f"{rms(yaws):.2f} deg")
+    print("by distance of the truth from the sensor's centre (mm):")
+    for label, chosen in bins(rows, lambda r: math.hypot(r["tx"], r["ty"]), args.radius_edges_mm):
+        print(f"  {label:>8}: {len(chosen):5d} contacts, position RMSE "
+              f"{rms([r['pos'] for r in chosen]):.3f} mm")
+    print("by tool:")
+    for tool in sorted({r["tool"] for r in rows}):
+        chosen = [r for r in rows if r["tool"] == tool]
+        yaws = [r["yaw"] for r in chosen if r["id"] in kept_ids]
+        print(f"  {tool:>11}: {len(chosen):5d} contacts, position RMSE "
+              f"{rms([r['pos'] for r in chosen]):.3f} mm, yaw RMSE without flips "
+              f"{rms(yaws):.2f} deg, flips {sum(1 for r in flips if r['tool'] == tool)}")
+
+
+if __name__ == "__main__":
+    main()
