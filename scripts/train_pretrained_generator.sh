@@ -16,5 +16,6 @@ run "$TF" encode --model models/pretrained/default.tfm --data "$WORK/data" --out
 run "$TF" train-generator --model models/pretrained/default.tfm --functaset "$WORK/f.tfs" \
   --data "$WORK/data" --out "$WORK/g_lat.tpg" --mode latents --epochs 100 --calibration-frames 60
 run "$TF" train-generator --model models/pretrained/default.tfm --functaset "$WORK/f.tfs" \
-  --data "$WORK/data" --out models/pretrained/pose_generator_bubble.tpg --mode pixels --epochs 100 \
-  --pixel-frames 400 --pixel-epochs 20 --calibration-frames 60
+  --data "$WORK/data" --out models/pretrained/pose_generator_bubble.tpg --mode pixels \
+  --hidden 256,256 --harmonics 8 --epochs 300 --pixel-frames 1000 --pixel-epochs 30 \
+  --calibration-frames 60
