@@ -215,15 +215,15 @@ struct EvalGeneratorFlags {
   bool unknown_tool = false;
   double sigma_inflation = 0;
   int max_pixels = 384;
-  int refined_starts = 2;
-  int iterations = 6;
+  int refined_starts = PoseFitOptions().max_refined_starts;
+  int iterations = PoseFitOptions().max_iterations;
   int knn_k = 4;
   int yaw_grid = 12;
   int coarse_pixels = 128;
   double position_grid_mm = 2.5;
   int position_rings = 2;
-  int coarse_starts = 4;
-  int coarse_iterations = 4;
+  int coarse_starts = PoseFitOptions().coarse_refined_starts;
+  int coarse_iterations = PoseFitOptions().coarse_iterations;
   bool diagnose = false;
   bool json = false;
   std::string contacts_csv;  // one row per contact, written atomically at the end
@@ -524,10 +524,12 @@ void RegisterEvalGenerator(CLI::App& app, CommandBody* selected) {
   sub->add_option("--max-pixels", flags->max_pixels, "Pixels per trunk pass (default 384)")
       ->check(CLI::Range(0, 1 << 20));
   sub->add_option("--refined-starts", flags->refined_starts,
-                  "Best distinct starts refined per tool (default 2)")
+                  "Best distinct starts refined per tool (default " +
+                      std::to_string(PoseFitOptions().max_refined_starts) + ")")
       ->check(CLI::Range(1, 100));
   sub->add_option("--iterations", flags->iterations,
-                  "Levenberg-Marquardt iterations per start (default 6)")
+                  "Levenberg-Marquardt iterations per start (default " +
+                      std::to_string(PoseFitOptions().max_iterations) + ")")
       ->check(CLI::Range(1, 1000));
   sub->add_option("--knn-k", flags->knn_k, "k-NN starts per tool (default 4)")
       ->check(CLI::Range(0, 1000));
@@ -545,10 +547,12 @@ void RegisterEvalGenerator(CLI::App& app, CommandBody* selected) {
                   "Rings of shifted copies of the first start (default 2: a 5 x 5 grid)")
       ->check(CLI::Range(0, 10));
   sub->add_option("--coarse-starts", flags->coarse_starts,
-                  "Starts refined in the coarse stage per tool (default 4)")
+                  "Starts refined in the coarse stage per tool (default " +
+                      std::to_string(PoseFitOptions().coarse_refined_starts) + ")")
       ->check(CLI::Range(1, 1000));
   sub->add_option("--coarse-iterations", flags->coarse_iterations,
-                  "Levenberg-Marquardt iterations in the coarse stage (default 4)")
+                  "Levenberg-Marquardt iterations in the coarse stage (default " +
+                      std::to_string(PoseFitOptions().coarse_iterations) + ")")
       ->check(CLI::Range(1, 1000));
   sub->add_flag("--unknown-tool", flags->unknown_tool, "Fit every tool and identify it");
   sub->add_flag("--diagnose", flags->diagnose,

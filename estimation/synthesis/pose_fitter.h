@@ -90,10 +90,11 @@ struct PoseFit {
 };
 
 struct PoseFitOptions {
-  int max_iterations = 6;          // Levenberg-Marquardt iterations per start, >= 1
-  int max_refined_starts = 2;      // best distinct starts refined, >= 1
-  int coarse_refined_starts = 4;   // with a coarse problem: starts refined on it, >= 1
-  int coarse_iterations = 4;       // their iterations there, >= 1
+  // Defaults chosen on 1,200 fresh contacts (docs/POSES.md, "The search's defaults").
+  int max_iterations = 4;          // Levenberg-Marquardt iterations per start, >= 1
+  int max_refined_starts = 3;      // best distinct starts refined, >= 1
+  int coarse_refined_starts = 6;   // with a coarse problem: starts refined on it, >= 1
+  int coarse_iterations = 3;       // their iterations there, >= 1
   double depth_min_m = 0.0015;     // depth bounds, 0 <= min < max
   double depth_max_m = 0.0175;
   double merge_position_m = 0.3e-3;  // > 0
