@@ -100,12 +100,7 @@ bool PoseFitOptions::IsValid(std::string* error) const {
 
 double PoseCost(const LatentProblem& problem, const PoseGenerator& generator, int tool_index,
                 const SE2d& pose, double depth_m) {
-  const Eigen::VectorXd z = generator.Generate(tool_index, pose, depth_m);
-  Eigen::VectorXd r(problem.num_residuals());
-  if (!problem.ResidualsAndJacobian(z.data(), r.data(), nullptr)) {
-    return std::numeric_limits<double>::infinity();
-  }
-  return 0.5 * r.squaredNorm();
+  return PoseCosts(problem, generator, tool_index, {{pose, depth_m, ""}}).front();
 }
 
 std::vector<double> PoseCosts(const LatentProblem& problem, const PoseGenerator& generator,

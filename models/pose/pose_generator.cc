@@ -255,8 +255,7 @@ Eigen::VectorXd PoseGenerator::Generate(int tool_index, const SE2d& pose, double
   // of W held in registers, column of W by column (one read of W): as a general matrix
   // product Eigen would first copy all of W into its packed panels, which for this
   // shape costs more than the product itself (`perf`: the packing was the search's
-  // second-largest cost with a 512-wide generator; the blocks are 3x faster than the
-  // product at widths 256 and 512 on an AVX-512 core).
+  // second-largest cost with a 512-wide generator).
   Eigen::Matrix<double, Eigen::Dynamic, 5> hx(f.size(), 5);
   hx.col(0) = f;
   hx.rightCols<4>() = J_f;

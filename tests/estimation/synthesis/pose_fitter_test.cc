@@ -141,7 +141,7 @@ TEST(GeneratorPoseCost, AnalyticJacobianMatchesAutodiffAndNumericDifferentiation
   }
 }
 
-TEST(PoseCosts, EqualPoseCostAtEveryStart) {
+TEST(PoseCosts, EqualHalfTheSquaredResidualsAtEachStartsLatent) {
   const SensorTrunk trunk = Trunk();
   const PoseGenerator g = Generator();
   const TrunkTargets targets = Render(trunk, g, 1, SE2d::FromXYYaw(-1e-3, 2e-3, 0.3), 0.01, 0.01);
@@ -155,8 +155,14 @@ TEST(PoseCosts, EqualPoseCostAtEveryStart) {
     const std::vector<double> costs = PoseCosts(problem, g, tool, starts);
     ASSERT_EQ(costs.size(), starts.size());
     for (std::size_t i = 0; i < starts.size(); ++i) {
-      const double one = PoseCost(problem, g, tool, starts[i].sensor_T_object, starts[i].depth_m);
-      EXPECT_NEAR(costs[i], one, 1e-10 * one) << "tool " << tool << " start " << i;
+      // The latent of one start from Generate, its residuals from the problem.
+      const Eigen::VectorXd z = g.Generate(tool, starts[i].sensor_T_object, starts[i].depth_m);
+      Eigen::VectorXd r(problem.num_residuals());
+      ASSERT_TRUE(problem.ResidualsAndJacobian(z.data(), r.data(), nullptr));
+      const double expected = 0.5 * r.squaredNorm();
+      EXPECT_NEAR(costs[i], expected, 1e-10 * expected) << "tool " << tool << " start " << i;
+      EXPECT_NEAR(PoseCost(problem, g, tool, starts[i].sensor_T_object, starts[i].depth_m),
+                  costs[i], 1e-10 * expected);
     }
   }
   EXPECT_TRUE(PoseCosts(problem, g, 0, {}).empty());
