@@ -296,14 +296,19 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
       identified += s.tool == tools[t];
       const int n = generator.SymmetryOrder(static_cast<int>(t));
       const SE2d& truth = contact.sensor_T_object;
-      // Score the mode of the true tool's components (the tool-conditional posterior).
-      SE2d mode = s.mean;
+      // Score the mode of the true tool's components (the tool-conditional posterior):
+      // its heaviest component, the first of that tool; the overall mode if it has none.
+      const LaplaceComponent* true_mode = nullptr;
       for (const LaplaceComponent& c : mixture.components()) {
         if (c.tool == tools[t]) {
-          mode = c.mean;
+          true_mode = &c;
           break;
         }
       }
+      const SE2d mode = true_mode != nullptr ? true_mode->mean : s.mean;
+      // The mode's yaw error (radians, modulo symmetry; n = 0: none).
+      const double mode_yaw_error =
+          n != 0 ? YawErrorModuloSymmetry(mode.yaw(), truth.yaw(), n) : std::nan("");
       const double dp = std::pow(mode.x() - truth.x(), 2) + std::pow(mode.y() - truth.y(), 2);
       pos_sq += dp;
       position_errors.push_back(std::sqrt(dp));
@@ -316,17 +321,9 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
         mean_yaw_errors.push_back(e);
       }
       if (!flags.contacts_csv.empty()) {
-        double mode_depth = std::nan("");
-        for (const LaplaceComponent& c : mixture.components()) {
-          if (c.tool == tools[t]) {
-            mode_depth = c.depth_m;
-            break;
-          }
-        }
+        const double mode_depth = true_mode != nullptr ? true_mode->depth_m : std::nan("");
         int modes = 0;
         for (const LaplaceComponent& c : mixture.components()) modes += c.tool == tools[t];
-        const double yaw_error = n != 0 ? kDeg * YawErrorModuloSymmetry(mode.yaw(), truth.yaw(), n)
-                                        : std::nan("");
         char row[512];
         std::snprintf(row, sizeof(row),
                       "%d,%s,%d,%.4f,%.4f,%.3f,%.4f,%.4f,%.4f,%.3f,%.4f,%.4f,%.4f,%.3f,%.4f,%.3f,%d,"
@@ -334,7 +331,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
                       k, tools[t].c_str(), n, 1e3 * truth.x(), 1e3 * truth.y(),
                       kDeg * truth.yaw(), 1e3 * contact.depth_m, 1e3 * mode.x(), 1e3 * mode.y(),
                       kDeg * mode.yaw(), 1e3 * mode_depth, 1e3 * mean.x(), 1e3 * mean.y(),
-                      kDeg * mean.yaw(), 1e3 * std::sqrt(dp), yaw_error, modes,
+                      kDeg * mean.yaw(), 1e3 * std::sqrt(dp), kDeg * mode_yaw_error, modes,
                       s.tool_probabilities.count(tools[t]) ? s.tool_probabilities.at(tools[t])
                                                            : 0.0);
         csv << row;
@@ -342,27 +339,20 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
       per_tool_pos[tools[t]].first += dp;
       per_tool_pos[tools[t]].second += 1;
       if (n != 0) {
-        const double e = YawErrorModuloSymmetry(mode.yaw(), truth.yaw(), n);
-        yaw_sq += e * e;
-        yaw_errors.push_back(e);
+        yaw_sq += mode_yaw_error * mode_yaw_error;
+        yaw_errors.push_back(mode_yaw_error);
         ++yaw_count;
       }
       if (flags.diagnose) {
         // Is the truth's objective lower than the chosen mode's (a search failure) or
         // higher (the generator and trunk prefer the wrong pose: a model failure)? The
         // truth is also refined (from the true pose and depth) to its local minimum.
-        const double e = n != 0 ? kDeg * YawErrorModuloSymmetry(mode.yaw(), truth.yaw(), n) : 0;
+        const double e = n != 0 ? kDeg * mode_yaw_error : 0;
         if (e > 5 || std::sqrt(dp) > 1e-3) {
           ++wrong;
           const LatentProblem problem(trunk, targets, options.problem);
           const int ti = static_cast<int>(t);
-          double mode_depth = 0;
-          for (const LaplaceComponent& c : mixture.components()) {
-            if (c.tool == tools[t]) {
-              mode_depth = c.depth_m;
-              break;
-            }
-          }
+          const double mode_depth = true_mode != nullptr ? true_mode->depth_m : 0;
           const double c_mode = PoseCost(problem, generator, ti, mode, mode_depth);
           const double c_truth = PoseCost(problem, generator, ti, truth, contact.depth_m);
           const std::vector<PoseFit> refined = FitPoseModes(
@@ -378,9 +368,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
                       search ? "search" : "model");
         }
       }
-      const bool has_tool = std::any_of(mixture.components().begin(), mixture.components().end(),
-                                        [&](const LaplaceComponent& c) { return c.tool == tools[t]; });
-      if (has_tool) {
+      if (true_mode != nullptr) {
         c50 += mixture.Contains(truth, 0.5, options.num_region_samples, seed, tools[t]);
         c90 += mixture.Contains(truth, 0.9, options.num_region_samples, seed, tools[t]);
       }

@@ -239,17 +239,7 @@ Eigen::VectorXd PoseGenerator::Generate(int tool_index, const SE2d& pose, double
                                         PoseJacobian* J_z_pose) const {
   PoseJacobian J_f;
   const Eigen::VectorXd f = Features(tool_index, pose, depth_m, J_z_pose ? &J_f : nullptr);
-  if (J_z_pose == nullptr) {
-    Eigen::VectorXd h = f;
-    for (std::size_t l = 0; l < layers_.size(); ++l) {
-      const Layer& L = layers_[l];
-      Eigen::Map<const Eigen::MatrixXd> W(parameters_.data() + L.weight_offset, L.out, L.in);
-      Eigen::Map<const Eigen::VectorXd> bias(parameters_.data() + L.bias_offset, L.out);
-      Eigen::VectorXd a = W * h + bias;
-      h = l + 1 < layers_.size() ? Eigen::VectorXd(a.array().tanh()) : a;
-    }
-    return latent_mean_ + latent_stddev_.cwiseProduct(h);
-  }
+  if (J_z_pose == nullptr) return Forward(f.transpose()).row(0).transpose();
   // Forward mode through the 4 coordinate directions beside the value: column 0 of hx is
   // h, columns 1..4 dh/d(x, y, yaw, depth). W * hx is accumulated in blocks of 32 rows
   // of W held in registers, column of W by column (one read of W): as a general matrix
