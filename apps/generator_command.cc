@@ -215,6 +215,7 @@ struct EvalGeneratorFlags {
   bool unknown_tool = false;
   double sigma_inflation = 0;
   int max_pixels = 384;
+  double contact_share = GeneratorPosterior::Options().problem.contact_share;
   int refined_starts = PoseFitOptions().max_refined_starts;
   int iterations = PoseFitOptions().max_iterations;
   int knn_k = 4;
@@ -249,6 +250,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
   GeneratorPosterior::Options options;
   options.sigma_inflation = flags.sigma_inflation;
   options.problem.max_pixels = flags.max_pixels;
+  options.problem.contact_share = flags.contact_share;
   options.fit.max_refined_starts = flags.refined_starts;
   options.fit.max_iterations = flags.iterations;
   options.knn_k = flags.knn_k;
@@ -511,6 +513,11 @@ void RegisterEvalGenerator(CLI::App& app, CommandBody* selected) {
       ->check(CLI::NonNegativeNumber);
   sub->add_option("--max-pixels", flags->max_pixels, "Pixels per trunk pass (default 384)")
       ->check(CLI::Range(0, 1 << 20));
+  sub->add_option("--contact-share", flags->contact_share,
+                  "Share of each pass's pixels drawn towards the contact, importance-weighted "
+                  "(default " + FormatFixed(GeneratorPosterior::Options().problem.contact_share, 2) +
+                      "; 0 = evenly spaced)")
+      ->check(CLI::Range(0.0, 1.0));
   sub->add_option("--refined-starts", flags->refined_starts,
                   "Best distinct starts refined per tool (default " +
                       std::to_string(PoseFitOptions().max_refined_starts) + ")")

@@ -44,6 +44,40 @@ Eigen::MatrixXd GramOfJacobian(const Jacobian& J) {
   return jtj.template selfadjointView<Eigen::Lower>().toDenseMatrix().template cast<double>();
 }
 
+// Options::contact_share's thinning of *chosen (pixel indices into targets, N of them) to
+// at most m pixels: systematic sampling with p_j = (1 - a) / N + a e_j / sum(e) at the
+// positions (i + 1/2) / m of the cumulative p, in pixel order; a pixel drawn c_j times is
+// kept once with *weight_factor c_j / (N p_j).
+void ContactSample(const TrunkTargets& targets, int m, double a, std::vector<int>* chosen,
+                   std::vector<double>* weight_factor) {
+  const size_t n = chosen->size();
+  std::vector<double> energy(n);
+  double total = 0;
+  for (size_t i = 0; i < n; ++i) {
+    const int j = (*chosen)[i];
+    energy[i] = targets.weights[j] * targets.values.row(j).cast<double>().squaredNorm();
+    total += energy[i];
+  }
+  if (!(total > 0) || !std::isfinite(total)) a = 0;
+  std::vector<int> kept;
+  weight_factor->clear();
+  double cumulative = 0;
+  int next = 0;  // the next sampling position (next + 1/2) / m
+  for (size_t i = 0; i < n && next < m; ++i) {
+    const double p = (1 - a) / static_cast<double>(n) + (a > 0 ? a * energy[i] / total : 0);
+    cumulative += p;
+    int count = 0;
+    while (next < m && (next + 0.5) / m < cumulative) {
+      ++count;
+      ++next;
+    }
+    if (count == 0) continue;
+    kept.push_back((*chosen)[i]);
+    weight_factor->push_back(count / (static_cast<double>(n) * p));
+  }
+  chosen->swap(kept);
+}
+
 }  // namespace
 
 const char* ToString(LatentProblem::RobustLoss loss) {
@@ -77,6 +111,8 @@ bool LatentProblem::Options::IsValid(std::string* error) const {
     message << "pixel_stride must be >= 1, found " << pixel_stride;
   } else if (max_pixels < 0) {
     message << "max_pixels must be >= 0 (0 = all), found " << max_pixels;
+  } else if (!(contact_share >= 0.0 && contact_share <= 1.0)) {
+    message << "contact_share must be in [0, 1], found " << contact_share;
   } else if (precision != Precision::kFloat && precision != Precision::kDouble) {
     message << "precision is not a Precision, found " << static_cast<int>(precision);
   } else {
@@ -151,11 +187,16 @@ LatentProblem::LatentProblem(const SensorTrunk& trunk, const TrunkTargets& targe
   std::vector<int> chosen;
   for (size_t i = 0; i < valid.size(); i += options_.pixel_stride) chosen.push_back(valid[i]);
   const int max_pixels = options_.max_pixels;
+  std::vector<double> weight_factor;  // empty: 1 for every chosen pixel
   if (max_pixels > 0 && static_cast<long>(chosen.size()) > max_pixels) {
-    std::vector<int> thinned(max_pixels);
-    const double step = static_cast<double>(chosen.size()) / max_pixels;
-    for (int i = 0; i < max_pixels; ++i) thinned[i] = chosen[static_cast<size_t>(i * step)];
-    chosen.swap(thinned);
+    if (options_.contact_share > 0) {
+      ContactSample(targets, max_pixels, options_.contact_share, &chosen, &weight_factor);
+    } else {
+      std::vector<int> thinned(max_pixels);
+      const double step = static_cast<double>(chosen.size()) / max_pixels;
+      for (int i = 0; i < max_pixels; ++i) thinned[i] = chosen[static_cast<size_t>(i * step)];
+      chosen.swap(thinned);
+    }
   }
 
   const int m = static_cast<int>(chosen.size());
@@ -168,7 +209,9 @@ LatentProblem::LatentProblem(const SensorTrunk& trunk, const TrunkTargets& targe
   for (int i = 0; i < m; ++i) {
     const int j = chosen[i];
     coords_.row(i) = grid.row(j);
-    const float w = targets.weights[j];
+    const float w = weight_factor.empty()
+                        ? targets.weights[j]
+                        : static_cast<float>(targets.weights[j] * weight_factor[i]);
     weights_float_[i] = w;
     weights_[i] = w;
     for (int c = 0; c < channels; ++c) {

@@ -105,6 +105,15 @@ class LatentProblem {
     // over the selected pixels; Psnr over all valid ones.
     int pixel_stride = 1;
     int max_pixels = 0;
+    // How max_pixels thins, in [0, 1]. 0: evenly spaced, as above. a > 0: importance
+    // sampling towards the contact: pixel j (of the N left after the stride) is drawn with
+    // probability p_j = (1 - a) / N + a e_j / sum(e), e_j = w_j * sum_c target_jc^2 (the
+    // frame's difference energy; p uniform if every e_j is 0), by systematic sampling over
+    // the pixel order (deterministic; a pixel drawn c_j times is kept once), and its weight
+    // becomes w_j c_j / (N p_j): the weighted sum over the kept pixels estimates the sum
+    // over all N times m / N without bias, as even thinning does, so costs and mean squared
+    // residuals keep their scale while a small contact gets a share of the pixels.
+    double contact_share = 0;
     // Precision of the trunk passes (Ceres always accumulates in double). float is about
     // 2x faster; latents agree with double within 1e-4 relative (latent_fitter_test), U
     // and its gradient carry ~1e-6 relative rounding, far below SGLD's injected noise.
@@ -138,6 +147,8 @@ class LatentProblem {
   const Eigen::MatrixXd& coords() const { return coords_; }
   const Eigen::MatrixXd& pixel_targets() const { return pixel_targets_; }
   const Eigen::VectorXd& pixel_weights() const { return weights_; }
+  // Each selected pixel's index in the frame (row of targets), increasing.
+  const std::vector<int>& pixel_index() const { return pixel_index_; }
 
   // The (robustified) whitened data residuals r' at z (num_residuals(), residual j*C + c)
   // and, if jacobian is not null, d r' / d z row-major (num_residuals() x d), as Ceres

@@ -227,6 +227,7 @@ std::vector<PoseStart> KnnPoseStarts::Starts(const Eigen::VectorXf& query, const
 LatentProblem::Options GeneratorPosterior::Options::DefaultProblem() {
   LatentProblem::Options o;
   o.max_pixels = 384;
+  o.contact_share = 0.5;
   return o;
 }
 

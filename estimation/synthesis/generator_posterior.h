@@ -143,7 +143,9 @@ class GeneratorPosterior {
   struct Options {
     // The frame's latent problem. Its sigma only scales the fit (the posterior sets its
     // own, header comment); max_pixels bounds the time per trunk pass (default 384 of the
-    // 70 x 88 bubble frame's 6160 pixels).
+    // 70 x 88 bubble frame's 6160 pixels), half of them drawn towards the contact
+    // (contact_share 0.5, importance-weighted): a shallow contact covers a few per cent of
+    // the frame, and evenly spaced pixels leave it a dozen (docs/POSES.md).
     LatentProblem::Options problem = DefaultProblem();
     PoseFitOptions fit;
     int knn_k = 4;                 // k-NN starts per tool, >= 0

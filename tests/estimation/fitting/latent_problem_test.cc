@@ -7,6 +7,7 @@
 // MetaSgd's own inner loop, the automatic sigma rule, pixel selection, and bad input.
 #include "estimation/fitting/latent_problem.h"
 
+#include <algorithm>
 #include <cmath>
 #include <optional>
 #include <stdexcept>
@@ -64,6 +65,7 @@ TEST(LatentProblemOptions, BadOptionsNameTheFieldAndTheConstructorThrows) {
       {"robust_loss_scale", [](LatentProblem::Options* o) { o->robust_loss_scale = NAN; }},
       {"pixel_stride", [](LatentProblem::Options* o) { o->pixel_stride = 0; }},
       {"max_pixels", [](LatentProblem::Options* o) { o->max_pixels = -1; }},
+      {"contact_share", [](LatentProblem::Options* o) { o->contact_share = 1.5; }},
   };
   for (const auto& c : cases) {
     LatentProblem::Options options;
@@ -408,6 +410,59 @@ TEST(LatentProblem, SelectsEveryStrideThPixelThenAtMostMaxPixels) {
   EXPECT_EQ(problem.num_residuals(), 10);
   // Psnr is over all valid pixels: the true latent reproduces every one.
   EXPECT_GT(problem.Psnr(kTrue), 100.0);
+}
+
+// The weighted energy sum_i w_i |t_i|^2 over the selected pixels.
+double SelectedEnergy(const LatentProblem& problem) {
+  double sum = 0;
+  for (int i = 0; i < problem.num_pixels(); ++i) {
+    sum += problem.pixel_weights()[i] * problem.pixel_targets().row(i).squaredNorm();
+  }
+  return sum;
+}
+
+TEST(LatentProblem, ContactShareDrawsTowardsTheContactAndKeepsTheWeightedSumsScale) {
+  const SensorTrunk trunk = Trunk();
+  TrunkTargets targets = testing_util::MakeTargets(trunk, kTrue, 0.0, 1);
+  targets.weights[0] = 0;  // 41 valid pixels
+  targets.weights[5] = 0.5f;
+  std::vector<int> blob;
+  for (int r = 2; r < 4; ++r) {
+    for (int c = 3; c < 5; ++c) blob.push_back(r * kCols + c);
+  }
+  for (int j : blob) targets.values.row(j) *= 20.0f;
+  LatentProblem::Options options;
+  const LatentProblem all(trunk, targets, options);
+  options.max_pixels = 12;
+  auto in_blob = [&](const LatentProblem& p) {
+    int count = 0;
+    for (int j : p.pixel_index()) count += std::count(blob.begin(), blob.end(), j);
+    return count;
+  };
+  const LatentProblem even(trunk, targets, options);
+  options.contact_share = 0.5;
+  const LatentProblem half(trunk, targets, options);
+  EXPECT_GT(in_blob(half), in_blob(even));
+  EXPECT_LE(half.num_pixels(), 12);
+  EXPECT_TRUE(std::is_sorted(half.pixel_index().begin(), half.pixel_index().end()));
+  EXPECT_EQ(std::adjacent_find(half.pixel_index().begin(), half.pixel_index().end()),
+            half.pixel_index().end());
+  // Deterministic.
+  EXPECT_EQ(LatentProblem(trunk, targets, options).pixel_index(), half.pixel_index());
+  // A share of 1 draws in proportion to the energy: the weighted energy of the drawn pixels
+  // is exactly m / N times the frame's.
+  options.contact_share = 1;
+  const LatentProblem full_share(trunk, targets, options);
+  EXPECT_EQ(in_blob(full_share), 4);
+  EXPECT_NEAR(SelectedEnergy(full_share), SelectedEnergy(all) * 12 / 41,
+              1e-5 * SelectedEnergy(all));
+  // A frame without difference energy is thinned evenly with its own weights.
+  targets.values.setZero();
+  const LatentProblem blank(trunk, targets, options);
+  EXPECT_EQ(blank.num_pixels(), 12);
+  for (int i = 0; i < blank.num_pixels(); ++i) {
+    EXPECT_EQ(blank.pixel_weights()[i], targets.weights[blank.pixel_index()[i]]);
+  }
 }
 
 TEST(LatentProblem, BadInputThrowsQuotingTheShapes) {
