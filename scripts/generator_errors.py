@@ -2,8 +2,9 @@
 """Where the generator path's pose errors are: reads the per-contact rows that
 `tactfunc eval-generator --contacts-csv FILE` writes and prints the mode's position and yaw
 errors split by contact depth, by distance from the sensor's centre and by tool, the
-contacts whose yaw is off by a large angle (mirrored or flipped modes), and the mean error
-vector (a systematic bias would show there). docs/POSES.md quotes its output.
+contacts whose yaw is off by a large angle (mirrored or flipped modes), the mean error
+vector (a systematic bias would show there), and per tool the position error along and
+across the object's own x axis (a rod's long axis), over all contacts and the shallow ones. docs/POSES.md quotes its output.
 
 Usage: python3 scripts/generator_errors.py CONTACTS.csv [--flip-deg 30]
        [--depth-edges-mm 6,10] [--radius-edges-mm 1.5,3]
@@ -51,7 +52,8 @@ def main():
     parser.add_argument("--depth-edges-mm", type=edges, default=[6.0, 10.0])
     parser.add_argument("--radius-edges-mm", type=edges, default=[1.5, 3.0])
     args = parser.parse_args()
-    required = ["tool", "symmetry_order", "truth_x_mm", "truth_y_mm", "truth_depth_mm",
+    required = ["tool", "symmetry_order", "truth_x_mm", "truth_y_mm", "truth_yaw_deg",
+                "truth_depth_mm",
                 "mode_x_mm", "mode_y_mm", "position_error_mm", "yaw_error_deg"]
     try:
         with open(args.contacts, newline="") as f:
@@ -67,6 +69,7 @@ def main():
                         "id": len(rows), "tool": r["tool"], "n": int(r["symmetry_order"]),
                         "tx": float(r["truth_x_mm"]), "ty": float(r["truth_y_mm"]),
                         "depth": float(r["truth_depth_mm"]),
+                        "tyaw": math.radians(float(r["truth_yaw_deg"])),
                         "ex": float(r["mode_x_mm"]) - float(r["truth_x_mm"]),
                         "ey": float(r["mode_y_mm"]) - float(r["truth_y_mm"]),
                         "pos": float(r["position_error_mm"]),
@@ -112,6 +115,23 @@ def main():
         print(f"  {tool:>11}: {len(chosen):5d} contacts, position RMSE "
               f"{rms([r['pos'] for r in chosen]):.3f} mm, yaw RMSE without flips "
               f"{rms(yaws):.2f} deg, flips {sum(1 for r in flips if r['tool'] == tool)}")
+
+    # The error in the truth's object frame: along its x axis and across it.
+    def along(r):
+        return r["ex"] * math.cos(r["tyaw"]) + r["ey"] * math.sin(r["tyaw"])
+
+    def across(r):
+        return -r["ex"] * math.sin(r["tyaw"]) + r["ey"] * math.cos(r["tyaw"])
+
+    shallow_mm = args.depth_edges_mm[0] if args.depth_edges_mm else math.inf
+    print(f"position error RMSE along / across the object's x axis (mm), all contacts and "
+          f"those below {shallow_mm:g} mm deep:")
+    for tool in sorted({r["tool"] for r in rows}):
+        chosen = [r for r in rows if r["tool"] == tool]
+        shallow = [r for r in chosen if r["depth"] < shallow_mm]
+        print(f"  {tool:>11}: {rms([along(r) for r in chosen]):.3f} / "
+              f"{rms([across(r) for r in chosen]):.3f}; shallow ({len(shallow)}): "
+              f"{rms([along(r) for r in shallow]):.3f} / {rms([across(r) for r in shallow]):.3f}")
 
 
 if __name__ == "__main__":
