@@ -75,33 +75,36 @@ PoseSamples SamplePosePosterior(const LatentProblem& problem, const PoseGenerato
     throw std::invalid_argument("SamplePosePosterior: sigma must be finite and > 0, got " +
                                 std::to_string(sigma));
   }
-  const GeneratorPoseCost cost(problem, generator, tool_index);  // throws for a bad tool
+  // Validates the tool index and the latent sizes (throws); the chain itself needs only
+  // the gradient of log p, so it takes the trunk's reverse pass J_r_z^T r (a vector-
+  // Jacobian product) instead of the residuals' full latent Jacobian.
+  const GeneratorPoseCost validated(problem, generator, tool_index);
+  (void)validated;
   const int n = generator.SymmetryOrder(tool_index);
-  const double scale = problem.sigma() / sigma;  // r_s = r * scale
-  const int m = problem.num_residuals();
+  const double scale2 = std::pow(problem.sigma() / sigma, 2);  // r_s = r * problem sigma / sigma
+  const double prior_variance = problem.sigma_z() * problem.sigma_z();
   PoseSamples out;
   out.sigma = sigma;
+  // log p = -1/2 ||r_s||^2 = -scale2 U_data(h(x)), U_data = U - the latent prior (the
+  // problem's 1/2 ||r||^2 at its own sigma); grad log p = -scale2 J_z_x^T grad U_data.
   LogDensityFunction log_density = [&](const Eigen::VectorXd& x, Eigen::VectorXd* gradient) {
     if (!(x[3] >= options.depth_min_m && x[3] <= options.depth_max_m)) {
       return -std::numeric_limits<double>::infinity();
     }
     ++out.trunk_evaluations;
-    Eigen::VectorXd r(m);
-    const double pose[3] = {x[0], x[1], x[2]};
-    const double depth = x[3];
-    const double* parameters[2] = {pose, &depth};
-    Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> J_pose(m, 3);
-    Eigen::VectorXd J_depth(m);
-    double* jacobians[2] = {J_pose.data(), J_depth.data()};
-    if (!cost.Evaluate(parameters, r.data(), gradient != nullptr ? jacobians : nullptr)) {
-      return -std::numeric_limits<double>::infinity();
-    }
-    r *= scale;
+    PoseGenerator::PoseJacobian J_z_x;
+    const Eigen::VectorXd z = generator.Generate(tool_index, SE2d::FromXYYaw(x[0], x[1], x[2]),
+                                                 x[3], gradient != nullptr ? &J_z_x : nullptr);
+    Eigen::VectorXd grad_u;
+    const double u_data = problem.Evaluate(z, gradient != nullptr ? &grad_u : nullptr) -
+                          0.5 * z.squaredNorm() / prior_variance;
+    if (!std::isfinite(u_data)) return -std::numeric_limits<double>::infinity();
     if (gradient != nullptr) {
-      gradient->head<3>() = -scale * (J_pose.transpose() * r);
-      (*gradient)[3] = -scale * J_depth.dot(r);
+      grad_u -= z / prior_variance;
+      *gradient = -scale2 * (J_z_x.transpose() * grad_u);
+      if (!gradient->allFinite()) return -std::numeric_limits<double>::infinity();
     }
-    return -0.5 * r.squaredNorm();
+    return -scale2 * u_data;
   };
   MetropolisOptions chain = options.chain;
   chain.angles = {2};
