@@ -9,7 +9,6 @@
 // a second Ctrl-C kills the program at once (the last checkpoint stays intact).
 
 #include <algorithm>
-#include <atomic>
 #include <csignal>
 #include <cstdlib>
 #include <filesystem>
@@ -21,6 +20,7 @@
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
 #include "apps/distributed.h"
+#include "apps/interrupt.h"
 #include "apps/output_paths.h"
 #include "apps/model_inputs.h"
 #include "apps/progress_bar.h"
@@ -49,30 +49,6 @@ struct EncodeFlags {
   bool allow_other_frames = false;
   bool share_rest = false;
   DatasetFlags dataset;
-};
-
-// Set by SIGINT; lock-free, so safe to store from a signal handler.
-std::atomic<bool> g_interrupt{false};
-static_assert(std::atomic<bool>::is_always_lock_free);
-
-extern "C" void OnInterrupt(int) {
-  g_interrupt.store(true);
-  std::signal(SIGINT, SIG_DFL);  // a second Ctrl-C ends the program at once
-}
-
-// Installs OnInterrupt for its lifetime.
-class InterruptScope {
- public:
-  InterruptScope() {
-    g_interrupt.store(false);
-    previous_ = std::signal(SIGINT, OnInterrupt);
-  }
-  ~InterruptScope() { std::signal(SIGINT, previous_); }
-  InterruptScope(const InterruptScope&) = delete;
-  InterruptScope& operator=(const InterruptScope&) = delete;
-
- private:
-  void (*previous_)(int) = SIG_DFL;
 };
 
 // The command line that continues an interrupted run: the flags that select frames and
@@ -217,7 +193,7 @@ void RunEncode(const EncodeFlags& flags) {
   Functaset functaset;
   try {
     InterruptScope scope;
-    functaset = encoder.Encode(dataset, &summary, progress, &g_interrupt);
+    functaset = encoder.Encode(dataset, &summary, progress, &InterruptScope::Flag());
   } catch (const std::exception&) {
     bar.Finish();
     // Never leave a partial output unannounced: say what --out holds now.

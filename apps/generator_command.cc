@@ -29,6 +29,8 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
+#include <filesystem>
 #include <iostream>
 #include <map>
 #include <memory>
@@ -38,7 +40,9 @@
 #include "CLI/CLI.hpp"
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
+#include "apps/interrupt.h"
 #include "apps/model_inputs.h"
+#include "apps/progress_bar.h"
 #include "estimation/data/dataset.h"
 #include "estimation/data/image_io.h"
 #include "estimation/data/trunk_targets.h"
@@ -71,7 +75,37 @@ struct TrainGeneratorFlags {
   double lr = 1e-3;
   std::uint64_t seed = 0;
   bool json = false;
+  bool resume = false;
 };
+
+// The checkpoints of train-generator's two stages, beside the output.
+std::string StageCheckpoint(const std::string& out, const char* stage) {
+  return out + "." + stage + ".ckpt";
+}
+
+// One training stage's epochs: a progress bar with the loss (progress lines where no bar
+// is drawn), and Ctrl-C stops the stage after its current epoch (a checkpoint is written).
+// A resumed stage's first call moves the bar to the epochs already done.
+GeneratorProgressCallback StageProgress(ProgressBar* bar) {
+  return [bar](int epoch, double loss) {
+    char status[40];
+    std::snprintf(status, sizeof(status), "loss %.4g", loss);
+    bar->SetStatus(status);
+    bar->Tick(epoch + 1 - bar->done());
+    return !InterruptScope::Requested();
+  };
+}
+
+// After a stage: if Ctrl-C stopped it, say where its checkpoint is and exit 130.
+void ExitIfInterrupted(const GeneratorTrainingSummary& stage, int epochs,
+                       const std::string& checkpoint) {
+  if (!InterruptScope::Requested()) return;
+  std::cerr << "train-generator: interrupted after " << stage.epochs_completed << " of " << epochs
+            << " epochs; checkpoint " << checkpoint
+            << ".\ntrain-generator: to continue, run the same command with --resume\n";
+  std::cout.flush();
+  std::exit(130);  // 128 + SIGINT, as shells report an interrupted program
+}
 
 struct Labelled {
   std::vector<GeneratorSample> samples;
@@ -123,14 +157,28 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
   if (train.samples.empty()) {
     throw DatasetError("--functaset '" + flags.functaset + "' has no labelled bubble train entries");
   }
+  const InterruptScope interrupt_scope;
   GeneratorTrainingOptions to;
   to.epochs = flags.epochs;
   to.learning_rate = flags.lr;
   to.seed = DeriveSeed(flags.seed, 1);
-  const GeneratorTrainingSummary reg =
-      TrainGeneratorOnLatents(&generator, train.samples, train.latents, to);
+  to.checkpoint_path = StageCheckpoint(flags.out, "regression");
+  to.resume = flags.resume;
+  GeneratorTrainingSummary reg;
+  {
+    ProgressBar bar("train-generator regression", to.epochs, "epochs",
+                    ProgressBar::Lines::kWhenNotDrawn);
+    reg = TrainGeneratorOnLatents(&generator, train.samples, train.latents, to,
+                                  StageProgress(&bar));
+    bar.Finish();
+  }
+  ExitIfInterrupted(reg, to.epochs, to.checkpoint_path);
   std::cout << "train-generator: latent regression on " << train.samples.size() << " contacts: "
-            << reg.BriefReport() << "\n";
+            << reg.BriefReport()
+            << (reg.epochs_resumed > 0
+                    ? " (resumed after " + std::to_string(reg.epochs_resumed) + " epochs)"
+                    : std::string())
+            << "\n";
   // Test-split frames for PSNR and calibration.
   const Labelled test = Collect(generator, functaset, dataset, Split::kTest, 0);
   std::vector<TrunkTargets> test_frames;
@@ -156,12 +204,16 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
     po.pixels_per_frame = flags.pixels;
     po.standardize_outputs = false;
     po.seed = DeriveSeed(flags.seed, 2);
-    pix = TrainGeneratorOnPixels(&generator, trunk, sub.samples, frames, po,
-                                 [](int epoch, double loss) {
-                                   std::cout << "  pixel epoch " << epoch << " loss " << loss << "\n"
-                                             << std::flush;
-                                   return true;
-                                 });
+    po.checkpoint_path = StageCheckpoint(flags.out, "pixels");
+    po.resume = flags.resume;
+    {
+      ProgressBar bar("train-generator pixels", po.epochs, "epochs",
+                      ProgressBar::Lines::kWhenNotDrawn);
+      pix = TrainGeneratorOnPixels(&generator, trunk, sub.samples, frames, po,
+                                   StageProgress(&bar));
+      bar.Finish();
+    }
+    ExitIfInterrupted(pix, po.epochs, po.checkpoint_path);
     psnr_pixels = MeanGeneratorPsnr(generator, trunk, psnr_samples, test_frames);
     std::cout << "train-generator: through the trunk on " << sub.samples.size()
               << " frames: " << pix.BriefReport() << "; test rendering PSNR " << psnr_pixels
@@ -201,6 +253,10 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
   generator.set_info_json(info.dump());
   generator.Save(flags.out);
   std::cout << "train-generator: wrote " << flags.out << "\n";
+  for (const char* stage : {"regression", "pixels"}) {
+    std::error_code ignored;  // the generator is written; a checkpoint left behind is harmless
+    std::filesystem::remove(StageCheckpoint(flags.out, stage), ignored);
+  }
   if (flags.json) {
     info["sigma_inflation"] = kappa;
     info["out"] = flags.out;
@@ -277,6 +333,9 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
   std::vector<double> times, cpu_times;
   std::map<std::string, std::pair<double, int>> per_tool_pos;
   const std::vector<std::string>& tools = generator.options().tools;
+  ProgressBar bar("eval-generator",
+                  static_cast<std::int64_t>(tools.size()) * flags.contacts_per_tool, "contacts",
+                  ProgressBar::Lines::kWhenNotDrawn);
   for (std::size_t t = 0; t < tools.size(); ++t) {
     for (int j = 0; j < flags.contacts_per_tool; ++j) {
       const int k = static_cast<int>(t) * flags.contacts_per_tool + j;
@@ -289,6 +348,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
       const GeneratorPosterior::Summary s =
           posterior.Estimate(targets, flags.unknown_tool ? "" : tools[t], &mixture);
       ++contacts;
+      bar.Tick();
       if (!s.usable) {
         ++failures;
         continue;
@@ -376,6 +436,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
       }
     }
   }
+  bar.Finish();
   if (!flags.contacts_csv.empty()) {
     WriteFileAtomically(flags.contacts_csv, csv.str());
     std::cout << "eval-generator: wrote one row per contact to " << flags.contacts_csv << "\n";
@@ -489,6 +550,9 @@ void RegisterTrainGenerator(CLI::App& app, CommandBody* selected) {
       ->check(CLI::PositiveNumber);
   sub->add_option("--seed", flags->seed, "Seed (default 0)");
   sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
+  sub->add_flag("--resume", flags->resume,
+                "Continue from the checkpoints OUT.regression.ckpt / OUT.pixels.ckpt that an "
+                "interrupted run (Ctrl-C) left; the same flags give the same generator");
   sub->callback([flags, selected]() { *selected = [flags]() { RunTrainGenerator(*flags); }; });
 }
 

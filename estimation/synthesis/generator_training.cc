@@ -6,12 +6,17 @@
 #include <boost/random/uniform_int_distribution.hpp>
 #include <chrono>
 #include <cmath>
+#include <filesystem>
 #include <numeric>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
+#include "estimation/training/internal/checkpoint.h"
 #include "models/core/seed.h"
+#include "models/core/sensor.h"
+#include "models/core/tensor_file.h"
+#include "nlohmann/json.hpp"
 
 namespace tactfunc {
 namespace {
@@ -31,6 +36,14 @@ class Adam {
     v_ = o_.beta2 * v_ + (1 - o_.beta2) * g.cwiseAbs2();
     const double c1 = 1 - std::pow(o_.beta1, t_), c2 = 1 - std::pow(o_.beta2, t_);
     *x -= (lr / c1) * (m_.array() / ((v_.array() / c2).sqrt() + o_.epsilon)).matrix();
+  }
+  const Eigen::VectorXd& m() const { return m_; }
+  const Eigen::VectorXd& v() const { return v_; }
+  int t() const { return t_; }
+  void Restore(Eigen::VectorXd m, Eigen::VectorXd v, int t) {
+    m_ = std::move(m);
+    v_ = std::move(v);
+    t_ = t;
   }
 
  private:
@@ -67,16 +80,94 @@ std::vector<int> Shuffled(int m, std::uint64_t seed) {
   return order;
 }
 
+// FNV-1a of the samples' tools and poses, continued from `hash`.
+std::uint64_t SamplesFingerprint(const std::vector<GeneratorSample>& samples,
+                                 std::uint64_t hash = 1469598103934665603ull) {
+  for (const GeneratorSample& s : samples) {
+    const double pose[4] = {s.sensor_T_object.x(), s.sensor_T_object.y(),
+                            s.sensor_T_object.yaw(), s.depth_m};
+    hash = internal::Fnv1a(&s.tool, sizeof(s.tool), hash);
+    hash = internal::Fnv1a(pose, sizeof(pose), hash);
+  }
+  return hash;
+}
+
+// The checkpoint's identity (header comment): the stage, the options that shape the
+// trajectory and the generator's size; the frames are the samples (and their targets).
+internal::CheckpointRun GeneratorCheckpointRun(const GeneratorTrainingOptions& o,
+                                               const std::string& stage,
+                                               const PoseGenerator& generator, int m,
+                                               std::uint64_t fingerprint) {
+  const nlohmann::json options = {{"stage", stage},
+                                  {"epochs", o.epochs},
+                                  {"batch_size", o.batch_size},
+                                  {"learning_rate", o.learning_rate},
+                                  {"beta1", o.beta1},
+                                  {"beta2", o.beta2},
+                                  {"epsilon", o.epsilon},
+                                  {"final_lr_fraction", o.final_lr_fraction},
+                                  {"pixels_per_frame", o.pixels_per_frame},
+                                  {"standardize_outputs", o.standardize_outputs},
+                                  {"seed", std::to_string(o.seed)},
+                                  {"num_parameters", generator.parameters().size()}};
+  internal::CheckpointRun run;
+  run.format = "tactfunc-generator-checkpoint";
+  run.version = 1;
+  run.sensor = ToString(SensorKind::kSoftBubble);  // the generator path's sensor
+  run.options_json = options.dump();
+  run.fingerprint = fingerprint;
+  run.num_frames = m;
+  return run;
+}
+
 template <typename BatchLoss>
 GeneratorTrainingSummary RunAdam(PoseGenerator* generator, int m,
                                  const GeneratorTrainingOptions& options,
-                                 const GeneratorProgressCallback& progress,
-                                 const BatchLoss& batch_loss) {
+                                 const GeneratorProgressCallback& progress, const std::string& stage,
+                                 std::uint64_t fingerprint, const BatchLoss& batch_loss) {
   const auto start = std::chrono::steady_clock::now();
   GeneratorTrainingSummary summary;
   Eigen::VectorXd theta = generator->parameters();
-  Adam adam(options, theta.size());
-  for (int epoch = 0; epoch < options.epochs; ++epoch) {
+  const Eigen::Index n = theta.size();
+  Adam adam(options, n);
+  const std::string& path = options.checkpoint_path;
+  const internal::CheckpointRun run =
+      GeneratorCheckpointRun(options, stage, *generator, m, fingerprint);
+  int first_epoch = 0;
+  double seconds_before = 0;
+  if (!path.empty() && options.resume && std::filesystem::exists(path)) {
+    nlohmann::json meta;
+    const TensorFile file = internal::ReadCheckpoint(path, run, &meta);
+    first_epoch = meta.at("step").get<int>();
+    seconds_before = meta.at("train_seconds").get<double>();
+    if (first_epoch < 1 || first_epoch > options.epochs) {
+      throw std::runtime_error("checkpoint " + path + ": meta.step " + std::to_string(first_epoch) +
+                               " is outside [1, " + std::to_string(options.epochs) + "] epochs");
+    }
+    theta = internal::CheckpointVector(file, "parameters", n);
+    adam.Restore(internal::CheckpointVector(file, "adam_m", n),
+                 internal::CheckpointVector(file, "adam_v", n),
+                 static_cast<int>(internal::CheckpointVector(file, "adam_t", 1)[0]));
+    const Eigen::VectorXd history = internal::CheckpointVector(file, "loss_history", first_epoch);
+    summary.loss_history.assign(history.data(), history.data() + history.size());
+    generator->SetParameters(theta);
+    summary.epochs_resumed = summary.epochs_completed = first_epoch;
+  }
+  auto write_checkpoint = [&](int epochs_done) {
+    const double seconds =
+        seconds_before +
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    TensorFile file = internal::NewCheckpoint(run, epochs_done, seconds);
+    const auto f64 = TensorFile::DType::kFloat64;
+    file.Add("parameters", f64, {n}, internal::ToStdVector(theta));
+    file.Add("adam_m", f64, {n}, internal::ToStdVector(adam.m()));
+    file.Add("adam_v", f64, {n}, internal::ToStdVector(adam.v()));
+    file.Add("adam_t", f64, {1}, {static_cast<double>(adam.t())});
+    file.Add("loss_history", f64, {static_cast<std::int64_t>(summary.loss_history.size())},
+             summary.loss_history);
+    file.Write(path);
+  };
+  for (int epoch = first_epoch; epoch < options.epochs; ++epoch) {
     const std::vector<int> order = Shuffled(m, DeriveSeed(options.seed, epoch));
     const double lr = LearningRate(options, epoch);
     double sum = 0;
@@ -94,7 +185,12 @@ GeneratorTrainingSummary RunAdam(PoseGenerator* generator, int m,
     generator->SetParameters(theta);
     summary.loss_history.push_back(loss);
     summary.epochs_completed = epoch + 1;
-    if (progress && !progress(epoch, loss)) break;
+    const bool stop = progress && !progress(epoch, loss);
+    if (!path.empty() &&
+        (stop || (epoch + 1) % options.checkpoint_every == 0 || epoch + 1 == options.epochs)) {
+      write_checkpoint(epoch + 1);
+    }
+    if (stop) break;
   }
   if (!summary.loss_history.empty()) {
     summary.initial_loss = summary.loss_history.front();
@@ -121,6 +217,8 @@ bool GeneratorTrainingOptions::IsValid(std::string* error) const {
     return fail("final_lr_fraction must be in [0, 1]");
   }
   if (pixels_per_frame < 1) return fail("pixels_per_frame must be >= 1");
+  if (checkpoint_every < 1) return fail("checkpoint_every must be >= 1");
+  if (resume && checkpoint_path.empty()) return fail("resume requires a checkpoint_path");
   return true;
 }
 
@@ -157,7 +255,10 @@ GeneratorTrainingSummary TrainGeneratorOnLatents(PoseGenerator* generator,
   const Eigen::MatrixXd features = FeatureMatrix(*generator, samples);
   const Eigen::VectorXd inv_var = generator->latent_stddev().cwiseAbs2().cwiseInverse();
   const double d = generator->latent_dim();
-  return RunAdam(generator, m, options, progress,
+  const std::uint64_t fingerprint = internal::Fnv1a(
+      latents.data(), sizeof(double) * static_cast<std::size_t>(latents.size()),
+      SamplesFingerprint(samples));
+  return RunAdam(generator, m, options, progress, "latents", fingerprint,
                  [&](const Eigen::VectorXd& theta, const std::vector<int>& rows, int,
                      Eigen::VectorXd* gradient) {
                    const int b = static_cast<int>(rows.size());
@@ -220,8 +321,17 @@ GeneratorTrainingSummary TrainGeneratorOnPixels(PoseGenerator* generator,
   }
   const Eigen::MatrixXd features = FeatureMatrix(*generator, samples);
   const int p = options.pixels_per_frame;
+  std::uint64_t fingerprint = SamplesFingerprint(samples);
+  for (const TrunkTargets& t : frames) {
+    fingerprint = internal::Fnv1a(t.values.data(),
+                                  sizeof(float) * static_cast<std::size_t>(t.values.size()),
+                                  fingerprint);
+    fingerprint = internal::Fnv1a(t.weights.data(),
+                                  sizeof(float) * static_cast<std::size_t>(t.weights.size()),
+                                  fingerprint);
+  }
   return RunAdam(
-      generator, m, options, progress,
+      generator, m, options, progress, "pixels", fingerprint,
       [&](const Eigen::VectorXd& theta, const std::vector<int>& rows, int epoch,
           Eigen::VectorXd* gradient) {
         const int b = static_cast<int>(rows.size());

@@ -17,6 +17,17 @@
 // Both: Adam on shuffled minibatches, everything seeded (DeriveSeed per epoch and
 // sample), single-threaded and deterministic.
 //
+// Checkpoints. With GeneratorTrainingOptions::checkpoint_path set, a TensorFile of kind
+// "checkpoint" (format "tactfunc-generator-checkpoint", estimation/training/internal/
+// checkpoint.h: the stage, the options that shape the trajectory, the samples' count and
+// fingerprint) holding the generator's parameters, Adam's moments and step and the loss
+// history is written atomically every checkpoint_every epochs, when the progress callback
+// stops the run, and at the end. With resume, training continues from it if it exists:
+// since every epoch's shuffle and pixel draws are seeded by the epoch, a run stopped and
+// resumed gives the same generator, bit for bit, as one never stopped. A checkpoint of
+// another stage, other options or other samples is refused (std::runtime_error naming
+// the field; TensorFileError for an unreadable file).
+//
 // Errors: bad options, shapes that do not match, unknown tool indices or non-finite
 // latents throw std::invalid_argument.
 #ifndef TACTFUNC_ESTIMATION_SYNTHESIS_GENERATOR_TRAINING_H_
@@ -54,11 +65,17 @@ struct GeneratorTrainingOptions {
   // Set the output standardisation from the latents (regression only).
   bool standardize_outputs = true;
   std::uint64_t seed = 0;
+  // Checkpoints (header comment): the path ("" = none), every how many epochs (>= 1), and
+  // whether to continue from the file if it exists. They do not change the result.
+  std::string checkpoint_path;
+  int checkpoint_every = 10;
+  bool resume = false;
   bool IsValid(std::string* error) const;
 };
 
 struct GeneratorTrainingSummary {
-  int epochs_completed = 0;
+  int epochs_completed = 0;  // counting those a resumed run found done
+  int epochs_resumed = 0;    // epochs the checkpoint already held (0: started anew)
   double initial_loss = 0, final_loss = 0;  // mean epoch loss of the first / last epoch
   std::vector<double> loss_history;
   double total_time_in_seconds = 0;

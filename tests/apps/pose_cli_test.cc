@@ -243,6 +243,15 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
                            Root("gf.tfs") + " --data " + Root("gd") + " --out " + Root("g.tpg") +
                            " --mode latents --epochs 5 --hidden 16 --calibration-frames 4");
   ASSERT_EQ(train.exit_code, 0) << train.err;
+  // Its stage checkpoints are gone once the generator is written; --resume without one
+  // trains anew, to the same bytes.
+  EXPECT_FALSE(fs::exists(Root("g.tpg.regression.ckpt")));
+  EXPECT_THAT(train.err, HasSubstr("train-generator regression: 5/5 epochs"));
+  const Result again = Run("train-generator --model " + Root("m.tfm") + " --functaset " +
+                           Root("gf.tfs") + " --data " + Root("gd") + " --out " + Root("g2.tpg") +
+                           " --mode latents --epochs 5 --hidden 16 --calibration-frames 4 --resume");
+  ASSERT_EQ(again.exit_code, 0) << again.err;
+  EXPECT_EQ(Slurp(Root("g2.tpg")), Slurp(Root("g.tpg")));
   const std::string out = Root("pose_generator");
   const std::string args = "pose --method generator --model " + Root("m.tfm") + " --pose-model " +
                            Root("p.tpm") + " --functaset " + Root("gf.tfs") + " --data " +
