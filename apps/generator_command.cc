@@ -329,7 +329,8 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
   std::ostringstream csv;
   csv << "contact,tool,symmetry_order,truth_x_mm,truth_y_mm,truth_yaw_deg,truth_depth_mm,"
          "mode_x_mm,mode_y_mm,mode_yaw_deg,mode_depth_mm,mean_x_mm,mean_y_mm,mean_yaw_deg,"
-         "position_error_mm,yaw_error_deg,modes,tool_probability\n";
+         "position_error_mm,yaw_error_deg,modes,tool_probability,mode_sd_x_mm,mode_sd_y_mm,"
+         "mode_sd_yaw_deg\n";
   std::vector<double> times, cpu_times;
   std::map<std::string, std::pair<double, int>> per_tool_pos;
   const std::vector<std::string>& tools = generator.options().tools;
@@ -386,16 +387,21 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
         const double mode_depth = true_mode != nullptr ? true_mode->depth_m : std::nan("");
         int modes = 0;
         for (const LaplaceComponent& c : mixture.components()) modes += c.tool == tools[t];
-        char row[512];
+        // The mode's Laplace standard deviations in its tangent space: x and y along and
+        // across the object's own axes (right perturbation), and the yaw.
+        Eigen::Vector3d sd = Eigen::Vector3d::Constant(std::nan(""));
+        if (true_mode != nullptr) sd = true_mode->covariance.diagonal().head<3>().cwiseSqrt();
+        char row[640];
         std::snprintf(row, sizeof(row),
                       "%d,%s,%d,%.4f,%.4f,%.3f,%.4f,%.4f,%.4f,%.3f,%.4f,%.4f,%.4f,%.3f,%.4f,%.3f,%d,"
-                      "%.4f\n",
+                      "%.4f,%.4f,%.4f,%.3f\n",
                       k, tools[t].c_str(), n, 1e3 * truth.x(), 1e3 * truth.y(),
                       kDeg * truth.yaw(), 1e3 * contact.depth_m, 1e3 * mode.x(), 1e3 * mode.y(),
                       kDeg * mode.yaw(), 1e3 * mode_depth, 1e3 * mean.x(), 1e3 * mean.y(),
                       kDeg * mean.yaw(), 1e3 * std::sqrt(dp), kDeg * mode_yaw_error, modes,
                       s.tool_probabilities.count(tools[t]) ? s.tool_probabilities.at(tools[t])
-                                                           : 0.0);
+                                                           : 0.0,
+                      1e3 * sd[0], 1e3 * sd[1], kDeg * sd[2]);
         csv << row;
       }
       per_tool_pos[tools[t]].first += dp;

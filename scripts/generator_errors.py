@@ -4,7 +4,10 @@
 errors split by contact depth, by distance from the sensor's centre and by tool, the
 contacts whose yaw is off by a large angle (mirrored or flipped modes), the mean error
 vector (a systematic bias would show there), and per tool the position error along and
-across the object's own x axis (a rod's long axis), over all contacts and the shallow ones. docs/POSES.md quotes its output.
+across the object's own x axis (a rod's long axis), over all contacts and the shallow ones,
+beside the standard deviations the mode's Laplace component gives in those directions
+(when the CSV has them): an error the posterior predicts is the frame's ambiguity, not a
+miss. docs/POSES.md quotes its output.
 
 Usage: python3 scripts/generator_errors.py CONTACTS.csv [--flip-deg 30]
        [--depth-edges-mm 6,10] [--radius-edges-mm 1.5,3]
@@ -75,6 +78,8 @@ def main():
                         "pos": float(r["position_error_mm"]),
                         "yaw": float(r["yaw_error_deg"]) if r["yaw_error_deg"] not in ("", "nan")
                         else float("nan"),
+                        "sdx": float(r.get("mode_sd_x_mm") or "nan"),
+                        "sdy": float(r.get("mode_sd_y_mm") or "nan"),
                     })
                 except ValueError as e:
                     sys.exit(f"generator_errors: {args.contacts}, line {line}: {e}")
@@ -124,14 +129,26 @@ def main():
         return -r["ex"] * math.sin(r["tyaw"]) + r["ey"] * math.cos(r["tyaw"])
 
     shallow_mm = args.depth_edges_mm[0] if args.depth_edges_mm else math.inf
+    with_sd = all(not math.isnan(r["sdx"]) for r in rows)
+
+    def predicted(chosen):
+        # The RMS of the mode's Laplace standard deviations along / across.
+        if not with_sd:
+            return ""
+        return (f" (posterior sd {rms([r['sdx'] for r in chosen]):.3f} / "
+                f"{rms([r['sdy'] for r in chosen]):.3f})")
+
     print(f"position error RMSE along / across the object's x axis (mm), all contacts and "
-          f"those below {shallow_mm:g} mm deep:")
+          f"those below {shallow_mm:g} mm deep" +
+          (", each beside the RMS of the mode's Laplace sd in those directions:" if with_sd
+           else ":"))
     for tool in sorted({r["tool"] for r in rows}):
         chosen = [r for r in rows if r["tool"] == tool]
         shallow = [r for r in chosen if r["depth"] < shallow_mm]
         print(f"  {tool:>11}: {rms([along(r) for r in chosen]):.3f} / "
-              f"{rms([across(r) for r in chosen]):.3f}; shallow ({len(shallow)}): "
-              f"{rms([along(r) for r in shallow]):.3f} / {rms([across(r) for r in shallow]):.3f}")
+              f"{rms([across(r) for r in chosen]):.3f}{predicted(chosen)}; shallow "
+              f"({len(shallow)}): {rms([along(r) for r in shallow]):.3f} / "
+              f"{rms([across(r) for r in shallow]):.3f}{predicted(shallow)}")
 
 
 if __name__ == "__main__":

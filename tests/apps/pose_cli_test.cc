@@ -334,6 +334,7 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
   ASSERT_TRUE(std::getline(rows, line));
   EXPECT_THAT(line, HasSubstr("truth_x_mm,truth_y_mm,truth_yaw_deg"));
   EXPECT_THAT(line, HasSubstr("position_error_mm,yaw_error_deg"));
+  EXPECT_THAT(line, HasSubstr("mode_sd_x_mm,mode_sd_y_mm,mode_sd_yaw_deg"));
   int count = 0;
   double sum_sq = 0;
   while (std::getline(rows, line)) {
@@ -341,9 +342,10 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
     std::istringstream cells(line);
     std::string cell;
     while (std::getline(cells, cell, ',')) v.push_back(std::atof(cell.c_str()));
-    ASSERT_EQ(v.size(), 18u) << line;
+    ASSERT_EQ(v.size(), 21u) << line;
     // position_error_mm is the distance between the truth's and the mode's positions.
     EXPECT_NEAR(v[14], std::hypot(v[7] - v[3], v[8] - v[4]), 2e-4) << line;
+    for (int c : {18, 19, 20}) EXPECT_GT(v[c], 0) << "the mode's Laplace sd, " << line;
     sum_sq += v[14] * v[14];
     ++count;
   }
