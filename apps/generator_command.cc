@@ -391,6 +391,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
         // across the object's own axes (right perturbation), and the yaw.
         Eigen::Vector3d sd = Eigen::Vector3d::Constant(std::nan(""));
         if (true_mode != nullptr) sd = true_mode->covariance.diagonal().head<3>().cwiseSqrt();
+        if (n == 0) sd[2] = std::nan("");  // the yaw of a C_inf tool is not estimated
         char row[640];
         std::snprintf(row, sizeof(row),
                       "%d,%s,%d,%.4f,%.4f,%.3f,%.4f,%.4f,%.4f,%.3f,%.4f,%.4f,%.4f,%.3f,%.4f,%.3f,%d,"

@@ -15,6 +15,7 @@
 #include <time.h>
 
 #include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
 #include <Eigen/LU>
 
 #include "models/core/seed.h"
@@ -24,6 +25,28 @@ namespace tactfunc {
 namespace {
 
 constexpr double kChi2_3_90 = 6.251388631170325;  // chi-square(3) 0.9-quantile
+
+// The inverse and the log-determinant of a Laplace Hessian (symmetric, positive
+// semi-definite up to rounding) from its eigen-decomposition, the eigenvalues floored at
+// 1e-12 of the largest: a direction the frame leaves (nearly) unconstrained gets a wide
+// but positive variance, never the negative one an LU inverse of a near-singular matrix
+// can round to. *log_det is -inf (the mode is then dropped) when every eigenvalue is 0.
+template <int K>
+Eigen::Matrix<double, K, K> LaplaceCovariance(const Eigen::Matrix<double, K, K>& hessian,
+                                              double* log_det) {
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, K, K>> eigen(
+      0.5 * (hessian + hessian.transpose()));
+  Eigen::Matrix<double, K, 1> values = eigen.eigenvalues();
+  const double floor = 1e-12 * values.maxCoeff();
+  if (!(floor > 0)) {
+    *log_det = -std::numeric_limits<double>::infinity();
+    return Eigen::Matrix<double, K, K>::Zero();
+  }
+  values = values.cwiseMax(floor);
+  *log_det = values.array().log().sum();
+  return eigen.eigenvectors() * values.cwiseInverse().asDiagonal() *
+         eigen.eigenvectors().transpose();
+}
 
 double Ms(std::chrono::steady_clock::time_point a, std::chrono::steady_clock::time_point b) {
   return std::chrono::duration<double, std::milli>(b - a).count();
@@ -426,16 +449,12 @@ GeneratorPosterior::Summary GeneratorPosterior::Estimate(const TrunkTargets& tar
         for (int a = 0; a < 3; ++a) {
           for (int b = 0; b < 3; ++b) h3(a, b) = H(idx[a], idx[b]);
         }
-        h3 += 1e-12 * Eigen::Matrix3d::Identity() * h3.trace();
-        const Eigen::Matrix3d s3 = h3.inverse();
+        const Eigen::Matrix3d s3 = LaplaceCovariance<3>(h3, &log_det);
         for (int a = 0; a < 3; ++a) {
           for (int b = 0; b < 3; ++b) c.covariance(idx[a], idx[b]) = s3(a, b);
         }
-        log_det = std::log(h3.determinant());
       } else {
-        Eigen::Matrix4d h4 = H + 1e-12 * Eigen::Matrix4d::Identity() * H.trace();
-        c.covariance = h4.inverse();
-        log_det = std::log(h4.determinant());
+        c.covariance = LaplaceCovariance<4>(H, &log_det);
       }
       c.log_evidence = -f.cost * scale + 0.5 * k * std::log(2 * M_PI) - 0.5 * log_det +
                        (n == 0 ? std::log(2 * M_PI) : std::log(static_cast<double>(n)));
