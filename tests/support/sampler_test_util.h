@@ -1,8 +1,9 @@
 // Copyright 2026 The tactfunc Authors.
 //
 // Tiny hand-built trunks and frames for the sampler tests (no trainer needed): an
-// untrained SIREN trunk from a seed, and targets the trunk itself generates at a known
-// latent (plus optional Gaussian pixel noise, drawn with Boost.Random).
+// untrained SIREN trunk from a seed, targets the trunk itself generates at a known
+// latent (plus optional Gaussian pixel noise, drawn with Boost.Random), and an untrained
+// pose generator.
 #ifndef TACTFUNC_TESTS_SUPPORT_SAMPLER_TEST_UTIL_H_
 #define TACTFUNC_TESTS_SUPPORT_SAMPLER_TEST_UTIL_H_
 
@@ -13,6 +14,7 @@
 #include <boost/random/normal_distribution.hpp>
 
 #include "estimation/data/trunk_targets.h"
+#include "models/pose/pose_generator.h"
 #include "models/trunk/functa_model.h"
 
 namespace tactfunc::testing_util {
@@ -55,6 +57,18 @@ inline TrunkTargets MakeTargets(const SensorTrunk& trunk, const Eigen::VectorXd&
   }
   t.weights = Eigen::VectorXf::Ones(y.rows());
   return t;
+}
+
+// An untrained pose generator of two tools ("l_shape", C_1; "rod", C_2) onto latents of
+// size latent_dim, one tanh layer of `hidden` units, 2 yaw harmonics, from `seed`.
+inline PoseGenerator MakeTinyGenerator(int latent_dim, int hidden, std::uint64_t seed) {
+  PoseGenerator::Options o;
+  o.tools = {"l_shape", "rod"};
+  o.symmetry_orders = {1, 2};
+  o.latent_dim = latent_dim;
+  o.hidden_sizes = {hidden};
+  o.yaw_harmonics = 2;
+  return PoseGenerator(o, seed);
 }
 
 }  // namespace tactfunc::testing_util

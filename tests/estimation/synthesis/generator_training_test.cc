@@ -20,15 +20,7 @@ namespace fs = std::filesystem;
 
 constexpr int kRows = 8, kCols = 9, kLatent = 5;
 
-PoseGenerator Generator() {
-  PoseGenerator::Options o;
-  o.tools = {"l_shape", "rod"};
-  o.symmetry_orders = {1, 2};
-  o.latent_dim = kLatent;
-  o.hidden_sizes = {10};
-  o.yaw_harmonics = 2;
-  return PoseGenerator(o, 7);
-}
+PoseGenerator Generator() { return testing_util::MakeTinyGenerator(kLatent, 10, 7); }
 
 // Labelled samples whose latents and frames a fixed generator renders through a tiny trunk.
 struct Data {

@@ -23,13 +23,7 @@ constexpr int kRows = 10, kCols = 12, kLatent = 6;
 SensorTrunk Trunk() { return testing_util::MakeTinyTrunk(kRows, kCols, 16, 2, kLatent, 11); }
 
 PoseGenerator Generator() {
-  PoseGenerator::Options o;
-  o.tools = {"l_shape", "rod"};
-  o.symmetry_orders = {1, 2};
-  o.latent_dim = kLatent;
-  o.hidden_sizes = {12};
-  o.yaw_harmonics = 2;
-  PoseGenerator g(o, 5);
+  PoseGenerator g = testing_util::MakeTinyGenerator(kLatent, 12, 5);
   g.SetLatentStandardization(Eigen::VectorXd::Zero(kLatent),
                              Eigen::VectorXd::Constant(kLatent, 0.6));
   return g;
