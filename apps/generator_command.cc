@@ -4,16 +4,19 @@
 //
 //   tactfunc train-generator --model M.tfm --functaset F.tfs --data D --out G.tpg
 //       [--mode latents|pixels] [--epochs 300] [--pixel-epochs 4] [--pixel-frames 200]
-//       [--calibration-frames 120] [--seed 0] [--json]
+//       [--calibration-frames 120] [--seed 0] [--resume] [--json]
 //     trains h(tool, T, depth) -> z on the functaset's labelled train-split entries: by
 //     regressing their latents (--mode latents), then (--mode pixels) on --pixel-frames
 //     frames per tool through the frozen trunk for --pixel-epochs more epochs; reports the
 //     mean rendering PSNR on the test split, calibrates the posterior's sigma inflation
-//     on --calibration-frames test-split frames and writes G atomically.
+//     on --calibration-frames test-split frames and writes G atomically. Each stage shows
+//     its epochs and checkpoints to G.regression.ckpt / G.pixels.ckpt (every 10 epochs and
+//     on Ctrl-C, which exits 130); --resume continues from them to the same G.
 //
 //   tactfunc eval-generator --model M.tfm --generator G.tpg [--functaset F.tfs]
 //       [--pose-model P.tpm] [--contacts-per-tool 20] [--seed 1592590336] [--unknown-tool]
-//       [--diagnose] [search knobs: --max-pixels, --refined-starts, --iterations, --knn-k,
+//       [--diagnose] [search knobs: --max-pixels, --contact-share, --refined-starts,
+//       --iterations, --knn-k,
 //       --yaw-grid, --position-grid, --position-rings, --coarse-pixels, --coarse-starts,
 //       --coarse-iterations] [--contacts-csv FILE] [--json]
 //     fresh Soft Bubble contacts (ContactSimulator, seeded; contact k uses DeriveSeed(seed,
@@ -24,7 +27,8 @@
 //     the tool identification rate. --diagnose: for every contact whose mode is > 5 deg or
 //     > 1 mm off, the objective at the mode, the truth and the truth refined (a lower
 //     refined truth = a search failure, else a model failure). --contacts-csv: one row per
-//     usable contact (truth, mode, posterior mean, errors), written atomically.
+//     usable contact (truth, mode, posterior mean, errors, the mode's Laplace standard
+//     deviations), written atomically.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
