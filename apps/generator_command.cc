@@ -174,6 +174,7 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
                     ProgressBar::Lines::kWhenNotDrawn);
     reg = TrainGeneratorOnLatents(&generator, train.samples, train.latents, to,
                                   StageProgress(&bar));
+    bar.Tick(reg.epochs_completed - bar.done());  // a stage its checkpoint had finished
     bar.Finish();
   }
   ExitIfInterrupted(reg, to.epochs, to.checkpoint_path);
@@ -215,6 +216,7 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
                       ProgressBar::Lines::kWhenNotDrawn);
       pix = TrainGeneratorOnPixels(&generator, trunk, sub.samples, frames, po,
                                    StageProgress(&bar));
+      bar.Tick(pix.epochs_completed - bar.done());
       bar.Finish();
     }
     ExitIfInterrupted(pix, po.epochs, po.checkpoint_path);

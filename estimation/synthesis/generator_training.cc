@@ -109,6 +109,9 @@ internal::CheckpointRun GeneratorCheckpointRun(const GeneratorTrainingOptions& o
                                   {"pixels_per_frame", o.pixels_per_frame},
                                   {"standardize_outputs", o.standardize_outputs},
                                   {"seed", std::to_string(o.seed)},
+                                  {"hidden_sizes", generator.options().hidden_sizes},
+                                  {"yaw_harmonics", generator.options().yaw_harmonics},
+                                  {"tools", generator.options().tools},
                                   {"num_parameters", generator.parameters().size()}};
   internal::CheckpointRun run;
   run.format = "tactfunc-generator-checkpoint";
