@@ -14,10 +14,12 @@
 //      the same start and are not repeated; without k-NN starts, a yaw grid at the centre;
 //      every start position is also tried at a grid of yaws (Options::yaw_grid);
 //   2. modes: FitPoseModes (estimation/synthesis/pose_fitter.h) in Ceres on SE(2), the
-//      starts scored and first refined on Options::coarse_pixels pixels of the frame;
+//      starts scored and first refined on Options::coarse_pixels pixels of the frame (both
+//      stages draw their pixels partly towards the contact, Options::problem);
 //   3. Laplace: at mode m with whitened residuals r at the posterior's pixel sigma s and
 //      Jacobian J over (tangent x, y, theta of the right perturbation, depth),
-//        H_m = J^T J,  Sigma_m = H_m^-1 (4 x 4),
+//        H_m = J^T J,  Sigma_m = H_m^-1 (4 x 4; H_m's eigenvalues floored at 1e-12 of
+//        the largest, so an unconstrained direction gets a wide, positive variance),
 //        log Z_m = -1/2 ||r||^2 + (k/2) log 2 pi - 1/2 log det H_m + log c_t,
 //      k = 4, c_t = n for a C_n tool (its n copies of every mode), and for n = 0 (yaw
 //      unobservable) k = 3 over (x, y, depth) and c_t = 2 pi (the yaw integrates out);
