@@ -276,15 +276,16 @@ struct EvalGeneratorFlags {
   std::uint64_t seed = 0x5eed0000u;
   bool unknown_tool = false;
   double sigma_inflation = 0;
-  int max_pixels = 384;
+  // The search knobs' defaults are GeneratorPosterior's and PoseFitOptions'.
+  int max_pixels = GeneratorPosterior::Options().problem.max_pixels;
   double contact_share = GeneratorPosterior::Options().problem.contact_share;
   int refined_starts = PoseFitOptions().max_refined_starts;
   int iterations = PoseFitOptions().max_iterations;
-  int knn_k = 4;
-  int yaw_grid = 12;
-  int coarse_pixels = 128;
-  double position_grid_mm = 2.5;
-  int position_rings = 2;
+  int knn_k = GeneratorPosterior::Options().knn_k;
+  int yaw_grid = GeneratorPosterior::Options().yaw_grid;
+  int coarse_pixels = GeneratorPosterior::Options().coarse_pixels;
+  double position_grid_mm = 1e3 * GeneratorPosterior::Options().position_grid_m;
+  int position_rings = GeneratorPosterior::Options().position_grid_rings;
   int coarse_starts = PoseFitOptions().coarse_refined_starts;
   int coarse_iterations = PoseFitOptions().coarse_iterations;
   bool diagnose = false;
@@ -588,7 +589,8 @@ void RegisterEvalGenerator(CLI::App& app, CommandBody* selected) {
   sub->add_option("--sigma-inflation", flags->sigma_inflation,
                   "Override the generator's calibrated sigma inflation (0 = stored)")
       ->check(CLI::NonNegativeNumber);
-  sub->add_option("--max-pixels", flags->max_pixels, "Pixels per trunk pass (default 384)")
+  sub->add_option("--max-pixels", flags->max_pixels,
+                  "Pixels per trunk pass (default " + std::to_string(flags->max_pixels) + ")")
       ->check(CLI::Range(0, 1 << 20));
   sub->add_option("--contact-share", flags->contact_share,
                   "Share of each pass's pixels drawn towards the contact, importance-weighted "
@@ -603,20 +605,26 @@ void RegisterEvalGenerator(CLI::App& app, CommandBody* selected) {
                   "Levenberg-Marquardt iterations per start (default " +
                       std::to_string(PoseFitOptions().max_iterations) + ")")
       ->check(CLI::Range(1, 1000));
-  sub->add_option("--knn-k", flags->knn_k, "k-NN starts per tool (default 4)")
+  sub->add_option("--knn-k", flags->knn_k,
+                  "k-NN starts per tool (default " + std::to_string(flags->knn_k) + ")")
       ->check(CLI::Range(0, 1000));
   sub->add_option("--yaw-grid", flags->yaw_grid,
-                  "Yaws per start position over the full turn (default 12; 1 = none)")
+                  "Yaws per start position over the full turn (default " +
+                      std::to_string(flags->yaw_grid) + "; 1 = none)")
       ->check(CLI::Range(1, 360));
   sub->add_option("--coarse-pixels", flags->coarse_pixels,
-                  "Pixels of the coarse stage (start scoring and first refinement; default "
-                  "128, 0 = none)")
+                  "Pixels of the coarse stage (start scoring and first refinement; default " +
+                      std::to_string(flags->coarse_pixels) + ", 0 = none)")
       ->check(CLI::Range(0, 1 << 20));
   sub->add_option("--position-grid", flags->position_grid_mm,
-                  "Spacing (mm) of the shifted copies of the first start (default 2.5, 0 = none)")
+                  "Spacing (mm) of the shifted copies of the first start (default " +
+                      FormatFixed(flags->position_grid_mm, 1) + ", 0 = none)")
       ->check(CLI::NonNegativeNumber);
   sub->add_option("--position-rings", flags->position_rings,
-                  "Rings of shifted copies of the first start (default 2: a 5 x 5 grid)")
+                  "Rings of shifted copies of the first start (default " +
+                      std::to_string(flags->position_rings) + ": a " +
+                      std::to_string(2 * flags->position_rings + 1) + " x " +
+                      std::to_string(2 * flags->position_rings + 1) + " grid)")
       ->check(CLI::Range(0, 10));
   sub->add_option("--coarse-starts", flags->coarse_starts,
                   "Starts refined in the coarse stage per tool (default " +
