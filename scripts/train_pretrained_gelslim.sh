@@ -1,0 +1,22 @@
+#!/usr/bin/env bash
+# Reproduces models/pretrained/gelslim.tfm, the GelSlim's committed trunk: the photometric
+# head (docs/REPRESENTATION.md, "Optical sensors: draw the indentation, then shade it"),
+# which draws the gel's markers and shading ridges where the direct SIREN of
+# models/pretrained/default.tfm draws a blurred shadow. Data: the GelSlim frames of the
+# default synthetic dataset (12 tools x 150 contacts, seed 1, with noise-free copies, as
+# scripts/train_pretrained.sh); `train --head photometric` with its defaults (d = 64 values,
+# 128 B per frame; 3000 steps after 1000 with the markers at the working resolution) and
+# the training latents' warm-start table, which `encode` starts its fits from.
+# Deterministic for the seed; about 5 minutes on 2 cores.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+WORK=${WORK:-/tmp/tactfunc_pretrained_gelslim}
+TF=build/bin/tactfunc
+test -x "$TF" || bash scripts/build.sh
+mkdir -p "$WORK"
+run() { echo "+ $*"; "$@"; }
+run "$TF" synth --out "$WORK/data" --frames-per-tool 150 --sensors gelslim --seed 1 --clean --overwrite
+run "$TF" train --data "$WORK/data" --out "$WORK/gelslim.tfm" --head photometric --seed 1 \
+  --threads 2 "$@"
+cp "$WORK/gelslim.tfm" models/pretrained/gelslim.tfm
+echo "wrote models/pretrained/gelslim.tfm (data in $WORK)"
