@@ -288,14 +288,38 @@ void DescribeFile(const std::string& path, bool json) {
   } else if (file.kind() == "pose_model") {
     out["pose_model"] = DescribePoseModel(content, path);
   } else if (file.kind() == "checkpoint") {
-    // A trunk training checkpoint (estimation/training/trunk_trainer.cc writes these fields).
+    // A checkpoint of estimation/training/internal/checkpoint.h: the trainers' (trunk,
+    // photometric, pose generator) or a latent refit's, told apart by its format.
     const std::string sensor = StringAt(meta, "sensor");
+    const std::string format = StringAt(meta, "format");
     const double step = NumberAt(meta, "step"), seconds = NumberAt(meta, "train_seconds");
-    std::cout << "  " << sensor << " trunk at step " << FormatFixed(step, 0) << " after "
-              << FormatFixed(seconds, 0) << " s of training; the same train command plus --resume "
-              << "continues it (with a larger --steps to extend a finished run)\n";
-    out["checkpoint"] = {
-        {"sensor", sensor}, {"step", CountOrNull(step)}, {"train_seconds", NumberOrNull(seconds)}};
+    std::string stage;
+    if (format == "tactfunc-generator-checkpoint") {
+      const auto options = meta.find("options");
+      if (options != meta.end() && options->is_object()) stage = StringAt(*options, "stage");
+      std::cout << "  pose generator, stage " << stage << ", at epoch " << FormatFixed(step, 0)
+                << " after " << FormatFixed(seconds, 0)
+                << " s of training; the same train-generator command plus --resume continues "
+                   "it\n";
+    } else if (format == "tactfunc-refit-checkpoint") {
+      const auto frames = meta.find("frames");
+      const double total = frames != meta.end() && frames->is_object()
+                               ? NumberAt(*frames, "count")
+                               : std::numeric_limits<double>::quiet_NaN();
+      std::cout << "  " << sensor << " latents re-fitted: the first " << FormatFixed(step, 0)
+                << " of " << FormatFixed(total, 0) << " entries after " << FormatFixed(seconds, 0)
+                << " s; the same train-pose command plus --resume continues it\n";
+    } else {
+      std::cout << "  " << sensor << " trunk at step " << FormatFixed(step, 0) << " after "
+                << FormatFixed(seconds, 0)
+                << " s of training; the same train command plus --resume "
+                << "continues it (with a larger --steps to extend a finished run)\n";
+    }
+    out["checkpoint"] = {{"format", format},
+                         {"sensor", sensor},
+                         {"step", CountOrNull(step)},
+                         {"train_seconds", NumberOrNull(seconds)}};
+    if (!stage.empty()) out["checkpoint"]["stage"] = stage;
   }
   if (json) EmitJson(out);
 }

@@ -21,10 +21,17 @@
 // z_K, but the sgld / laplace posteriors are centred on the MAP fit z* (ceres:10); a
 // g_phi trained on z_K is ~6 mm off at z* on the 12-tool bubble data (docs/CLI.md,
 // "Latent maps"). --refit re-fits every labelled latent (train and test) with the
-// posteriors' fit settings and trains and evaluates on those.
-#include <chrono>
+// posteriors' fit settings and trains and evaluates on those (RefitLatents,
+// estimation/functaset/latent_refit.h; a progress bar, or progress lines where none is
+// drawn). Ctrl-C stops the refit after the block in hand, keeps what it fitted in
+// OUT.refit.ckpt and exits 130; --resume continues from it. Ctrl-C during the MLP's
+// epochs exits 130 too, the complete refit kept; the MLP then trains again from its
+// first epoch (deterministic: the same model). The checkpoint is removed once OUT is
+// written.
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
+#include <filesystem>
 #include <iostream>
 #include <map>
 #include <memory>
@@ -35,14 +42,15 @@
 #include "CLI/CLI.hpp"
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
+#include "apps/interrupt.h"
 #include "apps/model_inputs.h"
 #include "apps/output_paths.h"
+#include "apps/progress_bar.h"
 #include "estimation/evaluation/baselines.h"
 #include "estimation/data/dataset.h"
 #include "estimation/functaset/functaset.h"
-#include "models/core/parallel_for.h"
+#include "estimation/functaset/latent_refit.h"
 #include "estimation/fitting/latent_fitter.h"
-#include "estimation/data/trunk_targets.h"
 #include "models/trunk/functa_model.h"
 #include "estimation/posterior/pose_posterior.h"
 #include "models/pose/pose_mlp.h"
@@ -72,8 +80,12 @@ struct TrainPoseFlags {
   int threads = 0;
   double posterior_sigma = 0;
   double refit_sigma = 0;  // 0 = the trunk's residual_sigma
+  bool resume = false;     // continue the refit from OUT.refit.ckpt
   bool json = false;
 };
+
+// The refit's checkpoint, beside the output.
+std::string RefitCheckpoint(const std::string& out) { return out + ".refit.ckpt"; }
 
 // Labelled entries of one split as training data.
 struct Samples {
@@ -164,13 +176,17 @@ void RunTrainPose(const TrainPoseFlags& flags) {
   std::string error;
   if (!training.IsValid(&error)) throw UsageError(error);
 
-  const std::vector<NamedPath> outputs = {{"--out", flags.out}};
+  const std::vector<NamedPath> outputs = {{"--out", flags.out},
+                                          {"--out's checkpoint", RefitCheckpoint(flags.out)}};
   std::vector<NamedPath> inputs = {{"--functaset", flags.functaset}, {"--model", flags.model}};
   if (!flags.data.empty()) {
     const std::vector<NamedPath> data = DatasetPathInputs("--data", flags.data, flags.dataset);
     inputs.insert(inputs.end(), data.begin(), data.end());
   }
   RefuseOutputsThatAreInputs(outputs, inputs);
+  // Ctrl-C stops the refit after the block of latents in hand (its checkpoint is kept
+  // for --resume) or the MLP training after its epoch.
+  const InterruptScope interrupt_scope;
   const Functaset functaset = Functaset::Load(flags.functaset);
   SensorKind sensor;
   if (!ParseSensorFlag(flags.sensor, &sensor)) {
@@ -219,41 +235,38 @@ void RunTrainPose(const TrainPoseFlags& flags) {
                        "the functaset already holds (train without --refit, or encode again "
                        "with another --strategy)");
     }
-    const LatentFitter fitter(trunk, fit);
-    refitted = Functaset(functaset.model_checksum(), functaset.dataset());
-    refitted.AddSensor(sensor, functaset.latent_dim(sensor));
-    const auto& entries = functaset.entries(sensor);
-    const auto start = std::chrono::steady_clock::now();
-    std::vector<std::size_t> frame_of(entries.size(), 0);
-    for (std::size_t i = 0; i < entries.size(); ++i) {
-      if (!entries[i].label.has_value()) continue;
-      const std::optional<std::size_t> index = dataset.FindFrame(entries[i].id, sensor);
-      if (!index) {
-        throw DatasetError("--data '" + flags.data + "' has no " + ToString(sensor) + " frame '" +
-                           entries[i].id + "' of the functaset");
-      }
-      frame_of[i] = *index;
+    RefitOptions refit;
+    refit.fit = fit;
+    refit.problem = problem_options;
+    refit.threads = ResolveThreads(flags.threads);
+    refit.model_checksum = model.checksum();
+    refit.checkpoint_path = RefitCheckpoint(flags.out);
+    refit.resume = flags.resume;
+    RefitSummary refit_summary;
+    {
+      ProgressBar bar("train-pose refit", functaset.entries(sensor).size(), "latents",
+                      ProgressBar::Lines::kWhenNotDrawn);
+      refitted = RefitLatents(functaset, sensor, dataset, trunk, refit, &refit_summary,
+                              [&](int done, int) {
+                                bar.Tick(done - bar.done());
+                                return !InterruptScope::Requested();
+                              });
+      bar.Finish();
     }
-    // Fits are independent and LatentFitter::Fit is const.
-    std::vector<Eigen::VectorXf> latents(entries.size());
-    internal::ParallelFor(static_cast<int>(entries.size()), ResolveThreads(flags.threads),
-                          [&](int i) {
-                            if (!entries[i].label.has_value()) return;
-                            const TrunkTargets targets =
-                                LoadTrunkTargets(dataset, frame_of[i], trunk.format);
-                            Eigen::VectorXd latent;
-                            fitter.Fit(LatentProblem(trunk, targets, problem_options), &latent);
-                            latents[i] = latent.cast<float>();
-                          });
-    for (std::size_t i = 0; i < entries.size(); ++i) {
-      FunctasetEntry entry = entries[i];
-      if (entry.label.has_value()) entry.latent = latents[i];
-      refitted.Add(sensor, std::move(entry));
+    if (refit_summary.stopped) {
+      std::cerr << "train-pose: interrupted after re-fitting " << refit_summary.done << " of "
+                << refit_summary.entries << " latents; checkpoint " << refit.checkpoint_path
+                << ".\ntrain-pose: to continue, run the same command with --resume\n";
+      std::cout.flush();
+      std::exit(130);  // 128 + SIGINT, as shells report an interrupted program
     }
-    std::cout << "train-pose: re-fitted " << entries.size() << " latents with " << flags.refit
-              << " in "
-              << std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count()
-              << " s\n";
+    std::cout << "train-pose: re-fitted " << refit_summary.entries << " latents with "
+              << flags.refit << " in " << refit_summary.seconds << " s";
+    if (refit_summary.resumed > 0) {
+      std::cout << " (" << refit_summary.resumed << " taken from " << refit.checkpoint_path
+                << ")";
+    }
+    std::cout << "\n";
     source = &refitted;
   }
   std::set<std::string> unknown_tools;
@@ -335,9 +348,21 @@ void RunTrainPose(const TrainPoseFlags& flags) {
           std::cerr << "train-pose: epoch " << epoch + 1 << "/" << flags.epochs << " loss " << loss
                     << "\n";
         }
-        return true;
+        return !InterruptScope::Requested();
       });
   std::cout << summary.BriefReport() << "\n";
+  if (summary.termination == PoseMlpTrainingTermination::kUserRequested) {
+    std::cerr << "train-pose: interrupted after " << summary.epochs_completed << " of "
+              << flags.epochs << " epochs; nothing was written";
+    if (!flags.refit.empty()) {
+      std::cerr << ". The re-fitted latents are kept in " << RefitCheckpoint(flags.out)
+                << ":\ntrain-pose: the same command with --resume takes them and trains the "
+                   "MLP again from its first epoch (the same model as a run never stopped)";
+    }
+    std::cerr << "\n";
+    std::cout.flush();
+    std::exit(130);  // 128 + SIGINT, as shells report an interrupted program
+  }
   if (summary.termination == PoseMlpTrainingTermination::kNonFinite) {
     throw std::runtime_error("training diverged (" + summary.message +
                              "); try a smaller --lr. Nothing was written.");
@@ -428,6 +453,8 @@ void RunTrainPose(const TrainPoseFlags& flags) {
   model.Save(flags.out);  // atomic
   std::cout << "train-pose: wrote " << flags.out << " in "
             << summary.total_time_in_seconds << " s of training\n";
+  std::error_code ignored;  // the model is written; a checkpoint left behind is harmless
+  std::filesystem::remove(RefitCheckpoint(flags.out), ignored);
 
   if (flags.json) {
     nlohmann::json j = {{"sensor", ToString(sensor)}};
@@ -492,6 +519,10 @@ void RegisterTrainPose(CLI::App& app, CommandBody* selected) {
       ->check(CLI::NonNegativeNumber);
   sub->add_option("--threads", flags->threads, "Threads of --refit (default: all cores)")
       ->check(CLI::Range(0, 256));
+  sub->add_flag("--resume", flags->resume,
+                "Continue --refit from the checkpoint OUT.refit.ckpt that an interrupted run "
+                "(Ctrl-C, exit 130) left; the options must match it. The MLP's epochs start "
+                "again (they take a minute or so); the model is the same as a run never stopped");
   sub->add_flag("--json", flags->json,
                 "Print {sensor, rmse_mm, rmse_deg, per_tool, out} as one JSON line");
   sub->callback([flags, selected]() { *selected = [flags]() { RunTrainPose(*flags); }; });

@@ -25,6 +25,7 @@
 #include "nlohmann/json.hpp"
 #include "tests/support/dataset_test_util.h"
 #include "tests/support/functa_test_util.h"
+#include "tests/support/test_dir.h"
 
 namespace tactfunc {
 namespace {
@@ -101,6 +102,26 @@ TEST_F(PoseCliTest, TrainPoseCanRefitTheLatentsWithThePosteriorsFit) {
   EXPECT_THAT(r.out, HasSubstr("re-fitted 12 latents with ceres:3"));
   EXPECT_EQ(nlohmann::json::parse(PoseMlp::Load(Root("p_refit.tpm")).info_json())["latents"],
             "refit ceres:3");
+  // The refit reports its progress where no bar is drawn, and its checkpoint is gone once
+  // the model is written.
+  EXPECT_THAT(r.err, HasSubstr("train-pose refit: 12/12 latents (100%)"));
+  EXPECT_FALSE(fs::exists(Root("p_refit.tpm.refit.ckpt")));
+  // --resume from a checkpoint that is not one: refused by name, nothing written.
+  testing_util::WriteText(Root("p_resume.tpm.refit.ckpt"), "not a checkpoint");
+  const Result foreign = Run("train-pose --functaset " + Root("f.tfs") + " --model " +
+                             Root("m.tfm") + " --data " + Root("d") + " --refit ceres:3 --out " +
+                             Root("p_resume.tpm") + " --hidden 8 --epochs 5 --batch 4 --resume");
+  EXPECT_NE(foreign.exit_code, 0);
+  EXPECT_THAT(foreign.err, HasSubstr("cannot resume from checkpoint"));
+  EXPECT_THAT(foreign.err, HasSubstr("p_resume.tpm.refit.ckpt"));
+  EXPECT_FALSE(fs::exists(Root("p_resume.tpm")));
+  // Without --resume the run starts anew (and replaces the stale file when it is done).
+  const Result anew = Run("train-pose --functaset " + Root("f.tfs") + " --model " +
+                          Root("m.tfm") + " --data " + Root("d") + " --refit ceres:3 --out " +
+                          Root("p_resume.tpm") + " --hidden 8 --epochs 5 --batch 4");
+  ASSERT_EQ(anew.exit_code, 0) << anew.err;
+  EXPECT_EQ(testing_util::Slurp(Root("p_resume.tpm")), testing_util::Slurp(Root("p_refit.tpm")));
+  EXPECT_FALSE(fs::exists(Root("p_resume.tpm.refit.ckpt")));
 
   // A larger pixel sigma gives the latent prior more weight: other latents, another fit
   // of the MLP, and the sigma recorded with the model.
