@@ -246,11 +246,15 @@ void RunTrainPose(const TrainPoseFlags& flags) {
     {
       ProgressBar bar("train-pose refit", functaset.entries(sensor).size(), "latents",
                       ProgressBar::Lines::kWhenNotDrawn);
-      refitted = RefitLatents(functaset, sensor, dataset, trunk, refit, &refit_summary,
-                              [&](int done, int) {
-                                bar.Tick(done - bar.done());
-                                return !InterruptScope::Requested();
-                              });
+      try {
+        refitted = RefitLatents(functaset, sensor, dataset, trunk, refit, &refit_summary,
+                                [&](int done, int) {
+                                  bar.Tick(done - bar.done());
+                                  return !InterruptScope::Requested();
+                                });
+      } catch (const DatasetError& e) {
+        throw DatasetError("--data '" + flags.data + "': " + e.what());
+      }
       bar.Finish();
     }
     if (refit_summary.stopped) {
