@@ -368,8 +368,11 @@ void RunTrainPose(const TrainPoseFlags& flags) {
     std::exit(130);  // 128 + SIGINT, as shells report an interrupted program
   }
   if (summary.termination == PoseMlpTrainingTermination::kNonFinite) {
-    throw std::runtime_error("training diverged (" + summary.message +
-                             "); try a smaller --lr. Nothing was written.");
+    throw std::runtime_error(
+        "training diverged (" + summary.message + "); try a smaller --lr. Nothing was written" +
+        (flags.refit.empty() ? std::string(".")
+                             : "; the re-fitted latents are kept in " + RefitCheckpoint(flags.out) +
+                                   ", which --resume takes."));
   }
 
   if (calibration.inputs.rows() > 0) {

@@ -115,6 +115,24 @@ TEST_F(PoseCliTest, TrainPoseCanRefitTheLatentsWithThePosteriorsFit) {
   EXPECT_THAT(foreign.err, HasSubstr("cannot resume from checkpoint"));
   EXPECT_THAT(foreign.err, HasSubstr("p_resume.tpm.refit.ckpt"));
   EXPECT_FALSE(fs::exists(Root("p_resume.tpm")));
+  // An MLP that diverges writes nothing but keeps the complete refit; info names it, and
+  // --resume takes it (nothing fitted again) to the model of a run never stopped.
+  const std::string refit_args = "train-pose --functaset " + Root("f.tfs") + " --model " +
+                                 Root("m.tfm") + " --data " + Root("d") +
+                                 " --refit ceres:3 --out " + Root("p_kept.tpm") +
+                                 " --hidden 8 --epochs 5 --batch 4";
+  const Result diverged = Run(refit_args + " --lr 1e30");
+  EXPECT_NE(diverged.exit_code, 0);
+  EXPECT_THAT(diverged.err, HasSubstr("p_kept.tpm.refit.ckpt, which --resume takes"));
+  EXPECT_FALSE(fs::exists(Root("p_kept.tpm")));
+  const Result described = Run("info " + Root("p_kept.tpm.refit.ckpt"));
+  ASSERT_EQ(described.exit_code, 0) << described.err;
+  EXPECT_THAT(described.out, HasSubstr("bubble latents re-fitted: the first 12 of 12 entries"));
+  const Result kept = Run(refit_args + " --resume");
+  ASSERT_EQ(kept.exit_code, 0) << kept.err;
+  EXPECT_THAT(kept.out, HasSubstr("(12 taken from " + Root("p_kept.tpm.refit.ckpt") + ")"));
+  EXPECT_EQ(testing_util::Slurp(Root("p_kept.tpm")), testing_util::Slurp(Root("p_refit.tpm")));
+  EXPECT_FALSE(fs::exists(Root("p_kept.tpm.refit.ckpt")));
   // Without --resume the run starts anew (and replaces the stale file when it is done).
   const Result anew = Run("train-pose --functaset " + Root("f.tfs") + " --model " +
                           Root("m.tfm") + " --data " + Root("d") + " --refit ceres:3 --out " +
