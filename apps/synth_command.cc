@@ -102,9 +102,8 @@ void RunSynth(const SynthFlags& flags) {
   simulator_options.gelslim.marker_darkness = flags.marker_darkness;
   CheckSize(flags, plan, simulator_options);
 
-  ProgressBar bar("synth", static_cast<std::int64_t>(plan.tools.size()) *
-                               plan.frames_per_tool,
-                  "contacts");
+  ProgressBar bar("synth", static_cast<std::int64_t>(plan.tools.size()) * plan.frames_per_tool,
+                  "contacts", ProgressBar::Lines::kWhenNotDrawn);
   const SynthesisReport report = Synthesize(plan, simulator_options,
                                             [&bar](int n) { bar.Tick(n); });
   bar.Finish();
