@@ -8,7 +8,8 @@
 // plain progress lines instead, one per 10 % of the work or per 10 s, whichever comes
 // first, and a last one at Finish:
 //   "encode: DONE/TOTAL frames (P%), R frames/s, ETA T"
-// (`tactfunc encode` and `tactfunc eval` use them: minutes without a word otherwise).
+// (the long commands use them -- synth, encode, eval, export, train-pose's refit,
+// train-generator, eval-generator: minutes without a word otherwise).
 #ifndef TACTFUNC_APPS_PROGRESS_BAR_H_
 #define TACTFUNC_APPS_PROGRESS_BAR_H_
 
