@@ -242,9 +242,27 @@ bool LatentProblem::ResidualsAndJacobian(const double* z_data, double* residuals
   return ResidualsAndJacobian(z_data, residuals, jacobian, nullptr);
 }
 
+bool LatentProblem::ResidualsAndJacobianAlong(const double* z, const Eigen::MatrixXd& directions,
+                                              double* residuals, double* jacobian) const {
+  if (directions.rows() != dim()) {
+    throw std::invalid_argument("LatentProblem::ResidualsAndJacobianAlong: directions: expected " +
+                                std::to_string(dim()) + " rows, got " +
+                                std::to_string(directions.rows()));
+  }
+  return ResidualPass(z, residuals, jacobian, nullptr, &directions);
+}
+
 bool LatentProblem::ResidualsAndJacobian(const double* z_data, double* residuals,
                                          double* jacobian, Eigen::MatrixXd* outputs_out) const {
+  return ResidualPass(z_data, residuals, jacobian, outputs_out, nullptr);
+}
+
+bool LatentProblem::ResidualPass(const double* z_data, double* residuals, double* jacobian,
+                                 Eigen::MatrixXd* outputs_out,
+                                 const Eigen::MatrixXd* directions) const {
   const int d = dim();
+  // Jacobian columns: d, or the directions' k.
+  const int cols = directions != nullptr ? static_cast<int>(directions->cols()) : d;
   const int c_count = channels();
   const long n = num_pixels();
   bool finite = true;
@@ -259,14 +277,16 @@ bool LatentProblem::ResidualsAndJacobian(const double* z_data, double* residuals
     }
     const LatentModulatedSiren::VectorX<Scalar> z =
         Eigen::Map<const Eigen::VectorXd>(z_data, d).cast<Scalar>();
-    // Ceres wants the (N C) x d Jacobian row-major, which in memory is the trunk's
-    // output-column layout (d x N C, column-major): taken where the trunk has it (no
+    // Ceres wants the (N C) x cols Jacobian row-major, which in memory is the trunk's
+    // output-column layout (cols x N C, column-major): taken where the trunk has it (no
     // readout branch, no spatial latents), so the copy below runs down columns.
     const bool columns = !trunk_->siren.has_readout() && !trunk_->siren.has_spatial();
-    Matrix outputs, J;
+    Matrix outputs, J, D;
+    if (directions != nullptr) D = directions->cast<Scalar>();
     trunk_->siren.ForwardAndLatentJacobian<Scalar>(
         *coords, z, &outputs, jacobian != nullptr ? &J : nullptr, nullptr,
-        columns ? JacobianLayout::kOutputColumns : JacobianLayout::kOutputRows);
+        columns ? JacobianLayout::kOutputColumns : JacobianLayout::kOutputRows,
+        directions != nullptr ? &D : nullptr);
     for (long j = 0; j < n; ++j) {
       for (int c = 0; c < c_count; ++c) {
         const long i = j * c_count + c;
@@ -277,11 +297,11 @@ bool LatentProblem::ResidualsAndJacobian(const double* z_data, double* residuals
     }
     if (outputs_out != nullptr) *outputs_out = outputs.template cast<double>();
     if (jacobian != nullptr && columns) {
-      Eigen::Map<Eigen::MatrixXd> out(jacobian, d, n * c_count);
+      Eigen::Map<Eigen::MatrixXd> out(jacobian, cols, n * c_count);
       out = J.template cast<double>() * residual_scale_.asDiagonal();
       finite = finite && out.allFinite();
     } else if (jacobian != nullptr) {
-      Eigen::Map<RowMajorMatrixXd> out(jacobian, n * c_count, d);
+      Eigen::Map<RowMajorMatrixXd> out(jacobian, n * c_count, cols);
       out = residual_scale_.asDiagonal() * J.template cast<double>();
       finite = finite && out.allFinite();
     }
@@ -291,7 +311,7 @@ bool LatentProblem::ResidualsAndJacobian(const double* z_data, double* residuals
   } else {
     run(double());
   }
-  Robustify(static_cast<int>(n * c_count), residuals, jacobian, d);
+  Robustify(static_cast<int>(n * c_count), residuals, jacobian, cols);
   return finite;
 }
 

@@ -159,6 +159,14 @@ class LatentProblem {
   // when outputs is not null (DataCostOfOutputs takes them).
   bool ResidualsAndJacobian(const double* z, double* residuals, double* jacobian,
                             Eigen::MatrixXd* outputs) const;
+  // The residuals and their Jacobian along the k columns of `directions` (d x k):
+  // jacobian, row-major num_residuals() x k, receives (d r' / d z) directions, taken
+  // through the trunk's reverse passes times A D (LatentModulatedSiren::
+  // ForwardAndLatentJacobian), so it costs far less than the whole Jacobian when k is
+  // small (a pose generator's 4 pose coordinates). Equal to ResidualsAndJacobian's
+  // Jacobian times `directions` up to rounding. Returns false as ResidualsAndJacobian.
+  bool ResidualsAndJacobianAlong(const double* z, const Eigen::MatrixXd& directions,
+                                 double* residuals, double* jacobian) const;
   // True if `pass` was computed for this problem's trunk and frame size and the problem
   // evaluates in float: then the two calls below equal ResidualsAndJacobian(0, ...) and
   // DataCost(0, psnr) up to rounding, without a trunk pass.
@@ -221,6 +229,9 @@ class LatentProblem {
   double DataCostOfOutputs(const Eigen::MatrixXd& outputs, std::optional<double>* psnr) const;
 
  private:
+  // ResidualsAndJacobian (directions null) and ResidualsAndJacobianAlong: one trunk pass.
+  bool ResidualPass(const double* z, double* residuals, double* jacobian,
+                    Eigen::MatrixXd* outputs, const Eigen::MatrixXd* directions) const;
   // U over the selected pixels (rows == nullptr) or the minibatch `rows` (scaled by N / n).
   double EvaluateRows(const Eigen::VectorXd& z, const std::vector<int>* rows,
                       Eigen::VectorXd* gradient) const;

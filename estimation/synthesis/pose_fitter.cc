@@ -65,11 +65,14 @@ bool GeneratorPoseCost::Evaluate(double const* const* parameters, double* residu
   const bool want = jacobians != nullptr && (jacobians[0] != nullptr || jacobians[1] != nullptr);
   PoseGenerator::PoseJacobian J_z_pose;
   const Eigen::VectorXd z = generator_->Generate(tool_, pose, depth, want ? &J_z_pose : nullptr);
-  const int n = problem_->num_residuals(), d = problem_->dim();
+  const int n = problem_->num_residuals();
   if (!want) return problem_->ResidualsAndJacobian(z.data(), residuals, nullptr);
-  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> J_r_z(n, d);
-  if (!problem_->ResidualsAndJacobian(z.data(), residuals, J_r_z.data())) return false;
-  const Eigen::Matrix<double, Eigen::Dynamic, 4> J_r_pose = J_r_z * J_z_pose;
+  // d r / d pose = (d r / d z)(d z / d pose), taken along the 4 pose directions through
+  // the trunk's reverse passes (not the n x d latent Jacobian times them).
+  Eigen::Matrix<double, Eigen::Dynamic, 4, Eigen::RowMajor> J_r_pose(n, 4);
+  if (!problem_->ResidualsAndJacobianAlong(z.data(), J_z_pose, residuals, J_r_pose.data())) {
+    return false;
+  }
   if (jacobians[0] != nullptr) {
     Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>(jacobians[0], n, 3) =
         J_r_pose.leftCols<3>();

@@ -1289,10 +1289,22 @@ void LatentModulatedSiren::ForwardAndLatentJacobian(const MatrixX<Scalar>& coord
                                                     MatrixX<Scalar>* outputs,
                                                     MatrixX<Scalar>* J_y_z,
                                                     MatrixX<Scalar>* J_y_x,
-                                                    JacobianLayout layout) const {
+                                                    JacobianLayout layout,
+                                                    const MatrixX<Scalar>* directions) const {
   CheckShape("coords", coords.rows(), coords.cols(), coords.rows(), 2);
   CheckShape("z", z.rows(), 1, options_.latent_dim, 1);
+  if (directions != nullptr) {
+    CheckShape("directions", directions->rows(), directions->cols(), options_.latent_dim,
+               directions->cols());
+  }
   const bool columns = layout == JacobianLayout::kOutputColumns;
+  if (directions != nullptr && J_y_z != nullptr && has_spatial()) {
+    // Each pixel's row is scattered over the grid's nodes: the whole Jacobian, then D.
+    MatrixX<Scalar> whole;
+    ForwardAndLatentJacobian<Scalar>(coords, z, outputs, &whole, J_y_x, layout, nullptr);
+    *J_y_z = whole * *directions;
+    return;
+  }
   if ((J_y_x != nullptr || columns) && (has_readout() || has_spatial())) {
     throw std::invalid_argument(
         std::string("LatentModulatedSiren::ForwardAndLatentJacobian: the ") +
@@ -1317,25 +1329,39 @@ void LatentModulatedSiren::ForwardAndLatentJacobian(const MatrixX<Scalar>& coord
   Trace<Scalar> trace(num_layers, width, channels, capacity,
                       /*keep_cosine=*/J_y_z != nullptr);
   if (outputs != nullptr) outputs->resize(n, channels);
-  // A.cols() x B: d y_c / d z per pixel (d = A.cols() without spatial latents; with them
+  // The map from the shifts to what J_y_z holds: A, or A D along `directions`.
+  MatrixX<Scalar> A_directions;
+  if (directions != nullptr) A_directions = net.A * *directions;
+  const ConstMap<Scalar> A_used =
+      directions != nullptr
+          ? ConstMap<Scalar>(A_directions.data(), A_directions.rows(), A_directions.cols())
+          : net.A;
+  const long k = A_used.cols();
+  // k x B: d y_c / d z (times D) per pixel (k = d without spatial latents; with them
   // d y_c / d [z_g, z_s(x)], scattered onto the nodes below).
   MatrixX<Scalar> g, g_below, J_channel;
   if (J_y_x != nullptr) J_y_x->resize(n * channels, 2);
   if (J_y_z != nullptr) {
+    const long cols = directions != nullptr ? directions->cols() : d;
     if (columns) {
-      J_y_z->resize(d, n * channels);
+      J_y_z->resize(cols, n * channels);
     } else {
-      J_y_z->resize(n * channels, d);
+      J_y_z->resize(n * channels, cols);
     }
     g.resize(width, capacity);
     g_below.resize(width, capacity);
-    J_channel.resize(net.A.cols(), capacity);
+    J_channel.resize(k, capacity);
   }
   std::unique_ptr<ReadoutMaps<Scalar>> readout;
   VectorX<Scalar> u;
+  // The readout's basis columns as J_y_z holds them: R (d x (G C)), or D^T R.
+  MatrixX<Scalar> R_directions;
   if (has_readout()) {
     readout = std::make_unique<ReadoutMaps<Scalar>>(ParameterData<Scalar>(), blocks_, num_layers);
     u = readout->R.transpose() * z + readout->m;
+    if (directions != nullptr && J_y_z != nullptr) {
+      R_directions = directions->transpose() * readout->R;
+    }
   }
   for (long begin = 0; begin < n; begin += kPixelBlock) {
     const long m = std::min(kPixelBlock, n - begin);
@@ -1358,8 +1384,12 @@ void LatentModulatedSiren::ForwardAndLatentJacobian(const MatrixX<Scalar>& coord
           row.setZero();
           for (int i = 0; i < 4; ++i) {
             if (corners.weight[i] == 0.0) continue;
-            row += static_cast<Scalar>(corners.weight[i]) *
-                   readout->R.col(corners.node[i] * channels + ch).transpose();
+            const long column = corners.node[i] * channels + ch;
+            if (directions != nullptr) {
+              row += static_cast<Scalar>(corners.weight[i]) * R_directions.col(column).transpose();
+            } else {
+              row += static_cast<Scalar>(corners.weight[i]) * readout->R.col(column).transpose();
+            }
           }
         }
       }
@@ -1376,7 +1406,7 @@ void LatentModulatedSiren::ForwardAndLatentJacobian(const MatrixX<Scalar>& coord
       for (int l = num_layers - 1; l >= 0; --l) {
         auto dl = delta->leftCols(m);
         dl.array() *= omega * trace.cosine[l].leftCols(m).array();
-        J.noalias() += net.A.middleRows(l * width, width).transpose() * dl;
+        J.noalias() += A_used.middleRows(l * width, width).transpose() * dl;
         if (l > 0) {
           below->leftCols(m).noalias() = net.W[l].transpose() * dl;
           std::swap(delta, below);
@@ -1629,7 +1659,7 @@ LatentModulatedSiren::VectorX<Scalar> LatentModulatedSiren::StartLatent(
                                                         S*);                           \
   template void LatentModulatedSiren::ForwardAndLatentJacobian<S>(                       \
       const MatrixX<S>&, const VectorX<S>&, MatrixX<S>*, MatrixX<S>*, MatrixX<S>*,        \
-      JacobianLayout) const;                                                              \
+      JacobianLayout, const MatrixX<S>*) const;                                           \
   template LatentModulatedSiren::VectorX<S> LatentModulatedSiren::StartLatent<S>(        \
       const MatrixX<S>&, const MatrixX<S>&, const VectorX<S>&) const;                    \
   template S LatentModulatedSiren::Loss<S>(const MatrixX<S>&, const VectorX<S>&,         \

@@ -369,11 +369,18 @@ class LatentModulatedSiren {
   // coordinates also move their interpolation. `layout` kOutputColumns gives J_y_z
   // transposed, d x (N*C) (the same values), for a trunk without the readout branch and
   // spatial latents (std::invalid_argument otherwise); J_y_x keeps its rows.
+  // With `directions` D (d x k, may be null) J_y_z receives J_y_z D instead, (N*C) x k
+  // (k x (N*C) for kOutputColumns): the Jacobian along k directions of latent space,
+  // e.g. a generator's d z / d pose. Without spatial latents the reverse passes are
+  // taken times A D (width x k per layer) instead of A (width x d), so a few directions
+  // cost far less than the whole Jacobian; with them the whole Jacobian is formed and
+  // multiplied. Throws std::invalid_argument for D of another row count.
   template <typename Scalar>
   void ForwardAndLatentJacobian(const MatrixX<Scalar>& coords, const VectorX<Scalar>& z,
                                 MatrixX<Scalar>* outputs, MatrixX<Scalar>* J_y_z,
                                 MatrixX<Scalar>* J_y_x = nullptr,
-                                JacobianLayout layout = JacobianLayout::kOutputRows) const;
+                                JacobianLayout layout = JacobianLayout::kOutputRows,
+                                const MatrixX<Scalar>* directions = nullptr) const;
 
   // The weighted MSE's normaliser over n pixels of C channels: returns 1 / (C sum_j w_j)
   // (w_j = 1 for every pixel when weights is empty) and sets *gradient_scale to

@@ -386,7 +386,9 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
     EXPECT_NEAR(v[14], std::hypot(v[7] - v[3], v[8] - v[4]), 2e-4) << line;
     // The mode's Laplace sd along, across and in yaw (none for a C_inf tool, n = v[2] = 0).
     for (int c : {18, 19, 20}) {
-      if (c < 20 || v[2] != 0) EXPECT_GT(v[c], 0) << "column " << c << ", " << line;
+      if (c < 20 || v[2] != 0) {
+        EXPECT_GT(v[c], 0) << "column " << c << ", " << line;
+      }
     }
     sum_sq += v[14] * v[14];
     ++count;

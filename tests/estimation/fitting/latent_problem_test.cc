@@ -288,6 +288,39 @@ TEST(LatentProblem, RobustJacobianMatchesCentralDifferencesOfTheResiduals) {
   }
 }
 
+TEST(LatentProblem, TheJacobianAlongDirectionsIsTheRobustJacobianTimesThem) {
+  const SensorTrunk trunk = Trunk();
+  TrunkTargets targets = testing_util::MakeTargets(trunk, kTrue, 0.05, 4);
+  for (int j = 0; j < kRows * kCols; j += 4) targets.values(j, 0) += 0.5f;
+  for (const auto precision : {LatentProblem::Precision::kDouble, LatentProblem::Precision::kFloat}) {
+    LatentProblem::Options options;
+    options.precision = precision;
+    options.robust_loss = LatentProblem::RobustLoss::kCauchy;
+    options.robust_loss_scale = 2.385;
+    const LatentProblem problem(trunk, targets, options);
+    const int n = problem.num_residuals();
+    const VectorXd z = Eigen::Vector4d(0.1, 0.3, -0.2, 0.2);
+    MatrixXd D(4, 3);
+    D << 1, 0.5, -2, 0, 1, 0.25, 3, -1, 0, 0.5, 0.5, 1;
+    VectorXd r(n), r_along(n);
+    RowMajor J(n, 4), J_along(n, 3);
+    ASSERT_TRUE(problem.ResidualsAndJacobian(z.data(), r.data(), J.data()));
+    ASSERT_TRUE(problem.ResidualsAndJacobianAlong(z.data(), D, r_along.data(), J_along.data()));
+    EXPECT_EQ(r_along, r);
+    const MatrixXd expected = J * D;
+    const double tolerance =
+        (precision == LatentProblem::Precision::kDouble ? 1e-12 : 1e-5) *
+        (1 + expected.cwiseAbs().maxCoeff());
+    EXPECT_LE((J_along - expected).cwiseAbs().maxCoeff(), tolerance);
+  }
+  const LatentProblem problem(trunk, targets, DoubleOptions());
+  VectorXd r(problem.num_residuals());
+  RowMajor J(problem.num_residuals(), 2);
+  const VectorXd z = VectorXd::Zero(4);
+  EXPECT_THROW(problem.ResidualsAndJacobianAlong(z.data(), MatrixXd::Zero(5, 2), r.data(), J.data()),
+               std::invalid_argument);
+}
+
 TEST(LatentProblem, MinibatchesOfAPartitionAverageToTheFullGradient) {
   const SensorTrunk trunk = Trunk();
   const TrunkTargets targets = testing_util::MakeTargets(trunk, kTrue, 0.05, 1);

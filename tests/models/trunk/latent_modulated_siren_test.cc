@@ -700,6 +700,45 @@ TEST(LatentModulatedSiren, LatentJacobianEqualsTheBackwardPassPerOutput) {
   }
 }
 
+TEST(LatentModulatedSiren, TheJacobianAlongDirectionsIsTheJacobianTimesThem) {
+  for (const Siren::Options& options :
+       With({SmallOptions(3), DeeperOptions(), ReadoutOptions(3)}, SpatialVariants(3))) {
+    SCOPED_TRACE(Describe(options));
+    const Siren siren = PerturbedSiren(options, 37);
+    std::mt19937_64 rng(5);
+    std::normal_distribution<double> normal;
+    MatrixXd D(options.latent_dim, 4);
+    for (int i = 0; i < D.size(); ++i) D.data()[i] = normal(rng);
+    for (const Frame& frame : Frames(siren)) {
+      MatrixXd y, J, y_along, J_along;
+      siren.ForwardAndLatentJacobian<double>(frame.coords, frame.z, &y, &J);
+      siren.ForwardAndLatentJacobian<double>(frame.coords, frame.z, &y_along, &J_along, nullptr,
+                                             JacobianLayout::kOutputRows, &D);
+      EXPECT_EQ(y_along, y);
+      ASSERT_EQ(J_along.rows(), J.rows());
+      ASSERT_EQ(J_along.cols(), 4);
+      const MatrixXd expected = J * D;
+      for (int r = 0; r < J.rows(); ++r) {
+        ExpectClose(J_along.row(r).transpose(), expected.row(r).transpose(), 1e-11, 1e-14,
+                    frame.name + " row " + std::to_string(r));
+      }
+      if (!options.has_readout() && !options.has_spatial()) {
+        MatrixXd J_columns;
+        siren.ForwardAndLatentJacobian<double>(frame.coords, frame.z, nullptr, &J_columns,
+                                               nullptr, JacobianLayout::kOutputColumns, &D);
+        EXPECT_EQ(J_columns, J_along.transpose());
+      }
+    }
+    const MatrixXd wrong = MatrixXd::Zero(options.latent_dim + 1, 2);
+    MatrixXd J;
+    EXPECT_THROW(siren.ForwardAndLatentJacobian<double>(Frames(siren).front().coords,
+                                                        Frames(siren).front().z, nullptr, &J,
+                                                        nullptr, JacobianLayout::kOutputRows,
+                                                        &wrong),
+                 std::invalid_argument);
+  }
+}
+
 TEST(LatentModulatedSiren, LatentJacobianMatchesJetAutodiff) {
   for (const Siren::Options& options : {SmallOptions(), ReadoutOptions()}) {
   const Siren siren = PerturbedSiren(options, 32);
