@@ -127,6 +127,8 @@ Functaset RefitLatents(const Functaset& functaset, SensorKind sensor, const Data
     }
     seconds_before = meta.at("train_seconds").get<double>();
     s.resumed = s.done = held;
+    // Report the entries taken; a stop asked for now comes after the next block.
+    if (progress) progress(s.done, n);
   }
   auto elapsed = [&] {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
