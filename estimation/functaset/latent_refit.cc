@@ -98,12 +98,21 @@ Functaset RefitLatents(const Functaset& functaset, SensorKind sensor, const Data
   run.format = "tactfunc-refit-checkpoint";
   run.version = 1;
   run.sensor = ToString(sensor);
-  run.options_json = nlohmann::json{{"strategy", options.fit.strategy.ToString()},
-                                    {"sigma", options.problem.sigma},
-                                    {"sigma_z", options.problem.sigma_z},
-                                    {"max_pixels", options.problem.max_pixels},
-                                    {"model_checksum", options.model_checksum}}
-                         .dump();
+  // What shapes a latent: the fit's strategy, the problem's options and the trunk.
+  const LatentProblem::Options& p = options.problem;
+  run.options_json =
+      nlohmann::json{{"strategy", options.fit.strategy.ToString()},
+                     {"sigma", p.sigma},
+                     {"sigma_z", p.sigma_z},
+                     {"robust_loss", static_cast<int>(p.robust_loss)},
+                     {"robust_loss_scale", p.robust_loss_scale},
+                     {"pixel_stride", p.pixel_stride},
+                     {"max_pixels", p.max_pixels},
+                     {"contact_share", p.contact_share},
+                     {"precision", p.precision == LatentProblem::Precision::kFloat ? "float"
+                                                                                   : "double"},
+                     {"model_checksum", options.model_checksum}}
+          .dump();
   run.fingerprint = EntriesFingerprint(entries);
   run.num_frames = n;
 

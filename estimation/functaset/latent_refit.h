@@ -13,9 +13,10 @@
 // estimation/training/internal/checkpoint.h) every checkpoint_every entries, when the
 // run stops and when it completes. With resume, a run continues after the entries the
 // checkpoint holds; the checkpoint must belong to the same run: the same sensor, fit
-// strategy, pixel sigma and model checksum (RefitOptions::model_checksum) and the same
-// functaset entries (ids, labels and latents, fingerprinted), or RefitLatents throws
-// naming what differs. A resumed run returns the same latents, bit for bit, as one never
+// strategy, latent problem options (sigma, prior, robust loss, pixel selection,
+// precision) and model checksum (RefitOptions::model_checksum) and the same functaset
+// entries (ids, labels and latents, fingerprinted), or RefitLatents throws naming what
+// differs. A resumed run returns the same latents, bit for bit, as one never
 // stopped. The caller removes the checkpoint once it has what it needs.
 //
 // Errors: std::invalid_argument for bad options, a sensor the functaset lacks, or a
