@@ -253,8 +253,7 @@ void RunEncode(const EncodeFlags& flags) {
               << " frames; the partial functaset is in " << flags.out
               << ".\nencode: to continue, run the same command with --resume:\n  "
               << ResumeCommand(flags) << "\n";
-    std::cout.flush();
-    std::exit(130);  // 128 + SIGINT, as shells report an interrupted program
+    ExitInterrupted();
   }
 }
 

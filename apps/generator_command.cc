@@ -46,6 +46,7 @@
 #include "apps/dataset_flags.h"
 #include "apps/interrupt.h"
 #include "apps/model_inputs.h"
+#include "apps/output_paths.h"
 #include "apps/progress_bar.h"
 #include "estimation/data/dataset.h"
 #include "estimation/data/image_io.h"
@@ -84,7 +85,7 @@ struct TrainGeneratorFlags {
 
 // The checkpoints of train-generator's two stages, beside the output.
 std::string StageCheckpoint(const std::string& out, const char* stage) {
-  return out + "." + stage + ".ckpt";
+  return CheckpointBeside(out, stage);
 }
 
 // One training stage's epochs: a progress bar with the loss (progress lines where no bar
@@ -107,8 +108,7 @@ void ExitIfInterrupted(const GeneratorTrainingSummary& stage, int epochs,
   std::cerr << "train-generator: interrupted after " << stage.epochs_completed << " of " << epochs
             << " epochs; checkpoint " << checkpoint
             << ".\ntrain-generator: to continue, run the same command with --resume\n";
-  std::cout.flush();
-  std::exit(130);  // 128 + SIGINT, as shells report an interrupted program
+  ExitInterrupted();
 }
 
 struct Labelled {

@@ -2,6 +2,8 @@
 #include "apps/interrupt.h"
 
 #include <csignal>
+#include <cstdlib>
+#include <iostream>
 
 namespace tactfunc::apps {
 namespace {
@@ -24,5 +26,10 @@ InterruptScope::InterruptScope() {
 InterruptScope::~InterruptScope() { std::signal(SIGINT, previous_); }
 
 std::atomic<bool>& InterruptScope::Flag() { return g_interrupt; }
+
+void ExitInterrupted() {
+  std::cout.flush();
+  std::exit(130);
+}
 
 }  // namespace tactfunc::apps

@@ -26,6 +26,10 @@ class InterruptScope {
   void (*previous_)(int);
 };
 
+// Ends an interrupted command once it has said what it kept: flushes stdout and exits
+// with 130 (128 + SIGINT, as shells report an interrupted program).
+[[noreturn]] void ExitInterrupted();
+
 }  // namespace tactfunc::apps
 
 #endif  // TACTFUNC_APPS_INTERRUPT_H_

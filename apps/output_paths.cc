@@ -52,6 +52,10 @@ bool Same(const Identity& out, const std::string& in_path) {
 
 }  // namespace
 
+std::string CheckpointBeside(const std::string& out, const std::string& part) {
+  return out + "." + part + ".ckpt";
+}
+
 bool SamePath(const std::string& a, const std::string& b) {
   if (a.empty() || b.empty()) return false;
   return Same(Identify(a, /*with_canonical=*/true), b);

@@ -16,6 +16,10 @@
 
 namespace tactfunc::apps {
 
+// The checkpoint of one part of a command's work beside its output: OUT.<part>.ckpt
+// (train's per sensor, train-generator's per stage, train-pose's refit).
+std::string CheckpointBeside(const std::string& out, const std::string& part);
+
 // A path a command reads or writes, with the flag that named it (for the message).
 struct NamedPath {
   std::string flag;  // e.g. "--model"; for derived files e.g. "--out (fit.png)"

@@ -24,6 +24,7 @@
 #include "apps/command.h"
 #include "apps/dataset_flags.h"
 #include "apps/distributed.h"
+#include "apps/interrupt.h"
 #include "apps/output_paths.h"
 #include "apps/model_inputs.h"
 #include "apps/pictures.h"
@@ -92,7 +93,7 @@ extern "C" void HandleSigint(int) {
 }
 
 std::string CheckpointPath(const std::string& out, SensorKind sensor) {
-  return out + "." + ToString(sensor) + ".ckpt";
+  return CheckpointBeside(out, ToString(sensor));
 }
 
 // M -> M.training.png, beside the checkpoints M.<sensor>.ckpt.
@@ -463,7 +464,7 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
   const std::uint64_t model_bytes = std::filesystem::file_size(flags.out);
   std::cout << "train: wrote " << flags.out << " (" << FormatBytes(model_bytes) << ", "
             << sensors.size() << " photometric trunk(s))" << std::endl;
-  if (g_interrupted.load()) std::exit(130);
+  if (g_interrupted.load()) ExitInterrupted();
   if (flags.json) {
     EmitJson({{"out", flags.out},
               {"sensors", figures},
@@ -709,7 +710,7 @@ void RunTrain(const TrainFlags& flags) {
     std::cout << "train: interrupted while writing the model; the model was written "
                  "completely to "
               << flags.out << " (training curves skipped)" << std::endl;
-    std::exit(130);  // 128 + SIGINT, as shells report an interrupted program
+    ExitInterrupted();
   }
   const std::uint64_t model_bytes = std::filesystem::file_size(flags.out);
   std::cout << "train: wrote " << flags.out << " (" << FormatBytes(model_bytes) << ", "

@@ -30,7 +30,6 @@
 // written.
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <filesystem>
 #include <iostream>
 #include <map>
@@ -85,7 +84,7 @@ struct TrainPoseFlags {
 };
 
 // The refit's checkpoint, beside the output.
-std::string RefitCheckpoint(const std::string& out) { return out + ".refit.ckpt"; }
+std::string RefitCheckpoint(const std::string& out) { return CheckpointBeside(out, "refit"); }
 
 // Labelled entries of one split as training data.
 struct Samples {
@@ -261,8 +260,7 @@ void RunTrainPose(const TrainPoseFlags& flags) {
       std::cerr << "train-pose: interrupted after re-fitting " << refit_summary.done << " of "
                 << refit_summary.entries << " latents; checkpoint " << refit.checkpoint_path
                 << ".\ntrain-pose: to continue, run the same command with --resume\n";
-      std::cout.flush();
-      std::exit(130);  // 128 + SIGINT, as shells report an interrupted program
+      ExitInterrupted();
     }
     std::cout << "train-pose: re-fitted " << refit_summary.entries << " latents with "
               << flags.refit << " in " << refit_summary.seconds << " s";
@@ -364,8 +362,7 @@ void RunTrainPose(const TrainPoseFlags& flags) {
                    "MLP again from its first epoch (the same model as a run never stopped)";
     }
     std::cerr << "\n";
-    std::cout.flush();
-    std::exit(130);  // 128 + SIGINT, as shells report an interrupted program
+    ExitInterrupted();
   }
   if (summary.termination == PoseMlpTrainingTermination::kNonFinite) {
     throw std::runtime_error(
