@@ -65,6 +65,7 @@ struct PhotometricBenchFlags {
   int fit_knn = 0;
   int fit_batch = PhotometricFitOptions().batch_pixels;
   int fit_block = PhotometricFitOptions().pixel_block;
+  double fit_contact_share = PhotometricFitOptions().contact_share;
   std::vector<double> fit_rate{PhotometricFitOptions().learning_rate};
   std::vector<int> fit_ceres;  // Ceres iteration counts fitted beside the Adam settings
   int fit_pixels = PhotometricCeresOptions().pixels;
@@ -367,6 +368,7 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
       run.options.probe_steps = flags.fit_probe;
       run.options.batch_pixels = flags.fit_batch;
       run.options.pixel_block = flags.fit_block;
+      run.options.contact_share = flags.fit_contact_share;
       run.options.learning_rate = rate;
       run.options.final_learning_rate = std::min(run.options.final_learning_rate, rate);
       fits.push_back(std::move(run));
@@ -554,6 +556,7 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
               {"fit_knn", flags.fit_knn},
               {"fit_batch", flags.fit_batch},
               {"fit_block", flags.fit_block},
+              {"fit_contact_share", flags.fit_contact_share},
               {"fit_rate", fits[0].options.learning_rate},
               {"fits", json_fits},
               {"threads", flags.threads},
@@ -610,6 +613,11 @@ void RegisterPhotometricBenchmark(CLI::App* bench, CommandBody* selected) {
                   "/ side^2 blocks (PhotometricFitOptions::pixel_block; default 1: "
                   "independent pixels)")
       ->check(CLI::Range(1, 16));
+  sub->add_option("--fit-contact-share", flags->fit_contact_share,
+                  "Share of a fit step's pixels drawn towards the contact, in [0, 1) "
+                  "(PhotometricFitOptions::contact_share; default 0: every pixel alike; "
+                  "needs --fit-block 1)")
+      ->check(CLI::Range(0.0, 0.999));
   sub->add_option("--fit-rate", flags->fit_rate,
                   "Adam's first step size in a fit, falling by a cosine to 1e-4 "
                   "(PhotometricFitOptions::learning_rate; default 5e-2); a comma-separated "

@@ -294,12 +294,15 @@ void RegisterEncode(CLI::App& app, CommandBody* selected) {
                   "trunk's own meta_sgd:K, what it was trained for; ceres:N fits the latent "
                   "problem to convergence, docs/FITTING.md); a photometric trunk (train "
                   "--head photometric): knn+adam:N, N Adam steps from the best of the "
-                  "model's training latents, 64 pixels a step (default knn+adam:40 where the "
-                  "model holds that table), knn+ceres:N, at most N Levenberg-Marquardt "
-                  "iterations in Ceres on every valid pixel from that latent (slower, closer "
-                  "to convergence), knn (that latent as it is), or adam:N, N steps from the "
-                  "contact's moment pose and its turn by pi (default adam:200 without a "
-                  "table)");
+                  "model's training latents, 64 pixels a step, half of them drawn towards "
+                  "the contact (default " +
+                      LatentEncoder::DefaultPhotometricStrategy(true) +
+                      " where the model holds that table), knn+ceres:N, at most N "
+                      "Levenberg-Marquardt iterations in Ceres on every valid pixel from that "
+                      "latent (slower, closer to convergence), knn (that latent as it is), or "
+                      "adam:N, N steps from the contact's moment pose and its turn by pi "
+                      "(default " +
+                      LatentEncoder::DefaultPhotometricStrategy(false) + " without a table)");
   sub->add_flag("--allow-other-frames", flags->allow_other_frames,
                 "Encode even when the data's frames (size, channels, sensor description) are "
                 "not those the model's trunk was trained on (a warning instead of an error)");

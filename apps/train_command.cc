@@ -66,6 +66,7 @@ struct TrainFlags {
   bool json = false;
   std::string head = "direct";  // "direct" or "photometric"
   int marker_warmup = 1000;
+  double contact_share = PhotometricTrainer::Options().contact_share;
   bool no_warm_start = false;
   // Set after parsing: which overrides were given.
   CLI::Option *latent_dim_option = nullptr, *width_option = nullptr, *layers_option = nullptr,
@@ -75,7 +76,7 @@ struct TrainFlags {
               *lr_final_fraction_option = nullptr, *inner_steps_option = nullptr,
               *alpha_init_option = nullptr, *alpha_max_option = nullptr,
               *divergence_drop_db_option = nullptr, *readout_rate_option = nullptr,
-              *marker_warmup_option = nullptr;
+              *marker_warmup_option = nullptr, *contact_share_option = nullptr;
 };
 
 // SIGINT: the current step finishes, a checkpoint is written, the command exits 1. A
@@ -317,6 +318,7 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
     o.batch_pixels = flags.pixels_option->count() && flags.pixels > 0 ? flags.pixels : 512;
     o.trunk_learning_rate = flags.learning_rate_option->count() ? flags.learning_rate : 2e-4;
     o.marker_warmup_steps = flags.marker_warmup;
+    o.contact_share = flags.contact_share;
     o.seed = base.seed;
     o.threads = base.threads;
     o.checkpoint_path = CheckpointPath(flags.out, sensor);
@@ -332,7 +334,8 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
               << (flags.steps_option->count() ? "--steps" : "default") << ", markers at the "
               << "working resolution for the first " << o.marker_warmup_steps << ") at "
               << format.rows << "x" << format.cols << ", " << o.batch_frames << " frames x "
-              << o.batch_pixels << " pixels a step on " << o.threads << " thread(s), latent "
+              << o.batch_pixels << " pixels a step (a share of " << o.contact_share
+              << " drawn towards the contact) on " << o.threads << " thread(s), latent "
               << o.trunk.latent_dim << std::endl;
     if (flags.resume) {
       std::cout << "train " << name << ": "
@@ -446,6 +449,7 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
                            {"trunk_learning_rate", o.trunk_learning_rate},
                            {"latent_learning_rate", o.latent_learning_rate},
                            {"marker_warmup_steps", o.marker_warmup_steps},
+                           {"contact_share", o.contact_share},
                            {"seed", o.seed}}},
                          {"steps", result.summary.steps},
                          {"train_frames", frames.size()},
@@ -539,6 +543,9 @@ void RunTrain(const TrainFlags& flags) {
   }
   if (flags.marker_warmup_option->count()) {
     throw UsageError("--marker-warmup applies to --head photometric");
+  }
+  if (flags.contact_share_option->count()) {
+    throw UsageError("--contact-share applies to --head photometric");
   }
   if (flags.no_warm_start) throw UsageError("--no-warm-start applies to --head photometric");
   if (flags.resume) {
@@ -849,6 +856,12 @@ void RegisterTrain(CLI::App& app, CommandBody* selected) {
                       "--head photometric: steps with the markers moved at the working "
                       "resolution before the sensor's (default 1000)")
           ->check(CLI::Range(0, 100000000));
+  flags->contact_share_option =
+      sub->add_option("--contact-share", flags->contact_share,
+                      "--head photometric: share of each frame's pixels a step draws towards "
+                      "its contact (weighted so that the loss is still the whole frame's); "
+                      "0 draws every pixel alike (default 0.5)")
+          ->check(CLI::Range(0.0, 0.999));
   sub->add_flag("--no-warm-start", flags->no_warm_start,
                 "--head photometric: leave the training latents' warm-start table out of the "
                 "model (a smaller file; encode then fits with adam:N only)");

@@ -169,4 +169,45 @@ std::vector<int> ValidPixels(const TrunkTargets& targets) {
   return valid;
 }
 
+std::vector<double> ContactDrawProbabilities(const TrunkTargets& targets,
+                                             const std::vector<int>& pixels, double share) {
+  const size_t n = pixels.size();
+  std::vector<double> energy(n);
+  double total = 0;
+  for (size_t i = 0; i < n; ++i) {
+    const int j = pixels[i];
+    const double w = targets.weights.size() == 0 ? 1.0 : targets.weights[j];
+    energy[i] = w * targets.values.row(j).cast<double>().squaredNorm();
+    total += energy[i];
+  }
+  if (!(total > 0) || !std::isfinite(total)) share = 0;
+  std::vector<double> p(n);
+  for (size_t i = 0; i < n; ++i) {
+    p[i] = (1 - share) / static_cast<double>(n) + (share > 0 ? share * energy[i] / total : 0);
+  }
+  return p;
+}
+
+void ContactSample(const TrunkTargets& targets, int m, double share, std::vector<int>* pixels,
+                   std::vector<double>* weight_factor) {
+  const size_t n = pixels->size();
+  const std::vector<double> p = ContactDrawProbabilities(targets, *pixels, share);
+  std::vector<int> kept;
+  weight_factor->clear();
+  double cumulative = 0;
+  int next = 0;  // the next sampling position (next + 1/2) / m
+  for (size_t i = 0; i < n && next < m; ++i) {
+    cumulative += p[i];
+    int count = 0;
+    while (next < m && (next + 0.5) / m < cumulative) {
+      ++count;
+      ++next;
+    }
+    if (count == 0) continue;
+    kept.push_back((*pixels)[i]);
+    weight_factor->push_back(count / (static_cast<double>(n) * p[i]));
+  }
+  pixels->swap(kept);
+}
+
 }  // namespace tactfunc

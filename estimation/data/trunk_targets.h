@@ -93,6 +93,19 @@ void CheckTargetsShape(const TrunkTargets& targets, int rows, int cols, int chan
 // in grid order.
 std::vector<int> ValidPixels(const TrunkTargets& targets);
 
+// Drawing a frame's pixels towards its contact. Pixel i of `pixels` (indices into the
+// targets' rows, n of them) has probability p_i = (1 - share) / n + share e_i / sum(e),
+// e_i = w_i ||target_i||^2 its weighted difference energy; p_i = 1 / n when the energies
+// sum to 0 or to no finite number. share in [0, 1].
+std::vector<double> ContactDrawProbabilities(const TrunkTargets& targets,
+                                             const std::vector<int>& pixels, double share);
+// Systematic sampling of m draws by those probabilities, at the positions (k + 1/2) / m
+// of their cumulative sum in pixel order: *pixels keeps each pixel drawn (c_i times) once,
+// in order, and *weight_factor gets c_i / (n p_i) for it, so that a weighted sum over the
+// kept pixels estimates the sum over all n times m / n without bias.
+void ContactSample(const TrunkTargets& targets, int m, double share, std::vector<int>* pixels,
+                   std::vector<double>* weight_factor);
+
 // The prediction back as a normalised Image (rows x cols x C), for pictures.
 Image TargetsToImage(const Eigen::MatrixXf& values, int rows, int cols);
 

@@ -44,40 +44,6 @@ Eigen::MatrixXd GramOfJacobian(const Jacobian& J) {
   return jtj.template selfadjointView<Eigen::Lower>().toDenseMatrix().template cast<double>();
 }
 
-// Options::contact_share's thinning of *chosen (pixel indices into targets, N of them) to
-// at most m pixels: systematic sampling with p_j = (1 - a) / N + a e_j / sum(e) at the
-// positions (i + 1/2) / m of the cumulative p, in pixel order; a pixel drawn c_j times is
-// kept once with *weight_factor c_j / (N p_j).
-void ContactSample(const TrunkTargets& targets, int m, double a, std::vector<int>* chosen,
-                   std::vector<double>* weight_factor) {
-  const size_t n = chosen->size();
-  std::vector<double> energy(n);
-  double total = 0;
-  for (size_t i = 0; i < n; ++i) {
-    const int j = (*chosen)[i];
-    energy[i] = targets.weights[j] * targets.values.row(j).cast<double>().squaredNorm();
-    total += energy[i];
-  }
-  if (!(total > 0) || !std::isfinite(total)) a = 0;
-  std::vector<int> kept;
-  weight_factor->clear();
-  double cumulative = 0;
-  int next = 0;  // the next sampling position (next + 1/2) / m
-  for (size_t i = 0; i < n && next < m; ++i) {
-    const double p = (1 - a) / static_cast<double>(n) + (a > 0 ? a * energy[i] / total : 0);
-    cumulative += p;
-    int count = 0;
-    while (next < m && (next + 0.5) / m < cumulative) {
-      ++count;
-      ++next;
-    }
-    if (count == 0) continue;
-    kept.push_back((*chosen)[i]);
-    weight_factor->push_back(count / (static_cast<double>(n) * p));
-  }
-  chosen->swap(kept);
-}
-
 }  // namespace
 
 const char* ToString(LatentProblem::RobustLoss loss) {

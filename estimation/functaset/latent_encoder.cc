@@ -30,14 +30,16 @@ namespace {
 const int kPhotometricFitSteps = PhotometricFitOptions().steps;
 constexpr std::uint64_t kPhotometricFitSeed = 0x70686f746f;
 // knn+adam:N: the neighbours scored per frame, the fit's first step size from the start,
-// its pixels per step, and the default N for a trunk with a warm-start table: of the
-// (pixels, steps) pairs tried, the fastest that cleared same-bits PCA by 3.5 dB on a
-// selection set no other row uses (docs/REPRESENTATION.md, "A warm start from the
-// training latents").
+// its pixels per step, the share of them drawn towards the contact, and the default N
+// for a trunk with a warm-start table: of the (pixels, steps, share) settings tried, the
+// fastest that cleared same-bits PCA by 3.5 dB on a selection set no other row uses
+// (docs/REPRESENTATION.md, "A warm start from the training latents" and "Pixels drawn
+// towards the contact").
 constexpr int kWarmStartCandidates = 4;
 constexpr double kWarmStartRate = 1e-2;
 constexpr int kWarmStartBatchPixels = 64;
-constexpr int kWarmStartFitSteps = 40;
+constexpr double kWarmStartContactShare = 0.5;
+constexpr int kWarmStartFitSteps = 20;
 
 }  // namespace
 
@@ -119,6 +121,11 @@ std::string LatentEncoder::Summary::FullReport() const {
   return out.str();
 }
 
+std::string LatentEncoder::DefaultPhotometricStrategy(bool warm_start_table) {
+  return warm_start_table ? "knn+adam:" + std::to_string(kWarmStartFitSteps)
+                          : "adam:" + std::to_string(kPhotometricFitSteps);
+}
+
 LatentEncoder::LatentEncoder(const FunctaModel& model, const Options& options)
     : model_(model), options_(options) {
   std::string error;
@@ -138,9 +145,7 @@ LatentEncoder::LatentEncoder(const FunctaModel& model, const Options& options)
         options_.strategy.empty()
             ? FitStrategy::FromString(
                   !photometric ? "meta_sgd:" + std::to_string(trunk.meta_sgd.inner_steps)
-                  : trunk.warm_start != nullptr
-                      ? "knn+adam:" + std::to_string(kWarmStartFitSteps)
-                      : "adam:" + std::to_string(kPhotometricFitSteps))
+                               : DefaultPhotometricStrategy(trunk.warm_start != nullptr))
             : FitStrategy::FromString(options_.strategy);
     const bool adam = state.strategy.refinement == FitStrategy::Refinement::kAdam;
     const bool knn_alone =
@@ -243,6 +248,7 @@ LatentEncoder::EncodedFrame LatentEncoder::EncodeTargetsImpl(
       // has 0 steps and keeps that start.
       fit.learning_rate = kWarmStartRate;
       fit.batch_pixels = kWarmStartBatchPixels;
+      fit.contact_share = kWarmStartContactShare;
       out.latent = state.warm_start->Fit(targets, kWarmStartCandidates, fit, kPhotometricFitSeed)
                        .latent.cast<float>();
     } else {

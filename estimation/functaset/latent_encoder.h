@@ -199,6 +199,10 @@ class LatentEncoder {
   // ""). Throws std::invalid_argument if the model has no trunk for the sensor.
   const FitStrategy& StrategyOf(SensorKind sensor) const { return State(sensor).strategy; }
 
+  // The default fit of a photometric trunk's frames: knn+adam:N where the model holds
+  // the trunk's warm-start table, adam:N without one.
+  static std::string DefaultPhotometricStrategy(bool warm_start_table);
+
  private:
   struct SensorState {
     SensorKind sensor;

@@ -7,11 +7,13 @@
 #include <filesystem>
 #include <limits>
 #include <memory>
+#include <numeric>
 #include <sstream>
 #include <stdexcept>
 
 #include "boost/random/mersenne_twister.hpp"
 #include "boost/random/uniform_int_distribution.hpp"
+#include "boost/random/uniform_real_distribution.hpp"
 #include "estimation/training/internal/checkpoint.h"
 #include "models/core/parallel_for.h"
 #include "models/core/seed.h"
@@ -56,6 +58,38 @@ void DrawPixels(const TrunkTargets& frame, int count, boost::random::mt19937_64*
     (*pixels)[i] = j;
     targets->row(i) = frame.values.row(j);
     (*weights)[i] = frame.weights.size() == 0 ? 1.0f : frame.weights[j];
+  }
+}
+
+// The cumulative distribution of PhotometricFitOptions::contact_share's draw over all of
+// the frame's pixels (its last entry 1).
+std::vector<double> ContactDrawCdf(const TrunkTargets& frame, double share) {
+  std::vector<int> all(frame.values.rows());
+  std::iota(all.begin(), all.end(), 0);
+  std::vector<double> cdf = ContactDrawProbabilities(frame, all, share);
+  std::partial_sum(cdf.begin(), cdf.end(), cdf.begin());
+  cdf.back() = 1.0;
+  return cdf;
+}
+
+// DrawPixels by the distribution `cdf` (ContactDrawCdf): pixel j weighs w_j / (N p_j).
+void DrawPixelsBy(const TrunkTargets& frame, const std::vector<double>& cdf, int count,
+                  boost::random::mt19937_64* rng, std::vector<int>* pixels,
+                  Eigen::MatrixXf* targets, Eigen::VectorXf* weights) {
+  const int n = static_cast<int>(cdf.size());
+  boost::random::uniform_real_distribution<double> uniform(0.0, 1.0);
+  pixels->resize(count);
+  targets->resize(count, frame.values.cols());
+  weights->resize(count);
+  for (int i = 0; i < count; ++i) {
+    const int j = std::min<int>(
+        n - 1, static_cast<int>(std::upper_bound(cdf.begin(), cdf.end(), uniform(*rng)) -
+                                cdf.begin()));
+    const double p = cdf[j] - (j > 0 ? cdf[j - 1] : 0.0);
+    (*pixels)[i] = j;
+    targets->row(i) = frame.values.row(j);
+    const double w = frame.weights.size() == 0 ? 1.0 : frame.weights[j];
+    (*weights)[i] = static_cast<float>(w / (n * p));
   }
 }
 
@@ -110,6 +144,8 @@ bool PhotometricTrainer::Options::IsValid(std::string* error) const {
     message << "latent_learning_rate must be finite and > 0, found " << latent_learning_rate;
   } else if (!(marker_learning_rate >= 0 && std::isfinite(marker_learning_rate))) {
     message << "marker_learning_rate must be finite and >= 0, found " << marker_learning_rate;
+  } else if (!(contact_share >= 0 && contact_share < 1)) {
+    message << "contact_share must be in [0, 1), found " << contact_share;
   } else if (marker_warmup_steps < 0) {
     message << "marker_warmup_steps must be >= 0, found " << marker_warmup_steps;
   } else if (threads < 1) {
@@ -142,6 +178,9 @@ std::string PhotometricTrainer::Options::TrajectoryOptionsJson() const {
   json["cosine_schedule"] = cosine_schedule;
   json["marker_warmup_steps"] = marker_warmup_steps;
   json["seed"] = seed;
+  // Only where it draws towards the contact, so that the checkpoints of runs that drew
+  // every pixel alike still resume.
+  if (contact_share > 0) json["contact_share"] = contact_share;
   return json.dump();
 }
 
@@ -152,6 +191,10 @@ bool PhotometricFitOptions::IsValid(std::string* error) const {
             << batch_pixels;
   } else if (pixel_block < 1 || pixel_block > 16) {
     message << "pixel_block must be in [1, 16], found " << pixel_block;
+  } else if (!(contact_share >= 0 && contact_share < 1)) {
+    message << "contact_share must be in [0, 1), found " << contact_share;
+  } else if (contact_share > 0 && pixel_block != 1) {
+    message << "contact_share needs pixel_block 1, found " << pixel_block;
   } else if (probe_steps < 0 || probe_steps > steps) {
     message << "probe_steps must be in [0, steps = " << steps << "], found " << probe_steps;
   } else if (!(learning_rate > 0 && std::isfinite(learning_rate)) ||
@@ -352,7 +395,12 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
       std::vector<int> pixels;
       Eigen::MatrixXf targets;
       Eigen::VectorXf weights;
-      DrawPixels(frames[slot.frame], o.batch_pixels, &rng, &pixels, &targets, &weights);
+      if (o.contact_share > 0) {
+        DrawPixelsBy(frames[slot.frame], ContactDrawCdf(frames[slot.frame], o.contact_share),
+                     o.batch_pixels, &rng, &pixels, &targets, &weights);
+      } else {
+        DrawPixels(frames[slot.frame], o.batch_pixels, &rng, &pixels, &targets, &weights);
+      }
       const Eigen::VectorXf z = latents.col(slot.frame).cast<float>();
       slot.loss = trunk.LossAndGradient<float>(pixels, z, targets, weights, &slot.dz,
                                                &slot.dsiren, &slot.dhead, nullptr,
@@ -442,10 +490,18 @@ PhotometricFit FitPhotometricLatent(const PhotometricTrunk& trunk, const TrunkTa
   std::vector<int> pixels;
   Eigen::MatrixXf targets;
   Eigen::VectorXf weights, dz;
+  const std::vector<double> contact_cdf = options.contact_share > 0
+                                              ? ContactDrawCdf(frame, options.contact_share)
+                                              : std::vector<double>();
   auto advance = [&](Start* s, int last_step) {
     for (int step = s->step + 1; step <= last_step; ++step) {
-      DrawPixelBlocks(frame, options.batch_pixels, options.pixel_block, &s->rng, &pixels,
-                      &targets, &weights);
+      if (contact_cdf.empty()) {
+        DrawPixelBlocks(frame, options.batch_pixels, options.pixel_block, &s->rng, &pixels,
+                        &targets, &weights);
+      } else {
+        DrawPixelsBy(frame, contact_cdf, options.batch_pixels, &s->rng, &pixels, &targets,
+                     &weights);
+      }
       trunk.LossAndGradient<float>(pixels, s->z.cast<float>(), targets, weights, &dz, nullptr,
                                    nullptr, nullptr, options.markers);
       const double rate =

@@ -2,12 +2,16 @@
 //
 // Trunk targets and THE PSNR of tactfunc (estimation/data/trunk_targets.h): the
 // definition on hand-made targets with known MSE and range, the pixels it leaves out,
-// its peak, and MakeTrunkTargets' layout of a frame.
+// its peak, MakeTrunkTargets' layout of a frame, and the draw of a frame's pixels towards
+// its contact.
 #include "estimation/data/trunk_targets.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numeric>
 #include <stdexcept>
+#include <vector>
 
 #include "gtest/gtest.h"
 
@@ -230,6 +234,62 @@ TEST(TargetsToImage, InvertsTheRowPerPixelLayout) {
   EXPECT_EQ(image.at(1, 2, 1), 15.0f);
   EXPECT_EQ(image.at(0, 1, 1), 11.0f);
   EXPECT_THROW(TargetsToImage(values, 3, 3), std::invalid_argument);
+}
+
+// ---- Drawing towards the contact -----------------------------------------------------
+
+TEST(ContactDrawProbabilities, MixEvenAndEnergyWeightedAndSumToOne) {
+  TrunkTargets t = Targets({0, 0, 1, 0, 2, 0, 0, 0});
+  t.weights[4] = 0.5f;  // weighted energies: 0, 0, 1, 0, 2, 0, 0, 0 (sum 3)
+  const std::vector<int> all{0, 1, 2, 3, 4, 5, 6, 7};
+  const std::vector<double> p = ContactDrawProbabilities(t, all, 0.6);
+  ASSERT_EQ(p.size(), 8u);
+  EXPECT_NEAR(p[0], 0.4 / 8, 1e-15);
+  EXPECT_NEAR(p[2], 0.4 / 8 + 0.6 * 1 / 3, 1e-15);
+  EXPECT_NEAR(p[4], 0.4 / 8 + 0.6 * 2 / 3, 1e-15);
+  EXPECT_NEAR(std::accumulate(p.begin(), p.end(), 0.0), 1.0, 1e-15);
+  // Over a subset, the subset's energies alone.
+  const std::vector<double> q = ContactDrawProbabilities(t, {1, 2}, 1.0);
+  EXPECT_EQ(q, (std::vector<double>{0.0, 1.0}));
+  // No energy (or no finite energy): evenly.
+  for (float v : {0.0f, std::numeric_limits<float>::infinity()}) {
+    TrunkTargets blank = Targets({0, 0, 0, 0});
+    blank.values(1, 0) = v;
+    for (double pi : ContactDrawProbabilities(blank, {0, 1, 2, 3}, 0.9)) EXPECT_EQ(pi, 0.25);
+  }
+}
+
+TEST(ContactSample, ItsWeightedEnergyEstimatesTheFramesWithoutBias) {
+  TrunkTargets t = Targets({0.1f, 0, 3, 0.2f, 0, 1, 0, 0.5f, 0, 0, 2, 0});
+  const double total = t.values.squaredNorm();
+  for (double share : {0.0, 0.5, 1.0}) {
+    std::vector<int> pixels(12);
+    std::iota(pixels.begin(), pixels.end(), 0);
+    std::vector<double> factor;
+    ContactSample(t, 6, share, &pixels, &factor);
+    ASSERT_EQ(pixels.size(), factor.size());
+    ASSERT_FALSE(pixels.empty());
+    EXPECT_TRUE(std::is_sorted(pixels.begin(), pixels.end()));
+    double estimate = 0;
+    for (size_t i = 0; i < pixels.size(); ++i) {
+      estimate += factor[i] * t.values.row(pixels[i]).squaredNorm();
+    }
+    // At share 1 the draw is proportional to the energy: the estimate is exact.
+    if (share == 1.0) {
+      EXPECT_NEAR(estimate, 6.0 / 12 * total, 1e-5);
+    }
+    // Evenly (share 0): 6 pixels, each weighing 1.
+    if (share == 0.0) {
+      EXPECT_EQ(pixels.size(), 6u);
+      for (double f : factor) EXPECT_NEAR(f, 1.0, 1e-12);
+    }
+  }
+  // The contact gets most of the draws at share 1: pixels without energy are never drawn.
+  std::vector<int> pixels(12);
+  std::iota(pixels.begin(), pixels.end(), 0);
+  std::vector<double> factor;
+  ContactSample(t, 6, 1.0, &pixels, &factor);
+  for (int j : pixels) EXPECT_GT(t.values(j, 0), 0.0f) << "pixel " << j;
 }
 
 }  // namespace

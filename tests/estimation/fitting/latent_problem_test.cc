@@ -192,7 +192,9 @@ TEST(LatentProblem, TheStartPassGivesTheResidualsJacobianAndCostAtZero) {
       const double cost0 = problem.DataCostAtStart(pass, &psnr0);
       EXPECT_NEAR(cost0, cost, 1e-5 * cost);
       ASSERT_EQ(psnr0.has_value(), psnr.has_value());
-      if (psnr) EXPECT_NEAR(*psnr0, *psnr, 1e-4);
+      if (psnr) {
+        EXPECT_NEAR(*psnr0, *psnr, 1e-4);
+      }
     }
   }
 }
@@ -219,7 +221,9 @@ TEST(LatentProblem, MetaSgdStepsThroughTheStartPassAreTheTrunksSteps) {
       EXPECT_GT(z.norm(), 0.0);
       EXPECT_NEAR(cost_pass, cost, 1e-5 * cost);
       ASSERT_EQ(psnr_pass.has_value(), psnr.has_value());
-      if (psnr) EXPECT_NEAR(*psnr_pass, *psnr, 1e-4);
+      if (psnr) {
+        EXPECT_NEAR(*psnr_pass, *psnr, 1e-4);
+      }
     }
     // Away from z = 0 the pass is not used: the same steps exactly.
     const VectorXd start = 0.1 * VectorXd::Ones(4);

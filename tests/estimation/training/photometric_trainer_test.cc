@@ -12,6 +12,7 @@
 #include <filesystem>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "gtest/gtest.h"
@@ -198,9 +199,11 @@ TEST(PhotometricTrainerTest, AFitOfAFrameTheTrunkDrewLowersItsLossTenfold) {
   PhotometricFitOptions options;
   options.steps = 300;
   options.batch_pixels = 192;
-  // Independent pixels, then 12 blocks of 4 x 4 a step (PhotometricFitOptions::pixel_block).
-  for (int block : {1, 4}) {
+  // Independent pixels, 12 blocks of 4 x 4 a step (PhotometricFitOptions::pixel_block),
+  // and independent pixels half drawn towards the contact (contact_share).
+  for (const auto& [block, share] : {std::pair{1, 0.0}, std::pair{4, 0.0}, std::pair{1, 0.5}}) {
     options.pixel_block = block;
+    options.contact_share = share;
     for (int i = 0; i < 3; ++i) {
       const TrunkTargets& frame = teacher.frames[i];
       // From the true pose and a zero code (a random teacher's frames are no contacts:
@@ -212,7 +215,8 @@ TEST(PhotometricTrainerTest, AFitOfAFrameTheTrunkDrewLowersItsLossTenfold) {
           nullptr, nullptr);
       const PhotometricFit fit = FitPhotometricLatent(teacher.trunk, frame, options, 11 + i,
                                                       &start);
-      EXPECT_LT(fit.loss, 0.1 * start_loss) << "frame " << i << ", block " << block;
+      EXPECT_LT(fit.loss, 0.1 * start_loss)
+          << "frame " << i << ", block " << block << ", contact share " << share;
       EXPECT_EQ(fit.latent.size(), 8);
       // The pixels come from the seed: the same seed, the same latent.
       EXPECT_EQ(FitPhotometricLatent(teacher.trunk, frame, options, 11 + i, &start).latent,
@@ -275,6 +279,29 @@ TEST(PhotometricTrainerTest, AFitRefusesPixelBlocksLargerThanTheFrameOrBelowOne)
   wide.pixel_block = 0;
   EXPECT_THROW(FitPhotometricLatent(teacher.trunk, teacher.frames[0], wide, 1),
                std::invalid_argument);
+}
+
+TEST(PhotometricTrainerTest, AFitRefusesAContactShareOutsideZeroToOneOrWithBlocks) {
+  const Teacher teacher = MakeTeacher(1);
+  PhotometricFitOptions options;
+  options.steps = 3;
+  for (const auto& [share, block] :
+       {std::pair{1.0, 1}, std::pair{-0.1, 1}, std::pair{std::nan(""), 1}, std::pair{0.5, 4}}) {
+    PhotometricFitOptions bad = options;
+    bad.contact_share = share;
+    bad.pixel_block = block;
+    try {
+      FitPhotometricLatent(teacher.trunk, teacher.frames[0], bad, 1);
+      FAIL() << "contact_share " << share << " with pixel_block " << block << " accepted";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find("contact_share"), std::string::npos) << e.what();
+    }
+  }
+  // A blank frame has no contact to draw towards: it is drawn evenly, and fits.
+  TrunkTargets blank = teacher.frames[0];
+  blank.values.setZero();
+  options.contact_share = 0.5;
+  EXPECT_TRUE(FitPhotometricLatent(teacher.trunk, blank, options, 1).latent.allFinite());
 }
 
 TEST(PhotometricTrainerTest, MomentPoseFindsTheCentreAndTheAxis) {
