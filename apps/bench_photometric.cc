@@ -465,10 +465,12 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
   }
   const int num_flipped = fits[0].flipped;
   std::printf("marker scale %.3f px per unit slope; training %.0f s, fits %.0f s (adam:%d, "
-              "probe %d, %d pixels a step in blocks of side %d; %.3f s per frame on %d "
-              "thread(s); %d of %zu kept the start turned by pi)\n",
+              "probe %d, %d pixels a step in blocks of side %d, a share of %.2f drawn towards "
+              "the contact; %.3f s per frame on %d thread(s); %d of %zu kept the start "
+              "turned by pi)\n",
               trunk.marker_scale(), train_seconds, fit_seconds, fits[0].options.steps,
-              flags.fit_probe, flags.fit_batch, flags.fit_block, fit_seconds / test.size(),
+              flags.fit_probe, flags.fit_batch, flags.fit_block, flags.fit_contact_share,
+              fit_seconds / test.size(),
               flags.threads,
               num_flipped, test.size());
   // The fit's trade of time against PSNR, where more than one setting was asked for.
@@ -486,8 +488,10 @@ void RunPhotometricBench(const PhotometricBenchFlags& flags) {
                          {"flipped_starts_kept", run.flipped}});
   }
   if (fits.size() > 1) {
-    std::printf("fit trade (probe %d, %d pixels a step in blocks of side %d, %d thread(s)):\n",
-                flags.fit_probe, flags.fit_batch, flags.fit_block, flags.threads);
+    std::printf("fit trade (probe %d, %d pixels a step in blocks of side %d, a share of %.2f "
+                "drawn towards the contact, %d thread(s)):\n",
+                flags.fit_probe, flags.fit_batch, flags.fit_block, flags.fit_contact_share,
+                flags.threads);
     std::printf("  %-22s  %10s  %8s  %11s\n", "fit", "noise-free", "vs PCA", "s per frame");
     for (const FitRun& run : fits) {
       char name[64];

@@ -173,8 +173,9 @@ struct PhotometricFitOptions {
   // Share of a step's pixels drawn towards the contact, a in [0, 1): pixel j of the
   // frame's N is drawn with probability p_j = (1 - a) / N + a e_j / sum(e), e_j its
   // weighted difference energy w_j ||target_j||^2, and weighs w_j / (N p_j), so that a
-  // step's weighted loss still estimates the whole frame's. 0: every pixel alike. Needs
-  // pixel_block 1.
+  // step's weighted loss still estimates the whole frame's (below 1 every pixel can be
+  // drawn, which the estimate needs). 0: every pixel alike. Needs pixel_block 1.
+  // encode's knn+adam:N draws with 0.5 (estimation/functaset/latent_encoder.cc).
   double contact_share = 0;
   // The frame's own markers (PhotometricTrunk::MakeMarkers of its reference; not owned,
   // must outlive the fit), or null for the trunk's own reference.
