@@ -296,13 +296,14 @@ void RegisterEncode(CLI::App& app, CommandBody* selected) {
                   "--head photometric): knn+adam:N, N Adam steps from the best of the "
                   "model's training latents, 64 pixels a step, half of them drawn towards "
                   "the contact (default " +
-                      LatentEncoder::DefaultPhotometricStrategy(true) +
-                      " where the model holds that table), knn+ceres:N, at most N "
+                      LatentEncoder::DefaultPhotometricStrategy(true, 64) +
+                      " for a latent of 64 values, in proportion for longer ones, where the "
+                      "model holds that table), knn+ceres:N, at most N "
                       "Levenberg-Marquardt iterations in Ceres on every valid pixel from that "
                       "latent (slower, closer to convergence), knn (that latent as it is), or "
                       "adam:N, N steps from the contact's moment pose and its turn by pi "
                       "(default " +
-                      LatentEncoder::DefaultPhotometricStrategy(false) + " without a table)");
+                      LatentEncoder::DefaultPhotometricStrategy(false, 64) + " without a table)");
   sub->add_flag("--allow-other-frames", flags->allow_other_frames,
                 "Encode even when the data's frames (size, channels, sensor description) are "
                 "not those the model's trunk was trained on (a warning instead of an error)");

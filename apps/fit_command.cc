@@ -426,8 +426,10 @@ void RegisterFit(CLI::App& app, CommandBody* selected) {
                   "knn, meta_sgd:K, ceres:N, knn+meta_sgd:K or knn+ceres:N (default ceres:10); "
                   "for a photometric trunk adam:N, knn+adam:N, knn+ceres:N or knn over the "
                   "model's warm-start table (default: encode's, " +
-                      LatentEncoder::DefaultPhotometricStrategy(true) + " with a table, " +
-                      LatentEncoder::DefaultPhotometricStrategy(false) + " without)");
+                      LatentEncoder::DefaultPhotometricStrategy(true, 64) +
+                      " with a table and a latent of 64 values, in proportion for longer "
+                      "ones; " +
+                      LatentEncoder::DefaultPhotometricStrategy(false, 64) + " without)");
   sub->add_option("--out", flags->out, "Folder for latent.json and fit.png (created)");
   sub->add_option("--precision", flags->precision, "float (default) or double trunk evaluations");
   sub->add_option("--jacobian", flags->jacobian,

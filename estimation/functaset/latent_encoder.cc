@@ -31,15 +31,16 @@ const int kPhotometricFitSteps = PhotometricFitOptions().steps;
 constexpr std::uint64_t kPhotometricFitSeed = 0x70686f746f;
 // knn+adam:N: the neighbours scored per frame, the fit's first step size from the start,
 // its pixels per step, the share of them drawn towards the contact, and the default N
-// for a trunk with a warm-start table: of the (pixels, steps, share) settings tried, the
-// fastest that cleared same-bits PCA by 3.5 dB on a selection set no other row uses
-// (docs/REPRESENTATION.md, "A warm start from the training latents" and "Pixels drawn
-// towards the contact").
+// for a trunk with a warm-start table per 64 latent values: at d = 64 the most steps
+// that keep encoding at 100 frames/s on 2 threads; a longer latent starts further from
+// its neighbour and has more values to move, and d = 128 needed twice the steps for
+// the same margin over same-bits PCA (docs/REPRESENTATION.md, "Pixels drawn towards the
+// contact").
 constexpr int kWarmStartCandidates = 4;
 constexpr double kWarmStartRate = 1e-2;
 constexpr int kWarmStartBatchPixels = 64;
 constexpr double kWarmStartContactShare = 0.5;
-constexpr int kWarmStartFitSteps = 20;
+constexpr int kWarmStartFitStepsPer64Values = 20;
 
 }  // namespace
 
@@ -121,8 +122,10 @@ std::string LatentEncoder::Summary::FullReport() const {
   return out.str();
 }
 
-std::string LatentEncoder::DefaultPhotometricStrategy(bool warm_start_table) {
-  return warm_start_table ? "knn+adam:" + std::to_string(kWarmStartFitSteps)
+std::string LatentEncoder::DefaultPhotometricStrategy(bool warm_start_table, int latent_dim) {
+  const int steps = std::max(kWarmStartFitStepsPer64Values,
+                             (kWarmStartFitStepsPer64Values * latent_dim + 32) / 64);
+  return warm_start_table ? "knn+adam:" + std::to_string(steps)
                           : "adam:" + std::to_string(kPhotometricFitSteps);
 }
 
@@ -145,7 +148,8 @@ LatentEncoder::LatentEncoder(const FunctaModel& model, const Options& options)
         options_.strategy.empty()
             ? FitStrategy::FromString(
                   !photometric ? "meta_sgd:" + std::to_string(trunk.meta_sgd.inner_steps)
-                               : DefaultPhotometricStrategy(trunk.warm_start != nullptr))
+                               : DefaultPhotometricStrategy(trunk.warm_start != nullptr,
+                                                            trunk.photometric->latent_dim()))
             : FitStrategy::FromString(options_.strategy);
     const bool adam = state.strategy.refinement == FitStrategy::Refinement::kAdam;
     const bool knn_alone =

@@ -212,6 +212,16 @@ TEST(LatentEncoder, StrategiesAreValidatedByName) {
   EXPECT_TRUE(options.IsValid(&error)) << error;
 }
 
+TEST(LatentEncoder, APhotometricTrunksDefaultStepsGrowWithItsLatent) {
+  // 20 Adam steps per 64 latent values from the warm-start table, never fewer than 20;
+  // without a table the cold fit's 200.
+  EXPECT_EQ(LatentEncoder::DefaultPhotometricStrategy(true, 64), "knn+adam:20");
+  EXPECT_EQ(LatentEncoder::DefaultPhotometricStrategy(true, 128), "knn+adam:40");
+  EXPECT_EQ(LatentEncoder::DefaultPhotometricStrategy(true, 96), "knn+adam:30");
+  EXPECT_EQ(LatentEncoder::DefaultPhotometricStrategy(true, 16), "knn+adam:20");
+  EXPECT_EQ(LatentEncoder::DefaultPhotometricStrategy(false, 128), "adam:200");
+}
+
 TEST(LatentEncoder, CeresStrategyIsTheLatentFittersFitAndBeatsTheInnerLoop) {
   const FunctaModel model = MakeModel(/*inner_steps=*/3, /*alpha=*/0.7);
   const SensorTrunk& trunk = model.Trunk(SensorKind::kSoftBubble);
