@@ -5,9 +5,10 @@
 # models/pretrained/default.tfm draws a blurred shadow. Data: the GelSlim frames of the
 # default synthetic dataset (12 tools x 150 contacts, seed 1, with noise-free copies, as
 # scripts/train_pretrained.sh); `train --head photometric` with its defaults (d = 64 values,
-# 128 B per frame; 3000 steps after 1000 with the markers at the working resolution) and
-# the training latents' warm-start table, which `encode` starts its fits from.
-# Deterministic for the seed; about 5 minutes on 2 cores.
+# 128 B per frame; 24000 steps, the first 1000 with the markers at the working resolution,
+# half of each frame's pixels drawn towards its contact) and the training latents'
+# warm-start table, which `encode` starts its fits from.
+# Deterministic for the seed; about 33 minutes on 2 cores.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 WORK=${WORK:-/tmp/tactfunc_pretrained_gelslim}
