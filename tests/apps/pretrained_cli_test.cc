@@ -6,8 +6,9 @@
 // models/pretrained/default.tfm, each with its default fit, at the same 128 B per frame.
 // The photometric trunk draws the markers and shading ridges the direct one blurs
 // (docs/RESULTS_RECONSTRUCTION.md, "The GelSlim's photometric trunk"); it must stay at
-// least 4 dB ahead on these frames (measured about 5.5 dB) and its reconstructions must
-// be written as recon draws them.
+// least 6.5 dB ahead on these frames (measured 6.96 dB: 33.65 against 26.68; the trunk
+// trained 3000 steps, committed until 2026-11-28, read 33.05, 6.36 ahead) and its
+// reconstructions must be written as recon draws them.
 #include <filesystem>
 #include <string>
 
@@ -56,7 +57,7 @@ TEST(PretrainedCliTest, TheCommittedGelSlimTrunkDrawsWhatTheDirectTrunkBlurs) {
   EXPECT_EQ(photometric["frames_encoded"], 24);
   const double psnr_photometric = photometric["psnr_mean"]["gelslim"].get<double>();
   const double psnr_direct = direct["psnr_mean"]["gelslim"].get<double>();
-  EXPECT_GE(psnr_photometric, psnr_direct + 4.0)
+  EXPECT_GE(psnr_photometric, psnr_direct + 6.5)
       << "photometric " << psnr_photometric << " dB, direct " << psnr_direct << " dB";
 
   const CliResult recon =
