@@ -779,12 +779,12 @@ void RegisterTrain(CLI::App& app, CommandBody* selected) {
                             ->check(CLI::Range(1, 100000));
   flags->layers_option =
       sub->add_option("--layers", flags->layers, "Hidden sine layers")->check(CLI::Range(1, 1000));
-  flags->steps_option = sub->add_option("--steps", flags->steps,
-                                        "Outer steps in total (a resumed run counts earlier ones; default: the "
-                                        "preset's, or " +
-                                            std::to_string(kPhotometricDefaultSteps) +
-                                            " with --head photometric)")
-                            ->check(CLI::Range(0, 100000000));
+  flags->steps_option =
+      sub->add_option("--steps", flags->steps,
+                      "Outer steps in total (a resumed run counts earlier ones; default: the "
+                      "preset's, or " +
+                          std::to_string(kPhotometricDefaultSteps) + " with --head photometric)")
+          ->check(CLI::Range(0, 100000000));
   flags->batch_option = sub->add_option("--batch", flags->batch, "Frames per outer step")
                             ->check(CLI::Range(1, 100000));
   flags->pixels_option =
