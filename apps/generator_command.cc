@@ -4,12 +4,13 @@
 //
 //   tactfunc train-generator --model M.tfm --functaset F.tfs --data D --out G.tpg
 //       [--mode latents|pixels] [--epochs 300] [--pixel-epochs 4] [--pixel-frames 200]
-//       [--calibration-frames 120] [--seed 0] [--resume] [--json]
+//       [--calibration-frames 120] [--temperature-frames 600] [--seed 0] [--resume] [--json]
 //     trains h(tool, T, depth) -> z on the functaset's labelled train-split entries: by
 //     regressing their latents (--mode latents), then (--mode pixels) on --pixel-frames
 //     frames per tool through the frozen trunk for --pixel-epochs more epochs; reports the
 //     mean rendering PSNR on the test split, calibrates the posterior's sigma inflation
-//     on --calibration-frames test-split frames and writes G atomically. Each stage shows
+//     on --calibration-frames test-split frames and its mode weights' temperature on
+//     --temperature-frames (CalibrateWeightTemperature) and writes G atomically. Each stage shows
 //     its epochs and checkpoints to G.regression.ckpt / G.pixels.ckpt (every 10 epochs and
 //     on Ctrl-C, which exits 130); --resume continues from them to the same G.
 //
@@ -77,6 +78,7 @@ struct TrainGeneratorFlags {
   int pixel_frames = 200;
   int pixels = 256;
   int calibration_frames = 120;
+  int temperature_frames = 600;
   double lr = 1e-3;
   std::uint64_t seed = 0;
   bool json = false;
@@ -230,22 +232,46 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
   GeneratorPosterior::Options po;
   po.sigma_inflation = 1;
   const GeneratorPosterior posterior(trunk, generator, po, knn.get());
+  // `count` test-split frames spread evenly over the split, with their labels.
+  auto calibration_set = [&](int count, std::vector<TrunkTargets>* frames,
+                             std::vector<PoseLabel>* labels) {
+    const std::size_t n = std::min<std::size_t>(test.frames.size(), count);
+    for (std::size_t i = 0; i < n; ++i) {
+      const std::size_t k = (2 * i + 1) * test.frames.size() / (2 * n);
+      frames->push_back(LoadTrunkTargets(dataset, test.frames[k], trunk.format));
+      PoseLabel l;
+      l.tool = options.tools[test.samples[k].tool];
+      l.sensor_T_object = test.samples[k].sensor_T_object;
+      l.depth_m = test.samples[k].depth_m;
+      labels->push_back(l);
+    }
+    return n;
+  };
   std::vector<TrunkTargets> cal_frames;
   std::vector<PoseLabel> cal_labels;
-  const std::size_t cal_count = std::min<std::size_t>(test.frames.size(), flags.calibration_frames);
-  for (std::size_t i = 0; i < cal_count; ++i) {
-    const std::size_t k = (2 * i + 1) * test.frames.size() / (2 * cal_count);
-    cal_frames.push_back(LoadTrunkTargets(dataset, test.frames[k], trunk.format));
-    PoseLabel l;
-    l.tool = options.tools[test.samples[k].tool];
-    l.sensor_T_object = test.samples[k].sensor_T_object;
-    l.depth_m = test.samples[k].depth_m;
-    cal_labels.push_back(l);
-  }
+  const std::size_t cal_count = calibration_set(flags.calibration_frames, &cal_frames, &cal_labels);
   const double kappa = CalibrateSigmaInflation(posterior, cal_frames, cal_labels);
   generator.set_sigma_inflation(kappa);
   std::cout << "train-generator: sigma inflation " << kappa << " (from " << cal_count
             << " test-split frames)\n";
+  // The mode weights' temperature, at that kappa, on more frames: only those whose
+  // posterior has two or more modes inform it.
+  double tau = 1;
+  if (kappa > 0) {
+    GeneratorPosterior::Options to_options;
+    to_options.sigma_inflation = kappa;
+    to_options.weight_temperature = 1;
+    const GeneratorPosterior at_kappa(trunk, generator, to_options, knn.get());
+    std::vector<TrunkTargets> t_frames;
+    std::vector<PoseLabel> t_labels;
+    const std::size_t t_count = calibration_set(flags.temperature_frames, &t_frames, &t_labels);
+    int informative = 0, wrong = 0;
+    tau = CalibrateWeightTemperature(at_kappa, t_frames, t_labels, 0.05, &informative, &wrong);
+    generator.set_weight_temperature(tau);
+    std::cout << "train-generator: mode weight temperature " << tau << " (from " << t_count
+              << " test-split frames, " << informative << " with two or more modes, " << wrong
+              << " of them with the truth outside the heaviest)\n";
+  }
   nlohmann::json info = {{"model", flags.model},
                          {"model_checksum", model.checksum()},
                          {"functaset", flags.functaset},
@@ -265,6 +291,7 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
   }
   if (flags.json) {
     info["sigma_inflation"] = kappa;
+    info["weight_temperature"] = tau;
     info["out"] = flags.out;
     EmitJson(info);
   }
@@ -276,6 +303,7 @@ struct EvalGeneratorFlags {
   std::uint64_t seed = 0x5eed0000u;
   bool unknown_tool = false;
   double sigma_inflation = 0;
+  double weight_temperature = 0;
   // The search knobs' defaults are GeneratorPosterior's and PoseFitOptions'.
   int max_pixels = GeneratorPosterior::Options().problem.max_pixels;
   double contact_share = GeneratorPosterior::Options().problem.contact_share;
@@ -312,6 +340,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
   if (!flags.pose_model.empty()) mlp = std::make_unique<PoseMlp>(PoseMlp::Load(flags.pose_model));
   GeneratorPosterior::Options options;
   options.sigma_inflation = flags.sigma_inflation;
+  options.weight_temperature = flags.weight_temperature;
   options.problem.max_pixels = flags.max_pixels;
   options.problem.contact_share = flags.contact_share;
   options.fit.max_refined_starts = flags.refined_starts;
@@ -560,6 +589,10 @@ void RegisterTrainGenerator(CLI::App& app, CommandBody* selected) {
   sub->add_option("--calibration-frames", flags->calibration_frames,
                   "Test-split frames for the sigma inflation (default 120)")
       ->check(CLI::Range(1, 1000000));
+  sub->add_option("--temperature-frames", flags->temperature_frames,
+                  "Test-split frames for the temperature of the posterior's mode weights "
+                  "(default 600)")
+      ->check(CLI::Range(1, 1000000));
   sub->add_option("--lr", flags->lr, "Adam step (default 1e-3; pixels use 0.3x)")
       ->check(CLI::PositiveNumber);
   sub->add_option("--seed", flags->seed, "Seed (default 0)");
@@ -588,6 +621,10 @@ void RegisterEvalGenerator(CLI::App& app, CommandBody* selected) {
                   "Contact seed (default 0x5eed0000, which no training data uses)");
   sub->add_option("--sigma-inflation", flags->sigma_inflation,
                   "Override the generator's calibrated sigma inflation (0 = stored)")
+      ->check(CLI::NonNegativeNumber);
+  sub->add_option("--weight-temperature", flags->weight_temperature,
+                  "Override the generator's calibrated temperature of the mode weights "
+                  "(0 = stored; 1 = the Laplace evidences as they are)")
       ->check(CLI::NonNegativeNumber);
   sub->add_option("--max-pixels", flags->max_pixels,
                   "Pixels per trunk pass (default " + std::to_string(flags->max_pixels) + ")")

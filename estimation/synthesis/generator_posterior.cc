@@ -66,19 +66,26 @@ SE2d Folded(const SE2d& t, const LaplaceComponent& c) {
   return SE2d::FromXYYaw(t.x(), t.y(), yaw);
 }
 
-double ComponentDensity(const LaplaceComponent& c, const SE2d& t) {
+// The squared Mahalanobis distance of t (folded) from c's mean over (x, y, yaw), or over
+// (x, y) for a tool without yaw (n = 0).
+double SquaredMahalanobis(const LaplaceComponent& c, const SE2d& t) {
   const SE2d::Tangent r = Folded(t, c).Minus(c.mean);
   if (c.symmetry_order == 0) {
-    const Eigen::Matrix2d s = c.covariance.topLeftCorner<2, 2>();
     const Eigen::Vector2d v = r.head<2>();
-    const double det = s.determinant();
-    if (!(det > 0)) return 0;
-    return std::exp(-0.5 * v.dot(s.ldlt().solve(v))) / (2 * M_PI * std::sqrt(det));
+    return v.dot(c.covariance.topLeftCorner<2, 2>().ldlt().solve(v));
   }
-  const Eigen::Matrix3d s = c.covariance.topLeftCorner<3, 3>();
-  const double det = s.determinant();
+  return r.dot(c.covariance.topLeftCorner<3, 3>().ldlt().solve(r));
+}
+
+double ComponentDensity(const LaplaceComponent& c, const SE2d& t) {
+  if (c.symmetry_order == 0) {
+    const double det = c.covariance.topLeftCorner<2, 2>().determinant();
+    if (!(det > 0)) return 0;
+    return std::exp(-0.5 * SquaredMahalanobis(c, t)) / (2 * M_PI * std::sqrt(det));
+  }
+  const double det = c.covariance.topLeftCorner<3, 3>().determinant();
   if (!(det > 0)) return 0;
-  return std::exp(-0.5 * r.dot(s.ldlt().solve(r))) / (std::pow(2 * M_PI, 1.5) * std::sqrt(det));
+  return std::exp(-0.5 * SquaredMahalanobis(c, t)) / (std::pow(2 * M_PI, 1.5) * std::sqrt(det));
 }
 
 // Appends every start of *starts turned by each of `offsets` (radians, in that order for
@@ -269,6 +276,9 @@ bool GeneratorPosterior::Options::IsValid(std::string* error) const {
   }
   if (!(sigma_inflation >= 0) || !std::isfinite(sigma_inflation)) {
     return fail("sigma_inflation must be finite and >= 0");
+  }
+  if (!(weight_temperature >= 0) || !std::isfinite(weight_temperature)) {
+    return fail("weight_temperature must be finite and >= 0");
   }
   if (num_region_samples < 10) return fail("num_region_samples must be >= 10");
   return true;
@@ -471,7 +481,12 @@ GeneratorPosterior::Summary GeneratorPosterior::Estimate(const TrunkTargets& tar
   double max_log = -std::numeric_limits<double>::infinity();
   for (const LaplaceComponent& c : components) max_log = std::max(max_log, c.log_evidence);
   double total = 0;
-  for (LaplaceComponent& c : components) total += c.weight = std::exp(c.log_evidence - max_log);
+  double tau = options_.weight_temperature > 0 ? options_.weight_temperature
+                                              : generator_->weight_temperature();
+  if (!(tau > 0)) tau = 1;
+  for (LaplaceComponent& c : components) {
+    total += c.weight = std::exp((c.log_evidence - max_log) / tau);
+  }
   for (LaplaceComponent& c : components) {
     c.weight /= total;
     summary.tool_probabilities[c.tool] += c.weight;
@@ -526,6 +541,73 @@ double CalibrateSigmaInflation(const GeneratorPosterior& posterior,
   std::sort(d2.begin(), d2.end());
   const double q = d2[std::min(d2.size() - 1, static_cast<std::size_t>(0.9 * d2.size()))];
   return std::sqrt(q / kChi2_3_90);
+}
+
+double CalibrateWeightTemperature(const GeneratorPosterior& posterior,
+                                  const std::vector<TrunkTargets>& frames,
+                                  const std::vector<PoseLabel>& labels, double min_temperature,
+                                  int* informative, int* heaviest_wrong) {
+  if (frames.size() != labels.size()) {
+    throw std::invalid_argument("CalibrateWeightTemperature: one label per frame expected");
+  }
+  if (!(min_temperature > 0 && min_temperature <= 1)) {
+    throw std::invalid_argument(
+        "CalibrateWeightTemperature: min_temperature must lie in (0, 1], got " +
+        std::to_string(min_temperature));
+  }
+  std::vector<WeightTemperatureCase> cases;
+  int wrong = 0;
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    PoseMixture mixture;
+    const GeneratorPosterior::Summary s = posterior.Estimate(frames[i], labels[i].tool, &mixture);
+    if (!s.usable || mixture.components().size() < 2) continue;
+    std::vector<double> log_z;
+    std::size_t truth = 0;
+    double best_d2 = std::numeric_limits<double>::infinity();
+    for (std::size_t m = 0; m < mixture.components().size(); ++m) {
+      const LaplaceComponent& c = mixture.components()[m];
+      log_z.push_back(c.log_evidence);
+      const double d2 = SquaredMahalanobis(c, labels[i].sensor_T_object);
+      if (d2 < best_d2) best_d2 = d2, truth = m;
+    }
+    // The components come heaviest first.
+    if (truth != 0) ++wrong;
+    cases.emplace_back(std::move(log_z), truth);
+  }
+  if (informative != nullptr) *informative = static_cast<int>(cases.size());
+  if (heaviest_wrong != nullptr) *heaviest_wrong = wrong;
+  return FitWeightTemperature(cases, min_temperature);
+}
+
+double FitWeightTemperature(const std::vector<WeightTemperatureCase>& cases,
+                            double min_temperature) {
+  if (!(min_temperature > 0 && min_temperature <= 1)) {
+    throw std::invalid_argument("FitWeightTemperature: min_temperature must lie in (0, 1], got " +
+                                std::to_string(min_temperature));
+  }
+  for (const auto& [log_z, truth] : cases) {
+    if (truth >= log_z.size()) {
+      throw std::invalid_argument("FitWeightTemperature: a case's truth index " +
+                                  std::to_string(truth) + " is not below its " +
+                                  std::to_string(log_z.size()) + " components");
+    }
+  }
+  if (cases.empty()) return 1;
+  constexpr int kGrid = 61;
+  double best_tau = 1, best_score = -std::numeric_limits<double>::infinity();
+  for (int g = 0; g < kGrid; ++g) {
+    const double tau = std::exp(std::log(min_temperature) * g / (kGrid - 1.0));  // 1 first
+    double score = 0;
+    for (const auto& [log_z, truth] : cases) {
+      const double top = *std::max_element(log_z.begin(), log_z.end());
+      double sum = 0;
+      for (double l : log_z) sum += std::exp((l - top) / tau);
+      score += (log_z[truth] - top) / tau - std::log(sum);
+    }
+    // Ties (every truth in the heaviest mode, weights saturated) keep the larger tau.
+    if (score > best_score + 1e-12) best_score = score, best_tau = tau;
+  }
+  return best_tau;
 }
 
 }  // namespace tactfunc

@@ -24,8 +24,14 @@
 //      k = 4, c_t = n for a C_n tool (its n copies of every mode), and for n = 0 (yaw
 //      unobservable) k = 3 over (x, y, depth) and c_t = 2 pi (the yaw integrates out);
 //      the uniform pose prior is the same for every tool and cancels.
-//   Mixture weights w_m = Z_m / sum Z (over the modes of every candidate tool); the tool
-//   probabilities P(t | y) = sum of its modes' weights.
+//   Mixture weights w_m = Z_m^(1/tau) / sum Z^(1/tau) (over the modes of every candidate
+//   tool); the tool probabilities P(t | y) = sum of its modes' weights. tau, the
+//   weights' temperature (PoseGenerator::weight_temperature, or
+//   Options::weight_temperature; 1 for a generator without one), is calibrated on held-out
+//   labelled contacts (CalibrateWeightTemperature): the pixel sigma below is inflated so
+//   that each mode's Gaussian covers the truth near it, which also shrinks the differences
+//   of log Z between modes by kappa^2, and the mode with the largest Z holds the truth far
+//   more often than Z alone would say (docs/POSES.md, "The mode weights' temperature").
 //
 // The pixel sigma s. The residuals of a rendering are dominated by the generator's and
 // the trunk's model error, spatially correlated, not by independent pixel noise, so the
@@ -53,6 +59,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -167,6 +174,8 @@ class GeneratorPosterior {
     int position_grid_rings = 2;
     // kappa of the header comment; 0 = the generator's sigma_inflation (3 if it has none).
     double sigma_inflation = 0;
+    // tau of the header comment; 0 = the generator's weight_temperature (1 if it has none).
+    double weight_temperature = 0;
     int num_region_samples = 400;  // for regions and sample clouds, >= 10
     std::uint64_t seed = 0;
     bool IsValid(std::string* error) const;
@@ -230,6 +239,33 @@ class GeneratorPosterior {
 double CalibrateSigmaInflation(const GeneratorPosterior& posterior,
                                const std::vector<TrunkTargets>& frames,
                                const std::vector<PoseLabel>& labels);
+
+// tau of the header comment by temperature scaling: the value on a log grid of 61 points
+// over [min_temperature, 1] that maximises the summed log weight of the mode holding the
+// truth, sum_i log w_true(i)(tau), over the given labelled frames (each fitted with its
+// tool known, with `posterior`'s kappa). The mode holding the truth is the component whose
+// (x, y, yaw) Mahalanobis distance to the truth (folded by the tool's symmetry) is the
+// smallest; frames with one component do not depend on tau and are left out. When the
+// truth always lies in the heaviest mode the sum grows as tau falls and the grid's floor
+// is returned. `informative` (if given) receives the number of frames with two or more
+// components and `heaviest_wrong` the number of those whose truth was not in the heaviest.
+// Returns 1 if no frame had two components. Throws std::invalid_argument unless
+// 0 < min_temperature <= 1 and frames and labels have the same length.
+// One frame for the temperature: its components' log evidences (log Z_m) and the index of
+// the component holding the truth.
+using WeightTemperatureCase = std::pair<std::vector<double>, std::size_t>;
+
+double CalibrateWeightTemperature(const GeneratorPosterior& posterior,
+                                  const std::vector<TrunkTargets>& frames,
+                                  const std::vector<PoseLabel>& labels,
+                                  double min_temperature = 0.05, int* informative = nullptr,
+                                  int* heaviest_wrong = nullptr);
+
+// CalibrateWeightTemperature's search on given cases (the grid and the rule for ties
+// above). Returns 1 for no cases. Throws std::invalid_argument unless 0 < min_temperature
+// <= 1 and every case's truth index is below its number of components.
+double FitWeightTemperature(const std::vector<WeightTemperatureCase>& cases,
+                            double min_temperature = 0.05);
 
 }  // namespace tactfunc
 

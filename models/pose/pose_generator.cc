@@ -134,6 +134,13 @@ void PoseGenerator::set_sigma_inflation(double kappa) {
   sigma_inflation_ = kappa;
 }
 
+void PoseGenerator::set_weight_temperature(double tau) {
+  Check(tau >= 0 && std::isfinite(tau),
+        "PoseGenerator::set_weight_temperature: expected a finite value >= 0, got " +
+            std::to_string(tau));
+  weight_temperature_ = tau;
+}
+
 Eigen::VectorXd PoseGenerator::Features(int tool_index, const SE2d& pose, double depth_m,
                                         PoseJacobian* J_f_pose) const {
   CheckToolIndex(tool_index);
@@ -332,6 +339,7 @@ std::string PoseGenerator::Serialize() const {
   meta["depth_center"] = options_.depth_center;
   meta["depth_scale"] = options_.depth_scale;
   meta["sigma_inflation"] = sigma_inflation_;
+  if (weight_temperature_ > 0) meta["weight_temperature"] = weight_temperature_;
   meta["info"] = nlohmann::json::parse(info_json_);
   file.set_meta_json(meta.dump());
   file.Add("parameters", TensorFile::DType::kFloat64, {parameters_.size()}, ToVector(parameters_));
@@ -379,6 +387,14 @@ PoseGenerator FromTensorFile(const TensorFile& file, const std::string& source) 
       throw TensorFileError(source + ": field 'sigma_inflation' must be finite and >= 0");
     }
     model.set_sigma_inflation(kappa);
+    if (meta.contains("weight_temperature")) {
+      field = "weight_temperature";
+      const double tau = meta.at("weight_temperature").get<double>();
+      if (!(tau > 0) || !std::isfinite(tau)) {
+        throw TensorFileError(source + ": field 'weight_temperature' must be finite and > 0");
+      }
+      model.set_weight_temperature(tau);
+    }
     field = "info";
     const nlohmann::json& info = meta.at("info");
     if (!info.is_object()) throw TensorFileError(source + ": field 'info' must be an object");

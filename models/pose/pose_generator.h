@@ -30,7 +30,9 @@
 // File (Save / Load): a TensorFile (models/core/tensor_file.h) of kind "pose_generator".
 // JSON meta {"format": "tactfunc-pose-generator", "version": 1, "tools": [names],
 // "symmetry_orders": [n], "latent_dim", "hidden_sizes", "yaw_harmonics",
-// "position_scale", "depth_center", "depth_scale", "sigma_inflation", "info": {...}};
+// "position_scale", "depth_center", "depth_scale", "sigma_inflation", "info": {...}},
+// and "weight_temperature" when it was calibrated (files written before it have none and
+// load with 0, read as 1 by the posterior);
 // float64 tensors "parameters" [P], "latent_mean" [d], "latent_stddev" [d]. Written
 // atomically; loading checks the kind, the version, every field and shape and throws
 // TensorFileError naming the file and the field; the round trip is exact.
@@ -103,6 +105,11 @@ class PoseGenerator {
   double sigma_inflation() const { return sigma_inflation_; }
   void set_sigma_inflation(double kappa);  // >= 0, finite
 
+  // The temperature tau of the posterior's mode weights (w ~ Z^(1/tau); the same header),
+  // calibrated on held-out contacts; 0 = not calibrated (the posterior then uses 1).
+  double weight_temperature() const { return weight_temperature_; }
+  void set_weight_temperature(double tau);  // >= 0, finite
+
   // ---- Features and passes -------------------------------------------------------
   // The feature vector of the header comment (size F); J_f_pose (optional, F x 4): its
   // derivative w.r.t. the coordinates (x, y, yaw, depth).
@@ -150,6 +157,7 @@ class PoseGenerator {
   Eigen::VectorXd latent_mean_;
   Eigen::VectorXd latent_stddev_;
   double sigma_inflation_ = 0;
+  double weight_temperature_ = 0;
   std::string info_json_ = "{}";
 };
 

@@ -1,10 +1,13 @@
 // Copyright 2026 The tactfunc Authors.
 #include "estimation/synthesis/pose_fitter.h"
 
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <memory>
+#include <stdexcept>
+#include <string>
 #include <vector>
 
 #include "ceres/autodiff_cost_function.h"
@@ -248,6 +251,62 @@ TEST(GeneratorPosterior, LaplaceCoversTheTruthAndPrefersTheRenderingTool) {
   PoseMixture again;
   posterior.Estimate(targets, "", &again);
   EXPECT_EQ(again.Mode().x(), posterior.Estimate(targets, "", &mixture).mean.x());
+}
+
+// The mode weights follow Z^(1/tau): the components and their log evidences do not
+// depend on tau, their weights' ratios are exp((log Z_a - log Z_b) / tau).
+TEST(GeneratorPosterior, TheWeightTemperatureSharpensTheModeWeightsOnly) {
+  const SensorTrunk trunk = Trunk();
+  const PoseGenerator g = Generator();
+  const TrunkTargets targets =
+      Render(trunk, g, 0, SE2d::FromXYYaw(-0.7e-3, 0.4e-3, -1.0), 0.010, 0.002);
+  GeneratorPosterior::Options options;
+  options.sigma_inflation = 3;
+  options.fit.max_iterations = 20;
+  PoseMixture plain, sharp;
+  const GeneratorPosterior at_one(trunk, g, options);  // every tool: several components
+  ASSERT_TRUE(at_one.Estimate(targets, "", &plain).usable);
+  options.weight_temperature = 0.5;
+  const GeneratorPosterior at_half(trunk, g, options);
+  ASSERT_TRUE(at_half.Estimate(targets, "", &sharp).usable);
+  ASSERT_GE(plain.components().size(), 2u);
+  ASSERT_EQ(sharp.components().size(), plain.components().size());
+  const LaplaceComponent& a = sharp.components()[0];
+  const LaplaceComponent& b = sharp.components()[1];
+  EXPECT_EQ(a.log_evidence, plain.components()[0].log_evidence);
+  EXPECT_EQ(b.log_evidence, plain.components()[1].log_evidence);
+  EXPECT_NEAR(std::log(a.weight / b.weight), 2 * (a.log_evidence - b.log_evidence),
+              1e-9 * (1 + std::abs(a.log_evidence - b.log_evidence)));
+  EXPECT_NEAR(std::log(plain.components()[0].weight / plain.components()[1].weight),
+              a.log_evidence - b.log_evidence,
+              1e-9 * (1 + std::abs(a.log_evidence - b.log_evidence)));
+  EXPECT_GT(a.weight, plain.components()[0].weight);
+  std::string error;
+  options.weight_temperature = -1;
+  EXPECT_FALSE(options.IsValid(&error));
+  EXPECT_THAT(error, ::testing::HasSubstr("weight_temperature"));
+}
+
+// Temperature scaling on hand-made cases: two modes whose log evidences differ by D, the
+// truth in the heavier one in 9 cases of 10, is fitted best by tau = D / logit(0.9).
+TEST(FitWeightTemperature, FindsTheTemperatureThatMatchesHowOftenTheHeaviestModeIsRight) {
+  const double logit = std::log(0.9 / 0.1);
+  std::vector<WeightTemperatureCase> cases(9, {{0.25 * logit, 0.0}, 0});
+  cases.push_back({{0.25 * logit, 0.0}, 1});
+  const double tau = FitWeightTemperature(cases, 0.05);
+  EXPECT_NEAR(std::log(tau), std::log(0.25), std::log(20.0) / 60) << tau;  // one grid step
+  // The order of the components does not matter, only which one holds the truth.
+  std::vector<WeightTemperatureCase> swapped;
+  for (const auto& [z, t] : cases) swapped.push_back({{z[1], z[0]}, 1 - t});
+  EXPECT_EQ(FitWeightTemperature(swapped, 0.05), tau);
+  // The truth always in the heaviest mode: the grid's floor. No cases: 1.
+  EXPECT_NEAR(FitWeightTemperature({{{1.0, 0.0, -2.0}, 0}}, 0.1), 0.1, 1e-12);
+  EXPECT_EQ(FitWeightTemperature({}, 0.05), 1);
+  // The truth in the lighter mode of every case: as flat as the grid allows.
+  EXPECT_EQ(FitWeightTemperature({{{1.0, 0.0}, 1}}, 0.05), 1);
+  EXPECT_THROW(FitWeightTemperature({{{1.0, 0.0}, 2}}, 0.05), std::invalid_argument);
+  EXPECT_THROW(FitWeightTemperature(cases, 0), std::invalid_argument);
+  EXPECT_THROW(FitWeightTemperature(cases, 1.5), std::invalid_argument);
 }
 
 // The yaw grid copies every start position to the grid's yaws: each added start sits

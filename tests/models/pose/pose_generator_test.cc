@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -11,6 +12,7 @@
 
 #include "ceres/jet.h"
 #include "models/core/tensor_file.h"
+#include "nlohmann/json.hpp"
 
 namespace tactfunc {
 namespace {
@@ -173,8 +175,28 @@ TEST(PoseGenerator, FileRoundTripIsExactAndCorruptFieldsAreNamed) {
   EXPECT_EQ(back.latent_mean(), g.latent_mean());
   EXPECT_EQ(back.latent_stddev(), g.latent_stddev());
   EXPECT_EQ(back.sigma_inflation(), 4.5);
+  EXPECT_EQ(back.weight_temperature(), 0);  // never calibrated: not written, read as 0
   EXPECT_EQ(back.options().tools, g.options().tools);
   EXPECT_EQ(back.info_json(), g.info_json());
+  PoseGenerator tempered = g;
+  tempered.set_weight_temperature(0.25);
+  EXPECT_EQ(PoseGenerator::Parse(tempered.Serialize(), "g.tpg").weight_temperature(), 0.25);
+  EXPECT_THROW(tempered.set_weight_temperature(-1), std::invalid_argument);
+  EXPECT_THROW(tempered.set_weight_temperature(std::nan("")), std::invalid_argument);
+  {
+    // A stored temperature must be positive and finite; the error names the field.
+    TensorFile file = TensorFile::Parse(tempered.Serialize(), "g.tpg");
+    nlohmann::json meta = nlohmann::json::parse(file.meta_json());
+    meta["weight_temperature"] = -0.5;
+    file.set_meta_json(meta.dump());
+    try {
+      PoseGenerator::Parse(file.Serialize(), "cold.tpg");
+      FAIL() << "expected TensorFileError";
+    } catch (const TensorFileError& e) {
+      EXPECT_THAT(e.what(), ::testing::HasSubstr("cold.tpg"));
+      EXPECT_THAT(e.what(), ::testing::HasSubstr("weight_temperature"));
+    }
+  }
 
   const std::string path =
       (std::filesystem::path(testing::TempDir()) / "pose_generator_test.tpg").string();
