@@ -271,6 +271,9 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
     std::cout << "train-generator: mode weight temperature " << tau << " (from " << t_count
               << " test-split frames, " << informative << " with two or more modes, " << wrong
               << " of them with the truth outside the heaviest)\n";
+  } else {
+    std::cout << "train-generator: mode weight temperature not calibrated (no sigma inflation: "
+                 "no usable test-split frame); the posterior uses 1\n";
   }
   nlohmann::json info = {{"model", flags.model},
                          {"model_checksum", model.checksum()},

@@ -22,6 +22,7 @@
 #include "estimation/functaset/functaset.h"
 #include "estimation/evaluation/reconstruction.h"
 #include "models/trunk/functa_model.h"
+#include "models/pose/pose_generator.h"
 #include "models/pose/pose_mlp.h"
 #include "models/core/tensor_file.h"
 #include "models/simulator/tool.h"
@@ -257,6 +258,28 @@ nlohmann::json DescribePoseModel(const std::string& bytes, const std::string& pa
           {"calibration_residuals", pose.calibration_residuals().rows()}};
 }
 
+// A pose generator: its shape and the posterior's calibration (docs/POSES.md, "The
+// generator path").
+nlohmann::json DescribePoseGenerator(const std::string& bytes, const std::string& path) {
+  const PoseGenerator g = PoseGenerator::Parse(bytes, path);
+  std::string hidden;
+  for (int h : g.options().hidden_sizes) hidden += (hidden.empty() ? "" : " x ") + std::to_string(h);
+  std::cout << "  pose generator: " << g.options().tools.size() << " tools, latent "
+            << g.options().latent_dim << ", tanh " << hidden << ", " << g.options().yaw_harmonics
+            << " yaw harmonics; sigma inflation "
+            << (g.sigma_inflation() > 0 ? FormatFixed(g.sigma_inflation(), 3) : "none")
+            << ", mode weight temperature "
+            << (g.weight_temperature() > 0 ? FormatFixed(g.weight_temperature(), 3)
+                                           : "none (1)")
+            << "\n";
+  return {{"tools", g.options().tools},
+          {"latent_dim", g.options().latent_dim},
+          {"hidden_sizes", g.options().hidden_sizes},
+          {"yaw_harmonics", g.options().yaw_harmonics},
+          {"sigma_inflation", g.sigma_inflation()},
+          {"weight_temperature", g.weight_temperature()}};
+}
+
 // Any tactfunc file: the container's facts, then those of its kind (parsed from the same
 // bytes, read once). The checksum is checked first, so a damaged file fails here with
 // the reason.
@@ -287,6 +310,8 @@ void DescribeFile(const std::string& path, bool json) {
     out["functaset"] = DescribeFunctaset(content, path);
   } else if (file.kind() == "pose_model") {
     out["pose_model"] = DescribePoseModel(content, path);
+  } else if (file.kind() == "pose_generator") {
+    out["pose_generator"] = DescribePoseGenerator(content, path);
   } else if (file.kind() == "checkpoint") {
     // A checkpoint of estimation/training/internal/checkpoint.h: the trainers' (trunk,
     // photometric, pose generator) or a latent refit's, told apart by its format.

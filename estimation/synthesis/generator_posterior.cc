@@ -77,15 +77,18 @@ double SquaredMahalanobis(const LaplaceComponent& c, const SE2d& t) {
   return r.dot(c.covariance.topLeftCorner<3, 3>().ldlt().solve(r));
 }
 
+// log of c's Gaussian density at t (folded) over (x, y, yaw), or over (x, y) for n = 0;
+// -infinity for a singular covariance.
+double ComponentLogDensity(const LaplaceComponent& c, const SE2d& t) {
+  const int k = c.symmetry_order == 0 ? 2 : 3;
+  const double det = k == 2 ? c.covariance.topLeftCorner<2, 2>().determinant()
+                            : c.covariance.topLeftCorner<3, 3>().determinant();
+  if (!(det > 0)) return -std::numeric_limits<double>::infinity();
+  return -0.5 * SquaredMahalanobis(c, t) - 0.5 * k * std::log(2 * M_PI) - 0.5 * std::log(det);
+}
+
 double ComponentDensity(const LaplaceComponent& c, const SE2d& t) {
-  if (c.symmetry_order == 0) {
-    const double det = c.covariance.topLeftCorner<2, 2>().determinant();
-    if (!(det > 0)) return 0;
-    return std::exp(-0.5 * SquaredMahalanobis(c, t)) / (2 * M_PI * std::sqrt(det));
-  }
-  const double det = c.covariance.topLeftCorner<3, 3>().determinant();
-  if (!(det > 0)) return 0;
-  return std::exp(-0.5 * SquaredMahalanobis(c, t)) / (std::pow(2 * M_PI, 1.5) * std::sqrt(det));
+  return std::exp(ComponentLogDensity(c, t));
 }
 
 // Appends every start of *starts turned by each of `offsets` (radians, in that order for
@@ -561,18 +564,20 @@ double CalibrateWeightTemperature(const GeneratorPosterior& posterior,
     PoseMixture mixture;
     const GeneratorPosterior::Summary s = posterior.Estimate(frames[i], labels[i].tool, &mixture);
     if (!s.usable || mixture.components().size() < 2) continue;
-    std::vector<double> log_z;
-    std::size_t truth = 0;
+    WeightTemperatureCase wc;
+    std::size_t nearest = 0;
     double best_d2 = std::numeric_limits<double>::infinity();
     for (std::size_t m = 0; m < mixture.components().size(); ++m) {
       const LaplaceComponent& c = mixture.components()[m];
-      log_z.push_back(c.log_evidence);
+      wc.log_evidence.push_back(c.log_evidence);
+      wc.log_density.push_back(ComponentLogDensity(c, labels[i].sensor_T_object));
       const double d2 = SquaredMahalanobis(c, labels[i].sensor_T_object);
-      if (d2 < best_d2) best_d2 = d2, truth = m;
+      if (d2 < best_d2) best_d2 = d2, nearest = m;
     }
+    if (!std::isfinite(*std::max_element(wc.log_density.begin(), wc.log_density.end()))) continue;
     // The components come heaviest first.
-    if (truth != 0) ++wrong;
-    cases.emplace_back(std::move(log_z), truth);
+    if (nearest != 0) ++wrong;
+    cases.push_back(std::move(wc));
   }
   if (informative != nullptr) *informative = static_cast<int>(cases.size());
   if (heaviest_wrong != nullptr) *heaviest_wrong = wrong;
@@ -585,11 +590,11 @@ double FitWeightTemperature(const std::vector<WeightTemperatureCase>& cases,
     throw std::invalid_argument("FitWeightTemperature: min_temperature must lie in (0, 1], got " +
                                 std::to_string(min_temperature));
   }
-  for (const auto& [log_z, truth] : cases) {
-    if (truth >= log_z.size()) {
-      throw std::invalid_argument("FitWeightTemperature: a case's truth index " +
-                                  std::to_string(truth) + " is not below its " +
-                                  std::to_string(log_z.size()) + " components");
+  for (const WeightTemperatureCase& c : cases) {
+    if (c.log_evidence.empty() || c.log_density.size() != c.log_evidence.size()) {
+      throw std::invalid_argument(
+          "FitWeightTemperature: a case needs one log density per log evidence, got " +
+          std::to_string(c.log_density.size()) + " and " + std::to_string(c.log_evidence.size()));
     }
   }
   if (cases.empty()) return 1;
@@ -598,13 +603,22 @@ double FitWeightTemperature(const std::vector<WeightTemperatureCase>& cases,
   for (int g = 0; g < kGrid; ++g) {
     const double tau = std::exp(std::log(min_temperature) * g / (kGrid - 1.0));  // 1 first
     double score = 0;
-    for (const auto& [log_z, truth] : cases) {
-      const double top = *std::max_element(log_z.begin(), log_z.end());
+    for (const WeightTemperatureCase& c : cases) {
+      // log sum_m w_m p_m with w = softmax(log Z / tau), both sums by log-sum-exp.
+      const double top = *std::max_element(c.log_evidence.begin(), c.log_evidence.end());
+      double norm = 0, top_joint = -std::numeric_limits<double>::infinity();
+      std::vector<double> joint(c.log_evidence.size());
+      for (std::size_t m = 0; m < joint.size(); ++m) {
+        const double lw = (c.log_evidence[m] - top) / tau;
+        norm += std::exp(lw);
+        joint[m] = lw + c.log_density[m];
+        top_joint = std::max(top_joint, joint[m]);
+      }
       double sum = 0;
-      for (double l : log_z) sum += std::exp((l - top) / tau);
-      score += (log_z[truth] - top) / tau - std::log(sum);
+      for (double j : joint) sum += std::exp(j - top_joint);
+      score += top_joint + std::log(sum) - std::log(norm);
     }
-    // Ties (every truth in the heaviest mode, weights saturated) keep the larger tau.
+    // Ties (the weights saturated) keep the larger tau.
     if (score > best_score + 1e-12) best_score = score, best_tau = tau;
   }
   return best_tau;

@@ -240,20 +240,23 @@ double CalibrateSigmaInflation(const GeneratorPosterior& posterior,
                                const std::vector<TrunkTargets>& frames,
                                const std::vector<PoseLabel>& labels);
 
-// tau of the header comment by temperature scaling: the value on a log grid of 61 points
-// over [min_temperature, 1] that maximises the summed log weight of the mode holding the
-// truth, sum_i log w_true(i)(tau), over the given labelled frames (each fitted with its
-// tool known, with `posterior`'s kappa). The mode holding the truth is the component whose
-// (x, y, yaw) Mahalanobis distance to the truth (folded by the tool's symmetry) is the
-// smallest; frames with one component do not depend on tau and are left out. When the
-// truth always lies in the heaviest mode the sum grows as tau falls and the grid's floor
-// is returned. `informative` (if given) receives the number of frames with two or more
-// components and `heaviest_wrong` the number of those whose truth was not in the heaviest.
-// Returns 1 if no frame had two components. Throws std::invalid_argument unless
+// tau of the header comment by temperature scaling on a proper score: the value on a log
+// grid of 61 points over [min_temperature, 1] that maximises the summed log density of the
+// truth under the mixture, sum_i log sum_m w_m(tau) N_m(truth_i), over the given labelled
+// frames (each fitted with its tool known, with `posterior`'s kappa; N_m the component's
+// (x, y, yaw) Gaussian, the truth folded by the tool's symmetry; (x, y) for n = 0). Frames
+// with one component do not depend on tau and are left out. Modes near each other share
+// the truth's density, so splitting one basin into two close modes does not pull tau up;
+// a truth in a distant, lighter mode does. When the truth always lies in the heaviest
+// mode the score grows as tau falls and the grid's floor is returned. `informative` (if
+// given) receives the number of frames with two or more components, `heaviest_wrong` the
+// number of those whose truth is nearest (Mahalanobis) to a component other than the
+// heaviest. Returns 1 if no frame had two components. Throws std::invalid_argument unless
 // 0 < min_temperature <= 1 and frames and labels have the same length.
-// One frame for the temperature: its components' log evidences (log Z_m) and the index of
-// the component holding the truth.
-using WeightTemperatureCase = std::pair<std::vector<double>, std::size_t>;
+struct WeightTemperatureCase {
+  std::vector<double> log_evidence;  // log Z_m of each component
+  std::vector<double> log_density;   // log N_m(truth) of each component
+};
 
 double CalibrateWeightTemperature(const GeneratorPosterior& posterior,
                                   const std::vector<TrunkTargets>& frames,
@@ -263,7 +266,7 @@ double CalibrateWeightTemperature(const GeneratorPosterior& posterior,
 
 // CalibrateWeightTemperature's search on given cases (the grid and the rule for ties
 // above). Returns 1 for no cases. Throws std::invalid_argument unless 0 < min_temperature
-// <= 1 and every case's truth index is below its number of components.
+// <= 1 and every case has one log density per log evidence (at least one).
 double FitWeightTemperature(const std::vector<WeightTemperatureCase>& cases,
                             double min_temperature = 0.05);
 

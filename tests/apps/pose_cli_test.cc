@@ -291,6 +291,12 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
                            " --mode latents --epochs 5 --hidden 16 --calibration-frames 4 --resume");
   ASSERT_EQ(again.exit_code, 0) << again.err;
   EXPECT_EQ(Slurp(Root("g2.tpg")), Slurp(Root("g.tpg")));
+  // The posterior's calibration is said, and stored: info reads it back.
+  EXPECT_THAT(train.out, HasSubstr("train-generator: mode weight temperature"));
+  const Result info = Run("info " + Root("g.tpg"));
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  EXPECT_THAT(info.out, HasSubstr("pose generator: 12 tools, latent"));
+  EXPECT_THAT(info.out, HasSubstr("mode weight temperature"));
   const std::string out = Root("pose_generator");
   const std::string args = "pose --method generator --model " + Root("m.tfm") + " --pose-model " +
                            Root("p.tpm") + " --functaset " + Root("gf.tfs") + " --data " +

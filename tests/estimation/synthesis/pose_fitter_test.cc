@@ -287,24 +287,36 @@ TEST(GeneratorPosterior, TheWeightTemperatureSharpensTheModeWeightsOnly) {
   EXPECT_THAT(error, ::testing::HasSubstr("weight_temperature"));
 }
 
-// Temperature scaling on hand-made cases: two modes whose log evidences differ by D, the
-// truth in the heavier one in 9 cases of 10, is fitted best by tau = D / logit(0.9).
-TEST(FitWeightTemperature, FindsTheTemperatureThatMatchesHowOftenTheHeaviestModeIsRight) {
+// Temperature scaling on hand-made cases: two distant modes whose log evidences differ
+// by D, the truth in the heavier one in 9 cases of 10, is fitted best by tau = D /
+// logit(0.9); two close modes that share the truth's density do not pull tau up.
+TEST(FitWeightTemperature, MatchesHowOftenTheHeaviestModeHoldsTheTruth) {
   const double logit = std::log(0.9 / 0.1);
-  std::vector<WeightTemperatureCase> cases(9, {{0.25 * logit, 0.0}, 0});
-  cases.push_back({{0.25 * logit, 0.0}, 1});
+  const double d = 0.25 * logit;
+  const WeightTemperatureCase in_heavier{{d, 0.0}, {0.0, -1e3}};
+  const WeightTemperatureCase in_lighter{{d, 0.0}, {-1e3, 0.0}};
+  std::vector<WeightTemperatureCase> cases(9, in_heavier);
+  cases.push_back(in_lighter);
   const double tau = FitWeightTemperature(cases, 0.05);
   EXPECT_NEAR(std::log(tau), std::log(0.25), std::log(20.0) / 60) << tau;  // one grid step
-  // The order of the components does not matter, only which one holds the truth.
+  // The order of the components does not matter.
   std::vector<WeightTemperatureCase> swapped;
-  for (const auto& [z, t] : cases) swapped.push_back({{z[1], z[0]}, 1 - t});
+  for (const WeightTemperatureCase& c : cases) {
+    swapped.push_back({{c.log_evidence[1], c.log_evidence[0]},
+                       {c.log_density[1], c.log_density[0]}});
+  }
   EXPECT_EQ(FitWeightTemperature(swapped, 0.05), tau);
+  // A truth between two close modes (equal density under both) leaves tau at the floor
+  // the separated cases give alone.
+  std::vector<WeightTemperatureCase> close(9, in_heavier);
+  close.push_back({{d, 0.0}, {-1.0, -1.0}});
+  EXPECT_NEAR(FitWeightTemperature(close, 0.1), 0.1, 1e-12);
   // The truth always in the heaviest mode: the grid's floor. No cases: 1.
-  EXPECT_NEAR(FitWeightTemperature({{{1.0, 0.0, -2.0}, 0}}, 0.1), 0.1, 1e-12);
+  EXPECT_NEAR(FitWeightTemperature({{{1.0, 0.0, -2.0}, {0.0, -1e3, -1e3}}}, 0.1), 0.1, 1e-12);
   EXPECT_EQ(FitWeightTemperature({}, 0.05), 1);
   // The truth in the lighter mode of every case: as flat as the grid allows.
-  EXPECT_EQ(FitWeightTemperature({{{1.0, 0.0}, 1}}, 0.05), 1);
-  EXPECT_THROW(FitWeightTemperature({{{1.0, 0.0}, 2}}, 0.05), std::invalid_argument);
+  EXPECT_EQ(FitWeightTemperature({in_lighter}, 0.05), 1);
+  EXPECT_THROW(FitWeightTemperature({{{1.0, 0.0}, {0.0}}}, 0.05), std::invalid_argument);
   EXPECT_THROW(FitWeightTemperature(cases, 0), std::invalid_argument);
   EXPECT_THROW(FitWeightTemperature(cases, 1.5), std::invalid_argument);
 }
