@@ -263,14 +263,14 @@ nlohmann::json DescribePoseModel(const std::string& bytes, const std::string& pa
 nlohmann::json DescribePoseGenerator(const std::string& bytes, const std::string& path) {
   const PoseGenerator g = PoseGenerator::Parse(bytes, path);
   std::string hidden;
-  for (int h : g.options().hidden_sizes) hidden += (hidden.empty() ? "" : " x ") + std::to_string(h);
+  for (int h : g.options().hidden_sizes)
+    hidden += (hidden.empty() ? "" : " x ") + std::to_string(h);
   std::cout << "  pose generator: " << g.options().tools.size() << " tools, latent "
             << g.options().latent_dim << ", tanh " << hidden << ", " << g.options().yaw_harmonics
             << " yaw harmonics; sigma inflation "
             << (g.sigma_inflation() > 0 ? FormatFixed(g.sigma_inflation(), 3) : "none")
             << ", mode weight temperature "
-            << (g.weight_temperature() > 0 ? FormatFixed(g.weight_temperature(), 3)
-                                           : "none (1)")
+            << (g.weight_temperature() > 0 ? FormatFixed(g.weight_temperature(), 3) : "none (1)")
             << "\n";
   return {{"tools", g.options().tools},
           {"latent_dim", g.options().latent_dim},

@@ -485,7 +485,7 @@ GeneratorPosterior::Summary GeneratorPosterior::Estimate(const TrunkTargets& tar
   for (const LaplaceComponent& c : components) max_log = std::max(max_log, c.log_evidence);
   double total = 0;
   double tau = options_.weight_temperature > 0 ? options_.weight_temperature
-                                              : generator_->weight_temperature();
+                                               : generator_->weight_temperature();
   if (!(tau > 0)) tau = 1;
   for (LaplaceComponent& c : components) {
     total += c.weight = std::exp((c.log_evidence - max_log) / tau);

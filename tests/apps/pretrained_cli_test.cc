@@ -27,16 +27,24 @@ using testing_util::RunTactfunc;
 
 const std::string kPretrained = std::string(TACTFUNC_SOURCE_DIR) + "/models/pretrained/";
 
-TEST(PretrainedCliTest, TheCommittedGelSlimTrunkDrawsWhatTheDirectTrunkBlurs) {
-  const fs::path root =
-      fs::path(::testing::TempDir()) / ("tactfunc_pretrained_" + std::to_string(::getpid()));
+// A fresh folder for one test, holding in d/ two fresh contacts per tool of `sensor` (a
+// synth seed no training run used).
+fs::path FreshContacts(const std::string& sensor) {
+  const fs::path root = fs::path(::testing::TempDir()) /
+                        ("tactfunc_pretrained_" + sensor + "_" + std::to_string(::getpid()));
   fs::remove_all(root);
   fs::create_directories(root);
+  const CliResult synth =
+      RunTactfunc(root, "synth --out " + (root / "d").string() + " --frames-per-tool 2 --sensors " +
+                            sensor + " --seed 20261128 --threads 1");
+  EXPECT_EQ(synth.exit_code, 0) << synth.err;
+  return root;
+}
+
+TEST(PretrainedCliTest, TheCommittedGelSlimTrunkDrawsWhatTheDirectTrunkBlurs) {
+  const fs::path root = FreshContacts("gelslim");
   const std::string data = (root / "d").string();
-  const CliResult synth = RunTactfunc(root, "synth --out " + data +
-                                                " --frames-per-tool 2 --sensors gelslim "
-                                                "--seed 20261128 --threads 1");
-  ASSERT_EQ(synth.exit_code, 0) << synth.err;
+  ASSERT_TRUE(fs::exists(root / "d" / "dataset.json"));
 
   const CliResult info = RunTactfunc(root, "info " + kPretrained + "gelslim.tfm");
   ASSERT_EQ(info.exit_code, 0) << info.err;
@@ -78,22 +86,16 @@ TEST(PretrainedCliTest, TheCommittedGelSlimTrunkDrawsWhatTheDirectTrunkBlurs) {
 // mean PSNR is the fit's, before the 8-bit rounding, which costs about 0.003 dB:
 // docs/RESULTS_RECONSTRUCTION.md, "The Soft Bubble's committed trunk").
 TEST(PretrainedCliTest, TheCommittedSoftBubbleTrunkBeatsTheSmallOneAtTheSameBytes) {
-  const fs::path root = fs::path(::testing::TempDir()) /
-                        ("tactfunc_pretrained_bubble_" + std::to_string(::getpid()));
-  fs::remove_all(root);
-  fs::create_directories(root);
+  const fs::path root = FreshContacts("bubble");
   const std::string data = (root / "d").string();
-  const CliResult synth = RunTactfunc(root, "synth --out " + data +
-                                                " --frames-per-tool 2 --sensors bubble "
-                                                "--seed 20261128 --threads 1");
-  ASSERT_EQ(synth.exit_code, 0) << synth.err;
+  ASSERT_TRUE(fs::exists(root / "d" / "dataset.json"));
 
   auto encode = [&](const std::string& model, const std::string& out,
                     const std::string& precision) {
-    const CliResult r = RunTactfunc(
-        root, "encode --model " + kPretrained + model + " --data " + data +
-                  " --sensors bubble --latent-precision " + precision + " --out " +
-                  (root / out).string() + " --threads 1 --json");
+    const CliResult r =
+        RunTactfunc(root, "encode --model " + kPretrained + model + " --data " + data +
+                              " --sensors bubble --latent-precision " + precision + " --out " +
+                              (root / out).string() + " --threads 1 --json");
     EXPECT_EQ(r.exit_code, 0) << r.err;
     return r.exit_code == 0 ? r.LastJson() : nlohmann::json();
   };

@@ -302,8 +302,8 @@ TEST(FitWeightTemperature, MatchesHowOftenTheHeaviestModeHoldsTheTruth) {
   // The order of the components does not matter.
   std::vector<WeightTemperatureCase> swapped;
   for (const WeightTemperatureCase& c : cases) {
-    swapped.push_back({{c.log_evidence[1], c.log_evidence[0]},
-                       {c.log_density[1], c.log_density[0]}});
+    swapped.push_back(
+        {{c.log_evidence[1], c.log_evidence[0]}, {c.log_density[1], c.log_density[0]}});
   }
   EXPECT_EQ(FitWeightTemperature(swapped, 0.05), tau);
   // A truth between two close modes (equal density under both) leaves tau at the floor
