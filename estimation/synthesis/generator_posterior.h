@@ -59,7 +59,6 @@
 #include <memory>
 #include <optional>
 #include <string>
-#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -240,6 +239,12 @@ double CalibrateSigmaInflation(const GeneratorPosterior& posterior,
                                const std::vector<TrunkTargets>& frames,
                                const std::vector<PoseLabel>& labels);
 
+// One labelled frame for the weights' temperature: its mixture's components.
+struct WeightTemperatureCase {
+  std::vector<double> log_evidence;  // log Z_m of each component
+  std::vector<double> log_density;   // log N_m(truth) of each component
+};
+
 // tau of the header comment by temperature scaling on a proper score: the value on a log
 // grid of 61 points over [min_temperature, 1] that maximises the summed log density of the
 // truth under the mixture, sum_i log sum_m w_m(tau) N_m(truth_i), over the given labelled
@@ -253,11 +258,6 @@ double CalibrateSigmaInflation(const GeneratorPosterior& posterior,
 // number of those whose truth is nearest (Mahalanobis) to a component other than the
 // heaviest. Returns 1 if no frame had two components. Throws std::invalid_argument unless
 // 0 < min_temperature <= 1 and frames and labels have the same length.
-struct WeightTemperatureCase {
-  std::vector<double> log_evidence;  // log Z_m of each component
-  std::vector<double> log_density;   // log N_m(truth) of each component
-};
-
 double CalibrateWeightTemperature(const GeneratorPosterior& posterior,
                                   const std::vector<TrunkTargets>& frames,
                                   const std::vector<PoseLabel>& labels,
