@@ -41,6 +41,19 @@ fs::path FreshContacts(const std::string& sensor) {
   return root;
 }
 
+// `encode --json` of the fresh contacts in root/d of one sensor with a committed model
+// (and `flags`), into root/out; null, and a failure, if it did not run.
+nlohmann::json EncodeFresh(const fs::path& root, const std::string& model,
+                           const std::string& sensor, const std::string& out,
+                           const std::string& flags = "") {
+  const CliResult r =
+      RunTactfunc(root, "encode --model " + kPretrained + model + " --data " +
+                            (root / "d").string() + " --sensors " + sensor + " " + flags +
+                            " --out " + (root / out).string() + " --threads 1 --json");
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  return r.exit_code == 0 ? r.LastJson() : nlohmann::json();
+}
+
 TEST(PretrainedCliTest, TheCommittedGelSlimTrunkDrawsWhatTheDirectTrunkBlurs) {
   const fs::path root = FreshContacts("gelslim");
   const std::string data = (root / "d").string();
@@ -51,15 +64,8 @@ TEST(PretrainedCliTest, TheCommittedGelSlimTrunkDrawsWhatTheDirectTrunkBlurs) {
   EXPECT_THAT(info.out, HasSubstr("photometric head: latent 64"));
   EXPECT_THAT(info.out, HasSubstr("warm-start table"));
 
-  auto encode = [&](const std::string& model, const std::string& out) {
-    const CliResult r = RunTactfunc(root, "encode --model " + kPretrained + model + " --data " +
-                                              data + " --sensors gelslim --out " +
-                                              (root / out).string() + " --threads 1 --json");
-    EXPECT_EQ(r.exit_code, 0) << r.err;
-    return r.exit_code == 0 ? r.LastJson() : nlohmann::json();
-  };
-  const nlohmann::json photometric = encode("gelslim.tfm", "p.tfs");
-  const nlohmann::json direct = encode("default.tfm", "d.tfs");
+  const nlohmann::json photometric = EncodeFresh(root, "gelslim.tfm", "gelslim", "p.tfs");
+  const nlohmann::json direct = EncodeFresh(root, "default.tfm", "gelslim", "d.tfs");
   ASSERT_FALSE(photometric.is_null());
   ASSERT_FALSE(direct.is_null());
   EXPECT_EQ(photometric["frames_encoded"], 24);
@@ -87,20 +93,12 @@ TEST(PretrainedCliTest, TheCommittedGelSlimTrunkDrawsWhatTheDirectTrunkBlurs) {
 // docs/RESULTS_RECONSTRUCTION.md, "The Soft Bubble's committed trunk").
 TEST(PretrainedCliTest, TheCommittedSoftBubbleTrunkBeatsTheSmallOneAtTheSameBytes) {
   const fs::path root = FreshContacts("bubble");
-  const std::string data = (root / "d").string();
   ASSERT_TRUE(fs::exists(root / "d" / "dataset.json"));
 
-  auto encode = [&](const std::string& model, const std::string& out,
-                    const std::string& precision) {
-    const CliResult r =
-        RunTactfunc(root, "encode --model " + kPretrained + model + " --data " + data +
-                              " --sensors bubble --latent-precision " + precision + " --out " +
-                              (root / out).string() + " --threads 1 --json");
-    EXPECT_EQ(r.exit_code, 0) << r.err;
-    return r.exit_code == 0 ? r.LastJson() : nlohmann::json();
-  };
-  const nlohmann::json large = encode("bubble.tfm", "b.tfs", "uint8");
-  const nlohmann::json small = encode("default.tfm", "s.tfs", "float16");
+  const nlohmann::json large =
+      EncodeFresh(root, "bubble.tfm", "bubble", "b.tfs", "--latent-precision uint8");
+  const nlohmann::json small =
+      EncodeFresh(root, "default.tfm", "bubble", "s.tfs", "--latent-precision float16");
   ASSERT_FALSE(large.is_null());
   ASSERT_FALSE(small.is_null());
   EXPECT_EQ(large["frames_encoded"], 24);

@@ -165,6 +165,18 @@ TEST(PoseGenerator, BackwardMatchesCentralDifferencesOfTheParameters) {
   EXPECT_NEAR(dfeat(1, 4), d, 1e-6);
 }
 
+// Parsing `file` as `source` throws a TensorFileError naming the source and `field`.
+void ExpectParseErrorNaming(const TensorFile& file, const std::string& source,
+                            const std::string& field) {
+  try {
+    PoseGenerator::Parse(file.Serialize(), source);
+    ADD_FAILURE() << "expected TensorFileError naming " << field;
+  } catch (const TensorFileError& e) {
+    EXPECT_THAT(e.what(), ::testing::HasSubstr(source));
+    EXPECT_THAT(e.what(), ::testing::HasSubstr(field));
+  }
+}
+
 TEST(PoseGenerator, FileRoundTripIsExactAndCorruptFieldsAreNamed) {
   PoseGenerator g = Trained();
   g.set_sigma_inflation(4.5);
@@ -189,13 +201,7 @@ TEST(PoseGenerator, FileRoundTripIsExactAndCorruptFieldsAreNamed) {
     nlohmann::json meta = nlohmann::json::parse(file.meta_json());
     meta["weight_temperature"] = -0.5;
     file.set_meta_json(meta.dump());
-    try {
-      PoseGenerator::Parse(file.Serialize(), "cold.tpg");
-      FAIL() << "expected TensorFileError";
-    } catch (const TensorFileError& e) {
-      EXPECT_THAT(e.what(), ::testing::HasSubstr("cold.tpg"));
-      EXPECT_THAT(e.what(), ::testing::HasSubstr("weight_temperature"));
-    }
+    ExpectParseErrorNaming(file, "cold.tpg", "weight_temperature");
   }
 
   const std::string path =
@@ -207,13 +213,7 @@ TEST(PoseGenerator, FileRoundTripIsExactAndCorruptFieldsAreNamed) {
   // A file with a missing field, and one of another kind.
   TensorFile file = TensorFile::Parse(bytes, "g.tpg");
   file.set_meta_json(R"({"format": "tactfunc-pose-generator", "version": 1, "tools": ["rod"]})");
-  try {
-    PoseGenerator::Parse(file.Serialize(), "broken.tpg");
-    FAIL() << "expected TensorFileError";
-  } catch (const TensorFileError& e) {
-    EXPECT_THAT(e.what(), ::testing::HasSubstr("broken.tpg"));
-    EXPECT_THAT(e.what(), ::testing::HasSubstr("symmetry_orders"));
-  }
+  ExpectParseErrorNaming(file, "broken.tpg", "symmetry_orders");
   TensorFile other("pose_model");
   EXPECT_THROW(PoseGenerator::Parse(other.Serialize(), "other.tpm"), TensorFileError);
 }
