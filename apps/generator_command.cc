@@ -16,7 +16,8 @@
 //
 //   tactfunc eval-generator --model M.tfm --generator G.tpg [--functaset F.tfs]
 //       [--pose-model P.tpm] [--contacts-per-tool 20] [--seed 1592590336] [--unknown-tool]
-//       [--diagnose] [search knobs: --max-pixels, --contact-share, --refined-starts,
+//       [--diagnose] [--information] [search knobs: --max-pixels, --contact-share,
+//       --refined-starts,
 //       --iterations, --knn-k,
 //       --yaw-grid, --position-grid, --position-rings, --coarse-pixels, --coarse-starts,
 //       --coarse-iterations] [--contacts-csv FILE] [--json]
@@ -27,9 +28,15 @@
 //     frame (fit + Laplace; wall clock and the thread's CPU time), and with --unknown-tool
 //     the tool identification rate. --diagnose: for every contact whose mode is > 5 deg or
 //     > 1 mm off, the objective at the mode, the truth and the truth refined (a lower
-//     refined truth = a search failure, else a model failure). --contacts-csv: one row per
-//     usable contact (truth, mode, posterior mean, errors, the mode's Laplace standard
-//     deviations), written atomically.
+//     refined truth = a search failure, else a model failure). --information: every
+//     contact's Cramer-Rao bound from the simulator's own frames and noise
+//     (SoftBubblePoseInformation) on the trunk's working frames and on the sensor's own,
+//     printed beside the mode's errors by contact depth: what
+//     any unbiased estimator misses on those frames; and for every wrong mode (as
+//     --diagnose) whether the frame itself prefers the truth's basin (the simulator's own
+//     fit from the truth and from the mode, FitSoftBubbleContact). --contacts-csv: one row per
+//     usable contact (truth, mode, posterior mean, errors, the mode's Laplace standard deviations,
+//     with --information the bound's), written atomically.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -61,6 +68,7 @@
 #include "models/pose/pose_generator.h"
 #include "models/pose/pose_mlp.h"
 #include "models/simulator/contact_simulator.h"
+#include "models/simulator/pose_information.h"
 #include "models/simulator/tool.h"
 #include "models/trunk/functa_model.h"
 
@@ -320,6 +328,7 @@ struct EvalGeneratorFlags {
   int coarse_starts = PoseFitOptions().coarse_refined_starts;
   int coarse_iterations = PoseFitOptions().coarse_iterations;
   bool diagnose = false;
+  bool information = false;
   bool json = false;
   std::string contacts_csv;  // one row per contact, written atomically at the end
 };
@@ -369,9 +378,28 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
   csv << "contact,tool,symmetry_order,truth_x_mm,truth_y_mm,truth_yaw_deg,truth_depth_mm,"
          "mode_x_mm,mode_y_mm,mode_yaw_deg,mode_depth_mm,mean_x_mm,mean_y_mm,mean_yaw_deg,"
          "position_error_mm,yaw_error_deg,modes,tool_probability,mode_sd_x_mm,mode_sd_y_mm,"
-         "mode_sd_yaw_deg\n";
+         "mode_sd_yaw_deg,bound_sd_along_mm,bound_sd_across_mm,bound_sd_yaw_deg,"
+         "bound_sd_depth_mm,frame_llr_truth_over_mode\n";
   std::vector<double> times, cpu_times;
   std::map<std::string, std::pair<double, int>> per_tool_pos;
+  // --information, by true depth (below 6 mm, 6-10 mm, from 10 mm): the mode's summed
+  // squared position error, the bound's summed trace (m^2) and the count; and the yaw's
+  // summed squared error and bound (rad^2) over tools with an observable yaw.
+  const double kDepthEdges[2] = {6e-3, 10e-3};
+  // The bound on the trunk's working frames and, beside it, on the sensor's own.
+  double band_error[3] = {0, 0, 0}, band_bound[3] = {0, 0, 0};
+  int band_count[3] = {0, 0, 0};
+  double bound_yaw_sq = 0, sensor_bound_sq = 0, sensor_bound_yaw_sq = 0;
+  // Wrong modes by what the frame says (FitSoftBubbleContact from the truth and from the
+  // mode): the fit from the mode came back to the truth's basin; it stayed elsewhere and
+  // the truth's basin explains the frame better by more than kClearNats, about as well,
+  // or worse by more than kClearNats.
+  constexpr double kClearNats = 3;
+  int frame_verdicts[4] = {0, 0, 0, 0};
+  std::vector<double> frame_llrs;
+  PoseInformationOptions working_size;
+  working_size.rows = trunk.format.rows;
+  working_size.cols = trunk.format.cols;
   const std::vector<std::string>& tools = generator.options().tools;
   ProgressBar bar("eval-generator",
                   static_cast<std::int64_t>(tools.size()) * flags.contacts_per_tool, "contacts",
@@ -422,6 +450,40 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
         mean_yaw_sq += e * e;
         mean_yaw_errors.push_back(e);
       }
+      PoseInformation information;
+      double frame_llr = std::nan("");
+      if (flags.information) {
+        information = SoftBubblePoseInformation(simulator, contact, working_size);
+        const PoseInformation sensor = SoftBubblePoseInformation(simulator, contact);
+        sensor_bound_sq += sensor.bound(0, 0) + sensor.bound(1, 1);
+        if (n != 0) sensor_bound_yaw_sq += sensor.bound(2, 2);
+        const int band = (contact.depth_m >= kDepthEdges[0]) + (contact.depth_m >= kDepthEdges[1]);
+        band_error[band] += dp;
+        band_bound[band] += information.bound(0, 0) + information.bound(1, 1);
+        ++band_count[band];
+        if (n != 0) bound_yaw_sq += information.bound(2, 2);
+        // A wrong mode (yaw > 5 deg or position > 1 mm off, as --diagnose): does the frame
+        // itself prefer the truth's basin? Fit the simulator's own models to the frame from
+        // the truth and from the mode, and compare their log-likelihoods.
+        if ((n != 0 && kDeg * mode_yaw_error > 5) || std::sqrt(dp) > 1e-3) {
+          Contact from_mode = contact;
+          from_mode.sensor_T_object = mode;
+          if (true_mode != nullptr) from_mode.depth_m = true_mode->depth_m;
+          const ContactFit at_truth = FitSoftBubbleContact(simulator, frame, contact);
+          const ContactFit at_mode = FitSoftBubbleContact(simulator, frame, from_mode);
+          frame_llr = at_truth.log_likelihood - at_mode.log_likelihood;
+          const SE2d& a = at_truth.contact.sensor_T_object;
+          const SE2d& b = at_mode.contact.sensor_T_object;
+          const bool same_basin =
+              std::hypot(a.x() - b.x(), a.y() - b.y()) < 0.3e-3 &&
+              (n == 0 || kDeg * YawErrorModuloSymmetry(a.yaw(), b.yaw(), n) < 2);
+          ++frame_verdicts[same_basin                ? 0
+                           : frame_llr > kClearNats  ? 1
+                           : frame_llr < -kClearNats ? 3
+                                                     : 2];
+          frame_llrs.push_back(frame_llr);
+        }
+      }
       if (!flags.contacts_csv.empty()) {
         const double mode_depth = true_mode != nullptr ? true_mode->depth_m : std::nan("");
         int modes = 0;
@@ -431,17 +493,27 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
         Eigen::Vector3d sd = Eigen::Vector3d::Constant(std::nan(""));
         if (true_mode != nullptr) sd = true_mode->covariance.diagonal().head<3>().cwiseSqrt();
         if (n == 0) sd[2] = std::nan("");  // the yaw of a C_inf tool is not estimated
-        char row[640];
-        std::snprintf(row, sizeof(row),
-                      "%d,%s,%d,%.4f,%.4f,%.3f,%.4f,%.4f,%.4f,%.3f,%.4f,%.4f,%.4f,%.3f,%.4f,%.3f,%d,"
-                      "%.4f,%.4f,%.4f,%.3f\n",
-                      k, tools[t].c_str(), n, 1e3 * truth.x(), 1e3 * truth.y(),
-                      kDeg * truth.yaw(), 1e3 * contact.depth_m, 1e3 * mode.x(), 1e3 * mode.y(),
-                      kDeg * mode.yaw(), 1e3 * mode_depth, 1e3 * mean.x(), 1e3 * mean.y(),
-                      kDeg * mean.yaw(), 1e3 * std::sqrt(dp), kDeg * mode_yaw_error, modes,
-                      s.tool_probabilities.count(tools[t]) ? s.tool_probabilities.at(tools[t])
-                                                           : 0.0,
-                      1e3 * sd[0], 1e3 * sd[1], kDeg * sd[2]);
+        // The bound's standard deviations along and across the true object's axes.
+        Eigen::Vector4d bound_sd = Eigen::Vector4d::Constant(std::nan(""));
+        if (flags.information) {
+          const Eigen::Matrix2d r = truth.Rotation();
+          const Eigen::Matrix2d object_block =
+              r.transpose() * information.bound.topLeftCorner<2, 2>() * r;
+          bound_sd << std::sqrt(object_block(0, 0)), std::sqrt(object_block(1, 1)),
+              std::sqrt(information.bound(2, 2)), std::sqrt(information.bound(3, 3));
+        }
+        char row[768];
+        std::snprintf(
+            row, sizeof(row),
+            "%d,%s,%d,%.4f,%.4f,%.3f,%.4f,%.4f,%.4f,%.3f,%.4f,%.4f,%.4f,%.3f,%.4f,%.3f,%d,"
+            "%.4f,%.4f,%.4f,%.3f,%.4f,%.4f,%.3f,%.4f,%.2f\n",
+            k, tools[t].c_str(), n, 1e3 * truth.x(), 1e3 * truth.y(), kDeg * truth.yaw(),
+            1e3 * contact.depth_m, 1e3 * mode.x(), 1e3 * mode.y(), kDeg * mode.yaw(),
+            1e3 * mode_depth, 1e3 * mean.x(), 1e3 * mean.y(), kDeg * mean.yaw(),
+            1e3 * std::sqrt(dp), kDeg * mode_yaw_error, modes,
+            s.tool_probabilities.count(tools[t]) ? s.tool_probabilities.at(tools[t]) : 0.0,
+            1e3 * sd[0], 1e3 * sd[1], kDeg * sd[2], 1e3 * bound_sd[0], 1e3 * bound_sd[1],
+            kDeg * bound_sd[2], 1e3 * bound_sd[3], frame_llr);
         csv << row;
       }
       per_tool_pos[tools[t]].first += dp;
@@ -531,6 +603,54 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
                 "(search failure): %d, higher (model failure): %d\n",
                 wrong, search_failures, model_failures);
   }
+  nlohmann::json information_json;
+  if (flags.information) {
+    // sqrt(mean bound) over a band: the floor on that band's RMSE for unbiased estimators.
+    const auto floor_mm = [](double sum, int count) {
+      return count > 0 ? 1e3 * std::sqrt(sum / count) : std::nan("");
+    };
+    const int all = band_count[0] + band_count[1] + band_count[2];
+    const double bound_mm = floor_mm(band_bound[0] + band_bound[1] + band_bound[2], all);
+    const double bound_deg = kDeg * std::sqrt(bound_yaw_sq / std::max(1, yaw_count));
+    const double sensor_mm = floor_mm(sensor_bound_sq, all);
+    const double sensor_deg = kDeg * std::sqrt(sensor_bound_yaw_sq / std::max(1, yaw_count));
+    std::printf(
+        "  Cramer-Rao bound (the simulator's frames and noise, any unbiased estimator) "
+        "on the trunk's %dx%d frames: position RMSE %.3f mm (mode %.3f), yaw RMSE %.2f "
+        "deg (mode %.2f); on the sensor's own: %.3f mm, %.2f deg\n",
+        trunk.format.rows, trunk.format.cols, bound_mm, rmse_mm, bound_deg, rmse_deg, sensor_mm,
+        sensor_deg);
+    const char* band_names[3] = {"below 6 mm deep", "6-10 mm deep", "from 10 mm deep"};
+    information_json = {{"bound_rmse_mm", NumberOrNull(bound_mm)},
+                        {"bound_rmse_deg", NumberOrNull(bound_deg)},
+                        {"sensor_bound_rmse_mm", NumberOrNull(sensor_mm)},
+                        {"sensor_bound_rmse_deg", NumberOrNull(sensor_deg)}};
+    for (int b = 0; b < 3; ++b) {
+      const double bound_b = floor_mm(band_bound[b], band_count[b]);
+      const double mode_b = floor_mm(band_error[b], band_count[b]);
+      std::printf("    %-15s %4d contacts: position RMSE bound %.3f mm, mode %.3f mm\n",
+                  band_names[b], band_count[b], bound_b, mode_b);
+      information_json["by_depth"].push_back({{"band", band_names[b]},
+                                              {"contacts", band_count[b]},
+                                              {"bound_rmse_mm", NumberOrNull(bound_b)},
+                                              {"mode_rmse_mm", NumberOrNull(mode_b)}});
+    }
+    std::sort(frame_llrs.begin(), frame_llrs.end());
+    const double llr_median = frame_llrs.empty() ? std::nan("") : frame_llrs[frame_llrs.size() / 2];
+    std::printf(
+        "  wrong modes (yaw > 5 deg or position > 1 mm): %zu; by the simulator's own fit "
+        "from the truth and from the mode, the frame puts the mode in the truth's basin: "
+        "%d; prefers the truth's basin by > %.0f nats: %d; about as likely (within %.0f): "
+        "%d; prefers the mode's basin: %d; log-likelihood ratio median %.1f nats\n",
+        frame_llrs.size(), frame_verdicts[0], kClearNats, frame_verdicts[1], kClearNats,
+        frame_verdicts[2], frame_verdicts[3], llr_median);
+    information_json["wrong_modes"] = {{"count", frame_llrs.size()},
+                                       {"mode_in_truth_basin", frame_verdicts[0]},
+                                       {"frame_prefers_truth", frame_verdicts[1]},
+                                       {"frame_ambiguous", frame_verdicts[2]},
+                                       {"frame_prefers_mode", frame_verdicts[3]},
+                                       {"log_likelihood_ratio_median", NumberOrNull(llr_median)}};
+  }
   if (flags.unknown_tool) {
     std::printf("  tool identified: %.3f\n", static_cast<double>(identified) / std::max(1, ok));
   }
@@ -554,9 +674,10 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
               {"median_ms", median},
               {"mean_ms", mean_ms},
               {"cpu_median_ms", cpu_median},
-              {"tool_identified", flags.unknown_tool ? NumberOrNull(static_cast<double>(identified) /
-                                                                     std::max(1, ok))
-                                                     : nlohmann::json()}});
+              {"information", information_json},
+              {"tool_identified",
+               flags.unknown_tool ? NumberOrNull(static_cast<double>(identified) / std::max(1, ok))
+                                  : nlohmann::json()}});
   }
 }
 
@@ -675,6 +796,10 @@ void RegisterEvalGenerator(CLI::App& app, CommandBody* selected) {
                       std::to_string(PoseFitOptions().coarse_iterations) + ")")
       ->check(CLI::Range(1, 1000));
   sub->add_flag("--unknown-tool", flags->unknown_tool, "Fit every tool and identify it");
+  sub->add_flag("--information", flags->information,
+                "Also each contact's Cramer-Rao bound on its pose and depth from the simulator's "
+                "frames and noise: what any unbiased estimator misses (8 more renders per "
+                "contact)");
   sub->add_flag("--diagnose", flags->diagnose,
                 "For every contact whose mode is > 5 deg or > 1 mm off: the objective at the "
                 "mode, at the truth and at the truth refined (search or model failure)");

@@ -7,7 +7,9 @@ vector (a systematic bias would show there), and per tool the position error alo
 across the object's own x axis (a rod's long axis), over all contacts and the shallow ones,
 beside the standard deviations the mode's Laplace component gives in those directions
 (when the CSV has them): an error the posterior predicts is the frame's ambiguity, not a
-miss. docs/POSES.md quotes its output.
+miss. With `eval-generator --information` it also prints the Cramer-Rao bound in the same
+splits (the floor any unbiased estimator has on those frames). docs/POSES.md quotes its
+output.
 
 Usage: python3 scripts/generator_errors.py CONTACTS.csv [--flip-deg 30]
        [--depth-edges-mm 6,10] [--radius-edges-mm 1.5,3]
@@ -80,6 +82,9 @@ def main():
                         else float("nan"),
                         "sdx": float(r.get("mode_sd_x_mm") or "nan"),
                         "sdy": float(r.get("mode_sd_y_mm") or "nan"),
+                        "bx": float(r.get("bound_sd_along_mm") or "nan"),
+                        "by": float(r.get("bound_sd_across_mm") or "nan"),
+                        "byaw": float(r.get("bound_sd_yaw_deg") or "nan"),
                     })
                 except ValueError as e:
                     sys.exit(f"generator_errors: {args.contacts}, line {line}: {e}")
@@ -88,11 +93,26 @@ def main():
     if not rows:
         sys.exit(f"generator_errors: {args.contacts} has no contacts")
 
+    with_bound = all(not math.isnan(r["bx"]) for r in rows)
+
+    def bound_pos(chosen):
+        # The floor on those contacts' position RMSE: sqrt of the mean bound trace.
+        return rms([math.hypot(r["bx"], r["by"]) for r in chosen])
+
+    def bound_text(chosen, yaws=None):
+        if not with_bound:
+            return ""
+        text = f"; bound {bound_pos(chosen):.3f} mm"
+        if yaws is not None:
+            text += f", {rms([r['byaw'] for r in yaws]):.2f} deg"
+        return text
+
     yawed = [r for r in rows if r["n"] != 0 and not math.isnan(r["yaw"])]
     flips = [r for r in yawed if r["yaw"] >= args.flip_deg]
     print(f"contacts: {len(rows)}; mode position RMSE {rms([r['pos'] for r in rows]):.3f} mm, "
           f"median {median([r['pos'] for r in rows]):.3f} mm; yaw RMSE "
-          f"{rms([r['yaw'] for r in yawed]):.2f} deg over {len(yawed)} contacts with a yaw")
+          f"{rms([r['yaw'] for r in yawed]):.2f} deg over {len(yawed)} contacts with a yaw"
+          + bound_text(rows, yawed))
     print(f"mean error vector (bias): x {sum(r['ex'] for r in rows) / len(rows):+.3f} mm, "
           f"y {sum(r['ey'] for r in rows) / len(rows):+.3f} mm")
     kept = [r for r in yawed if r["yaw"] < args.flip_deg]
@@ -108,7 +128,8 @@ def main():
         print(f"  {label:>8}: {len(chosen):5d} contacts, position RMSE "
               f"{rms([r['pos'] for r in chosen]):.3f} mm, median "
               f"{median([r['pos'] for r in chosen]):.3f} mm, yaw RMSE without flips "
-              f"{rms(yaws):.2f} deg")
+              f"{rms(yaws):.2f} deg"
+              + bound_text(chosen, [r for r in chosen if r["id"] in kept_ids]))
     print("by distance of the truth from the sensor's centre (mm):")
     for label, chosen in bins(rows, lambda r: math.hypot(r["tx"], r["ty"]), args.radius_edges_mm):
         print(f"  {label:>8}: {len(chosen):5d} contacts, position RMSE "
@@ -119,7 +140,8 @@ def main():
         yaws = [r["yaw"] for r in chosen if r["id"] in kept_ids]
         print(f"  {tool:>11}: {len(chosen):5d} contacts, position RMSE "
               f"{rms([r['pos'] for r in chosen]):.3f} mm, yaw RMSE without flips "
-              f"{rms(yaws):.2f} deg, flips {sum(1 for r in flips if r['tool'] == tool)}")
+              f"{rms(yaws):.2f} deg, flips {sum(1 for r in flips if r['tool'] == tool)}"
+              + bound_text(chosen, [r for r in chosen if r["id"] in kept_ids]))
 
     # The error in the truth's object frame: along its x axis and across it.
     def along(r):
@@ -132,11 +154,15 @@ def main():
     with_sd = all(not math.isnan(r["sdx"]) for r in rows)
 
     def predicted(chosen):
-        # The RMS of the mode's Laplace standard deviations along / across.
-        if not with_sd:
-            return ""
-        return (f" (posterior sd {rms([r['sdx'] for r in chosen]):.3f} / "
-                f"{rms([r['sdy'] for r in chosen]):.3f})")
+        # The RMS of the mode's Laplace standard deviations along / across, and the bound's.
+        text = ""
+        if with_sd:
+            text += (f" (posterior sd {rms([r['sdx'] for r in chosen]):.3f} / "
+                     f"{rms([r['sdy'] for r in chosen]):.3f})")
+        if with_bound:
+            text += (f" [bound {rms([r['bx'] for r in chosen]):.3f} / "
+                     f"{rms([r['by'] for r in chosen]):.3f}]")
+        return text
 
     print(f"position error RMSE along / across the object's x axis (mm), all contacts and "
           f"those below {shallow_mm:g} mm deep" +

@@ -407,6 +407,7 @@ ContactSimulator::Rendering ContactSimulator::RenderBubble(const Tool& tool,
 
   out.frame = out.clean;
   internal::NoiseStream noise(DeriveSeed(seed, 0));
+  // BubbleNoiseStddev(d) in float: sigma * (d / reference)^2.
   const float sigma = static_cast<float>(o.noise_stddev_m);
   const float inv_ref2 =
       static_cast<float>(1.0 / (o.noise_reference_depth_m * o.noise_reference_depth_m));

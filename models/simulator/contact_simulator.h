@@ -181,6 +181,18 @@ class ContactSimulator {
   // Metres per pixel of the sensor's frames.
   double PixelPitch(SensorKind sensor) const;
 
+  // The Soft Bubble's noise model, as Render draws it: pixel i of a frame whose
+  // noise-free depth is d reads NaN with probability BubbleDropoutProbability()[i], and
+  // otherwise d + BubbleNoiseStddev(d) * N(0, 1), independently of every other pixel.
+  // Metres in, metres out.
+  double BubbleNoiseStddev(double clean_depth_m) const {
+    const SoftBubbleOptions& o = options_.bubble;
+    const double q = clean_depth_m / o.noise_reference_depth_m;
+    return o.noise_stddev_m * q * q;
+  }
+  // Row-major, rows x cols of the Soft Bubble's frames; each in [0, 1].
+  const std::vector<float>& BubbleDropoutProbability() const { return bubble_dropout_; }
+
  private:
   Rendering RenderBubble(const Tool& tool, const Contact& contact,
                          std::uint64_t seed) const;

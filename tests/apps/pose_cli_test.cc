@@ -365,10 +365,11 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
   ASSERT_GE(unknown["tool_probabilities"].size(), 2u);
   for (const auto& p : unknown["tool_probabilities"]) total += p.get<double>();
   EXPECT_NEAR(total, 1.0, 1e-9);
-  // eval-generator on fresh contacts, one row per contact in --contacts-csv.
+  // eval-generator on fresh contacts, one row per contact in --contacts-csv, with each
+  // contact's Cramer-Rao bound from the simulator (--information).
   const std::string contacts = Root("contacts.csv");
   r = Run("eval-generator --model " + Root("m.tfm") + " --generator " + Root("g.tpg") +
-          " --contacts-per-tool 1 --contacts-csv " + contacts + " --json");
+          " --contacts-per-tool 1 --information --contacts-csv " + contacts + " --json");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const nlohmann::json eval = r.LastJson();
   for (const char* key : {"rmse_mm", "position_median_mm", "position_p90_mm", "coverage_90"}) {
@@ -380,14 +381,15 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
   EXPECT_THAT(line, HasSubstr("truth_x_mm,truth_y_mm,truth_yaw_deg"));
   EXPECT_THAT(line, HasSubstr("position_error_mm,yaw_error_deg"));
   EXPECT_THAT(line, HasSubstr("mode_sd_x_mm,mode_sd_y_mm,mode_sd_yaw_deg"));
-  int count = 0;
-  double sum_sq = 0;
+  EXPECT_THAT(line, HasSubstr("bound_sd_along_mm,bound_sd_across_mm,bound_sd_yaw_deg"));
+  int count = 0, judged = 0;
+  double sum_sq = 0, bound_sq = 0;
   while (std::getline(rows, line)) {
     std::vector<double> v;
     std::istringstream cells(line);
     std::string cell;
     while (std::getline(cells, cell, ',')) v.push_back(std::atof(cell.c_str()));
-    ASSERT_EQ(v.size(), 21u) << line;
+    ASSERT_EQ(v.size(), 26u) << line;
     // position_error_mm is the distance between the truth's and the mode's positions.
     EXPECT_NEAR(v[14], std::hypot(v[7] - v[3], v[8] - v[4]), 2e-4) << line;
     // The mode's Laplace sd along, across and in yaw (none for a C_inf tool, n = v[2] = 0).
@@ -396,9 +398,25 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
         EXPECT_GT(v[c], 0) << "column " << c << ", " << line;
       }
     }
+    // The bound's sd along, across, in yaw (none for a C_inf tool) and in depth; the
+    // frame's log-likelihood ratio only for a wrong mode.
+    for (int c : {21, 22, 23, 24}) {
+      if (c != 23 || v[2] != 0) {
+        EXPECT_GT(v[c], 0) << "column " << c << ", " << line;
+      }
+    }
+    const bool wrong = (v[2] != 0 && v[15] > 5) || v[14] > 1;
+    EXPECT_EQ(wrong, !std::isnan(v[25])) << line;
+    judged += wrong;
     sum_sq += v[14] * v[14];
+    bound_sq += v[21] * v[21] + v[22] * v[22];
     ++count;
   }
+  // The printed bound is the contacts' RMS; every wrong mode gets a verdict.
+  const nlohmann::json& information = eval["information"];
+  EXPECT_NEAR(std::sqrt(bound_sq / count), information["bound_rmse_mm"].get<double>(),
+              1e-3 + 1e-3 * information["bound_rmse_mm"].get<double>());
+  EXPECT_EQ(information["wrong_modes"]["count"].get<int>(), judged);
   EXPECT_EQ(count, eval["contacts"].get<int>() - eval["failures"].get<int>());  // usable ones
   EXPECT_GT(count, 0);
   EXPECT_NEAR(std::sqrt(sum_sq / count), eval["rmse_mm"].get<double>(),
