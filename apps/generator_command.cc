@@ -17,10 +17,9 @@
 //   tactfunc eval-generator --model M.tfm --generator G.tpg [--functaset F.tfs]
 //       [--pose-model P.tpm] [--contacts-per-tool 20] [--seed 1592590336] [--unknown-tool]
 //       [--diagnose] [--information] [search knobs: --max-pixels, --contact-share,
-//       --refined-starts,
-//       --iterations, --knn-k,
-//       --yaw-grid, --position-grid, --position-rings, --coarse-pixels, --coarse-starts,
-//       --coarse-iterations] [--contacts-csv FILE] [--json]
+//       --refined-starts, --iterations, --knn-k, --yaw-grid, --position-grid,
+//       --position-rings, --coarse-pixels, --coarse-starts, --coarse-iterations]
+//       [--contacts-csv FILE] [--json]
 //     fresh Soft Bubble contacts (ContactSimulator, seeded; contact k uses DeriveSeed(seed,
 //     k)) of every tool the generator knows through GeneratorPosterior (one thread): the
 //     posterior mode's position RMSE (mm) and yaw RMSE (deg, modulo symmetry, hemisphere
@@ -31,12 +30,12 @@
 //     refined truth = a search failure, else a model failure). --information: every
 //     contact's Cramer-Rao bound from the simulator's own frames and noise
 //     (SoftBubblePoseInformation) on the trunk's working frames and on the sensor's own,
-//     printed beside the mode's errors by contact depth: what
-//     any unbiased estimator misses on those frames; and for every wrong mode (as
-//     --diagnose) whether the frame itself prefers the truth's basin (the simulator's own
-//     fit from the truth and from the mode, FitSoftBubbleContact). --contacts-csv: one row per
-//     usable contact (truth, mode, posterior mean, errors, the mode's Laplace standard deviations,
-//     with --information the bound's), written atomically.
+//     printed beside the mode's errors by contact depth: what any unbiased estimator
+//     misses on those frames; and for every wrong mode (as --diagnose counts them) whether
+//     the frame itself prefers the truth's basin (JudgeWrongMode). --contacts-csv: one row
+//     per usable contact (truth, mode, posterior mean, errors, the mode's Laplace standard
+//     deviations, with --information the bound's and the frame's verdict), written
+//     atomically.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -338,6 +337,41 @@ Image AsStored(const Image& depth) {
                      PixelEncoding::kDepthU16Micrometres, "fresh contact");
 }
 
+// What a frame says about a wrong mode: the simulator's own models fitted to it from the
+// truth and from the mode (FitSoftBubbleContact). kInTruthBasin: the fit from the mode
+// came back to the truth's basin (within 0.3 mm and 2 degrees of the truth's fit);
+// otherwise the truth's basin explains the frame better by more than kClearNats, about as
+// well, or worse by more than kClearNats.
+enum FrameVerdict { kInTruthBasin, kPrefersTruth, kAmbiguous, kPrefersMode, kVerdicts };
+constexpr double kClearNats = 3;
+
+struct WrongModeJudgement {
+  FrameVerdict verdict = kAmbiguous;
+  double log_likelihood_ratio = 0;  // the truth's fit over the mode's, nats
+};
+
+WrongModeJudgement JudgeWrongMode(const ContactSimulator& simulator, const Image& frame,
+                                  const Contact& truth, const SE2d& mode, double mode_depth_m,
+                                  int symmetry_order) {
+  Contact from_mode = truth;
+  from_mode.sensor_T_object = mode;
+  from_mode.depth_m = mode_depth_m;
+  const ContactFit at_truth = FitSoftBubbleContact(simulator, frame, truth);
+  const ContactFit at_mode = FitSoftBubbleContact(simulator, frame, from_mode);
+  WrongModeJudgement j;
+  j.log_likelihood_ratio = at_truth.log_likelihood - at_mode.log_likelihood;
+  const SE2d& a = at_truth.contact.sensor_T_object;
+  const SE2d& b = at_mode.contact.sensor_T_object;
+  const bool same_basin =
+      std::hypot(a.x() - b.x(), a.y() - b.y()) < 0.3e-3 &&
+      (symmetry_order == 0 || kDeg * YawErrorModuloSymmetry(a.yaw(), b.yaw(), symmetry_order) < 2);
+  j.verdict = same_basin                             ? kInTruthBasin
+              : j.log_likelihood_ratio > kClearNats  ? kPrefersTruth
+              : j.log_likelihood_ratio < -kClearNats ? kPrefersMode
+                                                     : kAmbiguous;
+  return j;
+}
+
 void RunEvalGenerator(const EvalGeneratorFlags& flags) {
   const FunctaModel model = FunctaModel::Load(flags.model);
   const SensorTrunk& trunk = model.Trunk(SensorKind::kSoftBubble);
@@ -390,12 +424,8 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
   double band_error[3] = {0, 0, 0}, band_bound[3] = {0, 0, 0};
   int band_count[3] = {0, 0, 0};
   double bound_yaw_sq = 0, sensor_bound_sq = 0, sensor_bound_yaw_sq = 0;
-  // Wrong modes by what the frame says (FitSoftBubbleContact from the truth and from the
-  // mode): the fit from the mode came back to the truth's basin; it stayed elsewhere and
-  // the truth's basin explains the frame better by more than kClearNats, about as well,
-  // or worse by more than kClearNats.
-  constexpr double kClearNats = 3;
-  int frame_verdicts[4] = {0, 0, 0, 0};
+  // Wrong modes by what the frame says (JudgeWrongMode), counted by verdict.
+  int frame_verdicts[kVerdicts] = {0, 0, 0, 0};
   std::vector<double> frame_llrs;
   PoseInformationOptions working_size;
   working_size.rows = trunk.format.rows;
@@ -450,6 +480,8 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
         mean_yaw_sq += e * e;
         mean_yaw_errors.push_back(e);
       }
+      // Wrong: the mode's yaw more than 5 degrees or its position more than 1 mm off.
+      const bool wrong_mode = (n != 0 && kDeg * mode_yaw_error > 5) || std::sqrt(dp) > 1e-3;
       PoseInformation information;
       double frame_llr = std::nan("");
       if (flags.information) {
@@ -462,25 +494,13 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
         band_bound[band] += information.bound(0, 0) + information.bound(1, 1);
         ++band_count[band];
         if (n != 0) bound_yaw_sq += information.bound(2, 2);
-        // A wrong mode (yaw > 5 deg or position > 1 mm off, as --diagnose): does the frame
-        // itself prefer the truth's basin? Fit the simulator's own models to the frame from
-        // the truth and from the mode, and compare their log-likelihoods.
-        if ((n != 0 && kDeg * mode_yaw_error > 5) || std::sqrt(dp) > 1e-3) {
-          Contact from_mode = contact;
-          from_mode.sensor_T_object = mode;
-          if (true_mode != nullptr) from_mode.depth_m = true_mode->depth_m;
-          const ContactFit at_truth = FitSoftBubbleContact(simulator, frame, contact);
-          const ContactFit at_mode = FitSoftBubbleContact(simulator, frame, from_mode);
-          frame_llr = at_truth.log_likelihood - at_mode.log_likelihood;
-          const SE2d& a = at_truth.contact.sensor_T_object;
-          const SE2d& b = at_mode.contact.sensor_T_object;
-          const bool same_basin =
-              std::hypot(a.x() - b.x(), a.y() - b.y()) < 0.3e-3 &&
-              (n == 0 || kDeg * YawErrorModuloSymmetry(a.yaw(), b.yaw(), n) < 2);
-          ++frame_verdicts[same_basin                ? 0
-                           : frame_llr > kClearNats  ? 1
-                           : frame_llr < -kClearNats ? 3
-                                                     : 2];
+        // A wrong mode: does the frame itself prefer the truth's basin?
+        if (wrong_mode) {
+          const WrongModeJudgement j =
+              JudgeWrongMode(simulator, frame, contact, mode,
+                             true_mode != nullptr ? true_mode->depth_m : contact.depth_m, n);
+          ++frame_verdicts[j.verdict];
+          frame_llr = j.log_likelihood_ratio;
           frame_llrs.push_back(frame_llr);
         }
       }
@@ -528,7 +548,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
         // higher (the generator and trunk prefer the wrong pose: a model failure)? The
         // truth is also refined (from the true pose and depth) to its local minimum.
         const double e = n != 0 ? kDeg * mode_yaw_error : 0;
-        if (e > 5 || std::sqrt(dp) > 1e-3) {
+        if (wrong_mode) {
           ++wrong;
           const LatentProblem problem(trunk, targets, options.problem);
           const int ti = static_cast<int>(t);
@@ -642,13 +662,13 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
         "from the truth and from the mode, the frame puts the mode in the truth's basin: "
         "%d; prefers the truth's basin by > %.0f nats: %d; about as likely (within %.0f): "
         "%d; prefers the mode's basin: %d; log-likelihood ratio median %.1f nats\n",
-        frame_llrs.size(), frame_verdicts[0], kClearNats, frame_verdicts[1], kClearNats,
-        frame_verdicts[2], frame_verdicts[3], llr_median);
+        frame_llrs.size(), frame_verdicts[kInTruthBasin], kClearNats, frame_verdicts[kPrefersTruth],
+        kClearNats, frame_verdicts[kAmbiguous], frame_verdicts[kPrefersMode], llr_median);
     information_json["wrong_modes"] = {{"count", frame_llrs.size()},
-                                       {"mode_in_truth_basin", frame_verdicts[0]},
-                                       {"frame_prefers_truth", frame_verdicts[1]},
-                                       {"frame_ambiguous", frame_verdicts[2]},
-                                       {"frame_prefers_mode", frame_verdicts[3]},
+                                       {"mode_in_truth_basin", frame_verdicts[kInTruthBasin]},
+                                       {"frame_prefers_truth", frame_verdicts[kPrefersTruth]},
+                                       {"frame_ambiguous", frame_verdicts[kAmbiguous]},
+                                       {"frame_prefers_mode", frame_verdicts[kPrefersMode]},
                                        {"log_likelihood_ratio_median", NumberOrNull(llr_median)}};
   }
   if (flags.unknown_tool) {
@@ -798,8 +818,8 @@ void RegisterEvalGenerator(CLI::App& app, CommandBody* selected) {
   sub->add_flag("--unknown-tool", flags->unknown_tool, "Fit every tool and identify it");
   sub->add_flag("--information", flags->information,
                 "Also each contact's Cramer-Rao bound on its pose and depth from the simulator's "
-                "frames and noise: what any unbiased estimator misses (8 more renders per "
-                "contact)");
+                "frames and noise (what any unbiased estimator misses), and for every wrong mode "
+                "whether the frame itself prefers the truth's basin (about 10 ms more per contact)");
   sub->add_flag("--diagnose", flags->diagnose,
                 "For every contact whose mode is > 5 deg or > 1 mm off: the objective at the "
                 "mode, at the truth and at the truth refined (search or model failure)");
