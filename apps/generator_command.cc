@@ -816,10 +816,11 @@ void RegisterEvalGenerator(CLI::App& app, CommandBody* selected) {
                       std::to_string(PoseFitOptions().coarse_iterations) + ")")
       ->check(CLI::Range(1, 1000));
   sub->add_flag("--unknown-tool", flags->unknown_tool, "Fit every tool and identify it");
-  sub->add_flag("--information", flags->information,
-                "Also each contact's Cramer-Rao bound on its pose and depth from the simulator's "
-                "frames and noise (what any unbiased estimator misses), and for every wrong mode "
-                "whether the frame itself prefers the truth's basin (about 10 ms more per contact)");
+  sub->add_flag(
+      "--information", flags->information,
+      "Also each contact's Cramer-Rao bound on its pose and depth from the simulator's "
+      "frames and noise (what any unbiased estimator misses), and for every wrong mode "
+      "whether the frame itself prefers the truth's basin (about 10 ms more per contact)");
   sub->add_flag("--diagnose", flags->diagnose,
                 "For every contact whose mode is > 5 deg or > 1 mm off: the objective at the "
                 "mode, at the truth and at the truth refined (search or model failure)");
