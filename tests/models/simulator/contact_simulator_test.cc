@@ -10,25 +10,15 @@
 
 #include "gtest/gtest.h"
 #include "models/simulator/internal/membrane.h"
+#include "tests/support/simulator_test_util.h"
 
 namespace tactfunc {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
-// One simulator for the whole suite: building the references takes a few ms.
-const ContactSimulator& Simulator() {
-  static const ContactSimulator simulator;
-  return simulator;
-}
-
-Contact MakeContact(const std::string& tool, double x, double y, double yaw, double depth) {
-  Contact contact;
-  contact.tool = tool;
-  contact.sensor_T_object = SE2d::FromXYYaw(x, y, yaw);
-  contact.depth_m = depth;
-  return contact;
-}
+using testing_util::MakeContact;
+using testing_util::Simulator;
 
 // Per-pixel change from the reference, summed over channels: how far the membrane came
 // towards the camera (bubble, metres) or |intensity change| (GelSlim).

@@ -8,24 +8,15 @@
 
 #include "gtest/gtest.h"
 #include "models/core/seed.h"
+#include "tests/support/simulator_test_util.h"
 
 namespace tactfunc {
 namespace {
 
 constexpr double kDegree = 3.14159265358979323846 / 180;
 
-const ContactSimulator& Simulator() {
-  static const ContactSimulator simulator;
-  return simulator;
-}
-
-Contact MakeContact(const std::string& tool, double x, double y, double yaw, double depth) {
-  Contact contact;
-  contact.tool = tool;
-  contact.sensor_T_object = SE2d::FromXYYaw(x, y, yaw);
-  contact.depth_m = depth;
-  return contact;
-}
+using testing_util::MakeContact;
+using testing_util::Simulator;
 
 // Render draws the noise BubbleNoiseStddev and BubbleDropoutProbability describe: the
 // standardised noise of a frame has unit variance, and its dropouts come at the stated
