@@ -16,7 +16,7 @@
 //
 //   tactfunc eval-generator --model M.tfm --generator G.tpg [--functaset F.tfs]
 //       [--pose-model P.tpm] [--contacts-per-tool 20] [--seed 1592590336] [--unknown-tool]
-//       [--diagnose] [--information] [search knobs: --max-pixels, --contact-share,
+//       [--diagnose] [--information [--picture FILE]] [search knobs: --max-pixels, --contact-share,
 //       --refined-starts, --iterations, --knn-k, --yaw-grid, --position-grid,
 //       --position-rings, --coarse-pixels, --coarse-starts, --coarse-iterations]
 //       [--contacts-csv FILE] [--json]
@@ -35,7 +35,8 @@
 //     the frame itself prefers the truth's basin (JudgeWrongMode). --contacts-csv: one row
 //     per usable contact (truth, mode, posterior mean, errors, the mode's Laplace standard
 //     deviations, with --information the bound's and the frame's verdict), written
-//     atomically.
+//     atomically; --picture FILE (with --information): each contact's error against its
+//     bound.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -43,9 +44,12 @@
 #include <cstdlib>
 #include <filesystem>
 #include <iostream>
+#include <limits>
 #include <map>
 #include <memory>
 #include <numeric>
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 #include <sstream>
 
 #include "CLI/CLI.hpp"
@@ -54,6 +58,7 @@
 #include "apps/interrupt.h"
 #include "apps/model_inputs.h"
 #include "apps/output_paths.h"
+#include "apps/pictures.h"
 #include "apps/progress_bar.h"
 #include "estimation/data/dataset.h"
 #include "estimation/data/image_io.h"
@@ -328,6 +333,7 @@ struct EvalGeneratorFlags {
   int coarse_iterations = PoseFitOptions().coarse_iterations;
   bool diagnose = false;
   bool information = false;
+  std::string picture;  // with --information: each contact's error against its bound
   bool json = false;
   std::string contacts_csv;  // one row per contact, written atomically at the end
 };
@@ -370,6 +376,92 @@ WrongModeJudgement JudgeWrongMode(const ContactSimulator& simulator, const Image
               : j.log_likelihood_ratio < -kClearNats ? kPrefersMode
                                                      : kAmbiguous;
   return j;
+}
+
+// One contact on --information's picture: the mode's error and the bound's standard
+// deviation, position (mm) and yaw (deg; NaN for a tool without an observable yaw), and
+// its true depth's band (0: below 6 mm, 1: 6-10 mm, 2: from 10 mm).
+struct BoundPoint {
+  double bound_mm, error_mm, bound_deg, error_deg;
+  int band;
+};
+
+// Each contact's error against its bound, one panel for the position and one for the
+// yaw, both axes logarithmic over the same range: the line error = bound is the diagonal,
+// a point's height above it the factor by which the estimator misses what the frame
+// allows. Errors below the smallest bound sit on the bottom edge as triangles. The
+// dashed line is the product's aim (0.3 mm, 3 deg).
+cv::Mat BoundPicture(const std::vector<BoundPoint>& points, const std::string& subtitle) {
+  const cv::Scalar band_colour[3] = {cv::Scalar(60, 60, 220), cv::Scalar(40, 160, 240),
+                                     cv::Scalar(200, 120, 40)};
+  const char* band_name[3] = {"below 6 mm deep", "6-10 mm deep", "from 10 mm deep"};
+  std::vector<cv::Mat> panels;
+  for (int panel = 0; panel < 2; ++panel) {
+    const bool yaw = panel == 1;
+    const double aim = yaw ? 3.0 : 0.3;
+    double lo = std::numeric_limits<double>::infinity(), hi = aim;
+    for (const BoundPoint& p : points) {
+      const double b = yaw ? p.bound_deg : p.bound_mm, e = yaw ? p.error_deg : p.error_mm;
+      if (!(b > 0) || !std::isfinite(b)) continue;
+      lo = std::min(lo, b);
+      hi = std::max(hi, b);
+      if (std::isfinite(e)) hi = std::max(hi, e);
+    }
+    if (!std::isfinite(lo)) continue;
+    LogXPlot::Layout layout;
+    layout.height = 620;
+    layout.width = 1100;
+    layout.log_y = true;
+    LogXPlot plot(layout, lo, hi, lo, hi);
+    plot.DrawFrame(yaw ? "Cramer-Rao bound on the yaw, sd (deg)"
+                       : "Cramer-Rao bound on the position, RMSE (mm)",
+                   yaw ? "mode's yaw error (deg)" : "mode's position error (mm)",
+                   yaw ? "Yaw: the estimator against what the frames allow"
+                       : "Position: the estimator against what the frames allow",
+                   subtitle);
+    cv::Mat& canvas = plot.canvas();
+    const cv::Rect& area = plot.area();
+    const int bottom = area.y + area.height;
+    // The diagonal error = bound, clipped to the plot area.
+    std::vector<cv::Point> diagonal;
+    for (int k = 0; k <= 200; ++k) {
+      const double b =
+          std::pow(10.0, std::log10(lo) - 1 + k * (std::log10(hi) - std::log10(lo) + 2) / 200);
+      const cv::Point at(plot.X(b), plot.Y(b));
+      if (area.contains(at)) diagonal.push_back(at);
+    }
+    if (diagonal.size() > 1) {
+      cv::polylines(canvas, diagonal, false, cv::Scalar(130, 130, 130), 1, cv::LINE_AA);
+    }
+    DrawDashedLine(canvas, {area.x, plot.Y(aim)}, {area.x + area.width, plot.Y(aim)},
+                   cv::Scalar(0, 0, 0));
+    for (const BoundPoint& p : points) {
+      const double b = yaw ? p.bound_deg : p.bound_mm, e = yaw ? p.error_deg : p.error_mm;
+      if (!(b > 0) || !std::isfinite(b) || !std::isfinite(e)) continue;
+      const int x = plot.X(b);
+      if (e > 0 && plot.Y(e) < bottom) {
+        cv::circle(canvas, {x, plot.Y(e)}, 3, band_colour[p.band], cv::FILLED, cv::LINE_AA);
+      } else {
+        const std::vector<cv::Point> tip = {{x, bottom}, {x - 4, bottom - 7}, {x + 4, bottom - 7}};
+        cv::fillConvexPoly(canvas, tip, band_colour[p.band], cv::LINE_AA);
+      }
+    }
+    const int lx = area.x + area.width + 22, ly = area.y + 14;
+    for (int b = 0; b < 3; ++b) {
+      cv::circle(canvas, {lx + 7, ly + 20 * b}, 4, band_colour[b], cv::FILLED, cv::LINE_AA);
+      PlainText(canvas, band_name[b], {lx + 20, ly + 20 * b + 5}, 0.42);
+    }
+    cv::line(canvas, {lx, ly + 60}, {lx + 14, ly + 60}, cv::Scalar(130, 130, 130), 1);
+    PlainText(canvas, "error = bound", {lx + 20, ly + 65}, 0.42);
+    DrawDashedLine(canvas, {lx, ly + 80}, {lx + 14, ly + 80}, cv::Scalar(0, 0, 0));
+    PlainText(canvas, yaw ? "aim: 3 deg RMSE" : "aim: 0.3 mm RMSE", {lx + 20, ly + 85}, 0.42);
+    PlainText(canvas, "triangles: error below", {lx, ly + 110}, 0.38);
+    PlainText(canvas, "the axis", {lx, ly + 126}, 0.38);
+    panels.push_back(canvas);
+  }
+  cv::Mat picture;
+  if (!panels.empty()) cv::vconcat(panels, picture);
+  return picture;
 }
 
 void RunEvalGenerator(const EvalGeneratorFlags& flags) {
@@ -427,6 +519,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
   // Wrong modes by what the frame says (JudgeWrongMode), counted by verdict.
   int frame_verdicts[kVerdicts] = {0, 0, 0, 0};
   std::vector<double> frame_llrs;
+  std::vector<BoundPoint> bound_points;
   PoseInformationOptions working_size;
   working_size.rows = trunk.format.rows;
   working_size.cols = trunk.format.cols;
@@ -494,6 +587,9 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
         band_bound[band] += information.bound(0, 0) + information.bound(1, 1);
         ++band_count[band];
         if (n != 0) bound_yaw_sq += information.bound(2, 2);
+        bound_points.push_back({1e3 * information.PositionRmse(), 1e3 * std::sqrt(dp),
+                                n != 0 ? kDeg * information.YawSd() : std::nan(""),
+                                n != 0 ? kDeg * mode_yaw_error : std::nan(""), band});
         // A wrong mode: does the frame itself prefer the truth's basin?
         if (wrong_mode) {
           const WrongModeJudgement j =
@@ -671,6 +767,19 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
                                        {"frame_prefers_mode", frame_verdicts[kPrefersMode]},
                                        {"log_likelihood_ratio_median", NumberOrNull(llr_median)}};
   }
+  if (!flags.picture.empty()) {
+    char subtitle[256];
+    std::snprintf(subtitle, sizeof(subtitle),
+                  "%d fresh Soft Bubble contacts (seed %llu); bound from the simulator's own "
+                  "frames and noise on the trunk's %dx%d frames",
+                  ok, static_cast<unsigned long long>(flags.seed), trunk.format.rows,
+                  trunk.format.cols);
+    const cv::Mat picture = BoundPicture(bound_points, subtitle);
+    if (!picture.empty()) {
+      WritePicture(flags.picture, picture);
+      std::cout << "eval-generator: wrote " << flags.picture << "\n";
+    }
+  }
   if (flags.unknown_tool) {
     std::printf("  tool identified: %.3f\n", static_cast<double>(identified) / std::max(1, ok));
   }
@@ -821,6 +930,10 @@ void RegisterEvalGenerator(CLI::App& app, CommandBody* selected) {
       "Also each contact's Cramer-Rao bound on its pose and depth from the simulator's "
       "frames and noise (what any unbiased estimator misses), and for every wrong mode "
       "whether the frame itself prefers the truth's basin (about 10 ms more per contact)");
+  sub->add_option("--picture", flags->picture,
+                  "With --information: a PNG of each contact's mode error against its bound "
+                  "(position and yaw), written atomically")
+      ->needs("--information");
   sub->add_flag("--diagnose", flags->diagnose,
                 "For every contact whose mode is > 5 deg or > 1 mm off: the objective at the "
                 "mode, at the truth and at the truth refined (search or model failure)");

@@ -4,9 +4,11 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <stdexcept>
-
 #include <opencv2/imgproc.hpp>
+#include <stdexcept>
+#include <string>
+#include <utility>
+#include <vector>
 
 #include "estimation/data/codecs.h"
 #include "estimation/data/image_io.h"
@@ -224,6 +226,14 @@ LogXPlot::LogXPlot(const Layout& layout, double x_lo, double x_hi, double y_lo, 
   lx_lo_ = std::floor(std::log10(x_lo) * 4) / 4;
   lx_hi_ = std::ceil(std::log10(std::max(x_hi, x_lo)) * 4) / 4;
   if (lx_hi_ <= lx_lo_) lx_hi_ = lx_lo_ + 0.25;
+  if (layout.log_y) {
+    // y_lo_ and y_hi_ hold log10 of the range, in quarter decades.
+    if (!(y_lo > 0)) y_lo = 1, y_hi = std::max(y_hi, 10.0);
+    y_lo_ = std::floor(std::log10(y_lo) * 4) / 4;
+    y_hi_ = std::ceil(std::log10(std::max(y_hi, y_lo)) * 4) / 4;
+    if (y_hi_ <= y_lo_) y_hi_ = y_lo_ + 0.25;
+    return;
+  }
   const double pad = std::max(0.5, 0.06 * (y_hi - y_lo));
   y_lo_ = std::floor(y_lo - pad);
   y_hi_ = std::ceil(y_hi + pad);
@@ -235,7 +245,8 @@ int LogXPlot::X(double x) const {
 }
 
 int LogXPlot::Y(double y) const {
-  return area_.y + static_cast<int>(std::lround((y_hi_ - y) / (y_hi_ - y_lo_) * area_.height));
+  const double v = layout_.log_y ? std::log10(y) : y;
+  return area_.y + static_cast<int>(std::lround((y_hi_ - v) / (y_hi_ - y_lo_) * area_.height));
 }
 
 void LogXPlot::DrawFrame(const std::string& x_label, const std::string& y_label,
@@ -256,14 +267,32 @@ void LogXPlot::DrawFrame(const std::string& x_label, const std::string& y_label,
       PlainText(canvas_, label, {x - size.width / 2, top + ph + 22}, 0.45, axis);
     }
   }
-  const double span = y_hi_ - y_lo_;
-  const double step = span > 20 ? 5 : (span > 8 ? 2 : (span > 4 ? 1 : 0.5));
-  for (double v = std::ceil(y_lo_ / step) * step; v <= y_hi_ + 1e-9; v += step) {
+  // The y ticks: values and their labels.
+  std::vector<std::pair<double, std::string>> y_ticks;
+  if (layout_.log_y) {
+    for (int e = static_cast<int>(std::floor(y_lo_)); e <= static_cast<int>(std::ceil(y_hi_));
+         ++e) {
+      for (int m : {1, 2, 5}) {
+        const double v = m * std::pow(10.0, e);
+        if (std::log10(v) < y_lo_ - 1e-9 || std::log10(v) > y_hi_ + 1e-9) continue;
+        char label[32];
+        std::snprintf(label, sizeof(label), "%g", v);
+        y_ticks.emplace_back(v, label);
+      }
+    }
+  } else {
+    const double span = y_hi_ - y_lo_;
+    const double step = span > 20 ? 5 : (span > 8 ? 2 : (span > 4 ? 1 : 0.5));
+    for (double v = std::ceil(y_lo_ / step) * step; v <= y_hi_ + 1e-9; v += step) {
+      char label[32];
+      std::snprintf(label, sizeof(label), "%.*f", step < 1 ? 1 : 0, v);
+      y_ticks.emplace_back(v, label);
+    }
+  }
+  for (const auto& [v, label] : y_ticks) {
     const int y = Y(v);
     cv::line(canvas_, {left, y}, {left + pw, y}, grid, 1);
     cv::line(canvas_, {left - 6, y}, {left, y}, axis, 1);
-    char label[32];
-    std::snprintf(label, sizeof(label), "%.*f", step < 1 ? 1 : 0, v);
     PlainText(canvas_, label, {left - 50, y + 5}, 0.45, axis);
   }
   cv::rectangle(canvas_, {left, top}, {left + pw, top + ph}, axis, 1);

@@ -67,15 +67,16 @@ class LogXPlot {
   struct Layout {
     int width = 1400, height = 760;                     // canvas, pixels
     int left = 90, right = 270, top = 60, bottom = 80;  // margins around the plot area
+    bool log_y = false;  // the y axis logarithmic too (y_lo > 0), ticks as the x axis's
   };
   LogXPlot(const Layout& layout, double x_lo, double x_hi, double y_lo, double y_hi);
   cv::Mat& canvas() { return canvas_; }
-  // Pixel column of x (> 0) and row of y.
+  // Pixel column of x (> 0) and row of y (> 0 with log_y).
   int X(double x) const;
   int Y(double y) const;
   const cv::Rect& area() const { return area_; }
-  // Grid and ticks (x at 1, 2, 5 x 10^k; y at round steps), the frame, axis titles,
-  // a bold title and a grey subtitle above the plot.
+  // Grid and ticks (x at 1, 2, 5 x 10^k; y at round steps, or as x with log_y), the frame, axis
+  // titles, a bold title and a grey subtitle above the plot.
   void DrawFrame(const std::string& x_label, const std::string& y_label,
                  const std::string& title, const std::string& subtitle);
 

@@ -369,7 +369,8 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
   // contact's Cramer-Rao bound from the simulator (--information).
   const std::string contacts = Root("contacts.csv");
   r = Run("eval-generator --model " + Root("m.tfm") + " --generator " + Root("g.tpg") +
-          " --contacts-per-tool 1 --information --contacts-csv " + contacts + " --json");
+          " --contacts-per-tool 1 --information --picture " + Root("bound.png") +
+          " --contacts-csv " + contacts + " --json");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const nlohmann::json eval = r.LastJson();
   for (const char* key : {"rmse_mm", "position_median_mm", "position_p90_mm", "coverage_90"}) {
@@ -417,6 +418,12 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
   EXPECT_NEAR(std::sqrt(bound_sq / count), information["bound_rmse_mm"].get<double>(),
               1e-3 + 1e-3 * information["bound_rmse_mm"].get<double>());
   EXPECT_EQ(information["wrong_modes"]["count"].get<int>(), judged);
+  EXPECT_EQ(Slurp(Root("bound.png")).substr(1, 3), "PNG");
+  // The picture needs the bound.
+  r = Run("eval-generator --model " + Root("m.tfm") + " --generator " + Root("g.tpg") +
+          " --contacts-per-tool 1 --picture " + Root("bound2.png"));
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("--information"));
   EXPECT_EQ(count, eval["contacts"].get<int>() - eval["failures"].get<int>());  // usable ones
   EXPECT_GT(count, 0);
   EXPECT_NEAR(std::sqrt(sum_sq / count), eval["rmse_mm"].get<double>(),
