@@ -86,7 +86,7 @@ FrameDerivatives Differentiate(const ContactSimulator& simulator, const Contact&
                                       options.yaw_step_rad, options.depth_step_m};
   for (double h : step) {
     if (!(h > 0) || !std::isfinite(h)) {
-      throw std::invalid_argument("SoftBubblePoseInformation: every step must be > 0 and finite");
+      throw std::invalid_argument("PoseInformationOptions: every step must be > 0 and finite");
     }
   }
   FrameDerivatives out;
