@@ -30,9 +30,9 @@
 //     refined truth = a search failure, else a model failure). --information: every
 //     contact's Cramer-Rao bound from the simulator's own frames and noise
 //     (SoftBubblePoseInformation) on the trunk's working frames and on the sensor's own,
-//     printed beside the mode's errors by contact depth: what any unbiased estimator
-//     misses on those frames; and for every wrong mode (as --diagnose counts them) whether
-//     the frame itself prefers the truth's basin (JudgeWrongMode). --contacts-csv: one row
+//     printed beside the mode's errors by contact depth: the floor under any unbiased
+//     estimator's error on those frames; and for every wrong mode (as --diagnose counts them)
+//     whether the frame itself prefers the truth's basin (JudgeWrongMode). --contacts-csv: one row
 //     per usable contact (truth, mode, posterior mean, errors, the mode's Laplace standard
 //     deviations, with --information the bound's and the frame's verdict), written
 //     atomically; --picture FILE (with --information): each contact's error against its
@@ -928,7 +928,7 @@ void RegisterEvalGenerator(CLI::App& app, CommandBody* selected) {
   sub->add_flag(
       "--information", flags->information,
       "Also each contact's Cramer-Rao bound on its pose and depth from the simulator's "
-      "frames and noise (what any unbiased estimator misses), and for every wrong mode "
+      "frames and noise (the floor under any unbiased estimator's error), and for every wrong mode "
       "whether the frame itself prefers the truth's basin (about 10 ms more per contact)");
   sub->add_option("--picture", flags->picture,
                   "With --information: a PNG of each contact's mode error against its bound "
