@@ -928,8 +928,9 @@ void RegisterEvalGenerator(CLI::App& app, CommandBody* selected) {
   sub->add_flag(
       "--information", flags->information,
       "Also each contact's Cramer-Rao bound on its pose and depth from the simulator's "
-      "frames and noise (the floor under any unbiased estimator's error), and for every wrong mode "
-      "whether the frame itself prefers the truth's basin (about 10 ms more per contact)");
+      "frames and noise (the floor under any unbiased estimator's error), and for every "
+      "wrong mode whether the frame itself prefers the truth's basin (about 10 ms more per "
+      "contact)");
   sub->add_option("--picture", flags->picture,
                   "With --information: a PNG of each contact's mode error against its bound "
                   "(position and yaw), written atomically")
