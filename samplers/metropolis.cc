@@ -13,6 +13,7 @@
 #include <boost/random/normal_distribution.hpp>
 #include <boost/random/uniform_01.hpp>
 
+#include "models/core/internal/log_sum_exp.h"
 #include "models/core/seed.h"
 #include "samplers/sgld.h"
 
@@ -90,11 +91,7 @@ class JumpMixture {
                         0.5 * part.L.triangularView<Eigen::Lower>().solve(diff).squaredNorm());
       }
     }
-    const double top = *std::max_element(terms.begin(), terms.end());
-    if (!std::isfinite(top)) return top;
-    double sum = 0;
-    for (double t : terms) sum += std::exp(t - top);
-    return top + std::log(sum);
+    return internal::LogSumExp(terms);
   }
 
  private:

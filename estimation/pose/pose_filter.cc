@@ -11,15 +11,18 @@
 #include <utility>
 
 #include "Eigen/Cholesky"
-#include "models/simulator/tool.h"
 #include "Eigen/Eigenvalues"
+#include "models/core/internal/log_sum_exp.h"
 #include "models/core/seed.h"
+#include "models/simulator/tool.h"
 
 namespace tactfunc {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kInf = std::numeric_limits<double>::infinity();
+
+using internal::LogSumExp;
 
 std::string Num(double value) {
   char buffer[32];
@@ -64,16 +67,6 @@ Eigen::Matrix3d PsdSqrt(const Eigen::Matrix3d& m) {
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(m);
   return eig.eigenvectors() * eig.eigenvalues().cwiseMax(0).cwiseSqrt().asDiagonal() *
          eig.eigenvectors().transpose();
-}
-
-// log sum_k exp(a_k), with the largest term factored out; -inf if every a_k is -inf.
-double LogSumExp(const std::vector<double>& a) {
-  double m = -kInf;
-  for (double v : a) m = std::max(m, v);
-  if (!std::isfinite(m)) return m;
-  double s = 0;
-  for (double v : a) s += std::exp(v - m);
-  return m + std::log(s);
 }
 
 // The representative of `particle` modulo the tool's symmetry closest to `sample`'s yaw

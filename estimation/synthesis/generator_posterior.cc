@@ -1,6 +1,11 @@
 // Copyright 2026 The tactfunc Authors.
 #include "estimation/synthesis/generator_posterior.h"
 
+#include <time.h>
+
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+#include <Eigen/LU>
 #include <algorithm>
 #include <boost/random/mersenne_twister.hpp>
 #include <boost/random/normal_distribution.hpp>
@@ -12,12 +17,9 @@
 #include <map>
 #include <numeric>
 #include <stdexcept>
-#include <time.h>
+#include <string>
 
-#include <Eigen/Cholesky>
-#include <Eigen/Eigenvalues>
-#include <Eigen/LU>
-
+#include "models/core/internal/log_sum_exp.h"
 #include "models/core/seed.h"
 #include "models/simulator/tool.h"
 
@@ -546,6 +548,18 @@ double CalibrateSigmaInflation(const GeneratorPosterior& posterior,
   return std::sqrt(q / kChi2_3_90);
 }
 
+namespace {
+
+// The floor of the temperature grid: in (0, 1].
+void CheckMinTemperature(const char* who, double min_temperature) {
+  if (!(min_temperature > 0 && min_temperature <= 1)) {
+    throw std::invalid_argument(std::string(who) + ": min_temperature must lie in (0, 1], got " +
+                                std::to_string(min_temperature));
+  }
+}
+
+}  // namespace
+
 double CalibrateWeightTemperature(const GeneratorPosterior& posterior,
                                   const std::vector<TrunkTargets>& frames,
                                   const std::vector<PoseLabel>& labels, double min_temperature,
@@ -553,11 +567,7 @@ double CalibrateWeightTemperature(const GeneratorPosterior& posterior,
   if (frames.size() != labels.size()) {
     throw std::invalid_argument("CalibrateWeightTemperature: one label per frame expected");
   }
-  if (!(min_temperature > 0 && min_temperature <= 1)) {
-    throw std::invalid_argument(
-        "CalibrateWeightTemperature: min_temperature must lie in (0, 1], got " +
-        std::to_string(min_temperature));
-  }
+  CheckMinTemperature("CalibrateWeightTemperature", min_temperature);  // before the fits
   std::vector<WeightTemperatureCase> cases;
   int wrong = 0;
   for (std::size_t i = 0; i < frames.size(); ++i) {
@@ -586,10 +596,7 @@ double CalibrateWeightTemperature(const GeneratorPosterior& posterior,
 
 double FitWeightTemperature(const std::vector<WeightTemperatureCase>& cases,
                             double min_temperature) {
-  if (!(min_temperature > 0 && min_temperature <= 1)) {
-    throw std::invalid_argument("FitWeightTemperature: min_temperature must lie in (0, 1], got " +
-                                std::to_string(min_temperature));
-  }
+  CheckMinTemperature("FitWeightTemperature", min_temperature);
   for (const WeightTemperatureCase& c : cases) {
     if (c.log_evidence.empty() || c.log_density.size() != c.log_evidence.size()) {
       throw std::invalid_argument(
@@ -606,17 +613,12 @@ double FitWeightTemperature(const std::vector<WeightTemperatureCase>& cases,
     for (const WeightTemperatureCase& c : cases) {
       // log sum_m w_m p_m with w = softmax(log Z / tau), both sums by log-sum-exp.
       const double top = *std::max_element(c.log_evidence.begin(), c.log_evidence.end());
-      double norm = 0, top_joint = -std::numeric_limits<double>::infinity();
-      std::vector<double> joint(c.log_evidence.size());
+      std::vector<double> log_weight(c.log_evidence.size()), joint(c.log_evidence.size());
       for (std::size_t m = 0; m < joint.size(); ++m) {
-        const double lw = (c.log_evidence[m] - top) / tau;
-        norm += std::exp(lw);
-        joint[m] = lw + c.log_density[m];
-        top_joint = std::max(top_joint, joint[m]);
+        log_weight[m] = (c.log_evidence[m] - top) / tau;
+        joint[m] = log_weight[m] + c.log_density[m];
       }
-      double sum = 0;
-      for (double j : joint) sum += std::exp(j - top_joint);
-      score += top_joint + std::log(sum) - std::log(norm);
+      score += internal::LogSumExp(joint) - internal::LogSumExp(log_weight);
     }
     // Ties (the weights saturated) keep the larger tau.
     if (score > best_score + 1e-12) best_score = score, best_tau = tau;
