@@ -27,6 +27,7 @@
 #include "apps/bench.h"
 #include "apps/bench/fit_common.h"
 #include "apps/command.h"
+#include "apps/model_inputs.h"
 #include "apps/progress_bar.h"
 #include "estimation/data/image_io.h"
 #include "estimation/data/trunk_targets.h"
@@ -80,9 +81,13 @@ void RunPoseMcmcBench(const PoseMcmcFlags& flags) {
   }
   const FunctaModel model = FunctaModel::Load(flags.model);
   const SensorTrunk& trunk = model.Trunk(SensorKind::kSoftBubble);
-  const PoseGenerator generator = PoseGenerator::Load(flags.generator);
+  const PoseGenerator generator =
+      LoadPoseGeneratorFor(flags.generator, model, SensorKind::kSoftBubble, flags.model);
   std::unique_ptr<PoseMlp> mlp;
-  if (!flags.pose_model.empty()) mlp = std::make_unique<PoseMlp>(PoseMlp::Load(flags.pose_model));
+  if (!flags.pose_model.empty()) {
+    mlp = std::make_unique<PoseMlp>(
+        LoadPoseModelFor(flags.pose_model, model, SensorKind::kSoftBubble, flags.model));
+  }
   const GeneratorPosterior posterior(trunk, generator, GeneratorPosterior::Options(), nullptr,
                                      mlp.get());
   const ContactSimulator simulator;

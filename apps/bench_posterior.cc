@@ -198,7 +198,8 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
       throw UsageError("--generator: the generator path models Soft Bubble frames, not " +
                        std::string(ToString(sensor)));
     }
-    generator = std::make_unique<PoseGenerator>(PoseGenerator::Load(flags.generator));
+    generator = std::make_unique<PoseGenerator>(
+        LoadPoseGeneratorFor(flags.generator, model, sensor, flags.model));
     knn_starts = std::make_unique<KnnPoseStarts>(functaset, sensor);
     GeneratorPosterior::Options go;
     go.seed = flags.seed;

@@ -467,7 +467,8 @@ cv::Mat BoundPicture(const std::vector<BoundPoint>& points, const std::string& s
 void RunEvalGenerator(const EvalGeneratorFlags& flags) {
   const FunctaModel model = FunctaModel::Load(flags.model);
   const SensorTrunk& trunk = model.Trunk(SensorKind::kSoftBubble);
-  const PoseGenerator generator = PoseGenerator::Load(flags.generator);
+  const PoseGenerator generator =
+      LoadPoseGeneratorFor(flags.generator, model, SensorKind::kSoftBubble, flags.model);
   std::unique_ptr<KnnPoseStarts> knn;
   if (!flags.functaset.empty()) {
     const Functaset functaset = Functaset::Load(flags.functaset);

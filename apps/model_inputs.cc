@@ -216,6 +216,37 @@ PoseMlp LoadPoseModelFor(const std::string& path, const FunctaModel& model, Sens
   return pose;
 }
 
+PoseGenerator LoadPoseGeneratorFor(const std::string& path, const FunctaModel& model,
+                                   SensorKind sensor, const std::string& model_path) {
+  if (!fs::is_regular_file(path)) throw DatasetError("--generator '" + path + "': no such file");
+  PoseGenerator generator = PoseGenerator::Load(path);
+  const int latent_dim = TrunkLatentDim(model.Trunk(sensor));
+  if (generator.latent_dim() != latent_dim) {
+    throw DatasetError("--generator '" + path + "' renders " +
+                       std::to_string(generator.latent_dim()) + "-dimensional latents but the " +
+                       ToString(sensor) + " trunk of --model '" + model_path +
+                       "' has latent dimension " + std::to_string(latent_dim));
+  }
+  const nlohmann::json info = nlohmann::json::parse(generator.info_json());
+  const auto recorded = info.find("model_checksum");
+  if (recorded != info.end()) {
+    if (!recorded->is_number_unsigned()) {
+      throw DatasetError("--generator '" + path +
+                         "': field 'info.model_checksum' must be an unsigned integer");
+    }
+    const std::uint64_t checksum = recorded->get<std::uint64_t>();
+    if (checksum != model.checksum()) {
+      char buffer[128];
+      std::snprintf(buffer, sizeof(buffer), "0x%08llx, but --model has 0x%08x",
+                    static_cast<unsigned long long>(checksum), model.checksum());
+      throw DatasetError("--generator '" + path + "' was trained through the trunk of model " +
+                         "checksum " + buffer + " ('" + model_path +
+                         "'): it renders through that trunk only");
+    }
+  }
+  return generator;
+}
+
 nlohmann::json DataFramesJson(const SensorInfo& info) {
   return {{"rows", info.rows},
           {"cols", info.cols},

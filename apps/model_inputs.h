@@ -19,6 +19,7 @@
 #include "estimation/knn/knn_index.h"
 #include "models/trunk/functa_model.h"
 #include "models/core/image.h"
+#include "models/pose/pose_generator.h"
 #include "models/pose/pose_mlp.h"
 #include "models/core/sensor.h"
 #include "models/core/sensor_description.h"
@@ -145,6 +146,15 @@ std::string DataDescriptionWhere(const Dataset& dataset, const std::string& data
 
 PoseMlp LoadPoseModelFor(const std::string& path, const FunctaModel& model, SensorKind sensor,
                          const std::string& model_path);
+
+// Loads the pose generator at `path` (--generator) for the `sensor` trunk of `model`
+// (loaded from model_path, for messages) and checks that it renders through that trunk:
+// the latent dimension, and the trunk's checksum where the generator recorded the model
+// it was trained on (`train-generator` writes "model_checksum" into its info). Another
+// trunk of the same latent size would render garbage without a word. Throws DatasetError
+// naming the file and what differs.
+PoseGenerator LoadPoseGeneratorFor(const std::string& path, const FunctaModel& model,
+                                   SensorKind sensor, const std::string& model_path);
 
 }  // namespace tactfunc::apps
 

@@ -435,7 +435,8 @@ void RunGeneratorPose(const PoseFlags& flags, const FunctaModel& model, const In
                      "train-generator`, e.g. models/pretrained/pose_generator_bubble.tpg)");
   }
   const SensorTrunk& trunk = model.Trunk(input.sensor);
-  const PoseGenerator generator = PoseGenerator::Load(flags.generator);
+  const PoseGenerator generator =
+      LoadPoseGeneratorFor(flags.generator, model, input.sensor, flags.model);
   if (!tool.empty() && generator.ToolIndex(tool) < 0) {
     std::string names;
     for (const std::string& t : generator.options().tools) names += (names.empty() ? "" : ", ") + t;

@@ -21,6 +21,7 @@
 #include "gtest/gtest.h"
 #include "estimation/posterior/pose_posterior.h"
 #include "tests/apps/cli_test_util.h"
+#include "models/pose/pose_generator.h"
 #include "models/pose/pose_mlp.h"
 #include "nlohmann/json.hpp"
 #include "tests/support/dataset_test_util.h"
@@ -443,6 +444,23 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
           " --pose-model " + Root("p.tpm") + " --data " + Root("d") + " --id 000003");
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_THAT(r.err, HasSubstr("does not know it"));
+  // A generator renders through the trunk it was trained with: one that recorded another
+  // model's checksum is refused by every command that loads one, naming the file.
+  PoseGenerator other = PoseGenerator::Load(Root("g.tpg"));
+  nlohmann::json recorded = nlohmann::json::parse(other.info_json());
+  ASSERT_TRUE(recorded.contains("model_checksum"));
+  recorded["model_checksum"] = recorded["model_checksum"].get<std::uint64_t>() ^ 1u;
+  other.set_info_json(recorded.dump());
+  other.Save(Root("g_other.tpg"));
+  for (const std::string& command :
+       {args + " --generator " + Root("g_other.tpg"),
+        "eval-generator --model " + Root("m.tfm") + " --generator " + Root("g_other.tpg") +
+            " --contacts-per-tool 1"}) {
+    r = Run(command);
+    EXPECT_NE(r.exit_code, 0) << command;
+    EXPECT_THAT(r.err, HasSubstr("g_other.tpg' was trained through the trunk of model checksum"))
+        << command;
+  }
 }
 
 TEST_F(PoseCliTest, PoseReadsAFrameAndReferenceFromFiles) {
