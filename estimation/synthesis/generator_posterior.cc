@@ -303,8 +303,13 @@ std::string GeneratorPosterior::Summary::BriefReport() const {
 
 GeneratorPosterior::GeneratorPosterior(const SensorTrunk& trunk, const PoseGenerator& generator,
                                        const Options& options, const KnnPoseStarts* knn,
-                                       const PoseMlp* pose_mlp)
-    : trunk_(&trunk), generator_(&generator), options_(options), knn_(knn), pose_mlp_(pose_mlp) {
+                                       const PoseMlp* pose_mlp, const SensorTrunk* pose_mlp_trunk)
+    : trunk_(&trunk),
+      generator_(&generator),
+      options_(options),
+      knn_(knn),
+      pose_mlp_(pose_mlp),
+      pose_mlp_trunk_(pose_mlp_trunk == &trunk ? nullptr : pose_mlp_trunk) {
   std::string error;
   if (!options_.IsValid(&error)) throw std::invalid_argument(error);
   if (trunk.photometric != nullptr) {
@@ -317,21 +322,35 @@ GeneratorPosterior::GeneratorPosterior(const SensorTrunk& trunk, const PoseGener
                                 std::to_string(generator.latent_dim()) + " is not the trunk's " +
                                 std::to_string(trunk.siren.latent_dim()));
   }
-  if (pose_mlp != nullptr && pose_mlp->input_dim() != trunk.siren.latent_dim()) {
-    throw std::invalid_argument("GeneratorPosterior: the pose MLP's input_dim is not the trunk's "
-                                "latent_dim");
+  const SensorTrunk& mlp_trunk = pose_mlp_trunk_ != nullptr ? *pose_mlp_trunk_ : trunk;
+  if (pose_mlp != nullptr && pose_mlp->input_dim() != mlp_trunk.siren.latent_dim()) {
+    throw std::invalid_argument(
+        "GeneratorPosterior: the pose MLP's input_dim is not its trunk's "
+        "latent_dim");
+  }
+  if (pose_mlp_trunk_ != nullptr) {
+    const FrameFormat& a = trunk.format;
+    const FrameFormat& b = pose_mlp_trunk_->format;
+    if (a.rows != b.rows || a.cols != b.cols || a.grayscale != b.grayscale ||
+        a.per_image_min_max != b.per_image_min_max || a.scale != b.scale ||
+        pose_mlp_trunk_->photometric != nullptr) {
+      throw std::invalid_argument(
+          "GeneratorPosterior: the pose MLP's trunk works at another frame format (or is "
+          "photometric) than the generator's trunk; the frame's targets cannot serve both");
+    }
   }
 }
 
 std::vector<PoseStart> GeneratorPosterior::Starts(const LatentProblem& problem,
-                                                  const Eigen::VectorXf& query,
-                                                  int tool_index) const {
+                                                  const Eigen::VectorXf& query, int tool_index,
+                                                  const Eigen::VectorXf* mlp_query) const {
   const std::string& tool = generator_->options().tools[tool_index];
   const int n = generator_->SymmetryOrder(tool_index);
   std::vector<PoseStart> starts;
   if (knn_ != nullptr) starts = knn_->Starts(query, tool, options_.knn_k);
   if (pose_mlp_ != nullptr) {
-    const SE2d p = pose_mlp_->Predict(query.cast<double>(), n);
+    const SE2d p =
+        pose_mlp_->Predict((mlp_query != nullptr ? *mlp_query : query).cast<double>(), n);
     starts.push_back({p, 0.5 * (options_.fit.depth_min_m + options_.fit.depth_max_m), "mlp"});
   }
   if (knn_ == nullptr) {
@@ -405,10 +424,18 @@ GeneratorPosterior::Summary GeneratorPosterior::Estimate(const TrunkTargets& tar
     if (mixture != nullptr) *mixture = PoseMixture();
     return summary;
   }
-  Eigen::VectorXf query;
-  if (knn_ != nullptr || pose_mlp_ != nullptr) {
+  Eigen::VectorXf query, mlp_query;
+  if (knn_ != nullptr || (pose_mlp_ != nullptr && pose_mlp_trunk_ == nullptr)) {
     query = problem.MetaSgdSteps(Eigen::VectorXd::Zero(problem.dim()), trunk_->meta_sgd.inner_steps)
                 .cast<float>();
+  }
+  if (pose_mlp_ != nullptr && pose_mlp_trunk_ != nullptr) {
+    // The pose MLP's own latent map: the same pixels under its trunk.
+    const LatentProblem mlp_problem(*pose_mlp_trunk_, targets, options_.problem);
+    mlp_query = mlp_problem
+                    .MetaSgdSteps(Eigen::VectorXd::Zero(mlp_problem.dim()),
+                                  pose_mlp_trunk_->meta_sgd.inner_steps)
+                    .cast<float>();
   }
   struct ToolModes {
     int tool;
@@ -417,7 +444,8 @@ GeneratorPosterior::Summary GeneratorPosterior::Estimate(const TrunkTargets& tar
   std::vector<ToolModes> all;
   double best_msr = std::numeric_limits<double>::infinity();
   for (int t : candidates) {
-    const std::vector<PoseStart> starts = Starts(problem, query, t);
+    const std::vector<PoseStart> starts =
+        Starts(problem, query, t, pose_mlp_trunk_ != nullptr ? &mlp_query : nullptr);
     summary.num_starts += static_cast<int>(starts.size());
     ToolModes tm{t, FitPoseModes(problem, *generator_, t, starts, options_.fit,
                                           coarse ? &*coarse : nullptr)};

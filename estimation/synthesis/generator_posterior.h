@@ -198,12 +198,17 @@ class GeneratorPosterior {
     std::string BriefReport() const;
   };
 
-  // trunk, generator (and knn, pose_mlp if given) must outlive this. Throws
-  // std::invalid_argument for bad options or a generator whose latent_dim is not the
-  // trunk's.
+  // trunk, generator (and knn, pose_mlp, pose_mlp_trunk if given) must outlive this.
+  // pose_mlp_trunk: the trunk whose latents the pose MLP reads, when it is not `trunk`
+  // (a generator trained through a larger trunk than the pose MLP's): its start then comes
+  // from the frame's meta-SGD latent under pose_mlp_trunk, which must work at trunk's
+  // frame format (the same targets serve both). Throws std::invalid_argument for bad
+  // options, a generator whose latent_dim is not the trunk's, a pose MLP whose input is not
+  // its trunk's latent, or formats that differ.
   GeneratorPosterior(const SensorTrunk& trunk, const PoseGenerator& generator,
                      const Options& options, const KnnPoseStarts* knn = nullptr,
-                     const PoseMlp* pose_mlp = nullptr);
+                     const PoseMlp* pose_mlp = nullptr,
+                     const SensorTrunk* pose_mlp_trunk = nullptr);
 
   // The posterior of one frame. tool = "" fits every tool of the generator; else only
   // that tool (throws std::invalid_argument if the generator does not know it).
@@ -213,11 +218,12 @@ class GeneratorPosterior {
   const Options& options() const { return options_; }
 
   // The starts of one tool's search (k-NN labels near `query`, the frame's meta-SGD
-  // latent; the pose MLP at it; else a yaw grid at the centre; then the flipped yaws,
-  // the position grid around the first start and the yaw grid at every start position,
-  // as Options says). Estimate scores and refines them (FitPoseModes).
+  // latent; the pose MLP at it, or at `mlp_query` if given (the latent under the pose
+  // MLP's own trunk); else a yaw grid at the centre; then the flipped yaws, the position
+  // grid around the first start and the yaw grid at every start position, as Options
+  // says). Estimate scores and refines them (FitPoseModes).
   std::vector<PoseStart> Starts(const LatentProblem& problem, const Eigen::VectorXf& query,
-                                int tool_index) const;
+                                int tool_index, const Eigen::VectorXf* mlp_query = nullptr) const;
 
  private:
   bool yaw_grid_active(int symmetry_order) const {
@@ -229,6 +235,7 @@ class GeneratorPosterior {
   Options options_;
   const KnnPoseStarts* knn_;
   const PoseMlp* pose_mlp_;
+  const SensorTrunk* pose_mlp_trunk_;  // null: the pose MLP reads trunk_'s latents
 };
 
 // kappa such that the 90% regions of the best mode's Laplace Gaussian (x, y, yaw; sigma =

@@ -15,6 +15,7 @@
 #include "ceres/dynamic_numeric_diff_cost_function.h"
 #include "ceres/jet.h"
 #include "estimation/synthesis/generator_posterior.h"
+#include "models/pose/pose_mlp.h"
 #include "models/simulator/tool.h"
 #include "tests/support/sampler_test_util.h"
 
@@ -319,6 +320,41 @@ TEST(FitWeightTemperature, MatchesHowOftenTheHeaviestModeHoldsTheTruth) {
   EXPECT_THROW(FitWeightTemperature({{{1.0, 0.0}, {0.0}}}, 0.05), std::invalid_argument);
   EXPECT_THROW(FitWeightTemperature(cases, 0), std::invalid_argument);
   EXPECT_THROW(FitWeightTemperature(cases, 1.5), std::invalid_argument);
+}
+
+// A pose MLP that reads another trunk's latents (a generator trained through a larger
+// trunk than the pose MLP's): its start is the MLP at the frame's meta-SGD latent under
+// its own trunk, and a trunk of another frame format, or none for a mismatched MLP, is
+// refused.
+TEST(GeneratorPosterior, APoseMlpOnItsOwnTrunkStartsFromThatTrunksLatent) {
+  const SensorTrunk trunk = Trunk();
+  const PoseGenerator g = Generator();
+  const SensorTrunk other = testing_util::MakeTinyTrunk(kRows, kCols, 16, 2, 4, 23);  // d = 4
+  PoseMlp::Options mo;
+  mo.input_dim = 4;
+  mo.hidden_sizes = {8};
+  const PoseMlp mlp(mo, 3);
+  const TrunkTargets targets = Render(trunk, g, 1, SE2d::FromXYYaw(1e-3, -2e-3, 0.3), 0.010);
+  const GeneratorPosterior::Options options;
+  const GeneratorPosterior posterior(trunk, g, options, nullptr, &mlp, &other);
+  const LatentProblem problem(trunk, targets, options.problem);
+  const LatentProblem own(other, targets, options.problem);
+  const Eigen::VectorXf query =
+      own.MetaSgdSteps(Eigen::VectorXd::Zero(own.dim()), other.meta_sgd.inner_steps).cast<float>();
+  const SE2d expected = mlp.Predict(query.cast<double>(), g.SymmetryOrder(1));
+  int found = 0;
+  for (const PoseStart& start : posterior.Starts(problem, Eigen::VectorXf(), 1, &query)) {
+    if (start.source != "mlp") continue;
+    ++found;
+    EXPECT_EQ(start.sensor_T_object.x(), expected.x());
+    EXPECT_EQ(start.sensor_T_object.y(), expected.y());
+    EXPECT_EQ(start.sensor_T_object.yaw(), expected.yaw());
+  }
+  EXPECT_EQ(found, 1);
+  EXPECT_TRUE(posterior.Estimate(targets, g.options().tools[1], nullptr).usable);
+  EXPECT_THROW(GeneratorPosterior(trunk, g, options, nullptr, &mlp), std::invalid_argument);
+  const SensorTrunk wider = testing_util::MakeTinyTrunk(kRows, kCols + 1, 16, 2, 4, 23);
+  EXPECT_THROW(GeneratorPosterior(trunk, g, options, nullptr, &mlp, &wider), std::invalid_argument);
 }
 
 // The yaw grid copies every start position to the grid's yaws: each added start sits
