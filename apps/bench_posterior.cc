@@ -89,6 +89,8 @@ struct PosteriorBenchFlags {
   double sigma_z = 0;
   double sigma = 0;
   std::string generator;  // adds the generator path's row (bubble)
+  std::string generator_model;      // the generator's trunk, if not --model's
+  std::string generator_functaset;  // k-NN starts under --generator-model
 };
 
 struct Tally {
@@ -190,6 +192,7 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
   if (need_knn) {
     knn = MakeFunctasetKnn(functaset, sensor, /*train_only=*/true, options.knn, flags.functaset);
   }
+  std::unique_ptr<FunctaModel> generator_model;
   std::unique_ptr<PoseGenerator> generator;
   std::unique_ptr<KnnPoseStarts> knn_starts;
   std::unique_ptr<GeneratorPosterior> generator_posterior;
@@ -198,13 +201,36 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
       throw UsageError("--generator: the generator path models Soft Bubble frames, not " +
                        std::string(ToString(sensor)));
     }
+    // The generator's trunk: --generator-model's (its k-NN starts from
+    // --generator-functaset, if given), else --model's (k-NN starts from --functaset).
+    const FunctaModel* renderer = &model;
+    std::string renderer_path = flags.model;
+    if (!flags.generator_model.empty()) {
+      generator_model = std::make_unique<FunctaModel>(FunctaModel::Load(flags.generator_model));
+      renderer = generator_model.get();
+      renderer_path = flags.generator_model;
+      if (!renderer->HasSensor(sensor)) {
+        throw DatasetError("--generator-model '" + flags.generator_model +
+                           "' has no trunk for sensor " + ToString(sensor));
+      }
+    } else if (!flags.generator_functaset.empty()) {
+      throw UsageError(
+          "--generator-functaset goes with --generator-model (without it the "
+          "generator path's k-NN starts come from --functaset)");
+    }
     generator = std::make_unique<PoseGenerator>(
-        LoadPoseGeneratorFor(flags.generator, model, sensor, flags.model));
-    knn_starts = std::make_unique<KnnPoseStarts>(functaset, sensor);
+        LoadPoseGeneratorFor(flags.generator, *renderer, sensor, renderer_path));
+    if (renderer == &model) {
+      knn_starts = std::make_unique<KnnPoseStarts>(functaset, sensor);
+    } else if (!flags.generator_functaset.empty()) {
+      const Functaset own = Functaset::Load(flags.generator_functaset);
+      own.CheckModel(*renderer, renderer_path, flags.generator_functaset);
+      knn_starts = std::make_unique<KnnPoseStarts>(own, sensor);
+    }
     GeneratorPosterior::Options go;
     go.seed = flags.seed;
-    generator_posterior = std::make_unique<GeneratorPosterior>(trunk, *generator, go,
-                                                               knn_starts.get(), &pose_model);
+    generator_posterior = std::make_unique<GeneratorPosterior>(
+        renderer->Trunk(sensor), *generator, go, knn_starts.get(), &pose_model, &trunk);
   }
   std::vector<std::unique_ptr<PosePosterior>> posteriors;
   for (std::size_t s = 0; s < num_latent; ++s) {
@@ -521,6 +547,12 @@ void RegisterPosteriorBenchmark(CLI::App* bench, CommandBody* selected) {
   sub->add_option("--generator", flags->generator,
                   "Generator (.tpg): adds the generator path's row (Laplace mixture over the "
                   "pose modes, k-NN starts from --functaset, the label's tool; bubble only)");
+  sub->add_option("--generator-model", flags->generator_model,
+                  "Model whose trunk --generator renders through, if not --model's (same frame "
+                  "format; the pose model's start still reads --model's latents)");
+  sub->add_option("--generator-functaset", flags->generator_functaset,
+                  "With --generator-model: a functaset of that model for the generator path's "
+                  "k-NN starts (without it, none)");
   sub->add_option("--samples", flags->samples, "Pose samples per posterior (default 100)")
       ->check(CLI::Range(1, 1000000));
   sub->add_option("--seed", flags->seed, "Sampler seed (default 0)");

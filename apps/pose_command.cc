@@ -120,6 +120,7 @@ struct PoseFlags {
   std::string sampler;  // "": sgld, or laplace for a photometric trunk
   std::string method = "latent";
   std::string generator;
+  std::string generator_model;  // the generator's trunk, if not --model's
   int samples = 100;
   std::uint64_t seed = 0;
   int knn_k = 8;
@@ -434,9 +435,33 @@ void RunGeneratorPose(const PoseFlags& flags, const FunctaModel& model, const In
     throw UsageError("--method generator needs --generator G.tpg (from `tactfunc "
                      "train-generator`, e.g. models/pretrained/pose_generator_bubble.tpg)");
   }
-  const SensorTrunk& trunk = model.Trunk(input.sensor);
+  // The trunk the generator renders through: --generator-model's, else --model's. The pose
+  // model's start reads --model's latents either way (GeneratorPosterior's pose_mlp_trunk).
+  std::optional<FunctaModel> own_model;
+  const FunctaModel* generator_model = &model;
+  std::string generator_model_path = flags.model;
+  if (!flags.generator_model.empty()) {
+    own_model.emplace(FunctaModel::Load(flags.generator_model));
+    generator_model = &*own_model;
+    generator_model_path = flags.generator_model;
+    if (!own_model->HasSensor(input.sensor)) {
+      throw DatasetError("--generator-model '" + flags.generator_model +
+                         "' has no trunk for sensor " + ToString(input.sensor));
+    }
+    const FrameFormat& a = own_model->Trunk(input.sensor).format;
+    const FrameFormat& b = model.Trunk(input.sensor).format;
+    if (a.rows != b.rows || a.cols != b.cols || a.grayscale != b.grayscale ||
+        a.per_image_min_max != b.per_image_min_max || a.scale != b.scale) {
+      throw DatasetError("--generator-model '" + flags.generator_model + "' works at " +
+                         std::to_string(a.rows) + "x" + std::to_string(a.cols) + ", scale " +
+                         FormatFixed(a.scale, 4) + ", --model '" + flags.model + "' at " +
+                         std::to_string(b.rows) + "x" + std::to_string(b.cols) + ", scale " +
+                         FormatFixed(b.scale, 4) + ": both must see the frame alike");
+    }
+  }
+  const SensorTrunk& trunk = generator_model->Trunk(input.sensor);
   const PoseGenerator generator =
-      LoadPoseGeneratorFor(flags.generator, model, input.sensor, flags.model);
+      LoadPoseGeneratorFor(flags.generator, *generator_model, input.sensor, generator_model_path);
   if (!tool.empty() && generator.ToolIndex(tool) < 0) {
     std::string names;
     for (const std::string& t : generator.options().tools) names += (names.empty() ? "" : ", ") + t;
@@ -447,13 +472,21 @@ void RunGeneratorPose(const PoseFlags& flags, const FunctaModel& model, const In
   std::unique_ptr<KnnPoseStarts> knn;
   if (!flags.functaset.empty()) {
     const Functaset functaset = Functaset::Load(flags.functaset);
-    functaset.CheckModel(model, flags.model, flags.functaset);
-    knn = std::make_unique<KnnPoseStarts>(functaset, input.sensor);
+    if (generator_model != &model && functaset.model_checksum() == model.checksum()) {
+      // The latent path's functaset (--method both): its latents are not the generator
+      // trunk's, so they cannot place the generator's k-NN starts.
+      std::cout << "pose: --functaset holds --model's latents, not --generator-model's: the "
+                   "generator path starts from the pose model and its grids\n";
+    } else {
+      functaset.CheckModel(*generator_model, generator_model_path, flags.functaset);
+      knn = std::make_unique<KnnPoseStarts>(functaset, input.sensor);
+    }
   }
   GeneratorPosterior::Options options;
   options.seed = flags.seed;
   if (flags.max_pixels >= 0) options.problem.max_pixels = flags.max_pixels;
-  const GeneratorPosterior posterior(trunk, generator, options, knn.get(), &pose_model);
+  const GeneratorPosterior posterior(trunk, generator, options, knn.get(), &pose_model,
+                                     &model.Trunk(input.sensor));
   PoseMixture mixture;
   const GeneratorPosterior::Summary gs = posterior.Estimate(targets, tool, &mixture);
   std::cout << gs.BriefReport() << "\n";
@@ -579,6 +612,7 @@ void RunGeneratorPose(const PoseFlags& flags, const FunctaModel& model, const In
         {"sampler", mcmc ? ToString(kernel) : "laplace_mixture"},
         {"model", flags.model},
         {"generator", flags.generator},
+        {"generator_model", generator_model_path},
         {"pose_model", flags.pose_model}};
     if (input.label) {
       record["truth"] = PoseJson(input.label->sensor_T_object);
@@ -956,6 +990,9 @@ void RegisterPose(CLI::App& app, CommandBody* selected) {
                   "path above the generator path)");
   sub->add_option("--generator", flags->generator,
                   "Generator (.tpg) from `tactfunc train-generator`, for --method generator");
+  sub->add_option("--generator-model", flags->generator_model,
+                  "Model whose trunk --generator renders through, if not --model's (the pose "
+                  "model's start still reads --model's latents; the same frame format)");
   sub->add_flag("--unknown-tool", flags->unknown_tool,
                 "--method generator: ignore the label's tool and fit every tool");
   sub->add_option("--sampler", flags->sampler,

@@ -444,6 +444,25 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
           " --pose-model " + Root("p.tpm") + " --data " + Root("d") + " --id 000003");
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_THAT(r.err, HasSubstr("does not know it"));
+  // --generator-model: the generator renders through that model's trunk and the pose
+  // model's start reads --model's latents through its own trunk; the same model given
+  // again gives the same mode. Given the latent path's functaset, the generator path says
+  // it starts without k-NN; a model that sees the frame at another format is refused.
+  const std::string plain = "pose --method generator --model " + Root("m.tfm") + " --pose-model " +
+                            Root("p.tpm") + " --data " + Root("gd") + " --id 000003 --generator " +
+                            Root("g.tpg") + " --json";
+  r = Run(plain);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json alone = r.LastJson();
+  r = Run(plain + " --generator-model " + Root("m.tfm"));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.LastJson()["mean"], alone["mean"]);
+  r = Run(plain + " --generator-model " + Root("m.tfm") + " --functaset " + Root("gf.tfs"));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("--functaset holds --model's latents"));
+  r = Run(plain + " --generator-model " TACTFUNC_SOURCE_DIR "/models/pretrained/bubble.tfm");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.err, HasSubstr("both must see the frame alike"));
   // A generator renders through the trunk it was trained with: one that recorded another
   // model's checksum is refused by every command that loads one, naming the file.
   PoseGenerator other = PoseGenerator::Load(Root("g.tpg"));
