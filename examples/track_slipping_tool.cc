@@ -32,6 +32,9 @@
 //                          generator fits the pose through the trunk (slower, sharper)
 //   --generator G.tpg      pose generator for --sampler generator (default:
 //                          models/pretrained/pose_generator_bubble.tpg in the sources)
+//   --generator-model M.tfm  the trunk the generator renders through (default:
+//                          models/pretrained/bubble.tfm in the sources); the pose MLP's
+//                          start still reads --model's latents
 //   --samples N            pose samples per frame, default 100
 //   --particles N          default 1000
 //   --seed S               default 1 (frames' noise, posteriors and the filter)
@@ -81,6 +84,7 @@ struct Flags {
   std::string tool = "l_shape";
   std::string sampler = "laplace";
   std::string generator = TACTFUNC_SOURCE_DIR "/models/pretrained/pose_generator_bubble.tpg";
+  std::string generator_model = TACTFUNC_SOURCE_DIR "/models/pretrained/bubble.tfm";
   int frames = 30;
   int samples = 100;
   int particles = 1000;
@@ -93,7 +97,8 @@ void Usage(std::FILE* out) {
   std::fprintf(out,
                "usage: example_track_slipping_tool [--model M.tfm] [--pose-model P.tpm] "
                "[--tool NAME] [--frames N]\n"
-               "       [--sampler laplace|sgld|generator] [--generator G.tpg] [--samples N] "
+               "       [--sampler laplace|sgld|generator] [--generator G.tpg] "
+               "[--generator-model M.tfm] [--samples N] "
                "[--particles N] [--seed S] [--constant-velocity] [--skip-if-no-pose-model]\n");
 }
 
@@ -125,6 +130,8 @@ Flags ParseFlags(int argc, char** argv) {
       f.sampler = value();
     } else if (a == "--generator") {
       f.generator = value();
+    } else if (a == "--generator-model") {
+      f.generator_model = value();
     } else if (a == "--frames") {
       f.frames = integer(2);
     } else if (a == "--samples") {
@@ -216,7 +223,9 @@ int Run(const Flags& flags) {
   posterior_options.sampler = sampler;
   posterior_options.num_samples = flags.samples;
   std::optional<PoseGenerator> generator;
+  std::optional<FunctaModel> generator_model;  // the trunk the generator renders through
   if (by_generator) {
+    generator_model.emplace(FunctaModel::Load(flags.generator_model));
     generator.emplace(PoseGenerator::Load(flags.generator));
     if (generator->ToolIndex(flags.tool) < 0) {
       throw std::invalid_argument("--tool '" + flags.tool + "': the generator '" +
@@ -265,7 +274,8 @@ int Run(const Flags& flags) {
       // The scene names its tool: only that tool is modelled.
       GeneratorPosterior::Options options;
       options.seed = frame_seed;
-      const GeneratorPosterior frame_posterior(trunk, *generator, options, nullptr, &pose_mlp);
+      const GeneratorPosterior frame_posterior(generator_model->Trunk(sensor), *generator,
+                                               options, nullptr, &pose_mlp, &trunk);
       PoseMixture mixture;
       const GeneratorPosterior::Summary g = frame_posterior.Estimate(targets, flags.tool, &mixture);
       summary = {g.usable, g.message, g.mean, g.covariance, g.total_time_ms};

@@ -5,11 +5,12 @@
 # reproducible with scripts/train_pretrained_bubble.sh; the GelSlim's photometric trunk in
 # models/pretrained/gelslim.tfm, scripts/train_pretrained_gelslim.sh), the functasets of
 # the dataset and their reconstructions, 128 B per frame each; then one frame's pose
-# posterior by both paths, on the small two-sensor trunk the pose models were trained on
-# (models/pretrained/default.tfm, scripts/train_pretrained.sh): the committed pose model
-# on the frame's latent (models/pretrained/pose_bubble.tpm, scripts/train_pretrained_pose.sh)
+# posterior by both paths: the committed pose model on the frame's latent under the small
+# two-sensor trunk it was trained on (models/pretrained/pose_bubble.tpm on
+# models/pretrained/default.tfm; scripts/train_pretrained_pose.sh, scripts/train_pretrained.sh)
 # and the pose fitted through the committed generator
-# (models/pretrained/pose_generator_bubble.tpg, scripts/train_pretrained_generator.sh).
+# (models/pretrained/pose_generator_bubble.tpg, scripts/train_pretrained_generator.sh)
+# rendering through the Soft Bubble trunk above (--generator-model).
 # Everything lands in demo/.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -41,5 +42,6 @@ ID=$(awk -F, '$2 == "bubble" && $8 == "test" { if (!any) any = $1; if ($3 == "ro
               END { if (!found) print any }' "$OUT/data/labels.csv")
 "$TF" pose --model "$POSE_TRUNK" --pose-model models/pretrained/pose_bubble.tpm --data "$OUT/data" \
   --id "$ID" --sampler sgld --samples 100 --method both \
-  --generator models/pretrained/pose_generator_bubble.tpg --out "$OUT/pose"
+  --generator models/pretrained/pose_generator_bubble.tpg --generator-model "$BUBBLE_MODEL" \
+  --out "$OUT/pose"
 echo "demo: done. Look at $OUT/contact_sheet.png, $OUT/recon/*/recon_*.png and $OUT/pose/posterior.png"

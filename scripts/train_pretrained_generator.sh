@@ -2,7 +2,10 @@
 # Reproduces models/pretrained/pose_generator_bubble.tpg, the pose-conditioned generator of
 # the generator pose posterior (docs/POSES.md, "The generator path"), and the latent-only
 # variant it was compared with. Data: 12 tools x 1000 Soft Bubble contacts, seed 2 (as
-# scripts/train_pretrained_pose.sh), encoded with models/pretrained/default.tfm.
+# scripts/train_pretrained_pose.sh), encoded with models/pretrained/default.tfm (the pose
+# model's trunk: $WORK/f.tfs, the latent-only variant's) and with
+# models/pretrained/bubble.tfm (the Soft Bubble's reconstruction trunk, d = 128: $WORK/f_bubble.tfs),
+# which the committed generator renders through (`pose --generator-model`).
 # A few minutes on one core. Deterministic for the seeds.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -15,7 +18,9 @@ run "$TF" synth --out "$WORK/data" --frames-per-tool 1000 --sensors bubble --see
 run "$TF" encode --model models/pretrained/default.tfm --data "$WORK/data" --out "$WORK/f.tfs" --threads 1
 run "$TF" train-generator --model models/pretrained/default.tfm --functaset "$WORK/f.tfs" \
   --data "$WORK/data" --out "$WORK/g_lat.tpg" --mode latents --epochs 100 --calibration-frames 60
-run "$TF" train-generator --model models/pretrained/default.tfm --functaset "$WORK/f.tfs" \
+run "$TF" encode --model models/pretrained/bubble.tfm --data "$WORK/data" --out "$WORK/f_bubble.tfs" \
+  --threads 1
+run "$TF" train-generator --model models/pretrained/bubble.tfm --functaset "$WORK/f_bubble.tfs" \
   --data "$WORK/data" --out models/pretrained/pose_generator_bubble.tpg --mode pixels \
   --hidden 256,256 --harmonics 8 --epochs 300 --pixel-frames 1000 --pixel-epochs 30 \
   --calibration-frames 60

@@ -1,9 +1,9 @@
 // Copyright 2026 The tactfunc Authors.
 //
 // The generator pose posterior on fresh simulated Soft Bubble contacts (docs/POSES.md,
-// "The generator path"): the committed trunk (default.tfm), generator
-// (pose_generator_bubble.tpg, scripts/train_pretrained_generator.sh) and pose MLP
-// (pose_bubble.tpm, one start), contacts seeded 0x5eed0000 + k (no training data uses
+// "The generator path"): the committed generator (pose_generator_bubble.tpg,
+// scripts/train_pretrained_generator.sh), the trunk it renders through (bubble.tfm) and
+// the pose MLP (pose_bubble.tpm on default.tfm's latents, one start), contacts seeded 0x5eed0000 + k (no training data uses
 // them), the tool given. Without the training functaset the k-NN starts are replaced
 // by a yaw grid. One test checks the 90% regions against the binomial 99% interval, one
 // guards the accuracy the method reaches here (with a margin, so that a regression
@@ -54,12 +54,14 @@ double WithinFive(const Result& r) {
 
 const Result& Measure() {
   static const Result result = [] {
-    const FunctaModel model = FunctaModel::Load(kPretrained + "default.tfm");
+    const FunctaModel model = FunctaModel::Load(kPretrained + "bubble.tfm");
     const SensorTrunk& trunk = model.Trunk(SensorKind::kSoftBubble);
+    const FunctaModel mlp_model = FunctaModel::Load(kPretrained + "default.tfm");
     const PoseGenerator generator = PoseGenerator::Load(kPretrained + "pose_generator_bubble.tpg");
     const PoseMlp mlp = PoseMlp::Load(kPretrained + "pose_bubble.tpm");
     GeneratorPosterior::Options options;
-    const GeneratorPosterior posterior(trunk, generator, options, nullptr, &mlp);
+    const GeneratorPosterior posterior(trunk, generator, options, nullptr, &mlp,
+                                       &mlp_model.Trunk(SensorKind::kSoftBubble));
     const ContactSimulator simulator;
     const Image reference = AsStoredDepth(simulator.Reference(SensorKind::kSoftBubble));
     Result r;
@@ -109,7 +111,8 @@ const Result& Measure() {
 class GeneratorCoverageTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    for (const char* file : {"default.tfm", "pose_generator_bubble.tpg", "pose_bubble.tpm"}) {
+    for (const char* file :
+         {"bubble.tfm", "default.tfm", "pose_generator_bubble.tpg", "pose_bubble.tpm"}) {
       ASSERT_TRUE(std::filesystem::is_regular_file(kPretrained + file))
           << kPretrained + file << " is committed with the repository";
     }
