@@ -6,6 +6,8 @@
 # stand on (models/pretrained/default.tfm: d = 64, 4000 steps); the generator trained on it
 # exactly as scripts/train_pretrained_generator.sh trains the committed one (same
 # contacts, same options), and scored on the same 1,200 fresh contacts by eval-generator.
+# This generator is the committed one since the study (scripts/train_pretrained_generator.sh
+# writes it, the same weights); the script keeps the study's scoring beside it.
 # About 10 minutes on 2 cores. Deterministic for the seeds.
 set -euo pipefail
 cd "$(dirname "$0")/.."
