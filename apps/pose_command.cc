@@ -450,8 +450,7 @@ void RunGeneratorPose(const PoseFlags& flags, const FunctaModel& model, const In
     }
     const FrameFormat& a = own_model->Trunk(input.sensor).format;
     const FrameFormat& b = model.Trunk(input.sensor).format;
-    if (a.rows != b.rows || a.cols != b.cols || a.grayscale != b.grayscale ||
-        a.per_image_min_max != b.per_image_min_max || a.scale != b.scale) {
+    if (!a.SameAs(b)) {
       throw DatasetError("--generator-model '" + flags.generator_model + "' works at " +
                          std::to_string(a.rows) + "x" + std::to_string(a.cols) + ", scale " +
                          FormatFixed(a.scale, 4) + ", --model '" + flags.model + "' at " +

@@ -329,10 +329,7 @@ GeneratorPosterior::GeneratorPosterior(const SensorTrunk& trunk, const PoseGener
         "latent_dim");
   }
   if (pose_mlp_trunk_ != nullptr) {
-    const FrameFormat& a = trunk.format;
-    const FrameFormat& b = pose_mlp_trunk_->format;
-    if (a.rows != b.rows || a.cols != b.cols || a.grayscale != b.grayscale ||
-        a.per_image_min_max != b.per_image_min_max || a.scale != b.scale ||
+    if (!trunk.format.SameAs(pose_mlp_trunk_->format) ||
         pose_mlp_trunk_->photometric != nullptr) {
       throw std::invalid_argument(
           "GeneratorPosterior: the pose MLP's trunk works at another frame format (or is "

@@ -62,6 +62,12 @@ struct FrameFormat {
   bool per_image_min_max = false;  // false: fixed physical scale (a blank frame stays 0)
   double scale = 0;          // fixed scale: the physical difference that maps to 1.0, > 0
   bool IsValid(std::string* error) const;
+  // The same working frame: equal size, channels and normalisation, so that one set of
+  // targets serves two trunks.
+  bool SameAs(const FrameFormat& other) const {
+    return rows == other.rows && cols == other.cols && grayscale == other.grayscale &&
+           per_image_min_max == other.per_image_min_max && scale == other.scale;
+  }
 };
 
 // A photometric trunk's warm-start table (estimation/training/photometric_warm_start.h):
