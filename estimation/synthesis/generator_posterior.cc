@@ -325,8 +325,7 @@ GeneratorPosterior::GeneratorPosterior(const SensorTrunk& trunk, const PoseGener
   const SensorTrunk& mlp_trunk = pose_mlp_trunk_ != nullptr ? *pose_mlp_trunk_ : trunk;
   if (pose_mlp != nullptr && pose_mlp->input_dim() != mlp_trunk.siren.latent_dim()) {
     throw std::invalid_argument(
-        "GeneratorPosterior: the pose MLP's input_dim is not its trunk's "
-        "latent_dim");
+        "GeneratorPosterior: the pose MLP's input_dim is not its trunk's latent_dim");
   }
   if (pose_mlp_trunk_ != nullptr) {
     if (!trunk.format.SameAs(pose_mlp_trunk_->format) ||
