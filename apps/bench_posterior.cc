@@ -192,7 +192,7 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
   if (need_knn) {
     knn = MakeFunctasetKnn(functaset, sensor, /*train_only=*/true, options.knn, flags.functaset);
   }
-  std::unique_ptr<FunctaModel> generator_model;
+  GeneratorModel generator_model;
   std::unique_ptr<PoseGenerator> generator;
   std::unique_ptr<KnnPoseStarts> knn_starts;
   std::unique_ptr<GeneratorPosterior> generator_posterior;
@@ -203,21 +203,14 @@ void RunPosteriorBench(const PosteriorBenchFlags& flags) {
     }
     // The generator's trunk: --generator-model's (its k-NN starts from
     // --generator-functaset, if given), else --model's (k-NN starts from --functaset).
-    const FunctaModel* renderer = &model;
-    std::string renderer_path = flags.model;
-    if (!flags.generator_model.empty()) {
-      generator_model = std::make_unique<FunctaModel>(FunctaModel::Load(flags.generator_model));
-      renderer = generator_model.get();
-      renderer_path = flags.generator_model;
-      if (!renderer->HasSensor(sensor)) {
-        throw DatasetError("--generator-model '" + flags.generator_model +
-                           "' has no trunk for sensor " + ToString(sensor));
-      }
-    } else if (!flags.generator_functaset.empty()) {
+    if (flags.generator_model.empty() && !flags.generator_functaset.empty()) {
       throw UsageError(
           "--generator-functaset goes with --generator-model (without it the "
           "generator path's k-NN starts come from --functaset)");
     }
+    generator_model = LoadGeneratorModel(flags.generator_model, model, flags.model, sensor);
+    const FunctaModel* renderer = generator_model.model;
+    const std::string& renderer_path = generator_model.path;
     generator = std::make_unique<PoseGenerator>(
         LoadPoseGeneratorFor(flags.generator, *renderer, sensor, renderer_path));
     if (renderer == &model) {

@@ -247,6 +247,31 @@ PoseGenerator LoadPoseGeneratorFor(const std::string& path, const FunctaModel& m
   return generator;
 }
 
+GeneratorModel LoadGeneratorModel(const std::string& path, const FunctaModel& model,
+                                  const std::string& model_path, SensorKind sensor) {
+  GeneratorModel g;
+  g.model = &model;
+  g.path = model_path;
+  if (path.empty()) return g;
+  g.owned = std::make_unique<FunctaModel>(FunctaModel::Load(path));
+  g.model = g.owned.get();
+  g.path = path;
+  if (!g.owned->HasSensor(sensor)) {
+    throw DatasetError("--generator-model '" + path + "' has no trunk for sensor " +
+                       ToString(sensor));
+  }
+  const FrameFormat& a = g.owned->Trunk(sensor).format;
+  const FrameFormat& b = model.Trunk(sensor).format;
+  if (!a.SameAs(b)) {
+    throw DatasetError("--generator-model '" + path + "' works at " + std::to_string(a.rows) + "x" +
+                       std::to_string(a.cols) + ", scale " + FormatFixed(a.scale, 4) +
+                       ", --model '" + model_path + "' at " + std::to_string(b.rows) + "x" +
+                       std::to_string(b.cols) + ", scale " + FormatFixed(b.scale, 4) +
+                       ": both must see the frame alike");
+  }
+  return g;
+}
+
 nlohmann::json DataFramesJson(const SensorInfo& info) {
   return {{"rows", info.rows},
           {"cols", info.cols},

@@ -156,6 +156,19 @@ PoseMlp LoadPoseModelFor(const std::string& path, const FunctaModel& model, Sens
 PoseGenerator LoadPoseGeneratorFor(const std::string& path, const FunctaModel& model,
                                    SensorKind sensor, const std::string& model_path);
 
+// The model a pose generator renders through (--generator-model): `model` itself (owned
+// empty, path model_path) when `path` is empty, else the model loaded from `path`, checked
+// to have a `sensor` trunk that sees the frame at the format of `model`'s (the frame's
+// targets are made once, for `model`; FrameFormat::SameAs). Throws DatasetError naming
+// both models.
+struct GeneratorModel {
+  std::unique_ptr<FunctaModel> owned;  // null when the generator renders through --model
+  const FunctaModel* model = nullptr;
+  std::string path;
+};
+GeneratorModel LoadGeneratorModel(const std::string& path, const FunctaModel& model,
+                                  const std::string& model_path, SensorKind sensor);
+
 }  // namespace tactfunc::apps
 
 #endif  // TACTFUNC_APPS_MODEL_INPUTS_H_

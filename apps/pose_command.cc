@@ -437,27 +437,10 @@ void RunGeneratorPose(const PoseFlags& flags, const FunctaModel& model, const In
   }
   // The trunk the generator renders through: --generator-model's, else --model's. The pose
   // model's start reads --model's latents either way (GeneratorPosterior's pose_mlp_trunk).
-  std::optional<FunctaModel> own_model;
-  const FunctaModel* generator_model = &model;
-  std::string generator_model_path = flags.model;
-  if (!flags.generator_model.empty()) {
-    own_model.emplace(FunctaModel::Load(flags.generator_model));
-    generator_model = &*own_model;
-    generator_model_path = flags.generator_model;
-    if (!own_model->HasSensor(input.sensor)) {
-      throw DatasetError("--generator-model '" + flags.generator_model +
-                         "' has no trunk for sensor " + ToString(input.sensor));
-    }
-    const FrameFormat& a = own_model->Trunk(input.sensor).format;
-    const FrameFormat& b = model.Trunk(input.sensor).format;
-    if (!a.SameAs(b)) {
-      throw DatasetError("--generator-model '" + flags.generator_model + "' works at " +
-                         std::to_string(a.rows) + "x" + std::to_string(a.cols) + ", scale " +
-                         FormatFixed(a.scale, 4) + ", --model '" + flags.model + "' at " +
-                         std::to_string(b.rows) + "x" + std::to_string(b.cols) + ", scale " +
-                         FormatFixed(b.scale, 4) + ": both must see the frame alike");
-    }
-  }
+  const GeneratorModel renderer =
+      LoadGeneratorModel(flags.generator_model, model, flags.model, input.sensor);
+  const FunctaModel* generator_model = renderer.model;
+  const std::string& generator_model_path = renderer.path;
   const SensorTrunk& trunk = generator_model->Trunk(input.sensor);
   const PoseGenerator generator =
       LoadPoseGeneratorFor(flags.generator, *generator_model, input.sensor, generator_model_path);

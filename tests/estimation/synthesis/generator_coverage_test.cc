@@ -3,8 +3,8 @@
 // The generator pose posterior on fresh simulated Soft Bubble contacts (docs/POSES.md,
 // "The generator path"): the committed generator (pose_generator_bubble.tpg,
 // scripts/train_pretrained_generator.sh), the trunk it renders through (bubble.tfm) and
-// the pose MLP (pose_bubble.tpm on default.tfm's latents, one start), contacts seeded 0x5eed0000 + k (no training data uses
-// them), the tool given. Without the training functaset the k-NN starts are replaced
+// the pose MLP (pose_bubble.tpm on default.tfm's latents, one start), contacts seeded
+// 0x5eed0000 + k (no training data uses them), the tool given. Without the training functaset the k-NN starts are replaced
 // by a yaw grid. One test checks the 90% regions against the binomial 99% interval, one
 // guards the accuracy the method reaches here (with a margin, so that a regression
 // fails): the median yaw error, the share of yaws within 5 deg and the position RMSE.
