@@ -27,6 +27,7 @@
 #include "estimation/data/trunk_targets.h"
 #include "models/trunk/functa_model.h"
 #include "models/trunk/internal/fast_sincos.h"
+#include "models/trunk/internal/small_gemm.h"
 
 namespace tactfunc::apps::bench {
 namespace {
@@ -223,6 +224,32 @@ void RegisterGemmBenchmark() {
     state.counters["GFLOPS"] = benchmark::Counter(2.0 * 4096 * 256 * 256 / 1e9,
                                                   benchmark::Counter::kIsIterationInvariantRate);
   })->Unit(benchmark::kMillisecond);
+  // A layer's product in the passes, W (width x width) times a block of 256 pixels'
+  // activations, by Eigen and by the passes' kernel (internal::Product); and the
+  // reference product by the kernel.
+  auto product = [](const char* name, long rows, long depth, bool kernel) {
+    benchmark::RegisterBenchmark(name, [=](benchmark::State& state) {
+      const Eigen::MatrixXf a = Eigen::MatrixXf::Random(rows, depth),
+                            b = Eigen::MatrixXf::Random(depth, 256);
+      Eigen::MatrixXf c(rows, 256);
+      for (auto _ : state) {
+        if (kernel) {
+          internal::Product(a, b, c, /*accumulate=*/false);
+        } else {
+          c.noalias() = a * b;
+        }
+        benchmark::DoNotOptimize(c.data());
+      }
+      state.counters["GFLOPS"] = benchmark::Counter(
+          2.0 * rows * depth * 256 / 1e9, benchmark::Counter::kIsIterationInvariantRate);
+    })->Unit(benchmark::kMicrosecond);
+  };
+  product("kernel/gemm_float/4096x256x256", 4096, 256, true);
+  for (const long width : {64L, 128L, 256L}) {
+    const std::string shape = std::to_string(width) + "x" + std::to_string(width) + "x256";
+    product(("eigen/layer_product/" + shape).c_str(), width, width, false);
+    product(("kernel/layer_product/" + shape).c_str(), width, width, true);
+  }
 }
 
 // The SIREN's element-wise step for one block of 256 pixels of a width-64 layer: sin and

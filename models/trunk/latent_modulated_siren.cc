@@ -14,6 +14,7 @@
 #include "boost/random/mersenne_twister.hpp"
 #include "boost/random/uniform_real_distribution.hpp"
 #include "models/trunk/internal/fast_sincos.h"
+#include "models/trunk/internal/small_gemm.h"
 
 namespace tactfunc {
 
@@ -234,7 +235,7 @@ void RunForward(const Net<S>& net, double omega_0, const Eigen::MatrixBase<Coord
     // product zeroes its destination before adding the product, one more pass over it.
     // The sum is the same either way (one rounded addition per value).
     pre.colwise() = net.b[l].col(0) + gamma.segment(l * width, width);
-    pre.noalias() += net.W[l] * trace->h[l].leftCols(m);
+    internal::Product(net.W[l], trace->h[l].leftCols(m), pre, /*accumulate=*/true);
     if (spatial != nullptr) spatial->Blend(spatial->P, l * width, pre);
     S* cosine = keep_cosine ? trace->cosine[l].data() : nullptr;
     internal::ScaledSinCos(width * m, static_cast<S>(omega_0), pre.data(), pre.data(),
@@ -291,9 +292,10 @@ void RunBackwardBlock(const Net<S>& net, const std::vector<ParameterBlock>& bloc
     dgamma->segment(l * width, width) += delta.rowwise().sum();
     if (spatial != nullptr) spatial->Scatter(delta, l * width, dP);
     if (dL_dtheta != nullptr && (l == 0 || !first_layer_weights_only)) {
-      block(2 * l).noalias() += delta * trace.h[l].leftCols(m).transpose();
+      internal::Product(delta, trace.h[l].leftCols(m).transpose(), block(2 * l),
+                        /*accumulate=*/true);
     }
-    if (l > 0) layer_g(l - 1).noalias() = net.W[l].transpose() * delta;
+    if (l > 0) internal::Product(net.W[l].transpose(), delta, layer_g(l - 1), false);
   }
 }
 
@@ -642,12 +644,12 @@ struct TangentPass {
     for (int l = 0; l < num_layers; ++l) {
       auto s = s_dot[l].leftCols(m);
       if (l > 0) {
-        s.noalias() = net.W[l] * h_dot[l].leftCols(m);
+        internal::Product(net.W[l], h_dot[l].leftCols(m), s, /*accumulate=*/false);
       } else {
         s.setZero();
       }
       if (dnet) {
-        s.noalias() += dnet->W[l] * trace.h[l].leftCols(m);
+        internal::Product(dnet->W[l], trace.h[l].leftCols(m), s, /*accumulate=*/true);
         s.colwise() += dnet->b[l].col(0) + dgamma_dot.segment(l * width, width);
       } else {
         s.colwise() += dgamma_dot.segment(l * width, width);
@@ -691,12 +693,13 @@ struct TangentPass {
       ddgamma.segment(l * width, width) += ddmm.rowwise().sum();
       if (c.spatial) c.spatial->Scatter(ddmm, l * width, &ddP);
       const auto h_below = trace.h[l].leftCols(m);
-      hv_block(2 * l).noalias() += ddmm * h_below.transpose();
+      internal::Product(ddmm, h_below.transpose(), hv_block(2 * l), /*accumulate=*/true);
       if (l == 0) break;  // h_dot[0] = 0, and nothing lies below
       PreActivationGradient(gm, cosine, omega, &dmm);
-      hv_block(2 * l).noalias() += dmm * h_dot[l].leftCols(m).transpose();
-      gdm.noalias() = net.W[l].transpose() * ddmm;
-      if (dnet) gdm.noalias() += dnet->W[l].transpose() * dmm;
+      internal::Product(dmm, h_dot[l].leftCols(m).transpose(), hv_block(2 * l),
+                        /*accumulate=*/true);
+      internal::Product(net.W[l].transpose(), ddmm, gdm, /*accumulate=*/false);
+      if (dnet) internal::Product(dnet->W[l].transpose(), dmm, gdm, /*accumulate=*/true);
     }
   }
 
@@ -1406,9 +1409,10 @@ void LatentModulatedSiren::ForwardAndLatentJacobian(const MatrixX<Scalar>& coord
       for (int l = num_layers - 1; l >= 0; --l) {
         auto dl = delta->leftCols(m);
         dl.array() *= omega * trace.cosine[l].leftCols(m).array();
-        J.noalias() += A_used.middleRows(l * width, width).transpose() * dl;
+        internal::Product(A_used.middleRows(l * width, width).transpose(), dl, J,
+                          /*accumulate=*/true);
         if (l > 0) {
-          below->leftCols(m).noalias() = net.W[l].transpose() * dl;
+          internal::Product(net.W[l].transpose(), dl, below->leftCols(m), false);
           std::swap(delta, below);
         } else if (J_y_x != nullptr) {
           J_y_x->operator()(Eigen::seqN(begin * channels + ch, m, channels), Eigen::all) =

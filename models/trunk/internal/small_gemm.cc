@@ -1,0 +1,165 @@
+// Copyright 2026 The tactfunc Authors.
+#include "models/trunk/internal/small_gemm.h"
+
+#include <algorithm>
+#include <array>
+#include <utility>
+#include <vector>
+
+#if defined(__AVX512F__)
+#include <immintrin.h>
+#endif
+
+namespace tactfunc {
+namespace internal {
+
+#if defined(__AVX512F__)
+namespace {
+
+constexpr int kTileColumns = 6;  // 4 x 6 accumulators + 4 columns of A + a broadcast
+constexpr long kStripRows = 64;  // 4 registers of 16 floats
+
+// One tile: C's rows [0, 16 RZ) (the last register masked by `last`) x NC columns,
+// A column-major with leading dimension lda; B's value (k, j) at b[k + j * ldb]
+// (kBRows false: B column-major) or b[k * ldb + j] (kBRows true: B row-major, a
+// transposed block of activations). The two layouts are separate instantiations so that
+// the broadcasts' addresses are fixed offsets from one or six pointers: with both strides
+// known only at run time GCC 12 spilled the accumulators and ran at a third of the rate.
+template <int RZ, int NC, bool kBRows>
+void Tile(long depth, const float* a, long lda, const float* b, long ldb, float* c, long ldc,
+          __mmask16 last, bool accumulate) {
+  __m512 acc[RZ][NC];
+#pragma GCC unroll 8
+  for (int j = 0; j < NC; ++j) {
+#pragma GCC unroll 8
+    for (int i = 0; i < RZ; ++i) {
+      acc[i][j] = !accumulate  ? _mm512_setzero_ps()
+                  : i < RZ - 1 ? _mm512_loadu_ps(c + j * ldc + 16 * i)
+                               : _mm512_maskz_loadu_ps(last, c + j * ldc + 16 * i);
+    }
+  }
+  const float* b_column[NC];
+#pragma GCC unroll 8
+  for (int j = 0; j < NC; ++j) b_column[j] = kBRows ? b + j : b + j * ldb;
+  const long b_step = kBRows ? ldb : 1;
+  for (long k = 0; k < depth; ++k) {
+    __m512 column[RZ];
+#pragma GCC unroll 8
+    for (int i = 0; i < RZ; ++i) {
+      column[i] =
+          i < RZ - 1 ? _mm512_loadu_ps(a + 16 * i) : _mm512_maskz_loadu_ps(last, a + 16 * i);
+    }
+    a += lda;
+#pragma GCC unroll 8
+    for (int j = 0; j < NC; ++j) {
+      const __m512 value = _mm512_set1_ps(*b_column[j]);
+      b_column[j] += b_step;
+#pragma GCC unroll 8
+      for (int i = 0; i < RZ; ++i) acc[i][j] = _mm512_fmadd_ps(column[i], value, acc[i][j]);
+    }
+  }
+#pragma GCC unroll 8
+  for (int j = 0; j < NC; ++j) {
+#pragma GCC unroll 8
+    for (int i = 0; i < RZ; ++i) {
+      if (i < RZ - 1) {
+        _mm512_storeu_ps(c + j * ldc + 16 * i, acc[i][j]);
+      } else {
+        _mm512_mask_storeu_ps(c + j * ldc + 16 * i, last, acc[i][j]);
+      }
+    }
+  }
+}
+
+using TileFunction = void (*)(long, const float*, long, const float*, long, float*, long, __mmask16,
+                              bool);
+using TileTable = std::array<std::array<TileFunction, kTileColumns>, 4>;
+
+template <bool kBRows, int RZ, int... NC>
+constexpr std::array<TileFunction, kTileColumns> TileRow(std::integer_sequence<int, NC...>) {
+  return {&Tile<RZ, NC + 1, kBRows>...};
+}
+template <bool kBRows>
+constexpr TileTable Tiles() {
+  constexpr auto columns = std::make_integer_sequence<int, kTileColumns>();
+  return {TileRow<kBRows, 1>(columns), TileRow<kBRows, 2>(columns), TileRow<kBRows, 3>(columns),
+          TileRow<kBRows, 4>(columns)};
+}
+// [B row-major][RZ - 1][NC - 1].
+constexpr TileTable kTiles[2] = {Tiles<false>(), Tiles<true>()};
+
+}  // namespace
+
+bool HaveSmallGemm() { return true; }
+
+bool SmallGemm(long rows, long depth, long cols, const float* a, long a_row_stride,
+               long a_col_stride, const float* b, long b_row_stride, long b_col_stride, float* c,
+               long c_col_stride, bool accumulate) {
+  if (rows <= 0 || cols <= 0) return true;
+  long lda = a_col_stride;
+  if (a_row_stride != 1) {
+    // A transposed (or strided): copied column-major once, so that the tiles read its
+    // columns contiguously. One buffer per thread, grown and kept.
+    thread_local std::vector<float> packed;
+    packed.resize(static_cast<size_t>(rows) * static_cast<size_t>(std::max<long>(depth, 1)));
+    // In 16 x 16 tiles: a row-by-row copy of a transposed 256 x 256 matrix, each read
+    // or each write a stride apart, cost a third of the product's time.
+    constexpr long kSide = 16;
+    for (long i0 = 0; i0 < rows; i0 += kSide) {
+      const long i1 = std::min(rows, i0 + kSide);
+      for (long k0 = 0; k0 < depth; k0 += kSide) {
+        const long k1 = std::min(depth, k0 + kSide);
+        for (long i = i0; i < i1; ++i) {
+          for (long k = k0; k < k1; ++k) {
+            packed[k * rows + i] = a[i * a_row_stride + k * a_col_stride];
+          }
+        }
+      }
+    }
+    a = packed.data();
+    lda = rows;
+  }
+  // B column-major (b_row_stride 1) or row-major (b_col_stride 1) as it is; any other
+  // layout copied column-major first.
+  const bool b_rows = b_col_stride == 1 && b_row_stride != 1;
+  long ldb = b_rows ? b_row_stride : b_col_stride;
+  if (!b_rows && b_row_stride != 1) {
+    thread_local std::vector<float> packed_b;
+    packed_b.resize(static_cast<size_t>(cols) * static_cast<size_t>(std::max<long>(depth, 1)));
+    for (long j = 0; j < cols; ++j) {
+      for (long k = 0; k < depth; ++k) {
+        packed_b[j * depth + k] = b[k * b_row_stride + j * b_col_stride];
+      }
+    }
+    b = packed_b.data();
+    ldb = depth;
+  }
+  const TileTable& tiles = kTiles[b_rows ? 1 : 0];
+  for (long r0 = 0; r0 < rows; r0 += kStripRows) {
+    const long strip = std::min(kStripRows, rows - r0);
+    const int registers = static_cast<int>((strip + 15) / 16);
+    const int tail = static_cast<int>(strip % 16);
+    const __mmask16 last = tail == 0 ? __mmask16(0xFFFF) : __mmask16((1u << tail) - 1);
+    for (long j0 = 0; j0 < cols; j0 += kTileColumns) {
+      const int width = static_cast<int>(std::min<long>(kTileColumns, cols - j0));
+      const float* b_tile = b_rows ? b + j0 : b + j0 * ldb;
+      tiles[registers - 1][width - 1](depth, a + r0, lda, b_tile, ldb, c + r0 + j0 * c_col_stride,
+                                      c_col_stride, last, accumulate);
+    }
+  }
+  return true;
+}
+
+#else  // no AVX-512: the callers use Eigen's product
+
+bool HaveSmallGemm() { return false; }
+
+bool SmallGemm(long, long, long, const float*, long, long, const float*, long, long, float*, long,
+               bool) {
+  return false;
+}
+
+#endif
+
+}  // namespace internal
+}  // namespace tactfunc

@@ -1,0 +1,71 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// The float matrix products of the SIREN's batched passes: C = A B or C += A B with A
+// a layer's weights (width x width, or transposed) or a block's gradients (width x 256
+// pixels), B a block of activations. Eigen 3.4's general product runs these shapes
+// below its own large-matrix rate: its AVX-512 micro-kernel covers 48 rows x 4 columns,
+// so a 64-row product leaves a 16-row strip with four accumulators (FMA-latency bound),
+// and it packs the right-hand block on every call. SmallGemm's AVX-512 kernel keeps a
+// tile of up to 64 rows x 6 columns of C in 24 registers, reads A's columns where they
+// are (a layer's weights: contiguous) and broadcasts B's values from where they are,
+// so nothing is packed unless A is transposed (then A is copied once per call, a
+// width^2 copy against width^2 x 256 multiply-adds). docs/BENCHMARKS.md, "Our own
+// small-matrix kernel", has the measurements.
+//
+// The sums run over the inner dimension in order, one rounding per multiply-add, so a
+// product's values can differ from Eigen's by float rounding (a few ulps); they are the
+// same on every run and thread count.
+#ifndef TACTFUNC_MODELS_TRUNK_INTERNAL_SMALL_GEMM_H_
+#define TACTFUNC_MODELS_TRUNK_INTERNAL_SMALL_GEMM_H_
+
+#include <type_traits>
+
+#include "Eigen/Core"
+
+namespace tactfunc {
+namespace internal {
+
+// C (rows x cols, column j at c + j * c_col_stride) = A B, or += A B if accumulate, with
+// A (rows x depth) at a[i * a_row_stride + k * a_col_stride] and B (depth x cols) at
+// b[k * b_row_stride + j * b_col_stride]. C must not overlap A or B. Returns false and
+// leaves C untouched when this build has no kernel (compiled without AVX-512); the
+// caller then computes the product itself.
+bool SmallGemm(long rows, long depth, long cols, const float* a, long a_row_stride,
+               long a_col_stride, const float* b, long b_row_stride, long b_col_stride, float* c,
+               long c_col_stride, bool accumulate);
+
+// True when SmallGemm has a kernel in this build.
+bool HaveSmallGemm();
+
+// c = a * b (accumulate false) or c += a * b, with c not aliasing a or b (as Eigen's
+// noalias()). Float products of directly accessible operands with c column-major go
+// through SmallGemm; everything else (double, expressions) through Eigen.
+template <typename Lhs, typename Rhs, typename Dst>
+void Product(const Eigen::MatrixBase<Lhs>& a, const Eigen::MatrixBase<Rhs>& b, Dst&& c,
+             bool accumulate) {
+  using D = std::decay_t<Dst>;
+  constexpr bool kDirect =
+      bool(Lhs::Flags & Eigen::DirectAccessBit) && bool(Rhs::Flags & Eigen::DirectAccessBit) &&
+      bool(D::Flags & Eigen::DirectAccessBit) && bool(D::Flags & Eigen::LvalueBit);
+  if constexpr (kDirect && std::is_same_v<typename D::Scalar, float> &&
+                std::is_same_v<typename Lhs::Scalar, float> &&
+                std::is_same_v<typename Rhs::Scalar, float>) {
+    eigen_assert(c.rows() == a.rows() && c.cols() == b.cols() && a.cols() == b.rows());
+    if (c.rowStride() == 1 &&
+        SmallGemm(a.rows(), a.cols(), b.cols(), a.derived().data(), a.rowStride(), a.colStride(),
+                  b.derived().data(), b.rowStride(), b.colStride(), c.derived().data(),
+                  c.colStride(), accumulate)) {
+      return;
+    }
+  }
+  if (accumulate) {
+    c.noalias() += a * b;
+  } else {
+    c.noalias() = a * b;
+  }
+}
+
+}  // namespace internal
+}  // namespace tactfunc
+
+#endif  // TACTFUNC_MODELS_TRUNK_INTERNAL_SMALL_GEMM_H_

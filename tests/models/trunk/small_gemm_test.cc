@@ -1,0 +1,139 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// SmallGemm against a double-precision product over the shapes the SIREN's passes use and
+// their edges: strips of 64 rows with a masked tail, tiles of 6 columns with a remainder,
+// an empty inner dimension, transposed operands, blocks of larger matrices, "=" and "+=".
+#include "models/trunk/internal/small_gemm.h"
+
+#include <cmath>
+#include <string>
+
+#include "gtest/gtest.h"
+
+namespace tactfunc {
+namespace {
+
+using Eigen::MatrixXd;
+using Eigen::MatrixXf;
+
+// Deterministic values in [-1, 1) (a linear congruential sequence).
+MatrixXf Numbers(long rows, long cols, unsigned seed) {
+  MatrixXf m(rows, cols);
+  unsigned state = seed * 2654435761u + 12345u;
+  for (long j = 0; j < cols; ++j) {
+    for (long i = 0; i < rows; ++i) {
+      state = state * 1664525u + 1013904223u;
+      m(i, j) = static_cast<float>(state >> 8) / static_cast<float>(1u << 23) - 1.0f;
+    }
+  }
+  return m;
+}
+
+// Within float rounding of the double product: each value's error is bounded by
+// depth * eps * sum_k |a_ik b_kj| (a sum in order, one rounding per multiply-add).
+void ExpectClose(const MatrixXf& got, const MatrixXd& want, const MatrixXd& magnitude, long depth,
+                 const std::string& what) {
+  ASSERT_EQ(got.rows(), want.rows()) << what;
+  ASSERT_EQ(got.cols(), want.cols()) << what;
+  const double eps = 1.2e-7;
+  for (long j = 0; j < got.cols(); ++j) {
+    for (long i = 0; i < got.rows(); ++i) {
+      const double bound = (depth + 2) * eps * (magnitude(i, j) + 1e-30);
+      ASSERT_LE(std::abs(got(i, j) - want(i, j)), bound)
+          << what << " at (" << i << ", " << j << ")";
+    }
+  }
+}
+
+struct Shape {
+  long rows, depth, cols;
+};
+
+TEST(SmallGemm, MatchesADoubleProductOverShapesTransposesAndBlocks) {
+  const Shape shapes[] = {{1, 1, 1},       {5, 3, 7},      {16, 64, 6},    {17, 2, 256},
+                          {48, 64, 13},    {64, 64, 256},  {65, 7, 5},     {100, 33, 12},
+                          {128, 128, 256}, {130, 256, 19}, {256, 256, 64}, {64, 256, 64},
+                          {64, 0, 9}};
+  unsigned seed = 1;
+  for (const Shape& s : shapes) {
+    for (const bool transpose_a : {false, true}) {
+      for (const bool transpose_b : {false, true}) {
+        for (const bool accumulate : {false, true}) {
+          const std::string what = std::to_string(s.rows) + "x" + std::to_string(s.depth) + "x" +
+                                   std::to_string(s.cols) + (transpose_a ? " A^T" : "") +
+                                   (transpose_b ? " B^T" : "") + (accumulate ? " +=" : " =");
+          // Operands stored as blocks of larger matrices, so that every stride differs
+          // from the block's own size.
+          const MatrixXf a_store = transpose_a ? Numbers(s.depth + 3, s.rows + 2, seed++)
+                                               : Numbers(s.rows + 3, s.depth + 2, seed++);
+          const MatrixXf b_store = transpose_b ? Numbers(s.cols + 1, s.depth + 4, seed++)
+                                               : Numbers(s.depth + 1, s.cols + 4, seed++);
+          MatrixXf c_store = Numbers(s.rows + 5, s.cols + 2, seed++);
+          const MatrixXf c_before = c_store;
+          const MatrixXf a = transpose_a
+                                 ? MatrixXf(a_store.block(1, 2, s.depth, s.rows).transpose())
+                                 : MatrixXf(a_store.block(1, 2, s.rows, s.depth));
+          const MatrixXf b = transpose_b
+                                 ? MatrixXf(b_store.block(1, 3, s.cols, s.depth).transpose())
+                                 : MatrixXf(b_store.block(1, 3, s.depth, s.cols));
+          auto c = c_store.block(2, 1, s.rows, s.cols);
+          if (transpose_a && transpose_b) {
+            internal::Product(a_store.block(1, 2, s.depth, s.rows).transpose(),
+                              b_store.block(1, 3, s.cols, s.depth).transpose(), c, accumulate);
+          } else if (transpose_a) {
+            internal::Product(a_store.block(1, 2, s.depth, s.rows).transpose(),
+                              b_store.block(1, 3, s.depth, s.cols), c, accumulate);
+          } else if (transpose_b) {
+            internal::Product(a_store.block(1, 2, s.rows, s.depth),
+                              b_store.block(1, 3, s.cols, s.depth).transpose(), c, accumulate);
+          } else {
+            internal::Product(a_store.block(1, 2, s.rows, s.depth),
+                              b_store.block(1, 3, s.depth, s.cols), c, accumulate);
+          }
+          MatrixXd want = a.cast<double>() * b.cast<double>();
+          MatrixXd magnitude = a.cast<double>().cwiseAbs() * b.cast<double>().cwiseAbs();
+          if (accumulate) {
+            want += c_before.block(2, 1, s.rows, s.cols).cast<double>();
+            magnitude += c_before.block(2, 1, s.rows, s.cols).cast<double>().cwiseAbs();
+          }
+          ExpectClose(MatrixXf(c), want, magnitude, s.depth, what);
+          // Nothing outside C's block is written.
+          MatrixXf outside = c_store;
+          outside.block(2, 1, s.rows, s.cols) = c_before.block(2, 1, s.rows, s.cols);
+          ASSERT_EQ(outside, c_before) << what;
+        }
+      }
+    }
+  }
+}
+
+TEST(SmallGemm, OverwritesNonFiniteValuesWhenNotAccumulating) {
+  // "=" must not read C (Eigen's noalias() = does not either).
+  const MatrixXf a = Numbers(20, 8, 3), b = Numbers(8, 7, 4);
+  MatrixXf c = MatrixXf::Constant(20, 7, std::nanf(""));
+  internal::Product(a, b, c, /*accumulate=*/false);
+  EXPECT_TRUE(c.allFinite());
+  EXPECT_LE((c.cast<double>() - a.cast<double>() * b.cast<double>()).cwiseAbs().maxCoeff(), 1e-5);
+}
+
+TEST(SmallGemm, IsDeterministic) {
+  const MatrixXf a = Numbers(64, 64, 5), b = Numbers(64, 256, 6);
+  MatrixXf c1(64, 256), c2(64, 256);
+  internal::Product(a, b, c1, false);
+  internal::Product(a, b, c2, false);
+  EXPECT_EQ(c1, c2);
+}
+
+TEST(SmallGemm, HasItsKernelInAnAvx512Build) {
+#if defined(__AVX512F__)
+  EXPECT_TRUE(internal::HaveSmallGemm());
+#else
+  EXPECT_FALSE(internal::HaveSmallGemm());
+  float c = 0.0f;
+  const float one = 1.0f;
+  EXPECT_FALSE(internal::SmallGemm(1, 1, 1, &one, 1, 1, &one, 1, 1, &c, 1, false));
+#endif
+}
+
+}  // namespace
+}  // namespace tactfunc
