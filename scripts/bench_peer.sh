@@ -51,6 +51,13 @@ if [[ -d "$openblas_dir" ]]; then
   export LD_LIBRARY_PATH="$openblas_dir${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 fi
 export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
+# glibc returns freed blocks above its mmap threshold to the kernel, and PyTorch frees and
+# allocates its activation tensors on every pass: on a virtual machine where page faults
+# are dear, the peer's fit at width 64 read 24-146 ms per run of ten (median about 70)
+# by default and 19-22 ms with freed memory kept (the same 2-core AMD EPYC, one thread).
+# Both programs run with it kept (tactfunc reuses its buffers anyway), the peer at its
+# best, as with a caching allocator; a GLIBC_TUNABLES already set is kept.
+export GLIBC_TUNABLES="${GLIBC_TUNABLES:-glibc.malloc.mmap_threshold=33554432:glibc.malloc.trim_threshold=4294967296}"
 
 python=""
 for candidate in "${PYTHON:-}" python3 /usr/bin/python3; do
@@ -100,6 +107,35 @@ if [[ -d "$openblas_dir" && -z "${OPENBLAS_CORETYPE:-}" ]]; then
     fi
   fi
 fi
+# On a CPU with AVX-512 that OpenBLAS 0.3.21 does not know as such (an AMD Zen 4 is
+# run with its Haswell AVX2 kernels) the AVX-512 kernels can be far faster: measured on
+# such a 2-core AMD EPYC, one thread, 4096x256 times 256x256, Haswell 99.7 and SkylakeX
+# 171.5 GFLOP/s. Both are timed here and the peer runs with the faster, also when
+# OPENBLAS_CORETYPE was set before (that machine's environment set it to Haswell).
+gemm_rate() {
+  OPENBLAS_CORETYPE="$1" "$python" - <<'PY'
+import time, torch
+torch.set_num_threads(1)
+a, b = torch.randn(4096, 256), torch.randn(256, 256)
+best = 0.0
+for _ in range(20):
+    start = time.perf_counter(); a @ b; best = max(best, 2 * 4096 * 256 * 256 / (time.perf_counter() - start) / 1e9)
+print(f"{best:.1f}")
+PY
+}
+if [[ -d "$openblas_dir" && -n "$core" && "$core" != "SkylakeX" &&
+      "$core" != "Cooperlake" && "$core" != "SapphireRapids" ]]; then
+  flags="$(grep -m1 '^flags' /proc/cpuinfo 2>/dev/null || true)"
+  if [[ " $flags " == *" avx512f "* ]]; then
+    own_rate="$(gemm_rate "$core" || true)"
+    avx512_rate="$(gemm_rate SkylakeX || true)"
+    echo "bench_peer: OpenBLAS float GEMM 4096x256x256, one thread: $core kernels $own_rate, SkylakeX (AVX-512) kernels $avx512_rate GFLOP/s"
+    if awk -v a="$avx512_rate" -v b="$own_rate" 'BEGIN { exit !(a > b) }'; then
+      export OPENBLAS_CORETYPE=SkylakeX
+      core="$(openblas_core || true)"
+    fi
+  fi
+fi
 echo "bench_peer: OpenBLAS kernels: $core"
 
 tactfunc="${TACTFUNC:-build/bin/tactfunc}"
@@ -117,7 +153,7 @@ peer="scripts/peer/torch_trunk.py"
 common=(--rows 70 --cols 88 --steps 3 --batch 32 --pixels 512)
 
 echo "bench_peer: $rounds rounds; fits x $repeats, meta steps x $meta_repeats per run; sizes $sizes"
-echo "bench_peer: python $python; LD_LIBRARY_PATH=${LD_LIBRARY_PATH:-}"
+echo "bench_peer: python $python; LD_LIBRARY_PATH=${LD_LIBRARY_PATH:-}; GLIBC_TUNABLES=$GLIBC_TUNABLES"
 echo "bench_peer: load average at the start: $(cut -d' ' -f1-3 /proc/loadavg 2>/dev/null || echo n/a)"
 IFS=',' read -r -a size_list <<<"$sizes"
 for size in "${size_list[@]}"; do

@@ -60,10 +60,13 @@ void CheckShape(const char* what, long rows, long cols, long expected_rows,
   }
 }
 
-// Maps of theta's blocks in one scalar type.
+// Maps of theta's blocks in one scalar type, and the hidden layers' weights transposed
+// (W_t[l] = W[l]^T, copied once per call): the reverse passes' products W^T delta then
+// read a column-major matrix, which internal::Product would otherwise copy per block.
 template <typename S>
 struct Net {
   std::vector<ConstMap<S>> W, b;  // per hidden layer
+  std::vector<MatrixX<S>> W_t;    // per hidden layer, W[l]^T
   ConstMap<S> A, c, W_out, b_out;
   Net(const S* theta, const std::vector<ParameterBlock>& blocks, int num_layers)
       : A(At(theta, blocks[2 * num_layers])),
@@ -73,6 +76,7 @@ struct Net {
     for (int l = 0; l < num_layers; ++l) {
       W.push_back(At(theta, blocks[2 * l]));
       b.push_back(At(theta, blocks[2 * l + 1]));
+      W_t.push_back(W.back().transpose());
     }
   }
   static ConstMap<S> At(const S* theta, const ParameterBlock& block) {
@@ -295,7 +299,7 @@ void RunBackwardBlock(const Net<S>& net, const std::vector<ParameterBlock>& bloc
       internal::Product(delta, trace.h[l].leftCols(m).transpose(), block(2 * l),
                         /*accumulate=*/true);
     }
-    if (l > 0) internal::Product(net.W[l].transpose(), delta, layer_g(l - 1), false);
+    if (l > 0) internal::Product(net.W_t[l], delta, layer_g(l - 1), false);
   }
 }
 
@@ -698,8 +702,8 @@ struct TangentPass {
       PreActivationGradient(gm, cosine, omega, &dmm);
       internal::Product(dmm, h_dot[l].leftCols(m).transpose(), hv_block(2 * l),
                         /*accumulate=*/true);
-      internal::Product(net.W[l].transpose(), ddmm, gdm, /*accumulate=*/false);
-      if (dnet) internal::Product(dnet->W[l].transpose(), dmm, gdm, /*accumulate=*/true);
+      internal::Product(net.W_t[l], ddmm, gdm, /*accumulate=*/false);
+      if (dnet) internal::Product(dnet->W_t[l], dmm, gdm, /*accumulate=*/true);
     }
   }
 
@@ -1340,6 +1344,9 @@ void LatentModulatedSiren::ForwardAndLatentJacobian(const MatrixX<Scalar>& coord
           ? ConstMap<Scalar>(A_directions.data(), A_directions.rows(), A_directions.cols())
           : net.A;
   const long k = A_used.cols();
+  // A_used^T (k x (L width)), copied once: its layer blocks multiply every block's deltas.
+  MatrixX<Scalar> A_used_t;
+  if (J_y_z != nullptr) A_used_t = A_used.transpose();
   // k x B: d y_c / d z (times D) per pixel (k = d without spatial latents; with them
   // d y_c / d [z_g, z_s(x)], scattered onto the nodes below).
   MatrixX<Scalar> g, g_below, J_channel;
@@ -1409,10 +1416,9 @@ void LatentModulatedSiren::ForwardAndLatentJacobian(const MatrixX<Scalar>& coord
       for (int l = num_layers - 1; l >= 0; --l) {
         auto dl = delta->leftCols(m);
         dl.array() *= omega * trace.cosine[l].leftCols(m).array();
-        internal::Product(A_used.middleRows(l * width, width).transpose(), dl, J,
-                          /*accumulate=*/true);
+        internal::Product(A_used_t.middleCols(l * width, width), dl, J, /*accumulate=*/true);
         if (l > 0) {
-          internal::Product(net.W[l].transpose(), dl, below->leftCols(m), false);
+          internal::Product(net.W_t[l], dl, below->leftCols(m), false);
           std::swap(delta, below);
         } else if (J_y_x != nullptr) {
           J_y_x->operator()(Eigen::seqN(begin * channels + ch, m, channels), Eigen::all) =
