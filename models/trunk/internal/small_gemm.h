@@ -9,8 +9,9 @@
 // tile of up to 64 rows x 6 columns of C in 24 registers, reads A's columns where they
 // are (a layer's weights: contiguous) and broadcasts B's values from where they are,
 // so nothing is packed unless A is transposed (then A is copied once per call, a
-// width^2 copy against width^2 x 256 multiply-adds). docs/BENCHMARKS.md, "Our own
-// small-matrix kernel", has the measurements.
+// width^2 copy against width^2 x 256 multiply-adds; the passes keep W^T instead).
+// docs/BUILD.md, "The passes' GEMM kernel", and docs/BENCHMARKS.md, "Against PyTorch on
+// the CPU", have the measurements.
 //
 // The sums run over the inner dimension in order, one rounding per multiply-add, so a
 // product's values can differ from Eigen's by float rounding (a few ulps); they are the
