@@ -60,15 +60,18 @@ void CheckShape(const char* what, long rows, long cols, long expected_rows,
   }
 }
 
-// Maps of theta's blocks in one scalar type, and the hidden layers' weights transposed
-// (W_t[l] = W[l]^T, copied once per call): the reverse passes' products W^T delta then
-// read a column-major matrix, which internal::Product would otherwise copy per block.
+// Maps of theta's blocks in one scalar type and, for the calls with a reverse pass
+// (`transposes`), the hidden layers' weights transposed (W_t[l] = W[l]^T, copied once per
+// call): the products W^T delta then read a column-major matrix, which
+// internal::Product would otherwise copy per block. Forward-only calls skip the copies
+// (a pose search's many small calls would pay them for nothing).
 template <typename S>
 struct Net {
   std::vector<ConstMap<S>> W, b;  // per hidden layer
-  std::vector<MatrixX<S>> W_t;    // per hidden layer, W[l]^T
+  std::vector<MatrixX<S>> W_t;    // per hidden layer, W[l]^T (empty without `transposes`)
   ConstMap<S> A, c, W_out, b_out;
-  Net(const S* theta, const std::vector<ParameterBlock>& blocks, int num_layers)
+  Net(const S* theta, const std::vector<ParameterBlock>& blocks, int num_layers,
+      bool transposes)
       : A(At(theta, blocks[2 * num_layers])),
         c(At(theta, blocks[2 * num_layers + 1])),
         W_out(At(theta, blocks[2 * num_layers + 2])),
@@ -76,7 +79,7 @@ struct Net {
     for (int l = 0; l < num_layers; ++l) {
       W.push_back(At(theta, blocks[2 * l]));
       b.push_back(At(theta, blocks[2 * l + 1]));
-      W_t.push_back(W.back().transpose());
+      if (transposes) W_t.push_back(W.back().transpose());
     }
   }
   static ConstMap<S> At(const S* theta, const ParameterBlock& block) {
@@ -480,14 +483,14 @@ struct PassContext {
   std::unique_ptr<Spatial<S>> spatial;      // with spatial latents
   std::unique_ptr<ReadoutMaps<S>> readout;  // with the readout branch
 
-  PassContext(const LatentModulatedSiren& trunk, const S* theta, long capacity)
+  PassContext(const LatentModulatedSiren& trunk, const S* theta, long capacity, bool reverse)
       : siren(trunk),
         blocks(trunk.parameter_blocks()),
         num_layers(trunk.num_hidden_layers()),
         width(trunk.width()),
         channels(trunk.output_channels()),
         omega_0(trunk.options().omega_0),
-        net(theta, blocks, num_layers) {
+        net(theta, blocks, num_layers, /*transposes=*/reverse) {
     if (trunk.has_spatial()) spatial = std::make_unique<Spatial<S>>(trunk.options(), capacity);
     if (trunk.has_readout()) readout = std::make_unique<ReadoutMaps<S>>(theta, blocks, num_layers);
   }
@@ -596,7 +599,7 @@ struct TangentPass {
       : context(c), hv(Hv_theta != nullptr ? Hv_theta : &hv_storage) {
     const int num_layers = c.num_layers;
     const long width = c.width;
-    if (v_theta != nullptr) dnet = std::make_unique<Net<S>>(v_theta->data(), c.blocks, num_layers);
+    if (v_theta != nullptr) dnet = std::make_unique<Net<S>>(v_theta->data(), c.blocks, num_layers, true);
     if (c.spatial) {
       // gamma' = A_g v_zg + A_g' z_g + c' shared, P' = A_s V + A_s' Z per node.
       const long dg = c.spatial->d_global;
@@ -1173,7 +1176,8 @@ LatentModulatedSiren::MatrixX<Scalar> LatentModulatedSiren::ForwardPasses(
   CheckShape("coords", coords.rows(), coords.cols(), coords.rows(), 2);
   CheckShape("z", z.rows(), 1, options_.latent_dim, 1);
   const long n = coords.rows();
-  const Net<Scalar> net(ParameterData<Scalar>(), blocks_, options_.num_hidden_layers);
+  const Net<Scalar> net(ParameterData<Scalar>(), blocks_, options_.num_hidden_layers,
+                        /*transposes=*/false);
   std::unique_ptr<Spatial<Scalar>> spatial;
   if (has_spatial()) spatial = std::make_unique<Spatial<Scalar>>(options_, BlockCapacity(n));
   const VectorX<Scalar> gamma = SharedShifts(net, z, spatial.get());
@@ -1244,7 +1248,8 @@ void LatentModulatedSiren::BackwardPasses(
              options_.output_channels);
   const long n = coords.rows();
   const long capacity = BlockCapacity(n);
-  const Net<Scalar> net(ParameterData<Scalar>(), blocks_, options_.num_hidden_layers);
+  const Net<Scalar> net(ParameterData<Scalar>(), blocks_, options_.num_hidden_layers,
+                        /*transposes=*/true);
   std::unique_ptr<Spatial<Scalar>> spatial;
   MatrixX<Scalar> dP;  // the spatial latents' scattered dL/dgamma
   if (has_spatial()) {
@@ -1328,7 +1333,8 @@ void LatentModulatedSiren::ForwardAndLatentJacobian(const MatrixX<Scalar>& coord
   const long capacity = BlockCapacity(n);
   const int channels = options_.output_channels;
   const int d = options_.latent_dim;
-  const Net<Scalar> net(ParameterData<Scalar>(), blocks_, num_layers);
+  const Net<Scalar> net(ParameterData<Scalar>(), blocks_, num_layers,
+                        /*transposes=*/J_y_z != nullptr);
   std::unique_ptr<Spatial<Scalar>> spatial;
   if (has_spatial()) spatial = std::make_unique<Spatial<Scalar>>(options_, capacity);
   const VectorX<Scalar> gamma = SharedShifts(net, z, spatial.get());
@@ -1520,7 +1526,7 @@ Scalar LatentModulatedSiren::LossPasses(
   const bool hvp = Hv_z != nullptr || Hv_theta != nullptr;
   const bool reverse = gradient || hvp;
   const long capacity = BlockCapacity(n);
-  PassContext<Scalar> context(*this, ParameterData<Scalar>(), capacity);
+  PassContext<Scalar> context(*this, ParameterData<Scalar>(), capacity, reverse);
   LossPass<Scalar> pass(context, z, weights, n, capacity, reverse, dL_dtheta);
   std::unique_ptr<TangentPass<Scalar>> tangent;
   if (hvp) {
@@ -1562,7 +1568,7 @@ Scalar LatentModulatedSiren::LossAndGradient(const MatrixX<Scalar>& coords,
   const long n = coords.rows();
   const long capacity = BlockCapacity(n);
   auto record = std::make_unique<typename Tape<Scalar>::Record>();
-  PassContext<Scalar> context(*this, ParameterData<Scalar>(), capacity);
+  PassContext<Scalar> context(*this, ParameterData<Scalar>(), capacity, /*reverse=*/true);
   LossPass<Scalar> pass(context, z, weights, n, capacity, /*reverse=*/true, dL_dtheta);
   record->blocks.reserve((n + kPixelBlock - 1) / kPixelBlock);
   for (long begin = 0; begin < n; begin += kPixelBlock) {
@@ -1597,7 +1603,7 @@ void LatentModulatedSiren::HessianProduct(const Tape<Scalar>& tape,
   const typename Tape<Scalar>::Record& record = *tape.record_;
   const long n = record.coords.rows();
   const long capacity = BlockCapacity(n);
-  PassContext<Scalar> context(*this, ParameterData<Scalar>(), capacity);
+  PassContext<Scalar> context(*this, ParameterData<Scalar>(), capacity, /*reverse=*/true);
   TangentPass<Scalar> tangent(context, record.z, v_theta, v_z, capacity, Hv_theta);
   for (std::size_t b = 0; b < record.blocks.size(); ++b) {
     const long begin = static_cast<long>(b) * kPixelBlock;
