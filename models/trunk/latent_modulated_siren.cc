@@ -109,6 +109,7 @@ struct Trace {
   std::vector<MatrixX<S>> h;       // h[0] = coords^T (2 x B), h[l+1] width x B
   std::vector<MatrixX<S>> cosine;  // cos(omega_0 pre_l), width x B
   MatrixX<S> y;                    // C x B
+  VectorX<S> shift;                // a layer's b_l + gamma_l (RunForward's)
   long cols = 0;                   // pixels in the current block
 
   Trace(int num_layers, long width, long channels, long capacity, bool keep_cosine)
@@ -238,11 +239,9 @@ void RunForward(const Net<S>& net, double omega_0, const Eigen::MatrixBase<Coord
   trace->h[0].leftCols(m) = coords.transpose();
   for (int l = 0; l < num_layers; ++l) {
     auto pre = trace->h[l + 1].leftCols(m);
-    // The shifts first, then the product added onto them: Eigen's "=" of a matrix
-    // product zeroes its destination before adding the product, one more pass over it.
-    // The sum is the same either way (one rounded addition per value).
-    pre.colwise() = net.b[l].col(0) + gamma.segment(l * width, width);
-    internal::Product(net.W[l], trace->h[l].leftCols(m), pre, /*accumulate=*/true);
+    // The product's sums start from the shifts (no pass over `pre` to set them first).
+    trace->shift = net.b[l].col(0) + gamma.segment(l * width, width);
+    internal::ProductPlusOffset(net.W[l], trace->h[l].leftCols(m), trace->shift, pre);
     if (spatial != nullptr) spatial->Blend(spatial->P, l * width, pre);
     S* cosine = keep_cosine ? trace->cosine[l].data() : nullptr;
     internal::ScaledSinCos(width * m, static_cast<S>(omega_0), pre.data(), pre.data(),

@@ -26,17 +26,20 @@ constexpr long kStripRows = 64;  // 4 registers of 16 floats
 // broadcasts walk NC pointers by a fixed step. The register loops are unrolled by
 // pragma: without it GCC 12 kept the accumulators in memory, at 72 GFLOP/s against
 // 190-200 (docs/BUILD.md).
+// The sums start from C (accumulate), from `offset` (not null: the same rows in every
+// column) or from 0.
 template <int RZ, int NC, bool kBRows>
 void Tile(long depth, const float* a, long lda, const float* b, long ldb, float* c, long ldc,
-          __mmask16 last, bool accumulate) {
+          __mmask16 last, bool accumulate, const float* offset) {
   __m512 acc[RZ][NC];
 #pragma GCC unroll 8
   for (int j = 0; j < NC; ++j) {
+    const float* start = accumulate ? c + j * ldc : offset;
 #pragma GCC unroll 8
     for (int i = 0; i < RZ; ++i) {
-      acc[i][j] = !accumulate  ? _mm512_setzero_ps()
-                  : i < RZ - 1 ? _mm512_loadu_ps(c + j * ldc + 16 * i)
-                               : _mm512_maskz_loadu_ps(last, c + j * ldc + 16 * i);
+      acc[i][j] = start == nullptr ? _mm512_setzero_ps()
+                  : i < RZ - 1     ? _mm512_loadu_ps(start + 16 * i)
+                                   : _mm512_maskz_loadu_ps(last, start + 16 * i);
     }
   }
   const float* b_column[NC];
@@ -73,7 +76,7 @@ void Tile(long depth, const float* a, long lda, const float* b, long ldb, float*
 }
 
 using TileFunction = void (*)(long, const float*, long, const float*, long, float*, long, __mmask16,
-                              bool);
+                              bool, const float*);
 using TileTable = std::array<std::array<TileFunction, kTileColumns>, 4>;
 
 template <bool kBRows, int RZ, int... NC>
@@ -95,8 +98,9 @@ bool HaveSmallGemm() { return true; }
 
 bool SmallGemm(long rows, long depth, long cols, const float* a, long a_row_stride,
                long a_col_stride, const float* b, long b_row_stride, long b_col_stride, float* c,
-               long c_col_stride, bool accumulate) {
+               long c_col_stride, bool accumulate, const float* row_offset) {
   if (rows <= 0 || cols <= 0) return true;
+  if (accumulate) row_offset = nullptr;
   long lda = a_col_stride;
   if (a_row_stride != 1) {
     // A transposed (or strided): copied column-major once, so that the tiles read its
@@ -145,7 +149,8 @@ bool SmallGemm(long rows, long depth, long cols, const float* a, long a_row_stri
       const int width = static_cast<int>(std::min<long>(kTileColumns, cols - j0));
       const float* b_tile = b_rows ? b + j0 : b + j0 * ldb;
       tiles[registers - 1][width - 1](depth, a + r0, lda, b_tile, ldb, c + r0 + j0 * c_col_stride,
-                                      c_col_stride, last, accumulate);
+                                      c_col_stride, last, accumulate,
+                                      row_offset == nullptr ? nullptr : row_offset + r0);
     }
   }
   return true;
@@ -156,7 +161,7 @@ bool SmallGemm(long rows, long depth, long cols, const float* a, long a_row_stri
 bool HaveSmallGemm() { return false; }
 
 bool SmallGemm(long, long, long, const float*, long, long, const float*, long, long, float*, long,
-               bool) {
+               bool, const float*) {
   return false;
 }
 

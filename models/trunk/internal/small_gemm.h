@@ -28,22 +28,24 @@ namespace internal {
 
 // C (rows x cols, column j at c + j * c_col_stride) = A B, or += A B if accumulate, with
 // A (rows x depth) at a[i * a_row_stride + k * a_col_stride] and B (depth x cols) at
-// b[k * b_row_stride + j * b_col_stride]. C must not overlap A or B. Returns false and
-// leaves C untouched when this build has no kernel (compiled without AVX-512); the
-// caller then computes the product itself.
+// b[k * b_row_stride + j * b_col_stride]; without accumulate and with row_offset not null,
+// C = A B + row_offset 1^T (row_offset: rows values, added to every column as the sums'
+// start). C must not overlap A, B or row_offset. Returns false and leaves C untouched
+// when this build has no kernel (compiled without AVX-512); the caller then computes the
+// product itself.
 bool SmallGemm(long rows, long depth, long cols, const float* a, long a_row_stride,
                long a_col_stride, const float* b, long b_row_stride, long b_col_stride, float* c,
-               long c_col_stride, bool accumulate);
+               long c_col_stride, bool accumulate, const float* row_offset = nullptr);
 
 // True when SmallGemm has a kernel in this build.
 bool HaveSmallGemm();
 
-// c = a * b (accumulate false) or c += a * b, with c not aliasing a or b (as Eigen's
-// noalias()). Float products of directly accessible operands with c column-major go
-// through SmallGemm; everything else (double, expressions) through Eigen.
+namespace small_gemm_internal {
+// SmallGemm on Eigen operands where the types allow it (float, direct access, c
+// column-major, row_offset contiguous); false where the caller must use Eigen.
 template <typename Lhs, typename Rhs, typename Dst>
-void Product(const Eigen::MatrixBase<Lhs>& a, const Eigen::MatrixBase<Rhs>& b, Dst&& c,
-             bool accumulate) {
+bool Kernel(const Eigen::MatrixBase<Lhs>& a, const Eigen::MatrixBase<Rhs>& b, Dst& c,
+            bool accumulate, const float* row_offset) {
   using D = std::decay_t<Dst>;
   constexpr bool kDirect =
       bool(Lhs::Flags & Eigen::DirectAccessBit) && bool(Rhs::Flags & Eigen::DirectAccessBit) &&
@@ -52,18 +54,46 @@ void Product(const Eigen::MatrixBase<Lhs>& a, const Eigen::MatrixBase<Rhs>& b, D
                 std::is_same_v<typename Lhs::Scalar, float> &&
                 std::is_same_v<typename Rhs::Scalar, float>) {
     eigen_assert(c.rows() == a.rows() && c.cols() == b.cols() && a.cols() == b.rows());
-    if (c.rowStride() == 1 &&
-        SmallGemm(a.rows(), a.cols(), b.cols(), a.derived().data(), a.rowStride(), a.colStride(),
-                  b.derived().data(), b.rowStride(), b.colStride(), c.derived().data(),
-                  c.colStride(), accumulate)) {
-      return;
-    }
+    return c.rowStride() == 1 &&
+           SmallGemm(a.rows(), a.cols(), b.cols(), a.derived().data(), a.rowStride(), a.colStride(),
+                     b.derived().data(), b.rowStride(), b.colStride(), c.derived().data(),
+                     c.colStride(), accumulate, row_offset);
+  } else {
+    return false;
   }
+}
+}  // namespace small_gemm_internal
+
+// c = a * b (accumulate false) or c += a * b, with c not aliasing a or b (as Eigen's
+// noalias()). Float products of directly accessible operands with c column-major go
+// through SmallGemm; everything else (double, expressions) through Eigen.
+template <typename Lhs, typename Rhs, typename Dst>
+void Product(const Eigen::MatrixBase<Lhs>& a, const Eigen::MatrixBase<Rhs>& b, Dst&& c,
+             bool accumulate) {
+  if (small_gemm_internal::Kernel(a, b, c, accumulate, nullptr)) return;
   if (accumulate) {
     c.noalias() += a * b;
   } else {
     c.noalias() = a * b;
   }
+}
+
+// c = offset 1^T + a * b (offset: a column of c.rows() values, the start of every
+// column's sums), with c not aliasing a, b or offset. The kernel starts its sums from
+// offset instead of reading c back; Eigen adds the product onto c set to offset.
+template <typename Lhs, typename Rhs, typename Offset, typename Dst>
+void ProductPlusOffset(const Eigen::MatrixBase<Lhs>& a, const Eigen::MatrixBase<Rhs>& b,
+                       const Eigen::DenseBase<Offset>& offset, Dst&& c) {
+  eigen_assert(offset.size() == c.rows());
+  if constexpr (bool(Offset::Flags & Eigen::DirectAccessBit) &&
+                std::is_same_v<typename Offset::Scalar, float>) {
+    if (offset.innerStride() == 1 &&
+        small_gemm_internal::Kernel(a, b, c, /*accumulate=*/false, offset.derived().data())) {
+      return;
+    }
+  }
+  c.colwise() = offset.derived();
+  c.noalias() += a * b;
 }
 
 }  // namespace internal

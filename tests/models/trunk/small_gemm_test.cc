@@ -107,6 +107,28 @@ TEST(SmallGemm, MatchesADoubleProductOverShapesTransposesAndBlocks) {
   }
 }
 
+TEST(SmallGemm, StartsTheSumsFromAnOffsetColumn) {
+  // c = offset 1^T + a b, with the offset contiguous (the kernel's start) or a strided row
+  // of a matrix (Eigen's path); c starts as NaN, which neither path may read.
+  const Shape shapes[] = {{64, 64, 256}, {17, 2, 13}, {130, 33, 7}, {5, 0, 3}};
+  unsigned seed = 100;
+  for (const Shape& s : shapes) {
+    const MatrixXf a = Numbers(s.rows, s.depth, seed++), b = Numbers(s.depth, s.cols, seed++);
+    const MatrixXf offsets = Numbers(3, s.rows, seed++);
+    const Eigen::VectorXf offset = offsets.row(1).transpose();
+    MatrixXd want = a.cast<double>() * b.cast<double>();
+    want.colwise() += offset.cast<double>();
+    MatrixXd magnitude = a.cast<double>().cwiseAbs() * b.cast<double>().cwiseAbs();
+    magnitude.colwise() += offset.cast<double>().cwiseAbs();
+    MatrixXf c = MatrixXf::Constant(s.rows, s.cols, std::nanf(""));
+    internal::ProductPlusOffset(a, b, offset, c);
+    ExpectClose(c, want, magnitude, s.depth, "contiguous offset " + std::to_string(s.rows));
+    c.setConstant(std::nanf(""));
+    internal::ProductPlusOffset(a, b, offsets.row(1).transpose(), c);
+    ExpectClose(c, want, magnitude, s.depth, "strided offset " + std::to_string(s.rows));
+  }
+}
+
 TEST(SmallGemm, OverwritesNonFiniteValuesWhenNotAccumulating) {
   // "=" must not read C (Eigen's noalias() = does not either).
   const MatrixXf a = Numbers(20, 8, 3), b = Numbers(8, 7, 4);
