@@ -70,8 +70,7 @@ struct Net {
   std::vector<ConstMap<S>> W, b;  // per hidden layer
   std::vector<MatrixX<S>> W_t;    // per hidden layer, W[l]^T (empty without `transposes`)
   ConstMap<S> A, c, W_out, b_out;
-  Net(const S* theta, const std::vector<ParameterBlock>& blocks, int num_layers,
-      bool transposes)
+  Net(const S* theta, const std::vector<ParameterBlock>& blocks, int num_layers, bool transposes)
       : A(At(theta, blocks[2 * num_layers])),
         c(At(theta, blocks[2 * num_layers + 1])),
         W_out(At(theta, blocks[2 * num_layers + 2])),
@@ -598,7 +597,9 @@ struct TangentPass {
       : context(c), hv(Hv_theta != nullptr ? Hv_theta : &hv_storage) {
     const int num_layers = c.num_layers;
     const long width = c.width;
-    if (v_theta != nullptr) dnet = std::make_unique<Net<S>>(v_theta->data(), c.blocks, num_layers, true);
+    if (v_theta != nullptr) {
+      dnet = std::make_unique<Net<S>>(v_theta->data(), c.blocks, num_layers, /*transposes=*/true);
+    }
     if (c.spatial) {
       // gamma' = A_g v_zg + A_g' z_g + c' shared, P' = A_s V + A_s' Z per node.
       const long dg = c.spatial->d_global;
