@@ -16,6 +16,17 @@
 namespace tactfunc {
 namespace {
 
+// tanh of every value through Eigen's vectorised exp: tanh(x) = 1 - 2 / (exp(2x) + 1).
+// Eigen 3.4 evaluates double tanh one value at a time through libm, which took 11 % of
+// a pose search's samples (`perf record` of `tactfunc eval-generator`); this form runs
+// at about a tenth of the time per value and stays within 4e-16 of std::tanh in
+// absolute terms over [-30, 30] (exp's overflow to inf gives 1, its underflow to 0
+// gives -1, a NaN stays NaN).
+template <typename Derived>
+Eigen::Array<double, Eigen::Dynamic, Eigen::Dynamic> Tanh(const Eigen::ArrayBase<Derived>& x) {
+  return 1.0 - 2.0 / ((2.0 * x).exp() + 1.0);
+}
+
 constexpr char kKind[] = "pose_generator";
 constexpr char kFormat[] = "tactfunc-pose-generator";
 constexpr int kVersion = 1;
@@ -190,7 +201,7 @@ Eigen::MatrixXd PoseGenerator::Forward(const Eigen::VectorXd& parameters,
     Eigen::Map<const Eigen::VectorXd> bias(parameters.data() + L.bias_offset, L.out);
     Eigen::MatrixXd a = W * h;
     a.colwise() += bias;
-    h = l + 1 < layers_.size() ? Eigen::MatrixXd(a.array().tanh()) : a;
+    h = l + 1 < layers_.size() ? Eigen::MatrixXd(Tanh(a.array()).matrix()) : a;
   }
   Eigen::MatrixXd z = h.transpose();  // N x d
   z.array().rowwise() *= latent_stddev_.transpose().array();
@@ -217,7 +228,7 @@ void PoseGenerator::Backward(const Eigen::VectorXd& parameters, const Eigen::Mat
     Eigen::Map<const Eigen::VectorXd> bias(parameters.data() + L.bias_offset, L.out);
     Eigen::MatrixXd a = W * acts.back();
     a.colwise() += bias;
-    acts.push_back(a.array().tanh().matrix());
+    acts.push_back(Tanh(a.array()).matrix());
   }
   if (dL_dparameters != nullptr) *dL_dparameters = Eigen::VectorXd::Zero(parameters_.size());
   Eigen::MatrixXd delta = dL_dZ.transpose();  // d x N, w.r.t. the output u
@@ -281,7 +292,7 @@ Eigen::VectorXd PoseGenerator::Generate(int tool_index, const SE2d& pose, double
     a.col(0) += bias;
     if (l + 1 < layers_.size()) {
       hx.resize(L.out, 5);
-      hx.col(0) = a.col(0).array().tanh();
+      hx.col(0) = Tanh(a.col(0).array()).matrix();
       const Eigen::ArrayXd slope = 1 - hx.col(0).array().square();
       hx.rightCols<4>() = a.rightCols<4>().array().colwise() * slope;
     } else {
