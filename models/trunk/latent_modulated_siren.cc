@@ -290,7 +290,7 @@ void RunBackwardBlock(const Net<S>& net, const std::vector<ParameterBlock>& bloc
     }
     block(2 * num_layers + 3) += G.rowwise().sum();
   }
-  layer_g(num_layers - 1).noalias() = net.W_out.transpose() * G;
+  internal::Product(net.W_out.transpose(), G, layer_g(num_layers - 1), /*accumulate=*/false);
   auto delta = delta_buffer->leftCols(m);
   for (int l = num_layers - 1; l >= 0; --l) {
     PreActivationGradient(layer_g(l), trace.cosine[l].leftCols(m), omega, &delta);
@@ -688,8 +688,8 @@ struct TangentPass {
     auto gdm = g_dot.leftCols(m);
     auto dmm = dm.leftCols(m);
     auto ddmm = ddm.leftCols(m);
-    gdm.noalias() = net.W_out.transpose() * Gd;
-    if (dnet) gdm.noalias() += dnet->W_out.transpose() * Gm;
+    internal::Product(net.W_out.transpose(), Gd, gdm, /*accumulate=*/false);
+    if (dnet) internal::Product(dnet->W_out.transpose(), Gm, gdm, /*accumulate=*/true);
     for (int l = num_layers - 1; l >= 0; --l) {
       const auto gm = record.g[l].leftCols(m);
       const auto cosine = trace.cosine[l].leftCols(m);
