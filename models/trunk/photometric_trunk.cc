@@ -13,6 +13,7 @@
 #include "boost/random/mersenne_twister.hpp"
 #include "boost/random/uniform_real_distribution.hpp"
 #include "models/core/seed.h"
+#include "models/trunk/internal/small_gemm.h"
 
 namespace tactfunc {
 namespace {
@@ -80,20 +81,16 @@ Eigen::Matrix<S, Eigen::Dynamic, Eigen::Dynamic> ShadingNetwork(
   if (h1 == nullptr) h1 = &h1_local;
   if (a2 == nullptr) a2 = &a2_local;
   if (h2 == nullptr) h2 = &h2_local;
-  // Each layer's biases first, then its product added onto them: Eigen's "=" of a
-  // matrix product zeroes its destination before adding the product, one more pass
-  // over it. The sums are the same either way (one rounded addition per value).
+  // Each layer's products start their sums from the biases (internal::ProductPlusOffset;
+  // no pass setting them first).
   a1->resize(h, in.cols());
-  a1->colwise() = b1;
-  a1->noalias() += W1 * in;
+  internal::ProductPlusOffset(W1, in, b1, *a1);
   *h1 = Silu(*a1);
   a2->resize(h, in.cols());
-  a2->colwise() = b2;
-  a2->noalias() += W2 * *h1;
+  internal::ProductPlusOffset(W2, *h1, b2, *a2);
   *h2 = Silu(*a2);
   Matrix out(c, in.cols());
-  out.colwise() = b3;
-  out.noalias() += W3 * *h2;
+  internal::ProductPlusOffset(W3, *h2, b3, out);
   return out;
 }
 
@@ -581,12 +578,15 @@ void PhotometricTrunk::RunBackward(const Pass& pass_holder, const std::vector<in
                           const MatrixX<Scalar>& h2, const MatrixX<Scalar>& dout) {
     const MatrixX<Scalar> dh2 = W3.transpose() * dout;
     const MatrixX<Scalar> da2 = dh2.cwiseProduct(SiluSlope(a2));
-    const MatrixX<Scalar> dh1 = W2.transpose() * da2;
+    MatrixX<Scalar> dh1(h, da2.cols());
+    internal::Product(W2.transpose(), da2, dh1, /*accumulate=*/false);
     const MatrixX<Scalar> da1 = dh1.cwiseProduct(SiluSlope(a1));
     if (dL_dhead != nullptr) {
       Eigen::Map<MatrixX<Scalar>>(dhead.data() + layout.w1, h, 5) += da1 * in.transpose();
       Eigen::Map<VectorX<Scalar>>(dhead.data() + layout.b1, h) += da1.rowwise().sum();
-      Eigen::Map<MatrixX<Scalar>>(dhead.data() + layout.w2, h, h) += da2 * h1.transpose();
+      internal::Product(da2, h1.transpose(),
+                        Eigen::Map<MatrixX<Scalar>>(dhead.data() + layout.w2, h, h),
+                        /*accumulate=*/true);
       Eigen::Map<VectorX<Scalar>>(dhead.data() + layout.b2, h) += da2.rowwise().sum();
       Eigen::Map<MatrixX<Scalar>>(dhead.data() + layout.w3, c, h) += dout * h2.transpose();
       Eigen::Map<VectorX<Scalar>>(dhead.data() + layout.b3, c) += dout.rowwise().sum();
@@ -755,7 +755,9 @@ void PhotometricTrunk::ForwardAndLatentJacobian(const std::vector<int>& pixels,
   MatrixX<Scalar> JT(d, static_cast<Eigen::Index>(n) * c);
   for (int ch = 0; ch < c; ++ch) {
     const MatrixX<Scalar> da2 = slope2.array().colwise() * W3.row(ch).transpose().array();
-    const MatrixX<Scalar> da1 = (W2.transpose() * da2).cwiseProduct(slope1);
+    MatrixX<Scalar> da1(h, da2.cols());
+    internal::Product(W2.transpose(), da2, da1, /*accumulate=*/false);
+    da1.array() *= slope1.array();
     const MatrixX<Scalar> dinput = W1.transpose() * da1;  // 5 x N
     for (int i = 0; i < n; ++i) {
       const Scalar dg0 = dinput(0, i) - static_cast<Scalar>(m * pass.marker_d_col(ch, i));
