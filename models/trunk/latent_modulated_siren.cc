@@ -581,6 +581,7 @@ struct TangentPass {
   std::unique_ptr<Net<S>> dnet;              // theta' (v_theta not null)
   std::unique_ptr<ReadoutMaps<S>> dreadout;  // R', m' (v_theta not null, branch not frozen)
   VectorX<S> dgamma_dot;                     // gamma', the shared part
+  VectorX<S> shift_dot;                      // one layer's b_l' + gamma_l' (Block's)
   MatrixX<S> P_dot;                          // P' (spatial latents)
   VectorX<S> u_dot;                          // the readout's node values' tangent
   // h_dot[l]: tangent of h_l (h_dot[0] = 0); s_dot[l] = omega_0 * pre_l'.
@@ -650,16 +651,17 @@ struct TangentPass {
     // Tangent forward pass.
     for (int l = 0; l < num_layers; ++l) {
       auto s = s_dot[l].leftCols(m);
+      // pre_l' = W_l h_l' + W_l' h_l + b_l' + gamma_l', the products' sums started from
+      // the shifts' tangent (no pass over s to add it afterwards).
+      shift_dot = dgamma_dot.segment(l * width, width);
+      if (dnet) shift_dot += dnet->b[l].col(0);
       if (l > 0) {
-        internal::Product(net.W[l], h_dot[l].leftCols(m), s, /*accumulate=*/false);
-      } else {
-        s.setZero();
-      }
-      if (dnet) {
-        internal::Product(dnet->W[l], trace.h[l].leftCols(m), s, /*accumulate=*/true);
-        s.colwise() += dnet->b[l].col(0) + dgamma_dot.segment(l * width, width);
-      } else {
-        s.colwise() += dgamma_dot.segment(l * width, width);
+        internal::ProductPlusOffset(net.W[l], h_dot[l].leftCols(m), shift_dot, s);
+        if (dnet) internal::Product(dnet->W[l], trace.h[l].leftCols(m), s, /*accumulate=*/true);
+      } else if (dnet) {
+        internal::ProductPlusOffset(dnet->W[l], trace.h[l].leftCols(m), shift_dot, s);
+      } else {  // h_0' = 0
+        s.colwise() = shift_dot;
       }
       if (c.spatial) c.spatial->Blend(P_dot, l * width, s);
       s *= omega;
