@@ -420,18 +420,18 @@ GeneratorPosterior::Summary GeneratorPosterior::Estimate(const TrunkTargets& tar
     if (mixture != nullptr) *mixture = PoseMixture();
     return summary;
   }
+  // The frame's latent as its trunk's encoder gives it: meta-SGD from z = 0.
+  auto meta_sgd_latent = [](const LatentProblem& p) -> Eigen::VectorXf {
+    return p.MetaSgdSteps(Eigen::VectorXd::Zero(p.dim()), p.trunk().meta_sgd.inner_steps)
+        .cast<float>();
+  };
   Eigen::VectorXf query, mlp_query;
   if (knn_ != nullptr || (pose_mlp_ != nullptr && pose_mlp_trunk_ == nullptr)) {
-    query = problem.MetaSgdSteps(Eigen::VectorXd::Zero(problem.dim()), trunk_->meta_sgd.inner_steps)
-                .cast<float>();
+    query = meta_sgd_latent(problem);
   }
   if (pose_mlp_ != nullptr && pose_mlp_trunk_ != nullptr) {
     // The pose MLP's own latent map: the same pixels under its trunk.
-    const LatentProblem mlp_problem(*pose_mlp_trunk_, targets, options_.problem);
-    mlp_query = mlp_problem
-                    .MetaSgdSteps(Eigen::VectorXd::Zero(mlp_problem.dim()),
-                                  pose_mlp_trunk_->meta_sgd.inner_steps)
-                    .cast<float>();
+    mlp_query = meta_sgd_latent(LatentProblem(*pose_mlp_trunk_, targets, options_.problem));
   }
   struct ToolModes {
     int tool;
