@@ -99,6 +99,7 @@ bool HaveSmallGemm() { return true; }
 bool SmallGemm(long rows, long depth, long cols, const float* a, long a_row_stride,
                long a_col_stride, const float* b, long b_row_stride, long b_col_stride, float* c,
                long c_col_stride, bool accumulate, const float* row_offset) {
+  if (b_row_stride != 1 && b_col_stride != 1) return false;  // neither layout: Eigen's
   if (rows <= 0 || cols <= 0) return true;
   if (accumulate) row_offset = nullptr;
   long lda = a_col_stride;
@@ -124,21 +125,9 @@ bool SmallGemm(long rows, long depth, long cols, const float* a, long a_row_stri
     a = packed.data();
     lda = rows;
   }
-  // B column-major (b_row_stride 1) or row-major (b_col_stride 1) as it is; any other
-  // layout copied column-major first.
-  const bool b_rows = b_col_stride == 1 && b_row_stride != 1;
-  long ldb = b_rows ? b_row_stride : b_col_stride;
-  if (!b_rows && b_row_stride != 1) {
-    thread_local std::vector<float> packed_b;
-    packed_b.resize(static_cast<size_t>(cols) * static_cast<size_t>(std::max<long>(depth, 1)));
-    for (long j = 0; j < cols; ++j) {
-      for (long k = 0; k < depth; ++k) {
-        packed_b[j * depth + k] = b[k * b_row_stride + j * b_col_stride];
-      }
-    }
-    b = packed_b.data();
-    ldb = depth;
-  }
+  // B column-major (b_row_stride 1) or row-major (b_col_stride 1), read as it is.
+  const bool b_rows = b_row_stride != 1;
+  const long ldb = b_rows ? b_row_stride : b_col_stride;
   const TileTable& tiles = kTiles[b_rows ? 1 : 0];
   for (long r0 = 0; r0 < rows; r0 += kStripRows) {
     const long strip = std::min(kStripRows, rows - r0);

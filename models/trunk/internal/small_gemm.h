@@ -31,8 +31,8 @@ namespace internal {
 // b[k * b_row_stride + j * b_col_stride]; without accumulate and with row_offset not null,
 // C = A B + row_offset 1^T (row_offset: rows values, added to every column as the sums'
 // start). C must not overlap A, B or row_offset. Returns false and leaves C untouched
-// when this build has no kernel (compiled without AVX-512); the caller then computes the
-// product itself.
+// when this build has no kernel (compiled without AVX-512) or B is neither column- nor
+// row-major (neither stride 1); the caller then computes the product itself.
 bool SmallGemm(long rows, long depth, long cols, const float* a, long a_row_stride,
                long a_col_stride, const float* b, long b_row_stride, long b_col_stride, float* c,
                long c_col_stride, bool accumulate, const float* row_offset = nullptr);

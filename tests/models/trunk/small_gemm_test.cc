@@ -107,6 +107,22 @@ TEST(SmallGemm, MatchesADoubleProductOverShapesTransposesAndBlocks) {
   }
 }
 
+TEST(SmallGemm, LeavesARightHandSideOfNeitherLayoutToEigen) {
+  // B with no unit stride (every other value of a buffer, down and across): SmallGemm
+  // declines it and Product computes it through Eigen.
+  const MatrixXf a = Numbers(20, 9, 7), store = Numbers(2 * 9, 2 * 5, 8);
+  const Eigen::Map<const MatrixXf, 0, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>> b(
+      store.data(), 9, 5, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>(2 * 2 * 9, 2));
+  float c0 = 0.0f;
+  EXPECT_FALSE(internal::SmallGemm(20, 9, 5, a.data(), 1, 20, b.data(), 2, 4 * 9, &c0, 20,
+                                   /*accumulate=*/false));
+  MatrixXf c(20, 5);
+  internal::Product(a, b, c, /*accumulate=*/false);
+  const MatrixXf b_copy = b;
+  ExpectClose(c, a.cast<double>() * b_copy.cast<double>(),
+              a.cast<double>().cwiseAbs() * b_copy.cast<double>().cwiseAbs(), 9, "strided B");
+}
+
 TEST(SmallGemm, StartsTheSumsFromAnOffsetColumn) {
   // c = offset 1^T + a b, with the offset contiguous (the kernel's start) or a strided row
   // of a matrix (Eigen's path); c starts as NaN, which neither path may read.
