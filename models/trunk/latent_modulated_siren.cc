@@ -60,17 +60,20 @@ void CheckShape(const char* what, long rows, long cols, long expected_rows,
   }
 }
 
-// Maps of theta's blocks in one scalar type and, for the calls with a reverse pass
-// (`transposes`), the hidden layers' weights transposed (W_t[l] = W[l]^T, copied once per
-// call): the products W^T delta then read a column-major matrix, which
-// internal::Product would otherwise copy per block. Forward-only calls skip the copies
-// (a pose search's many small calls would pay them for nothing).
+// Maps of theta's blocks in one scalar type and the hidden layers' weights transposed
+// (W_t[l] = W[l]^T): the products W^T delta then read a column-major matrix, which
+// internal::Product would otherwise copy per block. For the trunk's own parameters the
+// transposes are the ones the trunk stores beside them (made once per parameter update,
+// `stored`); for any other theta (a Hessian-vector product's direction) this Net copies
+// them, once per call. Copying them per call cost a meta-training step 4 % of its time at
+// width 128 and 7 % at width 256 (`tactfunc bench trunk`).
 template <typename S>
 struct Net {
   std::vector<ConstMap<S>> W, b;  // per hidden layer
-  std::vector<MatrixX<S>> W_t;    // per hidden layer, W[l]^T (empty without `transposes`)
+  std::vector<ConstMap<S>> W_t;   // per hidden layer, W[l]^T
   ConstMap<S> A, c, W_out, b_out;
-  Net(const S* theta, const std::vector<ParameterBlock>& blocks, int num_layers, bool transposes)
+  Net(const S* theta, const std::vector<ParameterBlock>& blocks, int num_layers,
+      const std::vector<MatrixX<S>>* stored)
       : A(At(theta, blocks[2 * num_layers])),
         c(At(theta, blocks[2 * num_layers + 1])),
         W_out(At(theta, blocks[2 * num_layers + 2])),
@@ -78,12 +81,21 @@ struct Net {
     for (int l = 0; l < num_layers; ++l) {
       W.push_back(At(theta, blocks[2 * l]));
       b.push_back(At(theta, blocks[2 * l + 1]));
-      if (transposes) W_t.push_back(W.back().transpose());
     }
+    if (stored == nullptr) {
+      for (const ConstMap<S>& w : W) copies_.push_back(w.transpose());
+      stored = &copies_;
+    }
+    for (const MatrixX<S>& w_t : *stored) W_t.emplace_back(w_t.data(), w_t.rows(), w_t.cols());
   }
+  Net(const Net&) = delete;
+  Net& operator=(const Net&) = delete;
   static ConstMap<S> At(const S* theta, const ParameterBlock& block) {
     return ConstMap<S>(theta + block.offset, block.rows, block.cols);
   }
+
+ private:
+  std::vector<MatrixX<S>> copies_;  // W_t's storage when nothing stored them
 };
 
 // Pixels per block of every batched pass. Each pass runs over the pixels in blocks of
@@ -481,14 +493,16 @@ struct PassContext {
   std::unique_ptr<Spatial<S>> spatial;      // with spatial latents
   std::unique_ptr<ReadoutMaps<S>> readout;  // with the readout branch
 
-  PassContext(const LatentModulatedSiren& trunk, const S* theta, long capacity, bool reverse)
+  // theta and its hidden layers' weights transposed (the trunk's, as it stores them).
+  PassContext(const LatentModulatedSiren& trunk, const S* theta,
+              const std::vector<MatrixX<S>>& transposed, long capacity)
       : siren(trunk),
         blocks(trunk.parameter_blocks()),
         num_layers(trunk.num_hidden_layers()),
         width(trunk.width()),
         channels(trunk.output_channels()),
         omega_0(trunk.options().omega_0),
-        net(theta, blocks, num_layers, /*transposes=*/reverse) {
+        net(theta, blocks, num_layers, &transposed) {
     if (trunk.has_spatial()) spatial = std::make_unique<Spatial<S>>(trunk.options(), capacity);
     if (trunk.has_readout()) readout = std::make_unique<ReadoutMaps<S>>(theta, blocks, num_layers);
   }
@@ -599,7 +613,7 @@ struct TangentPass {
     const int num_layers = c.num_layers;
     const long width = c.width;
     if (v_theta != nullptr) {
-      dnet = std::make_unique<Net<S>>(v_theta->data(), c.blocks, num_layers, /*transposes=*/true);
+      dnet = std::make_unique<Net<S>>(v_theta->data(), c.blocks, num_layers, nullptr);
     }
     if (c.spatial) {
       // gamma' = A_g v_zg + A_g' z_g + c' shared, P' = A_s V + A_s' Z per node.
@@ -1028,8 +1042,7 @@ void LatentModulatedSiren::Initialize(std::uint64_t seed) {
     boost::random::uniform_real_distribution<double> uniform(-bound, bound);
     for (int i = 0; i < block.size(); ++i) parameters_[block.offset + i] = uniform(rng);
   }
-  parameters_float_ = parameters_.cast<float>();
-  parameters_generation_ = NextParametersGeneration();
+  ParametersChanged();
 }
 
 void LatentModulatedSiren::SetParameters(const Eigen::VectorXd& parameters) {
@@ -1039,8 +1052,7 @@ void LatentModulatedSiren::SetParameters(const Eigen::VectorXd& parameters) {
                                 std::to_string(parameters.size()));
   }
   parameters_ = parameters;
-  parameters_float_ = parameters_.cast<float>();
-  parameters_generation_ = NextParametersGeneration();
+  ParametersChanged();
 }
 
 namespace {
@@ -1091,6 +1103,30 @@ LatentModulatedSiren::ReadoutCorners LatentModulatedSiren::LocateSpatial(double 
                                                                          double x1) const {
   return LocateOnGrid(options_.coordinates, options_.spatial_rows, options_.spatial_cols, x0,
                       x1);
+}
+
+void LatentModulatedSiren::ParametersChanged() {
+  parameters_float_ = parameters_.cast<float>();
+  const int num_layers = options_.num_hidden_layers;
+  hidden_weights_t_.resize(num_layers);
+  hidden_weights_t_float_.resize(num_layers);
+  for (int l = 0; l < num_layers; ++l) {
+    const ParameterBlock& block = blocks_[2 * l];
+    hidden_weights_t_[l] =
+        Eigen::Map<const Eigen::MatrixXd>(parameters_.data() + block.offset, block.rows, block.cols)
+            .transpose();
+    hidden_weights_t_float_[l] = hidden_weights_t_[l].cast<float>();
+  }
+  parameters_generation_ = NextParametersGeneration();
+}
+
+template <>
+const std::vector<Eigen::MatrixXd>& LatentModulatedSiren::HiddenWeightsTransposed<double>() const {
+  return hidden_weights_t_;
+}
+template <>
+const std::vector<Eigen::MatrixXf>& LatentModulatedSiren::HiddenWeightsTransposed<float>() const {
+  return hidden_weights_t_float_;
 }
 
 template <>
@@ -1179,7 +1215,7 @@ LatentModulatedSiren::MatrixX<Scalar> LatentModulatedSiren::ForwardPasses(
   CheckShape("z", z.rows(), 1, options_.latent_dim, 1);
   const long n = coords.rows();
   const Net<Scalar> net(ParameterData<Scalar>(), blocks_, options_.num_hidden_layers,
-                        /*transposes=*/false);
+                        &HiddenWeightsTransposed<Scalar>());
   std::unique_ptr<Spatial<Scalar>> spatial;
   if (has_spatial()) spatial = std::make_unique<Spatial<Scalar>>(options_, BlockCapacity(n));
   const VectorX<Scalar> gamma = SharedShifts(net, z, spatial.get());
@@ -1251,7 +1287,7 @@ void LatentModulatedSiren::BackwardPasses(
   const long n = coords.rows();
   const long capacity = BlockCapacity(n);
   const Net<Scalar> net(ParameterData<Scalar>(), blocks_, options_.num_hidden_layers,
-                        /*transposes=*/true);
+                        &HiddenWeightsTransposed<Scalar>());
   std::unique_ptr<Spatial<Scalar>> spatial;
   MatrixX<Scalar> dP;  // the spatial latents' scattered dL/dgamma
   if (has_spatial()) {
@@ -1336,7 +1372,7 @@ void LatentModulatedSiren::ForwardAndLatentJacobian(const MatrixX<Scalar>& coord
   const int channels = options_.output_channels;
   const int d = options_.latent_dim;
   const Net<Scalar> net(ParameterData<Scalar>(), blocks_, num_layers,
-                        /*transposes=*/J_y_z != nullptr);
+                        &HiddenWeightsTransposed<Scalar>());
   std::unique_ptr<Spatial<Scalar>> spatial;
   if (has_spatial()) spatial = std::make_unique<Spatial<Scalar>>(options_, capacity);
   const VectorX<Scalar> gamma = SharedShifts(net, z, spatial.get());
@@ -1528,7 +1564,8 @@ Scalar LatentModulatedSiren::LossPasses(
   const bool hvp = Hv_z != nullptr || Hv_theta != nullptr;
   const bool reverse = gradient || hvp;
   const long capacity = BlockCapacity(n);
-  PassContext<Scalar> context(*this, ParameterData<Scalar>(), capacity, reverse);
+  PassContext<Scalar> context(*this, ParameterData<Scalar>(), HiddenWeightsTransposed<Scalar>(),
+                              capacity);
   LossPass<Scalar> pass(context, z, weights, n, capacity, reverse, dL_dtheta);
   std::unique_ptr<TangentPass<Scalar>> tangent;
   if (hvp) {
@@ -1570,7 +1607,8 @@ Scalar LatentModulatedSiren::LossAndGradient(const MatrixX<Scalar>& coords,
   const long n = coords.rows();
   const long capacity = BlockCapacity(n);
   auto record = std::make_unique<typename Tape<Scalar>::Record>();
-  PassContext<Scalar> context(*this, ParameterData<Scalar>(), capacity, /*reverse=*/true);
+  PassContext<Scalar> context(*this, ParameterData<Scalar>(), HiddenWeightsTransposed<Scalar>(),
+                              capacity);
   LossPass<Scalar> pass(context, z, weights, n, capacity, /*reverse=*/true, dL_dtheta);
   record->blocks.reserve((n + kPixelBlock - 1) / kPixelBlock);
   for (long begin = 0; begin < n; begin += kPixelBlock) {
@@ -1605,7 +1643,8 @@ void LatentModulatedSiren::HessianProduct(const Tape<Scalar>& tape,
   const typename Tape<Scalar>::Record& record = *tape.record_;
   const long n = record.coords.rows();
   const long capacity = BlockCapacity(n);
-  PassContext<Scalar> context(*this, ParameterData<Scalar>(), capacity, /*reverse=*/true);
+  PassContext<Scalar> context(*this, ParameterData<Scalar>(), HiddenWeightsTransposed<Scalar>(),
+                              capacity);
   TangentPass<Scalar> tangent(context, record.z, v_theta, v_z, capacity, Hv_theta);
   for (std::size_t b = 0; b < record.blocks.size(); ++b) {
     const long begin = static_cast<long>(b) * kPixelBlock;

@@ -509,6 +509,13 @@ class LatentModulatedSiren {
                     VectorX<Scalar>* Hv_theta, MatrixX<Scalar>* outputs) const;
   template <typename Scalar>
   const Scalar* ParameterData() const;
+  // The hidden layers' weights transposed, W_l^T, in the scalar type: made by
+  // ParametersChanged for the reverse passes' products W_l^T delta.
+  template <typename Scalar>
+  const std::vector<MatrixX<Scalar>>& HiddenWeightsTransposed() const;
+  // Derives what depends on parameters_ (the float copy, the transposes) and draws a
+  // new parameters generation; called wherever parameters_ changes.
+  void ParametersChanged();
   void BuildLayout();
 
   Options options_;
@@ -516,6 +523,8 @@ class LatentModulatedSiren {
   std::vector<ParameterBlock> blocks_;
   Eigen::VectorXd parameters_;
   Eigen::VectorXf parameters_float_;
+  std::vector<Eigen::MatrixXd> hidden_weights_t_;
+  std::vector<Eigen::MatrixXf> hidden_weights_t_float_;
   // Drawn anew from a process-wide counter whenever theta changes (copies share it):
   // a Tape records it to know the parameters it was recorded with.
   std::uint64_t parameters_generation_ = 0;
