@@ -244,11 +244,34 @@ void RegisterGemmBenchmark() {
           2.0 * rows * depth * 256 / 1e9, benchmark::Counter::kIsIterationInvariantRate);
     })->Unit(benchmark::kMicrosecond);
   };
+  // A layer's weight gradient from a block of 256 pixels, dW (width x width) += delta
+  // (width x 256) times h^T: the right-hand side is the activations' block read
+  // transposed (row-major), the depth is the block's pixels.
+  auto weight_gradient = [](const char* name, long width, bool kernel) {
+    benchmark::RegisterBenchmark(name, [=](benchmark::State& state) {
+      const Eigen::MatrixXf delta = Eigen::MatrixXf::Random(width, 256),
+                            h = Eigen::MatrixXf::Random(width, 256);
+      Eigen::MatrixXf dW = Eigen::MatrixXf::Zero(width, width);
+      for (auto _ : state) {
+        if (kernel) {
+          internal::Product(delta, h.transpose(), dW, /*accumulate=*/true);
+        } else {
+          dW.noalias() += delta * h.transpose();
+        }
+        benchmark::DoNotOptimize(dW.data());
+      }
+      state.counters["GFLOPS"] = benchmark::Counter(2.0 * width * width * 256 / 1e9,
+                                                    benchmark::Counter::kIsIterationInvariantRate);
+    })->Unit(benchmark::kMicrosecond);
+  };
   product("kernel/gemm_float/4096x256x256", 4096, 256, true);
   for (const long width : {64L, 128L, 256L}) {
     const std::string shape = std::to_string(width) + "x" + std::to_string(width) + "x256";
     product(("eigen/layer_product/" + shape).c_str(), width, width, false);
     product(("kernel/layer_product/" + shape).c_str(), width, width, true);
+    const std::string gradient_shape = std::to_string(width) + "x256x" + std::to_string(width);
+    weight_gradient(("eigen/weight_gradient/" + gradient_shape).c_str(), width, false);
+    weight_gradient(("kernel/weight_gradient/" + gradient_shape).c_str(), width, true);
   }
 }
 

@@ -99,15 +99,20 @@ struct Net {
 };
 
 // Pixels per block of every batched pass. Each pass runs over the pixels in blocks of
-// at most kPixelBlock columns so that a layer's activations (width x kPixelBlock: 64 KB
-// at width 64, 128 KB at width 128, in float) stay in L2 across the GEMM, the sines and
+// at most kPixelBlock columns so that a layer's activations (width x kPixelBlock: 32 KB
+// at width 64, 64 KB at width 128, in float) stay in L2 across the GEMM, the sines and
 // the reverse pass; gradients and Hessian-vector products are sums over pixels,
 // accumulated block by block, and the loss is normalised once over all pixels.
-// Measured (float, one core, d = 64; LossAndGradient w.r.t. z at 70x88, 2026-11):
-// width 64 / 3 layers: unblocked 23.2 ms, blocks of 256: 16.9, 512: 18.0, 1024: 18.2,
-// 2048: 19.3 ms; width 128 / 4 layers: 63.4, 46.9, 49.2, 51.5, 52.3 ms. 256 was the
-// fastest at both widths and at 80x107 (differences between 256 and 1024 are ~5%).
-constexpr long kPixelBlock = 256;
+// Measured with Eigen's products (float, one core, d = 64; LossAndGradient w.r.t. z at
+// 70x88, 2026-11): width 64 / 3 layers: unblocked 23.2 ms, blocks of 256: 16.9, 512:
+// 18.0, 1024: 18.2, 2048: 19.3 ms; width 128 / 4 layers: 63.4, 46.9, 49.2, 51.5, 52.3 ms.
+// With the passes' own kernel (internal::Product) blocks of 128 beat 256, alternating
+// the two builds (`tactfunc bench trunk`, medians of 4-5 runs, 2026-11-29): the
+// meta-training step 225 -> 219 ms at width 128 and 1447 -> 1389 ms at width 256, the
+// fit 19.6 -> 18.7 ms at width 128, the same at width 64 (40.6 / 40.0 ms, 4.8 ms): a
+// Hessian-vector product's block keeps a dozen width x block matrices, which at 256
+// pixels outgrow L2 at width 128.
+constexpr long kPixelBlock = 128;
 
 // What the forward pass keeps for the reverse passes, for one block of pixels. Every
 // matrix holds one pixel per column (features x capacity, of which the first `cols`
@@ -520,7 +525,11 @@ struct BlockRecord {
               bool keep_layers)
       : trace(num_layers, width, channels, capacity, /*keep_cosine=*/reverse),
         G(channels, capacity),
-        g(reverse ? (keep_layers ? num_layers : 1) : 0, MatrixX<S>(width, capacity)) {}
+        g(reverse ? (keep_layers ? num_layers : 1) : 0) {
+    // Each resized, not copied from a prototype: copying one matrix's uninitialised
+    // values into each cost 1 % of a meta-training step.
+    for (MatrixX<S>& layer : g) layer.resize(width, capacity);
+  }
 };
 
 // The loss over blocks of pixels and, if `reverse`, the reverse pass: dL/dgamma summed
