@@ -134,12 +134,19 @@ bool SmallGemm(long rows, long depth, long cols, const float* a, long a_row_stri
     const int registers = static_cast<int>((strip + 15) / 16);
     const int tail = static_cast<int>(strip % 16);
     const __mmask16 last = tail == 0 ? __mmask16(0xFFFF) : __mmask16((1u << tail) - 1);
-    for (long j0 = 0; j0 < cols; j0 += kTileColumns) {
-      const int width = static_cast<int>(std::min<long>(kTileColumns, cols - j0));
+    // The columns in as few tiles as kTileColumns allows, their widths differing by at
+    // most one: a block of 128 pixels as 18 tiles of 6 and 4 of 5, not 21 of 6 and one of
+    // 2 (whose 8 multiply-adds per 6 loads showed as 1.5 % of a width-256 meta-training
+    // step's profile; the step's time did not move measurably, 1355 / 1362 ms).
+    const long num_tiles = (cols + kTileColumns - 1) / kTileColumns;
+    const long base = cols / num_tiles, wider = cols % num_tiles;  // `wider` tiles of base + 1
+    for (long t = 0, j0 = 0; t < num_tiles; ++t) {
+      const int width = static_cast<int>(base + (t < wider ? 1 : 0));
       const float* b_tile = b_rows ? b + j0 : b + j0 * ldb;
       tiles[registers - 1][width - 1](depth, a + r0, lda, b_tile, ldb, c + r0 + j0 * c_col_stride,
                                       c_col_stride, last, accumulate,
                                       row_offset == nullptr ? nullptr : row_offset + r0);
+      j0 += width;
     }
   }
   return true;

@@ -53,7 +53,7 @@ TEST(SmallGemm, MatchesADoubleProductOverShapesTransposesAndBlocks) {
   const Shape shapes[] = {{1, 1, 1},       {5, 3, 7},      {16, 64, 6},    {17, 2, 256},
                           {48, 64, 13},    {64, 64, 256},  {65, 7, 5},     {100, 33, 12},
                           {128, 128, 256}, {130, 256, 19}, {256, 256, 64}, {64, 256, 64},
-                          {64, 0, 9}};
+                          {64, 32, 128},   {33, 16, 8},    {64, 0, 9}};
   unsigned seed = 1;
   for (const Shape& s : shapes) {
     for (const bool transpose_a : {false, true}) {
