@@ -278,6 +278,61 @@ void PreActivationGradient(const Eigen::MatrixBase<GradH>& g,
   out->array() = g.array() * (omega * cosine.array());
 }
 
+// The element-wise passes below each go once over a block's values, column by column
+// (the blocks are column-major, one pixel per column), where Eigen expressions would
+// take two passes: a Hessian-vector product's block keeps a dozen width x block
+// matrices, and these passes are bound by moving them, not by arithmetic.
+//
+// Each works on one column of `rows` values. GCC vectorises these loops only with
+// their pointers __restrict parameters of a function (as locals in the callers' loops
+// it kept them scalar, and the meta-training step took 8-22 % longer).
+template <typename S>
+void ColumnPreActivationGradientAndSum(long rows, S omega, const S* __restrict g,
+                                       const S* __restrict cosine, S* __restrict delta,
+                                       S* __restrict sum) {
+  for (long i = 0; i < rows; ++i) {
+    const S d = g[i] * (omega * cosine[i]);
+    delta[i] = d;
+    sum[i] += d;
+  }
+}
+// s <- omega s; h' = cos .* s.
+template <typename S>
+void ColumnScaleAndModulate(long rows, S omega, S* __restrict s, const S* __restrict cosine,
+                            S* __restrict h_dot) {
+  for (long i = 0; i < rows; ++i) {
+    const S v = s[i] * omega;
+    s[i] = v;
+    h_dot[i] = cosine[i] * v;
+  }
+}
+// dd = omega (g' .* cos - g .* sin .* s'); sum += dd.
+template <typename S>
+void ColumnTangentPreActivationGradientAndSum(long rows, S omega, const S* __restrict g_dot,
+                                              const S* __restrict g, const S* __restrict cosine,
+                                              const S* __restrict sine, const S* __restrict s_dot,
+                                              S* __restrict dd, S* __restrict sum) {
+  for (long i = 0; i < rows; ++i) {
+    const S v = omega * (g_dot[i] * cosine[i] - g[i] * sine[i] * s_dot[i]);
+    dd[i] = v;
+    sum[i] += v;
+  }
+}
+
+// delta = g .* (omega cos), as PreActivationGradient, and row_sum[i] += sum_j delta(i, j)
+// (the block's share of dL/dgamma) in the same pass.
+template <typename S, typename GradH, typename Cosine, typename Out>
+void PreActivationGradientAndRowSum(const Eigen::MatrixBase<GradH>& g,
+                                    const Eigen::MatrixBase<Cosine>& cosine, S omega,
+                                    Eigen::MatrixBase<Out>* out, S* row_sum) {
+  const long rows = g.rows();
+  for (long j = 0; j < g.cols(); ++j) {
+    ColumnPreActivationGradientAndSum(rows, omega, g.derived().data() + j * g.outerStride(),
+                                      cosine.derived().data() + j * cosine.outerStride(),
+                                      out->derived().data() + j * out->outerStride(), row_sum);
+  }
+}
+
 // Reverse pass of one block from G = dL/dY^T (C x m). The trace must hold the cosines.
 // (*g)[l] receives dL/dh_{l+1} (width x >= m) for every layer l, or, if g holds one
 // matrix, that one serves every layer in turn; *delta (width x >= m) is a work buffer.
@@ -310,8 +365,8 @@ void RunBackwardBlock(const Net<S>& net, const std::vector<ParameterBlock>& bloc
   internal::Product(net.W_out.transpose(), G, layer_g(num_layers - 1), /*accumulate=*/false);
   auto delta = delta_buffer->leftCols(m);
   for (int l = num_layers - 1; l >= 0; --l) {
-    PreActivationGradient(layer_g(l), trace.cosine[l].leftCols(m), omega, &delta);
-    dgamma->segment(l * width, width) += delta.rowwise().sum();
+    PreActivationGradientAndRowSum(layer_g(l), trace.cosine[l].leftCols(m), omega, &delta,
+                                   dgamma->data() + l * width);
     if (spatial != nullptr) spatial->Scatter(delta, l * width, dP);
     if (dL_dtheta != nullptr && (l == 0 || !first_layer_weights_only)) {
       internal::Product(delta, trace.h[l].leftCols(m).transpose(), block(2 * l),
@@ -687,8 +742,11 @@ struct TangentPass {
         s.colwise() = shift_dot;
       }
       if (c.spatial) c.spatial->Blend(P_dot, l * width, s);
-      s *= omega;
-      h_dot[l + 1].leftCols(m) = trace.cosine[l].leftCols(m).cwiseProduct(s);
+      // s *= omega, h_dot_{l+1} = cos .* s, in one pass.
+      for (long j = 0; j < m; ++j) {
+        ColumnScaleAndModulate(width, omega, s_dot[l].col(j).data(), trace.cosine[l].col(j).data(),
+                               h_dot[l + 1].col(j).data());
+      }
     }
     auto yd = y_dot.leftCols(m);
     yd.noalias() = net.W_out * h_dot[num_layers].leftCols(m);
@@ -718,11 +776,15 @@ struct TangentPass {
     for (int l = num_layers - 1; l >= 0; --l) {
       const auto gm = record.g[l].leftCols(m);
       const auto cosine = trace.cosine[l].leftCols(m);
-      const auto sine = trace.h[l + 1].leftCols(m).array();
       // d/dpre cos(omega pre) = -omega sin(omega pre); s_dot already holds omega pre'.
-      ddmm = omega * (gdm.array() * cosine.array() -
-                      gm.array() * sine * s_dot[l].leftCols(m).array());
-      ddgamma.segment(l * width, width) += ddmm.rowwise().sum();
+      // ddm = omega (g' .* cos - g .* sin .* s'), its row sums added to ddgamma_l, in one
+      // pass.
+      for (long j = 0; j < m; ++j) {
+        ColumnTangentPreActivationGradientAndSum(width, omega, gdm.col(j).data(), gm.col(j).data(),
+                                                 cosine.col(j).data(), trace.h[l + 1].col(j).data(),
+                                                 s_dot[l].col(j).data(), ddmm.col(j).data(),
+                                                 ddgamma.data() + l * width);
+      }
       if (c.spatial) c.spatial->Scatter(ddmm, l * width, &ddP);
       const auto h_below = trace.h[l].leftCols(m);
       internal::Product(ddmm, h_below.transpose(), hv_block(2 * l), /*accumulate=*/true);
