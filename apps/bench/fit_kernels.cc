@@ -224,9 +224,9 @@ void RegisterGemmBenchmark() {
     state.counters["GFLOPS"] = benchmark::Counter(2.0 * 4096 * 256 * 256 / 1e9,
                                                   benchmark::Counter::kIsIterationInvariantRate);
   })->Unit(benchmark::kMillisecond);
-  // A layer's product in the passes, W (width x width) times a block of 256 pixels'
-  // activations, by Eigen and by the passes' kernel (internal::Product); and the
-  // reference product by the kernel.
+  // A layer's product in the passes, W (width x width) times 256 pixels' activations (two
+  // of the passes' blocks of 128), by Eigen and by the passes' kernel (internal::Product);
+  // and the reference product by the kernel.
   auto product = [](const char* name, long rows, long depth, bool kernel) {
     benchmark::RegisterBenchmark(name, [=](benchmark::State& state) {
       const Eigen::MatrixXf a = Eigen::MatrixXf::Random(rows, depth),
@@ -244,9 +244,9 @@ void RegisterGemmBenchmark() {
           2.0 * rows * depth * 256 / 1e9, benchmark::Counter::kIsIterationInvariantRate);
     })->Unit(benchmark::kMicrosecond);
   };
-  // A layer's weight gradient from a block of 256 pixels, dW (width x width) += delta
-  // (width x 256) times h^T: the right-hand side is the activations' block read
-  // transposed (row-major), the depth is the block's pixels.
+  // A layer's weight gradient from 256 pixels, dW (width x width) += delta (width x 256)
+  // times h^T: the right-hand side is the activations read transposed (row-major), the
+  // depth is the pixels.
   auto weight_gradient = [](const char* name, long width, bool kernel) {
     benchmark::RegisterBenchmark(name, [=](benchmark::State& state) {
       const Eigen::MatrixXf delta = Eigen::MatrixXf::Random(width, 256),
