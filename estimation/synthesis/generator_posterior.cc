@@ -136,20 +136,28 @@ SE2d PoseMixture::Mean(const std::string& tool) const {
   std::vector<SE2d> means;
   std::vector<double> weights;
   int symmetry_order = 1;
+  const LaplaceComponent* heaviest = nullptr;
   for (const LaplaceComponent& c : components_) {
     if (c.tool != chosen) continue;
     means.push_back(c.mean);
     weights.push_back(c.weight);
     symmetry_order = c.symmetry_order;
+    if (heaviest == nullptr || c.weight > heaviest->weight) heaviest = &c;
   }
   if (means.empty()) {
     throw std::invalid_argument("PoseMixture::Mean: no component" +
                                 (chosen.empty() ? std::string() : " of tool '" + chosen + "'"));
   }
   if (!(std::accumulate(weights.begin(), weights.end(), 0.0) > 0)) weights.assign(means.size(), 1);
-  return PoseDistribution(std::move(means), std::move(weights))
-      .FoldedBySymmetry(symmetry_order)
-      .Mean();
+  const SE2d mean = PoseDistribution(std::move(means), std::move(weights))
+                        .FoldedBySymmetry(symmetry_order)
+                        .Mean();
+  if (symmetry_order < 2) return mean;  // n = 0: yaw 0; n = 1: nothing was folded
+  // Folding put the yaw in a representative of the fold's choosing; the same pose is
+  // given in the one nearest the heaviest component, so that one component's mean is
+  // that component's pose, not its equivalent turned by a multiple of 2 pi / n.
+  const double anchor = heaviest->mean.yaw();
+  return SE2d::FromXYYaw(mean.x(), mean.y(), anchor + FoldYaw(mean.yaw() - anchor, symmetry_order));
 }
 
 double PoseMixture::Density(const SE2d& t, const std::string& tool) const {

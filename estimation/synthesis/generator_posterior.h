@@ -103,6 +103,8 @@ class PoseMixture {
   // order (PoseDistribution::FoldedBySymmetry; n = 0: yaw 0). Each Laplace component is
   // centred on its mean in the tangent space, so this is the mixture's mean to first
   // order in the components' spread; with one component it is that component's mean.
+  // Of a symmetric tool's equivalent yaws the one nearest the heaviest component's is
+  // returned.
   // Between two mirrored modes of an asymmetric tool it falls between them: the Bayes
   // estimate under squared error, not a pose either mode explains (Mode() or the
   // components give hypotheses). Throws std::invalid_argument if no component matches.

@@ -222,6 +222,26 @@ TEST(PoseMixture, MeanWeighsTheModesOfOneToolAfterFoldingItsSymmetry) {
   EXPECT_NEAR(rod.x(), -5e-3, 1e-12);
   EXPECT_NEAR(YawErrorModuloSymmetry(rod.yaw(), 1.0, 2), 0, 1e-9);
   EXPECT_THROW(mixture.Mean("spoon"), std::invalid_argument);
+  // The square's mean yaw is given in the representative of its heavier mode (0.1).
+  EXPECT_NEAR(square.yaw(), 0.15, 1e-3);
+}
+
+TEST(PoseMixture, MeanGivesTheYawNearestTheHeaviestModeNotAnotherRepresentative) {
+  // A rod (C2) mode at yaw -2.4 rad folds to -2.4 + pi for the mean; the mean is still
+  // reported at -2.4, the component's own pose, as a consumer comparing it with the
+  // mode expects. Likewise for a C3 tool whose two modes straddle the fold.
+  const PoseMixture rod({Component("rod", 2, 1.0, SE2d::FromXYYaw(1e-3, 2e-3, -2.4))});
+  EXPECT_NEAR(rod.Mean().yaw(), -2.4, 1e-12);
+  EXPECT_NEAR(rod.Mean().x(), 1e-3, 1e-12);
+  const double third = 2 * M_PI / 3;
+  const PoseMixture c3({Component("triangle", 3, 0.75, SE2d::FromXYYaw(0, 0, 2.9)),
+                        Component("triangle", 3, 0.25, SE2d::FromXYYaw(0, 0, 2.9 - third - 0.2))});
+  // Folded, the modes are 0.2 apart; the mean sits a quarter of the way to the lighter.
+  EXPECT_NEAR(c3.Mean().yaw(), 2.85, 1e-3);
+  // Asymmetric tools are not folded: the mean is the barycentre itself.
+  const PoseMixture l({Component("l_shape", 1, 0.5, SE2d::FromXYYaw(0, 0, 3.0)),
+                       Component("l_shape", 1, 0.5, SE2d::FromXYYaw(0, 0, -3.0))});
+  EXPECT_NEAR(std::abs(l.Mean().yaw()), M_PI, 1e-9);
 }
 
 TEST(GeneratorPosterior, LaplaceCoversTheTruthAndPrefersTheRenderingTool) {
