@@ -54,6 +54,7 @@
 #include <memory>
 #include <opencv2/imgproc.hpp>
 #include <optional>
+#include <string>
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
@@ -82,6 +83,14 @@
 
 namespace tactfunc::apps {
 namespace {
+
+// What a printed yaw error means for a tool of symmetry order n (the truth's yaw is
+// printed as labelled, which may be an equivalent turned by 2 pi k / n).
+std::string YawErrorNote(int n) {
+  if (n == 1) return "";
+  if (n == 0) return " (yaw unobservable for this tool)";
+  return " (yaw modulo the tool's " + std::to_string(n) + "-fold symmetry)";
+}
 
 // The covariance of a pose estimate in the tangent space at `at` (right perturbations) and
 // as ROS PoseWithCovariance's 6x6 (x-y rotated by `yaw_of`), as `pose` prints them;
@@ -549,9 +558,10 @@ void RunGeneratorPose(const PoseFlags& flags, const FunctaModel& model, const In
   if (input.label) {
     const SE2d& truth = input.label->sensor_T_object;
     const double e_mm = 1e3 * std::hypot(mean.x() - truth.x(), mean.y() - truth.y());
-    std::printf("pose: truth %s x = %.3f mm, y = %.3f mm, yaw = %.2f deg; error %.3f mm, %.2f deg\n",
-                input.label->tool.c_str(), truth.x() * 1e3, truth.y() * 1e3, truth.yaw() * kDeg,
-                e_mm, YawErrorModuloSymmetry(mean.yaw(), truth.yaw(), n) * kDeg);
+    std::printf(
+        "pose: truth %s x = %.3f mm, y = %.3f mm, yaw = %.2f deg; error %.3f mm, %.2f deg%s\n",
+        input.label->tool.c_str(), truth.x() * 1e3, truth.y() * 1e3, truth.yaw() * kDeg, e_mm,
+        YawErrorModuloSymmetry(mean.yaw(), truth.yaw(), n) * kDeg, YawErrorNote(n).c_str());
   }
   const std::array<double, 36> ros = PrintCovariance(mean, cov, "mode", "the mode's yaw");
   nlohmann::json components = nlohmann::json::array();
@@ -873,9 +883,10 @@ void RunLatentPose(const PoseFlags& flags, PosteriorSampler sampler, const Funct
   if (input.label) {
     const SE2d& truth = input.label->sensor_T_object;
     const double e_mm = 1e3 * std::hypot(mean.x() - truth.x(), mean.y() - truth.y());
-    std::printf("pose: truth x = %.3f mm, y = %.3f mm, yaw = %.2f deg; error %.3f mm, %.2f deg\n",
+    std::printf("pose: truth x = %.3f mm, y = %.3f mm, yaw = %.2f deg; error %.3f mm, %.2f deg%s\n",
                 truth.x() * 1e3, truth.y() * 1e3, truth.yaw() * kDeg, e_mm,
-                YawErrorModuloSymmetry(mean.yaw(), truth.yaw(), n) * kDeg);
+                YawErrorModuloSymmetry(mean.yaw(), truth.yaw(), n) * kDeg,
+                YawErrorNote(n).c_str());
   }
   const std::array<double, 36> ros = PrintCovariance(mean, cov, "mean", "the mean yaw");
 
