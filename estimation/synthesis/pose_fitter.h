@@ -90,10 +90,11 @@ struct PoseFit {
 };
 
 struct PoseFitOptions {
-  // Defaults chosen on 1,200 fresh contacts (docs/POSES.md, "The search's defaults").
+  // Defaults chosen on 1,200 fresh contacts (docs/POSES.md, "The search's defaults" and
+  // "More contacts for the generator").
   int max_iterations = 4;          // Levenberg-Marquardt iterations per start, >= 1
-  int max_refined_starts = 3;      // best distinct starts refined, >= 1
-  int coarse_refined_starts = 6;   // with a coarse problem: starts refined on it, >= 1
+  int max_refined_starts = 4;      // best distinct starts refined, >= 1
+  int coarse_refined_starts = 8;   // with a coarse problem: starts refined on it, >= 1
   int coarse_iterations = 3;       // their iterations there, >= 1
   double depth_min_m = 0.0015;     // depth bounds, 0 <= min < max
   double depth_max_m = 0.0175;

@@ -134,9 +134,9 @@ TEST_F(GeneratorCoverageTest, PosteriorModeKeepsItsMeasuredAccuracy) {
   // stricter and still missed.
   const Result& r = Measure();
   const int ok = std::max(1, r.contacts - r.failures);
-  EXPECT_LE(Median(r), 1.5) << "median yaw error, deg";
-  EXPECT_GE(WithinFive(r), 0.88) << "share of yaw errors within 5 deg";
-  EXPECT_LE(1e3 * std::sqrt(r.position_sq / ok), 0.45) << "position RMSE, mm";
+  EXPECT_LE(Median(r), 1.0) << "median yaw error, deg";
+  EXPECT_GE(WithinFive(r), 0.94) << "share of yaw errors within 5 deg";
+  EXPECT_LE(1e3 * std::sqrt(r.position_sq / ok), 0.40) << "position RMSE, mm";
 }
 
 }  // namespace
