@@ -11,7 +11,7 @@
 # trained on them and renders through bubble.tfm (`pose --generator-model`), and f_gen.tfs
 # is the labelled functaset of its k-NN starts (docs/POSES.md, "More contacts for the
 # generator").
-# About 15 minutes on 2 cores (the generator's training about 6 on one). Deterministic for
+# About 14 minutes on 2 cores (the generator's training about 6 on one). Deterministic for
 # the seeds.
 set -euo pipefail
 cd "$(dirname "$0")/.."
