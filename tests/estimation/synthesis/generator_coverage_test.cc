@@ -129,9 +129,10 @@ TEST_F(GeneratorCoverageTest, NinetyPercentRegionsCoverTheTruthAtTheirNominalRat
 }
 
 TEST_F(GeneratorCoverageTest, PosteriorModeKeepsItsMeasuredAccuracy) {
-  // Measured on these contacts: see the printed line and docs/POSES.md. The bounds leave
-  // a margin above the measured figures; the product targets (0.3 mm, 3 deg RMSE) are
-  // stricter and still missed.
+  // Measured on these contacts: see the printed line and docs/POSES.md (2026-11-29: 0.331
+  // mm, median 0.67 deg, 0.979 within 5 deg). The bounds leave a margin above the
+  // measured figures; the product's position target (0.3 mm RMSE, met with the k-NN
+  // starts this test goes without) is stricter.
   const Result& r = Measure();
   const int ok = std::max(1, r.contacts - r.failures);
   EXPECT_LE(Median(r), 1.0) << "median yaw error, deg";
