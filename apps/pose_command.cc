@@ -92,6 +92,19 @@ std::string YawErrorNote(int n) {
   return " (yaw modulo the tool's " + std::to_string(n) + "-fold symmetry)";
 }
 
+// The truth line both paths print: the label, and the estimate's position error and yaw
+// error modulo the tool's symmetry order n (YawErrorNote says so). name_tool: the
+// label's tool too (the generator path, which may have identified the tool).
+void PrintTruth(const PoseLabel& label, const SE2d& estimate, int n, bool name_tool) {
+  const SE2d& truth = label.sensor_T_object;
+  const double e_mm = 1e3 * std::hypot(estimate.x() - truth.x(), estimate.y() - truth.y());
+  const std::string tool = name_tool ? label.tool + " " : "";
+  std::printf("pose: truth %sx = %.3f mm, y = %.3f mm, yaw = %.2f deg; error %.3f mm, %.2f deg%s\n",
+              tool.c_str(), truth.x() * 1e3, truth.y() * 1e3, truth.yaw() * kDeg, e_mm,
+              YawErrorModuloSymmetry(estimate.yaw(), truth.yaw(), n) * kDeg,
+              YawErrorNote(n).c_str());
+}
+
 // The covariance of a pose estimate in the tangent space at `at` (right perturbations) and
 // as ROS PoseWithCovariance's 6x6 (x-y rotated by `yaw_of`), as `pose` prints them;
 // returns the ROS covariance.
@@ -555,14 +568,7 @@ void RunGeneratorPose(const PoseFlags& flags, const FunctaModel& model, const In
                                              [&](const LaplaceComponent& c) {
                                                return c.tool == chosen;
                                              })));
-  if (input.label) {
-    const SE2d& truth = input.label->sensor_T_object;
-    const double e_mm = 1e3 * std::hypot(mean.x() - truth.x(), mean.y() - truth.y());
-    std::printf(
-        "pose: truth %s x = %.3f mm, y = %.3f mm, yaw = %.2f deg; error %.3f mm, %.2f deg%s\n",
-        input.label->tool.c_str(), truth.x() * 1e3, truth.y() * 1e3, truth.yaw() * kDeg, e_mm,
-        YawErrorModuloSymmetry(mean.yaw(), truth.yaw(), n) * kDeg, YawErrorNote(n).c_str());
-  }
+  if (input.label) PrintTruth(*input.label, mean, n, /*name_tool=*/true);
   const std::array<double, 36> ros = PrintCovariance(mean, cov, "mode", "the mode's yaw");
   nlohmann::json components = nlohmann::json::array();
   for (const LaplaceComponent& c : mixture.components()) {
@@ -880,14 +886,7 @@ void RunLatentPose(const PoseFlags& flags, PosteriorSampler sampler, const Funct
               mean.x() * 1e3, mean.y() * 1e3, mean.yaw() * kDeg);
   std::printf("pose: sd   x = %.3f mm, y = %.3f mm, yaw = %.2f deg\n",
               std::sqrt(cov(0, 0)) * 1e3, std::sqrt(cov(1, 1)) * 1e3, std::sqrt(cov(2, 2)) * kDeg);
-  if (input.label) {
-    const SE2d& truth = input.label->sensor_T_object;
-    const double e_mm = 1e3 * std::hypot(mean.x() - truth.x(), mean.y() - truth.y());
-    std::printf("pose: truth x = %.3f mm, y = %.3f mm, yaw = %.2f deg; error %.3f mm, %.2f deg%s\n",
-                truth.x() * 1e3, truth.y() * 1e3, truth.yaw() * kDeg, e_mm,
-                YawErrorModuloSymmetry(mean.yaw(), truth.yaw(), n) * kDeg,
-                YawErrorNote(n).c_str());
-  }
+  if (input.label) PrintTruth(*input.label, mean, n, /*name_tool=*/false);
   const std::array<double, 36> ros = PrintCovariance(mean, cov, "mean", "the mean yaw");
 
   const std::vector<PoseMode> modes = distribution->Modes();
