@@ -27,7 +27,9 @@
 //     frame (fit + Laplace; wall clock and the thread's CPU time), and with --unknown-tool
 //     the tool identification rate. --diagnose: for every contact whose mode is > 5 deg or
 //     > 1 mm off, the objective at the mode, the truth and the truth refined (a lower
-//     refined truth = a search failure, else a model failure). --information: every
+//     refined truth = a search failure, else a model failure), and over the whole frame
+//     at the mode, the truth and the trunk's own best latent (Ceres to convergence: how
+//     well any generator could render the frame through this trunk). --information: every
 //     contact's Cramer-Rao bound from the simulator's own frames and noise
 //     (SoftBubblePoseInformation) on the trunk's working frames and on the sensor's own,
 //     printed beside the mode's errors by contact depth: the floor under any unbiased
@@ -63,6 +65,7 @@
 #include "estimation/data/dataset.h"
 #include "estimation/data/image_io.h"
 #include "estimation/data/trunk_targets.h"
+#include "estimation/fitting/latent_fitter.h"
 #include "estimation/functaset/functaset.h"
 #include "estimation/pose/pose_distribution.h"
 #include "estimation/synthesis/generator_posterior.h"
@@ -378,6 +381,39 @@ WrongModeJudgement JudgeWrongMode(const ContactSimulator& simulator, const Image
   return j;
 }
 
+// --diagnose's whole-frame objectives of a wrong mode: the generator's rendering at the
+// mode and at the truth, and the trunk's own best latent (Ceres from the truth's
+// generated latent to convergence). A trunk cost near the generator's at the truth says
+// the trunk cannot draw the frame better; far below, the generator is what falls short.
+struct TrunkWholeFrame {
+  double mode_cost = 0, truth_cost = 0, trunk_cost = 0;
+  double trunk_psnr_db = 0;
+};
+
+TrunkWholeFrame JudgeAgainstTheTrunk(const SensorTrunk& trunk, const TrunkTargets& targets,
+                                     LatentProblem::Options problem_options,
+                                     const PoseGenerator& generator, int tool_index,
+                                     const SE2d& mode, double mode_depth_m, const SE2d& truth,
+                                     double truth_depth_m) {
+  problem_options.max_pixels = 0;  // every valid pixel
+  problem_options.contact_share = 0;
+  const LatentProblem whole(trunk, targets, problem_options);
+  TrunkWholeFrame out;
+  out.mode_cost = PoseCost(whole, generator, tool_index, mode, mode_depth_m);
+  out.truth_cost = PoseCost(whole, generator, tool_index, truth, truth_depth_m);
+  LatentFitter::Options fit;
+  fit.strategy = FitStrategy::FromString("ceres:30");
+  Eigen::VectorXd z;
+  const LatentFitter::Summary summary = LatentFitter(trunk, fit).Fit(
+      whole, generator.Generate(tool_index, truth, truth_depth_m), &z);
+  Eigen::VectorXd r(whole.num_residuals());
+  out.trunk_cost = whole.ResidualsAndJacobian(z.data(), r.data(), nullptr)
+                       ? 0.5 * r.squaredNorm()
+                       : std::nan("");
+  out.trunk_psnr_db = summary.psnr;
+  return out;
+}
+
 // One contact on --information's picture: the mode's error and the bound's standard
 // deviation, position (mm) and yaw (deg; NaN for a tool without an observable yaw), and
 // its true depth's band (0: below 6 mm, 1: 6-10 mm, 2: from 10 mm).
@@ -499,6 +535,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
   double mean_pos_sq = 0, mean_yaw_sq = 0;  // of the posterior mean
   std::vector<double> mean_yaw_errors;
   int wrong = 0, search_failures = 0, model_failures = 0;
+  std::vector<double> trunk_psnrs;  // --diagnose: the trunk's own best latent per wrong mode
   std::vector<double> yaw_errors;
   std::vector<double> position_errors;  // of the mode, metres
   std::ostringstream csv;
@@ -663,6 +700,17 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
                       "truth %.1f, truth refined %.1f -> %s failure\n",
                       k, tools[t].c_str(), e, 1e3 * std::sqrt(dp), c_mode, c_truth, c_refined,
                       search ? "search" : "model");
+          // Which part of the renderer: over the whole frame (so that a free latent cannot
+          // fit the few pixels of a pass), the generator at the mode and at the truth
+          // against the trunk's own best latent (Ceres to convergence from the truth's
+          // generated latent), the best any generator could render through this trunk.
+          const TrunkWholeFrame whole = JudgeAgainstTheTrunk(
+              trunk, targets, options.problem, generator, ti, mode, mode_depth, truth,
+              contact.depth_m);
+          trunk_psnrs.push_back(whole.trunk_psnr_db);
+          std::printf("    whole frame: mode %.1f, truth %.1f, the trunk's own best latent %.1f "
+                      "(PSNR %.2f dB)\n",
+                      whole.mode_cost, whole.truth_cost, whole.trunk_cost, whole.trunk_psnr_db);
         }
       }
       if (true_mode != nullptr) {
@@ -719,6 +767,12 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
     std::printf("  wrong (yaw > 5 deg or position > 1 mm): %d; truth's refined cost lower "
                 "(search failure): %d, higher (model failure): %d\n",
                 wrong, search_failures, model_failures);
+    if (!trunk_psnrs.empty()) {
+      std::sort(trunk_psnrs.begin(), trunk_psnrs.end());
+      std::printf(
+          "  the trunk's own best latent on those frames: PSNR median %.2f dB (%.2f-%.2f)\n",
+          trunk_psnrs[trunk_psnrs.size() / 2], trunk_psnrs.front(), trunk_psnrs.back());
+    }
   }
   nlohmann::json information_json;
   if (flags.information) {
@@ -938,7 +992,9 @@ void RegisterEvalGenerator(CLI::App& app, CommandBody* selected) {
       ->needs("--information");
   sub->add_flag("--diagnose", flags->diagnose,
                 "For every contact whose mode is > 5 deg or > 1 mm off: the objective at the "
-                "mode, at the truth and at the truth refined (search or model failure)");
+                "mode, at the truth and at the truth refined (search or model failure), and "
+                "over the whole frame beside the trunk's own best latent (the generator's or "
+                "the trunk's shortfall)");
   sub->add_option("--contacts-csv", flags->contacts_csv,
                   "Write one CSV row per contact (truth, mode, posterior mean, errors; mm and "
                   "degrees) to this file (atomically)");

@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -371,7 +372,7 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
   const std::string contacts = Root("contacts.csv");
   r = Run("eval-generator --model " + Root("m.tfm") + " --generator " + Root("g.tpg") +
           " --contacts-per-tool 1 --information --picture " + Root("bound.png") +
-          " --contacts-csv " + contacts + " --json");
+          " --contacts-csv " + contacts + " --diagnose --json");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const nlohmann::json eval = r.LastJson();
   for (const char* key : {"rmse_mm", "position_median_mm", "position_p90_mm", "coverage_90"}) {
@@ -419,6 +420,23 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
   EXPECT_NEAR(std::sqrt(bound_sq / count), information["bound_rmse_mm"].get<double>(),
               1e-3 + 1e-3 * information["bound_rmse_mm"].get<double>());
   EXPECT_EQ(information["wrong_modes"]["count"].get<int>(), judged);
+  // --diagnose: every wrong mode's whole-frame objectives, the trunk's own best latent
+  // (Ceres from the truth's generated latent) never above the truth's rendering.
+  int whole_frames = 0;
+  std::istringstream out_lines(r.out);
+  while (std::getline(out_lines, line)) {
+    double mode_cost = 0, truth_cost = 0, trunk_cost = 0, psnr = 0;
+    if (std::sscanf(line.c_str(),
+                    "    whole frame: mode %lf, truth %lf, the trunk's own best latent %lf (PSNR "
+                    "%lf dB)",
+                    &mode_cost, &truth_cost, &trunk_cost, &psnr) != 4) {
+      continue;
+    }
+    ++whole_frames;
+    EXPECT_LE(trunk_cost, truth_cost * (1 + 1e-6)) << line;
+    EXPECT_GT(psnr, 0) << line;
+  }
+  EXPECT_EQ(whole_frames, judged);
   EXPECT_EQ(Slurp(Root("bound.png")).substr(1, 3), "PNG");
   // The picture needs the bound.
   r = Run("eval-generator --model " + Root("m.tfm") + " --generator " + Root("g.tpg") +
