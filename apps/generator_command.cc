@@ -383,11 +383,15 @@ WrongModeJudgement JudgeWrongMode(const ContactSimulator& simulator, const Image
 
 // --diagnose's whole-frame objectives of a wrong mode: the generator's rendering at the
 // mode and at the truth, and the trunk's own best latent (Ceres from the truth's
-// generated latent to convergence). A trunk cost near the generator's at the truth says
-// the trunk cannot draw the frame better; far below, the generator is what falls short.
+// generated latent to convergence), the floor any generator could reach through this
+// trunk. The excess of the truth's rendering over that floor is the generator's
+// shortfall at the truth; a floor far above the sensor noise would be the trunk's. (Not
+// PSNR: its peak is the frame's own range, so a shallow contact at the noise floor reads
+// a low PSNR.)
 struct TrunkWholeFrame {
   double mode_cost = 0, truth_cost = 0, trunk_cost = 0;
-  double trunk_psnr_db = 0;
+  double TruthExcess() const { return truth_cost / trunk_cost - 1; }
+  double ModeExcess() const { return mode_cost / trunk_cost - 1; }
 };
 
 TrunkWholeFrame JudgeAgainstTheTrunk(const SensorTrunk& trunk, const TrunkTargets& targets,
@@ -404,13 +408,11 @@ TrunkWholeFrame JudgeAgainstTheTrunk(const SensorTrunk& trunk, const TrunkTarget
   LatentFitter::Options fit;
   fit.strategy = FitStrategy::FromString("ceres:30");
   Eigen::VectorXd z;
-  const LatentFitter::Summary summary = LatentFitter(trunk, fit).Fit(
-      whole, generator.Generate(tool_index, truth, truth_depth_m), &z);
+  LatentFitter(trunk, fit).Fit(whole, generator.Generate(tool_index, truth, truth_depth_m), &z);
   Eigen::VectorXd r(whole.num_residuals());
   out.trunk_cost = whole.ResidualsAndJacobian(z.data(), r.data(), nullptr)
                        ? 0.5 * r.squaredNorm()
                        : std::nan("");
-  out.trunk_psnr_db = summary.psnr;
   return out;
 }
 
@@ -535,7 +537,9 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
   double mean_pos_sq = 0, mean_yaw_sq = 0;  // of the posterior mean
   std::vector<double> mean_yaw_errors;
   int wrong = 0, search_failures = 0, model_failures = 0;
-  std::vector<double> trunk_psnrs;  // --diagnose: the trunk's own best latent per wrong mode
+  // --diagnose: per wrong mode, the truth's and the mode's whole-frame excess over the
+  // trunk's own best latent.
+  std::vector<double> truth_excess, mode_excess;
   std::vector<double> yaw_errors;
   std::vector<double> position_errors;  // of the mode, metres
   std::ostringstream csv;
@@ -707,10 +711,12 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
           const TrunkWholeFrame whole = JudgeAgainstTheTrunk(
               trunk, targets, options.problem, generator, ti, mode, mode_depth, truth,
               contact.depth_m);
-          trunk_psnrs.push_back(whole.trunk_psnr_db);
+          truth_excess.push_back(whole.TruthExcess());
+          mode_excess.push_back(whole.ModeExcess());
           std::printf("    whole frame: mode %.1f, truth %.1f, the trunk's own best latent %.1f "
-                      "(PSNR %.2f dB)\n",
-                      whole.mode_cost, whole.truth_cost, whole.trunk_cost, whole.trunk_psnr_db);
+                      "(truth %+.1f %%, mode %+.1f %% above it)\n",
+                      whole.mode_cost, whole.truth_cost, whole.trunk_cost,
+                      100 * whole.TruthExcess(), 100 * whole.ModeExcess());
         }
       }
       if (true_mode != nullptr) {
@@ -767,11 +773,15 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
     std::printf("  wrong (yaw > 5 deg or position > 1 mm): %d; truth's refined cost lower "
                 "(search failure): %d, higher (model failure): %d\n",
                 wrong, search_failures, model_failures);
-    if (!trunk_psnrs.empty()) {
-      std::sort(trunk_psnrs.begin(), trunk_psnrs.end());
+    if (!truth_excess.empty()) {
+      std::sort(truth_excess.begin(), truth_excess.end());
+      std::sort(mode_excess.begin(), mode_excess.end());
+      const std::size_t half = truth_excess.size() / 2;
       std::printf(
-          "  the trunk's own best latent on those frames: PSNR median %.2f dB (%.2f-%.2f)\n",
-          trunk_psnrs[trunk_psnrs.size() / 2], trunk_psnrs.front(), trunk_psnrs.back());
+          "  over the whole frame, above the trunk's own best latent: the truth's rendering "
+          "median %+.1f %% (%+.1f to %+.1f), the mode's %+.1f %% (%+.1f to %+.1f)\n",
+          100 * truth_excess[half], 100 * truth_excess.front(), 100 * truth_excess.back(),
+          100 * mode_excess[half], 100 * mode_excess.front(), 100 * mode_excess.back());
     }
   }
   nlohmann::json information_json;
@@ -993,8 +1003,8 @@ void RegisterEvalGenerator(CLI::App& app, CommandBody* selected) {
   sub->add_flag("--diagnose", flags->diagnose,
                 "For every contact whose mode is > 5 deg or > 1 mm off: the objective at the "
                 "mode, at the truth and at the truth refined (search or model failure), and "
-                "over the whole frame beside the trunk's own best latent (the generator's or "
-                "the trunk's shortfall)");
+                "over the whole frame at the mode, at the truth and at the trunk's own best "
+                "latent (what the generator falls short of the trunk by)");
   sub->add_option("--contacts-csv", flags->contacts_csv,
                   "Write one CSV row per contact (truth, mode, posterior mean, errors; mm and "
                   "degrees) to this file (atomically)");

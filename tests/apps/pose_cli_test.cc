@@ -425,16 +425,22 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
   int whole_frames = 0;
   std::istringstream out_lines(r.out);
   while (std::getline(out_lines, line)) {
-    double mode_cost = 0, truth_cost = 0, trunk_cost = 0, psnr = 0;
+    double mode_cost = 0, truth_cost = 0, trunk_cost = 0, truth_pct = 0, mode_pct = 0;
     if (std::sscanf(line.c_str(),
-                    "    whole frame: mode %lf, truth %lf, the trunk's own best latent %lf (PSNR "
-                    "%lf dB)",
-                    &mode_cost, &truth_cost, &trunk_cost, &psnr) != 4) {
+                    "    whole frame: mode %lf, truth %lf, the trunk's own best latent %lf (truth "
+                    "%lf %%, mode %lf %% above it)",
+                    &mode_cost, &truth_cost, &trunk_cost, &truth_pct, &mode_pct) != 5) {
       continue;
     }
     ++whole_frames;
+    EXPECT_GT(trunk_cost, 0) << line;
     EXPECT_LE(trunk_cost, truth_cost * (1 + 1e-6)) << line;
-    EXPECT_GT(psnr, 0) << line;
+    // The percentages from the printed costs, within their rounding (0.05 each).
+    const auto tolerance = [&](double cost) {
+      return 0.06 + 100 * 0.05 * (1 / trunk_cost + cost / (trunk_cost * trunk_cost));
+    };
+    EXPECT_NEAR(truth_pct, 100 * (truth_cost / trunk_cost - 1), tolerance(truth_cost)) << line;
+    EXPECT_NEAR(mode_pct, 100 * (mode_cost / trunk_cost - 1), tolerance(mode_cost)) << line;
   }
   EXPECT_EQ(whole_frames, judged);
   EXPECT_EQ(Slurp(Root("bound.png")).substr(1, 3), "PNG");
