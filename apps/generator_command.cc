@@ -18,7 +18,8 @@
 //       [--pose-model P.tpm] [--contacts-per-tool 20] [--seed 1592590336] [--unknown-tool]
 //       [--diagnose] [--information [--picture FILE]] [search knobs: --max-pixels, --contact-share,
 //       --refined-starts, --iterations, --knn-k, --yaw-grid, --position-grid,
-//       --position-rings, --coarse-pixels, --coarse-starts, --coarse-iterations]
+//       --position-rings, --coarse-pixels, --coarse-starts, --coarse-iterations,
+//       --final-pixels]
 //       [--contacts-csv FILE] [--json]
 //     fresh Soft Bubble contacts (ContactSimulator, seeded; contact k uses DeriveSeed(seed,
 //     k)) of every tool the generator knows through GeneratorPosterior (one thread): the
@@ -330,6 +331,7 @@ struct EvalGeneratorFlags {
   int knn_k = GeneratorPosterior::Options().knn_k;
   int yaw_grid = GeneratorPosterior::Options().yaw_grid;
   int coarse_pixels = GeneratorPosterior::Options().coarse_pixels;
+  int final_pixels = GeneratorPosterior::Options().final_pixels;
   double position_grid_mm = 1e3 * GeneratorPosterior::Options().position_grid_m;
   int position_rings = GeneratorPosterior::Options().position_grid_rings;
   int coarse_starts = PoseFitOptions().coarse_refined_starts;
@@ -525,6 +527,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
   options.knn_k = flags.knn_k;
   options.yaw_grid = flags.yaw_grid;
   options.coarse_pixels = flags.coarse_pixels;
+  options.final_pixels = flags.final_pixels;
   options.position_grid_m = 1e-3 * flags.position_grid_mm;
   options.position_grid_rings = flags.position_rings;
   options.fit.coarse_refined_starts = flags.coarse_starts;
@@ -970,6 +973,12 @@ void RegisterEvalGenerator(CLI::App& app, CommandBody* selected) {
   sub->add_option("--coarse-pixels", flags->coarse_pixels,
                   "Pixels of the coarse stage (start scoring and first refinement; default " +
                       std::to_string(flags->coarse_pixels) + ", 0 = none)")
+      ->check(CLI::Range(0, 1 << 20));
+  sub->add_option("--final-pixels", flags->final_pixels,
+                  "Pixels of a final stage that refines every distinct mode again and takes its "
+                  "Laplace approximation there (all valid pixels when the frame has fewer; "
+                  "default " +
+                      std::to_string(flags->final_pixels) + " = none)")
       ->check(CLI::Range(0, 1 << 20));
   sub->add_option("--position-grid", flags->position_grid_mm,
                   "Spacing (mm) of the shifted copies of the first start (default " +

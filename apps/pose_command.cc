@@ -148,6 +148,7 @@ struct PoseFlags {
   int knn_k = 8;
   int sgld_minibatch = PosePosterior::kDefaultSgldMinibatch;
   int max_pixels = -1;  // -1 = the method's default (latent: every valid pixel)
+  int final_pixels = 0;  // --method generator: GeneratorPosterior::Options::final_pixels
   double pixel_pitch_mm = 0;
   std::string out;
   int height = 420;
@@ -489,6 +490,7 @@ void RunGeneratorPose(const PoseFlags& flags, const FunctaModel& model, const In
   GeneratorPosterior::Options options;
   options.seed = flags.seed;
   if (flags.max_pixels >= 0) options.problem.max_pixels = flags.max_pixels;
+  options.final_pixels = flags.final_pixels;
   const GeneratorPosterior posterior(trunk, generator, options, knn.get(), &pose_model,
                                      &model.Trunk(input.sensor));
   PoseMixture mixture;
@@ -655,6 +657,10 @@ void RunPose(const PoseFlags& flags) {
   }
   if (flags.method == "both" && flags.generator.empty()) {
     throw UsageError("--method both: give --generator (the generator path's model)");
+  }
+  if (flags.final_pixels > 0 && flags.method == "latent") {
+    throw UsageError("--final-pixels: refines the generator path's modes; give --method generator "
+                     "or both");
   }
   PosteriorSampler sampler = PosteriorSampler::kSgld;
   if (!flags.sampler.empty() && !PosteriorSamplerFromString(flags.sampler, &sampler)) {
@@ -1008,6 +1014,11 @@ void RegisterPose(CLI::App& app, CommandBody* selected) {
                   "every one (default: every one for --method latent, " +
                       std::to_string(GeneratorPosterior::Options().problem.max_pixels) +
                       " for --method generator)")
+      ->check(CLI::Range(0, 100000000));
+  sub->add_option("--final-pixels", flags->final_pixels,
+                  "--method generator: refine every distinct mode again on N pixels (all "
+                  "valid pixels when the frame has fewer) and take its Laplace approximation "
+                  "there; slower, ranks nearby modes on more of the frame (default 0 = none)")
       ->check(CLI::Range(0, 100000000));
   sub->add_option("--pixel-pitch-mm", flags->pixel_pitch_mm,
                   "Pixel pitch for posterior.png (default: the frame's dataset.json)")

@@ -283,6 +283,7 @@ bool GeneratorPosterior::Options::IsValid(std::string* error) const {
   if (knn_k < 0) return fail("knn_k must be >= 0");
   if (yaw_grid < 1) return fail("yaw_grid must be >= 1");
   if (coarse_pixels < 0) return fail("coarse_pixels must be >= 0");
+  if (final_pixels < 0) return fail("final_pixels must be >= 0");
   if (position_grid_rings < 0) return fail("position_grid_rings must be >= 0");
   if (!(position_grid_m >= 0) || !std::isfinite(position_grid_m)) {
     return fail("position_grid_m must be finite and >= 0");
@@ -417,6 +418,14 @@ GeneratorPosterior::Summary GeneratorPosterior::Estimate(const TrunkTargets& tar
   }
   Summary summary;
   const LatentProblem problem(*trunk_, targets, options_.problem);
+  std::optional<LatentProblem> final_problem;
+  if (options_.final_pixels > 0) {
+    LatentProblem::Options fo = options_.problem;
+    fo.max_pixels = options_.final_pixels;
+    final_problem.emplace(*trunk_, targets, fo);
+  }
+  // The problem the Laplace approximations are taken on.
+  const LatentProblem& laplace_problem = final_problem ? *final_problem : problem;
   std::optional<LatentProblem> coarse;
   if (options_.coarse_pixels > 0 && options_.coarse_pixels < problem.num_pixels()) {
     LatentProblem::Options co = options_.problem;
@@ -453,6 +462,14 @@ GeneratorPosterior::Summary GeneratorPosterior::Estimate(const TrunkTargets& tar
     summary.num_starts += static_cast<int>(starts.size());
     ToolModes tm{t, FitPoseModes(problem, *generator_, t, starts, options_.fit,
                                           coarse ? &*coarse : nullptr)};
+    if (final_problem) {
+      // Step 2b: each distinct mode refined again, as a start of its own.
+      std::vector<PoseStart> modes;
+      for (const PoseFit& f : tm.modes) modes.push_back({f.sensor_T_object, f.depth_m, f.start});
+      PoseFitOptions fo = options_.fit;
+      fo.max_refined_starts = std::max(1, static_cast<int>(modes.size()));
+      tm.modes = FitPoseModes(*final_problem, *generator_, t, modes, fo, nullptr);
+    }
     for (const PoseFit& f : tm.modes) best_msr = std::min(best_msr, f.mean_squared_residual);
     all.push_back(std::move(tm));
   }
@@ -469,12 +486,12 @@ GeneratorPosterior::Summary GeneratorPosterior::Estimate(const TrunkTargets& tar
                                               : generator_->sigma_inflation();
   if (!(kappa > 0)) kappa = 3;
   summary.rms_residual = std::sqrt(best_msr);
-  summary.num_pixels = problem.num_pixels();
+  summary.num_pixels = laplace_problem.num_pixels();
   summary.pixel_factor = std::sqrt(
-      problem.num_pixels() /
-      std::min(kReferencePixels, static_cast<double>(problem.num_valid_pixels())));
+      laplace_problem.num_pixels() /
+      std::min(kReferencePixels, static_cast<double>(laplace_problem.num_valid_pixels())));
   summary.sigma = kappa * std::max(summary.rms_residual, 1e-6) * summary.pixel_factor;
-  const double scale = std::pow(problem.sigma() / summary.sigma, 2);  // r_s^2 = r_0^2 scale
+  const double scale = std::pow(laplace_problem.sigma() / summary.sigma, 2);  // r_s^2 = r_0^2 scale
 
   std::vector<LaplaceComponent> components;
   for (const ToolModes& tm : all) {

@@ -16,6 +16,10 @@
 //   2. modes: FitPoseModes (estimation/synthesis/pose_fitter.h) in Ceres on SE(2), the
 //      starts scored and first refined on Options::coarse_pixels pixels of the frame (both
 //      stages draw their pixels partly towards the contact, Options::problem);
+//   2b. optionally (Options::final_pixels > 0), every distinct mode refined again on a
+//      problem of that many pixels (all valid pixels when it holds more), where its cost
+//      and Jacobian for step 3 are then taken: the few pixels of the search can rank two
+//      nearby modes wrongly (docs/POSES.md, "The final ranking on more pixels");
 //   3. Laplace: at mode m with whitened residuals r at the posterior's pixel sigma s and
 //      Jacobian J over (tangent x, y, theta of the right perturbation, depth),
 //        H_m = J^T J,  Sigma_m = H_m^-1 (4 x 4; H_m's eigenvalues floored at 1e-12 of
@@ -167,6 +171,10 @@ class GeneratorPosterior {
     // Pixels of the coarse stage (scoring the starts, their first refinement,
     // pose_fitter.h); 0 = no coarse stage (the starts are scored on the full problem).
     int coarse_pixels = 128;
+    // Pixels of the final stage (step 2b; drawn as Options::problem draws, all valid
+    // pixels evenly when it holds as many); 0 = none, the modes as the search left them.
+    // When set, s and N below are the final problem's.
+    int final_pixels = 0;
     // Position grid: the first start (the nearest neighbour's label, else the pose MLP's)
     // is also tried at the positions (a, b) * position_grid_m away in x and y for
     // |a|, |b| <= position_grid_rings (each at the yaw grid); 0 = none. Catches a wrong

@@ -322,6 +322,15 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
     EXPECT_NEAR(record["posterior_mean"]["x_m"].get<double>(), record["mean"]["x_m"].get<double>(),
                 1e-12);
   }
+  // --final-pixels refines the generator path's modes on more pixels (here every pixel);
+  // the latent path has no modes to refine and refuses it, naming the flag.
+  r = Run(args + " --generator " + Root("g.tpg") + " --final-pixels 100000 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_GE(r.LastJson()["modes"].get<int>(), 1);
+  r = Run("pose --model " + Root("m.tfm") + " --pose-model " + Root("p.tpm") + " --data " +
+          Root("gd") + " --id 000003 --final-pixels 512");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("--final-pixels"));
   // MCMC over the pose: 4 chains of 5 kept samples, their diagnostics in the record.
   r = Run(args + " --generator " + Root("g.tpg") + " --sampler rwm --out " + out + " --json");
   ASSERT_EQ(r.exit_code, 0) << r.err;

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -272,6 +273,48 @@ TEST(GeneratorPosterior, LaplaceCoversTheTruthAndPrefersTheRenderingTool) {
   PoseMixture again;
   posterior.Estimate(targets, "", &again);
   EXPECT_EQ(again.Mode().x(), posterior.Estimate(targets, "", &mixture).mean.x());
+}
+
+// The final stage refines each mode again on more pixels and takes the Laplace
+// approximation there: the summary's pixels are the final problem's, and the best mode's
+// objective on that problem is lower than where the search on few pixels left it.
+TEST(GeneratorPosterior, TheFinalStageRefinesTheModesOnItsOwnPixels) {
+  const SensorTrunk trunk = Trunk();
+  const PoseGenerator g = Generator();
+  const SE2d truth = SE2d::FromXYYaw(-0.7e-3, 0.4e-3, -1.0);
+  const TrunkTargets targets = Render(trunk, g, 0, truth, 0.010, 0.01);
+  GeneratorPosterior::Options options;
+  options.sigma_inflation = 2;
+  options.problem.max_pixels = 24;
+  options.coarse_pixels = 12;
+  PoseMixture searched, refined;
+  const GeneratorPosterior::Summary s =
+      GeneratorPosterior(trunk, g, options).Estimate(targets, "l_shape", &searched);
+  ASSERT_TRUE(s.usable) << s.message;
+  EXPECT_EQ(s.num_pixels, 24);
+  options.final_pixels = kRows * kCols;  // every pixel
+  const GeneratorPosterior::Summary f =
+      GeneratorPosterior(trunk, g, options).Estimate(targets, "l_shape", &refined);
+  ASSERT_TRUE(f.usable) << f.message;
+  EXPECT_EQ(f.num_pixels, kRows * kCols);
+  LatentProblem::Options whole = options.problem;
+  whole.max_pixels = 0;
+  const LatentProblem all(trunk, targets, whole);
+  const int tool = g.ToolIndex("l_shape");
+  const auto best_cost = [&](const PoseMixture& m) {
+    double best = std::numeric_limits<double>::infinity();
+    for (const LaplaceComponent& c : m.components()) {
+      best = std::min(best, PoseCost(all, g, tool, c.mean, c.depth_m));
+    }
+    return best;
+  };
+  EXPECT_LT(best_cost(refined), best_cost(searched));
+  EXPECT_LT(PoseCost(all, g, tool, refined.Mode(), refined.components().front().depth_m),
+            PoseCost(all, g, tool, SE2d::FromXYYaw(0, 0, 0), 0.010));
+  std::string error;
+  options.final_pixels = -1;
+  EXPECT_FALSE(options.IsValid(&error));
+  EXPECT_THAT(error, ::testing::HasSubstr("final_pixels"));
 }
 
 // The mode weights follow Z^(1/tau): the components and their log evidences do not
