@@ -491,7 +491,8 @@ GeneratorPosterior::Summary GeneratorPosterior::Estimate(const TrunkTargets& tar
       laplace_problem.num_pixels() /
       std::min(kReferencePixels, static_cast<double>(laplace_problem.num_valid_pixels())));
   summary.sigma = kappa * std::max(summary.rms_residual, 1e-6) * summary.pixel_factor;
-  const double scale = std::pow(laplace_problem.sigma() / summary.sigma, 2);  // r_s^2 = r_0^2 scale
+  // r_s^2 = r_0^2 scale
+  const double scale = std::pow(laplace_problem.sigma() / summary.sigma, 2);
 
   std::vector<LaplaceComponent> components;
   for (const ToolModes& tm : all) {

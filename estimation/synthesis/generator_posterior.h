@@ -17,9 +17,9 @@
 //      starts scored and first refined on Options::coarse_pixels pixels of the frame (both
 //      stages draw their pixels partly towards the contact, Options::problem);
 //   2b. optionally (Options::final_pixels > 0), every distinct mode refined again on a
-//      problem of that many pixels (all valid pixels when it holds more), where its cost
-//      and Jacobian for step 3 are then taken: the few pixels of the search can rank two
-//      nearby modes wrongly (docs/POSES.md, "The final ranking on more pixels");
+//      problem of that many pixels (all valid pixels when the frame has no more), where
+//      its cost and Jacobian for step 3 are then taken: the few pixels of the search can
+//      rank two nearby modes wrongly (docs/POSES.md, "The final ranking on more pixels");
 //   3. Laplace: at mode m with whitened residuals r at the posterior's pixel sigma s and
 //      Jacobian J over (tangent x, y, theta of the right perturbation, depth),
 //        H_m = J^T J,  Sigma_m = H_m^-1 (4 x 4; H_m's eigenvalues floored at 1e-12 of
