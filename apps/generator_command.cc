@@ -691,7 +691,9 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
         const double e = n != 0 ? kDeg * mode_yaw_error : 0;
         if (wrong_mode) {
           ++wrong;
-          const LatentProblem problem(trunk, targets, options.problem);
+          // The problem the posterior ranked its modes on (the final stage's with
+          // --final-pixels), so that the costs compare what chose the mode.
+          const LatentProblem problem(trunk, targets, options.RankingProblem());
           const int ti = static_cast<int>(t);
           const double mode_depth = true_mode != nullptr ? true_mode->depth_m : 0;
           const double c_mode = PoseCost(problem, generator, ti, mode, mode_depth);

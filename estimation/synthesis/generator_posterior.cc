@@ -274,6 +274,12 @@ LatentProblem::Options GeneratorPosterior::Options::DefaultProblem() {
   return o;
 }
 
+LatentProblem::Options GeneratorPosterior::Options::RankingProblem() const {
+  LatentProblem::Options o = problem;
+  if (final_pixels > 0) o.max_pixels = final_pixels;
+  return o;
+}
+
 bool GeneratorPosterior::Options::IsValid(std::string* error) const {
   if (!problem.IsValid(error) || !fit.IsValid(error)) return false;
   auto fail = [&](const std::string& m) {
@@ -419,11 +425,7 @@ GeneratorPosterior::Summary GeneratorPosterior::Estimate(const TrunkTargets& tar
   Summary summary;
   const LatentProblem problem(*trunk_, targets, options_.problem);
   std::optional<LatentProblem> final_problem;
-  if (options_.final_pixels > 0) {
-    LatentProblem::Options fo = options_.problem;
-    fo.max_pixels = options_.final_pixels;
-    final_problem.emplace(*trunk_, targets, fo);
-  }
+  if (options_.final_pixels > 0) final_problem.emplace(*trunk_, targets, options_.RankingProblem());
   // The problem the Laplace approximations are taken on.
   const LatentProblem& laplace_problem = final_problem ? *final_problem : problem;
   std::optional<LatentProblem> coarse;

@@ -189,6 +189,9 @@ class GeneratorPosterior {
     std::uint64_t seed = 0;
     bool IsValid(std::string* error) const;
     static LatentProblem::Options DefaultProblem();
+    // The problem the modes are finally ranked on and their Laplace approximations taken
+    // on: `problem`, with final_pixels pixels when the final stage is on.
+    LatentProblem::Options RankingProblem() const;
   };
 
   struct Summary {

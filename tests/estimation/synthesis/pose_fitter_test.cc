@@ -292,7 +292,9 @@ TEST(GeneratorPosterior, TheFinalStageRefinesTheModesOnItsOwnPixels) {
       GeneratorPosterior(trunk, g, options).Estimate(targets, "l_shape", &searched);
   ASSERT_TRUE(s.usable) << s.message;
   EXPECT_EQ(s.num_pixels, 24);
+  EXPECT_EQ(options.RankingProblem().max_pixels, 24);
   options.final_pixels = kRows * kCols;  // every pixel
+  EXPECT_EQ(options.RankingProblem().max_pixels, kRows * kCols);
   const GeneratorPosterior::Summary f =
       GeneratorPosterior(trunk, g, options).Estimate(targets, "l_shape", &refined);
   ASSERT_TRUE(f.usable) << f.message;
