@@ -4,13 +4,16 @@
 //
 //   tactfunc train-generator --model M.tfm --functaset F.tfs --data D --out G.tpg
 //       [--mode latents|pixels] [--epochs 300] [--pixel-epochs 4] [--pixel-frames 200]
-//       [--calibration-frames 120] [--temperature-frames 600] [--seed 0] [--resume] [--json]
+//       [--calibration-frames 120] [--temperature-frames 600] [--final-pixels 0]
+//       [--recalibrate G0.tpg] [--seed 0] [--resume] [--json]
 //     trains h(tool, T, depth) -> z on the functaset's labelled train-split entries: by
 //     regressing their latents (--mode latents), then (--mode pixels) on --pixel-frames
 //     frames per tool through the frozen trunk for --pixel-epochs more epochs; reports the
 //     mean rendering PSNR on the test split, calibrates the posterior's sigma inflation
 //     on --calibration-frames test-split frames and its mode weights' temperature on
-//     --temperature-frames (CalibrateWeightTemperature) and writes G atomically. Each stage shows
+//     --temperature-frames (CalibrateWeightTemperature), both with the posterior's final
+//     stage on --final-pixels pixels (recorded in G: the posterior's default), and writes G
+//     atomically; --recalibrate G0 skips the training and calibrates G0. Each stage shows
 //     its epochs and checkpoints to G.regression.ckpt / G.pixels.ckpt (every 10 epochs and
 //     on Ctrl-C, which exits 130); --resume continues from them to the same G.
 //
@@ -95,6 +98,8 @@ struct TrainGeneratorFlags {
   int pixels = 256;
   int calibration_frames = 120;
   int temperature_frames = 600;
+  int final_pixels = 0;     // the posterior's final stage during calibration (recorded)
+  std::string recalibrate;  // a trained generator: calibrate it only
   double lr = 1e-3;
   std::uint64_t seed = 0;
   bool json = false;
@@ -173,12 +178,17 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
   options.latent_dim = trunk.siren.latent_dim();
   options.hidden_sizes = ParsePositiveIntList(flags.hidden, "--hidden", "widths");
   options.yaw_harmonics = flags.harmonics;
+  const bool train_it = flags.recalibrate.empty();
   PoseGenerator generator(options, DeriveSeed(flags.seed, 0));
-
-  const Labelled train = Collect(generator, functaset, dataset, Split::kTrain, 0);
-  if (train.samples.empty()) {
-    throw DatasetError("--functaset '" + flags.functaset + "' has no labelled bubble train entries");
+  if (!train_it) {
+    generator = PoseGenerator::Load(flags.recalibrate);
+    if (generator.options().latent_dim != options.latent_dim) {
+      throw UsageError("--recalibrate '" + flags.recalibrate + "': the generator's latent_dim is " +
+                       std::to_string(generator.options().latent_dim) + ", the trunk of --model '" +
+                       flags.model + "' has " + std::to_string(options.latent_dim));
+    }
   }
+
   const InterruptScope interrupt_scope;
   GeneratorTrainingOptions to;
   to.epochs = flags.epochs;
@@ -187,21 +197,28 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
   to.checkpoint_path = StageCheckpoint(flags.out, "regression");
   to.resume = flags.resume;
   GeneratorTrainingSummary reg;
-  {
+  std::size_t train_contacts = 0;
+  if (train_it) {
+    const Labelled train = Collect(generator, functaset, dataset, Split::kTrain, 0);
+    if (train.samples.empty()) {
+      throw DatasetError("--functaset '" + flags.functaset +
+                         "' has no labelled bubble train entries");
+    }
     ProgressBar bar("train-generator regression", to.epochs, "epochs",
                     ProgressBar::Lines::kWhenNotDrawn);
     reg = TrainGeneratorOnLatents(&generator, train.samples, train.latents, to,
                                   StageProgress(&bar));
     bar.Tick(reg.epochs_completed - bar.done());  // a stage its checkpoint had finished
     bar.Finish();
+    ExitIfInterrupted(reg, to.epochs, to.checkpoint_path);
+    train_contacts = train.samples.size();
+    std::cout << "train-generator: latent regression on " << train.samples.size()
+              << " contacts: " << reg.BriefReport()
+              << (reg.epochs_resumed > 0
+                      ? " (resumed after " + std::to_string(reg.epochs_resumed) + " epochs)"
+                      : std::string())
+              << "\n";
   }
-  ExitIfInterrupted(reg, to.epochs, to.checkpoint_path);
-  std::cout << "train-generator: latent regression on " << train.samples.size() << " contacts: "
-            << reg.BriefReport()
-            << (reg.epochs_resumed > 0
-                    ? " (resumed after " + std::to_string(reg.epochs_resumed) + " epochs)"
-                    : std::string())
-            << "\n";
   // Test-split frames for PSNR and calibration.
   const Labelled test = Collect(generator, functaset, dataset, Split::kTest, 0);
   std::vector<TrunkTargets> test_frames;
@@ -213,10 +230,12 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
     psnr_samples.push_back(test.samples[k]);
   }
   const double psnr_latents = MeanGeneratorPsnr(generator, trunk, psnr_samples, test_frames);
-  std::cout << "train-generator: test rendering PSNR after regression " << psnr_latents << " dB\n";
+  std::cout << "train-generator: test rendering PSNR "
+            << (train_it ? "after regression " : "of " + flags.recalibrate + " ") << psnr_latents
+            << " dB\n";
   double psnr_pixels = std::nan("");
   GeneratorTrainingSummary pix;
-  if (flags.mode == "pixels") {
+  if (train_it && flags.mode == "pixels") {
     const Labelled sub = Collect(generator, functaset, dataset, Split::kTrain, flags.pixel_frames);
     std::vector<TrunkTargets> frames;
     for (std::size_t index : sub.frames) frames.push_back(LoadTrunkTargets(dataset, index, trunk.format));
@@ -247,6 +266,7 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
   std::unique_ptr<KnnPoseStarts> knn = std::make_unique<KnnPoseStarts>(functaset, SensorKind::kSoftBubble);
   GeneratorPosterior::Options po;
   po.sigma_inflation = 1;
+  po.final_pixels = flags.final_pixels;
   const GeneratorPosterior posterior(trunk, generator, po, knn.get());
   // `count` test-split frames spread evenly over the split, with their labels.
   auto calibration_set = [&](int count, std::vector<TrunkTargets>* frames,
@@ -256,7 +276,7 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
       const std::size_t k = (2 * i + 1) * test.frames.size() / (2 * n);
       frames->push_back(LoadTrunkTargets(dataset, test.frames[k], trunk.format));
       PoseLabel l;
-      l.tool = options.tools[test.samples[k].tool];
+      l.tool = generator.options().tools[test.samples[k].tool];
       l.sensor_T_object = test.samples[k].sensor_T_object;
       l.depth_m = test.samples[k].depth_m;
       labels->push_back(l);
@@ -277,6 +297,7 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
     GeneratorPosterior::Options to_options;
     to_options.sigma_inflation = kappa;
     to_options.weight_temperature = 1;
+    to_options.final_pixels = flags.final_pixels;
     const GeneratorPosterior at_kappa(trunk, generator, to_options, knn.get());
     std::vector<TrunkTargets> t_frames;
     std::vector<PoseLabel> t_labels;
@@ -291,16 +312,29 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
     std::cout << "train-generator: mode weight temperature not calibrated (no sigma inflation: "
                  "no usable test-split frame); the posterior uses 1\n";
   }
-  nlohmann::json info = {{"model", flags.model},
-                         {"model_checksum", model.checksum()},
-                         {"functaset", flags.functaset},
-                         {"mode", flags.mode},
-                         {"train_contacts", train.samples.size()},
-                         {"regression_epochs", reg.epochs_completed},
-                         {"pixel_epochs", pix.epochs_completed},
-                         {"test_psnr_latents", NumberOrNull(psnr_latents)},
-                         {"test_psnr_pixels", NumberOrNull(psnr_pixels)},
-                         {"seed", flags.seed}};
+  generator.set_final_pixels(flags.final_pixels);
+  if (flags.final_pixels > 0) {
+    std::cout << "train-generator: calibrated with the posterior's final stage on "
+              << flags.final_pixels << " pixels (its default from now on)\n";
+  }
+  nlohmann::json info;
+  if (train_it) {
+    info = {{"model", flags.model},
+            {"model_checksum", model.checksum()},
+            {"functaset", flags.functaset},
+            {"mode", flags.mode},
+            {"train_contacts", train_contacts},
+            {"regression_epochs", reg.epochs_completed},
+            {"pixel_epochs", pix.epochs_completed},
+            {"test_psnr_latents", NumberOrNull(psnr_latents)},
+            {"test_psnr_pixels", NumberOrNull(psnr_pixels)},
+            {"seed", flags.seed}};
+  } else {  // the training's record stays; the calibration's source is added
+    info = nlohmann::json::parse(generator.info_json());
+    info["recalibrated_from"] = flags.recalibrate;
+    info["calibration_functaset"] = flags.functaset;
+    info["test_psnr"] = NumberOrNull(psnr_latents);
+  }
   generator.set_info_json(info.dump());
   generator.Save(flags.out);
   std::cout << "train-generator: wrote " << flags.out << "\n";
@@ -693,7 +727,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
           ++wrong;
           // The problem the posterior ranked its modes on (the final stage's with
           // --final-pixels), so that the costs compare what chose the mode.
-          const LatentProblem problem(trunk, targets, options.RankingProblem());
+          const LatentProblem problem(trunk, targets, posterior.options().RankingProblem());
           const int ti = static_cast<int>(t);
           const double mode_depth = true_mode != nullptr ? true_mode->depth_m : 0;
           const double c_mode = PoseCost(problem, generator, ti, mode, mode_depth);
@@ -916,6 +950,15 @@ void RegisterTrainGenerator(CLI::App& app, CommandBody* selected) {
                   "Test-split frames for the temperature of the posterior's mode weights "
                   "(default 600)")
       ->check(CLI::Range(1, 1000000));
+  sub->add_option("--final-pixels", flags->final_pixels,
+                  "Calibrate with the posterior's final stage on N pixels (eval-generator "
+                  "--final-pixels) and record it, so that the posterior runs that stage by "
+                  "default (default 0 = none)")
+      ->check(CLI::Range(0, 1 << 20));
+  sub->add_option("--recalibrate", flags->recalibrate,
+                  "A trained generator (.tpg) to calibrate again (kappa, tau, --final-pixels) "
+                  "on --functaset's test split instead of training one; written to --out with "
+                  "its training record; the training flags are ignored");
   sub->add_option("--lr", flags->lr, "Adam step (default 1e-3; pixels use 0.3x)")
       ->check(CLI::PositiveNumber);
   sub->add_option("--seed", flags->seed, "Seed (default 0)");
@@ -978,9 +1021,8 @@ void RegisterEvalGenerator(CLI::App& app, CommandBody* selected) {
       ->check(CLI::Range(0, 1 << 20));
   sub->add_option("--final-pixels", flags->final_pixels,
                   "Pixels of a final stage that refines every distinct mode again and takes its "
-                  "Laplace approximation there (all valid pixels when the frame has fewer; "
-                  "default " +
-                      std::to_string(flags->final_pixels) + " = none)")
+                  "Laplace approximation there (all valid pixels when the frame has fewer; 0 = "
+                  "none; default: the stage the generator was calibrated with, as `info` shows)")
       ->check(CLI::Range(0, 1 << 20));
   sub->add_option("--position-grid", flags->position_grid_mm,
                   "Spacing (mm) of the shifted copies of the first start (default " +

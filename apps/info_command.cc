@@ -271,13 +271,18 @@ nlohmann::json DescribePoseGenerator(const std::string& bytes, const std::string
             << (g.sigma_inflation() > 0 ? FormatFixed(g.sigma_inflation(), 3) : "none")
             << ", mode weight temperature "
             << (g.weight_temperature() > 0 ? FormatFixed(g.weight_temperature(), 3) : "none (1)")
+            << ", calibrated with "
+            << (g.final_pixels() > 0 ? "a final stage on " + std::to_string(g.final_pixels()) +
+                                           " pixels"
+                                     : std::string("no final stage"))
             << "\n";
   return {{"tools", g.options().tools},
           {"latent_dim", g.options().latent_dim},
           {"hidden_sizes", g.options().hidden_sizes},
           {"yaw_harmonics", g.options().yaw_harmonics},
           {"sigma_inflation", g.sigma_inflation()},
-          {"weight_temperature", g.weight_temperature()}};
+          {"weight_temperature", g.weight_temperature()},
+          {"final_pixels", g.final_pixels()}};
 }
 
 // Any tactfunc file: the container's facts, then those of its kind (parsed from the same

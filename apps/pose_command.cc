@@ -148,7 +148,7 @@ struct PoseFlags {
   int knn_k = 8;
   int sgld_minibatch = PosePosterior::kDefaultSgldMinibatch;
   int max_pixels = -1;  // -1 = the method's default (latent: every valid pixel)
-  int final_pixels = 0;  // --method generator: GeneratorPosterior::Options::final_pixels
+  int final_pixels = -1;  // --method generator: GeneratorPosterior::Options::final_pixels
   double pixel_pitch_mm = 0;
   std::string out;
   int height = 420;
@@ -658,7 +658,7 @@ void RunPose(const PoseFlags& flags) {
   if (flags.method == "both" && flags.generator.empty()) {
     throw UsageError("--method both: give --generator (the generator path's model)");
   }
-  if (flags.final_pixels > 0 && flags.method == "latent") {
+  if (flags.final_pixels >= 0 && flags.method == "latent") {
     throw UsageError("--final-pixels: refines the generator path's modes; give --method generator "
                      "or both");
   }
@@ -1018,7 +1018,8 @@ void RegisterPose(CLI::App& app, CommandBody* selected) {
   sub->add_option("--final-pixels", flags->final_pixels,
                   "--method generator: refine every distinct mode again on N pixels (all "
                   "valid pixels when the frame has fewer) and take its Laplace approximation "
-                  "there; slower, ranks nearby modes on more of the frame (default 0 = none)")
+                  "there; slower, ranks nearby modes on more of the frame (0 = none; default: "
+                  "the stage the generator was calibrated with, as `info` shows)")
       ->check(CLI::Range(0, 100000000));
   sub->add_option("--pixel-pitch-mm", flags->pixel_pitch_mm,
                   "Pixel pitch for posterior.png (default: the frame's dataset.json)")

@@ -289,7 +289,7 @@ bool GeneratorPosterior::Options::IsValid(std::string* error) const {
   if (knn_k < 0) return fail("knn_k must be >= 0");
   if (yaw_grid < 1) return fail("yaw_grid must be >= 1");
   if (coarse_pixels < 0) return fail("coarse_pixels must be >= 0");
-  if (final_pixels < 0) return fail("final_pixels must be >= 0");
+  if (final_pixels < -1) return fail("final_pixels must be >= 0, or -1 for the generator's");
   if (position_grid_rings < 0) return fail("position_grid_rings must be >= 0");
   if (!(position_grid_m >= 0) || !std::isfinite(position_grid_m)) {
     return fail("position_grid_m must be finite and >= 0");
@@ -327,6 +327,7 @@ GeneratorPosterior::GeneratorPosterior(const SensorTrunk& trunk, const PoseGener
       pose_mlp_trunk_(pose_mlp_trunk == &trunk ? nullptr : pose_mlp_trunk) {
   std::string error;
   if (!options_.IsValid(&error)) throw std::invalid_argument(error);
+  if (options_.final_pixels < 0) options_.final_pixels = generator.final_pixels();
   if (trunk.photometric != nullptr) {
     throw std::invalid_argument(
         "GeneratorPosterior: renders through the direct trunk; the photometric trunk has no "

@@ -172,9 +172,11 @@ class GeneratorPosterior {
     // pose_fitter.h); 0 = no coarse stage (the starts are scored on the full problem).
     int coarse_pixels = 128;
     // Pixels of the final stage (step 2b; drawn as Options::problem draws, all valid
-    // pixels evenly when it holds as many); 0 = none, the modes as the search left them.
+    // pixels evenly when it holds as many); 0 = none, the modes as the search left them;
+    // -1 = the generator's (the stage its kappa and tau were calibrated with,
+    // PoseGenerator::final_pixels; the posterior's options() hold the value resolved).
     // When set, s and N below are the final problem's.
-    int final_pixels = 0;
+    int final_pixels = -1;
     // Position grid: the first start (the nearest neighbour's label, else the pose MLP's)
     // is also tried at the positions (a, b) * position_grid_m away in x and y for
     // |a|, |b| <= position_grid_rings (each at the yaw grid); 0 = none. Catches a wrong
@@ -190,7 +192,8 @@ class GeneratorPosterior {
     bool IsValid(std::string* error) const;
     static LatentProblem::Options DefaultProblem();
     // The problem the modes are finally ranked on and their Laplace approximations taken
-    // on: `problem`, with final_pixels pixels when the final stage is on.
+    // on: `problem`, with final_pixels pixels when the final stage is on (call it on a
+    // posterior's options(), where -1 is resolved).
     LatentProblem::Options RankingProblem() const;
   };
 

@@ -152,6 +152,12 @@ void PoseGenerator::set_weight_temperature(double tau) {
   weight_temperature_ = tau;
 }
 
+void PoseGenerator::set_final_pixels(int n) {
+  Check(n >= 0, "PoseGenerator::set_final_pixels: expected a value >= 0, got " +
+                    std::to_string(n));
+  final_pixels_ = n;
+}
+
 Eigen::VectorXd PoseGenerator::Features(int tool_index, const SE2d& pose, double depth_m,
                                         PoseJacobian* J_f_pose) const {
   CheckToolIndex(tool_index);
@@ -351,6 +357,7 @@ std::string PoseGenerator::Serialize() const {
   meta["depth_scale"] = options_.depth_scale;
   meta["sigma_inflation"] = sigma_inflation_;
   if (weight_temperature_ > 0) meta["weight_temperature"] = weight_temperature_;
+  if (final_pixels_ > 0) meta["final_pixels"] = final_pixels_;
   meta["info"] = nlohmann::json::parse(info_json_);
   file.set_meta_json(meta.dump());
   file.Add("parameters", TensorFile::DType::kFloat64, {parameters_.size()}, ToVector(parameters_));
@@ -405,6 +412,16 @@ PoseGenerator FromTensorFile(const TensorFile& file, const std::string& source) 
         throw TensorFileError(source + ": field 'weight_temperature' must be finite and > 0");
       }
       model.set_weight_temperature(tau);
+    }
+    if (meta.contains("final_pixels")) {
+      field = "final_pixels";
+      const nlohmann::json& n = meta.at("final_pixels");
+      const bool in_range = n.is_number_integer() && n.get<std::int64_t>() >= 0 &&
+                            n.get<std::int64_t>() <= (1 << 20);
+      if (!in_range) {
+        throw TensorFileError(source + ": field 'final_pixels' must be an integer in [0, 1048576]");
+      }
+      model.set_final_pixels(n.get<int>());
     }
     field = "info";
     const nlohmann::json& info = meta.at("info");

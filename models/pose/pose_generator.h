@@ -32,7 +32,8 @@
 // "symmetry_orders": [n], "latent_dim", "hidden_sizes", "yaw_harmonics",
 // "position_scale", "depth_center", "depth_scale", "sigma_inflation", "info": {...}},
 // and "weight_temperature" when it was calibrated (files written before it have none and
-// load with 0, read as 1 by the posterior);
+// load with 0, read as 1 by the posterior); "final_pixels" when kappa and tau were
+// calibrated with the posterior's final stage on (absent = off);
 // float64 tensors "parameters" [P], "latent_mean" [d], "latent_stddev" [d]. Written
 // atomically; loading checks the kind, the version, every field and shape and throws
 // TensorFileError naming the file and the field; the round trip is exact.
@@ -110,6 +111,12 @@ class PoseGenerator {
   double weight_temperature() const { return weight_temperature_; }
   void set_weight_temperature(double tau);  // >= 0, finite
 
+  // The pixels of the posterior's final stage (GeneratorPosterior::Options::final_pixels)
+  // that kappa and tau were calibrated with; 0 = none. The posterior runs that stage
+  // unless told otherwise, so that the calibration holds.
+  int final_pixels() const { return final_pixels_; }
+  void set_final_pixels(int n);  // >= 0
+
   // ---- Features and passes -------------------------------------------------------
   // The feature vector of the header comment (size F); J_f_pose (optional, F x 4): its
   // derivative w.r.t. the coordinates (x, y, yaw, depth).
@@ -158,6 +165,7 @@ class PoseGenerator {
   Eigen::VectorXd latent_stddev_;
   double sigma_inflation_ = 0;
   double weight_temperature_ = 0;
+  int final_pixels_ = 0;
   std::string info_json_ = "{}";
 };
 

@@ -299,6 +299,33 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
   ASSERT_EQ(info.exit_code, 0) << info.err;
   EXPECT_THAT(info.out, HasSubstr("pose generator: 12 tools, latent"));
   EXPECT_THAT(info.out, HasSubstr("mode weight temperature"));
+  EXPECT_THAT(info.out, HasSubstr("calibrated with no final stage"));
+  // --recalibrate calibrates a trained generator again, here with the final stage on,
+  // which it records (info shows it) and keeps the training's parameters and record.
+  const Result recal = Run("train-generator --model " + Root("m.tfm") + " --functaset " +
+                           Root("gf.tfs") + " --data " + Root("gd") + " --out " +
+                           Root("g_staged.tpg") + " --recalibrate " + Root("g.tpg") +
+                           " --final-pixels 600 --calibration-frames 4 --temperature-frames 8");
+  ASSERT_EQ(recal.exit_code, 0) << recal.err;
+  EXPECT_THAT(recal.out, HasSubstr("final stage on 600 pixels"));
+  EXPECT_THAT(recal.err, ::testing::Not(HasSubstr("regression")));
+  const PoseGenerator staged = PoseGenerator::Load(Root("g_staged.tpg"));
+  const PoseGenerator trained = PoseGenerator::Load(Root("g.tpg"));
+  EXPECT_EQ(staged.parameters(), trained.parameters());
+  EXPECT_EQ(staged.final_pixels(), 600);
+  EXPECT_EQ(nlohmann::json::parse(staged.info_json())["recalibrated_from"], Root("g.tpg"));
+  EXPECT_EQ(nlohmann::json::parse(staged.info_json())["regression_epochs"], 5);
+  EXPECT_THAT(Run("info " + Root("g_staged.tpg")).out,
+              HasSubstr("calibrated with a final stage on 600 pixels"));
+  // A generator of another latent size is refused, naming the flag and both sizes.
+  const Result wider = Run("train-generator --model " + Root("m.tfm") + " --functaset " +
+                           Root("gf.tfs") + " --data " + Root("gd") + " --out " +
+                           Root("g_bad.tpg") + " --recalibrate " +
+                           TACTFUNC_SOURCE_DIR "/models/pretrained/pose_generator_bubble.tpg");
+  EXPECT_EQ(wider.exit_code, 2);
+  EXPECT_THAT(wider.err, HasSubstr("--recalibrate"));
+  EXPECT_THAT(wider.err, HasSubstr("latent_dim is 128"));
+  EXPECT_FALSE(fs::exists(Root("g_bad.tpg")));
   const std::string out = Root("pose_generator");
   const std::string args = "pose --method generator --model " + Root("m.tfm") + " --pose-model " +
                            Root("p.tpm") + " --functaset " + Root("gf.tfs") + " --data " +

@@ -313,8 +313,17 @@ TEST(GeneratorPosterior, TheFinalStageRefinesTheModesOnItsOwnPixels) {
   EXPECT_LT(best_cost(refined), best_cost(searched));
   EXPECT_LT(PoseCost(all, g, tool, refined.Mode(), refined.components().front().depth_m),
             PoseCost(all, g, tool, SE2d::FromXYYaw(0, 0, 0), 0.010));
-  std::string error;
+  // -1 (the default) takes the generator's recorded stage: none here, then 20 pixels.
   options.final_pixels = -1;
+  EXPECT_EQ(GeneratorPosterior(trunk, g, options).options().final_pixels, 0);
+  PoseGenerator staged = g;
+  staged.set_final_pixels(20);
+  const GeneratorPosterior by_generator(trunk, staged, options);
+  EXPECT_EQ(by_generator.options().final_pixels, 20);
+  EXPECT_EQ(by_generator.options().RankingProblem().max_pixels, 20);
+  EXPECT_EQ(by_generator.Estimate(targets, "l_shape", nullptr).num_pixels, 20);
+  std::string error;
+  options.final_pixels = -2;
   EXPECT_FALSE(options.IsValid(&error));
   EXPECT_THAT(error, ::testing::HasSubstr("final_pixels"));
 }

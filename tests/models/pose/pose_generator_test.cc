@@ -203,6 +203,20 @@ TEST(PoseGenerator, FileRoundTripIsExactAndCorruptFieldsAreNamed) {
     file.set_meta_json(meta.dump());
     ExpectParseErrorNaming(file, "cold.tpg", "weight_temperature");
   }
+  // The final stage the calibration ran with: absent = 0, else stored and read back; a
+  // negative or fractional count is refused, naming the field.
+  EXPECT_EQ(back.final_pixels(), 0);
+  PoseGenerator staged = g;
+  staged.set_final_pixels(1024);
+  EXPECT_EQ(PoseGenerator::Parse(staged.Serialize(), "g.tpg").final_pixels(), 1024);
+  EXPECT_THROW(staged.set_final_pixels(-1), std::invalid_argument);
+  for (const nlohmann::json& bad : {nlohmann::json(-3), nlohmann::json(2.5)}) {
+    TensorFile file = TensorFile::Parse(staged.Serialize(), "g.tpg");
+    nlohmann::json meta = nlohmann::json::parse(file.meta_json());
+    meta["final_pixels"] = bad;
+    file.set_meta_json(meta.dump());
+    ExpectParseErrorNaming(file, "staged.tpg", "final_pixels");
+  }
 
   const std::string path =
       (std::filesystem::path(testing::TempDir()) / "pose_generator_test.tpg").string();
