@@ -10,7 +10,8 @@
 # 12,000 above), encoded with bubble.tfm into $WORK/f_gen.tfs: the committed generator is
 # trained on them and renders through bubble.tfm (`pose --generator-model`), and f_gen.tfs
 # is the labelled functaset of its k-NN starts (docs/POSES.md, "More contacts for the
-# generator").
+# generator"); its kappa and tau are calibrated with the posterior's final stage on 1,024
+# pixels, which the posterior then runs by default ("The final ranking on more pixels").
 # About 14 minutes on 2 cores (the generator's training about 6 on one). Deterministic for
 # the seeds.
 set -euo pipefail
@@ -27,11 +28,12 @@ run "$TF" train-generator --model models/pretrained/default.tfm --functaset "$WO
 run "$TF" encode --model models/pretrained/bubble.tfm --data "$WORK/data" --out "$WORK/f_bubble.tfs" \
   --threads 1
 GEN_FRAMES=${GEN_FRAMES:-4000}
+OUT=${OUT:-models/pretrained/pose_generator_bubble.tpg}  # another OUT for a variant
 run "$TF" synth --out "$WORK/gen_data" --frames-per-tool "$GEN_FRAMES" --sensors bubble --seed 2 \
   --threads 2 --overwrite
 run "$TF" encode --model models/pretrained/bubble.tfm --data "$WORK/gen_data" \
   --out "$WORK/f_gen.tfs" --threads 2
 run "$TF" train-generator --model models/pretrained/bubble.tfm --functaset "$WORK/f_gen.tfs" \
-  --data "$WORK/gen_data" --out models/pretrained/pose_generator_bubble.tpg --mode pixels \
+  --data "$WORK/gen_data" --out "$OUT" --mode pixels \
   --hidden 256,256 --harmonics 8 --epochs 300 --pixel-frames "$GEN_FRAMES" --pixel-epochs 30 \
-  --calibration-frames 600
+  --calibration-frames 600 --final-pixels 1024
