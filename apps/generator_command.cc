@@ -18,14 +18,16 @@
 //     on Ctrl-C, which exits 130); --resume continues from them to the same G.
 //
 //   tactfunc eval-generator --model M.tfm --generator G.tpg [--functaset F.tfs]
-//       [--pose-model P.tpm] [--contacts-per-tool 20] [--seed 1592590336] [--unknown-tool]
+//       [--pose-model P.tpm] [--contacts-per-tool 20] [--tools LIST] [--seed 1592590336]
+//       [--unknown-tool]
 //       [--diagnose] [--information [--picture FILE]] [search knobs: --max-pixels, --contact-share,
 //       --refined-starts, --iterations, --knn-k, --yaw-grid, --position-grid,
 //       --position-rings, --coarse-pixels, --coarse-starts, --coarse-iterations,
 //       --final-pixels]
 //       [--contacts-csv FILE] [--json]
 //     fresh Soft Bubble contacts (ContactSimulator, seeded; contact k uses DeriveSeed(seed,
-//     k)) of every tool the generator knows through GeneratorPosterior (one thread): the
+//     k)) of every tool the generator knows (--tools: of those, the same contacts) through
+//     GeneratorPosterior (one thread): the
 //     posterior mode's position RMSE (mm) and yaw RMSE (deg, modulo symmetry, hemisphere
 //     left out), the coverage of the 50% and 90% highest-density regions, the time per
 //     frame (fit + Laplace; wall clock and the thread's CPU time), and with --unknown-tool
@@ -353,6 +355,7 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
 struct EvalGeneratorFlags {
   std::string model, generator, functaset, pose_model;
   int contacts_per_tool = 20;
+  std::string tools;  // comma-separated subset of the generator's tools; empty = all
   std::uint64_t seed = 0x5eed0000u;
   bool unknown_tool = false;
   double sigma_inflation = 0;
@@ -603,10 +606,21 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
   working_size.rows = trunk.format.rows;
   working_size.cols = trunk.format.cols;
   const std::vector<std::string>& tools = generator.options().tools;
-  ProgressBar bar("eval-generator",
-                  static_cast<std::int64_t>(tools.size()) * flags.contacts_per_tool, "contacts",
-                  ProgressBar::Lines::kWhenNotDrawn);
+  // --tools: a subset, each contact seeded as in the run over every tool.
+  std::vector<bool> evaluated(tools.size(), flags.tools.empty());
+  for (const std::string& name : SplitList(flags.tools)) {
+    const int index = generator.ToolIndex(name);
+    if (index < 0) {
+      throw UsageError("--tools: '" + name + "' is not a tool of --generator '" +
+                       flags.generator + "'");
+    }
+    evaluated[index] = true;
+  }
+  const auto tool_count = std::count(evaluated.begin(), evaluated.end(), true);
+  ProgressBar bar("eval-generator", static_cast<std::int64_t>(tool_count) * flags.contacts_per_tool,
+                  "contacts", ProgressBar::Lines::kWhenNotDrawn);
   for (std::size_t t = 0; t < tools.size(); ++t) {
+    if (!evaluated[t]) continue;
     for (int j = 0; j < flags.contacts_per_tool; ++j) {
       const int k = static_cast<int>(t) * flags.contacts_per_tool + j;
       const std::uint64_t seed = DeriveSeed(flags.seed, k);
@@ -725,8 +739,8 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
         const double e = n != 0 ? kDeg * mode_yaw_error : 0;
         if (wrong_mode) {
           ++wrong;
-          // The problem the posterior ranked its modes on (the final stage's with
-          // --final-pixels), so that the costs compare what chose the mode.
+          // The problem the posterior ranked its modes on (the final stage's when it
+          // runs), so that the costs compare what chose the mode.
           const LatentProblem problem(trunk, targets, posterior.options().RankingProblem());
           const int ti = static_cast<int>(t);
           const double mode_depth = true_mode != nullptr ? true_mode->depth_m : 0;
@@ -981,6 +995,9 @@ void RegisterEvalGenerator(CLI::App& app, CommandBody* selected) {
       ->required();
   sub->add_option("--functaset", flags->functaset, "Labelled functaset for the k-NN starts");
   sub->add_option("--pose-model", flags->pose_model, "Pose MLP for an extra start");
+  sub->add_option("--tools", flags->tools,
+                  "Only these of the generator's tools (comma-separated; default all); each "
+                  "contact is the one the run over every tool draws");
   sub->add_option("--contacts-per-tool", flags->contacts_per_tool, "Default 20")
       ->check(CLI::Range(1, 100000));
   sub->add_option("--seed", flags->seed,

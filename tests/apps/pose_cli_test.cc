@@ -485,6 +485,29 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
           " --contacts-per-tool 1 --picture " + Root("bound2.png"));
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_THAT(r.err, HasSubstr("--information"));
+  // --tools: only those tools, each contact the one the run over every tool drew (rod is
+  // the generator's 7th tool: row 6 of the run above).
+  const std::string rod_csv = Root("contacts_rod.csv");
+  r = Run("eval-generator --model " + Root("m.tfm") + " --generator " + Root("g.tpg") +
+          " --contacts-per-tool 1 --tools rod --contacts-csv " + rod_csv + " --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.LastJson()["contacts"].get<int>(), 1);
+  {
+    std::istringstream all(Slurp(contacts)), one(Slurp(rod_csv));
+    std::string header, row, rod_row;
+    std::getline(one, header);
+    std::getline(one, rod_row);
+    std::getline(all, header);
+    std::string truth_of_rod;
+    while (std::getline(all, row)) {
+      if (row.find(",rod,") != std::string::npos) truth_of_rod = row.substr(row.find(",rod,"), 40);
+    }
+    EXPECT_EQ(rod_row.substr(rod_row.find(",rod,"), 40), truth_of_rod);
+  }
+  r = Run("eval-generator --model " + Root("m.tfm") + " --generator " + Root("g.tpg") +
+          " --contacts-per-tool 1 --tools spoon");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("--tools: 'spoon'"));
   EXPECT_EQ(count, eval["contacts"].get<int>() - eval["failures"].get<int>());  // usable ones
   EXPECT_GT(count, 0);
   EXPECT_NEAR(std::sqrt(sum_sq / count), eval["rmse_mm"].get<double>(),
