@@ -20,7 +20,8 @@
 //   tactfunc eval-generator --model M.tfm --generator G.tpg [--functaset F.tfs]
 //       [--pose-model P.tpm] [--contacts-per-tool 20] [--tools LIST] [--seed 1592590336]
 //       [--unknown-tool]
-//       [--diagnose] [--information [--picture FILE]] [search knobs: --max-pixels, --contact-share,
+//       [--diagnose [--diagnose-picture FILE]] [--information [--picture FILE]]
+//       [search knobs: --max-pixels, --contact-share,
 //       --refined-starts, --iterations, --knn-k, --yaw-grid, --position-grid,
 //       --position-rings, --coarse-pixels, --coarse-starts, --coarse-iterations,
 //       --final-pixels]
@@ -35,7 +36,8 @@
 //     > 1 mm off, the objective at the mode, the truth and the truth refined (a lower
 //     refined truth = a search failure, else a model failure), and over the whole frame
 //     at the mode, the truth and the trunk's own best latent (Ceres to convergence: how
-//     well any generator could render the frame through this trunk). --information: every
+//     well any generator could render the frame through this trunk); --diagnose-picture:
+//     the first 6 wrong modes drawn (WrongModePicture). --information: every
 //     contact's Cramer-Rao bound from the simulator's own frames and noise
 //     (SoftBubblePoseInformation) on the trunk's working frames and on the sensor's own,
 //     printed beside the mode's errors by contact depth: the floor under any unbiased
@@ -71,6 +73,7 @@
 #include "estimation/data/dataset.h"
 #include "estimation/data/image_io.h"
 #include "estimation/data/trunk_targets.h"
+#include "estimation/evaluation/reconstruction.h"
 #include "estimation/fitting/latent_fitter.h"
 #include "estimation/functaset/functaset.h"
 #include "estimation/pose/pose_distribution.h"
@@ -374,6 +377,7 @@ struct EvalGeneratorFlags {
   int coarse_starts = PoseFitOptions().coarse_refined_starts;
   int coarse_iterations = PoseFitOptions().coarse_iterations;
   bool diagnose = false;
+  std::string diagnose_picture;  // with --diagnose: the wrong modes' renderings
   bool information = false;
   std::string picture;  // with --information: each contact's error against its bound
   bool json = false;
@@ -429,6 +433,7 @@ WrongModeJudgement JudgeWrongMode(const ContactSimulator& simulator, const Image
 // a low PSNR.)
 struct TrunkWholeFrame {
   double mode_cost = 0, truth_cost = 0, trunk_cost = 0;
+  Eigen::VectorXd trunk_latent;  // the trunk's own best latent
   double TruthExcess() const { return truth_cost / trunk_cost - 1; }
   double ModeExcess() const { return mode_cost / trunk_cost - 1; }
 };
@@ -446,13 +451,85 @@ TrunkWholeFrame JudgeAgainstTheTrunk(const SensorTrunk& trunk, const TrunkTarget
   out.truth_cost = PoseCost(whole, generator, tool_index, truth, truth_depth_m);
   LatentFitter::Options fit;
   fit.strategy = FitStrategy::FromString("ceres:30");
-  Eigen::VectorXd z;
+  Eigen::VectorXd& z = out.trunk_latent;
   LatentFitter(trunk, fit).Fit(whole, generator.Generate(tool_index, truth, truth_depth_m), &z);
   Eigen::VectorXd r(whole.num_residuals());
   out.trunk_cost = whole.ResidualsAndJacobian(z.data(), r.data(), nullptr)
                        ? 0.5 * r.squaredNorm()
                        : std::nan("");
   return out;
+}
+
+// One wrong mode on --diagnose-picture.
+struct WrongModeView {
+  int contact = 0;
+  std::string tool;
+  double depth_m = 0;
+  TrunkTargets targets;
+  SE2d truth, mode;
+  Eigen::VectorXf truth_latent, mode_latent;
+  TrunkWholeFrame whole;
+};
+
+// --diagnose-picture: one row per wrong mode, left to right the frame (contact number and
+// depth; the truth's pose as a green arrow, the mode's red), the trunk's own best latent
+// (the tool), the generator's rendering at the truth and at the mode (each with its
+// whole-frame objective's excess over the trunk's best; the same colour scale as the
+// frame), and the two renderings' errors against the frame (one diverging scale for the
+// row). pitch_m: metres per pixel of the trunk's working frame.
+cv::Mat WrongModePicture(const std::vector<WrongModeView>& views, const SensorTrunk& trunk,
+                         double pitch_m, int tile_height) {
+  const int rows = trunk.format.rows, cols = trunk.format.cols;
+  const cv::Scalar kTruth(80, 200, 80), kMode(60, 60, 230);
+  std::vector<std::vector<cv::Mat>> grid;
+  for (const WrongModeView& v : views) {
+    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+    for (int j = 0; j < v.targets.values.rows(); ++j) {
+      if (!(v.targets.weights[j] > 0)) continue;
+      lo = std::min<double>(lo, v.targets.values.row(j).minCoeff());
+      hi = std::max<double>(hi, v.targets.values.row(j).maxCoeff());
+    }
+    const Eigen::MatrixXf trunk_best = Reconstruct(trunk, v.whole.trunk_latent.cast<float>());
+    const Eigen::MatrixXf at_truth = Reconstruct(trunk, v.truth_latent);
+    const Eigen::MatrixXf at_mode = Reconstruct(trunk, v.mode_latent);
+    double scale = 1e-6;
+    for (const Eigen::MatrixXf* m : {&at_truth, &at_mode}) {
+      for (int j = 0; j < m->rows(); ++j) {
+        if (v.targets.weights[j] > 0) {
+          scale = std::max<double>(scale, std::abs((m->row(j) - v.targets.values.row(j)).mean()));
+        }
+      }
+    }
+    auto value = [&](const Eigen::MatrixXf& values) {
+      return ValueTile(values, v.targets.weights, rows, cols, lo, hi);
+    };
+    auto fit = [&](const cv::Mat& tile) { return FitHeight(tile, tile_height); };
+    cv::Mat frame = fit(value(v.targets.values));
+    DrawPoseArrow(frame, frame.rows, frame.cols, pitch_m * rows / frame.rows, v.truth.x(),
+                  v.truth.y(), v.truth.yaw(), kTruth);
+    DrawPoseArrow(frame, frame.rows, frame.cols, pitch_m * rows / frame.rows, v.mode.x(),
+                  v.mode.y(), v.mode.yaw(), kMode);
+    char label[96];
+    std::snprintf(label, sizeof(label), "#%d %.1f mm", v.contact, 1e3 * v.depth_m);
+    PutLabel(frame, label, {4, 14}, 0.4);
+    cv::Mat best_tile = fit(value(trunk_best));
+    PutLabel(best_tile, v.tool, {4, 14}, 0.4);
+    cv::Mat truth_tile = fit(value(at_truth)), mode_tile = fit(value(at_mode));
+    std::snprintf(label, sizeof(label), "%+.1f %%", 100 * v.whole.TruthExcess());
+    PutLabel(truth_tile, label, {4, 14}, 0.4);
+    std::snprintf(label, sizeof(label), "%+.1f %%", 100 * v.whole.ModeExcess());
+    PutLabel(mode_tile, label, {4, 14}, 0.4);
+    grid.push_back({frame, best_tile, truth_tile, mode_tile,
+                    fit(ErrorTile(at_truth, v.targets, scale)),
+                    fit(ErrorTile(at_mode, v.targets, scale))});
+  }
+  if (grid.empty()) return cv::Mat();
+  const char* titles[6] = {"frame", "trunk's best", "h(truth)", "h(mode)", "h(truth)-frame",
+                           "h(mode)-frame"};
+  std::vector<cv::Mat> header;
+  for (int c = 0; c < 6; ++c) header.push_back(Caption(grid.front()[c].cols, titles[c]));
+  grid.insert(grid.begin(), header);
+  return TileGrid(grid);
 }
 
 // One contact on --information's picture: the mode's error and the bound's standard
@@ -577,6 +654,9 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
   double mean_pos_sq = 0, mean_yaw_sq = 0;  // of the posterior mean
   std::vector<double> mean_yaw_errors;
   int wrong = 0, search_failures = 0, model_failures = 0;
+  // --diagnose-picture: the first kPictureRows wrong modes.
+  constexpr std::size_t kPictureRows = 6;
+  std::vector<WrongModeView> wrong_views;
   // --diagnose: per wrong mode, the truth's and the mode's whole-frame excess over the
   // trunk's own best latent.
   std::vector<double> truth_excess, mode_excess;
@@ -766,6 +846,12 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
               contact.depth_m);
           truth_excess.push_back(whole.TruthExcess());
           mode_excess.push_back(whole.ModeExcess());
+          if (!flags.diagnose_picture.empty() && wrong_views.size() < kPictureRows) {
+            wrong_views.push_back({k, tools[t], contact.depth_m, targets, truth, mode,
+                                   generator.Generate(ti, truth, contact.depth_m).cast<float>(),
+                                   generator.Generate(ti, mode, mode_depth).cast<float>(),
+                                   whole});
+          }
           std::printf("    whole frame: mode %.1f, truth %.1f, the trunk's own best latent %.1f "
                       "(truth %+.1f %%, mode %+.1f %% above it)\n",
                       whole.mode_cost, whole.truth_cost, whole.trunk_cost,
@@ -884,6 +970,19 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
                                        {"frame_ambiguous", frame_verdicts[kAmbiguous]},
                                        {"frame_prefers_mode", frame_verdicts[kPrefersMode]},
                                        {"log_likelihood_ratio_median", NumberOrNull(llr_median)}};
+  }
+  if (!flags.diagnose_picture.empty()) {
+    const SoftBubbleOptions bubble;  // the simulator's: the pitch of its frames
+    const double pitch_m = bubble.pixel_pitch_m * bubble.rows / trunk.format.rows;
+    const cv::Mat picture = WrongModePicture(wrong_views, trunk, pitch_m, 100);
+    if (picture.empty()) {
+      std::cout << "eval-generator: no wrong mode, " << flags.diagnose_picture
+                << " not written\n";
+    } else {
+      WritePicture(flags.diagnose_picture, picture);
+      std::cout << "eval-generator: wrote " << flags.diagnose_picture << " ("
+                << wrong_views.size() << " wrong modes)\n";
+    }
   }
   if (!flags.picture.empty()) {
     char subtitle[256];
@@ -1075,6 +1174,11 @@ void RegisterEvalGenerator(CLI::App& app, CommandBody* selected) {
                 "mode, at the truth and at the truth refined (search or model failure), and "
                 "over the whole frame at the mode, at the truth and at the trunk's own best "
                 "latent (what the generator falls short of the trunk by)");
+  sub->add_option("--diagnose-picture", flags->diagnose_picture,
+                  "With --diagnose: a PNG of the first 6 wrong modes, each frame beside the "
+                  "trunk's own best latent, the generator's renderings at the truth and at "
+                  "the mode and their errors, written atomically")
+      ->needs("--diagnose");
   sub->add_option("--contacts-csv", flags->contacts_csv,
                   "Write one CSV row per contact (truth, mode, posterior mean, errors; mm and "
                   "degrees) to this file (atomically)");

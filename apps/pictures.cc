@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 #include <string>
@@ -94,6 +95,15 @@ cv::Mat DifferenceTile(const Image& difference, double scale) {
     }
   }
   return ColourMapped(unit, cv::COLORMAP_TWILIGHT_SHIFTED);
+}
+
+cv::Mat ErrorTile(const Eigen::MatrixXf& prediction, const TrunkTargets& target, double scale) {
+  Image error(target.rows, target.cols, 1);
+  for (int j = 0; j < target.rows * target.cols; ++j) {
+    error.data[j] = target.weights[j] > 0 ? (prediction.row(j) - target.values.row(j)).mean()
+                                          : std::numeric_limits<float>::quiet_NaN();
+  }
+  return DifferenceTile(error, scale);
 }
 
 cv::Mat ValueTile(const Eigen::MatrixXf& values, const Eigen::VectorXf& weights, int rows,

@@ -12,6 +12,7 @@
 #include <Eigen/Core>
 #include <opencv2/core.hpp>
 
+#include "estimation/data/trunk_targets.h"
 #include "models/core/image.h"
 #include "models/core/sensor.h"
 
@@ -27,6 +28,9 @@ cv::Mat RawTile(const Image& frame, SensorKind sensor, const Image& reference);
 // channel through a diverging map in [-scale, scale] (0 = mid grey); three channels as
 // 0.5 + diff / (2 scale) per channel. NaN pixels red.
 cv::Mat DifferenceTile(const Image& difference, double scale);
+// prediction - target (N x C normalised values, mean over channels) through
+// DifferenceTile's diverging map in [-scale, scale]; the target's invalid pixels red.
+cv::Mat ErrorTile(const Eigen::MatrixXf& prediction, const TrunkTargets& target, double scale);
 // Normalised trunk values (N x C of a rows x cols frame, pixel j = row * cols + col) as a
 // BGR tile: one channel through viridis over [lo, hi], three channels as RGB over
 // [lo, hi]; pixels with weight <= 0 dark grey.

@@ -50,17 +50,6 @@ struct ReconFlags {
   DatasetFlags dataset;
 };
 
-// prediction - target (mean over channels) through a diverging map in [-scale, scale]
-// (DifferenceTile: 0 is the map's centre); invalid pixels red.
-cv::Mat ErrorTile(const Eigen::MatrixXf& prediction, const TrunkTargets& target, double scale) {
-  Image error(target.rows, target.cols, 1);
-  for (int j = 0; j < target.rows * target.cols; ++j) {
-    error.data[j] = target.weights[j] > 0 ? (prediction.row(j) - target.values.row(j)).mean()
-                                          : std::numeric_limits<float>::quiet_NaN();
-  }
-  return DifferenceTile(error, scale);
-}
-
 cv::Mat TextCell(int height, int width, const std::vector<std::string>& lines) {
   cv::Mat cell(height, width, CV_8UC3, kBackground);
   int y = 18;

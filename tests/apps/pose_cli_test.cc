@@ -408,7 +408,8 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
   const std::string contacts = Root("contacts.csv");
   r = Run("eval-generator --model " + Root("m.tfm") + " --generator " + Root("g.tpg") +
           " --contacts-per-tool 1 --information --picture " + Root("bound.png") +
-          " --contacts-csv " + contacts + " --diagnose --json");
+          " --contacts-csv " + contacts + " --diagnose --diagnose-picture " +
+          Root("wrong.png") + " --json");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const nlohmann::json eval = r.LastJson();
   for (const char* key : {"rmse_mm", "position_median_mm", "position_p90_mm", "coverage_90"}) {
@@ -479,12 +480,24 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
     EXPECT_NEAR(mode_pct, 100 * (mode_cost / trunk_cost - 1), tolerance(mode_cost)) << line;
   }
   EXPECT_EQ(whole_frames, judged);
+  // --diagnose-picture: the wrong modes' renderings, or a word that there were none.
+  if (judged > 0) {
+    EXPECT_EQ(Slurp(Root("wrong.png")).substr(1, 3), "PNG");
+    EXPECT_THAT(r.out, HasSubstr("wrong modes)"));
+  } else {
+    EXPECT_FALSE(fs::exists(Root("wrong.png")));
+    EXPECT_THAT(r.out, HasSubstr("no wrong mode"));
+  }
   EXPECT_EQ(Slurp(Root("bound.png")).substr(1, 3), "PNG");
   // The picture needs the bound.
   r = Run("eval-generator --model " + Root("m.tfm") + " --generator " + Root("g.tpg") +
           " --contacts-per-tool 1 --picture " + Root("bound2.png"));
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_THAT(r.err, HasSubstr("--information"));
+  r = Run("eval-generator --model " + Root("m.tfm") + " --generator " + Root("g.tpg") +
+          " --contacts-per-tool 1 --diagnose-picture " + Root("wrong2.png"));
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("--diagnose"));
   // --tools: only those tools, each contact the one the run over every tool drew (rod is
   // the generator's 7th tool: row 6 of the run above).
   const std::string rod_csv = Root("contacts_rod.csv");
