@@ -184,9 +184,9 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
   options.hidden_sizes = ParsePositiveIntList(flags.hidden, "--hidden", "widths");
   options.yaw_harmonics = flags.harmonics;
   const bool train_it = flags.recalibrate.empty();
-  PoseGenerator generator(options, DeriveSeed(flags.seed, 0));
+  PoseGenerator generator = train_it ? PoseGenerator(options, DeriveSeed(flags.seed, 0))
+                                     : PoseGenerator::Load(flags.recalibrate);
   if (!train_it) {
-    generator = PoseGenerator::Load(flags.recalibrate);
     if (generator.options().latent_dim != options.latent_dim) {
       throw UsageError("--recalibrate '" + flags.recalibrate + "': the generator's latent_dim is " +
                        std::to_string(generator.options().latent_dim) + ", the trunk of --model '" +
@@ -505,10 +505,11 @@ cv::Mat WrongModePicture(const std::vector<WrongModeView>& views, const SensorTr
     };
     auto fit = [&](const cv::Mat& tile) { return FitHeight(tile, tile_height); };
     cv::Mat frame = fit(value(v.targets.values));
-    DrawPoseArrow(frame, frame.rows, frame.cols, pitch_m * rows / frame.rows, v.truth.x(),
-                  v.truth.y(), v.truth.yaw(), kTruth);
-    DrawPoseArrow(frame, frame.rows, frame.cols, pitch_m * rows / frame.rows, v.mode.x(),
-                  v.mode.y(), v.mode.yaw(), kMode);
+    const double tile_pitch_m = pitch_m * rows / frame.rows;  // metres per tile pixel
+    DrawPoseArrow(frame, frame.rows, frame.cols, tile_pitch_m, v.truth.x(), v.truth.y(),
+                  v.truth.yaw(), kTruth);
+    DrawPoseArrow(frame, frame.rows, frame.cols, tile_pitch_m, v.mode.x(), v.mode.y(),
+                  v.mode.yaw(), kMode);
     char label[96];
     std::snprintf(label, sizeof(label), "#%d %.1f mm", v.contact, 1e3 * v.depth_m);
     PutLabel(frame, label, {4, 14}, 0.4);
@@ -972,7 +973,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
                                        {"log_likelihood_ratio_median", NumberOrNull(llr_median)}};
   }
   if (!flags.diagnose_picture.empty()) {
-    const SoftBubbleOptions bubble;  // the simulator's: the pitch of its frames
+    const SoftBubbleOptions& bubble = simulator.options().bubble;  // the frames' pitch
     const double pitch_m = bubble.pixel_pitch_m * bubble.rows / trunk.format.rows;
     const cv::Mat picture = WrongModePicture(wrong_views, trunk, pitch_m, 100);
     if (picture.empty()) {
