@@ -26,6 +26,10 @@ basis fitted on the noisy train split of the evaluation set (as eval's PCA).
   python3 scripts/representation_aligned_pca.py --eval /tmp/export_eval --sensor bubble \\
       --bytes 128 256 --out /tmp/aligned_pca_bubble.json
 
+`--basis-data DIR` learns the aligned basis from the train split of another export (a
+recording of more contacts, as a pretrained model sees) and also scores plain PCA learned
+from those frames; `--shrink` shrinks every code by its Wiener gain before it is stored.
+
 Input: `tactfunc export --clean` of the train and test splits (docs/CLI.md). Needs NumPy and
 PyTorch (bilinear sampling). Deterministic.
 """
@@ -130,6 +134,9 @@ def blur(frames, sigma):
 def pca(x, k):
     mean = x.mean(0)
     xc = x - mean
+    if len(x) > 4000:  # a large basis set: randomised SVD (Halko et al.), 6 power iterations
+        _, _, v = torch.svd_lowrank(torch.from_numpy(xc), q=k + 32, niter=6)
+        return mean, v[:, :k].numpy()
     vals, vecs = np.linalg.eigh(xc @ xc.T)
     order = np.argsort(vals)[::-1][:k]
     basis = (xc.T @ vecs[:, order]) / np.sqrt(np.maximum(vals[order], 1e-30))
@@ -230,12 +237,26 @@ def main():
     ap.add_argument("--basis-from-clean", action="store_true",
                     help="learn both bases from the NOISE-FREE train frames (a bound: what a "
                          "basis free of the sensor noise would give; needs their export)")
+    ap.add_argument("--basis-data",
+                    help="learn the aligned basis from the train split of this `tactfunc "
+                         "export` dir instead (more contacts than the evaluation set's train "
+                         "split, as a pretrained model sees); eval's PCA stays on --eval's")
+    ap.add_argument("--shrink", action="store_true",
+                    help="shrink each aligned code by its Wiener gain max(0, (l_k - s2) / l_k) "
+                         "before it is stored (l_k: the variance of component k over the basis "
+                         "frames; s2, the noise floor: the median variance of components k..2k "
+                         "of the same basis): the MMSE linear code, same bytes")
     ap.add_argument("--precision", choices=list(BITS), default="float16",
                     help="how every code value is stored (PCA and aligned alike; the pose "
                          "values stay float16): bytes x 8 / bits components")
     ap.add_argument("--out", help="write the figures as JSON here")
     args = ap.parse_args()
 
+    if args.basis_data and (args.scale or args.refine or args.residual or args.clusters > 1
+                            or args.basis_from_clean):
+        sys.exit("representation_aligned_pca.py: --basis-data goes with the translation or "
+                 "moment-angle alignment alone (not --scale, --refine, --residual, --clusters "
+                 "or --basis-from-clean)")
     train = load(args.eval, f"{args.sensor}_train").astype(np.float64)
     test = load(args.eval, f"{args.sensor}_test").astype(np.float64)
     clean = load(args.eval, f"{args.sensor}_test_clean").astype(np.float64)
@@ -263,13 +284,24 @@ def main():
     test_pose16 = test_pose.astype(np.float16).astype(np.float64)
     if args.basis_from_clean:
         train = load(args.eval, f"{args.sensor}_train_clean").astype(np.float64)
-    basis_train = blur(train, args.blur)
-    aligned_train = canvas.align(basis_train, train_pose)
+    basis_train, basis_pose = blur(train, args.blur), train_pose
+    if args.basis_data:
+        more = load(args.basis_data, f"{args.sensor}_train").astype(np.float64)
+        mpath = os.path.join(args.basis_data, f"{args.sensor}_train_weights.npy")
+        more_w = np.load(mpath) if os.path.exists(mpath) else np.ones(more.shape[:3], np.float32)
+        basis_pose = moment_poses(more, more_w)
+        if args.translate_only:
+            basis_pose[:, 2] = 0
+        basis_pose[:, 3] = 1
+        basis_train = blur(more, args.blur)
+        print(f"aligned basis learned from {len(more)} frames of {args.basis_data}", flush=True)
+    aligned_train = canvas.align(basis_train, basis_pose)
     resampled = canvas.unalign(canvas.align(clean, test_pose16), test_pose16, c)
     result = {"sensor": args.sensor, "canvas": args.canvas, "upsample": args.upsample,
               "basis_from_clean": args.basis_from_clean,
               "translate_only": args.translate_only, "clusters": args.clusters, "scale": args.scale, "blur": args.blur,
-              "refine": args.refine,
+              "refine": args.refine, "shrink": args.shrink,
+              "basis_data": args.basis_data,
               "canvas_side": canvas.side,
               "resampling_only_psnr_clean": float(psnr_per_frame(resampled, clean, test_w).mean()),
               "rows": []}
@@ -285,7 +317,17 @@ def main():
         mean, basis = pca(flat_train, k_plain)
         codes = store((test.reshape(len(test), -1) - mean) @ basis, args.precision)
         plain = (codes @ basis.T + mean).reshape(test.shape)
-        amean, abasis = pca(aligned_train, k_aligned)
+        if args.shrink:
+            amean, abasis = pca(aligned_train, 2 * k_aligned)
+            var = (((aligned_train - amean) @ abasis) ** 2).mean(0)
+            noise = np.median(var[k_aligned:])
+            gains = np.maximum(0.0, (var[:k_aligned] - noise) / var[:k_aligned])
+            abasis = abasis[:, :k_aligned]
+            print(f"shrink: noise floor {noise:.3g}, gains {gains[0]:.3f} .. "
+                  f"{gains[-1]:.3f}, {int((gains == 0).sum())} of {k_aligned} off", flush=True)
+        else:
+            amean, abasis = pca(aligned_train, k_aligned)
+            gains = np.ones(k_aligned)
         train_pose_k, test_pose_k = train_pose, test_pose16
         for _ in range(args.refine):
             train_pose_k = refine_poses(canvas, train, train_pose_k, amean, abasis)
@@ -295,8 +337,10 @@ def main():
             test_pose_k = refine_poses(canvas, test, test_pose16, amean, abasis).astype(
                 np.float16).astype(np.float64)
             aligned_test = canvas.align(test, test_pose_k)
-        acodes = store((aligned_test - amean) @ abasis, args.precision)
+        acodes = store(((aligned_test - amean) @ abasis) * gains, args.precision)
         aligned = canvas.unalign(acodes @ abasis.T + amean, test_pose_k, c)
+        if args.clusters > 1 and args.shrink:
+            sys.exit("representation_aligned_pca.py: --shrink does not go with --clusters")
         if args.clusters > 1:
             aligned = canvas.unalign(mixture_codes(aligned_train, aligned_test, args.clusters,
                                                    k_aligned - 1, args.precision),
@@ -314,6 +358,23 @@ def main():
                "aligned_components": k_aligned, "residual_components": args.residual,
                "aligned_psnr_clean": float(psnr_per_frame(aligned, clean, test_w).mean())}
         row["margin"] = row["aligned_psnr_clean"] - row["pca_psnr_clean"]
+        if args.basis_data:
+            # Plain PCA given the same contacts as the aligned basis (and the same shrinkage):
+            # how much of the margin is the data, how much the alignment.
+            flat_more = more.reshape(len(more), -1)
+            if args.shrink:
+                pmean, pbasis = pca(flat_more, 2 * k_plain)
+                pvar = (((flat_more - pmean) @ pbasis) ** 2).mean(0)
+                pnoise = np.median(pvar[k_plain:])
+                pgains = np.maximum(0.0, (pvar[:k_plain] - pnoise) / pvar[:k_plain])
+                pbasis = pbasis[:, :k_plain]
+            else:
+                pmean, pbasis = pca(flat_more, k_plain)
+                pgains = np.ones(k_plain)
+            pcodes = store(((test.reshape(len(test), -1) - pmean) @ pbasis) * pgains,
+                           args.precision)
+            row["pca_basis_data_psnr_clean"] = float(psnr_per_frame(
+                (pcodes @ pbasis.T + pmean).reshape(test.shape), clean, test_w).mean())
         result["rows"].append(row)
         if args.out and bytes_per_frame == args.bytes[0]:
             picture = os.path.splitext(args.out)[0] + ".png"
