@@ -42,9 +42,10 @@
 //     (SoftBubblePoseInformation) on the trunk's working frames and on the sensor's own,
 //     printed beside the mode's errors by contact depth: the floor under any unbiased
 //     estimator's error on those frames; and for every wrong mode (as --diagnose counts them)
-//     whether the frame itself prefers the truth's basin (JudgeWrongMode). --contacts-csv: one row
+//     whether the frame itself prefers the truth's basin (JudgeWrongMode), and whether the
+//     trunk keeps that preference (TrunkLogLikelihoodRatio). --contacts-csv: one row
 //     per usable contact (truth, mode, posterior mean, errors, the mode's Laplace standard
-//     deviations, with --information the bound's and the frame's verdict), written
+//     deviations, with --information the bound's, the frame's and the trunk's verdict), written
 //     atomically; --picture FILE (with --information): each contact's error against its
 //     bound.
 #include <algorithm>
@@ -400,6 +401,7 @@ constexpr double kClearNats = 3;
 struct WrongModeJudgement {
   FrameVerdict verdict = kAmbiguous;
   double log_likelihood_ratio = 0;  // the truth's fit over the mode's, nats
+  Contact truth_fit, mode_fit;      // the simulator's fits from the truth and the mode
 };
 
 WrongModeJudgement JudgeWrongMode(const ContactSimulator& simulator, const Image& frame,
@@ -412,6 +414,8 @@ WrongModeJudgement JudgeWrongMode(const ContactSimulator& simulator, const Image
   const ContactFit at_mode = FitSoftBubbleContact(simulator, frame, from_mode);
   WrongModeJudgement j;
   j.log_likelihood_ratio = at_truth.log_likelihood - at_mode.log_likelihood;
+  j.truth_fit = at_truth.contact;
+  j.mode_fit = at_mode.contact;
   const SE2d& a = at_truth.contact.sensor_T_object;
   const SE2d& b = at_mode.contact.sensor_T_object;
   const bool same_basin =
@@ -422,6 +426,35 @@ WrongModeJudgement JudgeWrongMode(const ContactSimulator& simulator, const Image
               : j.log_likelihood_ratio < -kClearNats ? kPrefersMode
                                                      : kAmbiguous;
   return j;
+}
+
+// What the best generator possible through this trunk would say about a wrong mode: at
+// each of the judgement's two simulator fits, the trunk's own latent for the simulator's
+// noise-free frame there (Ceres to convergence from the generator's latent, every valid
+// pixel), scored on the frame over every valid pixel; the mode's objective minus the
+// truth's, in nats (> 0: the trunk keeps what tells the truth from the mode, and a
+// generator that rendered every pose as the trunk fits it would rank the truth first).
+double TrunkLogLikelihoodRatio(const ContactSimulator& simulator, const Image& reference,
+                               const SensorTrunk& trunk, const TrunkTargets& targets,
+                               LatentProblem::Options problem_options,
+                               const PoseGenerator& generator, int tool_index,
+                               const WrongModeJudgement& judgement, std::uint64_t seed) {
+  problem_options.max_pixels = 0;  // every valid pixel
+  problem_options.contact_share = 0;
+  LatentFitter::Options fit;
+  fit.strategy = FitStrategy::FromString("ceres:30");
+  const LatentProblem frame(trunk, targets, problem_options);
+  Eigen::VectorXd r(frame.num_residuals());
+  auto objective_at = [&](const Contact& at) {
+    const Image clean = simulator.Render(SensorKind::kSoftBubble, at, seed).clean;
+    const TrunkTargets noise_free =
+        MakeTrunkTargets(AsStored(clean), reference, SensorKind::kSoftBubble, trunk.format);
+    Eigen::VectorXd z = generator.Generate(tool_index, at.sensor_T_object, at.depth_m);
+    LatentFitter(trunk, fit).Fit(LatentProblem(trunk, noise_free, problem_options), z, &z);
+    return frame.ResidualsAndJacobian(z.data(), r.data(), nullptr) ? 0.5 * r.squaredNorm()
+                                                                  : std::nan("");
+  };
+  return objective_at(judgement.mode_fit) - objective_at(judgement.truth_fit);
 }
 
 // --diagnose's whole-frame objectives of a wrong mode: the generator's rendering at the
@@ -668,7 +701,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
          "mode_x_mm,mode_y_mm,mode_yaw_deg,mode_depth_mm,mean_x_mm,mean_y_mm,mean_yaw_deg,"
          "position_error_mm,yaw_error_deg,modes,tool_probability,mode_sd_x_mm,mode_sd_y_mm,"
          "mode_sd_yaw_deg,bound_sd_along_mm,bound_sd_across_mm,bound_sd_yaw_deg,"
-         "bound_sd_depth_mm,frame_llr_truth_over_mode\n";
+         "bound_sd_depth_mm,frame_llr_truth_over_mode,trunk_llr_truth_over_mode\n";
   std::vector<double> times, cpu_times;
   std::map<std::string, std::pair<double, int>> per_tool_pos;
   // --information, by true depth (below 6 mm, 6-10 mm, from 10 mm): the mode's summed
@@ -682,6 +715,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
   // Wrong modes by what the frame says (JudgeWrongMode), counted by verdict.
   int frame_verdicts[kVerdicts] = {0, 0, 0, 0};
   std::vector<double> frame_llrs;
+  std::vector<double> trunk_llrs;  // the same wrong modes through the trunk
   std::vector<BoundPoint> bound_points;
   PoseInformationOptions working_size;
   working_size.rows = trunk.format.rows;
@@ -751,6 +785,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
       const bool wrong_mode = (n != 0 && kDeg * mode_yaw_error > 5) || std::sqrt(dp) > 1e-3;
       PoseInformation information;
       double frame_llr = std::nan("");
+      double trunk_llr = std::nan("");
       if (flags.information) {
         information = SoftBubblePoseInformation(simulator, contact, working_size);
         const PoseInformation sensor = SoftBubblePoseInformation(simulator, contact);
@@ -772,6 +807,10 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
           ++frame_verdicts[j.verdict];
           frame_llr = j.log_likelihood_ratio;
           frame_llrs.push_back(frame_llr);
+          trunk_llr = TrunkLogLikelihoodRatio(simulator, reference, trunk, targets,
+                                              options.problem, generator, static_cast<int>(t),
+                                              j, seed);
+          trunk_llrs.push_back(trunk_llr);
         }
       }
       if (!flags.contacts_csv.empty()) {
@@ -796,14 +835,14 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
         std::snprintf(
             row, sizeof(row),
             "%d,%s,%d,%.4f,%.4f,%.3f,%.4f,%.4f,%.4f,%.3f,%.4f,%.4f,%.4f,%.3f,%.4f,%.3f,%d,"
-            "%.4f,%.4f,%.4f,%.3f,%.4f,%.4f,%.3f,%.4f,%.2f\n",
+            "%.4f,%.4f,%.4f,%.3f,%.4f,%.4f,%.3f,%.4f,%.2f,%.2f\n",
             k, tools[t].c_str(), n, 1e3 * truth.x(), 1e3 * truth.y(), kDeg * truth.yaw(),
             1e3 * contact.depth_m, 1e3 * mode.x(), 1e3 * mode.y(), kDeg * mode.yaw(),
             1e3 * mode_depth, 1e3 * mean.x(), 1e3 * mean.y(), kDeg * mean.yaw(),
             1e3 * std::sqrt(dp), kDeg * mode_yaw_error, modes,
             s.tool_probabilities.count(tools[t]) ? s.tool_probabilities.at(tools[t]) : 0.0,
             1e3 * sd[0], 1e3 * sd[1], kDeg * sd[2], 1e3 * bound_sd[0], 1e3 * bound_sd[1],
-            kDeg * bound_sd[2], 1e3 * bound_sd[3], frame_llr);
+            kDeg * bound_sd[2], 1e3 * bound_sd[3], frame_llr, trunk_llr);
         csv << row;
       }
       per_tool_pos[tools[t]].first += dp;
@@ -971,6 +1010,24 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
                                        {"frame_ambiguous", frame_verdicts[kAmbiguous]},
                                        {"frame_prefers_mode", frame_verdicts[kPrefersMode]},
                                        {"log_likelihood_ratio_median", NumberOrNull(llr_median)}};
+    // The same wrong modes through the trunk (TrunkLogLikelihoodRatio).
+    const auto trunk_prefers_truth = std::count_if(
+        trunk_llrs.begin(), trunk_llrs.end(), [](double v) { return v > kClearNats; });
+    const auto trunk_prefers_mode = std::count_if(
+        trunk_llrs.begin(), trunk_llrs.end(), [](double v) { return v < -kClearNats; });
+    std::sort(trunk_llrs.begin(), trunk_llrs.end());
+    const double trunk_median =
+        trunk_llrs.empty() ? std::nan("") : trunk_llrs[trunk_llrs.size() / 2];
+    std::printf(
+        "  through the trunk (its own latent for the simulator's noise-free frame at each "
+        "of those fits, scored on the frame): prefers the truth by > %.0f nats: %ld; the "
+        "mode: %ld; log-likelihood ratio median %.1f nats\n",
+        kClearNats, static_cast<long>(trunk_prefers_truth), static_cast<long>(trunk_prefers_mode),
+        trunk_median);
+    information_json["wrong_modes"]["trunk_prefers_truth"] = trunk_prefers_truth;
+    information_json["wrong_modes"]["trunk_prefers_mode"] = trunk_prefers_mode;
+    information_json["wrong_modes"]["trunk_log_likelihood_ratio_median"] =
+        NumberOrNull(trunk_median);
   }
   if (!flags.diagnose_picture.empty()) {
     const SoftBubbleOptions& bubble = simulator.options().bubble;  // the frames' pitch

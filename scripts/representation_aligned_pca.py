@@ -135,12 +135,29 @@ def pca(x, k):
     mean = x.mean(0)
     xc = x - mean
     if len(x) > 4000:  # a large basis set: randomised SVD (Halko et al.), 6 power iterations
+        torch.manual_seed(0)  # the sketch's draws: the same basis on every run
         _, _, v = torch.svd_lowrank(torch.from_numpy(xc), q=k + 32, niter=6)
         return mean, v[:, :k].numpy()
     vals, vecs = np.linalg.eigh(xc @ xc.T)
     order = np.argsort(vals)[::-1][:k]
     basis = (xc.T @ vecs[:, order]) / np.sqrt(np.maximum(vals[order], 1e-30))
     return mean, basis
+
+
+def shrunk_pca(x, k, shrink):
+    """pca(x, k) and each component's code gain: 1, or with `shrink` its Wiener gain
+    max(0, (l_k - s2) / l_k), l_k the component's variance over x and s2 the noise floor,
+    the median variance of components k..2k."""
+    if not shrink:
+        mean, basis = pca(x, k)
+        return mean, basis, np.ones(k)
+    mean, basis = pca(x, 2 * k)
+    var = (((x - mean) @ basis) ** 2).mean(0)
+    noise = np.median(var[k:])
+    gains = np.maximum(0.0, (var[:k] - noise) / var[:k])
+    print(f"shrink: noise floor {noise:.3g}, gains {gains[0]:.3f} .. {gains[-1]:.3f}, "
+          f"{int((gains == 0).sum())} of {k} off", flush=True)
+    return mean, basis[:, :k], gains
 
 
 def unexplained(aligned, mean, basis):
@@ -317,17 +334,7 @@ def main():
         mean, basis = pca(flat_train, k_plain)
         codes = store((test.reshape(len(test), -1) - mean) @ basis, args.precision)
         plain = (codes @ basis.T + mean).reshape(test.shape)
-        if args.shrink:
-            amean, abasis = pca(aligned_train, 2 * k_aligned)
-            var = (((aligned_train - amean) @ abasis) ** 2).mean(0)
-            noise = np.median(var[k_aligned:])
-            gains = np.maximum(0.0, (var[:k_aligned] - noise) / var[:k_aligned])
-            abasis = abasis[:, :k_aligned]
-            print(f"shrink: noise floor {noise:.3g}, gains {gains[0]:.3f} .. "
-                  f"{gains[-1]:.3f}, {int((gains == 0).sum())} of {k_aligned} off", flush=True)
-        else:
-            amean, abasis = pca(aligned_train, k_aligned)
-            gains = np.ones(k_aligned)
+        amean, abasis, gains = shrunk_pca(aligned_train, k_aligned, args.shrink)
         train_pose_k, test_pose_k = train_pose, test_pose16
         for _ in range(args.refine):
             train_pose_k = refine_poses(canvas, train, train_pose_k, amean, abasis)
@@ -361,16 +368,7 @@ def main():
         if args.basis_data:
             # Plain PCA given the same contacts as the aligned basis (and the same shrinkage):
             # how much of the margin is the data, how much the alignment.
-            flat_more = more.reshape(len(more), -1)
-            if args.shrink:
-                pmean, pbasis = pca(flat_more, 2 * k_plain)
-                pvar = (((flat_more - pmean) @ pbasis) ** 2).mean(0)
-                pnoise = np.median(pvar[k_plain:])
-                pgains = np.maximum(0.0, (pvar[:k_plain] - pnoise) / pvar[:k_plain])
-                pbasis = pbasis[:, :k_plain]
-            else:
-                pmean, pbasis = pca(flat_more, k_plain)
-                pgains = np.ones(k_plain)
+            pmean, pbasis, pgains = shrunk_pca(more.reshape(len(more), -1), k_plain, args.shrink)
             pcodes = store(((test.reshape(len(test), -1) - pmean) @ pbasis) * pgains,
                            args.precision)
             row["pca_basis_data_psnr_clean"] = float(psnr_per_frame(

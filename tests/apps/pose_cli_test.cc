@@ -422,6 +422,7 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
   EXPECT_THAT(line, HasSubstr("position_error_mm,yaw_error_deg"));
   EXPECT_THAT(line, HasSubstr("mode_sd_x_mm,mode_sd_y_mm,mode_sd_yaw_deg"));
   EXPECT_THAT(line, HasSubstr("bound_sd_along_mm,bound_sd_across_mm,bound_sd_yaw_deg"));
+  EXPECT_THAT(line, HasSubstr("frame_llr_truth_over_mode,trunk_llr_truth_over_mode"));
   int count = 0, judged = 0;
   double sum_sq = 0, bound_sq = 0;
   while (std::getline(rows, line)) {
@@ -429,7 +430,7 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
     std::istringstream cells(line);
     std::string cell;
     while (std::getline(cells, cell, ',')) v.push_back(std::atof(cell.c_str()));
-    ASSERT_EQ(v.size(), 26u) << line;
+    ASSERT_EQ(v.size(), 27u) << line;
     // position_error_mm is the distance between the truth's and the mode's positions.
     EXPECT_NEAR(v[14], std::hypot(v[7] - v[3], v[8] - v[4]), 2e-4) << line;
     // The mode's Laplace sd along, across and in yaw (none for a C_inf tool, n = v[2] = 0).
@@ -447,6 +448,8 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
     }
     const bool wrong = (v[2] != 0 && v[15] > 5) || v[14] > 1;
     EXPECT_EQ(wrong, !std::isnan(v[25])) << line;
+    // And through the trunk (TrunkLogLikelihoodRatio), for the same wrong modes only.
+    EXPECT_EQ(wrong, !std::isnan(v[26])) << line;
     judged += wrong;
     sum_sq += v[14] * v[14];
     bound_sq += v[21] * v[21] + v[22] * v[22];
@@ -457,6 +460,10 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
   EXPECT_NEAR(std::sqrt(bound_sq / count), information["bound_rmse_mm"].get<double>(),
               1e-3 + 1e-3 * information["bound_rmse_mm"].get<double>());
   EXPECT_EQ(information["wrong_modes"]["count"].get<int>(), judged);
+  ASSERT_GT(judged, 0) << "the small test trunk has wrong modes to judge";
+  EXPECT_LE(information["wrong_modes"]["trunk_prefers_truth"].get<int>() +
+                information["wrong_modes"]["trunk_prefers_mode"].get<int>(),
+            judged);
   // --diagnose: every wrong mode's whole-frame objectives, the trunk's own best latent
   // (Ceres from the truth's generated latent) never above the truth's rendering.
   int whole_frames = 0;
