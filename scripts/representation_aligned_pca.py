@@ -274,6 +274,8 @@ def main():
         sys.exit("representation_aligned_pca.py: --basis-data goes with the translation or "
                  "moment-angle alignment alone (not --scale, --refine, --residual, --clusters "
                  "or --basis-from-clean)")
+    if args.clusters > 1 and args.shrink:
+        sys.exit("representation_aligned_pca.py: --shrink does not go with --clusters")
     train = load(args.eval, f"{args.sensor}_train").astype(np.float64)
     test = load(args.eval, f"{args.sensor}_test").astype(np.float64)
     clean = load(args.eval, f"{args.sensor}_test_clean").astype(np.float64)
@@ -346,8 +348,6 @@ def main():
             aligned_test = canvas.align(test, test_pose_k)
         acodes = store(((aligned_test - amean) @ abasis) * gains, args.precision)
         aligned = canvas.unalign(acodes @ abasis.T + amean, test_pose_k, c)
-        if args.clusters > 1 and args.shrink:
-            sys.exit("representation_aligned_pca.py: --shrink does not go with --clusters")
         if args.clusters > 1:
             aligned = canvas.unalign(mixture_codes(aligned_train, aligned_test, args.clusters,
                                                    k_aligned - 1, args.precision),
