@@ -134,21 +134,16 @@ void WriteFitPicture(const std::string& path, const TrunkTargets& target,
                      const Eigen::MatrixXf& recon, const LatentFitter::Summary& summary,
                      SensorKind sensor, int height) {
   const int rows = target.rows, cols = target.cols, n = rows * cols;
-  double lo = std::numeric_limits<double>::infinity(), hi = -lo, error_scale = 0;
+  const auto [lo, hi] = ValidValueRange(target);
+  double error_scale = 0;
   Image error(rows, cols, 1);
   for (int j = 0; j < n; ++j) {
     if (!(target.weights[j] > 0)) {
       error.data[j] = std::numeric_limits<float>::quiet_NaN();
       continue;
     }
-    lo = std::min<double>(lo, target.values.row(j).minCoeff());
-    hi = std::max<double>(hi, target.values.row(j).maxCoeff());
     error.data[j] = (recon.row(j) - target.values.row(j)).mean();
     error_scale = std::max<double>(error_scale, std::abs(error.data[j]));
-  }
-  if (!(hi > lo)) {
-    lo = std::isfinite(lo) ? lo - 0.5 : -0.5;
-    hi = lo + 1.0;
   }
   if (!(error_scale > 0)) error_scale = 1.0;
   const cv::Mat target_tile =

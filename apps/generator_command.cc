@@ -428,6 +428,30 @@ WrongModeJudgement JudgeWrongMode(const ContactSimulator& simulator, const Image
   return j;
 }
 
+// --diagnose's and --information's whole-frame judgements: the problem over every valid
+// pixel of the frame (no thinning, no draw towards the contact), Ceres to convergence on
+// it, and an objective there (half the squared whitened residuals; NaN if not finite).
+LatentProblem::Options EveryValidPixel(LatentProblem::Options options) {
+  options.max_pixels = 0;
+  options.contact_share = 0;
+  return options;
+}
+
+Eigen::VectorXd ConvergedLatent(const SensorTrunk& trunk, const LatentProblem& problem,
+                                const Eigen::VectorXd& start) {
+  LatentFitter::Options fit;
+  fit.strategy = FitStrategy::FromString("ceres:30");
+  Eigen::VectorXd z;
+  LatentFitter(trunk, fit).Fit(problem, start, &z);
+  return z;
+}
+
+double Objective(const LatentProblem& problem, const Eigen::VectorXd& z) {
+  Eigen::VectorXd r(problem.num_residuals());
+  return problem.ResidualsAndJacobian(z.data(), r.data(), nullptr) ? 0.5 * r.squaredNorm()
+                                                                   : std::nan("");
+}
+
 // What the best generator possible through this trunk would say about a wrong mode: at
 // each of the judgement's two simulator fits, the trunk's own latent for the simulator's
 // noise-free frame there (Ceres to convergence from the generator's latent, every valid
@@ -439,20 +463,16 @@ double TrunkLogLikelihoodRatio(const ContactSimulator& simulator, const Image& r
                                LatentProblem::Options problem_options,
                                const PoseGenerator& generator, int tool_index,
                                const WrongModeJudgement& judgement, std::uint64_t seed) {
-  problem_options.max_pixels = 0;  // every valid pixel
-  problem_options.contact_share = 0;
-  LatentFitter::Options fit;
-  fit.strategy = FitStrategy::FromString("ceres:30");
+  problem_options = EveryValidPixel(problem_options);
   const LatentProblem frame(trunk, targets, problem_options);
-  Eigen::VectorXd r(frame.num_residuals());
   auto objective_at = [&](const Contact& at) {
     const Image clean = simulator.Render(SensorKind::kSoftBubble, at, seed).clean;
     const TrunkTargets noise_free =
         MakeTrunkTargets(AsStored(clean), reference, SensorKind::kSoftBubble, trunk.format);
-    Eigen::VectorXd z = generator.Generate(tool_index, at.sensor_T_object, at.depth_m);
-    LatentFitter(trunk, fit).Fit(LatentProblem(trunk, noise_free, problem_options), z, &z);
-    return frame.ResidualsAndJacobian(z.data(), r.data(), nullptr) ? 0.5 * r.squaredNorm()
-                                                                  : std::nan("");
+    const LatentProblem at_pose(trunk, noise_free, problem_options);
+    return Objective(frame, ConvergedLatent(trunk, at_pose,
+                                            generator.Generate(tool_index, at.sensor_T_object,
+                                                               at.depth_m)));
   };
   return objective_at(judgement.mode_fit) - objective_at(judgement.truth_fit);
 }
@@ -476,20 +496,13 @@ TrunkWholeFrame JudgeAgainstTheTrunk(const SensorTrunk& trunk, const TrunkTarget
                                      const PoseGenerator& generator, int tool_index,
                                      const SE2d& mode, double mode_depth_m, const SE2d& truth,
                                      double truth_depth_m) {
-  problem_options.max_pixels = 0;  // every valid pixel
-  problem_options.contact_share = 0;
-  const LatentProblem whole(trunk, targets, problem_options);
+  const LatentProblem whole(trunk, targets, EveryValidPixel(problem_options));
   TrunkWholeFrame out;
   out.mode_cost = PoseCost(whole, generator, tool_index, mode, mode_depth_m);
   out.truth_cost = PoseCost(whole, generator, tool_index, truth, truth_depth_m);
-  LatentFitter::Options fit;
-  fit.strategy = FitStrategy::FromString("ceres:30");
-  Eigen::VectorXd& z = out.trunk_latent;
-  LatentFitter(trunk, fit).Fit(whole, generator.Generate(tool_index, truth, truth_depth_m), &z);
-  Eigen::VectorXd r(whole.num_residuals());
-  out.trunk_cost = whole.ResidualsAndJacobian(z.data(), r.data(), nullptr)
-                       ? 0.5 * r.squaredNorm()
-                       : std::nan("");
+  out.trunk_latent =
+      ConvergedLatent(trunk, whole, generator.Generate(tool_index, truth, truth_depth_m));
+  out.trunk_cost = Objective(whole, out.trunk_latent);
   return out;
 }
 
@@ -516,12 +529,8 @@ cv::Mat WrongModePicture(const std::vector<WrongModeView>& views, const SensorTr
   const cv::Scalar kTruth(80, 200, 80), kMode(60, 60, 230);
   std::vector<std::vector<cv::Mat>> grid;
   for (const WrongModeView& v : views) {
-    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
-    for (int j = 0; j < v.targets.values.rows(); ++j) {
-      if (!(v.targets.weights[j] > 0)) continue;
-      lo = std::min<double>(lo, v.targets.values.row(j).minCoeff());
-      hi = std::max<double>(hi, v.targets.values.row(j).maxCoeff());
-    }
+    const std::pair<double, double> range = ValidValueRange(v.targets);  // the row's colours
+    const double lo = range.first, hi = range.second;
     const Eigen::MatrixXf trunk_best = Reconstruct(trunk, v.whole.trunk_latent.cast<float>());
     const Eigen::MatrixXf at_truth = Reconstruct(trunk, v.truth_latent);
     const Eigen::MatrixXf at_mode = Reconstruct(trunk, v.mode_latent);

@@ -106,6 +106,20 @@ cv::Mat ErrorTile(const Eigen::MatrixXf& prediction, const TrunkTargets& target,
   return DifferenceTile(error, scale);
 }
 
+std::pair<double, double> ValidValueRange(const TrunkTargets& target) {
+  double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+  for (int j = 0; j < target.values.rows(); ++j) {
+    if (!(target.weights[j] > 0)) continue;
+    lo = std::min<double>(lo, target.values.row(j).minCoeff());
+    hi = std::max<double>(hi, target.values.row(j).maxCoeff());
+  }
+  if (!(hi > lo)) {
+    lo = std::isfinite(lo) ? lo - 0.5 : -0.5;
+    hi = lo + 1.0;
+  }
+  return {lo, hi};
+}
+
 cv::Mat ValueTile(const Eigen::MatrixXf& values, const Eigen::VectorXf& weights, int rows,
                   int cols, double lo, double hi) {
   const double span = hi > lo ? hi - lo : 1.0;

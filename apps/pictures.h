@@ -7,6 +7,7 @@
 #define TACTFUNC_APPS_PICTURES_H_
 
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -31,6 +32,10 @@ cv::Mat DifferenceTile(const Image& difference, double scale);
 // prediction - target (N x C normalised values, mean over channels) through
 // DifferenceTile's diverging map in [-scale, scale]; the target's invalid pixels red.
 cv::Mat ErrorTile(const Eigen::MatrixXf& prediction, const TrunkTargets& target, double scale);
+// The range [lo, hi] of a target's values over its valid pixels, the colour range its
+// ValueTiles share; a range of width 1 about the value (about 0 if no pixel is valid)
+// when every valid value is the same.
+std::pair<double, double> ValidValueRange(const TrunkTargets& target);
 // Normalised trunk values (N x C of a rows x cols frame, pixel j = row * cols + col) as a
 // BGR tile: one channel through viridis over [lo, hi], three channels as RGB over
 // [lo, hi]; pixels with weight <= 0 dark grey.

@@ -143,16 +143,7 @@ std::vector<std::string> WriteExamples(const ReconFlags& flags, const FunctaMode
   grid.back().push_back(TextCell(26, w, {error_title}));
   for (const Example& e : examples) {
     // Target, z = 0 and reconstruction share the target's range.
-    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
-    for (int j = 0; j < rows * cols; ++j) {
-      if (!(e.target.weights[j] > 0)) continue;
-      lo = std::min<double>(lo, e.target.values.row(j).minCoeff());
-      hi = std::max<double>(hi, e.target.values.row(j).maxCoeff());
-    }
-    if (!(hi > lo)) {
-      lo = std::isfinite(lo) ? lo - 0.5 : -0.5;
-      hi = lo + 1.0;
-    }
+    const auto [lo, hi] = ValidValueRange(e.target);
     const auto& r = *e.result;
     std::vector<cv::Mat> row;
     row.push_back(TextCell(
