@@ -524,7 +524,9 @@ GeneratorPosterior::Summary GeneratorPosterior::Estimate(const TrunkTargets& tar
       } else {
         c.covariance = LaplaceCovariance<4>(H, &log_det);
       }
-      c.log_evidence = -f.cost * scale + 0.5 * k * std::log(2 * M_PI) - 0.5 * log_det +
+      c.dimension = k;
+      c.log_likelihood = -f.cost * scale;
+      c.log_evidence = c.log_likelihood + 0.5 * k * std::log(2 * M_PI) - 0.5 * log_det +
                        (n == 0 ? std::log(2 * M_PI) : std::log(static_cast<double>(n)));
       if (std::isfinite(c.log_evidence) && c.covariance.allFinite()) components.push_back(c);
     }
@@ -536,14 +538,16 @@ GeneratorPosterior::Summary GeneratorPosterior::Estimate(const TrunkTargets& tar
     summary.cpu_time_ms = ThreadCpuMs() - cpu0;
     return summary;
   }
-  double max_log = -std::numeric_limits<double>::infinity();
-  for (const LaplaceComponent& c : components) max_log = std::max(max_log, c.log_evidence);
-  double total = 0;
   double tau = options_.weight_temperature > 0 ? options_.weight_temperature
                                                : generator_->weight_temperature();
   if (!(tau > 0)) tau = 1;
+  double max_log = -std::numeric_limits<double>::infinity();
+  for (const LaplaceComponent& c : components) {
+    max_log = std::max(max_log, TemperedLogEvidence(c, tau));
+  }
+  double total = 0;
   for (LaplaceComponent& c : components) {
-    total += c.weight = std::exp((c.log_evidence - max_log) / tau);
+    total += c.weight = std::exp(TemperedLogEvidence(c, tau) - max_log);
   }
   for (LaplaceComponent& c : components) {
     c.weight /= total;
@@ -613,6 +617,11 @@ void CheckMinTemperature(const char* who, double min_temperature) {
 
 }  // namespace
 
+double TemperedLogEvidence(const LaplaceComponent& component, double tau) {
+  return component.log_likelihood / tau + (component.log_evidence - component.log_likelihood) +
+         0.5 * component.dimension * std::log(tau);
+}
+
 double CalibrateWeightTemperature(const GeneratorPosterior& posterior,
                                   const std::vector<TrunkTargets>& frames,
                                   const std::vector<PoseLabel>& labels, double min_temperature,
@@ -632,7 +641,9 @@ double CalibrateWeightTemperature(const GeneratorPosterior& posterior,
     double best_d2 = std::numeric_limits<double>::infinity();
     for (std::size_t m = 0; m < mixture.components().size(); ++m) {
       const LaplaceComponent& c = mixture.components()[m];
-      wc.log_evidence.push_back(c.log_evidence);
+      wc.log_likelihood.push_back(c.log_likelihood);
+      wc.log_occam.push_back(c.log_evidence - c.log_likelihood);
+      wc.dimension.push_back(c.dimension);
       wc.log_density.push_back(ComponentLogDensity(c, labels[i].sensor_T_object));
       const double d2 = SquaredMahalanobis(c, labels[i].sensor_T_object);
       if (d2 < best_d2) best_d2 = d2, nearest = m;
@@ -651,10 +662,14 @@ double FitWeightTemperature(const std::vector<WeightTemperatureCase>& cases,
                             double min_temperature) {
   CheckMinTemperature("FitWeightTemperature", min_temperature);
   for (const WeightTemperatureCase& c : cases) {
-    if (c.log_evidence.empty() || c.log_density.size() != c.log_evidence.size()) {
+    const std::size_t m = c.log_likelihood.size();
+    if (m == 0 || c.log_density.size() != m || !(c.log_occam.empty() || c.log_occam.size() == m) ||
+        !(c.dimension.empty() || c.dimension.size() == m)) {
       throw std::invalid_argument(
-          "FitWeightTemperature: a case needs one log density per log evidence, got " +
-          std::to_string(c.log_density.size()) + " and " + std::to_string(c.log_evidence.size()));
+          "FitWeightTemperature: a case needs one log density (and one log_occam and dimension "
+          "where given) per log likelihood, got " + std::to_string(c.log_density.size()) + ", " +
+          std::to_string(c.log_occam.size()) + " and " + std::to_string(c.dimension.size()) +
+          " for " + std::to_string(m));
     }
   }
   if (cases.empty()) return 1;
@@ -664,11 +679,15 @@ double FitWeightTemperature(const std::vector<WeightTemperatureCase>& cases,
     const double tau = std::exp(std::log(min_temperature) * g / (kGrid - 1.0));  // 1 first
     double score = 0;
     for (const WeightTemperatureCase& c : cases) {
-      // log sum_m w_m p_m with w = softmax(log Z / tau), both sums by log-sum-exp.
-      const double top = *std::max_element(c.log_evidence.begin(), c.log_evidence.end());
-      std::vector<double> log_weight(c.log_evidence.size()), joint(c.log_evidence.size());
-      for (std::size_t m = 0; m < joint.size(); ++m) {
-        log_weight[m] = (c.log_evidence[m] - top) / tau;
+      // log sum_m w_m p_m with w = softmax(log Z(tau)), both sums by log-sum-exp.
+      const std::size_t size = c.log_likelihood.size();
+      std::vector<double> log_weight(size), joint(size);
+      for (std::size_t m = 0; m < size; ++m) {
+        LaplaceComponent component;
+        component.log_likelihood = c.log_likelihood[m];
+        component.log_evidence = c.log_likelihood[m] + (c.log_occam.empty() ? 0 : c.log_occam[m]);
+        component.dimension = c.dimension.empty() ? 4 : c.dimension[m];
+        log_weight[m] = TemperedLogEvidence(component, tau);
         joint[m] = log_weight[m] + c.log_density[m];
       }
       score += internal::LogSumExp(joint) - internal::LogSumExp(log_weight);

@@ -28,14 +28,22 @@
 //      k = 4, c_t = n for a C_n tool (its n copies of every mode), and for n = 0 (yaw
 //      unobservable) k = 3 over (x, y, depth) and c_t = 2 pi (the yaw integrates out);
 //      the uniform pose prior is the same for every tool and cancels.
-//   Mixture weights w_m = Z_m^(1/tau) / sum Z^(1/tau) (over the modes of every candidate
-//   tool); the tool probabilities P(t | y) = sum of its modes' weights. tau, the
-//   weights' temperature (PoseGenerator::weight_temperature, or
-//   Options::weight_temperature; 1 for a generator without one), is calibrated on held-out
-//   labelled contacts (CalibrateWeightTemperature): the pixel sigma below is inflated so
-//   that each mode's Gaussian covers the truth near it, which also shrinks the differences
-//   of log Z between modes by kappa^2, and the mode with the largest Z holds the truth far
-//   more often than Z alone would say (docs/POSES.md, "The mode weights' temperature").
+//   Mixture weights: the Laplace evidence of the likelihood tempered by 1/tau,
+//        log Z_m(tau) = -1/(2 tau) ||r||^2 + (k/2) log 2 pi - 1/2 log det H_m
+//                       + (k/2) log tau + log c_t
+//   (the integral of exp(-||r||^2 / (2 tau)) over the mode's basin: its Hessian is H_m /
+//   tau), w_m = Z_m(tau) / sum Z(tau) over the modes of every candidate tool; the tool
+//   probabilities P(t | y) = sum of its modes' weights. tau, the likelihood's temperature
+//   (PoseGenerator::weight_temperature, or Options::weight_temperature; 1 for a generator
+//   without one), is calibrated on held-out labelled contacts (CalibrateWeightTemperature):
+//   the pixel sigma below is inflated so that each mode's Gaussian covers the truth near
+//   it, which also shrinks the likelihood ratios between modes by kappa^2, and the mode
+//   with the best fit holds the truth far more often than that ratio alone would say
+//   (docs/POSES.md, "The mode weights' temperature"). Only the likelihood is tempered:
+//   the Occam factor -1/2 log det H_m of a mode's width is not a model error to correct
+//   (raising Z_m itself to 1/tau, as the posterior did before, weighed widths against
+//   fits 1/tau times too strongly; docs/POSES.md, "Tempering the likelihood, not the
+//   evidence").
 //
 // The pixel sigma s. The residuals of a rendering are dominated by the generator's and
 // the trunk's model error, spatially correlated, not by independent pixel noise, so the
@@ -85,7 +93,9 @@ struct LaplaceComponent {
   std::string tool;
   int symmetry_order = 1;
   double weight = 0;
-  double log_evidence = 0;
+  double log_evidence = 0;    // log Z_m at tau = 1 (header comment)
+  double log_likelihood = 0;  // its data term, -1/2 ||r||^2 at the pixel sigma s
+  int dimension = 4;          // k: 4, or 3 for a tool whose yaw is unobservable
   SE2d mean;
   double depth_m = 0;
   Eigen::Matrix4d covariance = Eigen::Matrix4d::Zero();
@@ -262,15 +272,24 @@ double CalibrateSigmaInflation(const GeneratorPosterior& posterior,
                                const std::vector<TrunkTargets>& frames,
                                const std::vector<PoseLabel>& labels);
 
+// log Z_m(tau) of the header comment: the component's evidence with its likelihood
+// tempered by 1/tau (tau > 0). At tau = 1, log_evidence.
+double TemperedLogEvidence(const LaplaceComponent& component, double tau);
+
 // One labelled frame for the weights' temperature: its mixture's components.
 struct WeightTemperatureCase {
-  std::vector<double> log_evidence;  // log Z_m of each component
-  std::vector<double> log_density;   // log N_m(truth) of each component
+  std::vector<double> log_likelihood;  // each component's log_likelihood
+  std::vector<double> log_density;     // log N_m(truth) of each component
+  // log_evidence - log_likelihood of each component (empty: all 0), and its dimension
+  // (empty: all 4).
+  std::vector<double> log_occam;
+  std::vector<int> dimension;
 };
 
 // tau of the header comment by temperature scaling on a proper score: the value on a log
 // grid of 61 points over [min_temperature, 1] that maximises the summed log density of the
-// truth under the mixture, sum_i log sum_m w_m(tau) N_m(truth_i), over the given labelled
+// truth under the mixture, sum_i log sum_m w_m(tau) N_m(truth_i) with w_m(tau) from
+// TemperedLogEvidence, over the given labelled
 // frames (each fitted with its tool known, with `posterior`'s kappa; N_m the component's
 // (x, y, yaw) Gaussian, the truth folded by the tool's symmetry; (x, y) for n = 0). Frames
 // with one component do not depend on tau and are left out. Modes near each other share
@@ -289,7 +308,8 @@ double CalibrateWeightTemperature(const GeneratorPosterior& posterior,
 
 // CalibrateWeightTemperature's search on given cases (the grid and the rule for ties
 // above). Returns 1 for no cases. Throws std::invalid_argument unless 0 < min_temperature
-// <= 1 and every case has one log density per log evidence (at least one).
+// <= 1 and every case has one log density (and, where given, one log_occam and one
+// dimension) per log likelihood (at least one).
 double FitWeightTemperature(const std::vector<WeightTemperatureCase>& cases,
                             double min_temperature = 0.05);
 

@@ -328,9 +328,12 @@ TEST(GeneratorPosterior, TheFinalStageRefinesTheModesOnItsOwnPixels) {
   EXPECT_THAT(error, ::testing::HasSubstr("final_pixels"));
 }
 
-// The mode weights follow Z^(1/tau): the components and their log evidences do not
-// depend on tau, their weights' ratios are exp((log Z_a - log Z_b) / tau).
-TEST(GeneratorPosterior, TheWeightTemperatureSharpensTheModeWeightsOnly) {
+// The mode weights follow the evidence of the likelihood tempered by 1/tau: the
+// components, their log evidences and log likelihoods do not depend on tau; their
+// weights' log ratios are TemperedLogEvidence's differences, in which only the
+// likelihoods' difference is scaled by 1/tau (the Occam factors are not); at tau = 1 they
+// are the log evidences' differences.
+TEST(GeneratorPosterior, TheWeightTemperatureTempersTheLikelihoodOnly) {
   const SensorTrunk trunk = Trunk();
   const PoseGenerator g = Generator();
   const TrunkTargets targets =
@@ -346,23 +349,40 @@ TEST(GeneratorPosterior, TheWeightTemperatureSharpensTheModeWeightsOnly) {
   ASSERT_TRUE(at_half.Estimate(targets, "", &sharp).usable);
   ASSERT_GE(plain.components().size(), 2u);
   ASSERT_EQ(sharp.components().size(), plain.components().size());
+  // The components in the same order at both temperatures (by their poses).
+  auto same = [](const LaplaceComponent& x, const LaplaceComponent& y) {
+    return x.tool == y.tool && x.mean.x() == y.mean.x() && x.mean.yaw() == y.mean.yaw();
+  };
   const LaplaceComponent& a = sharp.components()[0];
   const LaplaceComponent& b = sharp.components()[1];
-  EXPECT_EQ(a.log_evidence, plain.components()[0].log_evidence);
-  EXPECT_EQ(b.log_evidence, plain.components()[1].log_evidence);
-  EXPECT_NEAR(std::log(a.weight / b.weight), 2 * (a.log_evidence - b.log_evidence),
-              1e-9 * (1 + std::abs(a.log_evidence - b.log_evidence)));
-  EXPECT_NEAR(std::log(plain.components()[0].weight / plain.components()[1].weight),
-              a.log_evidence - b.log_evidence,
-              1e-9 * (1 + std::abs(a.log_evidence - b.log_evidence)));
-  EXPECT_GT(a.weight, plain.components()[0].weight);
+  const LaplaceComponent* a1 = nullptr;
+  const LaplaceComponent* b1 = nullptr;
+  for (const LaplaceComponent& c : plain.components()) {
+    if (same(c, a)) a1 = &c;
+    if (same(c, b)) b1 = &c;
+  }
+  ASSERT_NE(a1, nullptr);
+  ASSERT_NE(b1, nullptr);
+  EXPECT_EQ(a.log_evidence, a1->log_evidence);
+  EXPECT_EQ(a.log_likelihood, a1->log_likelihood);
+  EXPECT_LT(a.log_likelihood, 0);
+  const double tempered = TemperedLogEvidence(a, 0.5) - TemperedLogEvidence(b, 0.5);
+  EXPECT_NEAR(std::log(a.weight / b.weight), tempered, 1e-9 * (1 + std::abs(tempered)));
+  // Only the likelihood is scaled: the Occam factors' difference enters once.
+  const double occam = (a.log_evidence - a.log_likelihood) - (b.log_evidence - b.log_likelihood);
+  const double expected = 2 * (a.log_likelihood - b.log_likelihood) + occam +
+                          0.5 * (a.dimension - b.dimension) * std::log(0.5);
+  EXPECT_NEAR(tempered, expected, 1e-9 * (1 + std::abs(expected)));
+  const double untempered = a1->log_evidence - b1->log_evidence;
+  EXPECT_NEAR(std::log(a1->weight / b1->weight), untempered, 1e-9 * (1 + std::abs(untempered)));
+  EXPECT_EQ(TemperedLogEvidence(a, 1.0), a.log_evidence);
   std::string error;
   options.weight_temperature = -1;
   EXPECT_FALSE(options.IsValid(&error));
   EXPECT_THAT(error, ::testing::HasSubstr("weight_temperature"));
 }
 
-// Temperature scaling on hand-made cases: two distant modes whose log evidences differ
+// Temperature scaling on hand-made cases: two distant modes whose log likelihoods differ
 // by D, the truth in the heavier one in 9 cases of 10, is fitted best by tau = D /
 // logit(0.9); two close modes that share the truth's density do not pull tau up.
 TEST(FitWeightTemperature, MatchesHowOftenTheHeaviestModeHoldsTheTruth) {
@@ -378,7 +398,7 @@ TEST(FitWeightTemperature, MatchesHowOftenTheHeaviestModeHoldsTheTruth) {
   std::vector<WeightTemperatureCase> swapped;
   for (const WeightTemperatureCase& c : cases) {
     swapped.push_back(
-        {{c.log_evidence[1], c.log_evidence[0]}, {c.log_density[1], c.log_density[0]}});
+        {{c.log_likelihood[1], c.log_likelihood[0]}, {c.log_density[1], c.log_density[0]}});
   }
   EXPECT_EQ(FitWeightTemperature(swapped, 0.05), tau);
   // A truth between two close modes (equal density under both) leaves tau at the floor
@@ -392,6 +412,25 @@ TEST(FitWeightTemperature, MatchesHowOftenTheHeaviestModeHoldsTheTruth) {
   // The truth in the lighter mode of every case: as flat as the grid allows.
   EXPECT_EQ(FitWeightTemperature({in_lighter}, 0.05), 1);
   EXPECT_THROW(FitWeightTemperature({{{1.0, 0.0}, {0.0}}}, 0.05), std::invalid_argument);
+  EXPECT_THROW(FitWeightTemperature({{{1.0, 0.0}, {0.0, 0.0}, {0.0}}}, 0.05),
+               std::invalid_argument);
+  // An Occam factor is not tempered: the likelihoods tie, the first mode is twice as wide
+  // (log 2 more evidence) and holds the truth in 2 cases of 3, as its weight 2/3 says at
+  // any tau; so every tau scores the same and the tie keeps tau = 1. Were the factor
+  // tempered with the likelihood, tau = 1 would be the unique best.
+  const WeightTemperatureCase wide_holds{{0.0, 0.0}, {0.0, -1e3}, {std::log(2.0), 0.0}, {}};
+  const WeightTemperatureCase narrow_holds{{0.0, 0.0}, {-1e3, 0.0}, {std::log(2.0), 0.0}, {}};
+  EXPECT_EQ(FitWeightTemperature({wide_holds, wide_holds, narrow_holds}, 0.05), 1);
+  // The same cases with the first likelihood D higher: the weights sharpen with 1/tau
+  // while the Occam factor's log 2 stays, so the score's best tau moves below 1.
+  const WeightTemperatureCase better_wide{{d, 0.0}, {0.0, -1e3}, {std::log(2.0), 0.0}, {}};
+  const WeightTemperatureCase better_narrow{{d, 0.0}, {-1e3, 0.0}, {std::log(2.0), 0.0}, {}};
+  std::vector<WeightTemperatureCase> mixed(9, better_wide);
+  mixed.push_back(better_narrow);
+  // The truth in the heavier mode 9 times in 10: w = 0.9 at D / tau + log 2 = logit(0.9).
+  const double tau_mixed = FitWeightTemperature(mixed, 0.05);
+  EXPECT_NEAR(std::log(tau_mixed), std::log(d / (logit - std::log(2.0))), std::log(20.0) / 60)
+      << tau_mixed;
   EXPECT_THROW(FitWeightTemperature(cases, 0), std::invalid_argument);
   EXPECT_THROW(FitWeightTemperature(cases, 1.5), std::invalid_argument);
 }
