@@ -270,7 +270,11 @@ nlohmann::json DescribePoseGenerator(const std::string& bytes, const std::string
             << " yaw harmonics; sigma inflation "
             << (g.sigma_inflation() > 0 ? FormatFixed(g.sigma_inflation(), 3) : "none")
             << ", mode weight temperature "
-            << (g.weight_temperature() > 0 ? FormatFixed(g.weight_temperature(), 3) : "none (1)")
+            << (g.weight_temperature() > 0
+                    ? FormatFixed(g.weight_temperature(), 3) +
+                          (g.weight_temperature_on_likelihood() ? " on the likelihood"
+                                                                : " on the whole evidence")
+                    : std::string("none (1)"))
             << ", calibrated with "
             << (g.final_pixels() > 0 ? "a final stage on " + std::to_string(g.final_pixels()) +
                                            " pixels"
@@ -282,6 +286,8 @@ nlohmann::json DescribePoseGenerator(const std::string& bytes, const std::string
           {"yaw_harmonics", g.options().yaw_harmonics},
           {"sigma_inflation", g.sigma_inflation()},
           {"weight_temperature", g.weight_temperature()},
+          {"weight_temperature_on",
+           g.weight_temperature_on_likelihood() ? "likelihood" : "evidence"},
           {"final_pixels", g.final_pixels()}};
 }
 

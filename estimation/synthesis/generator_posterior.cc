@@ -541,14 +541,17 @@ GeneratorPosterior::Summary GeneratorPosterior::Estimate(const TrunkTargets& tar
   double tau = options_.weight_temperature > 0 ? options_.weight_temperature
                                                : generator_->weight_temperature();
   if (!(tau > 0)) tau = 1;
+  // A generator calibrated before the likelihood alone was tempered keeps the weights its
+  // tau was calibrated for, Z^(1/tau) (PoseGenerator::weight_temperature_on_likelihood).
+  const bool on_evidence =
+      !(options_.weight_temperature > 0) && !generator_->weight_temperature_on_likelihood();
+  auto log_weight = [&](const LaplaceComponent& c) {
+    return on_evidence ? c.log_evidence / tau : TemperedLogEvidence(c, tau);
+  };
   double max_log = -std::numeric_limits<double>::infinity();
-  for (const LaplaceComponent& c : components) {
-    max_log = std::max(max_log, TemperedLogEvidence(c, tau));
-  }
+  for (const LaplaceComponent& c : components) max_log = std::max(max_log, log_weight(c));
   double total = 0;
-  for (LaplaceComponent& c : components) {
-    total += c.weight = std::exp(TemperedLogEvidence(c, tau) - max_log);
-  }
+  for (LaplaceComponent& c : components) total += c.weight = std::exp(log_weight(c) - max_log);
   for (LaplaceComponent& c : components) {
     c.weight /= total;
     summary.tool_probabilities[c.tool] += c.weight;

@@ -43,7 +43,9 @@
 //   the Occam factor -1/2 log det H_m of a mode's width is not a model error to correct
 //   (raising Z_m itself to 1/tau, as the posterior did before, weighed widths against
 //   fits 1/tau times too strongly; docs/POSES.md, "Tempering the likelihood, not the
-//   evidence").
+//   evidence"). A generator file calibrated before keeps w ~ Z^(1/tau), the weights its
+//   tau was calibrated for (PoseGenerator::weight_temperature_on_likelihood), unless
+//   Options::weight_temperature is set.
 //
 // The pixel sigma s. The residuals of a rendering are dominated by the generator's and
 // the trunk's model error, spatially correlated, not by independent pixel noise, so the

@@ -145,11 +145,12 @@ void PoseGenerator::set_sigma_inflation(double kappa) {
   sigma_inflation_ = kappa;
 }
 
-void PoseGenerator::set_weight_temperature(double tau) {
+void PoseGenerator::set_weight_temperature(double tau, bool on_likelihood) {
   Check(tau >= 0 && std::isfinite(tau),
         "PoseGenerator::set_weight_temperature: expected a finite value >= 0, got " +
             std::to_string(tau));
   weight_temperature_ = tau;
+  weight_temperature_on_likelihood_ = on_likelihood;
 }
 
 void PoseGenerator::set_final_pixels(int n) {
@@ -356,7 +357,10 @@ std::string PoseGenerator::Serialize() const {
   meta["depth_center"] = options_.depth_center;
   meta["depth_scale"] = options_.depth_scale;
   meta["sigma_inflation"] = sigma_inflation_;
-  if (weight_temperature_ > 0) meta["weight_temperature"] = weight_temperature_;
+  if (weight_temperature_ > 0) {
+    meta["weight_temperature"] = weight_temperature_;
+    meta["weight_temperature_on"] = weight_temperature_on_likelihood_ ? "likelihood" : "evidence";
+  }
   if (final_pixels_ > 0) meta["final_pixels"] = final_pixels_;
   meta["info"] = nlohmann::json::parse(info_json_);
   file.set_meta_json(meta.dump());
@@ -411,7 +415,17 @@ PoseGenerator FromTensorFile(const TensorFile& file, const std::string& source) 
       if (!(tau > 0) || !std::isfinite(tau)) {
         throw TensorFileError(source + ": field 'weight_temperature' must be finite and > 0");
       }
-      model.set_weight_temperature(tau);
+      // A file without the field was calibrated when tau tempered the whole evidence.
+      std::string on = "evidence";
+      if (meta.contains("weight_temperature_on")) {
+        field = "weight_temperature_on";
+        on = meta.at("weight_temperature_on").get<std::string>();
+        if (on != "likelihood" && on != "evidence") {
+          throw TensorFileError(source + ": field 'weight_temperature_on' must be \"likelihood\" "
+                                "or \"evidence\", got \"" + on + "\"");
+        }
+      }
+      model.set_weight_temperature(tau, on == "likelihood");
     }
     if (meta.contains("final_pixels")) {
       field = "final_pixels";

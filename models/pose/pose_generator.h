@@ -106,10 +106,16 @@ class PoseGenerator {
   double sigma_inflation() const { return sigma_inflation_; }
   void set_sigma_inflation(double kappa);  // >= 0, finite
 
-  // The temperature tau of the posterior's mode weights (w ~ Z^(1/tau); the same header),
-  // calibrated on held-out contacts; 0 = not calibrated (the posterior then uses 1).
+  // The temperature tau of the posterior's mode weights (estimation/synthesis/
+  // generator_posterior.h), calibrated on held-out contacts; 0 = not calibrated (the
+  // posterior then uses 1). on_likelihood: what tau was calibrated to temper, the
+  // likelihood alone (every calibration since 2026-11-29) or each mode's whole evidence,
+  // w ~ Z^(1/tau) (false: a file calibrated before, whose tau the posterior applies as it
+  // was calibrated). Stored as "weight_temperature_on" ("likelihood" | "evidence"); a file
+  // without it was calibrated before and reads as "evidence".
   double weight_temperature() const { return weight_temperature_; }
-  void set_weight_temperature(double tau);  // >= 0, finite
+  bool weight_temperature_on_likelihood() const { return weight_temperature_on_likelihood_; }
+  void set_weight_temperature(double tau, bool on_likelihood = true);  // tau >= 0, finite
 
   // The pixels of the posterior's final stage (GeneratorPosterior::Options::final_pixels)
   // that kappa and tau were calibrated with; 0 = none. The posterior runs that stage
@@ -165,6 +171,7 @@ class PoseGenerator {
   Eigen::VectorXd latent_stddev_;
   double sigma_inflation_ = 0;
   double weight_temperature_ = 0;
+  bool weight_temperature_on_likelihood_ = true;
   int final_pixels_ = 0;
   std::string info_json_ = "{}";
 };

@@ -376,6 +376,17 @@ TEST(GeneratorPosterior, TheWeightTemperatureTempersTheLikelihoodOnly) {
   const double untempered = a1->log_evidence - b1->log_evidence;
   EXPECT_NEAR(std::log(a1->weight / b1->weight), untempered, 1e-9 * (1 + std::abs(untempered)));
   EXPECT_EQ(TemperedLogEvidence(a, 1.0), a.log_evidence);
+  // A generator calibrated when tau tempered the whole evidence keeps w ~ Z^(1/tau).
+  PoseGenerator legacy = g;
+  legacy.set_weight_temperature(0.5, false);
+  options.weight_temperature = 0;
+  PoseMixture old;
+  ASSERT_TRUE(GeneratorPosterior(trunk, legacy, options).Estimate(targets, "", &old).usable);
+  ASSERT_GE(old.components().size(), 2u);
+  const LaplaceComponent& c = old.components()[0];
+  const LaplaceComponent& e = old.components()[1];
+  EXPECT_NEAR(std::log(c.weight / e.weight), 2 * (c.log_evidence - e.log_evidence),
+              1e-9 * (1 + std::abs(c.log_evidence - e.log_evidence)));
   std::string error;
   options.weight_temperature = -1;
   EXPECT_FALSE(options.IsValid(&error));

@@ -193,6 +193,27 @@ TEST(PoseGenerator, FileRoundTripIsExactAndCorruptFieldsAreNamed) {
   PoseGenerator tempered = g;
   tempered.set_weight_temperature(0.25);
   EXPECT_EQ(PoseGenerator::Parse(tempered.Serialize(), "g.tpg").weight_temperature(), 0.25);
+  // What tau tempers is stored: the likelihood by default, the whole evidence for a
+  // generator calibrated before; a file without the field reads as the evidence.
+  EXPECT_TRUE(
+      PoseGenerator::Parse(tempered.Serialize(), "g.tpg").weight_temperature_on_likelihood());
+  PoseGenerator legacy = g;
+  legacy.set_weight_temperature(0.25, false);
+  EXPECT_FALSE(
+      PoseGenerator::Parse(legacy.Serialize(), "g.tpg").weight_temperature_on_likelihood());
+  {
+    TensorFile file = TensorFile::Parse(tempered.Serialize(), "g.tpg");
+    nlohmann::json meta = nlohmann::json::parse(file.meta_json());
+    ASSERT_EQ(meta.at("weight_temperature_on"), "likelihood");
+    meta.erase("weight_temperature_on");
+    file.set_meta_json(meta.dump());
+    const PoseGenerator old = PoseGenerator::Parse(file.Serialize(), "old.tpg");
+    EXPECT_EQ(old.weight_temperature(), 0.25);
+    EXPECT_FALSE(old.weight_temperature_on_likelihood());
+    meta["weight_temperature_on"] = "pixels";
+    file.set_meta_json(meta.dump());
+    ExpectParseErrorNaming(file, "odd.tpg", "weight_temperature_on");
+  }
   EXPECT_THROW(tempered.set_weight_temperature(-1), std::invalid_argument);
   EXPECT_THROW(tempered.set_weight_temperature(std::nan("")), std::invalid_argument);
   {
