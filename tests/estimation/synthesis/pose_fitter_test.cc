@@ -425,13 +425,16 @@ TEST(FitWeightTemperature, MatchesHowOftenTheHeaviestModeHoldsTheTruth) {
   EXPECT_THROW(FitWeightTemperature({{{1.0, 0.0}, {0.0}}}, 0.05), std::invalid_argument);
   EXPECT_THROW(FitWeightTemperature({{{1.0, 0.0}, {0.0, 0.0}, {0.0}}}, 0.05),
                std::invalid_argument);
-  // An Occam factor is not tempered: the likelihoods tie, the first mode is twice as wide
-  // (log 2 more evidence) and holds the truth in 2 cases of 3, as its weight 2/3 says at
-  // any tau; so every tau scores the same and the tie keeps tau = 1. Were the factor
-  // tempered with the likelihood, tau = 1 would be the unique best.
+  // An Occam factor is not tempered: the likelihoods tie and the first mode is twice as
+  // wide (log 2 more evidence), so its weight is 2/3 at every tau, every tau scores the
+  // same and the tie keeps tau = 1, though the truth is in the wide mode 9 times in 10.
+  // (Were the factor tempered, w = 2^(1/tau) / (1 + 2^(1/tau)) = 0.9 would pick tau =
+  // log 2 / log 9, about 0.32.)
   const WeightTemperatureCase wide_holds{{0.0, 0.0}, {0.0, -1e3}, {std::log(2.0), 0.0}, {}};
   const WeightTemperatureCase narrow_holds{{0.0, 0.0}, {-1e3, 0.0}, {std::log(2.0), 0.0}, {}};
-  EXPECT_EQ(FitWeightTemperature({wide_holds, wide_holds, narrow_holds}, 0.05), 1);
+  std::vector<WeightTemperatureCase> tied(9, wide_holds);
+  tied.push_back(narrow_holds);
+  EXPECT_EQ(FitWeightTemperature(tied, 0.05), 1);
   // The same cases with the first likelihood D higher: the weights sharpen with 1/tau
   // while the Occam factor's log 2 stays, so the score's best tau moves below 1.
   const WeightTemperatureCase better_wide{{d, 0.0}, {0.0, -1e3}, {std::log(2.0), 0.0}, {}};
