@@ -399,8 +399,8 @@ TEST(GeneratorPosterior, TheWeightTemperatureTempersTheLikelihoodOnly) {
 TEST(FitWeightTemperature, MatchesHowOftenTheHeaviestModeHoldsTheTruth) {
   const double logit = std::log(0.9 / 0.1);
   const double d = 0.25 * logit;
-  const WeightTemperatureCase in_heavier{{d, 0.0}, {0.0, -1e3}};
-  const WeightTemperatureCase in_lighter{{d, 0.0}, {-1e3, 0.0}};
+  const WeightTemperatureCase in_heavier{{d, 0.0}, {0.0, -1e3}, {}, {}};
+  const WeightTemperatureCase in_lighter{{d, 0.0}, {-1e3, 0.0}, {}, {}};
   std::vector<WeightTemperatureCase> cases(9, in_heavier);
   cases.push_back(in_lighter);
   const double tau = FitWeightTemperature(cases, 0.05);
@@ -408,22 +408,25 @@ TEST(FitWeightTemperature, MatchesHowOftenTheHeaviestModeHoldsTheTruth) {
   // The order of the components does not matter.
   std::vector<WeightTemperatureCase> swapped;
   for (const WeightTemperatureCase& c : cases) {
-    swapped.push_back(
-        {{c.log_likelihood[1], c.log_likelihood[0]}, {c.log_density[1], c.log_density[0]}});
+    swapped.push_back({{c.log_likelihood[1], c.log_likelihood[0]},
+                       {c.log_density[1], c.log_density[0]},
+                       {},
+                       {}});
   }
   EXPECT_EQ(FitWeightTemperature(swapped, 0.05), tau);
   // A truth between two close modes (equal density under both) leaves tau at the floor
   // the separated cases give alone.
   std::vector<WeightTemperatureCase> close(9, in_heavier);
-  close.push_back({{d, 0.0}, {-1.0, -1.0}});
+  close.push_back({{d, 0.0}, {-1.0, -1.0}, {}, {}});
   EXPECT_NEAR(FitWeightTemperature(close, 0.1), 0.1, 1e-12);
   // The truth always in the heaviest mode: the grid's floor. No cases: 1.
-  EXPECT_NEAR(FitWeightTemperature({{{1.0, 0.0, -2.0}, {0.0, -1e3, -1e3}}}, 0.1), 0.1, 1e-12);
+  EXPECT_NEAR(FitWeightTemperature({{{1.0, 0.0, -2.0}, {0.0, -1e3, -1e3}, {}, {}}}, 0.1), 0.1,
+              1e-12);
   EXPECT_EQ(FitWeightTemperature({}, 0.05), 1);
   // The truth in the lighter mode of every case: as flat as the grid allows.
   EXPECT_EQ(FitWeightTemperature({in_lighter}, 0.05), 1);
-  EXPECT_THROW(FitWeightTemperature({{{1.0, 0.0}, {0.0}}}, 0.05), std::invalid_argument);
-  EXPECT_THROW(FitWeightTemperature({{{1.0, 0.0}, {0.0, 0.0}, {0.0}}}, 0.05),
+  EXPECT_THROW(FitWeightTemperature({{{1.0, 0.0}, {0.0}, {}, {}}}, 0.05), std::invalid_argument);
+  EXPECT_THROW(FitWeightTemperature({{{1.0, 0.0}, {0.0, 0.0}, {0.0}, {}}}, 0.05),
                std::invalid_argument);
   // An Occam factor is not tempered: the likelihoods tie and the first mode is twice as
   // wide (log 2 more evidence), so its weight is 2/3 at every tau, every tau scores the
