@@ -317,6 +317,21 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
   EXPECT_EQ(nlohmann::json::parse(staged.info_json())["regression_epochs"], 5);
   EXPECT_THAT(Run("info " + Root("g_staged.tpg")).out,
               HasSubstr("calibrated with a final stage on 600 pixels"));
+  // info says what a temperature tempers: a file calibrated when it tempered the whole
+  // evidence says so, in its line and in --json.
+  PoseGenerator legacy = trained;
+  legacy.set_weight_temperature(0.5, false);
+  legacy.Save(Root("g_legacy.tpg"));
+  const Result legacy_info = Run("info " + Root("g_legacy.tpg"));
+  ASSERT_EQ(legacy_info.exit_code, 0) << legacy_info.err;
+  EXPECT_THAT(legacy_info.out, HasSubstr("mode weight temperature 0.500 on the whole evidence"));
+  EXPECT_THAT(Run("info --json " + Root("g_legacy.tpg")).out,
+              HasSubstr("\"weight_temperature_on\":\"evidence\""));
+  PoseGenerator tempered = trained;
+  tempered.set_weight_temperature(0.5);
+  tempered.Save(Root("g_tempered.tpg"));
+  EXPECT_THAT(Run("info " + Root("g_tempered.tpg")).out,
+              HasSubstr("mode weight temperature 0.500 on the likelihood"));
   // A generator of another latent size is refused, naming the flag and both sizes.
   const Result wider = Run("train-generator --model " + Root("m.tfm") + " --functaset " +
                            Root("gf.tfs") + " --data " + Root("gd") + " --out " +
