@@ -664,6 +664,9 @@ double CalibrateWeightTemperature(const GeneratorPosterior& posterior,
 double FitWeightTemperature(const std::vector<WeightTemperatureCase>& cases,
                             double min_temperature) {
   CheckMinTemperature("FitWeightTemperature", min_temperature);
+  // Each case's components as the posterior holds them (the fields TemperedLogEvidence
+  // reads), made once for the whole grid.
+  std::vector<std::vector<LaplaceComponent>> components;
   for (const WeightTemperatureCase& c : cases) {
     const std::size_t m = c.log_likelihood.size();
     if (m == 0 || c.log_density.size() != m || !(c.log_occam.empty() || c.log_occam.size() == m) ||
@@ -674,6 +677,12 @@ double FitWeightTemperature(const std::vector<WeightTemperatureCase>& cases,
           std::to_string(c.log_occam.size()) + " and " + std::to_string(c.dimension.size()) +
           " for " + std::to_string(m));
     }
+    std::vector<LaplaceComponent>& made = components.emplace_back(m);
+    for (std::size_t k = 0; k < m; ++k) {
+      made[k].log_likelihood = c.log_likelihood[k];
+      made[k].log_evidence = c.log_likelihood[k] + (c.log_occam.empty() ? 0 : c.log_occam[k]);
+      made[k].dimension = c.dimension.empty() ? 4 : c.dimension[k];
+    }
   }
   if (cases.empty()) return 1;
   constexpr int kGrid = 61;
@@ -681,17 +690,13 @@ double FitWeightTemperature(const std::vector<WeightTemperatureCase>& cases,
   for (int g = 0; g < kGrid; ++g) {
     const double tau = std::exp(std::log(min_temperature) * g / (kGrid - 1.0));  // 1 first
     double score = 0;
-    for (const WeightTemperatureCase& c : cases) {
+    for (std::size_t i = 0; i < cases.size(); ++i) {
       // log sum_m w_m p_m with w = softmax(log Z(tau)), both sums by log-sum-exp.
-      const std::size_t size = c.log_likelihood.size();
+      const std::size_t size = components[i].size();
       std::vector<double> log_weight(size), joint(size);
       for (std::size_t m = 0; m < size; ++m) {
-        LaplaceComponent component;
-        component.log_likelihood = c.log_likelihood[m];
-        component.log_evidence = c.log_likelihood[m] + (c.log_occam.empty() ? 0 : c.log_occam[m]);
-        component.dimension = c.dimension.empty() ? 4 : c.dimension[m];
-        log_weight[m] = TemperedLogEvidence(component, tau);
-        joint[m] = log_weight[m] + c.log_density[m];
+        log_weight[m] = TemperedLogEvidence(components[i][m], tau);
+        joint[m] = log_weight[m] + cases[i].log_density[m];
       }
       score += internal::LogSumExp(joint) - internal::LogSumExp(log_weight);
     }
