@@ -26,8 +26,12 @@
 //       --position-rings, --coarse-pixels, --coarse-starts, --coarse-iterations,
 //       --final-pixels]
 //       [--contacts-csv FILE] [--json]
+//       [--data D [--split test|train|all] [--allow-other-frames] [dataset flags]]
 //     fresh Soft Bubble contacts (ContactSimulator, seeded; contact k uses DeriveSeed(seed,
-//     k)) of every tool the generator knows (--tools: of those, the same contacts) through
+//     k)) of every tool the generator knows (--tools: of those, the same contacts), or
+//     with --data the labelled bubble frames of a dataset's split (each label the truth;
+//     --contacts-per-tool then caps each tool's frames, default all; --information, which
+//     needs the simulator's contacts, is refused), through
 //     GeneratorPosterior (one thread): the
 //     posterior mode's position RMSE (mm) and yaw RMSE (deg, modulo symmetry, hemisphere
 //     left out), the coverage of the 50% and 90% highest-density regions, the time per
@@ -358,7 +362,13 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
 
 struct EvalGeneratorFlags {
   std::string model, generator, functaset, pose_model;
+  // --data: a labelled dataset's bubble frames instead of fresh simulated contacts.
+  std::string data;
+  DatasetFlags dataset;
+  std::string split = "test";  // with --data: train, test or all
+  bool allow_other_frames = false;
   int contacts_per_tool = 20;
+  bool contacts_per_tool_given = false;
   std::string tools;  // comma-separated subset of the generator's tools; empty = all
   std::uint64_t seed = 0x5eed0000u;
   bool unknown_tool = false;
@@ -662,6 +672,13 @@ cv::Mat BoundPicture(const std::vector<BoundPoint>& points, const std::string& s
 }
 
 void RunEvalGenerator(const EvalGeneratorFlags& flags) {
+  if (!flags.data.empty() && flags.information) {
+    throw UsageError("--information needs the simulator's own contacts: it cannot score "
+                     "--data's frames (leave out --data or --information)");
+  }
+  if (flags.split != "train" && flags.split != "test" && flags.split != "all") {
+    throw UsageError("--split: expected train, test or all, got '" + flags.split + "'");
+  }
   const FunctaModel model = FunctaModel::Load(flags.model);
   const SensorTrunk& trunk = model.Trunk(SensorKind::kSoftBubble);
   const PoseGenerator generator =
@@ -692,6 +709,16 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
   const GeneratorPosterior posterior(trunk, generator, options, knn.get(), mlp.get());
   const ContactSimulator simulator;
   const Image reference = AsStored(simulator.Reference(SensorKind::kSoftBubble));
+  std::unique_ptr<Dataset> dataset;
+  if (!flags.data.empty()) {
+    dataset = std::make_unique<Dataset>(OpenDataset(flags.data, flags.dataset));
+    if (!dataset->has_sensor(SensorKind::kSoftBubble)) {
+      throw DatasetError("--data '" + flags.data + "': no bubble frames (the generator " +
+                         "renders Soft Bubble frames)");
+    }
+    CheckModelMatchesData(model, flags.model, *dataset, flags.data, SensorKind::kSoftBubble,
+                          "eval-generator", "--allow-other-frames", flags.allow_other_frames);
+  }
   int contacts = 0, failures = 0, c50 = 0, c90 = 0, yaw_count = 0, identified = 0;
   double pos_sq = 0, yaw_sq = 0;
   double mean_pos_sq = 0, mean_yaw_sq = 0;  // of the posterior mean
@@ -740,18 +767,58 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
     }
     evaluated[index] = true;
   }
-  const auto tool_count = std::count(evaluated.begin(), evaluated.end(), true);
-  ProgressBar bar("eval-generator", static_cast<std::int64_t>(tool_count) * flags.contacts_per_tool,
-                  "contacts", ProgressBar::Lines::kWhenNotDrawn);
-  for (std::size_t t = 0; t < tools.size(); ++t) {
-    if (!evaluated[t]) continue;
-    for (int j = 0; j < flags.contacts_per_tool; ++j) {
-      const int k = static_cast<int>(t) * flags.contacts_per_tool + j;
+  // What is scored: contact k of tool t, seeded as in the run over every tool; with --data
+  // the split's labelled frames of each evaluated tool in the dataset's order (k: the
+  // frame's index in the dataset), at most --contacts-per-tool of each when given.
+  struct EvalCase {
+    int tool = 0;
+    int contact = 0;
+    std::size_t frame = 0;  // --data: index into dataset->frames()
+  };
+  std::vector<EvalCase> cases;
+  if (dataset) {
+    std::vector<int> taken(tools.size(), 0);
+    const std::vector<FrameRecord>& records = dataset->frames();
+    for (std::size_t i = 0; i < records.size(); ++i) {
+      const FrameRecord& r = records[i];
+      if (r.sensor != SensorKind::kSoftBubble || !r.label.has_value()) continue;
+      if (flags.split != "all" && ToString(r.split) != flags.split) continue;
+      const int t = generator.ToolIndex(r.label->tool);
+      if (t < 0 || !evaluated[t]) continue;
+      if (flags.contacts_per_tool_given && taken[t] >= flags.contacts_per_tool) continue;
+      ++taken[t];
+      cases.push_back({t, static_cast<int>(i), i});
+    }
+    if (cases.empty()) {
+      throw DatasetError("--data '" + flags.data + "': no labelled bubble frames of the " +
+                         (flags.split == "all" ? std::string("dataset") : flags.split + " split") +
+                         " whose tool the generator knows");
+    }
+  } else {
+    for (std::size_t t = 0; t < tools.size(); ++t) {
+      if (!evaluated[t]) continue;
+      for (int j = 0; j < flags.contacts_per_tool; ++j) {
+        const int k = static_cast<int>(t) * flags.contacts_per_tool + j;
+        cases.push_back({static_cast<int>(t), k, 0});
+      }
+    }
+  }
+  ProgressBar bar("eval-generator", static_cast<std::int64_t>(cases.size()), "contacts",
+                  ProgressBar::Lines::kWhenNotDrawn);
+  for (const EvalCase& c : cases) {
+    {
+      const std::size_t t = static_cast<std::size_t>(c.tool);
+      const int k = c.contact;
       const std::uint64_t seed = DeriveSeed(flags.seed, k);
-      const Contact contact = simulator.SamplePairedContact(tools[t], seed).bubble;
-      const Image frame = AsStored(simulator.Render(SensorKind::kSoftBubble, contact, seed).frame);
+      // A fresh contact, or a labelled frame of --data (its label the truth).
+      const Contact contact = dataset ? *dataset->frames()[c.frame].label
+                                      : simulator.SamplePairedContact(tools[t], seed).bubble;
+      const Image frame =
+          dataset ? Image()
+                  : AsStored(simulator.Render(SensorKind::kSoftBubble, contact, seed).frame);
       const TrunkTargets targets =
-          MakeTrunkTargets(frame, reference, SensorKind::kSoftBubble, trunk.format);
+          dataset ? LoadTrunkTargets(*dataset, c.frame, trunk.format)
+                  : MakeTrunkTargets(frame, reference, SensorKind::kSoftBubble, trunk.format);
       PoseMixture mixture;
       const GeneratorPosterior::Summary s =
           posterior.Estimate(targets, flags.unknown_tool ? "" : tools[t], &mixture);
@@ -924,7 +991,9 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
   const double mean_ms = times.empty() ? 0 : std::accumulate(times.begin(), times.end(), 0.0) / times.size();
   const double rmse_mm = 1e3 * std::sqrt(pos_sq / std::max(1, ok));
   const double rmse_deg = kDeg * std::sqrt(yaw_sq / std::max(1, yaw_count));
-  std::printf("eval-generator: %d fresh contacts (%d failed), tool %s\n", contacts, failures,
+  const std::string scored =
+      dataset ? "labelled frames of " + flags.data + " (" + flags.split + ")" : "fresh contacts";
+  std::printf("eval-generator: %d %s (%d failed), tool %s\n", contacts, scored.c_str(), failures,
               flags.unknown_tool ? "unknown (every tool fitted)" : "given");
   std::printf("  position RMSE %.3f mm, yaw RMSE %.2f deg (modulo symmetry, hemisphere left out)\n",
               rmse_mm, rmse_deg);
@@ -1154,7 +1223,8 @@ void RegisterEvalGenerator(CLI::App& app, CommandBody* selected) {
   CLI::App* sub = app.add_subcommand(
       "eval-generator",
       "Score the generator pose posterior on fresh simulated bubble contacts of every tool it "
-      "knows: position / yaw RMSE of the mode and of the posterior mean, 50%/90% region coverage, time per frame, and "
+      "knows, or on a labelled dataset's frames (--data): position / yaw RMSE of the mode and "
+      "of the posterior mean, 50%/90% region coverage, time per frame, and "
       "tool identification with --unknown-tool.");
   sub->add_option("--model", flags->model, "Model file (.tfm)")->required();
   sub->add_option("--generator", flags->generator, "Generator from `tactfunc train-generator`")
@@ -1164,8 +1234,20 @@ void RegisterEvalGenerator(CLI::App& app, CommandBody* selected) {
   sub->add_option("--tools", flags->tools,
                   "Only these of the generator's tools (comma-separated; default all); each "
                   "contact is the one the run over every tool draws");
-  sub->add_option("--contacts-per-tool", flags->contacts_per_tool, "Default 20")
-      ->check(CLI::Range(1, 100000));
+  CLI::Option* per_tool =
+      sub->add_option("--contacts-per-tool", flags->contacts_per_tool,
+                      "Default 20; with --data at most this many frames of each tool (default "
+                      "all)")
+          ->check(CLI::Range(1, 100000));
+  sub->add_option("--data", flags->data,
+                  "Score the labelled bubble frames of this dataset (ours or your own) instead "
+                  "of fresh simulated contacts: the frames of --split whose tool the generator "
+                  "knows, each label the truth");
+  sub->add_option("--split", flags->split, "With --data: train, test (default) or all");
+  sub->add_flag("--allow-other-frames", flags->allow_other_frames,
+                "With --data: run even when its frames (size, channels, sensor description) "
+                "are not those the model's trunk was trained on (a warning instead of an error)");
+  AddDatasetFlags(sub, &flags->dataset);
   sub->add_option("--seed", flags->seed,
                   "Contact seed (default 0x5eed0000, which no training data uses)");
   sub->add_option("--sigma-inflation", flags->sigma_inflation,
@@ -1250,7 +1332,10 @@ void RegisterEvalGenerator(CLI::App& app, CommandBody* selected) {
                   "Write one CSV row per contact (truth, mode, posterior mean, errors; mm and "
                   "degrees) to this file (atomically)");
   sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
-  sub->callback([flags, selected]() { *selected = [flags]() { RunEvalGenerator(*flags); }; });
+  sub->callback([flags, selected, per_tool]() {
+    flags->contacts_per_tool_given = per_tool->count() > 0;
+    *selected = [flags]() { RunEvalGenerator(*flags); };
+  });
 }
 
 }  // namespace tactfunc::apps

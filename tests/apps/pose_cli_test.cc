@@ -8,6 +8,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -539,6 +540,73 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
     }
     EXPECT_EQ(rod_row.substr(rod_row.find(",rod,"), 40), truth_of_rod);
   }
+  // --data: a labelled dataset's frames instead of fresh contacts, each label the truth.
+  // gd's frames are all in its train split: each of its rod and square frames is scored
+  // once, with its own label's pose and depth.
+  std::vector<std::string> train_truths;  // "tool,x_mm,y_mm,depth_mm" as the CSV rounds them
+  {
+    std::istringstream labels(Slurp(Root("gd") + "/labels.csv"));
+    std::string header, row;
+    std::getline(labels, header);
+    while (std::getline(labels, row)) {
+      std::vector<std::string> f;
+      std::istringstream cells(row);
+      std::string cell;
+      while (std::getline(cells, cell, ',')) f.push_back(cell);
+      ASSERT_EQ(f.size(), 8u) << row;
+      if (f[7] != "train" || (f[2] != "rod" && f[2] != "square")) continue;
+      char truth[128];
+      std::snprintf(truth, sizeof(truth), "%s,%.4f,%.4f,%.4f", f[2].c_str(),
+                    1e3 * std::atof(f[3].c_str()), 1e3 * std::atof(f[4].c_str()),
+                    1e3 * std::atof(f[6].c_str()));
+      train_truths.push_back(truth);
+    }
+  }
+  ASSERT_EQ(train_truths.size(), 12u);
+  const std::string data_csv = Root("contacts_data.csv");
+  r = Run("eval-generator --model " + Root("m.tfm") + " --generator " + Root("g.tpg") +
+          " --functaset " + Root("gf.tfs") + " --data " + Root("gd") +
+          " --split train --tools rod,square --contacts-csv " + data_csv + " --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("labelled frames of " + Root("gd") + " (train)"));
+  EXPECT_EQ(r.LastJson()["contacts"].get<int>(), 12);
+  {
+    std::vector<std::string> scored;
+    std::istringstream rows_of_data(Slurp(data_csv));
+    std::string row;
+    std::getline(rows_of_data, row);
+    while (std::getline(rows_of_data, row)) {
+      std::vector<std::string> f;
+      std::istringstream cells(row);
+      std::string cell;
+      while (std::getline(cells, cell, ',')) f.push_back(cell);
+      ASSERT_GE(f.size(), 7u) << row;
+      scored.push_back(f[1] + "," + f[3] + "," + f[4] + "," + f[6]);
+    }
+    std::sort(scored.begin(), scored.end());
+    std::sort(train_truths.begin(), train_truths.end());
+    EXPECT_EQ(scored, train_truths);
+  }
+  // At most --contacts-per-tool frames of each tool.
+  r = Run("eval-generator --model " + Root("m.tfm") + " --generator " + Root("g.tpg") +
+          " --data " + Root("gd") + " --split all --tools rod,square --contacts-per-tool 2 "
+          "--json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.LastJson()["contacts"].get<int>(), 4);
+  // A split without frames (gd has no test split), the simulator's bound (it needs its own
+  // contacts) and a bad split are refused, naming what is wrong.
+  r = Run("eval-generator --model " + Root("m.tfm") + " --generator " + Root("g.tpg") +
+          " --data " + Root("gd"));
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.err, HasSubstr("no labelled bubble frames of the test split"));
+  r = Run("eval-generator --model " + Root("m.tfm") + " --generator " + Root("g.tpg") +
+          " --data " + Root("gd") + " --information");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("--information"));
+  r = Run("eval-generator --model " + Root("m.tfm") + " --generator " + Root("g.tpg") +
+          " --data " + Root("gd") + " --split validation");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("--split: expected train, test or all, got 'validation'"));
   r = Run("eval-generator --model " + Root("m.tfm") + " --generator " + Root("g.tpg") +
           " --contacts-per-tool 1 --tools spoon");
   EXPECT_EQ(r.exit_code, 2);
