@@ -806,178 +806,176 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
   ProgressBar bar("eval-generator", static_cast<std::int64_t>(cases.size()), "contacts",
                   ProgressBar::Lines::kWhenNotDrawn);
   for (const EvalCase& c : cases) {
-    {
-      const std::size_t t = static_cast<std::size_t>(c.tool);
-      const int k = c.contact;
-      const std::uint64_t seed = DeriveSeed(flags.seed, k);
-      // A fresh contact, or a labelled frame of --data (its label the truth).
-      const Contact contact = dataset ? *dataset->frames()[c.frame].label
-                                      : simulator.SamplePairedContact(tools[t], seed).bubble;
-      const Image frame =
-          dataset ? Image()
-                  : AsStored(simulator.Render(SensorKind::kSoftBubble, contact, seed).frame);
-      const TrunkTargets targets =
-          dataset ? LoadTrunkTargets(*dataset, c.frame, trunk.format)
-                  : MakeTrunkTargets(frame, reference, SensorKind::kSoftBubble, trunk.format);
-      PoseMixture mixture;
-      const GeneratorPosterior::Summary s =
-          posterior.Estimate(targets, flags.unknown_tool ? "" : tools[t], &mixture);
-      ++contacts;
-      bar.Tick();
-      if (!s.usable) {
-        ++failures;
-        continue;
+    const std::size_t t = static_cast<std::size_t>(c.tool);
+    const int k = c.contact;
+    const std::uint64_t seed = DeriveSeed(flags.seed, k);
+    // A fresh contact, or a labelled frame of --data (its label the truth).
+    const Contact contact = dataset ? *dataset->frames()[c.frame].label
+                                    : simulator.SamplePairedContact(tools[t], seed).bubble;
+    const Image frame =
+        dataset ? Image()
+                : AsStored(simulator.Render(SensorKind::kSoftBubble, contact, seed).frame);
+    const TrunkTargets targets =
+        dataset ? LoadTrunkTargets(*dataset, c.frame, trunk.format)
+                : MakeTrunkTargets(frame, reference, SensorKind::kSoftBubble, trunk.format);
+    PoseMixture mixture;
+    const GeneratorPosterior::Summary s =
+        posterior.Estimate(targets, flags.unknown_tool ? "" : tools[t], &mixture);
+    ++contacts;
+    bar.Tick();
+    if (!s.usable) {
+      ++failures;
+      continue;
+    }
+    times.push_back(s.total_time_ms);
+    cpu_times.push_back(s.cpu_time_ms);
+    identified += s.tool == tools[t];
+    const int n = generator.SymmetryOrder(static_cast<int>(t));
+    const SE2d& truth = contact.sensor_T_object;
+    // Score the mode of the true tool's components (the tool-conditional posterior):
+    // its heaviest component, the first of that tool; the overall mode if it has none.
+    const LaplaceComponent* true_mode = nullptr;
+    for (const LaplaceComponent& c : mixture.components()) {
+      if (c.tool == tools[t]) {
+        true_mode = &c;
+        break;
       }
-      times.push_back(s.total_time_ms);
-      cpu_times.push_back(s.cpu_time_ms);
-      identified += s.tool == tools[t];
-      const int n = generator.SymmetryOrder(static_cast<int>(t));
-      const SE2d& truth = contact.sensor_T_object;
-      // Score the mode of the true tool's components (the tool-conditional posterior):
-      // its heaviest component, the first of that tool; the overall mode if it has none.
-      const LaplaceComponent* true_mode = nullptr;
-      for (const LaplaceComponent& c : mixture.components()) {
-        if (c.tool == tools[t]) {
-          true_mode = &c;
-          break;
-        }
+    }
+    const SE2d mode = true_mode != nullptr ? true_mode->mean : s.mean;
+    // The mode's yaw error (radians, modulo symmetry; n = 0: none).
+    const double mode_yaw_error =
+        n != 0 ? YawErrorModuloSymmetry(mode.yaw(), truth.yaw(), n) : std::nan("");
+    const double dp = std::pow(mode.x() - truth.x(), 2) + std::pow(mode.y() - truth.y(), 2);
+    pos_sq += dp;
+    position_errors.push_back(std::sqrt(dp));
+    // And the posterior mean of the true tool's components (PoseMixture::Mean).
+    const SE2d mean = mixture.Mean(tools[t]);
+    mean_pos_sq += std::pow(mean.x() - truth.x(), 2) + std::pow(mean.y() - truth.y(), 2);
+    if (n != 0) {
+      const double e = YawErrorModuloSymmetry(mean.yaw(), truth.yaw(), n);
+      mean_yaw_sq += e * e;
+      mean_yaw_errors.push_back(e);
+    }
+    // Wrong: the mode's yaw more than 5 degrees or its position more than 1 mm off.
+    const bool wrong_mode = (n != 0 && kDeg * mode_yaw_error > 5) || std::sqrt(dp) > 1e-3;
+    PoseInformation information;
+    double frame_llr = std::nan("");
+    double trunk_llr = std::nan("");
+    if (flags.information) {
+      information = SoftBubblePoseInformation(simulator, contact, working_size);
+      const PoseInformation sensor = SoftBubblePoseInformation(simulator, contact);
+      sensor_bound_sq += sensor.bound(0, 0) + sensor.bound(1, 1);
+      if (n != 0) sensor_bound_yaw_sq += sensor.bound(2, 2);
+      const int band = (contact.depth_m >= kDepthEdges[0]) + (contact.depth_m >= kDepthEdges[1]);
+      band_error[band] += dp;
+      band_bound[band] += information.bound(0, 0) + information.bound(1, 1);
+      ++band_count[band];
+      if (n != 0) bound_yaw_sq += information.bound(2, 2);
+      bound_points.push_back({1e3 * information.PositionRmse(), 1e3 * std::sqrt(dp),
+                              n != 0 ? kDeg * information.YawSd() : std::nan(""),
+                              n != 0 ? kDeg * mode_yaw_error : std::nan(""), band});
+      // A wrong mode: does the frame itself prefer the truth's basin?
+      if (wrong_mode) {
+        const WrongModeJudgement j =
+            JudgeWrongMode(simulator, frame, contact, mode,
+                           true_mode != nullptr ? true_mode->depth_m : contact.depth_m, n);
+        ++frame_verdicts[j.verdict];
+        frame_llr = j.log_likelihood_ratio;
+        frame_llrs.push_back(frame_llr);
+        trunk_llr = TrunkLogLikelihoodRatio(simulator, reference, trunk, targets,
+                                            options.problem, generator, static_cast<int>(t),
+                                            j, seed);
+        trunk_llrs.push_back(trunk_llr);
       }
-      const SE2d mode = true_mode != nullptr ? true_mode->mean : s.mean;
-      // The mode's yaw error (radians, modulo symmetry; n = 0: none).
-      const double mode_yaw_error =
-          n != 0 ? YawErrorModuloSymmetry(mode.yaw(), truth.yaw(), n) : std::nan("");
-      const double dp = std::pow(mode.x() - truth.x(), 2) + std::pow(mode.y() - truth.y(), 2);
-      pos_sq += dp;
-      position_errors.push_back(std::sqrt(dp));
-      // And the posterior mean of the true tool's components (PoseMixture::Mean).
-      const SE2d mean = mixture.Mean(tools[t]);
-      mean_pos_sq += std::pow(mean.x() - truth.x(), 2) + std::pow(mean.y() - truth.y(), 2);
-      if (n != 0) {
-        const double e = YawErrorModuloSymmetry(mean.yaw(), truth.yaw(), n);
-        mean_yaw_sq += e * e;
-        mean_yaw_errors.push_back(e);
-      }
-      // Wrong: the mode's yaw more than 5 degrees or its position more than 1 mm off.
-      const bool wrong_mode = (n != 0 && kDeg * mode_yaw_error > 5) || std::sqrt(dp) > 1e-3;
-      PoseInformation information;
-      double frame_llr = std::nan("");
-      double trunk_llr = std::nan("");
+    }
+    if (!flags.contacts_csv.empty()) {
+      const double mode_depth = true_mode != nullptr ? true_mode->depth_m : std::nan("");
+      int modes = 0;
+      for (const LaplaceComponent& c : mixture.components()) modes += c.tool == tools[t];
+      // The mode's Laplace standard deviations in its tangent space: x and y along and
+      // across the object's own axes (right perturbation), and the yaw.
+      Eigen::Vector3d sd = Eigen::Vector3d::Constant(std::nan(""));
+      if (true_mode != nullptr) sd = true_mode->covariance.diagonal().head<3>().cwiseSqrt();
+      if (n == 0) sd[2] = std::nan("");  // the yaw of a C_inf tool is not estimated
+      // The bound's standard deviations along and across the true object's axes.
+      Eigen::Vector4d bound_sd = Eigen::Vector4d::Constant(std::nan(""));
       if (flags.information) {
-        information = SoftBubblePoseInformation(simulator, contact, working_size);
-        const PoseInformation sensor = SoftBubblePoseInformation(simulator, contact);
-        sensor_bound_sq += sensor.bound(0, 0) + sensor.bound(1, 1);
-        if (n != 0) sensor_bound_yaw_sq += sensor.bound(2, 2);
-        const int band = (contact.depth_m >= kDepthEdges[0]) + (contact.depth_m >= kDepthEdges[1]);
-        band_error[band] += dp;
-        band_bound[band] += information.bound(0, 0) + information.bound(1, 1);
-        ++band_count[band];
-        if (n != 0) bound_yaw_sq += information.bound(2, 2);
-        bound_points.push_back({1e3 * information.PositionRmse(), 1e3 * std::sqrt(dp),
-                                n != 0 ? kDeg * information.YawSd() : std::nan(""),
-                                n != 0 ? kDeg * mode_yaw_error : std::nan(""), band});
-        // A wrong mode: does the frame itself prefer the truth's basin?
-        if (wrong_mode) {
-          const WrongModeJudgement j =
-              JudgeWrongMode(simulator, frame, contact, mode,
-                             true_mode != nullptr ? true_mode->depth_m : contact.depth_m, n);
-          ++frame_verdicts[j.verdict];
-          frame_llr = j.log_likelihood_ratio;
-          frame_llrs.push_back(frame_llr);
-          trunk_llr = TrunkLogLikelihoodRatio(simulator, reference, trunk, targets,
-                                              options.problem, generator, static_cast<int>(t),
-                                              j, seed);
-          trunk_llrs.push_back(trunk_llr);
+        const Eigen::Matrix2d r = truth.Rotation();
+        const Eigen::Matrix2d object_block =
+            r.transpose() * information.bound.topLeftCorner<2, 2>() * r;
+        bound_sd << std::sqrt(object_block(0, 0)), std::sqrt(object_block(1, 1)),
+            std::sqrt(information.bound(2, 2)), std::sqrt(information.bound(3, 3));
+      }
+      char row[768];
+      std::snprintf(
+          row, sizeof(row),
+          "%d,%s,%d,%.4f,%.4f,%.3f,%.4f,%.4f,%.4f,%.3f,%.4f,%.4f,%.4f,%.3f,%.4f,%.3f,%d,"
+          "%.4f,%.4f,%.4f,%.3f,%.4f,%.4f,%.3f,%.4f,%.2f,%.2f\n",
+          k, tools[t].c_str(), n, 1e3 * truth.x(), 1e3 * truth.y(), kDeg * truth.yaw(),
+          1e3 * contact.depth_m, 1e3 * mode.x(), 1e3 * mode.y(), kDeg * mode.yaw(),
+          1e3 * mode_depth, 1e3 * mean.x(), 1e3 * mean.y(), kDeg * mean.yaw(),
+          1e3 * std::sqrt(dp), kDeg * mode_yaw_error, modes,
+          s.tool_probabilities.count(tools[t]) ? s.tool_probabilities.at(tools[t]) : 0.0,
+          1e3 * sd[0], 1e3 * sd[1], kDeg * sd[2], 1e3 * bound_sd[0], 1e3 * bound_sd[1],
+          kDeg * bound_sd[2], 1e3 * bound_sd[3], frame_llr, trunk_llr);
+      csv << row;
+    }
+    per_tool_pos[tools[t]].first += dp;
+    per_tool_pos[tools[t]].second += 1;
+    if (n != 0) {
+      yaw_sq += mode_yaw_error * mode_yaw_error;
+      yaw_errors.push_back(mode_yaw_error);
+      ++yaw_count;
+    }
+    if (flags.diagnose) {
+      // Is the truth's objective lower than the chosen mode's (a search failure) or
+      // higher (the generator and trunk prefer the wrong pose: a model failure)? The
+      // truth is also refined (from the true pose and depth) to its local minimum.
+      const double e = n != 0 ? kDeg * mode_yaw_error : 0;
+      if (wrong_mode) {
+        ++wrong;
+        // The problem the posterior ranked its modes on (the final stage's when it
+        // runs), so that the costs compare what chose the mode.
+        const LatentProblem problem(trunk, targets, posterior.options().RankingProblem());
+        const int ti = static_cast<int>(t);
+        const double mode_depth = true_mode != nullptr ? true_mode->depth_m : 0;
+        const double c_mode = PoseCost(problem, generator, ti, mode, mode_depth);
+        const double c_truth = PoseCost(problem, generator, ti, truth, contact.depth_m);
+        const std::vector<PoseFit> refined = FitPoseModes(
+            problem, generator, ti, {{truth, contact.depth_m, "truth"}}, options.fit);
+        const double c_refined = refined.empty() ? std::nan("") : refined.front().cost;
+        // Lower by more than 1% of the mode's cost (not the same minimum re-found).
+        const bool search = c_refined < c_mode - 0.01 * std::abs(c_mode);
+        search_failures += search;
+        model_failures += !search;
+        std::printf("  contact %d %-11s yaw err %6.1f deg pos err %.2f mm | cost: mode %.1f, "
+                    "truth %.1f, truth refined %.1f -> %s failure\n",
+                    k, tools[t].c_str(), e, 1e3 * std::sqrt(dp), c_mode, c_truth, c_refined,
+                    search ? "search" : "model");
+        // Which part of the renderer: over the whole frame (so that a free latent cannot
+        // fit the few pixels of a pass), the generator at the mode and at the truth
+        // against the trunk's own best latent (Ceres to convergence from the truth's
+        // generated latent), the best any generator could render through this trunk.
+        const TrunkWholeFrame whole = JudgeAgainstTheTrunk(
+            trunk, targets, options.problem, generator, ti, mode, mode_depth, truth,
+            contact.depth_m);
+        truth_excess.push_back(whole.TruthExcess());
+        mode_excess.push_back(whole.ModeExcess());
+        if (!flags.diagnose_picture.empty() && wrong_views.size() < kPictureRows) {
+          wrong_views.push_back({k, tools[t], contact.depth_m, targets, truth, mode,
+                                 generator.Generate(ti, truth, contact.depth_m).cast<float>(),
+                                 generator.Generate(ti, mode, mode_depth).cast<float>(),
+                                 whole});
         }
+        std::printf("    whole frame: mode %.1f, truth %.1f, the trunk's own best latent %.1f "
+                    "(truth %+.1f %%, mode %+.1f %% above it)\n",
+                    whole.mode_cost, whole.truth_cost, whole.trunk_cost,
+                    100 * whole.TruthExcess(), 100 * whole.ModeExcess());
       }
-      if (!flags.contacts_csv.empty()) {
-        const double mode_depth = true_mode != nullptr ? true_mode->depth_m : std::nan("");
-        int modes = 0;
-        for (const LaplaceComponent& c : mixture.components()) modes += c.tool == tools[t];
-        // The mode's Laplace standard deviations in its tangent space: x and y along and
-        // across the object's own axes (right perturbation), and the yaw.
-        Eigen::Vector3d sd = Eigen::Vector3d::Constant(std::nan(""));
-        if (true_mode != nullptr) sd = true_mode->covariance.diagonal().head<3>().cwiseSqrt();
-        if (n == 0) sd[2] = std::nan("");  // the yaw of a C_inf tool is not estimated
-        // The bound's standard deviations along and across the true object's axes.
-        Eigen::Vector4d bound_sd = Eigen::Vector4d::Constant(std::nan(""));
-        if (flags.information) {
-          const Eigen::Matrix2d r = truth.Rotation();
-          const Eigen::Matrix2d object_block =
-              r.transpose() * information.bound.topLeftCorner<2, 2>() * r;
-          bound_sd << std::sqrt(object_block(0, 0)), std::sqrt(object_block(1, 1)),
-              std::sqrt(information.bound(2, 2)), std::sqrt(information.bound(3, 3));
-        }
-        char row[768];
-        std::snprintf(
-            row, sizeof(row),
-            "%d,%s,%d,%.4f,%.4f,%.3f,%.4f,%.4f,%.4f,%.3f,%.4f,%.4f,%.4f,%.3f,%.4f,%.3f,%d,"
-            "%.4f,%.4f,%.4f,%.3f,%.4f,%.4f,%.3f,%.4f,%.2f,%.2f\n",
-            k, tools[t].c_str(), n, 1e3 * truth.x(), 1e3 * truth.y(), kDeg * truth.yaw(),
-            1e3 * contact.depth_m, 1e3 * mode.x(), 1e3 * mode.y(), kDeg * mode.yaw(),
-            1e3 * mode_depth, 1e3 * mean.x(), 1e3 * mean.y(), kDeg * mean.yaw(),
-            1e3 * std::sqrt(dp), kDeg * mode_yaw_error, modes,
-            s.tool_probabilities.count(tools[t]) ? s.tool_probabilities.at(tools[t]) : 0.0,
-            1e3 * sd[0], 1e3 * sd[1], kDeg * sd[2], 1e3 * bound_sd[0], 1e3 * bound_sd[1],
-            kDeg * bound_sd[2], 1e3 * bound_sd[3], frame_llr, trunk_llr);
-        csv << row;
-      }
-      per_tool_pos[tools[t]].first += dp;
-      per_tool_pos[tools[t]].second += 1;
-      if (n != 0) {
-        yaw_sq += mode_yaw_error * mode_yaw_error;
-        yaw_errors.push_back(mode_yaw_error);
-        ++yaw_count;
-      }
-      if (flags.diagnose) {
-        // Is the truth's objective lower than the chosen mode's (a search failure) or
-        // higher (the generator and trunk prefer the wrong pose: a model failure)? The
-        // truth is also refined (from the true pose and depth) to its local minimum.
-        const double e = n != 0 ? kDeg * mode_yaw_error : 0;
-        if (wrong_mode) {
-          ++wrong;
-          // The problem the posterior ranked its modes on (the final stage's when it
-          // runs), so that the costs compare what chose the mode.
-          const LatentProblem problem(trunk, targets, posterior.options().RankingProblem());
-          const int ti = static_cast<int>(t);
-          const double mode_depth = true_mode != nullptr ? true_mode->depth_m : 0;
-          const double c_mode = PoseCost(problem, generator, ti, mode, mode_depth);
-          const double c_truth = PoseCost(problem, generator, ti, truth, contact.depth_m);
-          const std::vector<PoseFit> refined = FitPoseModes(
-              problem, generator, ti, {{truth, contact.depth_m, "truth"}}, options.fit);
-          const double c_refined = refined.empty() ? std::nan("") : refined.front().cost;
-          // Lower by more than 1% of the mode's cost (not the same minimum re-found).
-          const bool search = c_refined < c_mode - 0.01 * std::abs(c_mode);
-          search_failures += search;
-          model_failures += !search;
-          std::printf("  contact %d %-11s yaw err %6.1f deg pos err %.2f mm | cost: mode %.1f, "
-                      "truth %.1f, truth refined %.1f -> %s failure\n",
-                      k, tools[t].c_str(), e, 1e3 * std::sqrt(dp), c_mode, c_truth, c_refined,
-                      search ? "search" : "model");
-          // Which part of the renderer: over the whole frame (so that a free latent cannot
-          // fit the few pixels of a pass), the generator at the mode and at the truth
-          // against the trunk's own best latent (Ceres to convergence from the truth's
-          // generated latent), the best any generator could render through this trunk.
-          const TrunkWholeFrame whole = JudgeAgainstTheTrunk(
-              trunk, targets, options.problem, generator, ti, mode, mode_depth, truth,
-              contact.depth_m);
-          truth_excess.push_back(whole.TruthExcess());
-          mode_excess.push_back(whole.ModeExcess());
-          if (!flags.diagnose_picture.empty() && wrong_views.size() < kPictureRows) {
-            wrong_views.push_back({k, tools[t], contact.depth_m, targets, truth, mode,
-                                   generator.Generate(ti, truth, contact.depth_m).cast<float>(),
-                                   generator.Generate(ti, mode, mode_depth).cast<float>(),
-                                   whole});
-          }
-          std::printf("    whole frame: mode %.1f, truth %.1f, the trunk's own best latent %.1f "
-                      "(truth %+.1f %%, mode %+.1f %% above it)\n",
-                      whole.mode_cost, whole.truth_cost, whole.trunk_cost,
-                      100 * whole.TruthExcess(), 100 * whole.ModeExcess());
-        }
-      }
-      if (true_mode != nullptr) {
-        c50 += mixture.Contains(truth, 0.5, options.num_region_samples, seed, tools[t]);
-        c90 += mixture.Contains(truth, 0.9, options.num_region_samples, seed, tools[t]);
-      }
+    }
+    if (true_mode != nullptr) {
+      c50 += mixture.Contains(truth, 0.5, options.num_region_samples, seed, tools[t]);
+      c90 += mixture.Contains(truth, 0.9, options.num_region_samples, seed, tools[t]);
     }
   }
   bar.Finish();
