@@ -772,8 +772,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
   // frame's index in the dataset), at most --contacts-per-tool of each when given.
   struct EvalCase {
     int tool = 0;
-    int contact = 0;
-    std::size_t frame = 0;  // --data: index into dataset->frames()
+    int contact = 0;  // k; with --data the frame's index into dataset->frames()
   };
   std::vector<EvalCase> cases;
   if (dataset) {
@@ -787,7 +786,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
       if (t < 0 || !evaluated[t]) continue;
       if (flags.contacts_per_tool_given && taken[t] >= flags.contacts_per_tool) continue;
       ++taken[t];
-      cases.push_back({t, static_cast<int>(i), i});
+      cases.push_back({t, static_cast<int>(i)});
     }
     if (cases.empty()) {
       throw DatasetError("--data '" + flags.data + "': no labelled bubble frames of the " +
@@ -799,7 +798,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
       if (!evaluated[t]) continue;
       for (int j = 0; j < flags.contacts_per_tool; ++j) {
         const int k = static_cast<int>(t) * flags.contacts_per_tool + j;
-        cases.push_back({static_cast<int>(t), k, 0});
+        cases.push_back({static_cast<int>(t), k});
       }
     }
   }
@@ -810,13 +809,13 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
     const int k = c.contact;
     const std::uint64_t seed = DeriveSeed(flags.seed, k);
     // A fresh contact, or a labelled frame of --data (its label the truth).
-    const Contact contact = dataset ? *dataset->frames()[c.frame].label
+    const Contact contact = dataset ? *dataset->frames()[k].label
                                     : simulator.SamplePairedContact(tools[t], seed).bubble;
     const Image frame =
         dataset ? Image()
                 : AsStored(simulator.Render(SensorKind::kSoftBubble, contact, seed).frame);
     const TrunkTargets targets =
-        dataset ? LoadTrunkTargets(*dataset, c.frame, trunk.format)
+        dataset ? LoadTrunkTargets(*dataset, k, trunk.format)
                 : MakeTrunkTargets(frame, reference, SensorKind::kSoftBubble, trunk.format);
     PoseMixture mixture;
     const GeneratorPosterior::Summary s =

@@ -543,20 +543,13 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
   // --data: a labelled dataset's frames instead of fresh contacts, each label the truth.
   // gd's frames are all in its train split: each of its rod and square frames is scored
   // once, with its own label's pose and depth.
-  const auto CsvCells = [](const std::string& row) {
-    std::vector<std::string> f;
-    std::istringstream cells(row);
-    std::string cell;
-    while (std::getline(cells, cell, ',')) f.push_back(cell);
-    return f;
-  };
   std::vector<std::string> train_truths;  // "tool,x_mm,y_mm,depth_mm" as the CSV rounds them
   {
     std::istringstream labels(Slurp(Root("gd") + "/labels.csv"));
     std::string header, row;
     std::getline(labels, header);
     while (std::getline(labels, row)) {
-      const std::vector<std::string> f = CsvCells(row);
+      const std::vector<std::string> f = testing_util::CsvFields(row);
       ASSERT_EQ(f.size(), 8u) << row;
       if (f[7] != "train" || (f[2] != "rod" && f[2] != "square")) continue;
       char truth[128];
@@ -580,7 +573,7 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
     std::string row;
     std::getline(rows_of_data, row);
     while (std::getline(rows_of_data, row)) {
-      const std::vector<std::string> f = CsvCells(row);
+      const std::vector<std::string> f = testing_util::CsvFields(row);
       ASSERT_GE(f.size(), 7u) << row;
       scored.push_back(f[1] + "," + f[3] + "," + f[4] + "," + f[6]);
     }
