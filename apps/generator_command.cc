@@ -110,6 +110,8 @@ struct TrainGeneratorFlags {
   int temperature_frames = 600;
   int final_pixels = 0;     // the posterior's final stage during calibration (recorded)
   std::string recalibrate;  // a trained generator: calibrate it only
+  double tune_trunk = 0;    // the trunk's step as a fraction of the pixel stage's (0: frozen)
+  std::string out_model;    // with --tune-trunk: the generator's own trunk, written here
   double lr = 1e-3;
   std::uint64_t seed = 0;
   bool json = false;
@@ -175,11 +177,30 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
   if (flags.mode != "latents" && flags.mode != "pixels") {
     throw UsageError("--mode: expected latents or pixels, got '" + flags.mode + "'");
   }
+  if (flags.tune_trunk < 0) {
+    throw UsageError("--tune-trunk: expected a fraction >= 0, got " +
+                     std::to_string(flags.tune_trunk));
+  }
+  const bool tune = flags.tune_trunk > 0;
+  if (tune && (flags.mode != "pixels" || !flags.recalibrate.empty())) {
+    throw UsageError("--tune-trunk trains the trunk in the pixel stage: it needs --mode pixels "
+                     "and no --recalibrate");
+  }
+  if (tune != !flags.out_model.empty()) {
+    throw UsageError("--tune-trunk and --out-model go together (the tuned trunk is written to "
+                     "--out-model)");
+  }
   const FunctaModel model = FunctaModel::Load(flags.model);
   const SensorTrunk& trunk = model.Trunk(SensorKind::kSoftBubble);
   const Functaset functaset = Functaset::Load(flags.functaset);
   functaset.CheckModel(model, flags.model, flags.functaset);
   const Dataset dataset = OpenDataset(flags.data, flags.dataset);
+  // The trunk the generator renders through: --model's, or its copy tuned along with the
+  // generator (--tune-trunk), which calibration and the record then name.
+  FunctaModel tuned_model = model;
+  const SensorTrunk* render_trunk = &trunk;
+  std::string render_model = flags.model;
+  std::uint32_t render_checksum = model.checksum();
   PoseGenerator::Options options;
   for (const Tool& t : ToolSet()) {
     options.tools.push_back(t.name());
@@ -258,16 +279,34 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
     po.seed = DeriveSeed(flags.seed, 2);
     po.checkpoint_path = StageCheckpoint(flags.out, "pixels");
     po.resume = flags.resume;
+    po.trunk_step_fraction = flags.tune_trunk;
+    LatentModulatedSiren& tuned = tuned_model.MutableTrunk(SensorKind::kSoftBubble).siren;
     {
       ProgressBar bar("train-generator pixels", po.epochs, "epochs",
                       ProgressBar::Lines::kWhenNotDrawn);
       pix = TrainGeneratorOnPixels(&generator, trunk, sub.samples, frames, po,
-                                   StageProgress(&bar));
+                                   StageProgress(&bar), tune ? &tuned : nullptr);
       bar.Tick(pix.epochs_completed - bar.done());
       bar.Finish();
     }
     ExitIfInterrupted(pix, po.epochs, po.checkpoint_path);
-    psnr_pixels = MeanGeneratorPsnr(generator, trunk, psnr_samples, test_frames);
+    if (tune) {
+      nlohmann::json record = model.info_json().empty() ? nlohmann::json::object()
+                                                        : nlohmann::json::parse(model.info_json());
+      record["tuned_with_generator"] = {{"generator", flags.out},
+                                        {"from_model", flags.model},
+                                        {"from_model_checksum", model.checksum()},
+                                        {"trunk_step_fraction", flags.tune_trunk},
+                                        {"pixel_epochs", pix.epochs_completed}};
+      tuned_model.set_info_json(record.dump());
+      tuned_model.Save(flags.out_model);
+      render_checksum = FunctaModel::Load(flags.out_model).checksum();
+      render_model = flags.out_model;
+      render_trunk = &tuned_model.Trunk(SensorKind::kSoftBubble);
+      std::cout << "train-generator: wrote the generator's own trunk to " << flags.out_model
+                << "\n";
+    }
+    psnr_pixels = MeanGeneratorPsnr(generator, *render_trunk, psnr_samples, test_frames);
     std::cout << "train-generator: through the trunk on " << sub.samples.size()
               << " frames: " << pix.BriefReport() << "; test rendering PSNR " << psnr_pixels
               << " dB\n";
@@ -277,7 +316,7 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
   GeneratorPosterior::Options po;
   po.sigma_inflation = 1;
   po.final_pixels = flags.final_pixels;
-  const GeneratorPosterior posterior(trunk, generator, po, knn.get());
+  const GeneratorPosterior posterior(*render_trunk, generator, po, knn.get());
   // `count` test-split frames spread evenly over the split, with their labels.
   auto calibration_set = [&](int count, std::vector<TrunkTargets>* frames,
                              std::vector<PoseLabel>* labels) {
@@ -308,7 +347,7 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
     to_options.sigma_inflation = kappa;
     to_options.weight_temperature = 1;
     to_options.final_pixels = flags.final_pixels;
-    const GeneratorPosterior at_kappa(trunk, generator, to_options, knn.get());
+    const GeneratorPosterior at_kappa(*render_trunk, generator, to_options, knn.get());
     std::vector<TrunkTargets> t_frames;
     std::vector<PoseLabel> t_labels;
     const std::size_t t_count = calibration_set(flags.temperature_frames, &t_frames, &t_labels);
@@ -329,8 +368,8 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
   }
   nlohmann::json info;
   if (train_it) {
-    info = {{"model", flags.model},
-            {"model_checksum", model.checksum()},
+    info = {{"model", render_model},
+            {"model_checksum", render_checksum},
             {"functaset", flags.functaset},
             {"mode", flags.mode},
             {"train_contacts", train_contacts},
@@ -1205,6 +1244,13 @@ void RegisterTrainGenerator(CLI::App& app, CommandBody* selected) {
                   "A trained generator (.tpg) to calibrate again (kappa, tau, --final-pixels) "
                   "on --functaset's test split instead of training one; written to --out with "
                   "its training record; the training flags are ignored");
+  sub->add_option("--tune-trunk", flags->tune_trunk,
+                  "Train the trunk too in the pixel stage, its Adam step this fraction of the "
+                  "generator's (default 0: frozen); needs --out-model")
+      ->check(CLI::NonNegativeNumber);
+  sub->add_option("--out-model", flags->out_model,
+                  "With --tune-trunk: the generator's own trunk (.tfm) to write (atomically); "
+                  "the generator renders through it (`pose --generator-model`)");
   sub->add_option("--lr", flags->lr, "Adam step (default 1e-3; pixels use 0.3x)")
       ->check(CLI::PositiveNumber);
   sub->add_option("--seed", flags->seed, "Seed (default 0)");

@@ -30,12 +30,19 @@ class Adam {
  public:
   Adam(const GeneratorTrainingOptions& o, Eigen::Index size)
       : o_(o), m_(Eigen::VectorXd::Zero(size)), v_(Eigen::VectorXd::Zero(size)) {}
-  void Step(double lr, const Eigen::VectorXd& g, Eigen::VectorXd* x) {
+  // scale: each coordinate's step as a fraction of lr (empty: 1 for all).
+  void Step(double lr, const Eigen::VectorXd& g, const Eigen::VectorXd& scale,
+            Eigen::VectorXd* x) {
     ++t_;
     m_ = o_.beta1 * m_ + (1 - o_.beta1) * g;
     v_ = o_.beta2 * v_ + (1 - o_.beta2) * g.cwiseAbs2();
     const double c1 = 1 - std::pow(o_.beta1, t_), c2 = 1 - std::pow(o_.beta2, t_);
-    *x -= (lr / c1) * (m_.array() / ((v_.array() / c2).sqrt() + o_.epsilon)).matrix();
+    const Eigen::ArrayXd step = m_.array() / ((v_.array() / c2).sqrt() + o_.epsilon);
+    if (scale.size() == 0) {
+      *x -= (lr / c1) * step.matrix();
+    } else {
+      *x -= (lr / c1) * (step * scale.array()).matrix();
+    }
   }
   const Eigen::VectorXd& m() const { return m_; }
   const Eigen::VectorXd& v() const { return v_; }
@@ -96,7 +103,8 @@ std::uint64_t SamplesFingerprint(const std::vector<GeneratorSample>& samples,
 // trajectory and the generator's size; the frames are the samples (and their targets).
 internal::CheckpointRun GeneratorCheckpointRun(const GeneratorTrainingOptions& o,
                                                const std::string& stage,
-                                               const PoseGenerator& generator, int m,
+                                               const PoseGenerator& generator,
+                                               Eigen::Index num_parameters, int m,
                                                std::uint64_t fingerprint) {
   const nlohmann::json options = {{"stage", stage},
                                   {"epochs", o.epochs},
@@ -112,7 +120,8 @@ internal::CheckpointRun GeneratorCheckpointRun(const GeneratorTrainingOptions& o
                                   {"hidden_sizes", generator.options().hidden_sizes},
                                   {"yaw_harmonics", generator.options().yaw_harmonics},
                                   {"tools", generator.options().tools},
-                                  {"num_parameters", generator.parameters().size()}};
+                                  {"trunk_step_fraction", o.trunk_step_fraction},
+                                  {"num_parameters", num_parameters}};
   internal::CheckpointRun run;
   run.format = "tactfunc-generator-checkpoint";
   run.version = 1;
@@ -123,19 +132,22 @@ internal::CheckpointRun GeneratorCheckpointRun(const GeneratorTrainingOptions& o
   return run;
 }
 
+// Adam over theta (initially `theta`, each coordinate's step scaled by step_scale, empty:
+// all 1); `apply` hands the parameters to the model after each epoch and on resuming.
 template <typename BatchLoss>
-GeneratorTrainingSummary RunAdam(PoseGenerator* generator, int m,
+GeneratorTrainingSummary RunAdam(const PoseGenerator& generator, Eigen::VectorXd theta,
+                                 const Eigen::VectorXd& step_scale,
+                                 const std::function<void(const Eigen::VectorXd&)>& apply, int m,
                                  const GeneratorTrainingOptions& options,
                                  const GeneratorProgressCallback& progress, const std::string& stage,
                                  std::uint64_t fingerprint, const BatchLoss& batch_loss) {
   const auto start = std::chrono::steady_clock::now();
   GeneratorTrainingSummary summary;
-  Eigen::VectorXd theta = generator->parameters();
   const Eigen::Index n = theta.size();
   Adam adam(options, n);
   const std::string& path = options.checkpoint_path;
   const internal::CheckpointRun run =
-      GeneratorCheckpointRun(options, stage, *generator, m, fingerprint);
+      GeneratorCheckpointRun(options, stage, generator, n, m, fingerprint);
   int first_epoch = 0;
   double seconds_before = 0;
   if (!path.empty() && options.resume && std::filesystem::exists(path)) {
@@ -153,7 +165,7 @@ GeneratorTrainingSummary RunAdam(PoseGenerator* generator, int m,
                  static_cast<int>(internal::CheckpointVector(file, "adam_t", 1)[0]));
     const Eigen::VectorXd history = internal::CheckpointVector(file, "loss_history", first_epoch);
     summary.loss_history.assign(history.data(), history.data() + history.size());
-    generator->SetParameters(theta);
+    apply(theta);
     summary.epochs_resumed = summary.epochs_completed = first_epoch;
   }
   auto write_checkpoint = [&](int epochs_done) {
@@ -181,11 +193,11 @@ GeneratorTrainingSummary RunAdam(PoseGenerator* generator, int m,
       Eigen::VectorXd gradient;
       sum += batch_loss(theta, rows, epoch, &gradient);
       ++batches;
-      adam.Step(lr, gradient, &theta);
+      adam.Step(lr, gradient, step_scale, &theta);
     }
     const double loss = sum / std::max(1, batches);
     if (!std::isfinite(loss)) break;
-    generator->SetParameters(theta);
+    apply(theta);
     summary.loss_history.push_back(loss);
     summary.epochs_completed = epoch + 1;
     const bool stop = progress && !progress(epoch, loss);
@@ -222,6 +234,7 @@ bool GeneratorTrainingOptions::IsValid(std::string* error) const {
   if (pixels_per_frame < 1) return fail("pixels_per_frame must be >= 1");
   if (checkpoint_every < 1) return fail("checkpoint_every must be >= 1");
   if (resume && checkpoint_path.empty()) return fail("resume requires a checkpoint_path");
+  if (!(trunk_step_fraction >= 0)) return fail("trunk_step_fraction must be >= 0");
   return true;
 }
 
@@ -240,6 +253,8 @@ GeneratorTrainingSummary TrainGeneratorOnLatents(PoseGenerator* generator,
   std::string error;
   Check(options.IsValid(&error), error);
   Check(generator != nullptr, "TrainGeneratorOnLatents: null generator");
+  Check(options.trunk_step_fraction == 0,
+        "TrainGeneratorOnLatents: trunk_step_fraction applies to training on pixels only");
   const int m = static_cast<int>(samples.size());
   Check(m > 0 && latents.rows() == m && latents.cols() == generator->latent_dim(),
         "TrainGeneratorOnLatents: expected " + std::to_string(m) + " x " +
@@ -261,7 +276,9 @@ GeneratorTrainingSummary TrainGeneratorOnLatents(PoseGenerator* generator,
   const std::uint64_t fingerprint = internal::Fnv1a(
       latents.data(), sizeof(double) * static_cast<std::size_t>(latents.size()),
       SamplesFingerprint(samples));
-  return RunAdam(generator, m, options, progress, "latents", fingerprint,
+  return RunAdam(*generator, generator->parameters(), Eigen::VectorXd(),
+                 [generator](const Eigen::VectorXd& p) { generator->SetParameters(p); }, m,
+                 options, progress, "latents", fingerprint,
                  [&](const Eigen::VectorXd& theta, const std::vector<int>& rows, int,
                      Eigen::VectorXd* gradient) {
                    const int b = static_cast<int>(rows.size());
@@ -283,7 +300,8 @@ GeneratorTrainingSummary TrainGeneratorOnPixels(PoseGenerator* generator,
                                                 const std::vector<GeneratorSample>& samples,
                                                 const std::vector<TrunkTargets>& frames,
                                                 const GeneratorTrainingOptions& options,
-                                                const GeneratorProgressCallback& progress) {
+                                                const GeneratorProgressCallback& progress,
+                                                LatentModulatedSiren* tuned_siren) {
   std::string error;
   Check(options.IsValid(&error), error);
   Check(generator != nullptr, "TrainGeneratorOnPixels: null generator");
@@ -294,11 +312,18 @@ GeneratorTrainingSummary TrainGeneratorOnPixels(PoseGenerator* generator,
         "TrainGeneratorOnPixels: the generator's latent_dim " +
             std::to_string(generator->latent_dim()) + " is not the trunk's " +
             std::to_string(trunk.siren.latent_dim()));
+  const bool tune = options.trunk_step_fraction > 0;
+  Check(!tune || tuned_siren != nullptr,
+        "TrainGeneratorOnPixels: trunk_step_fraction > 0 needs a tuned_siren to write");
+  // The SIREN the loss passes run through: the trunk's own, or a copy trained along.
+  LatentModulatedSiren tuned = tune ? trunk.siren : LatentModulatedSiren(trunk.siren.options());
+  const LatentModulatedSiren& siren = tune ? tuned : trunk.siren;
+  const Eigen::Index generator_size = generator->parameters().size();
   const int m = static_cast<int>(samples.size());
   Check(m > 0 && static_cast<int>(frames.size()) == m,
         "TrainGeneratorOnPixels: expected one frame per sample (" + std::to_string(m) +
             "), got " + std::to_string(frames.size()));
-  const int channels = trunk.siren.output_channels();
+  const int channels = siren.output_channels();
   // Valid pixels and the grid of each frame's resolution.
   std::vector<std::vector<int>> valid(m);
   std::vector<Eigen::MatrixXf> grids;
@@ -316,7 +341,7 @@ GeneratorTrainingSummary TrainGeneratorOnPixels(PoseGenerator* generator,
     auto it = std::find(sizes.begin(), sizes.end(), size);
     if (it == sizes.end()) {
       sizes.push_back(size);
-      grids.push_back(trunk.siren.Grid<float>(t.rows, t.cols));
+      grids.push_back(siren.Grid<float>(t.rows, t.cols));
       grid_of[i] = static_cast<int>(grids.size()) - 1;
     } else {
       grid_of[i] = static_cast<int>(it - sizes.begin());
@@ -333,14 +358,29 @@ GeneratorTrainingSummary TrainGeneratorOnPixels(PoseGenerator* generator,
                                   sizeof(float) * static_cast<std::size_t>(t.weights.size()),
                                   fingerprint);
   }
-  return RunAdam(
-      generator, m, options, progress, "pixels", fingerprint,
+  // theta = the generator's parameters, then (tuning) the SIREN's.
+  const Eigen::Index trunk_size = tune ? tuned.NumParameters() : 0;
+  Eigen::VectorXd theta0(generator_size + trunk_size), step_scale;
+  theta0 << generator->parameters(), (tune ? tuned.parameters() : Eigen::VectorXd());
+  if (tune) {
+    step_scale = Eigen::VectorXd::Ones(theta0.size());
+    step_scale.tail(trunk_size).setConstant(options.trunk_step_fraction);
+  }
+  const auto apply = [&](const Eigen::VectorXd& theta) {
+    generator->SetParameters(theta.head(generator_size));
+    if (tune) tuned.SetParameters(theta.tail(trunk_size));
+  };
+  const GeneratorTrainingSummary summary = RunAdam(
+      *generator, theta0, step_scale, apply, m, options, progress, "pixels", fingerprint,
       [&](const Eigen::VectorXd& theta, const std::vector<int>& rows, int epoch,
           Eigen::VectorXd* gradient) {
         const int b = static_cast<int>(rows.size());
         Eigen::MatrixXd f(b, features.cols());
         for (int i = 0; i < b; ++i) f.row(i) = features.row(rows[i]);
-        const Eigen::MatrixXd z = generator->Forward(theta, f);
+        const Eigen::VectorXd generator_theta = theta.head(generator_size);
+        if (tune) tuned.SetParameters(theta.tail(trunk_size));
+        const Eigen::MatrixXd z = generator->Forward(generator_theta, f);
+        Eigen::VectorXd trunk_gradient = Eigen::VectorXd::Zero(trunk_size);
         Eigen::MatrixXd dL_dZ(b, z.cols());
         double loss = 0;
         for (int i = 0; i < b; ++i) {
@@ -360,15 +400,21 @@ GeneratorTrainingSummary TrainGeneratorOnPixels(PoseGenerator* generator,
             coords.row(j) = grid.row(pixel);
             targets.row(j) = frames[s].values.row(pixel);
           }
-          Eigen::VectorXf dz;
+          Eigen::VectorXf dz, dtheta;
           const Eigen::VectorXf zf = z.row(i).transpose().cast<float>();
-          loss += trunk.siren.LossAndGradient<float>(coords, zf, targets, Eigen::VectorXf(), &dz,
-                                                     nullptr);
+          loss += siren.LossAndGradient<float>(coords, zf, targets, Eigen::VectorXf(), &dz,
+                                               tune ? &dtheta : nullptr);
           dL_dZ.row(i) = dz.cast<double>().transpose() / b;
+          if (tune) trunk_gradient += dtheta.cast<double>() / b;
         }
-        generator->Backward(theta, f, dL_dZ, gradient, nullptr);
+        Eigen::VectorXd generator_gradient;
+        generator->Backward(generator_theta, f, dL_dZ, &generator_gradient, nullptr);
+        gradient->resize(theta.size());
+        *gradient << generator_gradient, trunk_gradient;
         return loss / b;
       });
+  if (tune) *tuned_siren = tuned;
+  return summary;
 }
 
 double MeanGeneratorPsnr(const PoseGenerator& generator, const SensorTrunk& trunk,

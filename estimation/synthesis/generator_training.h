@@ -13,6 +13,8 @@
 //                            pixels_per_frame valid pixels drawn afresh per sample and
 //                            epoch; dL/dz comes from the trunk's reverse pass and is
 //                            pushed through h. Usually started from a regressed h.
+//                            Optionally the trunk's SIREN is trained along with h
+//                            (trunk_step_fraction), into a trunk of the generator's own.
 //
 // Both: Adam on shuffled minibatches, everything seeded (DeriveSeed per epoch and
 // sample), single-threaded and deterministic.
@@ -64,6 +66,9 @@ struct GeneratorTrainingOptions {
   int pixels_per_frame = 256;
   // Set the output standardisation from the latents (regression only).
   bool standardize_outputs = true;
+  // Pixel training only: > 0 trains the trunk's SIREN along with the generator, its Adam
+  // step this fraction of the generator's (TrainGeneratorOnPixels); 0 keeps it frozen.
+  double trunk_step_fraction = 0;
   std::uint64_t seed = 0;
   // Checkpoints (header comment): the path ("" = none), every how many epochs (>= 1), and
   // whether to continue from the file if it exists. They do not change the result.
@@ -93,12 +98,17 @@ GeneratorTrainingSummary TrainGeneratorOnLatents(PoseGenerator* generator,
                                                  const GeneratorProgressCallback& progress = {});
 
 // frames: one TrunkTargets per sample, at any resolution (the trunk is continuous).
+// With options.trunk_step_fraction > 0 the trunk's SIREN is trained jointly, from
+// trunk.siren (which stays as it is), and the result written to *tuned_siren (required
+// then; untouched otherwise): a trunk of the generator's own, for rendering poses only
+// (the functaset's latents belong to the trunk they were fitted with).
 GeneratorTrainingSummary TrainGeneratorOnPixels(PoseGenerator* generator,
                                                 const SensorTrunk& trunk,
                                                 const std::vector<GeneratorSample>& samples,
                                                 const std::vector<TrunkTargets>& frames,
                                                 const GeneratorTrainingOptions& options,
-                                                const GeneratorProgressCallback& progress = {});
+                                                const GeneratorProgressCallback& progress = {},
+                                                LatentModulatedSiren* tuned_siren = nullptr);
 
 // Mean PSNR (trunk_targets.h's Psnr, all valid pixels) of f_theta(.; h(pose_i)) against
 // frames[i]: how well the generator renders the labelled contacts.

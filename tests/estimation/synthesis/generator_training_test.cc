@@ -145,6 +145,89 @@ TEST_F(GeneratorTrainingCheckpoint, ResumeWithoutACheckpointStartsAnewAndOthersA
   EXPECT_THROW(TrainGeneratorOnLatents(&h, d.samples, d.latents, o), TensorFileError);
 }
 
+// Frames another trunk drew: a frozen trunk cannot render them however the generator
+// moves, a trunk trained along can come closer.
+TEST(GeneratorTrainingTunedTrunk, TrainingTheTrunkAlongFitsFramesTheFrozenOneCannot) {
+  const Data d;
+  const SensorTrunk other = testing_util::MakeTinyTrunk(kRows, kCols, 12, 2, kLatent, 4);
+  GeneratorTrainingOptions o = Options("");
+  o.epochs = 40;
+  o.standardize_outputs = false;
+  PoseGenerator frozen = Generator();
+  const GeneratorTrainingSummary f = TrainGeneratorOnPixels(&frozen, other, d.samples, d.frames, o);
+  LatentModulatedSiren untouched = other.siren;  // fraction 0: the argument is not written
+  PoseGenerator frozen_again = Generator();
+  TrainGeneratorOnPixels(&frozen_again, other, d.samples, d.frames, o, {}, &untouched);
+  EXPECT_EQ(untouched.parameters(), other.siren.parameters());
+  EXPECT_EQ(frozen_again.parameters(), frozen.parameters());
+
+  o.trunk_step_fraction = 1;
+  PoseGenerator joint = Generator();
+  LatentModulatedSiren tuned = other.siren;
+  const SensorTrunk before = other;
+  const GeneratorTrainingSummary j =
+      TrainGeneratorOnPixels(&joint, other, d.samples, d.frames, o, {}, &tuned);
+  EXPECT_EQ(other.siren.parameters(), before.siren.parameters());  // the input stays
+  EXPECT_NE(tuned.parameters(), other.siren.parameters());
+  EXPECT_LT(j.final_loss, 0.5 * f.final_loss) << "frozen " << f.final_loss;
+  // Rendered through the tuned trunk the generator draws the frames better than through
+  // the frozen one (a trunk with the tuned SIREN).
+  SensorTrunk tuned_trunk = other;
+  tuned_trunk.siren = tuned;
+  EXPECT_GT(MeanGeneratorPsnr(joint, tuned_trunk, d.samples, d.frames),
+            MeanGeneratorPsnr(frozen, other, d.samples, d.frames) + 1);
+}
+
+TEST_F(GeneratorTrainingCheckpoint, ATunedTrunkResumesBitForBit) {
+  const Data d;
+  GeneratorTrainingOptions o = Options("");
+  o.standardize_outputs = false;
+  o.trunk_step_fraction = 0.5;
+  PoseGenerator straight = Generator();
+  LatentModulatedSiren straight_siren = d.trunk.siren;
+  TrainGeneratorOnPixels(&straight, d.trunk, d.samples, d.frames, o, {}, &straight_siren);
+
+  o.checkpoint_path = Path("pixels.ckpt");
+  PoseGenerator stopped = Generator();
+  LatentModulatedSiren siren = d.trunk.siren;
+  auto stop = [](int epoch, double) { return epoch + 1 < 3; };
+  EXPECT_EQ(TrainGeneratorOnPixels(&stopped, d.trunk, d.samples, d.frames, o, stop, &siren)
+                .epochs_completed,
+            3);
+  o.resume = true;
+  PoseGenerator resumed = Generator();  // a fresh process: only the checkpoint carries over
+  LatentModulatedSiren resumed_siren = d.trunk.siren;
+  EXPECT_EQ(TrainGeneratorOnPixels(&resumed, d.trunk, d.samples, d.frames, o, {}, &resumed_siren)
+                .epochs_resumed,
+            3);
+  EXPECT_EQ(resumed.parameters(), straight.parameters());
+  EXPECT_EQ(resumed_siren.parameters(), straight_siren.parameters());
+  // The tuned run's checkpoint is another run than a frozen trunk's: refused.
+  o.trunk_step_fraction = 0;
+  PoseGenerator g = Generator();
+  try {
+    TrainGeneratorOnPixels(&g, d.trunk, d.samples, d.frames, o);
+    FAIL() << "expected a refusal";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("differs"), std::string::npos) << e.what();
+  }
+}
+
+TEST(GeneratorTrainingTunedTrunk, MisuseIsRefused) {
+  const Data d;
+  GeneratorTrainingOptions o = Options("");
+  o.trunk_step_fraction = 0.1;
+  PoseGenerator g = Generator();
+  // Nowhere to write the tuned trunk.
+  EXPECT_THROW(TrainGeneratorOnPixels(&g, d.trunk, d.samples, d.frames, o), std::invalid_argument);
+  // Regression has no trunk to tune.
+  EXPECT_THROW(TrainGeneratorOnLatents(&g, d.samples, d.latents, o), std::invalid_argument);
+  o.trunk_step_fraction = -0.1;
+  std::string error;
+  EXPECT_FALSE(o.IsValid(&error));
+  EXPECT_NE(error.find("trunk_step_fraction"), std::string::npos) << error;
+}
+
 TEST(GeneratorTrainingOptions, CheckpointFieldsAreValidated) {
   GeneratorTrainingOptions o;
   std::string error;
