@@ -25,6 +25,7 @@
 #include "tests/apps/cli_test_util.h"
 #include "models/pose/pose_generator.h"
 #include "models/pose/pose_mlp.h"
+#include "models/trunk/functa_model.h"
 #include "nlohmann/json.hpp"
 #include "tests/support/dataset_test_util.h"
 #include "tests/support/functa_test_util.h"
@@ -660,6 +661,66 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
     EXPECT_THAT(r.err, HasSubstr("g_other.tpg' was trained through the trunk of model checksum"))
         << command;
   }
+}
+
+// --tune-trunk trains the trunk along with the generator in the pixel stage and writes it
+// as the generator's own trunk: the generator records that model, `pose` renders through it
+// with --generator-model and refuses --model's trunk alone.
+TEST_F(PoseCliTest, TrainGeneratorTunesATrunkOfItsOwn) {
+  const Result synth = Run("synth --out " + Root("td") + " --frames-per-tool 6 --sensors bubble "
+                           "--seed 5 --threads 1");
+  ASSERT_EQ(synth.exit_code, 0) << synth.err;
+  const Result encode = Run("encode --model " + Root("m.tfm") + " --data " + Root("td") +
+                            " --out " + Root("tf.tfs") + " --threads 1");
+  ASSERT_EQ(encode.exit_code, 0) << encode.err;
+  const std::string train = "train-generator --model " + Root("m.tfm") + " --functaset " +
+                            Root("tf.tfs") + " --data " + Root("td") + " --mode pixels "
+                            "--epochs 3 --pixel-epochs 2 --pixel-frames 6 --hidden 16 "
+                            "--calibration-frames 4 --temperature-frames 4";
+  Result r = Run(train + " --out " + Root("gt.tpg") + " --tune-trunk 0.5 --out-model " +
+                 Root("gt.tfm"));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("wrote the generator's own trunk to " + Root("gt.tfm")));
+  const FunctaModel base = FunctaModel::Load(Root("m.tfm"));
+  const FunctaModel tuned = FunctaModel::Load(Root("gt.tfm"));
+  const SensorTrunk& a = base.Trunk(SensorKind::kSoftBubble);
+  const SensorTrunk& b = tuned.Trunk(SensorKind::kSoftBubble);
+  ASSERT_EQ(a.siren.NumParameters(), b.siren.NumParameters());
+  EXPECT_NE(a.siren.parameters(), b.siren.parameters());
+  EXPECT_TRUE(a.format.SameAs(b.format));
+  const nlohmann::json record = nlohmann::json::parse(tuned.info_json());
+  EXPECT_EQ(record["tuned_with_generator"]["from_model"], Root("m.tfm"));
+  EXPECT_EQ(record["tuned_with_generator"]["trunk_step_fraction"], 0.5);
+  const PoseGenerator generator = PoseGenerator::Load(Root("gt.tpg"));
+  EXPECT_EQ(nlohmann::json::parse(generator.info_json())["model"], Root("gt.tfm"));
+  // The gelslim trunk (not tuned) is the same as --model's.
+  if (base.HasSensor(SensorKind::kGelSlim)) {
+    EXPECT_EQ(base.Trunk(SensorKind::kGelSlim).siren.parameters(),
+              tuned.Trunk(SensorKind::kGelSlim).siren.parameters());
+  }
+  const std::string pose = "pose --method generator --model " + Root("m.tfm") + " --pose-model " +
+                           Root("p.tpm") + " --data " + Root("td") + " --id 000003 --samples 10 " +
+                           "--generator " + Root("gt.tpg");
+  r = Run(pose + " --generator-model " + Root("gt.tfm") + " --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.LastJson()["method"], "generator");
+  r = Run(pose);
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.err, HasSubstr("trained through the trunk of model"));
+  // Misuse: each flag without the other, and with regression only.
+  r = Run(train + " --out " + Root("gx.tpg") + " --tune-trunk 0.5");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("--out-model"));
+  r = Run(train + " --out " + Root("gx.tpg") + " --out-model " + Root("gx.tfm"));
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("--tune-trunk"));
+  r = Run("train-generator --model " + Root("m.tfm") + " --functaset " + Root("tf.tfs") +
+          " --data " + Root("td") + " --mode latents --epochs 2 --out " + Root("gx.tpg") +
+          " --tune-trunk 0.5 --out-model " + Root("gx.tfm"));
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("--mode pixels"));
+  EXPECT_FALSE(fs::exists(Root("gx.tpg")));
+  EXPECT_FALSE(fs::exists(Root("gx.tfm")));
 }
 
 TEST_F(PoseCliTest, PoseReadsAFrameAndReferenceFromFiles) {
