@@ -63,6 +63,7 @@
 #include <map>
 #include <memory>
 #include <numeric>
+#include <optional>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 #include <sstream>
@@ -197,7 +198,7 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
   const Dataset dataset = OpenDataset(flags.data, flags.dataset);
   // The trunk the generator renders through: --model's, or its copy tuned along with the
   // generator (--tune-trunk), which calibration and the record then name.
-  FunctaModel tuned_model = model;
+  std::optional<FunctaModel> tuned_model;
   const SensorTrunk* render_trunk = &trunk;
   std::string render_model = flags.model;
   std::uint32_t render_checksum = model.checksum();
@@ -280,12 +281,14 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
     po.checkpoint_path = StageCheckpoint(flags.out, "pixels");
     po.resume = flags.resume;
     po.trunk_step_fraction = flags.tune_trunk;
-    LatentModulatedSiren& tuned = tuned_model.MutableTrunk(SensorKind::kSoftBubble).siren;
+    if (tune) tuned_model.emplace(model);
+    LatentModulatedSiren* tuned =
+        tune ? &tuned_model->MutableTrunk(SensorKind::kSoftBubble).siren : nullptr;
     {
       ProgressBar bar("train-generator pixels", po.epochs, "epochs",
                       ProgressBar::Lines::kWhenNotDrawn);
       pix = TrainGeneratorOnPixels(&generator, trunk, sub.samples, frames, po,
-                                   StageProgress(&bar), tune ? &tuned : nullptr);
+                                   StageProgress(&bar), tuned);
       bar.Tick(pix.epochs_completed - bar.done());
       bar.Finish();
     }
@@ -298,11 +301,11 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
                                         {"from_model_checksum", model.checksum()},
                                         {"trunk_step_fraction", flags.tune_trunk},
                                         {"pixel_epochs", pix.epochs_completed}};
-      tuned_model.set_info_json(record.dump());
-      tuned_model.Save(flags.out_model);
+      tuned_model->set_info_json(record.dump());
+      tuned_model->Save(flags.out_model);
       render_checksum = FunctaModel::Load(flags.out_model).checksum();
       render_model = flags.out_model;
-      render_trunk = &tuned_model.Trunk(SensorKind::kSoftBubble);
+      render_trunk = &tuned_model->Trunk(SensorKind::kSoftBubble);
       std::cout << "train-generator: wrote the generator's own trunk to " << flags.out_model
                 << "\n";
     }

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <filesystem>
 #include <numeric>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -316,8 +317,9 @@ GeneratorTrainingSummary TrainGeneratorOnPixels(PoseGenerator* generator,
   Check(!tune || tuned_siren != nullptr,
         "TrainGeneratorOnPixels: trunk_step_fraction > 0 needs a tuned_siren to write");
   // The SIREN the loss passes run through: the trunk's own, or a copy trained along.
-  LatentModulatedSiren tuned = tune ? trunk.siren : LatentModulatedSiren(trunk.siren.options());
-  const LatentModulatedSiren& siren = tune ? tuned : trunk.siren;
+  std::optional<LatentModulatedSiren> tuned;
+  if (tune) tuned.emplace(trunk.siren);
+  const LatentModulatedSiren& siren = tune ? *tuned : trunk.siren;
   const Eigen::Index generator_size = generator->parameters().size();
   const int m = static_cast<int>(samples.size());
   Check(m > 0 && static_cast<int>(frames.size()) == m,
@@ -359,16 +361,16 @@ GeneratorTrainingSummary TrainGeneratorOnPixels(PoseGenerator* generator,
                                   fingerprint);
   }
   // theta = the generator's parameters, then (tuning) the SIREN's.
-  const Eigen::Index trunk_size = tune ? tuned.NumParameters() : 0;
+  const Eigen::Index trunk_size = tune ? tuned->NumParameters() : 0;
   Eigen::VectorXd theta0(generator_size + trunk_size), step_scale;
-  theta0 << generator->parameters(), (tune ? tuned.parameters() : Eigen::VectorXd());
+  theta0 << generator->parameters(), (tune ? tuned->parameters() : Eigen::VectorXd());
   if (tune) {
     step_scale = Eigen::VectorXd::Ones(theta0.size());
     step_scale.tail(trunk_size).setConstant(options.trunk_step_fraction);
   }
   const auto apply = [&](const Eigen::VectorXd& theta) {
     generator->SetParameters(theta.head(generator_size));
-    if (tune) tuned.SetParameters(theta.tail(trunk_size));
+    if (tune) tuned->SetParameters(theta.tail(trunk_size));
   };
   const GeneratorTrainingSummary summary = RunAdam(
       *generator, theta0, step_scale, apply, m, options, progress, "pixels", fingerprint,
@@ -378,7 +380,7 @@ GeneratorTrainingSummary TrainGeneratorOnPixels(PoseGenerator* generator,
         Eigen::MatrixXd f(b, features.cols());
         for (int i = 0; i < b; ++i) f.row(i) = features.row(rows[i]);
         const Eigen::VectorXd generator_theta = theta.head(generator_size);
-        if (tune) tuned.SetParameters(theta.tail(trunk_size));
+        if (tune) tuned->SetParameters(theta.tail(trunk_size));
         const Eigen::MatrixXd z = generator->Forward(generator_theta, f);
         Eigen::VectorXd trunk_gradient = Eigen::VectorXd::Zero(trunk_size);
         Eigen::MatrixXd dL_dZ(b, z.cols());
@@ -413,7 +415,7 @@ GeneratorTrainingSummary TrainGeneratorOnPixels(PoseGenerator* generator,
         *gradient << generator_gradient, trunk_gradient;
         return loss / b;
       });
-  if (tune) *tuned_siren = tuned;
+  if (tune) *tuned_siren = *tuned;
   return summary;
 }
 
