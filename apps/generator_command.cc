@@ -49,9 +49,9 @@
 //     whether the frame itself prefers the truth's basin (JudgeWrongMode), and whether the
 //     trunk keeps that preference (TrunkLogLikelihoodRatio). --contacts-csv: one row
 //     per usable contact (truth, mode, posterior mean, errors, the mode's Laplace standard
-//     deviations, with --information the bound's, the frame's and the trunk's verdict), written
-//     atomically; --picture FILE (with --information): each contact's error against its
-//     bound.
+//     deviations, with --information the bound's, the frame's and the trunk's verdict, with
+//     --diagnose a wrong mode's whole-frame objectives), written atomically; --picture FILE
+//     (with --information): each contact's error against its bound.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -779,7 +779,8 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
          "mode_x_mm,mode_y_mm,mode_yaw_deg,mode_depth_mm,mean_x_mm,mean_y_mm,mean_yaw_deg,"
          "position_error_mm,yaw_error_deg,modes,tool_probability,mode_sd_x_mm,mode_sd_y_mm,"
          "mode_sd_yaw_deg,bound_sd_along_mm,bound_sd_across_mm,bound_sd_yaw_deg,"
-         "bound_sd_depth_mm,frame_llr_truth_over_mode,trunk_llr_truth_over_mode\n";
+         "bound_sd_depth_mm,frame_llr_truth_over_mode,trunk_llr_truth_over_mode,"
+         "whole_frame_truth_cost,whole_frame_mode_cost,whole_frame_trunk_best_cost\n";
   std::vector<double> times, cpu_times;
   std::map<std::string, std::pair<double, int>> per_tool_pos;
   // --information, by true depth (below 6 mm, 6-10 mm, from 10 mm): the mode's summed
@@ -929,45 +930,9 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
         trunk_llrs.push_back(trunk_llr);
       }
     }
-    if (!flags.contacts_csv.empty()) {
-      const double mode_depth = true_mode != nullptr ? true_mode->depth_m : std::nan("");
-      int modes = 0;
-      for (const LaplaceComponent& c : mixture.components()) modes += c.tool == tools[t];
-      // The mode's Laplace standard deviations in its tangent space: x and y along and
-      // across the object's own axes (right perturbation), and the yaw.
-      Eigen::Vector3d sd = Eigen::Vector3d::Constant(std::nan(""));
-      if (true_mode != nullptr) sd = true_mode->covariance.diagonal().head<3>().cwiseSqrt();
-      if (n == 0) sd[2] = std::nan("");  // the yaw of a C_inf tool is not estimated
-      // The bound's standard deviations along and across the true object's axes.
-      Eigen::Vector4d bound_sd = Eigen::Vector4d::Constant(std::nan(""));
-      if (flags.information) {
-        const Eigen::Matrix2d r = truth.Rotation();
-        const Eigen::Matrix2d object_block =
-            r.transpose() * information.bound.topLeftCorner<2, 2>() * r;
-        bound_sd << std::sqrt(object_block(0, 0)), std::sqrt(object_block(1, 1)),
-            std::sqrt(information.bound(2, 2)), std::sqrt(information.bound(3, 3));
-      }
-      char row[768];
-      std::snprintf(
-          row, sizeof(row),
-          "%d,%s,%d,%.4f,%.4f,%.3f,%.4f,%.4f,%.4f,%.3f,%.4f,%.4f,%.4f,%.3f,%.4f,%.3f,%d,"
-          "%.4f,%.4f,%.4f,%.3f,%.4f,%.4f,%.3f,%.4f,%.2f,%.2f\n",
-          k, tools[t].c_str(), n, 1e3 * truth.x(), 1e3 * truth.y(), kDeg * truth.yaw(),
-          1e3 * contact.depth_m, 1e3 * mode.x(), 1e3 * mode.y(), kDeg * mode.yaw(),
-          1e3 * mode_depth, 1e3 * mean.x(), 1e3 * mean.y(), kDeg * mean.yaw(),
-          1e3 * std::sqrt(dp), kDeg * mode_yaw_error, modes,
-          s.tool_probabilities.count(tools[t]) ? s.tool_probabilities.at(tools[t]) : 0.0,
-          1e3 * sd[0], 1e3 * sd[1], kDeg * sd[2], 1e3 * bound_sd[0], 1e3 * bound_sd[1],
-          kDeg * bound_sd[2], 1e3 * bound_sd[3], frame_llr, trunk_llr);
-      csv << row;
-    }
-    per_tool_pos[tools[t]].first += dp;
-    per_tool_pos[tools[t]].second += 1;
-    if (n != 0) {
-      yaw_sq += mode_yaw_error * mode_yaw_error;
-      yaw_errors.push_back(mode_yaw_error);
-      ++yaw_count;
-    }
+    // --diagnose, a wrong mode: the whole-frame objectives (NaN otherwise).
+    TrunkWholeFrame whole;
+    whole.mode_cost = whole.truth_cost = whole.trunk_cost = std::nan("");
     if (flags.diagnose) {
       // Is the truth's objective lower than the chosen mode's (a search failure) or
       // higher (the generator and trunk prefer the wrong pose: a model failure)? The
@@ -997,9 +962,8 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
         // fit the few pixels of a pass), the generator at the mode and at the truth
         // against the trunk's own best latent (Ceres to convergence from the truth's
         // generated latent), the best any generator could render through this trunk.
-        const TrunkWholeFrame whole = JudgeAgainstTheTrunk(
-            trunk, targets, options.problem, generator, ti, mode, mode_depth, truth,
-            contact.depth_m);
+        whole = JudgeAgainstTheTrunk(trunk, targets, options.problem, generator, ti, mode,
+                                     mode_depth, truth, contact.depth_m);
         truth_excess.push_back(whole.TruthExcess());
         mode_excess.push_back(whole.ModeExcess());
         if (!flags.diagnose_picture.empty() && wrong_views.size() < kPictureRows) {
@@ -1013,6 +977,46 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
                     whole.mode_cost, whole.truth_cost, whole.trunk_cost,
                     100 * whole.TruthExcess(), 100 * whole.ModeExcess());
       }
+    }
+    if (!flags.contacts_csv.empty()) {
+      const double mode_depth = true_mode != nullptr ? true_mode->depth_m : std::nan("");
+      int modes = 0;
+      for (const LaplaceComponent& c : mixture.components()) modes += c.tool == tools[t];
+      // The mode's Laplace standard deviations in its tangent space: x and y along and
+      // across the object's own axes (right perturbation), and the yaw.
+      Eigen::Vector3d sd = Eigen::Vector3d::Constant(std::nan(""));
+      if (true_mode != nullptr) sd = true_mode->covariance.diagonal().head<3>().cwiseSqrt();
+      if (n == 0) sd[2] = std::nan("");  // the yaw of a C_inf tool is not estimated
+      // The bound's standard deviations along and across the true object's axes.
+      Eigen::Vector4d bound_sd = Eigen::Vector4d::Constant(std::nan(""));
+      if (flags.information) {
+        const Eigen::Matrix2d r = truth.Rotation();
+        const Eigen::Matrix2d object_block =
+            r.transpose() * information.bound.topLeftCorner<2, 2>() * r;
+        bound_sd << std::sqrt(object_block(0, 0)), std::sqrt(object_block(1, 1)),
+            std::sqrt(information.bound(2, 2)), std::sqrt(information.bound(3, 3));
+      }
+      char row[768];
+      std::snprintf(
+          row, sizeof(row),
+          "%d,%s,%d,%.4f,%.4f,%.3f,%.4f,%.4f,%.4f,%.3f,%.4f,%.4f,%.4f,%.3f,%.4f,%.3f,%d,"
+          "%.4f,%.4f,%.4f,%.3f,%.4f,%.4f,%.3f,%.4f,%.2f,%.2f,%.2f,%.2f,%.2f\n",
+          k, tools[t].c_str(), n, 1e3 * truth.x(), 1e3 * truth.y(), kDeg * truth.yaw(),
+          1e3 * contact.depth_m, 1e3 * mode.x(), 1e3 * mode.y(), kDeg * mode.yaw(),
+          1e3 * mode_depth, 1e3 * mean.x(), 1e3 * mean.y(), kDeg * mean.yaw(),
+          1e3 * std::sqrt(dp), kDeg * mode_yaw_error, modes,
+          s.tool_probabilities.count(tools[t]) ? s.tool_probabilities.at(tools[t]) : 0.0,
+          1e3 * sd[0], 1e3 * sd[1], kDeg * sd[2], 1e3 * bound_sd[0], 1e3 * bound_sd[1],
+          kDeg * bound_sd[2], 1e3 * bound_sd[3], frame_llr, trunk_llr, whole.truth_cost,
+          whole.mode_cost, whole.trunk_cost);
+      csv << row;
+    }
+    per_tool_pos[tools[t]].first += dp;
+    per_tool_pos[tools[t]].second += 1;
+    if (n != 0) {
+      yaw_sq += mode_yaw_error * mode_yaw_error;
+      yaw_errors.push_back(mode_yaw_error);
+      ++yaw_count;
     }
     if (true_mode != nullptr) {
       c50 += mixture.Contains(truth, 0.5, options.num_region_samples, seed, tools[t]);

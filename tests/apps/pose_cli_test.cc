@@ -447,7 +447,7 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
     std::istringstream cells(line);
     std::string cell;
     while (std::getline(cells, cell, ',')) v.push_back(std::atof(cell.c_str()));
-    ASSERT_EQ(v.size(), 27u) << line;
+    ASSERT_EQ(v.size(), 30u) << line;
     // position_error_mm is the distance between the truth's and the mode's positions.
     EXPECT_NEAR(v[14], std::hypot(v[7] - v[3], v[8] - v[4]), 2e-4) << line;
     // The mode's Laplace sd along, across and in yaw (none for a C_inf tool, n = v[2] = 0).
@@ -467,6 +467,13 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
     EXPECT_EQ(wrong, !std::isnan(v[25])) << line;
     // And through the trunk (TrunkLogLikelihoodRatio), for the same wrong modes only.
     EXPECT_EQ(wrong, !std::isnan(v[26])) << line;
+    // --diagnose's whole-frame objectives (truth, mode, the trunk's best), for the same;
+    // the trunk's own best latent, fitted from the truth's rendering, fits the frame at
+    // least as well as that rendering.
+    for (int c : {27, 28, 29}) {
+      EXPECT_EQ(wrong, !std::isnan(v[c])) << "column " << c << ", " << line;
+    }
+    if (wrong) EXPECT_LE(v[29], v[27] + 0.01) << line;
     judged += wrong;
     sum_sq += v[14] * v[14];
     bound_sq += v[21] * v[21] + v[22] * v[22];
