@@ -315,7 +315,10 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
               << " dB\n";
   }
   // Calibrate the sigma inflation on test-split frames (tool known).
-  std::unique_ptr<KnnPoseStarts> knn = std::make_unique<KnnPoseStarts>(functaset, SensorKind::kSoftBubble);
+  // The k-NN starts read --functaset's latents: the frame's query under --model's trunk
+  // (the generator may render through a tuned one).
+  std::unique_ptr<KnnPoseStarts> knn =
+      std::make_unique<KnnPoseStarts>(functaset, SensorKind::kSoftBubble, &trunk);
   GeneratorPosterior::Options po;
   po.sigma_inflation = 1;
   po.final_pixels = flags.final_pixels;

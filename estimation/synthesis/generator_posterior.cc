@@ -223,7 +223,9 @@ bool PoseMixture::Contains(const SE2d& t, double p, int num_region_samples, std:
 
 // ---- KnnPoseStarts ------------------------------------------------------------------------
 
-KnnPoseStarts::KnnPoseStarts(const Functaset& functaset, SensorKind sensor) {
+KnnPoseStarts::KnnPoseStarts(const Functaset& functaset, SensorKind sensor,
+                             const SensorTrunk* query_trunk)
+    : query_trunk_(query_trunk) {
   std::map<std::string, std::vector<const FunctasetEntry*>> by_tool;
   for (const FunctasetEntry& e : functaset.entries(sensor)) {
     if (e.split == Split::kTrain && e.label.has_value()) by_tool[e.label->tool].push_back(&e);
@@ -233,6 +235,12 @@ KnnPoseStarts::KnnPoseStarts(const Functaset& functaset, SensorKind sensor) {
                                 ToString(sensor) + " train entries");
   }
   const int d = functaset.latent_dim(sensor);
+  latent_dim_ = d;
+  if (query_trunk != nullptr && query_trunk->siren.latent_dim() != d) {
+    throw std::invalid_argument("KnnPoseStarts: '" + functaset.source() + "' holds latents of " +
+                                std::to_string(d) + " values, its query trunk's latent_dim is " +
+                                std::to_string(query_trunk->siren.latent_dim()));
+  }
   for (const auto& [tool, entries] : by_tool) {
     ToolIndex t;
     FlannKnnIndex::Options o;
@@ -337,6 +345,20 @@ GeneratorPosterior::GeneratorPosterior(const SensorTrunk& trunk, const PoseGener
     throw std::invalid_argument("GeneratorPosterior: the generator's latent_dim " +
                                 std::to_string(generator.latent_dim()) + " is not the trunk's " +
                                 std::to_string(trunk.siren.latent_dim()));
+  }
+  if (knn != nullptr) {
+    const SensorTrunk& knn_trunk = knn->query_trunk() != nullptr ? *knn->query_trunk() : trunk;
+    if (knn->latent_dim() != knn_trunk.siren.latent_dim()) {
+      throw std::invalid_argument(
+          "GeneratorPosterior: the k-NN functaset's latents are not its query trunk's (" +
+          std::to_string(knn->latent_dim()) + " against " +
+          std::to_string(knn_trunk.siren.latent_dim()) + " values)");
+    }
+    if (!trunk.format.SameAs(knn_trunk.format) || knn_trunk.photometric != nullptr) {
+      throw std::invalid_argument(
+          "GeneratorPosterior: the k-NN query trunk works at another frame format (or is "
+          "photometric) than the generator's trunk; the frame's targets cannot serve both");
+    }
   }
   const SensorTrunk& mlp_trunk = pose_mlp_trunk_ != nullptr ? *pose_mlp_trunk_ : trunk;
   if (pose_mlp != nullptr && pose_mlp->input_dim() != mlp_trunk.siren.latent_dim()) {
@@ -445,14 +467,22 @@ GeneratorPosterior::Summary GeneratorPosterior::Estimate(const TrunkTargets& tar
     return p.MetaSgdSteps(Eigen::VectorXd::Zero(p.dim()), p.trunk().meta_sgd.inner_steps)
         .cast<float>();
   };
+  // The frame's latent under each trunk a query needs (the renderer's, the k-NN
+  // functaset's, the pose MLP's), each computed once: the same pixels under that trunk.
+  std::vector<std::pair<const SensorTrunk*, Eigen::VectorXf>> latents;
+  auto latent_under = [&](const SensorTrunk* t) -> const Eigen::VectorXf& {
+    if (t == nullptr) t = trunk_;
+    for (const auto& [known, z] : latents) {
+      if (known == t) return z;
+    }
+    latents.emplace_back(t, meta_sgd_latent(t == trunk_ ? problem
+                                                        : LatentProblem(*t, targets,
+                                                                        options_.problem)));
+    return latents.back().second;
+  };
   Eigen::VectorXf query, mlp_query;
-  if (knn_ != nullptr || (pose_mlp_ != nullptr && pose_mlp_trunk_ == nullptr)) {
-    query = meta_sgd_latent(problem);
-  }
-  if (pose_mlp_ != nullptr && pose_mlp_trunk_ != nullptr) {
-    // The pose MLP's own latent map: the same pixels under its trunk.
-    mlp_query = meta_sgd_latent(LatentProblem(*pose_mlp_trunk_, targets, options_.problem));
-  }
+  if (knn_ != nullptr) query = latent_under(knn_->query_trunk());
+  if (pose_mlp_ != nullptr) mlp_query = latent_under(pose_mlp_trunk_);
   struct ToolModes {
     int tool;
     std::vector<PoseFit> modes;
@@ -461,7 +491,7 @@ GeneratorPosterior::Summary GeneratorPosterior::Estimate(const TrunkTargets& tar
   double best_msr = std::numeric_limits<double>::infinity();
   for (int t : candidates) {
     const std::vector<PoseStart> starts =
-        Starts(problem, query, t, pose_mlp_trunk_ != nullptr ? &mlp_query : nullptr);
+        Starts(problem, query, t, pose_mlp_ != nullptr ? &mlp_query : nullptr);
     summary.num_starts += static_cast<int>(starts.size());
     ToolModes tm{t, FitPoseModes(problem, *generator_, t, starts, options_.fit,
                                           coarse ? &*coarse : nullptr)};

@@ -141,16 +141,23 @@ class PoseMixture {
 };
 
 // Starts from the labelled functaset: one FLANN index per tool over the train-split
-// latents. Built once; Search is const.
+// latents. Built once; Search is const. query_trunk: the trunk whose latents the
+// functaset holds when it is not the one the posterior renders through (a generator with
+// a trunk of its own, `pose --generator-model`); the posterior then takes the frame's
+// query latent under that trunk. Null: the posterior's own trunk. Not owned; it must
+// outlive this object.
 class KnnPoseStarts {
  public:
   // Throws std::invalid_argument if the functaset has no labelled train entries of
-  // `sensor`.
-  KnnPoseStarts(const Functaset& functaset, SensorKind sensor);
+  // `sensor`, or query_trunk's latent_dim is not the functaset's.
+  KnnPoseStarts(const Functaset& functaset, SensorKind sensor,
+                const SensorTrunk* query_trunk = nullptr);
   // The labels of the k nearest latents of `tool` (empty if the tool has none).
   std::vector<PoseStart> Starts(const Eigen::VectorXf& query, const std::string& tool,
                                 int k) const;
   int size() const { return size_; }
+  int latent_dim() const { return latent_dim_; }
+  const SensorTrunk* query_trunk() const { return query_trunk_; }
 
  private:
   struct ToolIndex {
@@ -159,6 +166,8 @@ class KnnPoseStarts {
   };
   std::map<std::string, ToolIndex> tools_;
   int size_ = 0;
+  int latent_dim_ = 0;
+  const SensorTrunk* query_trunk_ = nullptr;
 };
 
 class GeneratorPosterior {
@@ -246,8 +255,9 @@ class GeneratorPosterior {
   const Options& options() const { return options_; }
 
   // The starts of one tool's search (k-NN labels near `query`, the frame's meta-SGD
-  // latent; the pose MLP at it, or at `mlp_query` if given (the latent under the pose
-  // MLP's own trunk); else a yaw grid at the centre; then the flipped yaws, the position
+  // latent under the k-NN functaset's trunk (KnnPoseStarts::query_trunk, else this
+  // posterior's); the pose MLP at it, or at `mlp_query` if given (the latent under the
+  // pose MLP's own trunk); else a yaw grid at the centre; then the flipped yaws, the position
   // grid around the first start and the yaw grid at every start position, as Options
   // says). Estimate scores and refines them (FitPoseModes).
   std::vector<PoseStart> Starts(const LatentProblem& problem, const Eigen::VectorXf& query,

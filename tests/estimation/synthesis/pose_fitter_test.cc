@@ -15,6 +15,7 @@
 #include "ceres/dynamic_autodiff_cost_function.h"
 #include "ceres/dynamic_numeric_diff_cost_function.h"
 #include "ceres/jet.h"
+#include "estimation/functaset/functaset.h"
 #include "estimation/synthesis/generator_posterior.h"
 #include "models/pose/pose_mlp.h"
 #include "models/simulator/tool.h"
@@ -485,6 +486,73 @@ TEST(GeneratorPosterior, APoseMlpOnItsOwnTrunkStartsFromThatTrunksLatent) {
   EXPECT_THROW(GeneratorPosterior(trunk, g, options, nullptr, &mlp), std::invalid_argument);
   const SensorTrunk wider = testing_util::MakeTinyTrunk(kRows, kCols + 1, 16, 2, 4, 23);
   EXPECT_THROW(GeneratorPosterior(trunk, g, options, nullptr, &mlp, &wider), std::invalid_argument);
+}
+
+// A k-NN functaset of another trunk's latents (a generator with a trunk of its own): the
+// frame's query is its latent under the functaset's trunk (KnnPoseStarts::query_trunk).
+// The functaset holds the frame under that trunk (labelled with one pose) and under the
+// renderer's (labelled with another); with one neighbour and no other starts the search
+// starts from the first pose with the query trunk given and from the second without,
+// each exactly as a functaset holding that entry alone.
+TEST(GeneratorPosterior, KnnStartsReadTheFrameUnderTheFunctasetsOwnTrunk) {
+  const SensorTrunk trunk = Trunk();
+  const PoseGenerator g = Generator();
+  const SensorTrunk own = testing_util::MakeTinyTrunk(kRows, kCols, 16, 2, kLatent, 29);
+  const std::string tool = g.options().tools[1];
+  const TrunkTargets targets = Render(trunk, g, 1, SE2d::FromXYYaw(1e-3, -2e-3, 0.3), 0.010);
+  GeneratorPosterior::Options options;
+  options.knn_k = 1;
+  options.flip_starts = false;
+  options.yaw_grid = 1;  // no other yaws
+  options.position_grid_m = 0;
+  auto latent = [&](const SensorTrunk& t) {
+    const LatentProblem p(t, targets, options.problem);
+    return Eigen::VectorXf(
+        p.MetaSgdSteps(Eigen::VectorXd::Zero(p.dim()), t.meta_sgd.inner_steps).cast<float>());
+  };
+  const Eigen::VectorXf z_own = latent(own), z_renderer = latent(trunk);
+  ASSERT_GT((z_own - z_renderer).norm(), 1e-5);
+  const FunctasetEntry under_own{"own", Split::kTrain,
+                                 PoseLabel{tool, SE2d::FromXYYaw(1.5e-3, -1.5e-3, 0.35), 0.011},
+                                 z_own};
+  const FunctasetEntry under_renderer{
+      "renderer", Split::kTrain, PoseLabel{tool, SE2d::FromXYYaw(-3e-3, 2e-3, -1.0), 0.008},
+      z_renderer};
+  auto functaset = [](const std::vector<FunctasetEntry>& entries) {
+    Functaset f(0, "test");
+    f.AddSensor(SensorKind::kSoftBubble, kLatent);
+    for (const FunctasetEntry& e : entries) f.Add(SensorKind::kSoftBubble, e);
+    return f;
+  };
+  const Functaset both = functaset({under_own, under_renderer});
+  const Functaset only_own = functaset({under_own}), only_renderer = functaset({under_renderer});
+  auto mode = [&](const KnnPoseStarts& knn) {
+    PoseMixture mixture;
+    EXPECT_TRUE(GeneratorPosterior(trunk, g, options, &knn).Estimate(targets, tool, &mixture).usable);
+    return mixture.components().front().mean;
+  };
+  const SE2d with_own = mode(KnnPoseStarts(both, SensorKind::kSoftBubble, &own));
+  const SE2d expected_own = mode(KnnPoseStarts(only_own, SensorKind::kSoftBubble));
+  EXPECT_EQ(with_own.x(), expected_own.x());
+  EXPECT_EQ(with_own.y(), expected_own.y());
+  EXPECT_EQ(with_own.yaw(), expected_own.yaw());
+  const SE2d without = mode(KnnPoseStarts(both, SensorKind::kSoftBubble));
+  const SE2d expected_renderer = mode(KnnPoseStarts(only_renderer, SensorKind::kSoftBubble));
+  // The two starts end in different modes, so the equalities tell the queries apart.
+  EXPECT_TRUE(expected_own.x() != expected_renderer.x() ||
+              expected_own.yaw() != expected_renderer.yaw());
+  EXPECT_EQ(without.x(), expected_renderer.x());
+  EXPECT_EQ(without.yaw(), expected_renderer.yaw());
+  // The query trunk given as the renderer itself changes nothing.
+  const SE2d same = mode(KnnPoseStarts(both, SensorKind::kSoftBubble, &trunk));
+  EXPECT_EQ(same.x(), without.x());
+  EXPECT_EQ(same.yaw(), without.yaw());
+  // A query trunk of another latent size, or another frame format, is refused.
+  const SensorTrunk smaller = testing_util::MakeTinyTrunk(kRows, kCols, 16, 2, 4, 29);
+  EXPECT_THROW(KnnPoseStarts(both, SensorKind::kSoftBubble, &smaller), std::invalid_argument);
+  const SensorTrunk wider = testing_util::MakeTinyTrunk(kRows, kCols + 1, 16, 2, kLatent, 29);
+  const KnnPoseStarts knn_wider(both, SensorKind::kSoftBubble, &wider);
+  EXPECT_THROW(GeneratorPosterior(trunk, g, options, &knn_wider), std::invalid_argument);
 }
 
 // The yaw grid copies every start position to the grid's yaws: each added start sits
