@@ -528,7 +528,8 @@ TEST(GeneratorPosterior, KnnStartsReadTheFrameUnderTheFunctasetsOwnTrunk) {
   const Functaset only_own = functaset({under_own}), only_renderer = functaset({under_renderer});
   auto mode = [&](const KnnPoseStarts& knn) {
     PoseMixture mixture;
-    EXPECT_TRUE(GeneratorPosterior(trunk, g, options, &knn).Estimate(targets, tool, &mixture).usable);
+    const GeneratorPosterior posterior(trunk, g, options, &knn);
+    EXPECT_TRUE(posterior.Estimate(targets, tool, &mixture).usable);
     return mixture.components().front().mean;
   };
   const SE2d with_own = mode(KnnPoseStarts(both, SensorKind::kSoftBubble, &own));
