@@ -475,9 +475,12 @@ GeneratorPosterior::Summary GeneratorPosterior::Estimate(const TrunkTargets& tar
     for (const auto& [known, z] : latents) {
       if (known == t) return z;
     }
-    latents.emplace_back(t, meta_sgd_latent(t == trunk_ ? problem
-                                                        : LatentProblem(*t, targets,
-                                                                        options_.problem)));
+    // (Not a conditional expression: that would copy `problem`.)
+    if (t == trunk_) {
+      latents.emplace_back(t, meta_sgd_latent(problem));
+    } else {
+      latents.emplace_back(t, meta_sgd_latent(LatentProblem(*t, targets, options_.problem)));
+    }
     return latents.back().second;
   };
   Eigen::VectorXf query, mlp_query;
