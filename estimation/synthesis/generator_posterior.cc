@@ -346,6 +346,15 @@ GeneratorPosterior::GeneratorPosterior(const SensorTrunk& trunk, const PoseGener
                                 std::to_string(generator.latent_dim()) + " is not the trunk's " +
                                 std::to_string(trunk.siren.latent_dim()));
   }
+  // A trunk that reads the frame's latent for a query (the k-NN functaset's, the pose
+  // MLP's) takes the same targets as the renderer.
+  auto check_same_frames = [&trunk](const SensorTrunk& other, const std::string& whose) {
+    if (!trunk.format.SameAs(other.format) || other.photometric != nullptr) {
+      throw std::invalid_argument(
+          "GeneratorPosterior: " + whose + " works at another frame format (or is "
+          "photometric) than the generator's trunk; the frame's targets cannot serve both");
+    }
+  };
   if (knn != nullptr) {
     const SensorTrunk& knn_trunk = knn->query_trunk() != nullptr ? *knn->query_trunk() : trunk;
     if (knn->latent_dim() != knn_trunk.siren.latent_dim()) {
@@ -354,25 +363,14 @@ GeneratorPosterior::GeneratorPosterior(const SensorTrunk& trunk, const PoseGener
           std::to_string(knn->latent_dim()) + " against " +
           std::to_string(knn_trunk.siren.latent_dim()) + " values)");
     }
-    if (!trunk.format.SameAs(knn_trunk.format) || knn_trunk.photometric != nullptr) {
-      throw std::invalid_argument(
-          "GeneratorPosterior: the k-NN query trunk works at another frame format (or is "
-          "photometric) than the generator's trunk; the frame's targets cannot serve both");
-    }
+    check_same_frames(knn_trunk, "the k-NN query trunk");
   }
   const SensorTrunk& mlp_trunk = pose_mlp_trunk_ != nullptr ? *pose_mlp_trunk_ : trunk;
   if (pose_mlp != nullptr && pose_mlp->input_dim() != mlp_trunk.siren.latent_dim()) {
     throw std::invalid_argument(
         "GeneratorPosterior: the pose MLP's input_dim is not its trunk's latent_dim");
   }
-  if (pose_mlp_trunk_ != nullptr) {
-    if (!trunk.format.SameAs(pose_mlp_trunk_->format) ||
-        pose_mlp_trunk_->photometric != nullptr) {
-      throw std::invalid_argument(
-          "GeneratorPosterior: the pose MLP's trunk works at another frame format (or is "
-          "photometric) than the generator's trunk; the frame's targets cannot serve both");
-    }
-  }
+  if (pose_mlp_trunk_ != nullptr) check_same_frames(*pose_mlp_trunk_, "the pose MLP's trunk");
 }
 
 std::vector<PoseStart> GeneratorPosterior::Starts(const LatentProblem& problem,
