@@ -178,10 +178,6 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
   if (flags.mode != "latents" && flags.mode != "pixels") {
     throw UsageError("--mode: expected latents or pixels, got '" + flags.mode + "'");
   }
-  if (flags.tune_trunk < 0) {
-    throw UsageError("--tune-trunk: expected a fraction >= 0, got " +
-                     std::to_string(flags.tune_trunk));
-  }
   const bool tune = flags.tune_trunk > 0;
   if (tune && (flags.mode != "pixels" || !flags.recalibrate.empty())) {
     throw UsageError("--tune-trunk trains the trunk in the pixel stage: it needs --mode pixels "
@@ -303,7 +299,10 @@ void RunTrainGenerator(const TrainGeneratorFlags& flags) {
                                         {"pixel_epochs", pix.epochs_completed}};
       tuned_model->set_info_json(record.dump());
       tuned_model->Save(flags.out_model);
-      render_checksum = FunctaModel::Load(flags.out_model).checksum();
+      // Calibrate through the trunk as the file holds it (float32 parameters, the checksum
+      // the generator records), which is what `pose` and `eval-generator` will load.
+      *tuned_model = FunctaModel::Load(flags.out_model);
+      render_checksum = tuned_model->checksum();
       render_model = flags.out_model;
       render_trunk = &tuned_model->Trunk(SensorKind::kSoftBubble);
       std::cout << "train-generator: wrote the generator's own trunk to " << flags.out_model
