@@ -7,6 +7,9 @@
 #include <iostream>
 #include <thread>
 
+#include "CLI/CLI.hpp"
+#include "models/trunk/product_precision.h"
+
 namespace tactfunc::apps {
 
 void EmitJson(const nlohmann::json& figures) {
@@ -51,6 +54,23 @@ std::vector<std::string> SplitList(const std::string& text) {
   }
   flush();
   return items;
+}
+
+void AddProductPrecisionFlag(CLI::App* sub, std::string* value) {
+  sub->add_option("--products", *value,
+                  "Precision of the trunk's matrix products: float (default) or bf16 (operands "
+                  "rounded to bfloat16, sums in float; about twice the multiply-adds per "
+                  "second on a CPU with AVX512_BF16, at a small cost in accuracy: docs/BUILD.md)")
+      ->check(CLI::IsMember({"float", "bf16"}));
+}
+
+void ApplyProductPrecision(const std::string& value) {
+  const ProductPrecision precision = ParseProductPrecision(value);
+  if (!ProductPrecisionAvailable(precision)) {
+    throw UsageError("--products " + value +
+                     ": this CPU lacks AVX512_BF16, which bfloat16 products need; use float");
+  }
+  SetProductPrecision(precision);
 }
 
 int ResolveThreads(int requested) {

@@ -77,6 +77,13 @@ nlohmann::json NumberOrNull(double value);
 // and `missing` for NaN.
 std::string FormatFixed(double value, int digits, const char* missing = "n/a");
 
+// The --products flag of the commands that run the trunks' batched passes: "float" (the
+// default) or "bf16", the products' operands in bfloat16 with float sums
+// (models/trunk/product_precision.h). ApplyProductPrecision sets the process's precision
+// from the flag's value; on a CPU without AVX512_BF16 it throws UsageError saying so.
+void AddProductPrecisionFlag(CLI::App* sub, std::string* value);
+void ApplyProductPrecision(const std::string& value);
+
 }  // namespace tactfunc::apps
 
 #endif  // TACTFUNC_APPS_COMMAND_H_

@@ -39,6 +39,7 @@ struct EncodeFlags {
   std::string data;
   std::string out;
   int threads = 0;
+  std::string products = "float";
   int checkpoint_every = 500;
   bool resume = false;
   std::string sensors;
@@ -60,6 +61,7 @@ std::string ResumeCommand(const EncodeFlags& flags) {
   if (!flags.split.empty()) command += " --split " + flags.split;
   if (!flags.strategy.empty()) command += " --strategy " + flags.strategy;
   if (flags.threads > 0) command += " --threads " + std::to_string(flags.threads);
+  if (flags.products != "float") command += " --products " + flags.products;
   if (flags.allow_other_frames) command += " --allow-other-frames";
   if (flags.share_rest) command += " --share-rest";
   if (!flags.dataset.sensor.empty()) command += " --sensor " + flags.dataset.sensor;
@@ -112,6 +114,7 @@ void RunEncode(const EncodeFlags& flags) {
   const ProcessGroup& processes = Processes();
   // Left by an earlier run killed mid-write; rank 0 is the one process that writes.
   if (processes.rank() == 0) RemoveStaleTemporaries(flags.out);
+  ApplyProductPrecision(flags.products);
   const FunctaModel model = FunctaModel::Load(flags.model);
   const Dataset dataset = OpenDataset(flags.data, flags.dataset);
   RefuseOutputsThatAreInputs(outputs, DatasetFileInputs("--data", dataset));
@@ -270,6 +273,7 @@ void RegisterEncode(CLI::App& app, CommandBody* selected) {
   sub->add_option("--out", flags->out,
                   "Functaset file to write (.tfs); also the checkpoint of a partial run")
       ->required();
+  AddProductPrecisionFlag(sub, &flags->products);
   sub->add_option("--threads", flags->threads, "Worker threads (default: all cores)")
       ->check(CLI::Range(0, 256));
   sub->add_option("--checkpoint-every", flags->checkpoint_every,

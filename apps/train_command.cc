@@ -48,6 +48,7 @@ struct TrainFlags {
   std::string sensors;  // empty = every sensor of the dataset
   int latent_dim = 0, width = 0, layers = 0, steps = 0, batch = 0, pixels = 0;
   int threads = 0;
+  std::string products = "float";
   double learning_rate = 0;
   double omega_0 = 0;
   double lr_final_fraction = 1;
@@ -489,6 +490,7 @@ void RunTrain(const TrainFlags& flags) {
   for (SensorKind sensor : {SensorKind::kSoftBubble, SensorKind::kGelSlim}) {
     OptionsFor(flags, sensor);  // bad flags fail before the dataset is read
   }
+  ApplyProductPrecision(flags.products);
 
   const std::filesystem::path out_path(flags.out);
   const std::filesystem::path out_dir =
@@ -710,6 +712,7 @@ void RunTrain(const TrainFlags& flags) {
   if (processes.rank() != 0) return;  // rank 0 writes the model and speaks
   nlohmann::json info = {{"trainer", "tactfunc train"},
                          {"preset", flags.preset},
+                         {"products", flags.products},
                          {"data", flags.data},
                          {"trunks", info_trunks}};
   model.set_info_json(info.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
@@ -845,6 +848,7 @@ void RegisterTrain(CLI::App& app, CommandBody* selected) {
   sub->add_option("--working-size", flags->working_size,
                   "Working resolution ROWSxCOLS the frames are resized to (default: the "
                   "preset's; keep your frames' aspect ratio)");
+  AddProductPrecisionFlag(sub, &flags->products);
   sub->add_option("--threads", flags->threads, "Worker threads (default: all cores)")
       ->check(CLI::Range(0, 256));
   flags->seed_option =

@@ -17,6 +17,7 @@
 #include "estimation/data/image_io.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "models/trunk/product_precision.h"
 #include "tests/apps/cli_test_util.h"
 #include "tests/support/dataset_test_util.h"
 #include "nlohmann/json.hpp"
@@ -193,6 +194,33 @@ TEST_F(CliTest, BenchTrunkTimesTheFitAndTheMetaStepAndCountsTheirFlops) {
   const Result bad = Run("bench trunk --workloads fit,train");
   EXPECT_NE(bad.exit_code, 0);
   EXPECT_THAT(bad.err, HasSubstr("--workloads"));
+}
+
+// --products bf16 runs the same workloads with bfloat16 products where the CPU has
+// AVX512_BF16 (and says so in its output), refuses clearly where it lacks it, and any
+// other value is a usage error.
+TEST_F(CliTest, BenchTrunkRunsItsProductsInBfloat16OnRequest) {
+  const std::string base = "bench trunk --width 32 --layers 2 --latent 8 --rows 12 --cols 14 "
+                           "--steps 2 --batch 2 --pixels 20 --repeats 1 --workloads fit --json";
+  const Result as_float = Run(base);
+  ASSERT_EQ(as_float.exit_code, 0) << as_float.err;
+  EXPECT_EQ(as_float.LastJson()["products"], "float");
+  const Result bf16 = Run(base + " --products bf16");
+  if (ProductPrecisionAvailable(ProductPrecision::kBfloat16)) {
+    ASSERT_EQ(bf16.exit_code, 0) << bf16.err;
+    EXPECT_THAT(bf16.out, HasSubstr("bf16 products"));
+    const nlohmann::json j = bf16.LastJson();
+    EXPECT_EQ(j["products"], "bf16");
+    // The same frame fitted the same way, within bfloat16's error of float's PSNR.
+    EXPECT_NEAR(j["fit"]["psnr"].get<double>(), as_float.LastJson()["fit"]["psnr"].get<double>(),
+                0.5);
+  } else {
+    EXPECT_EQ(bf16.exit_code, 2);
+    EXPECT_THAT(bf16.err, HasSubstr("AVX512_BF16"));
+  }
+  const Result bad = Run(base + " --products half");
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_THAT(bad.err, HasSubstr("--products"));
 }
 
 TEST_F(CliTest, BenchPcaOnADatasetScoresThreeBasesAgainstTheNoiseFreeFrames) {

@@ -22,6 +22,7 @@
 #include <type_traits>
 
 #include "Eigen/Core"
+#include "models/trunk/product_precision.h"
 
 namespace tactfunc {
 namespace internal {
@@ -40,6 +41,17 @@ bool SmallGemm(long rows, long depth, long cols, const float* a, long a_row_stri
 // True when SmallGemm has a kernel in this build.
 bool HaveSmallGemm();
 
+// SmallGemm with A and B rounded to bfloat16 and the sums in float
+// (small_gemm_bf16.cc): the same arguments and contract; false where the CPU lacks
+// AVX512_BF16 (HaveBfloat16Gemm) or B has neither layout.
+bool SmallGemmBfloat16(long rows, long depth, long cols, const float* a, long a_row_stride,
+                       long a_col_stride, const float* b, long b_row_stride, long b_col_stride,
+                       float* c, long c_col_stride, bool accumulate,
+                       const float* row_offset = nullptr);
+
+// True when this CPU runs SmallGemmBfloat16's kernel.
+bool HaveBfloat16Gemm();
+
 namespace small_gemm_internal {
 // SmallGemm on Eigen operands where the types allow it (float, direct access, c
 // column-major, row_offset contiguous); false where the caller must use Eigen.
@@ -54,10 +66,12 @@ bool Kernel(const Eigen::MatrixBase<Lhs>& a, const Eigen::MatrixBase<Rhs>& b, Ds
                 std::is_same_v<typename Lhs::Scalar, float> &&
                 std::is_same_v<typename Rhs::Scalar, float>) {
     eigen_assert(c.rows() == a.rows() && c.cols() == b.cols() && a.cols() == b.rows());
-    return c.rowStride() == 1 &&
-           SmallGemm(a.rows(), a.cols(), b.cols(), a.derived().data(), a.rowStride(), a.colStride(),
-                     b.derived().data(), b.rowStride(), b.colStride(), c.derived().data(),
-                     c.colStride(), accumulate, row_offset);
+    if (c.rowStride() != 1) return false;
+    const auto kernel =
+        GetProductPrecision() == ProductPrecision::kBfloat16 ? &SmallGemmBfloat16 : &SmallGemm;
+    return kernel(a.rows(), a.cols(), b.cols(), a.derived().data(), a.rowStride(), a.colStride(),
+                  b.derived().data(), b.rowStride(), b.colStride(), c.derived().data(),
+                  c.colStride(), accumulate, row_offset);
   } else {
     return false;
   }

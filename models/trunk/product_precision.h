@@ -1,0 +1,41 @@
+// Copyright 2026 The tactfunc Authors.
+//
+// The precision of the trunks' batched matrix products, for the whole process.
+//
+// kFloat (the default): float operands and sums. kBfloat16: each product's operands are
+// rounded to bfloat16 (8 significant bits against float's 24) and multiplied with
+// AVX512_BF16's dot-product instruction, the sums kept in float; twice the float
+// kernel's multiply-adds per instruction, for a relative error of a product of about
+// 2^-8 / sqrt(depth) per term (docs/BUILD.md, "bfloat16 products", has what it costs
+// in speed and in PSNR). It applies to the products of the SIREN's and the photometric
+// head's batched passes (forward, reverse, Hessian-vector products, weight gradients):
+// fitting, encoding, meta-training, rendering. Parameters, latents, sines, losses and
+// optimiser states stay float or double, and double passes are untouched.
+//
+// Deterministic like the float kernel: the same inputs give the same bits on every run
+// and thread count. Set it before work starts; passes running while it changes may mix
+// the two.
+#ifndef TACTFUNC_MODELS_TRUNK_PRODUCT_PRECISION_H_
+#define TACTFUNC_MODELS_TRUNK_PRODUCT_PRECISION_H_
+
+#include <string>
+
+namespace tactfunc {
+
+enum class ProductPrecision { kFloat, kBfloat16 };
+
+// True when this CPU can run the precision (kBfloat16 needs AVX512_BF16).
+bool ProductPrecisionAvailable(ProductPrecision precision);
+
+// Sets the process's product precision. Throws std::invalid_argument, leaving it
+// unchanged, when the CPU cannot run it.
+void SetProductPrecision(ProductPrecision precision);
+ProductPrecision GetProductPrecision();
+
+// "float" / "bf16", and back (std::invalid_argument naming the accepted values).
+std::string ProductPrecisionName(ProductPrecision precision);
+ProductPrecision ParseProductPrecision(const std::string& name);
+
+}  // namespace tactfunc
+
+#endif  // TACTFUNC_MODELS_TRUNK_PRODUCT_PRECISION_H_
