@@ -11,11 +11,15 @@
 #
 # Usage: scripts/bench_peer.sh [--rounds N] [--repeats N] [--meta-repeats N]
 #                              [--sizes W:L:D,...] [--out DIR]
+#                              [--products float|bf16] [--peer-products float|bf16]
 #   --rounds        interleaved rounds (default 5)
 #   --repeats       timed fits per program run (default 10)
 #   --meta-repeats  timed meta-training steps per program run (default 3)
 #   --sizes         trunk sizes width:layers:latent (default 64:3:64,128:4:128,256:6:256)
 #   --out           keep every JSON line here (default: a temporary folder)
+#   --products      precision of tactfunc's matrix products (bench trunk --products;
+#                   default float)
+#   --peer-products precision of the peer's (bf16: torch.autocast; default: --products)
 # The frame is 70x88 (the bubble's working resolution), K = 3, and a meta-training step
 # is 32 frames x 512 random pixels (the presets' batch), float32 everywhere.
 #
@@ -34,6 +38,8 @@ repeats=10
 meta_repeats=3
 sizes="64:3:64,128:4:128,256:6:256"
 out=""
+products=float
+peer_products=""
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --rounds) rounds="$2"; shift 2 ;;
@@ -41,9 +47,19 @@ while [[ $# -gt 0 ]]; do
     --meta-repeats) meta_repeats="$2"; shift 2 ;;
     --sizes) sizes="$2"; shift 2 ;;
     --out) out="$2"; shift 2 ;;
+    --products) products="$2"; shift 2 ;;
+    --peer-products) peer_products="$2"; shift 2 ;;
     -h|--help) sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'; exit 0 ;;
     *) echo "bench_peer: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
+done
+
+peer_products="${peer_products:-$products}"
+for p in "$products" "$peer_products"; do
+  if [[ "$p" != float && "$p" != bf16 ]]; then
+    echo "bench_peer: --products / --peer-products: expected float or bf16, got '$p'" >&2
+    exit 2
+  fi
 done
 
 openblas_dir=/usr/lib/x86_64-linux-gnu/openblas-pthread
@@ -153,6 +169,7 @@ peer="scripts/peer/torch_trunk.py"
 common=(--rows 70 --cols 88 --steps 3 --batch 32 --pixels 512)
 
 echo "bench_peer: $rounds rounds; fits x $repeats, meta steps x $meta_repeats per run; sizes $sizes"
+echo "bench_peer: products: tactfunc $products, PyTorch $peer_products"
 echo "bench_peer: python $python; LD_LIBRARY_PATH=${LD_LIBRARY_PATH:-}; GLIBC_TUNABLES=$GLIBC_TUNABLES"
 echo "bench_peer: load average at the start: $(cut -d' ' -f1-3 /proc/loadavg 2>/dev/null || echo n/a)"
 IFS=',' read -r -a size_list <<<"$sizes"
@@ -168,21 +185,24 @@ for round in $(seq 1 "$rounds"); do
     shape=(--width "$width" --layers "$layers" --latent "$latent" "${common[@]}")
     echo "bench_peer: round $round/$rounds, size $size: tactfunc ..."
     "$tactfunc" bench trunk "${shape[@]}" --threads 1 --repeats "$repeats" \
-      --workloads fit --json | tail -n 1 >"$out/tactfunc_fit_${size}_$round.json"
+      --workloads fit --products "$products" --json | tail -n 1 >"$out/tactfunc_fit_${size}_$round.json"
     echo "bench_peer: round $round/$rounds, size $size: pytorch ..."
-    "$python" "$peer" fit "${shape[@]}" --threads 1 --repeats "$repeats" \
+    "$python" "$peer" fit "${shape[@]}" --threads 1 --repeats "$repeats" --products "$peer_products" \
       >"$out/pytorch_fit_${size}_$round.json"
     "$tactfunc" bench trunk "${shape[@]}" --threads 1 --repeats "$meta_repeats" \
-      --workloads meta-step --json | tail -n 1 >"$out/tactfunc_meta_${size}_$round.json"
+      --workloads meta-step --products "$products" --json | tail -n 1 \
+      >"$out/tactfunc_meta_${size}_$round.json"
     "$python" "$peer" meta-step "${shape[@]}" --threads 1 --repeats "$meta_repeats" \
+      --products "$peer_products" \
       >"$out/pytorch_meta_${size}_$round.json"
   done
 done
 
 echo "bench_peer: load average at the end: $(cut -d' ' -f1-3 /proc/loadavg 2>/dev/null || echo n/a)"
-"$python" - "$out" "$rounds" "$sizes" <<'EOF'
+"$python" - "$out" "$rounds" "$sizes" "$products" "$peer_products" <<'EOF'
 import json, statistics, sys
 out, rounds, sizes = sys.argv[1], int(sys.argv[2]), sys.argv[3].split(",")
+products, peer_products = sys.argv[4], sys.argv[5]
 def load(name):
     with open(f"{out}/{name}.json") as f:
         return json.loads(f.read().strip().splitlines()[-1])
@@ -236,6 +256,8 @@ for size in sizes:
           f"the pass at z = 0 {statistics.median(passes):.3g} ms once")
 print(f"PyTorch {torch_version}; BLAS mapped by the PyTorch process: {', '.join(sorted(blas)) or 'none found'}")
 print(f"rounds: {rounds}; ratio = PyTorch time / tactfunc time per round (each time a median over its run's repeats)")
+print(f"products: tactfunc {products}, PyTorch {peer_products}")
 print(json.dumps({"bench": "peer", "torch": torch_version, "blas": sorted(blas), "rounds": rounds,
+                  "products": products, "peer_products": peer_products,
                   "results": summary}))
 EOF

@@ -31,6 +31,12 @@ Subcommands (each prints one JSON line of medians, min and max over --repeats):
              them (aten::mm / addmm / bmm / matmul), beside the analytic count of
              reverse-mode autograd.
 
+--products bf16 runs every matrix product with its operands in bfloat16 the way a
+PyTorch user asks for it on the CPU, under torch.autocast("cpu", dtype=torch.bfloat16)
+(oneDNN's bfloat16 products where the CPU has them), with the products' results taken
+back to float32 before the sines, so that, as in tactfunc's --products bf16, only the
+products run in bfloat16.
+
 The program never imports anything outside the standard library and torch.
 """
 import argparse
@@ -70,11 +76,13 @@ class Trunk(torch.nn.Module):
             self.modulation.bias.zero_()
 
     def forward(self, coords, z):
-        shifts = self.modulation(z).unsqueeze(-2).split(self.width, dim=-1)
+        # .float() is the identity on float32 tensors; under --products bf16 it takes
+        # each product's bfloat16 result back to float32.
+        shifts = self.modulation(z).float().unsqueeze(-2).split(self.width, dim=-1)
         h = coords
         for layer, shift in zip(self.hidden, shifts):
-            h = torch.sin(OMEGA_0 * (layer(h) + shift))
-        return self.out(h)
+            h = torch.sin(OMEGA_0 * (layer(h).float() + shift))
+        return self.out(h).float()
 
 
 def grid(rows, cols):
@@ -325,6 +333,8 @@ def main():
                         help="random pixels per frame per meta-training step (0 = all)")
     parser.add_argument("--threads", type=int, default=1, help="torch.set_num_threads")
     parser.add_argument("--repeats", type=int, default=20, help="timed repetitions")
+    parser.add_argument("--products", choices=["float", "bf16"], default="float",
+                        help="precision of the matrix products (bf16: torch.autocast)")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     torch.set_num_interop_threads(1)
@@ -332,8 +342,10 @@ def main():
     out = {"impl": "pytorch", "torch": torch.__version__, "threads": torch.get_num_threads(),
            "width": args.width, "layers": args.layers, "latent": args.latent,
            "channels": args.channels, "rows": args.rows, "cols": args.cols,
-           "steps": args.steps, "batch": args.batch, "repeats": args.repeats}
-    out.update(run(args))
+           "steps": args.steps, "batch": args.batch, "repeats": args.repeats,
+           "products": args.products}
+    with torch.autocast("cpu", dtype=torch.bfloat16, enabled=args.products == "bf16"):
+        out.update(run(args))
     out["blas"] = blas_libraries()
     print(json.dumps(out))
     return 0
