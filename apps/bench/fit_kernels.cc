@@ -28,6 +28,7 @@
 #include "models/trunk/functa_model.h"
 #include "models/trunk/internal/fast_sincos.h"
 #include "models/trunk/internal/small_gemm.h"
+#include "models/trunk/product_precision.h"
 
 namespace tactfunc::apps::bench {
 namespace {
@@ -212,6 +213,17 @@ void RegisterKernelBenchmarks(const std::shared_ptr<KernelSetup>& s) {
   })->Unit(benchmark::kMillisecond);
 }
 
+// The products' precision for one benchmark's run (bfloat16 when asked), float after.
+class ScopedBenchPrecision {
+ public:
+  explicit ScopedBenchPrecision(bool bf16) {
+    if (bf16) SetProductPrecision(ProductPrecision::kBfloat16);
+  }
+  ~ScopedBenchPrecision() { SetProductPrecision(ProductPrecision::kFloat); }
+  ScopedBenchPrecision(const ScopedBenchPrecision&) = delete;
+  ScopedBenchPrecision& operator=(const ScopedBenchPrecision&) = delete;
+};
+
 void RegisterGemmBenchmark() {
   benchmark::RegisterBenchmark("eigen/gemm_float/4096x256x256", [](benchmark::State& state) {
     const Eigen::MatrixXf a = Eigen::MatrixXf::Random(4096, 256),
@@ -227,11 +239,13 @@ void RegisterGemmBenchmark() {
   // A layer's product in the passes, W (width x width) times 256 pixels' activations (two
   // of the passes' blocks of 128), by Eigen and by the passes' kernel (internal::Product);
   // and the reference product by the kernel.
-  auto product = [](const char* name, long rows, long depth, bool kernel) {
+  // bf16: the kernel with ProductPrecision::kBfloat16 (registered where the CPU has it).
+  auto product = [](const char* name, long rows, long depth, bool kernel, bool bf16 = false) {
     benchmark::RegisterBenchmark(name, [=](benchmark::State& state) {
       const Eigen::MatrixXf a = Eigen::MatrixXf::Random(rows, depth),
                             b = Eigen::MatrixXf::Random(depth, 256);
       Eigen::MatrixXf c(rows, 256);
+      const ScopedBenchPrecision precision(bf16);
       for (auto _ : state) {
         if (kernel) {
           internal::Product(a, b, c, /*accumulate=*/false);
@@ -247,11 +261,12 @@ void RegisterGemmBenchmark() {
   // A layer's weight gradient from 256 pixels, dW (width x width) += delta (width x 256)
   // times h^T: the right-hand side is the activations read transposed (row-major), the
   // depth is the pixels.
-  auto weight_gradient = [](const char* name, long width, bool kernel) {
+  auto weight_gradient = [](const char* name, long width, bool kernel, bool bf16 = false) {
     benchmark::RegisterBenchmark(name, [=](benchmark::State& state) {
       const Eigen::MatrixXf delta = Eigen::MatrixXf::Random(width, 256),
                             h = Eigen::MatrixXf::Random(width, 256);
       Eigen::MatrixXf dW = Eigen::MatrixXf::Zero(width, width);
+      const ScopedBenchPrecision precision(bf16);
       for (auto _ : state) {
         if (kernel) {
           internal::Product(delta, h.transpose(), dW, /*accumulate=*/true);
@@ -264,14 +279,21 @@ void RegisterGemmBenchmark() {
                                                     benchmark::Counter::kIsIterationInvariantRate);
     })->Unit(benchmark::kMicrosecond);
   };
+  const bool bf16 = ProductPrecisionAvailable(ProductPrecision::kBfloat16);
   product("kernel/gemm_float/4096x256x256", 4096, 256, true);
+  if (bf16) product("kernel_bf16/gemm/4096x256x256", 4096, 256, true, true);
   for (const long width : {64L, 128L, 256L}) {
     const std::string shape = std::to_string(width) + "x" + std::to_string(width) + "x256";
     product(("eigen/layer_product/" + shape).c_str(), width, width, false);
     product(("kernel/layer_product/" + shape).c_str(), width, width, true);
+    if (bf16) product(("kernel_bf16/layer_product/" + shape).c_str(), width, width, true, true);
     const std::string gradient_shape = std::to_string(width) + "x256x" + std::to_string(width);
     weight_gradient(("eigen/weight_gradient/" + gradient_shape).c_str(), width, false);
     weight_gradient(("kernel/weight_gradient/" + gradient_shape).c_str(), width, true);
+    if (bf16) {
+      weight_gradient(("kernel_bf16/weight_gradient/" + gradient_shape).c_str(), width, true,
+                      true);
+    }
   }
 }
 

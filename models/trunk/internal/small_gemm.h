@@ -52,6 +52,13 @@ bool SmallGemmBfloat16(long rows, long depth, long cols, const float* a, long a_
 // True when this CPU runs SmallGemmBfloat16's kernel.
 bool HaveBfloat16Gemm();
 
+// Under ProductPrecision::kBfloat16, products with fewer inner terms or columns than this
+// stay float: they gain nothing from pairs of terms, and they are the products whose
+// operands are pixel coordinates (a first layer's, depth 2, and its weight gradient, 2
+// columns), which bfloat16 would move by up to 2^-9 of their value (a sixth of a pixel
+// across 88 columns), and the output layer's few channels.
+inline constexpr long kMinBfloat16Extent = 16;
+
 namespace small_gemm_internal {
 // SmallGemm on Eigen operands where the types allow it (float, direct access, c
 // column-major, row_offset contiguous); false where the caller must use Eigen.
@@ -67,8 +74,10 @@ bool Kernel(const Eigen::MatrixBase<Lhs>& a, const Eigen::MatrixBase<Rhs>& b, Ds
                 std::is_same_v<typename Rhs::Scalar, float>) {
     eigen_assert(c.rows() == a.rows() && c.cols() == b.cols() && a.cols() == b.rows());
     if (c.rowStride() != 1) return false;
-    const auto kernel =
-        GetProductPrecision() == ProductPrecision::kBfloat16 ? &SmallGemmBfloat16 : &SmallGemm;
+    const auto kernel = GetProductPrecision() == ProductPrecision::kBfloat16 &&
+                                a.cols() >= kMinBfloat16Extent && b.cols() >= kMinBfloat16Extent
+                            ? &SmallGemmBfloat16
+                            : &SmallGemm;
     return kernel(a.rows(), a.cols(), b.cols(), a.derived().data(), a.rowStride(), a.colStride(),
                   b.derived().data(), b.rowStride(), b.colStride(), c.derived().data(),
                   c.colStride(), accumulate, row_offset);
