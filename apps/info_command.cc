@@ -99,7 +99,11 @@ nlohmann::json DescribeModel(const std::string& bytes, const std::string& path) 
   const nlohmann::json info = nlohmann::json::parse(model.info_json());
   const nlohmann::json trunks_info = ObjectAt(info, "trunks");
   const std::string preset = StringAt(info, "preset");
-  std::cout << "  preset " << preset << "\n";
+  // Files written before `train --products` existed were trained in float.
+  const std::string products =
+      StringAt(info, "products") == "?" ? "float" : StringAt(info, "products");
+  std::cout << "  preset " << preset
+            << (products == "float" ? "" : ", trained with " + products + " products") << "\n";
   nlohmann::json trunks = nlohmann::json::object();
   for (SensorKind sensor : model.sensors()) {
     const SensorTrunk& t = model.Trunk(sensor);
@@ -198,7 +202,10 @@ nlohmann::json DescribeModel(const std::string& bytes, const std::string& path) 
     trunk["train_psnr"] = NumberOrNull(psnr);
     trunks[ToString(sensor)] = trunk;
   }
-  return {{"trunks", trunks}, {"parameter_bytes", model.ParameterBytes()}, {"preset", preset}};
+  return {{"trunks", trunks},
+          {"parameter_bytes", model.ParameterBytes()},
+          {"preset", preset},
+          {"products", products}};
 }
 
 // A functaset: per sensor the latent size, the entries per split and their mean PSNR.

@@ -29,6 +29,7 @@
 #include "models/pose/pose_mlp.h"
 #include "models/pose/pose_model_provenance.h"
 #include "models/trunk/functa_model.h"
+#include "models/trunk/product_precision.h"
 #include "nlohmann/json.hpp"
 #include "tests/apps/cli_test_util.h"
 
@@ -37,6 +38,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using ::testing::HasSubstr;
+using ::testing::Not;
 using Result = testing_util::CliResult;
 
 class TrainCliTest : public ::testing::Test {
@@ -96,6 +98,29 @@ TEST_F(TrainCliTest, TheInnerLoopKnobsReachTheModelAndEncodeUsesIt) {
   const Result encode = Run("encode --model " + Root("m.tfm") + " --data " + Root("d") +
                             " --out " + Root("f.tfs") + " --threads 1 --json");
   EXPECT_EQ(encode.exit_code, 0) << encode.err;
+}
+
+// --products bf16 (where the CPU has AVX512_BF16) trains and encodes with bfloat16
+// products, and the model says so: `info` names them, its JSON carries "products"
+// (a float model's reads "float").
+TEST_F(TrainCliTest, AModelTrainedWithBfloat16ProductsSaysSo) {
+  if (!ProductPrecisionAvailable(ProductPrecision::kBfloat16)) {
+    GTEST_SKIP() << "this CPU lacks AVX512_BF16";
+  }
+  const Result train = Run("train --data " + Root("d") + " --out " + Root("bf16.tfm") +
+                           " --preset tiny --steps 3 --seed 2 --products bf16");
+  ASSERT_EQ(train.exit_code, 0) << train.err;
+  const Result info = Run("info " + Root("bf16.tfm"));
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  EXPECT_THAT(info.out, HasSubstr("trained with bf16 products"));
+  EXPECT_EQ(Run("info " + Root("bf16.tfm") + " --json").LastJson()["model"]["products"], "bf16");
+  const Result encode = Run("encode --model " + Root("bf16.tfm") + " --data " + Root("d") +
+                            " --out " + Root("bf16.tfs") + " --threads 1 --products bf16");
+  EXPECT_EQ(encode.exit_code, 0) << encode.err;
+  TrainAndEncode("plain");
+  const Result float_info = Run("info " + Root("plain.tfm") + " --json");
+  EXPECT_EQ(float_info.LastJson()["model"]["products"], "float");
+  EXPECT_THAT(Run("info " + Root("plain.tfm")).out, Not(HasSubstr("products")));
 }
 
 
