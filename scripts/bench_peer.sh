@@ -21,7 +21,8 @@
 #                   default float)
 #   --peer-products precision of the peer's (bf16: torch.autocast; default: --products)
 # The frame is 70x88 (the bubble's working resolution), K = 3, and a meta-training step
-# is 32 frames x 512 random pixels (the presets' batch), float32 everywhere.
+# is 32 frames x 512 random pixels (the presets' batch), float32 everywhere but the
+# products under --products / --peer-products bf16.
 #
 # PyTorch is not a dependency of tactfunc: without an importable torch this prints how
 # to install it and exits 0 ("skipped"). Debian: apt-get install -y python3-torch, and
