@@ -8,6 +8,8 @@
 
 #if defined(__AVX512F__)
 #include <immintrin.h>
+
+#include "models/trunk/internal/small_gemm_tile.h"
 #endif
 
 namespace tactfunc {
@@ -16,8 +18,7 @@ namespace internal {
 #if defined(__AVX512F__)
 namespace {
 
-constexpr int kTileColumns = 6;  // 4 x 6 accumulators + 4 columns of A + a broadcast
-constexpr long kStripRows = 64;  // 4 registers of 16 floats
+using small_gemm_tile::kTileColumns;
 
 // One tile: C's rows [0, 16 RZ) (the last register masked by `last`) x NC columns,
 // A column-major with leading dimension lda; B's value (k, j) at b[k + j * ldb]
@@ -32,16 +33,7 @@ template <int RZ, int NC, bool kBRows>
 void Tile(long depth, const float* a, long lda, const float* b, long ldb, float* c, long ldc,
           __mmask16 last, bool accumulate, const float* offset) {
   __m512 acc[RZ][NC];
-#pragma GCC unroll 8
-  for (int j = 0; j < NC; ++j) {
-    const float* start = accumulate ? c + j * ldc : offset;
-#pragma GCC unroll 8
-    for (int i = 0; i < RZ; ++i) {
-      acc[i][j] = start == nullptr ? _mm512_setzero_ps()
-                  : i < RZ - 1     ? _mm512_loadu_ps(start + 16 * i)
-                                   : _mm512_maskz_loadu_ps(last, start + 16 * i);
-    }
-  }
+  small_gemm_tile::StartSums<RZ, NC>(acc, c, ldc, last, accumulate, offset);
   const float* b_column[NC];
 #pragma GCC unroll 8
   for (int j = 0; j < NC; ++j) b_column[j] = kBRows ? b + j : b + j * ldb;
@@ -62,17 +54,7 @@ void Tile(long depth, const float* a, long lda, const float* b, long ldb, float*
       for (int i = 0; i < RZ; ++i) acc[i][j] = _mm512_fmadd_ps(column[i], value, acc[i][j]);
     }
   }
-#pragma GCC unroll 8
-  for (int j = 0; j < NC; ++j) {
-#pragma GCC unroll 8
-    for (int i = 0; i < RZ; ++i) {
-      if (i < RZ - 1) {
-        _mm512_storeu_ps(c + j * ldc + 16 * i, acc[i][j]);
-      } else {
-        _mm512_mask_storeu_ps(c + j * ldc + 16 * i, last, acc[i][j]);
-      }
-    }
-  }
+  small_gemm_tile::StoreSums<RZ, NC>(acc, c, ldc, last);
 }
 
 using TileFunction = void (*)(long, const float*, long, const float*, long, float*, long, __mmask16,
@@ -129,26 +111,14 @@ bool SmallGemm(long rows, long depth, long cols, const float* a, long a_row_stri
   const bool b_rows = b_row_stride != 1;
   const long ldb = b_rows ? b_row_stride : b_col_stride;
   const TileTable& tiles = kTiles[b_rows ? 1 : 0];
-  for (long r0 = 0; r0 < rows; r0 += kStripRows) {
-    const long strip = std::min(kStripRows, rows - r0);
-    const int registers = static_cast<int>((strip + 15) / 16);
-    const int tail = static_cast<int>(strip % 16);
-    const __mmask16 last = tail == 0 ? __mmask16(0xFFFF) : __mmask16((1u << tail) - 1);
-    // The columns in as few tiles as kTileColumns allows, their widths differing by at
-    // most one: a block of 128 pixels as 18 tiles of 6 and 4 of 5, not 21 of 6 and one of
-    // 2 (whose 8 multiply-adds per 6 loads showed as 1.5 % of a width-256 meta-training
-    // step's profile; the step's time did not move measurably, 1355 / 1362 ms).
-    const long num_tiles = (cols + kTileColumns - 1) / kTileColumns;
-    const long base = cols / num_tiles, wider = cols % num_tiles;  // `wider` tiles of base + 1
-    for (long t = 0, j0 = 0; t < num_tiles; ++t) {
-      const int width = static_cast<int>(base + (t < wider ? 1 : 0));
-      const float* b_tile = b_rows ? b + j0 : b + j0 * ldb;
-      tiles[registers - 1][width - 1](depth, a + r0, lda, b_tile, ldb, c + r0 + j0 * c_col_stride,
-                                      c_col_stride, last, accumulate,
-                                      row_offset == nullptr ? nullptr : row_offset + r0);
-      j0 += width;
-    }
-  }
+  small_gemm_tile::ForEachTile(
+      rows, cols, [&](long r0, int registers, __mmask16 last, long j0, int width) {
+        const float* b_tile = b_rows ? b + j0 : b + j0 * ldb;
+        tiles[registers - 1][width - 1](depth, a + r0, lda, b_tile, ldb,
+                                        c + r0 + j0 * c_col_stride, c_col_stride, last,
+                                        accumulate,
+                                        row_offset == nullptr ? nullptr : row_offset + r0);
+      });
   return true;
 }
 

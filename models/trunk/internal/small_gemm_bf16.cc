@@ -21,6 +21,8 @@
 
 #if defined(__x86_64__) && defined(__GNUC__)
 #include <immintrin.h>
+
+#include "models/trunk/internal/small_gemm_tile.h"
 #define TACTFUNC_BF16_KERNEL 1
 #define TACTFUNC_BF16_TARGET __attribute__((target("avx512f,avx512bw,avx512vl,avx512bf16")))
 #endif
@@ -31,8 +33,7 @@ namespace internal {
 #if defined(TACTFUNC_BF16_KERNEL)
 namespace {
 
-constexpr int kTileColumns = 6;
-constexpr long kStripRows = 64;
+using small_gemm_tile::kTileColumns;
 
 // Rounds 16 floats of x and 16 of y to bfloat16 (nearest, ties to even, as the hardware
 // rounds) and interleaves them: 32-bit lane i holds x[i] in its low half and y[i] in its
@@ -46,6 +47,19 @@ TACTFUNC_BF16_TARGET inline __m512i Interleave(__m512 x, __m512 y) {
   return _mm512_permutexvar_epi16(index, both);
 }
 
+// Two contiguous runs of n values, x and y (null: zeros), as n_padded pairs at out (a
+// multiple of 16; the pairs beyond n are zero): out[i] = (x[i], y[i]).
+TACTFUNC_BF16_TARGET void InterleaveRows(const float* x, const float* y, long n, long n_padded,
+                                         uint32_t* out) {
+  for (long i = 0; i < n_padded; i += 16) {
+    const long count = std::min<long>(16, std::max<long>(0, n - i));
+    const __mmask16 m = count == 16 ? __mmask16(0xFFFF) : __mmask16((1u << count) - 1);
+    const __m512 vx = _mm512_maskz_loadu_ps(m, x + i);
+    const __m512 vy = y == nullptr ? _mm512_setzero_ps() : _mm512_maskz_loadu_ps(m, y + i);
+    _mm512_storeu_si512(out + i, Interleave(vx, vy));
+  }
+}
+
 // A (rows x depth, a[i * rs + k * cs]) as pairs: p[kp * rows_padded + i] = (A(i, 2 kp),
 // A(i, 2 kp + 1)), rows padded with zeros to a multiple of 16, an odd depth's last pair
 // completed with a zero.
@@ -54,15 +68,8 @@ TACTFUNC_BF16_TARGET void PackA(long rows, long depth, const float* a, long rs, 
   const long pairs = (depth + 1) / 2;
   if (rs == 1) {
     for (long kp = 0; kp < pairs; ++kp) {
-      const float* x = a + (2 * kp) * cs;
-      const float* y = 2 * kp + 1 < depth ? a + (2 * kp + 1) * cs : nullptr;
-      for (long i = 0; i < rows_padded; i += 16) {
-        const long n = std::min<long>(16, std::max<long>(0, rows - i));
-        const __mmask16 m = n == 16 ? __mmask16(0xFFFF) : __mmask16((1u << n) - 1);
-        const __m512 vx = _mm512_maskz_loadu_ps(m, x + i);
-        const __m512 vy = y == nullptr ? _mm512_setzero_ps() : _mm512_maskz_loadu_ps(m, y + i);
-        _mm512_storeu_si512(p + kp * rows_padded + i, Interleave(vx, vy));
-      }
+      InterleaveRows(a + (2 * kp) * cs, 2 * kp + 1 < depth ? a + (2 * kp + 1) * cs : nullptr,
+                     rows, rows_padded, p + kp * rows_padded);
     }
     return;
   }
@@ -106,15 +113,8 @@ TACTFUNC_BF16_TARGET void PackB(long depth, long cols, const float* b, long ldb,
     return;
   }
   for (long kp = 0; kp < pairs; ++kp) {
-    const float* x = b + (2 * kp) * ldb;
-    const float* y = 2 * kp + 1 < depth ? b + (2 * kp + 1) * ldb : nullptr;
-    for (long j = 0; j < cols16; j += 16) {
-      const long n = std::min<long>(16, std::max<long>(0, cols - j));
-      const __mmask16 m = n == 16 ? __mmask16(0xFFFF) : __mmask16((1u << n) - 1);
-      const __m512 vx = _mm512_maskz_loadu_ps(m, x + j);
-      const __m512 vy = y == nullptr ? _mm512_setzero_ps() : _mm512_maskz_loadu_ps(m, y + j);
-      _mm512_storeu_si512(p + kp * cols16 + j, Interleave(vx, vy));
-    }
+    InterleaveRows(b + (2 * kp) * ldb, 2 * kp + 1 < depth ? b + (2 * kp + 1) * ldb : nullptr,
+                   cols, cols16, p + kp * cols16);
   }
 }
 
@@ -126,16 +126,7 @@ TACTFUNC_BF16_TARGET void Tile(long pairs, const uint32_t* a, long lda, const ui
                                long b_col, long b_pair, float* c, long ldc, __mmask16 last,
                                bool accumulate, const float* offset) {
   __m512 acc[RZ][NC];
-#pragma GCC unroll 8
-  for (int j = 0; j < NC; ++j) {
-    const float* start = accumulate ? c + j * ldc : offset;
-#pragma GCC unroll 8
-    for (int i = 0; i < RZ; ++i) {
-      acc[i][j] = start == nullptr ? _mm512_setzero_ps()
-                  : i < RZ - 1     ? _mm512_loadu_ps(start + 16 * i)
-                                   : _mm512_maskz_loadu_ps(last, start + 16 * i);
-    }
-  }
+  small_gemm_tile::StartSums<RZ, NC>(acc, c, ldc, last, accumulate, offset);
   const uint32_t* b_column[NC];
 #pragma GCC unroll 8
   for (int j = 0; j < NC; ++j) b_column[j] = b + j * b_col;
@@ -155,17 +146,7 @@ TACTFUNC_BF16_TARGET void Tile(long pairs, const uint32_t* a, long lda, const ui
       for (int i = 0; i < RZ; ++i) acc[i][j] = _mm512_dpbf16_ps(acc[i][j], column[i], value);
     }
   }
-#pragma GCC unroll 8
-  for (int j = 0; j < NC; ++j) {
-#pragma GCC unroll 8
-    for (int i = 0; i < RZ; ++i) {
-      if (i < RZ - 1) {
-        _mm512_storeu_ps(c + j * ldc + 16 * i, acc[i][j]);
-      } else {
-        _mm512_mask_storeu_ps(c + j * ldc + 16 * i, last, acc[i][j]);
-      }
-    }
-  }
+  small_gemm_tile::StoreSums<RZ, NC>(acc, c, ldc, last);
 }
 
 using TileFunction = void (*)(long, const uint32_t*, long, const uint32_t*, long, long, float*,
@@ -212,22 +193,14 @@ bool SmallGemmBfloat16(long rows, long depth, long cols, const float* a, long a_
         packed_b.data());
   const long b_col = b_rows ? 1 : pairs;
   const long b_pair = b_rows ? cols16 : 1;
-  for (long r0 = 0; r0 < rows; r0 += kStripRows) {
-    const long strip = std::min(kStripRows, rows - r0);
-    const int registers = static_cast<int>((strip + 15) / 16);
-    const int tail = static_cast<int>(strip % 16);
-    const __mmask16 last = tail == 0 ? __mmask16(0xFFFF) : __mmask16((1u << tail) - 1);
-    const long num_tiles = (cols + kTileColumns - 1) / kTileColumns;
-    const long base = cols / num_tiles, wider = cols % num_tiles;
-    for (long t = 0, j0 = 0; t < num_tiles; ++t) {
-      const int width = static_cast<int>(base + (t < wider ? 1 : 0));
-      kTiles[registers - 1][width - 1](pairs, packed_a.data() + r0, rows_padded,
-                                       packed_b.data() + j0 * b_col, b_col, b_pair,
-                                       c + r0 + j0 * c_col_stride, c_col_stride, last, accumulate,
-                                       row_offset == nullptr ? nullptr : row_offset + r0);
-      j0 += width;
-    }
-  }
+  small_gemm_tile::ForEachTile(
+      rows, cols, [&](long r0, int registers, __mmask16 last, long j0, int width) {
+        kTiles[registers - 1][width - 1](pairs, packed_a.data() + r0, rows_padded,
+                                         packed_b.data() + j0 * b_col, b_col, b_pair,
+                                         c + r0 + j0 * c_col_stride, c_col_stride, last,
+                                         accumulate,
+                                         row_offset == nullptr ? nullptr : row_offset + r0);
+      });
   return true;
 }
 

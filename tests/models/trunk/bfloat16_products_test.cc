@@ -15,12 +15,17 @@
 #include "models/trunk/internal/small_gemm.h"
 #include "models/trunk/latent_modulated_siren.h"
 #include "models/trunk/product_precision.h"
+#include "tests/support/gemm_test_cases.h"
 
 namespace tactfunc {
 namespace {
 
 using Eigen::MatrixXd;
 using Eigen::MatrixXf;
+using testing_util::ForEachGemmCase;
+using testing_util::GemmCase;
+using testing_util::GemmShape;
+using testing_util::Numbers;
 
 // Sets a precision for one scope and puts float back at its end.
 class ScopedPrecision {
@@ -28,18 +33,6 @@ class ScopedPrecision {
   explicit ScopedPrecision(ProductPrecision p) { SetProductPrecision(p); }
   ~ScopedPrecision() { SetProductPrecision(ProductPrecision::kFloat); }
 };
-
-MatrixXf Numbers(long rows, long cols, unsigned seed) {
-  MatrixXf m(rows, cols);
-  unsigned state = seed * 2654435761u + 12345u;
-  for (long j = 0; j < cols; ++j) {
-    for (long i = 0; i < rows; ++i) {
-      state = state * 1664525u + 1013904223u;
-      m(i, j) = static_cast<float>(state >> 8) / static_cast<float>(1u << 23) - 1.0f;
-    }
-  }
-  return m;
-}
 
 // Round to nearest bfloat16, ties to even (finite values), written from the format's
 // definition: keep the top 16 bits of the float.
@@ -57,71 +50,50 @@ MatrixXd Rounded(const MatrixXf& m) {
   return m.cast<double>().unaryExpr([](double x) { return Bfloat16(static_cast<float>(x)); });
 }
 
-struct Shape {
-  long rows, depth, cols;
-};
-
 TEST(Bfloat16Products, AreTheDoubleProductOfTheRoundedOperandsOverShapesAndLayouts) {
   if (!internal::HaveBfloat16Gemm()) GTEST_SKIP() << "this CPU lacks AVX512_BF16";
   // The kernel itself, on every shape (internal::Product sends it only products of 16
-  // or more inner terms and columns), operands and result blocks of larger matrices.
-  const Shape shapes[] = {{1, 1, 1},      {5, 3, 7},       {16, 64, 6},   {17, 2, 128},
-                          {48, 65, 13},   {64, 64, 128},   {65, 7, 5},    {100, 33, 12},
-                          {130, 128, 19}, {256, 256, 128}, {64, 128, 64}, {33, 0, 8}};
+  // or more inner terms and columns).
   unsigned seed = 1;
-  for (const Shape& s : shapes) {
-    for (const bool transpose_a : {false, true}) {
-      for (const bool transpose_b : {false, true}) {
-        for (const bool accumulate : {false, true}) {
-          const std::string what = std::to_string(s.rows) + "x" + std::to_string(s.depth) + "x" +
-                                   std::to_string(s.cols) + (transpose_a ? " A^T" : "") +
-                                   (transpose_b ? " B^T" : "") + (accumulate ? " +=" : " =");
-          // A stored as A or as A^T, B as B or B^T, each a block at (1, 2) of a larger
-          // matrix, so that no stride equals the block's size.
-          const MatrixXf a_store = transpose_a ? Numbers(s.depth + 3, s.rows + 2, seed++)
-                                               : Numbers(s.rows + 3, s.depth + 2, seed++);
-          const MatrixXf b_store = transpose_b ? Numbers(s.cols + 1, s.depth + 4, seed++)
-                                               : Numbers(s.depth + 1, s.cols + 4, seed++);
-          MatrixXf c_store = Numbers(s.rows + 5, s.cols + 2, seed++);
-          const MatrixXf c_before = c_store;
-          const float* a0 = &a_store(1, 2);
-          const float* b0 = &b_store(1, 3);
-          const long lda = a_store.rows(), ldb = b_store.rows();
-          const MatrixXf a = transpose_a
-                                 ? MatrixXf(a_store.block(1, 2, s.depth, s.rows).transpose())
-                                 : MatrixXf(a_store.block(1, 2, s.rows, s.depth));
-          const MatrixXf b = transpose_b
-                                 ? MatrixXf(b_store.block(1, 3, s.cols, s.depth).transpose())
-                                 : MatrixXf(b_store.block(1, 3, s.depth, s.cols));
-          ASSERT_TRUE(internal::SmallGemmBfloat16(
-              s.rows, s.depth, s.cols, a0, transpose_a ? lda : 1, transpose_a ? 1 : lda, b0,
-              transpose_b ? ldb : 1, transpose_b ? 1 : ldb, &c_store(2, 1), c_store.rows(),
-              accumulate))
-              << what;
-          const MatrixXd ra = Rounded(a), rb = Rounded(b);
-          MatrixXd want = ra * rb;
-          MatrixXd magnitude = ra.cwiseAbs() * rb.cwiseAbs();
-          if (accumulate) {
-            want += c_before.block(2, 1, s.rows, s.cols).cast<double>();
-            magnitude += c_before.block(2, 1, s.rows, s.cols).cast<double>().cwiseAbs();
-          }
-          // The products of bfloat16 values are exact in float; what remains is the
-          // float rounding of the sums.
-          const double eps = 1.2e-7;
-          for (long j = 0; j < s.cols; ++j) {
-            for (long i = 0; i < s.rows; ++i) {
-              ASSERT_LE(std::abs(c_store(2 + i, 1 + j) - want(i, j)),
-                        (s.depth + 2) * eps * magnitude(i, j) + 1e-30)
-                  << what << " at (" << i << ", " << j << ")";
-            }
-          }
-          MatrixXf outside = c_store;
-          outside.block(2, 1, s.rows, s.cols) = c_before.block(2, 1, s.rows, s.cols);
-          ASSERT_EQ(outside, c_before) << what;
+  ForEachGemmCase(
+      {{1, 1, 1},
+       {5, 3, 7},
+       {16, 64, 6},
+       {17, 2, 128},
+       {48, 65, 13},
+       {64, 64, 128},
+       {65, 7, 5},
+       {100, 33, 12},
+       {130, 128, 19},
+       {256, 256, 128},
+       {64, 128, 64},
+       {33, 0, 8}},
+      &seed, [](GemmCase& g) {
+        const GemmShape& s = g.shape;
+        ASSERT_TRUE(internal::SmallGemmBfloat16(
+            s.rows, s.depth, s.cols, g.a(), g.a_row_stride(), g.a_col_stride(), g.b(),
+            g.b_row_stride(), g.b_col_stride(), g.c(), g.c_col_stride(), g.accumulate))
+            << g.what;
+        const MatrixXd ra = Rounded(g.A()), rb = Rounded(g.B());
+        MatrixXd want = ra * rb;
+        MatrixXd magnitude = ra.cwiseAbs() * rb.cwiseAbs();
+        if (g.accumulate) {
+          want += g.CBefore();
+          magnitude += g.CBefore().cwiseAbs();
         }
-      }
-    }
-  }
+        // The products of bfloat16 values are exact in float; what remains is the
+        // float rounding of the sums.
+        const double eps = 1.2e-7;
+        const auto c = g.c_block();
+        for (long j = 0; j < s.cols; ++j) {
+          for (long i = 0; i < s.rows; ++i) {
+            ASSERT_LE(std::abs(c(i, j) - want(i, j)),
+                      (s.depth + 2) * eps * magnitude(i, j) + 1e-30)
+                << g.what << " at (" << i << ", " << j << ")";
+          }
+        }
+        ASSERT_TRUE(g.OnlyCChanged()) << g.what;
+      });
 }
 
 TEST(Bfloat16Products, LeaveShortProductsSuchAsTheCoordinatesOnesInFloat) {

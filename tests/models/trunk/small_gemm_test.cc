@@ -9,25 +9,17 @@
 #include <string>
 
 #include "gtest/gtest.h"
+#include "tests/support/gemm_test_cases.h"
 
 namespace tactfunc {
 namespace {
 
 using Eigen::MatrixXd;
 using Eigen::MatrixXf;
-
-// Deterministic values in [-1, 1) (a linear congruential sequence).
-MatrixXf Numbers(long rows, long cols, unsigned seed) {
-  MatrixXf m(rows, cols);
-  unsigned state = seed * 2654435761u + 12345u;
-  for (long j = 0; j < cols; ++j) {
-    for (long i = 0; i < rows; ++i) {
-      state = state * 1664525u + 1013904223u;
-      m(i, j) = static_cast<float>(state >> 8) / static_cast<float>(1u << 23) - 1.0f;
-    }
-  }
-  return m;
-}
+using testing_util::ForEachGemmCase;
+using testing_util::GemmCase;
+using testing_util::GemmShape;
+using testing_util::Numbers;
 
 // Within float rounding of the double product: each value's error is bounded by
 // depth * eps * sum_k |a_ik b_kj| (a sum in order, one rounding per multiply-add).
@@ -45,66 +37,45 @@ void ExpectClose(const MatrixXf& got, const MatrixXd& want, const MatrixXd& magn
   }
 }
 
-struct Shape {
-  long rows, depth, cols;
-};
-
 TEST(SmallGemm, MatchesADoubleProductOverShapesTransposesAndBlocks) {
-  const Shape shapes[] = {{1, 1, 1},       {5, 3, 7},      {16, 64, 6},    {17, 2, 256},
-                          {48, 64, 13},    {64, 64, 256},  {65, 7, 5},     {100, 33, 12},
-                          {128, 128, 256}, {130, 256, 19}, {256, 256, 64}, {64, 256, 64},
-                          {64, 32, 128},   {33, 16, 8},    {64, 0, 9}};
   unsigned seed = 1;
-  for (const Shape& s : shapes) {
-    for (const bool transpose_a : {false, true}) {
-      for (const bool transpose_b : {false, true}) {
-        for (const bool accumulate : {false, true}) {
-          const std::string what = std::to_string(s.rows) + "x" + std::to_string(s.depth) + "x" +
-                                   std::to_string(s.cols) + (transpose_a ? " A^T" : "") +
-                                   (transpose_b ? " B^T" : "") + (accumulate ? " +=" : " =");
-          // Operands stored as blocks of larger matrices, so that every stride differs
-          // from the block's own size.
-          const MatrixXf a_store = transpose_a ? Numbers(s.depth + 3, s.rows + 2, seed++)
-                                               : Numbers(s.rows + 3, s.depth + 2, seed++);
-          const MatrixXf b_store = transpose_b ? Numbers(s.cols + 1, s.depth + 4, seed++)
-                                               : Numbers(s.depth + 1, s.cols + 4, seed++);
-          MatrixXf c_store = Numbers(s.rows + 5, s.cols + 2, seed++);
-          const MatrixXf c_before = c_store;
-          const MatrixXf a = transpose_a
-                                 ? MatrixXf(a_store.block(1, 2, s.depth, s.rows).transpose())
-                                 : MatrixXf(a_store.block(1, 2, s.rows, s.depth));
-          const MatrixXf b = transpose_b
-                                 ? MatrixXf(b_store.block(1, 3, s.cols, s.depth).transpose())
-                                 : MatrixXf(b_store.block(1, 3, s.depth, s.cols));
-          auto c = c_store.block(2, 1, s.rows, s.cols);
-          if (transpose_a && transpose_b) {
-            internal::Product(a_store.block(1, 2, s.depth, s.rows).transpose(),
-                              b_store.block(1, 3, s.cols, s.depth).transpose(), c, accumulate);
-          } else if (transpose_a) {
-            internal::Product(a_store.block(1, 2, s.depth, s.rows).transpose(),
-                              b_store.block(1, 3, s.depth, s.cols), c, accumulate);
-          } else if (transpose_b) {
-            internal::Product(a_store.block(1, 2, s.rows, s.depth),
-                              b_store.block(1, 3, s.cols, s.depth).transpose(), c, accumulate);
-          } else {
-            internal::Product(a_store.block(1, 2, s.rows, s.depth),
-                              b_store.block(1, 3, s.depth, s.cols), c, accumulate);
-          }
-          MatrixXd want = a.cast<double>() * b.cast<double>();
-          MatrixXd magnitude = a.cast<double>().cwiseAbs() * b.cast<double>().cwiseAbs();
-          if (accumulate) {
-            want += c_before.block(2, 1, s.rows, s.cols).cast<double>();
-            magnitude += c_before.block(2, 1, s.rows, s.cols).cast<double>().cwiseAbs();
-          }
-          ExpectClose(MatrixXf(c), want, magnitude, s.depth, what);
-          // Nothing outside C's block is written.
-          MatrixXf outside = c_store;
-          outside.block(2, 1, s.rows, s.cols) = c_before.block(2, 1, s.rows, s.cols);
-          ASSERT_EQ(outside, c_before) << what;
+  ForEachGemmCase(
+      {{1, 1, 1},
+       {5, 3, 7},
+       {16, 64, 6},
+       {17, 2, 256},
+       {48, 64, 13},
+       {64, 64, 256},
+       {65, 7, 5},
+       {100, 33, 12},
+       {128, 128, 256},
+       {130, 256, 19},
+       {256, 256, 64},
+       {64, 256, 64},
+       {64, 32, 128},
+       {33, 16, 8},
+       {64, 0, 9}},
+      &seed, [](GemmCase& g) {
+        auto c = g.c_block();
+        if (g.transpose_a && g.transpose_b) {
+          internal::Product(g.a_block().transpose(), g.b_block().transpose(), c, g.accumulate);
+        } else if (g.transpose_a) {
+          internal::Product(g.a_block().transpose(), g.b_block(), c, g.accumulate);
+        } else if (g.transpose_b) {
+          internal::Product(g.a_block(), g.b_block().transpose(), c, g.accumulate);
+        } else {
+          internal::Product(g.a_block(), g.b_block(), c, g.accumulate);
         }
-      }
-    }
-  }
+        const MatrixXd a = g.A().cast<double>(), b = g.B().cast<double>();
+        MatrixXd want = a * b;
+        MatrixXd magnitude = a.cwiseAbs() * b.cwiseAbs();
+        if (g.accumulate) {
+          want += g.CBefore();
+          magnitude += g.CBefore().cwiseAbs();
+        }
+        ExpectClose(MatrixXf(c), want, magnitude, g.shape.depth, g.what);
+        ASSERT_TRUE(g.OnlyCChanged()) << g.what;  // nothing outside C's block written
+      });
 }
 
 TEST(SmallGemm, LeavesARightHandSideOfNeitherLayoutToEigen) {
@@ -126,9 +97,8 @@ TEST(SmallGemm, LeavesARightHandSideOfNeitherLayoutToEigen) {
 TEST(SmallGemm, StartsTheSumsFromAnOffsetColumn) {
   // c = offset 1^T + a b, with the offset contiguous (the kernel's start) or a strided row
   // of a matrix (Eigen's path); c starts as NaN, which neither path may read.
-  const Shape shapes[] = {{64, 64, 256}, {17, 2, 13}, {130, 33, 7}, {5, 0, 3}};
   unsigned seed = 100;
-  for (const Shape& s : shapes) {
+  for (const GemmShape& s : {GemmShape{64, 64, 256}, {17, 2, 13}, {130, 33, 7}, {5, 0, 3}}) {
     const MatrixXf a = Numbers(s.rows, s.depth, seed++), b = Numbers(s.depth, s.cols, seed++);
     const MatrixXf offsets = Numbers(3, s.rows, seed++);
     const Eigen::VectorXf offset = offsets.row(1).transpose();
