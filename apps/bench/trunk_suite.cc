@@ -293,6 +293,11 @@ void RunTrunkBench(const TrunkFlags& flags) {
   auto wants = [&](const char* name) {
     return std::find(workloads.begin(), workloads.end(), name) != workloads.end();
   };
+  // The reference rate is the float product's, measured before the precision is set, so
+  // that bfloat16 products read as a share of what float reaches (above 100 % if faster);
+  // the trunk is made after it, so that it packs its weights for bfloat16 products.
+  const GemmRates gemm = MeasureGemmGflops(20);
+  ApplyProductPrecision(flags.products);
   const SensorTrunk trunk = MakeTrunk(flags);
   std::cout << "bench trunk: width " << flags.width << ", " << flags.layers << " layers, d = "
             << flags.latent
@@ -300,10 +305,6 @@ void RunTrunkBench(const TrunkFlags& flags) {
             << ", C = " << flags.channels << ", " << trunk.siren.NumParameters()
             << " parameters, " << flags.rows << "x" << flags.cols << " frames, float, "
             << flags.products << " products\n";
-  const GemmRates gemm = MeasureGemmGflops(20);
-  // The reference rate is the float product's, measured before the precision is set, so
-  // that bfloat16 products read as a share of what float reaches (above 100 % if faster).
-  ApplyProductPrecision(flags.products);
   const double gemm_gflops = gemm.Reference();
   std::cout << "bench trunk: float GEMM 4096x256x256, one thread (best of 20): Eigen "
             << FormatFixed(gemm.eigen, 1) << " GFLOP/s, the passes' kernel "

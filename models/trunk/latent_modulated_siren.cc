@@ -15,6 +15,7 @@
 #include "boost/random/uniform_real_distribution.hpp"
 #include "models/trunk/internal/fast_sincos.h"
 #include "models/trunk/internal/small_gemm.h"
+#include "models/trunk/product_precision.h"
 
 namespace tactfunc {
 
@@ -60,6 +61,19 @@ void CheckShape(const char* what, long rows, long cols, long expected_rows,
   }
 }
 
+}  // namespace
+
+namespace internal {
+// A trunk's hidden layers' weights W_l and transposes W_l^T packed for bfloat16
+// products, for layers 1 .. L-1 (layer 0's product, of the pixel coordinates, stays
+// float: its entries are left empty).
+struct Bfloat16Weights {
+  std::vector<Bfloat16Pairs> W, W_t;
+};
+}  // namespace internal
+
+namespace {
+
 // Maps of theta's blocks in one scalar type and the hidden layers' weights transposed
 // (W_t[l] = W[l]^T): the products W^T delta then read a column-major matrix, which
 // internal::Product would otherwise copy per block. For the trunk's own parameters the
@@ -67,17 +81,22 @@ void CheckShape(const char* what, long rows, long cols, long expected_rows,
 // `stored`); for any other theta (a Hessian-vector product's direction) this Net copies
 // them, once per call. Copying them per call cost a meta-training step 4 % of its time at
 // width 128 and 7 % at width 256 (`tactfunc bench trunk`).
+//
+// With the trunk's stored transposes also its bfloat16 packs (`packed`, may be null):
+// Packed(l) / PackedT(l) give the products of W[l] and W_t[l] their packed copies.
 template <typename S>
 struct Net {
   std::vector<ConstMap<S>> W, b;  // per hidden layer
   std::vector<ConstMap<S>> W_t;   // per hidden layer, W[l]^T
   ConstMap<S> A, c, W_out, b_out;
+  const internal::Bfloat16Weights* packed;
   Net(const S* theta, const std::vector<ParameterBlock>& blocks, int num_layers,
-      const std::vector<MatrixX<S>>* stored)
+      const std::vector<MatrixX<S>>* stored, const internal::Bfloat16Weights* packed_weights)
       : A(At(theta, blocks[2 * num_layers])),
         c(At(theta, blocks[2 * num_layers + 1])),
         W_out(At(theta, blocks[2 * num_layers + 2])),
-        b_out(At(theta, blocks[2 * num_layers + 3])) {
+        b_out(At(theta, blocks[2 * num_layers + 3])),
+        packed(packed_weights) {
     for (int l = 0; l < num_layers; ++l) {
       W.push_back(At(theta, blocks[2 * l]));
       b.push_back(At(theta, blocks[2 * l + 1]));
@@ -93,8 +112,15 @@ struct Net {
   static ConstMap<S> At(const S* theta, const ParameterBlock& block) {
     return ConstMap<S>(theta + block.offset, block.rows, block.cols);
   }
+  const internal::Bfloat16Pairs* Packed(int l) const { return PackedAt(l, false); }
+  const internal::Bfloat16Pairs* PackedT(int l) const { return PackedAt(l, true); }
 
  private:
+  const internal::Bfloat16Pairs* PackedAt(int l, bool transposed) const {
+    if (packed == nullptr) return nullptr;
+    const std::vector<internal::Bfloat16Pairs>& v = transposed ? packed->W_t : packed->W;
+    return v[l].rows > 0 ? &v[l] : nullptr;
+  }
   std::vector<MatrixX<S>> copies_;  // W_t's storage when nothing stored them
 };
 
@@ -257,7 +283,8 @@ void RunForward(const Net<S>& net, double omega_0, const Eigen::MatrixBase<Coord
     auto pre = trace->h[l + 1].leftCols(m);
     // The product's sums start from the shifts (no pass over `pre` to set them first).
     trace->shift = net.b[l].col(0) + gamma.segment(l * width, width);
-    internal::ProductPlusOffset(net.W[l], trace->h[l].leftCols(m), trace->shift, pre);
+    internal::ProductPlusOffset(net.W[l], trace->h[l].leftCols(m), trace->shift, pre,
+                                net.Packed(l));
     if (spatial != nullptr) spatial->Blend(spatial->P, l * width, pre);
     S* cosine = keep_cosine ? trace->cosine[l].data() : nullptr;
     internal::ScaledSinCos(width * m, static_cast<S>(omega_0), pre.data(), pre.data(),
@@ -372,7 +399,7 @@ void RunBackwardBlock(const Net<S>& net, const std::vector<ParameterBlock>& bloc
       internal::Product(delta, trace.h[l].leftCols(m).transpose(), block(2 * l),
                         /*accumulate=*/true);
     }
-    if (l > 0) internal::Product(net.W_t[l], delta, layer_g(l - 1), false);
+    if (l > 0) internal::Product(net.W_t[l], delta, layer_g(l - 1), false, net.PackedT(l));
   }
 }
 
@@ -553,16 +580,18 @@ struct PassContext {
   std::unique_ptr<Spatial<S>> spatial;      // with spatial latents
   std::unique_ptr<ReadoutMaps<S>> readout;  // with the readout branch
 
-  // theta and its hidden layers' weights transposed (the trunk's, as it stores them).
+  // theta and its hidden layers' weights transposed and packed (the trunk's, as it
+  // stores them).
   PassContext(const LatentModulatedSiren& trunk, const S* theta,
-              const std::vector<MatrixX<S>>& transposed, long capacity)
+              const std::vector<MatrixX<S>>& transposed,
+              const internal::Bfloat16Weights* packed, long capacity)
       : siren(trunk),
         blocks(trunk.parameter_blocks()),
         num_layers(trunk.num_hidden_layers()),
         width(trunk.width()),
         channels(trunk.output_channels()),
         omega_0(trunk.options().omega_0),
-        net(theta, blocks, num_layers, &transposed) {
+        net(theta, blocks, num_layers, &transposed, packed) {
     if (trunk.has_spatial()) spatial = std::make_unique<Spatial<S>>(trunk.options(), capacity);
     if (trunk.has_readout()) readout = std::make_unique<ReadoutMaps<S>>(theta, blocks, num_layers);
   }
@@ -677,7 +706,7 @@ struct TangentPass {
     const int num_layers = c.num_layers;
     const long width = c.width;
     if (v_theta != nullptr) {
-      dnet = std::make_unique<Net<S>>(v_theta->data(), c.blocks, num_layers, nullptr);
+      dnet = std::make_unique<Net<S>>(v_theta->data(), c.blocks, num_layers, nullptr, nullptr);
     }
     if (c.spatial) {
       // gamma' = A_g v_zg + A_g' z_g + c' shared, P' = A_s V + A_s' Z per node.
@@ -734,7 +763,7 @@ struct TangentPass {
       shift_dot = dgamma_dot.segment(l * width, width);
       if (dnet) shift_dot += dnet->b[l].col(0);
       if (l > 0) {
-        internal::ProductPlusOffset(net.W[l], h_dot[l].leftCols(m), shift_dot, s);
+        internal::ProductPlusOffset(net.W[l], h_dot[l].leftCols(m), shift_dot, s, net.Packed(l));
         if (dnet) internal::Product(dnet->W[l], trace.h[l].leftCols(m), s, /*accumulate=*/true);
       } else if (dnet) {
         internal::ProductPlusOffset(dnet->W[l], trace.h[l].leftCols(m), shift_dot, s);
@@ -792,7 +821,7 @@ struct TangentPass {
       PreActivationGradient(gm, cosine, omega, &dmm);
       internal::Product(dmm, h_dot[l].leftCols(m).transpose(), hv_block(2 * l),
                         /*accumulate=*/true);
-      internal::Product(net.W_t[l], ddmm, gdm, /*accumulate=*/false);
+      internal::Product(net.W_t[l], ddmm, gdm, /*accumulate=*/false, net.PackedT(l));
       if (dnet) internal::Product(dnet->W_t[l], dmm, gdm, /*accumulate=*/true);
     }
   }
@@ -1188,7 +1217,34 @@ void LatentModulatedSiren::ParametersChanged() {
             .transpose();
     hidden_weights_t_float_[l] = hidden_weights_t_[l].cast<float>();
   }
+  packed_weights_.reset();
+  if (GetProductPrecision() == ProductPrecision::kBfloat16 &&
+      options_.width >= internal::kMinBfloat16Extent) {
+    auto packed = std::make_shared<internal::Bfloat16Weights>();
+    packed->W.resize(num_layers);
+    packed->W_t.resize(num_layers);
+    bool ok = true;
+    for (int l = 1; l < num_layers && ok; ++l) {
+      const ParameterBlock& block = blocks_[2 * l];
+      const Eigen::MatrixXf& w_t = hidden_weights_t_float_[l];
+      ok = internal::PackBfloat16Pairs(block.rows, block.cols,
+                                       parameters_float_.data() + block.offset, 1, block.rows,
+                                       &packed->W[l]) &&
+           internal::PackBfloat16Pairs(w_t.rows(), w_t.cols(), w_t.data(), 1, w_t.rows(),
+                                       &packed->W_t[l]);
+    }
+    if (ok) packed_weights_ = std::move(packed);
+  }
   parameters_generation_ = NextParametersGeneration();
+}
+
+template <>
+const internal::Bfloat16Weights* LatentModulatedSiren::PackedWeights<double>() const {
+  return nullptr;
+}
+template <>
+const internal::Bfloat16Weights* LatentModulatedSiren::PackedWeights<float>() const {
+  return packed_weights_.get();
 }
 
 template <>
@@ -1286,7 +1342,7 @@ LatentModulatedSiren::MatrixX<Scalar> LatentModulatedSiren::ForwardPasses(
   CheckShape("z", z.rows(), 1, options_.latent_dim, 1);
   const long n = coords.rows();
   const Net<Scalar> net(ParameterData<Scalar>(), blocks_, options_.num_hidden_layers,
-                        &HiddenWeightsTransposed<Scalar>());
+                        &HiddenWeightsTransposed<Scalar>(), PackedWeights<Scalar>());
   std::unique_ptr<Spatial<Scalar>> spatial;
   if (has_spatial()) spatial = std::make_unique<Spatial<Scalar>>(options_, BlockCapacity(n));
   const VectorX<Scalar> gamma = SharedShifts(net, z, spatial.get());
@@ -1358,7 +1414,7 @@ void LatentModulatedSiren::BackwardPasses(
   const long n = coords.rows();
   const long capacity = BlockCapacity(n);
   const Net<Scalar> net(ParameterData<Scalar>(), blocks_, options_.num_hidden_layers,
-                        &HiddenWeightsTransposed<Scalar>());
+                        &HiddenWeightsTransposed<Scalar>(), PackedWeights<Scalar>());
   std::unique_ptr<Spatial<Scalar>> spatial;
   MatrixX<Scalar> dP;  // the spatial latents' scattered dL/dgamma
   if (has_spatial()) {
@@ -1443,7 +1499,7 @@ void LatentModulatedSiren::ForwardAndLatentJacobian(const MatrixX<Scalar>& coord
   const int channels = options_.output_channels;
   const int d = options_.latent_dim;
   const Net<Scalar> net(ParameterData<Scalar>(), blocks_, num_layers,
-                        &HiddenWeightsTransposed<Scalar>());
+                        &HiddenWeightsTransposed<Scalar>(), PackedWeights<Scalar>());
   std::unique_ptr<Spatial<Scalar>> spatial;
   if (has_spatial()) spatial = std::make_unique<Spatial<Scalar>>(options_, capacity);
   const VectorX<Scalar> gamma = SharedShifts(net, z, spatial.get());
@@ -1533,7 +1589,7 @@ void LatentModulatedSiren::ForwardAndLatentJacobian(const MatrixX<Scalar>& coord
         dl.array() *= omega * trace.cosine[l].leftCols(m).array();
         internal::Product(A_used_t.middleCols(l * width, width), dl, J, /*accumulate=*/true);
         if (l > 0) {
-          internal::Product(net.W_t[l], dl, below->leftCols(m), false);
+          internal::Product(net.W_t[l], dl, below->leftCols(m), false, net.PackedT(l));
           std::swap(delta, below);
         } else if (J_y_x != nullptr) {
           J_y_x->operator()(Eigen::seqN(begin * channels + ch, m, channels), Eigen::all) =
@@ -1636,7 +1692,7 @@ Scalar LatentModulatedSiren::LossPasses(
   const bool reverse = gradient || hvp;
   const long capacity = BlockCapacity(n);
   PassContext<Scalar> context(*this, ParameterData<Scalar>(), HiddenWeightsTransposed<Scalar>(),
-                              capacity);
+                              PackedWeights<Scalar>(), capacity);
   LossPass<Scalar> pass(context, z, weights, n, capacity, reverse, dL_dtheta);
   std::unique_ptr<TangentPass<Scalar>> tangent;
   if (hvp) {
@@ -1679,7 +1735,7 @@ Scalar LatentModulatedSiren::LossAndGradient(const MatrixX<Scalar>& coords,
   const long capacity = BlockCapacity(n);
   auto record = std::make_unique<typename Tape<Scalar>::Record>();
   PassContext<Scalar> context(*this, ParameterData<Scalar>(), HiddenWeightsTransposed<Scalar>(),
-                              capacity);
+                              PackedWeights<Scalar>(), capacity);
   LossPass<Scalar> pass(context, z, weights, n, capacity, /*reverse=*/true, dL_dtheta);
   record->blocks.reserve((n + kPixelBlock - 1) / kPixelBlock);
   for (long begin = 0; begin < n; begin += kPixelBlock) {
@@ -1715,7 +1771,7 @@ void LatentModulatedSiren::HessianProduct(const Tape<Scalar>& tape,
   const long n = record.coords.rows();
   const long capacity = BlockCapacity(n);
   PassContext<Scalar> context(*this, ParameterData<Scalar>(), HiddenWeightsTransposed<Scalar>(),
-                              capacity);
+                              PackedWeights<Scalar>(), capacity);
   TangentPass<Scalar> tangent(context, record.z, v_theta, v_z, capacity, Hv_theta);
   for (std::size_t b = 0; b < record.blocks.size(); ++b) {
     const long begin = static_cast<long>(b) * kPixelBlock;

@@ -119,6 +119,10 @@
 
 namespace tactfunc {
 
+namespace internal {
+struct Bfloat16Weights;  // latent_modulated_siren.cc
+}  // namespace internal
+
 // How pixel indices map to trunk coordinates; see the header comment for formulas.
 enum class CoordinateConvention {
   kPixelCenters,
@@ -513,8 +517,13 @@ class LatentModulatedSiren {
   // ParametersChanged for the reverse passes' products W_l^T delta.
   template <typename Scalar>
   const std::vector<MatrixX<Scalar>>& HiddenWeightsTransposed() const;
-  // Derives what depends on parameters_ (the float copy, the transposes) and draws a
-  // new parameters generation; called wherever parameters_ changes.
+  // The hidden layers' weights and their transposes packed for bfloat16 products, made by
+  // ParametersChanged when the process's product precision is bfloat16 then; null for
+  // double and otherwise (products then pack them per call, to the same bits).
+  template <typename Scalar>
+  const internal::Bfloat16Weights* PackedWeights() const;
+  // Derives what depends on parameters_ (the float copy, the transposes, the bfloat16
+  // packs) and draws a new parameters generation; called wherever parameters_ changes.
   void ParametersChanged();
   void BuildLayout();
 
@@ -525,6 +534,7 @@ class LatentModulatedSiren {
   Eigen::VectorXf parameters_float_;
   std::vector<Eigen::MatrixXd> hidden_weights_t_;
   std::vector<Eigen::MatrixXf> hidden_weights_t_float_;
+  std::shared_ptr<const internal::Bfloat16Weights> packed_weights_;  // immutable, shared by copies
   // Drawn anew from a process-wide counter whenever theta changes (copies share it):
   // a Tape records it to know the parameters it was recorded with.
   std::uint64_t parameters_generation_ = 0;

@@ -19,7 +19,9 @@
 #ifndef TACTFUNC_MODELS_TRUNK_INTERNAL_SMALL_GEMM_H_
 #define TACTFUNC_MODELS_TRUNK_INTERNAL_SMALL_GEMM_H_
 
+#include <cstdint>
 #include <type_traits>
+#include <vector>
 
 #include "Eigen/Core"
 #include "models/trunk/product_precision.h"
@@ -52,6 +54,22 @@ bool SmallGemmBfloat16(long rows, long depth, long cols, const float* a, long a_
 // True when this CPU runs SmallGemmBfloat16's kernel.
 bool HaveBfloat16Gemm();
 
+// A left-hand side rounded to bfloat16 and packed as SmallGemmBfloat16 reads it, made
+// once for many products (a layer's weights, for every block of pixels of a pass):
+// rows x depth as pairs along the inner dimension, rows padded to a multiple of 16.
+struct Bfloat16Pairs {
+  long rows = 0, depth = 0, rows_padded = 0;
+  std::vector<std::uint32_t> pairs;
+};
+// Packs A (rows x depth at a[i * a_row_stride + k * a_col_stride]) into *out; false
+// (out untouched) where the CPU lacks AVX512_BF16.
+bool PackBfloat16Pairs(long rows, long depth, const float* a, long a_row_stride,
+                       long a_col_stride, Bfloat16Pairs* out);
+// SmallGemmBfloat16 with A packed: the same bits as SmallGemmBfloat16 on the A packed.
+bool SmallGemmBfloat16Packed(const Bfloat16Pairs& a, long cols, const float* b, long b_row_stride,
+                             long b_col_stride, float* c, long c_col_stride, bool accumulate,
+                             const float* row_offset = nullptr);
+
 // Under ProductPrecision::kBfloat16, products with fewer inner terms or columns than this
 // stay float: they gain nothing from pairs of terms, and they are the products whose
 // operands are pixel coordinates (a first layer's, depth 2, and its weight gradient, 2
@@ -61,10 +79,11 @@ inline constexpr long kMinBfloat16Extent = 16;
 
 namespace small_gemm_internal {
 // SmallGemm on Eigen operands where the types allow it (float, direct access, c
-// column-major, row_offset contiguous); false where the caller must use Eigen.
+// column-major, row_offset contiguous), in the process's product precision, reading A
+// from a_pairs (not null: A packed) under bfloat16; false where the caller must use Eigen.
 template <typename Lhs, typename Rhs, typename Dst>
 bool Kernel(const Eigen::MatrixBase<Lhs>& a, const Eigen::MatrixBase<Rhs>& b, Dst& c,
-            bool accumulate, const float* row_offset) {
+            bool accumulate, const float* row_offset, const Bfloat16Pairs* a_pairs) {
   using D = std::decay_t<Dst>;
   constexpr bool kDirect =
       bool(Lhs::Flags & Eigen::DirectAccessBit) && bool(Rhs::Flags & Eigen::DirectAccessBit) &&
@@ -74,10 +93,15 @@ bool Kernel(const Eigen::MatrixBase<Lhs>& a, const Eigen::MatrixBase<Rhs>& b, Ds
                 std::is_same_v<typename Rhs::Scalar, float>) {
     eigen_assert(c.rows() == a.rows() && c.cols() == b.cols() && a.cols() == b.rows());
     if (c.rowStride() != 1) return false;
-    const auto kernel = GetProductPrecision() == ProductPrecision::kBfloat16 &&
-                                a.cols() >= kMinBfloat16Extent && b.cols() >= kMinBfloat16Extent
-                            ? &SmallGemmBfloat16
-                            : &SmallGemm;
+    const bool bf16 = GetProductPrecision() == ProductPrecision::kBfloat16 &&
+                      a.cols() >= kMinBfloat16Extent && b.cols() >= kMinBfloat16Extent;
+    if (bf16 && a_pairs != nullptr) {
+      eigen_assert(a_pairs->rows == a.rows() && a_pairs->depth == a.cols());
+      return SmallGemmBfloat16Packed(*a_pairs, b.cols(), b.derived().data(), b.rowStride(),
+                                     b.colStride(), c.derived().data(), c.colStride(),
+                                     accumulate, row_offset);
+    }
+    const auto kernel = bf16 ? &SmallGemmBfloat16 : &SmallGemm;
     return kernel(a.rows(), a.cols(), b.cols(), a.derived().data(), a.rowStride(), a.colStride(),
                   b.derived().data(), b.rowStride(), b.colStride(), c.derived().data(),
                   c.colStride(), accumulate, row_offset);
@@ -89,11 +113,13 @@ bool Kernel(const Eigen::MatrixBase<Lhs>& a, const Eigen::MatrixBase<Rhs>& b, Ds
 
 // c = a * b (accumulate false) or c += a * b, with c not aliasing a or b (as Eigen's
 // noalias()). Float products of directly accessible operands with c column-major go
-// through SmallGemm; everything else (double, expressions) through Eigen.
+// through SmallGemm; everything else (double, expressions) through Eigen. a_pairs, if
+// not null, is a packed (PackBfloat16Pairs) for bfloat16 products, which then skip
+// packing it: the same bits, less time.
 template <typename Lhs, typename Rhs, typename Dst>
 void Product(const Eigen::MatrixBase<Lhs>& a, const Eigen::MatrixBase<Rhs>& b, Dst&& c,
-             bool accumulate) {
-  if (small_gemm_internal::Kernel(a, b, c, accumulate, nullptr)) return;
+             bool accumulate, const Bfloat16Pairs* a_pairs = nullptr) {
+  if (small_gemm_internal::Kernel(a, b, c, accumulate, nullptr, a_pairs)) return;
   if (accumulate) {
     c.noalias() += a * b;
   } else {
@@ -103,15 +129,18 @@ void Product(const Eigen::MatrixBase<Lhs>& a, const Eigen::MatrixBase<Rhs>& b, D
 
 // c = offset 1^T + a * b (offset: a column of c.rows() values, the start of every
 // column's sums), with c not aliasing a, b or offset. The kernel starts its sums from
-// offset instead of reading c back; Eigen adds the product onto c set to offset.
+// offset instead of reading c back; Eigen adds the product onto c set to offset. a_pairs
+// as for Product.
 template <typename Lhs, typename Rhs, typename Offset, typename Dst>
 void ProductPlusOffset(const Eigen::MatrixBase<Lhs>& a, const Eigen::MatrixBase<Rhs>& b,
-                       const Eigen::DenseBase<Offset>& offset, Dst&& c) {
+                       const Eigen::DenseBase<Offset>& offset, Dst&& c,
+                       const Bfloat16Pairs* a_pairs = nullptr) {
   eigen_assert(offset.size() == c.rows());
   if constexpr (bool(Offset::Flags & Eigen::DirectAccessBit) &&
                 std::is_same_v<typename Offset::Scalar, float>) {
     if (offset.innerStride() == 1 &&
-        small_gemm_internal::Kernel(a, b, c, /*accumulate=*/false, offset.derived().data())) {
+        small_gemm_internal::Kernel(a, b, c, /*accumulate=*/false, offset.derived().data(),
+                                    a_pairs)) {
       return;
     }
   }

@@ -173,29 +173,38 @@ bool HaveBfloat16Gemm() {
   return have;
 }
 
-bool SmallGemmBfloat16(long rows, long depth, long cols, const float* a, long a_row_stride,
-                       long a_col_stride, const float* b, long b_row_stride, long b_col_stride,
-                       float* c, long c_col_stride, bool accumulate, const float* row_offset) {
+bool PackBfloat16Pairs(long rows, long depth, const float* a, long a_row_stride,
+                       long a_col_stride, Bfloat16Pairs* out) {
+  if (!HaveBfloat16Gemm()) return false;
+  out->rows = rows;
+  out->depth = depth;
+  out->rows_padded = (std::max<long>(rows, 0) + 15) / 16 * 16;
+  out->pairs.resize(static_cast<size_t>(std::max<long>((depth + 1) / 2, 1) * out->rows_padded));
+  PackA(rows, depth, a, a_row_stride, a_col_stride, out->rows_padded, out->pairs.data());
+  return true;
+}
+
+bool SmallGemmBfloat16Packed(const Bfloat16Pairs& a, long cols, const float* b, long b_row_stride,
+                             long b_col_stride, float* c, long c_col_stride, bool accumulate,
+                             const float* row_offset) {
   if (!HaveBfloat16Gemm()) return false;
   if (b_row_stride != 1 && b_col_stride != 1) return false;
+  const long rows = a.rows, depth = a.depth;
   if (rows <= 0 || cols <= 0) return true;
   if (accumulate) row_offset = nullptr;
   const long pairs = (depth + 1) / 2;
-  const long rows_padded = (rows + 15) / 16 * 16;
   const long cols16 = (cols + 15) / 16 * 16;
   const bool b_rows = b_row_stride != 1;
-  // One pair of buffers per thread, grown and kept.
-  thread_local std::vector<uint32_t> packed_a, packed_b;
-  packed_a.resize(static_cast<size_t>(std::max<long>(pairs, 1) * rows_padded));
+  // One buffer per thread, grown and kept.
+  thread_local std::vector<uint32_t> packed_b;
   packed_b.resize(static_cast<size_t>(std::max<long>(pairs, 1) * (b_rows ? cols16 : cols)));
-  PackA(rows, depth, a, a_row_stride, a_col_stride, rows_padded, packed_a.data());
   PackB(depth, cols, b, b_rows ? b_row_stride : b_col_stride, b_rows, pairs, cols16,
         packed_b.data());
   const long b_col = b_rows ? 1 : pairs;
   const long b_pair = b_rows ? cols16 : 1;
   small_gemm_tile::ForEachTile(
       rows, cols, [&](long r0, int registers, __mmask16 last, long j0, int width) {
-        kTiles[registers - 1][width - 1](pairs, packed_a.data() + r0, rows_padded,
+        kTiles[registers - 1][width - 1](pairs, a.pairs.data() + r0, a.rows_padded,
                                          packed_b.data() + j0 * b_col, b_col, b_pair,
                                          c + r0 + j0 * c_col_stride, c_col_stride, last,
                                          accumulate,
@@ -204,9 +213,26 @@ bool SmallGemmBfloat16(long rows, long depth, long cols, const float* a, long a_
   return true;
 }
 
+bool SmallGemmBfloat16(long rows, long depth, long cols, const float* a, long a_row_stride,
+                       long a_col_stride, const float* b, long b_row_stride, long b_col_stride,
+                       float* c, long c_col_stride, bool accumulate, const float* row_offset) {
+  if (b_row_stride != 1 && b_col_stride != 1) return false;
+  thread_local Bfloat16Pairs packed_a;  // grown and kept
+  return PackBfloat16Pairs(rows, depth, a, a_row_stride, a_col_stride, &packed_a) &&
+         SmallGemmBfloat16Packed(packed_a, cols, b, b_row_stride, b_col_stride, c, c_col_stride,
+                                 accumulate, row_offset);
+}
+
 #else  // not x86-64 GCC/Clang: no bfloat16 kernel
 
 bool HaveBfloat16Gemm() { return false; }
+
+bool PackBfloat16Pairs(long, long, const float*, long, long, Bfloat16Pairs*) { return false; }
+
+bool SmallGemmBfloat16Packed(const Bfloat16Pairs&, long, const float*, long, long, float*, long,
+                             bool, const float*) {
+  return false;
+}
 
 bool SmallGemmBfloat16(long, long, long, const float*, long, long, const float*, long, long,
                        float*, long, bool, const float*) {

@@ -196,5 +196,44 @@ TEST(Bfloat16Products, KeepATrunksLossAndLatentGradientWithinBfloat16sError) {
   EXPECT_LE((t_bf16 - t_float).norm(), 0.02 * t_float.norm());
 }
 
+TEST(Bfloat16Products, ATrunksPackedWeightsGiveTheBitsOfPackingThemPerProduct) {
+  if (!internal::HaveBfloat16Gemm()) GTEST_SKIP() << "this CPU lacks AVX512_BF16";
+  // A trunk made under bfloat16 packs its weights once (and again whenever they change);
+  // one made under float has no packs and its bfloat16 products pack per call. Both
+  // must give the same bits, at the start, after SetParameters and in a copy.
+  LatentModulatedSiren::Options options;
+  options.latent_dim = 24;
+  options.width = 64;
+  options.num_hidden_layers = 3;
+  // Made under float: no packs, now or after SetParameters.
+  const LatentModulatedSiren unpacked(options, /*seed=*/5);
+  const Eigen::VectorXd moved =
+      unpacked.parameters() + 0.01 * Numbers(unpacked.NumParameters(), 1, 9).cast<double>();
+  LatentModulatedSiren unpacked_moved(options, /*seed=*/5);
+  unpacked_moved.SetParameters(moved);
+  const ScopedPrecision bf16(ProductPrecision::kBfloat16);
+  LatentModulatedSiren packed(options, /*seed=*/5);
+  const MatrixXf coords = LatentModulatedSiren::GridCoordinates(20, 33).cast<float>();
+  const Eigen::VectorXf z = 0.5f * Numbers(options.latent_dim, 1, 6);
+  const Eigen::VectorXf v_z = Numbers(options.latent_dim, 1, 7);
+  const MatrixXf targets = 0.1f * Numbers(20 * 33, 1, 8);
+  const Eigen::VectorXf weights;
+  auto passes = [&](const LatentModulatedSiren& trunk) {
+    Eigen::VectorXf dz, dtheta, hv_z, hv_theta;
+    const float loss = trunk.LossGradientAndHessianProduct<float>(
+        coords, z, targets, weights, nullptr, v_z, &dz, &dtheta, &hv_z, &hv_theta);
+    Eigen::VectorXf all(1 + dz.size() + dtheta.size() + hv_z.size() + hv_theta.size());
+    all << loss, dz, dtheta, hv_z, hv_theta;
+    return all;
+  };
+  const Eigen::VectorXf before = passes(packed);
+  EXPECT_EQ(before, passes(unpacked));
+  packed.SetParameters(moved);
+  const Eigen::VectorXf after = passes(packed);
+  EXPECT_EQ(after, passes(unpacked_moved));
+  EXPECT_NE(after, before);
+  EXPECT_EQ(passes(LatentModulatedSiren(packed)), after);
+}
+
 }  // namespace
 }  // namespace tactfunc
