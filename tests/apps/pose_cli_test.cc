@@ -473,7 +473,9 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
     for (int c : {27, 28, 29}) {
       EXPECT_EQ(wrong, !std::isnan(v[c])) << "column " << c << ", " << line;
     }
-    if (wrong) EXPECT_LE(v[29], v[27] + 0.01) << line;
+    if (wrong) {
+      EXPECT_LE(v[29], v[27] + 0.01) << line;
+    }
     judged += wrong;
     sum_sq += v[14] * v[14];
     bound_sq += v[21] * v[21] + v[22] * v[22];
