@@ -4,17 +4,19 @@
 //
 // kFloat (the default): float operands and sums. kBfloat16: each product's operands are
 // rounded to bfloat16 (8 significant bits against float's 24) and multiplied with
-// AVX512_BF16's dot-product instruction, the sums kept in float; twice the float
-// kernel's multiply-adds per instruction, for a relative error of a product of about
-// 2^-8 / sqrt(depth) per term (docs/BUILD.md, "bfloat16 products", has what it costs
-// in speed and in PSNR). It applies to the products of the SIREN's and the photometric
-// head's batched passes (forward, reverse, Hessian-vector products, weight gradients):
-// fitting, encoding, meta-training, rendering. Parameters, latents, sines, losses and
-// optimiser states stay float or double, and double passes are untouched.
+// AVX512_BF16's dot-product instruction, the sums kept in float: twice the float
+// kernel's multiply-adds per instruction, each term of a sum off by at most about 2^-8
+// of itself. Products of fewer than 16 inner terms or columns stay float (among them the
+// first layer's, of the pixel coordinates). It applies to the products of the SIREN's
+// and the photometric head's batched passes (forward, reverse, Hessian-vector products,
+// weight gradients): fitting, encoding, meta-training, rendering. Parameters, latents,
+// sines, losses and optimiser states stay float or double, and double passes are
+// untouched. docs/BUILD.md ("bfloat16 products") describes the kernel and
+// docs/BENCHMARKS.md what it buys in speed and costs in PSNR.
 //
 // Deterministic like the float kernel: the same inputs give the same bits on every run
-// and thread count. Set it before work starts; passes running while it changes may mix
-// the two.
+// and thread count. Set it before work starts (before trunks are made or loaded, so that
+// they pack their weights for it); passes running while it changes may mix the two.
 #ifndef TACTFUNC_MODELS_TRUNK_PRODUCT_PRECISION_H_
 #define TACTFUNC_MODELS_TRUNK_PRODUCT_PRECISION_H_
 

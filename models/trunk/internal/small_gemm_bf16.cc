@@ -3,11 +3,11 @@
 // SmallGemm's bfloat16 kernel: the same products with A and B rounded to bfloat16 (8
 // significant bits) and the sums kept in float. AVX512_BF16's VDPBF16PS multiplies 32
 // pairs of bfloat16 and adds each pair's two products to one of 16 float sums, twice the
-// multiply-adds per instruction of a float FMA: on this project's AMD EPYC (Zen 4) the
-// instruction's peak is 1.8x the float FMA's (docs/BUILD.md, "The passes' GEMM kernel").
-// The operands are packed per call into bfloat16 pairs along the inner dimension (a
-// layer's weights: rows x depth; a block's activations: depth x 128 pixels), a pass
-// over each operand that costs a small fraction of the product's multiply-adds.
+// multiply-adds per instruction of a float FMA: the passes' products run 1.6-1.8x the
+// float kernel's rate on an AMD EPYC, packing included (`tactfunc bench kernels`;
+// docs/BENCHMARKS.md, "bfloat16 products"). The operands are packed into bfloat16 pairs
+// along the inner dimension: B (a block's activations or gradients) per call, A per
+// call too unless the caller packed it once (PackBfloat16Pairs: a trunk's weights).
 //
 // Compiled for AVX512_BF16 by function attribute, whatever the build's -march, and
 // chosen at run time only where the CPU has it (ProductPrecisionAvailable).
