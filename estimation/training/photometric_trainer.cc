@@ -17,6 +17,7 @@
 #include "estimation/training/internal/checkpoint.h"
 #include "models/core/parallel_for.h"
 #include "models/core/seed.h"
+#include "models/trunk/product_precision.h"
 #include "nlohmann/json.hpp"
 
 namespace tactfunc {
@@ -169,6 +170,10 @@ std::string PhotometricTrainer::Options::TrajectoryOptionsJson() const {
   json["trunk.shading_width"] = trunk.shading_width;
   json["trunk.supersample"] = trunk.supersample;
   json["trunk.wide_biases"] = trunk.wide_biases;
+  // As TrunkTrainer's: absent = float products (older files).
+  if (GetProductPrecision() != ProductPrecision::kFloat) {
+    json["products"] = ProductPrecisionName(GetProductPrecision());
+  }
   json["steps"] = steps;
   json["batch_frames"] = batch_frames;
   json["batch_pixels"] = batch_pixels;

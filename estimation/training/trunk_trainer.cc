@@ -21,6 +21,7 @@
 #include "models/core/parallel_for.h"
 #include "models/core/seed.h"
 #include "models/core/tensor_file.h"
+#include "models/trunk/product_precision.h"
 #include "Eigen/Eigenvalues"
 #include "nlohmann/json.hpp"
 
@@ -536,6 +537,11 @@ std::string TrunkTrainer::TrajectoryOptionsJson(SensorKind sensor,
   json["format.cols"] = format.cols;
   json["format.grayscale"] = format.grayscale;
   json["format.scale"] = format.scale;
+  // The products' precision shapes the trajectory too (absent = float, older files):
+  // a run resumed in the other precision is refused like any other changed option.
+  if (GetProductPrecision() != ProductPrecision::kFloat) {
+    json["products"] = ProductPrecisionName(GetProductPrecision());
+  }
   json["meta_sgd.inner_steps"] = o.meta_sgd.inner_steps;
   json["meta_sgd.latent_l2_weight"] = o.meta_sgd.latent_l2_weight;
   json["meta_sgd.first_order"] = o.meta_sgd.first_order;

@@ -102,7 +102,7 @@ TEST_F(TrainCliTest, TheInnerLoopKnobsReachTheModelAndEncodeUsesIt) {
 
 // --products bf16 (where the CPU has AVX512_BF16) trains and encodes with bfloat16
 // products, and the model says so: `info` names them, its JSON carries "products"
-// (a float model's reads "float").
+// (a float model's reads "float"); its checkpoint resumes only in bfloat16.
 TEST_F(TrainCliTest, AModelTrainedWithBfloat16ProductsSaysSo) {
   if (!ProductPrecisionAvailable(ProductPrecision::kBfloat16)) {
     GTEST_SKIP() << "this CPU lacks AVX512_BF16";
@@ -114,6 +114,14 @@ TEST_F(TrainCliTest, AModelTrainedWithBfloat16ProductsSaysSo) {
   ASSERT_EQ(info.exit_code, 0) << info.err;
   EXPECT_THAT(info.out, HasSubstr("trained with bf16 products"));
   EXPECT_EQ(Run("info " + Root("bf16.tfm") + " --json").LastJson()["model"]["products"], "bf16");
+  // Its checkpoint resumes in bfloat16 only: the precision shapes the trajectory.
+  const std::string more = "train --data " + Root("d") + " --out " + Root("bf16.tfm") +
+                           " --preset tiny --steps 4 --seed 2 --resume";
+  const Result as_float = Run(more);
+  EXPECT_NE(as_float.exit_code, 0);
+  EXPECT_THAT(as_float.err, HasSubstr("option 'products'"));
+  const Result resumed = Run(more + " --products bf16");
+  EXPECT_EQ(resumed.exit_code, 0) << resumed.err;
   const Result encode = Run("encode --model " + Root("bf16.tfm") + " --data " + Root("d") +
                             " --out " + Root("bf16.tfs") + " --threads 1 --products bf16");
   EXPECT_EQ(encode.exit_code, 0) << encode.err;
