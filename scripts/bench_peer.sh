@@ -186,9 +186,11 @@ for round in $(seq 1 "$rounds"); do
     shape=(--width "$width" --layers "$layers" --latent "$latent" "${common[@]}")
     echo "bench_peer: round $round/$rounds, size $size: tactfunc ..."
     "$tactfunc" bench trunk "${shape[@]}" --threads 1 --repeats "$repeats" \
-      --workloads fit --products "$products" --json | tail -n 1 >"$out/tactfunc_fit_${size}_$round.json"
+      --workloads fit --products "$products" --json | tail -n 1 \
+      >"$out/tactfunc_fit_${size}_$round.json"
     echo "bench_peer: round $round/$rounds, size $size: pytorch ..."
-    "$python" "$peer" fit "${shape[@]}" --threads 1 --repeats "$repeats" --products "$peer_products" \
+    "$python" "$peer" fit "${shape[@]}" --threads 1 --repeats "$repeats" \
+      --products "$peer_products" \
       >"$out/pytorch_fit_${size}_$round.json"
     "$tactfunc" bench trunk "${shape[@]}" --threads 1 --repeats "$meta_repeats" \
       --workloads meta-step --products "$products" --json | tail -n 1 \
