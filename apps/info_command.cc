@@ -225,10 +225,12 @@ nlohmann::json DescribeFunctaset(const std::string& bytes, const std::string& pa
     }
     const std::string strategy =
         functaset.fit_strategy(sensor).empty() ? "n/a" : functaset.fit_strategy(sensor);
-    std::printf("  %-8s %zu latents of %d values, %s B each on disk (%d labelled), fit %s",
+    const std::string& products = functaset.products(sensor);
+    std::printf("  %-8s %zu latents of %d values, %s B each on disk (%d labelled), fit %s%s",
                 ToString(sensor), functaset.entries(sensor).size(), functaset.latent_dim(sensor),
                 FormatFixed(functaset.BytesPerFrame(sensor), 0).c_str(), labelled,
-                strategy.c_str());
+                strategy.c_str(),
+                products == "float" ? "" : (" with " + products + " products").c_str());
     nlohmann::json splits = nlohmann::json::object();
     for (const auto& [split, values] : psnrs) {
       const PsnrStats stats = ComputePsnrStats(values);
@@ -241,6 +243,7 @@ nlohmann::json DescribeFunctaset(const std::string& bytes, const std::string& pa
                                  {"fit_strategy", functaset.fit_strategy(sensor).empty()
                                                       ? nlohmann::json(nullptr)
                                                       : nlohmann::json(functaset.fit_strategy(sensor))},
+                                 {"products", products},
                                  {"count", functaset.entries(sensor).size()},
                                  {"labelled", labelled},
                                  {"splits", splits}};

@@ -712,9 +712,11 @@ void RunTrain(const TrainFlags& flags) {
   if (processes.rank() != 0) return;  // rank 0 writes the model and speaks
   nlohmann::json info = {{"trainer", "tactfunc train"},
                          {"preset", flags.preset},
-                         {"products", flags.products},
                          {"data", flags.data},
                          {"trunks", info_trunks}};
+  // Only where not float, so that a float run's model keeps the bytes (and checksum) it
+  // had before the flag existed.
+  if (flags.products != "float") info["products"] = flags.products;
   model.set_info_json(info.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
   // The handler stays installed through the write (a Ctrl-C now would otherwise kill
   // the process between the temporary file and the rename, losing the model).

@@ -187,6 +187,17 @@ void Functaset::set_fit_strategy(SensorKind sensor, const std::string& strategy)
   blocks_[sensor].fit_strategy = strategy;
 }
 
+const std::string& Functaset::products(SensorKind sensor) const { return Block(sensor).products; }
+
+void Functaset::set_products(SensorKind sensor, const std::string& products) {
+  Block(sensor);  // throws for an undeclared sensor
+  if (products != "float" && products != "bf16") {
+    throw std::invalid_argument("Functaset: products must be float or bf16, got '" + products +
+                                "'");
+  }
+  blocks_[sensor].products = products;
+}
+
 void Functaset::Add(SensorKind sensor, FunctasetEntry entry) {
   auto it = blocks_.find(sensor);
   if (it == blocks_.end()) {
@@ -356,6 +367,7 @@ std::string Functaset::Serialize() const {
                                {"ids", std::move(ids)},
                                {"splits", std::move(splits)},
                                {"tools", std::move(tools)}});
+    if (block.products != "float") meta["sensors"].back()["products"] = block.products;
     if (block.rest_latent) {
       // The entries at rest, by index, ascending. Absent in files without a rest latent
       // (and in files older than the field).
@@ -564,6 +576,14 @@ Functaset Functaset::Parse(const std::string& bytes, const std::string& source) 
       if (entry.contains("fit_strategy")) {
         field = where + ".fit_strategy";
         out.set_fit_strategy(sensor, entry.at("fit_strategy").get<std::string>());
+      }
+      if (entry.contains("products")) {
+        field = where + ".products";
+        const std::string products = entry.at("products").get<std::string>();
+        if (products != "float" && products != "bf16") {
+          throw fail("expected float or bf16, got '" + products + "'");
+        }
+        out.set_products(sensor, products);
       }
       if (rest) out.set_rest_latent(sensor, *rest);
       std::int64_t row = 0;  // latent row of the next entry not at rest

@@ -22,6 +22,7 @@
 //   {"format": "tactfunc-functaset", "version": 1, "complete": true|false,
 //    "model_checksum": <uint32>, "dataset": "<path>",
 //    "sensors": [{"sensor": "bubble", "latent_dim": d, "count": M, "fit_strategy": "...",
+//                 "products": "bf16" (absent: float),
 //                 "ids": [M strings], "splits": [M of "train"|"test"],
 //                 "tools": [M of tool name or null (unlabelled)]}, ...]}
 // and per sensor the tensors
@@ -162,6 +163,12 @@ class Functaset {
   // Throws like latent_dim().
   const std::string& fit_strategy(SensorKind sensor) const;
   void set_fit_strategy(SensorKind sensor, const std::string& strategy);
+  // The precision of the trunk's matrix products the sensor's latents were fitted with:
+  // "float", or "bf16" (`encode --products bf16`; models/trunk/product_precision.h).
+  // "float" for files without the field. Throws like latent_dim(); set_products also
+  // for any other value.
+  const std::string& products(SensorKind sensor) const;
+  void set_products(SensorKind sensor, const std::string& products);
 
   // Appends an entry to a declared sensor. An entry at rest takes the sensor's rest
   // latent (its own latent is ignored). Throws std::invalid_argument if the sensor is
@@ -209,6 +216,7 @@ class Functaset {
     // while every latent still lies on it, so a second save writes the same codes.
     std::optional<CodeTable> codes;
     std::string fit_strategy;
+    std::string products = "float";
     std::optional<Eigen::VectorXf> rest_latent;
     std::vector<FunctasetEntry> entries;
     std::unordered_map<std::string, std::size_t> index;  // id -> entries position

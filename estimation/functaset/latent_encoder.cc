@@ -19,6 +19,7 @@
 #include "estimation/data/photometric_markers.h"
 #include "estimation/fitting/photometric_ceres_fit.h"
 #include "estimation/training/photometric_trainer.h"
+#include "models/trunk/product_precision.h"
 
 namespace tactfunc {
 namespace {
@@ -418,6 +419,14 @@ Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
             ToString(sensor) + " latents with strategy '" + theirs + "', this run with '" + ours +
             "'; resume with the strategy of the interrupted run (or another output)");
       }
+      const std::string products = ProductPrecisionName(GetProductPrecision());
+      if (checkpoint.products(sensor) != products) {
+        throw std::invalid_argument(
+            "LatentEncoder: the checkpoint " + options_.checkpoint_path + " fitted its " +
+            ToString(sensor) + " latents with " + checkpoint.products(sensor) +
+            " products, this run with " + products +
+            "; resume with the --products of the interrupted run (or another output)");
+      }
       if ((checkpoint.rest_latent(sensor) != nullptr) != options_.share_rest_latent) {
         throw std::invalid_argument(
             "LatentEncoder: the checkpoint " + options_.checkpoint_path + " was written " +
@@ -523,6 +532,7 @@ Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
     for (SensorKind sensor : sensors) {
       out.AddSensor(sensor, TrunkLatentDim(model_.Trunk(sensor)));
       out.set_fit_strategy(sensor, State(sensor).strategy.ToString());
+      out.set_products(sensor, ProductPrecisionName(GetProductPrecision()));
       if (options_.share_rest_latent) out.set_rest_latent(sensor, State(sensor).rest_latent);
     }
     for (const Job& job : jobs) {

@@ -102,7 +102,8 @@ TEST_F(TrainCliTest, TheInnerLoopKnobsReachTheModelAndEncodeUsesIt) {
 
 // --products bf16 (where the CPU has AVX512_BF16) trains and encodes with bfloat16
 // products, and the model says so: `info` names them, its JSON carries "products"
-// (a float model's reads "float"); its checkpoint resumes only in bfloat16.
+// (a float model's reads "float"); its checkpoint resumes only in bfloat16; a
+// functaset encoded with them says so too.
 TEST_F(TrainCliTest, AModelTrainedWithBfloat16ProductsSaysSo) {
   if (!ProductPrecisionAvailable(ProductPrecision::kBfloat16)) {
     GTEST_SKIP() << "this CPU lacks AVX512_BF16";
@@ -125,10 +126,22 @@ TEST_F(TrainCliTest, AModelTrainedWithBfloat16ProductsSaysSo) {
   const Result encode = Run("encode --model " + Root("bf16.tfm") + " --data " + Root("d") +
                             " --out " + Root("bf16.tfs") + " --threads 1 --products bf16");
   EXPECT_EQ(encode.exit_code, 0) << encode.err;
+  // An encode resumed from it in float is refused: the precision shapes the latents.
+  const Result resume = Run("encode --model " + Root("bf16.tfm") + " --data " + Root("d") +
+                            " --out " + Root("bf16.tfs") + " --threads 1 --resume");
+  EXPECT_NE(resume.exit_code, 0);
+  EXPECT_THAT(resume.err, HasSubstr("with bf16 products, this run with float"));
+  // The functaset records the precision its latents were fitted with, per sensor.
+  EXPECT_THAT(Run("info " + Root("bf16.tfs")).out, HasSubstr("with bf16 products"));
+  EXPECT_EQ(
+      Run("info " + Root("bf16.tfs") + " --json").LastJson()["functaset"]["sensors"]["bubble"]
+                                                            ["products"],
+      "bf16");
   TrainAndEncode("plain");
   const Result float_info = Run("info " + Root("plain.tfm") + " --json");
   EXPECT_EQ(float_info.LastJson()["model"]["products"], "float");
   EXPECT_THAT(Run("info " + Root("plain.tfm")).out, Not(HasSubstr("products")));
+  EXPECT_THAT(Run("info " + Root("plain.tfs")).out, Not(HasSubstr("products")));
 }
 
 
