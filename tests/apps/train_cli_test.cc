@@ -126,6 +126,16 @@ TEST_F(TrainCliTest, AModelTrainedWithBfloat16ProductsSaysSo) {
   const Result encode = Run("encode --model " + Root("bf16.tfm") + " --data " + Root("d") +
                             " --out " + Root("bf16.tfs") + " --threads 1 --products bf16");
   EXPECT_EQ(encode.exit_code, 0) << encode.err;
+  // Bit-identical whatever --threads, as in float.
+  ASSERT_EQ(Run("encode --model " + Root("bf16.tfm") + " --data " + Root("d") + " --out " +
+                Root("bf16_2.tfs") + " --threads 2 --products bf16")
+                .exit_code,
+            0);
+  auto bytes = [](const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+  };
+  EXPECT_EQ(bytes(Root("bf16_2.tfs")), bytes(Root("bf16.tfs")));
   // An encode resumed from it in float is refused: the precision shapes the latents.
   const Result resume = Run("encode --model " + Root("bf16.tfm") + " --data " + Root("d") +
                             " --out " + Root("bf16.tfs") + " --threads 1 --resume");
