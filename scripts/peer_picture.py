@@ -74,9 +74,9 @@ def main():
                 if r is None:
                     continue
                 bx = gx + i * bar
-                svg.append(f'<rect x="{bx:.1f}" y="{y_of(r["ratio_median"]):.1f}" '
-                           f'width="{bar - 2:.1f}" height="{y_of(0) - y_of(r["ratio_median"]):.1f}" '
-                           f'fill="{COLOURS[i % len(COLOURS)]}"/>')
+                y_top = y_of(r["ratio_median"])
+                svg.append(f'<rect x="{bx:.1f}" y="{y_top:.1f}" width="{bar - 2:.1f}" '
+                           f'height="{y_of(0) - y_top:.1f}" fill="{COLOURS[i % len(COLOURS)]}"/>')
                 cx = bx + (bar - 2) / 2
                 svg.append(f'<line x1="{cx:.1f}" y1="{y_of(r["ratio_min"]):.1f}" x2="{cx:.1f}" '
                            f'y2="{y_of(r["ratio_max"]):.1f}" stroke="black"/>')
