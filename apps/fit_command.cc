@@ -75,6 +75,7 @@ struct FitFlags {
   std::string strategy;  // "": ceres:10, or the encoder's default for a photometric trunk
   std::string out;
   std::string precision = "float";
+  std::string products = "float";
   std::string jacobian = "analytic";
   std::string knn_index = "brute_force";
   int knn_k = 8;
@@ -248,6 +249,7 @@ void RunFit(const FitFlags& flags) {
   const Image& frame = pair.frame;
   const Image& reference = pair.reference;
 
+  ApplyProductPrecision(flags.products);
   const FunctaModel model = FunctaModel::Load(flags.model);
   if (!model.HasSensor(sensor)) {
     std::string have;
@@ -427,6 +429,7 @@ void RegisterFit(CLI::App& app, CommandBody* selected) {
                       LatentEncoder::DefaultPhotometricStrategy(false, 64) + " without)");
   sub->add_option("--out", flags->out, "Folder for latent.json and fit.png (created)");
   sub->add_option("--precision", flags->precision, "float (default) or double trunk evaluations");
+  AddProductPrecisionFlag(sub, &flags->products);
   sub->add_option("--jacobian", flags->jacobian,
                   "analytic (default) or autodiff (the slow ceres::Jet reference)");
   sub->add_option("--sigma", flags->sigma,

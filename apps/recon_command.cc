@@ -43,6 +43,7 @@ struct ReconFlags {
   std::string out;
   int examples = 6;
   int threads = 0;
+  std::string products = "float";
   int tile_height = 140;
   bool worst = false;
   bool json = false;
@@ -211,6 +212,7 @@ void RunRecon(const ReconFlags& flags) {
   inputs.push_back({"--model", flags.model});
   inputs.push_back({"--functaset", flags.functaset});
   RefuseOutputsThatAreInputs(outputs, inputs);
+  ApplyProductPrecision(flags.products);
   const FunctaModel model = FunctaModel::Load(flags.model);
   const Functaset functaset = Functaset::Load(flags.functaset);
   functaset.CheckModel(model, flags.model, flags.functaset);
@@ -357,6 +359,7 @@ void RegisterRecon(CLI::App& app, CommandBody* selected) {
   sub->add_flag("--allow-other-frames", flags->allow_other_frames,
                 "Run even when the data's frames (size, channels, sensor description) are not "
                 "those the model's trunk was trained on (a warning instead of an error)");
+  AddProductPrecisionFlag(sub, &flags->products);
   sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
   AddDatasetFlags(sub, &flags->dataset);
   sub->callback([flags, selected]() { *selected = [flags]() { RunRecon(*flags); }; });
