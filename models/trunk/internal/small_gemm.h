@@ -73,8 +73,9 @@ bool SmallGemmBfloat16Packed(const Bfloat16Pairs& a, long cols, const float* b, 
 // Under ProductPrecision::kBfloat16, products with fewer inner terms or columns than this
 // stay float: they gain nothing from pairs of terms, and they are the products whose
 // operands are pixel coordinates (a first layer's, depth 2, and its weight gradient, 2
-// columns), which bfloat16 would move by up to 2^-9 of their value (a sixth of a pixel
-// across 88 columns), and the output layer's few channels.
+// columns), which bfloat16 would move by up to 2^-9 of their value (near the edge,
+// 0.002 in (-1, 1): a twelfth of a pixel across 88 columns), and the output layer's few
+// channels.
 inline constexpr long kMinBfloat16Extent = 16;
 
 namespace small_gemm_internal {
