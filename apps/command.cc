@@ -8,6 +8,7 @@
 #include <thread>
 
 #include "CLI/CLI.hpp"
+#include "estimation/functaset/functaset.h"
 #include "models/trunk/product_precision.h"
 
 namespace tactfunc::apps {
@@ -71,6 +72,28 @@ void ApplyProductPrecision(const std::string& value) {
                      ": this CPU lacks AVX512_BF16, which bfloat16 products need; use float");
   }
   SetProductPrecision(precision);
+}
+
+void AddFunctasetProductPrecisionFlag(CLI::App* sub, std::string* value) {
+  sub->add_option("--products", *value,
+                  "Precision of the trunk's matrix products: float or bf16 (default: the one "
+                  "the functaset was encoded with, where this CPU runs it; docs/BUILD.md)")
+      ->check(CLI::IsMember({"float", "bf16"}));
+}
+
+std::string ProductPrecisionFor(const std::string& flag, const Functaset& functaset,
+                                const std::string& path, const std::string& command) {
+  if (!flag.empty()) return flag;
+  bool bf16 = false;
+  for (SensorKind sensor : functaset.sensors()) bf16 = bf16 || functaset.products(sensor) == "bf16";
+  if (!bf16) return "float";
+  if (!ProductPrecisionAvailable(ProductPrecision::kBfloat16)) {
+    std::cerr << command << ": " << path << " was encoded with bf16 products, which this CPU "
+              << "lacks (AVX512_BF16); rendering in float, its PSNRs may differ a little\n";
+    return "float";
+  }
+  std::cout << command << ": bf16 products, as " << path << " was encoded\n";
+  return "bf16";
 }
 
 int ResolveThreads(int requested) {

@@ -21,6 +21,10 @@ namespace CLI {
 class App;  // CLI11; a subcommand's registration includes "CLI/CLI.hpp"
 }  // namespace CLI
 
+namespace tactfunc {
+class Functaset;  // estimation/functaset/functaset.h
+}  // namespace tactfunc
+
 namespace tactfunc::apps {
 
 // A subcommand's body, chosen during parsing and run by main() under its error handler.
@@ -83,6 +87,14 @@ std::string FormatFixed(double value, int digits, const char* missing = "n/a");
 // from the flag's value; on a CPU without AVX512_BF16 it throws UsageError saying so.
 void AddProductPrecisionFlag(CLI::App* sub, std::string* value);
 void ApplyProductPrecision(const std::string& value);
+// For the commands that render a functaset's latents (recon, eval): their --products
+// defaults to "" (the flag's help says so), meaning the precision the functaset was
+// encoded with. Returns `flag` if given; else "bf16" if a sensor of the functaset (read
+// from `path`) was encoded with bfloat16 products and this CPU runs them (saying so on
+// stdout), "float" otherwise (with a note on stderr when the CPU lacks them).
+void AddFunctasetProductPrecisionFlag(CLI::App* sub, std::string* value);
+std::string ProductPrecisionFor(const std::string& flag, const Functaset& functaset,
+                                const std::string& path, const std::string& command);
 
 }  // namespace tactfunc::apps
 

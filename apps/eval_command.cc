@@ -62,7 +62,7 @@ struct EvalFlags {
   std::string data, model, functaset, pose_model, out, sensors;
   std::vector<std::string> extra_functasets, extra_models;
   int threads = 0;
-  std::string products = "float";
+  std::string products;  // "": as the functaset was encoded
   int raw_downsample = 2;
   int knn_k = 5;
   bool json = false;
@@ -326,9 +326,11 @@ void RunEval(const EvalFlags& flags) {
   }
   RefuseOutputsThatAreInputs(outputs, read);
   const int threads = ResolveThreads(flags.threads);
-  ApplyProductPrecision(flags.products);
-  const FunctaModel model = FunctaModel::Load(flags.model);
+  // The functaset first: its products' precision is set before the models are read, so
+  // that the trunks pack their weights for it.
   const Functaset functaset = Functaset::Load(flags.functaset);
+  ApplyProductPrecision(ProductPrecisionFor(flags.products, functaset, flags.functaset, "eval"));
+  const FunctaModel model = FunctaModel::Load(flags.model);
   functaset.CheckModel(model, flags.model, flags.functaset);
   const Dataset dataset = OpenDataset(flags.data, flags.dataset);
   RefuseOutputsThatAreInputs(outputs, DatasetFileInputs("--data", dataset));
@@ -633,7 +635,7 @@ void RegisterEval(CLI::App& app, CommandBody* selected) {
   sub->add_flag("--allow-other-frames", flags->allow_other_frames,
                 "Run even when the data's frames (size, channels, sensor description) are not "
                 "those the model's trunk was trained on (a warning instead of an error)");
-  AddProductPrecisionFlag(sub, &flags->products);
+  AddFunctasetProductPrecisionFlag(sub, &flags->products);
   sub->add_flag("--json", flags->json, "Print {rows, targets, rate_distortion, ...} as one JSON line");
   AddDatasetFlags(sub, &flags->dataset);
   sub->callback([flags, selected]() {

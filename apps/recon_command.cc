@@ -43,7 +43,7 @@ struct ReconFlags {
   std::string out;
   int examples = 6;
   int threads = 0;
-  std::string products = "float";
+  std::string products;  // "": as the functaset was encoded
   int tile_height = 140;
   bool worst = false;
   bool json = false;
@@ -212,9 +212,11 @@ void RunRecon(const ReconFlags& flags) {
   inputs.push_back({"--model", flags.model});
   inputs.push_back({"--functaset", flags.functaset});
   RefuseOutputsThatAreInputs(outputs, inputs);
-  ApplyProductPrecision(flags.products);
-  const FunctaModel model = FunctaModel::Load(flags.model);
+  // The functaset first: its products' precision is set before the model is read, so
+  // that the trunks pack their weights for it.
   const Functaset functaset = Functaset::Load(flags.functaset);
+  ApplyProductPrecision(ProductPrecisionFor(flags.products, functaset, flags.functaset, "recon"));
+  const FunctaModel model = FunctaModel::Load(flags.model);
   functaset.CheckModel(model, flags.model, flags.functaset);
   if (!functaset.complete()) {
     std::cerr << "recon: note: " << flags.functaset << " is a partial functaset; evaluating the "
@@ -359,7 +361,7 @@ void RegisterRecon(CLI::App& app, CommandBody* selected) {
   sub->add_flag("--allow-other-frames", flags->allow_other_frames,
                 "Run even when the data's frames (size, channels, sensor description) are not "
                 "those the model's trunk was trained on (a warning instead of an error)");
-  AddProductPrecisionFlag(sub, &flags->products);
+  AddFunctasetProductPrecisionFlag(sub, &flags->products);
   sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
   AddDatasetFlags(sub, &flags->dataset);
   sub->callback([flags, selected]() { *selected = [flags]() { RunRecon(*flags); }; });

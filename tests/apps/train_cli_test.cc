@@ -136,16 +136,18 @@ TEST_F(TrainCliTest, AModelTrainedWithBfloat16ProductsSaysSo) {
     return std::string(std::istreambuf_iterator<char>(in), {});
   };
   EXPECT_EQ(bytes(Root("bf16_2.tfs")), bytes(Root("bf16.tfs")));
-  // recon in the same precision reproduces the encode's PSNRs (the functaset holds its
-  // latents in float16, hence the tolerance); fit and eval take the flag as well.
+  // recon renders in the precision the functaset was encoded with unless told otherwise,
+  // and so reproduces the encode's PSNRs (the functaset holds its latents in float16,
+  // hence the tolerance); fit and eval take the flag as well.
   const Result encoded = Run("encode --model " + Root("bf16.tfm") + " --data " + Root("d") +
                              " --out " + Root("bf16_3.tfs") + " --threads 1 --products bf16" +
                              " --json");
   ASSERT_EQ(encoded.exit_code, 0) << encoded.err;
   const Result recon = Run("recon --model " + Root("bf16.tfm") + " --functaset " +
                            Root("bf16_3.tfs") + " --data " + Root("d") + " --out " +
-                           Root("recon_bf16") + " --products bf16 --json");
+                           Root("recon_bf16") + " --json");
   ASSERT_EQ(recon.exit_code, 0) << recon.err;
+  EXPECT_THAT(recon.out, HasSubstr("bf16 products, as " + Root("bf16_3.tfs") + " was encoded"));
   EXPECT_NEAR(recon.LastJson()["groups"][0]["noisy"]["mean"].get<double>(),
               encoded.LastJson()["psnr_mean"]["bubble"].get<double>(), 1e-3);
   for (const std::string command : {"fit", "recon", "eval"}) {
