@@ -57,11 +57,16 @@ std::vector<std::string> SplitList(const std::string& text) {
   return items;
 }
 
-void AddProductPrecisionFlag(CLI::App* sub, std::string* value) {
+void AddProductPrecisionFlag(CLI::App* sub, std::string* value, bool as_functaset) {
   sub->add_option("--products", *value,
-                  "Precision of the trunk's matrix products: float (default) or bf16 (operands "
-                  "rounded to bfloat16, sums in float; about twice the multiply-adds per "
-                  "second on a CPU with AVX512_BF16, at a small cost in accuracy: docs/BUILD.md)")
+                  as_functaset
+                      ? "Precision of the trunk's matrix products: float or bf16 (default: the "
+                        "one the functaset was encoded with, where this CPU runs it; "
+                        "docs/BUILD.md)"
+                      : "Precision of the trunk's matrix products: float (default) or bf16 "
+                        "(operands rounded to bfloat16, sums in float; about twice the "
+                        "multiply-adds per second on a CPU with AVX512_BF16, at a small cost in "
+                        "accuracy: docs/BUILD.md)")
       ->check(CLI::IsMember({"float", "bf16"}));
 }
 
@@ -72,13 +77,6 @@ void ApplyProductPrecision(const std::string& value) {
                      ": this CPU lacks AVX512_BF16, which bfloat16 products need; use float");
   }
   SetProductPrecision(precision);
-}
-
-void AddFunctasetProductPrecisionFlag(CLI::App* sub, std::string* value) {
-  sub->add_option("--products", *value,
-                  "Precision of the trunk's matrix products: float or bf16 (default: the one "
-                  "the functaset was encoded with, where this CPU runs it; docs/BUILD.md)")
-      ->check(CLI::IsMember({"float", "bf16"}));
 }
 
 std::string ProductPrecisionFor(const std::string& flag, const Functaset& functaset,

@@ -85,14 +85,14 @@ std::string FormatFixed(double value, int digits, const char* missing = "n/a");
 // default) or "bf16", the products' operands in bfloat16 with float sums
 // (models/trunk/product_precision.h). ApplyProductPrecision sets the process's precision
 // from the flag's value; on a CPU without AVX512_BF16 it throws UsageError saying so.
-void AddProductPrecisionFlag(CLI::App* sub, std::string* value);
+// as_functaset: the commands that render a functaset's latents (recon, eval), whose
+// --products defaults to "" (the flag's help says so), meaning the precision the
+// functaset was encoded with (ProductPrecisionFor).
+void AddProductPrecisionFlag(CLI::App* sub, std::string* value, bool as_functaset = false);
 void ApplyProductPrecision(const std::string& value);
-// For the commands that render a functaset's latents (recon, eval): their --products
-// defaults to "" (the flag's help says so), meaning the precision the functaset was
-// encoded with. Returns `flag` if given; else "bf16" if a sensor of the functaset (read
-// from `path`) was encoded with bfloat16 products and this CPU runs them (saying so on
-// stdout), "float" otherwise (with a note on stderr when the CPU lacks them).
-void AddFunctasetProductPrecisionFlag(CLI::App* sub, std::string* value);
+// The precision for such a command: `flag` if given; else "bf16" if a sensor of the
+// functaset (read from `path`) was encoded with bfloat16 products and this CPU runs them
+// (saying so on stdout), "float" otherwise (with a note on stderr when the CPU lacks them).
 std::string ProductPrecisionFor(const std::string& flag, const Functaset& functaset,
                                 const std::string& path, const std::string& command);
 

@@ -100,8 +100,8 @@ nlohmann::json DescribeModel(const std::string& bytes, const std::string& path) 
   const nlohmann::json trunks_info = ObjectAt(info, "trunks");
   const std::string preset = StringAt(info, "preset");
   // Files written before `train --products` existed were trained in float.
-  const std::string products =
-      StringAt(info, "products") == "?" ? "float" : StringAt(info, "products");
+  std::string products = StringAt(info, "products");
+  if (products == "?") products = "float";
   std::cout << "  preset " << preset
             << (products == "float" ? "" : ", trained with " + products + " products") << "\n";
   nlohmann::json trunks = nlohmann::json::object();

@@ -361,7 +361,7 @@ void RegisterRecon(CLI::App& app, CommandBody* selected) {
   sub->add_flag("--allow-other-frames", flags->allow_other_frames,
                 "Run even when the data's frames (size, channels, sensor description) are not "
                 "those the model's trunk was trained on (a warning instead of an error)");
-  AddFunctasetProductPrecisionFlag(sub, &flags->products);
+  AddProductPrecisionFlag(sub, &flags->products, /*as_functaset=*/true);
   sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
   AddDatasetFlags(sub, &flags->dataset);
   sub->callback([flags, selected]() { *selected = [flags]() { RunRecon(*flags); }; });

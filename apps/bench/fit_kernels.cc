@@ -213,17 +213,6 @@ void RegisterKernelBenchmarks(const std::shared_ptr<KernelSetup>& s) {
   })->Unit(benchmark::kMillisecond);
 }
 
-// The products' precision for one benchmark's run (bfloat16 when asked), float after.
-class ScopedBenchPrecision {
- public:
-  explicit ScopedBenchPrecision(bool bf16) {
-    if (bf16) SetProductPrecision(ProductPrecision::kBfloat16);
-  }
-  ~ScopedBenchPrecision() { SetProductPrecision(ProductPrecision::kFloat); }
-  ScopedBenchPrecision(const ScopedBenchPrecision&) = delete;
-  ScopedBenchPrecision& operator=(const ScopedBenchPrecision&) = delete;
-};
-
 void RegisterGemmBenchmark() {
   benchmark::RegisterBenchmark("eigen/gemm_float/4096x256x256", [](benchmark::State& state) {
     const Eigen::MatrixXf a = Eigen::MatrixXf::Random(4096, 256),
@@ -245,7 +234,8 @@ void RegisterGemmBenchmark() {
       const Eigen::MatrixXf a = Eigen::MatrixXf::Random(rows, depth),
                             b = Eigen::MatrixXf::Random(depth, 256);
       Eigen::MatrixXf c(rows, 256);
-      const ScopedBenchPrecision precision(bf16);
+      const ScopedProductPrecision precision(bf16 ? ProductPrecision::kBfloat16
+                                                   : ProductPrecision::kFloat);
       for (auto _ : state) {
         if (kernel) {
           internal::Product(a, b, c, /*accumulate=*/false);
@@ -266,7 +256,8 @@ void RegisterGemmBenchmark() {
       const Eigen::MatrixXf delta = Eigen::MatrixXf::Random(width, 256),
                             h = Eigen::MatrixXf::Random(width, 256);
       Eigen::MatrixXf dW = Eigen::MatrixXf::Zero(width, width);
-      const ScopedBenchPrecision precision(bf16);
+      const ScopedProductPrecision precision(bf16 ? ProductPrecision::kBfloat16
+                                                   : ProductPrecision::kFloat);
       for (auto _ : state) {
         if (kernel) {
           internal::Product(delta, h.transpose(), dW, /*accumulate=*/true);

@@ -34,6 +34,22 @@ bool ProductPrecisionAvailable(ProductPrecision precision);
 void SetProductPrecision(ProductPrecision precision);
 ProductPrecision GetProductPrecision();
 
+// Sets a precision for one scope (throwing as SetProductPrecision does) and puts back
+// the one before at its end.
+class ScopedProductPrecision {
+ public:
+  explicit ScopedProductPrecision(ProductPrecision precision)
+      : previous_(GetProductPrecision()) {
+    SetProductPrecision(precision);
+  }
+  ~ScopedProductPrecision() { SetProductPrecision(previous_); }
+  ScopedProductPrecision(const ScopedProductPrecision&) = delete;
+  ScopedProductPrecision& operator=(const ScopedProductPrecision&) = delete;
+
+ private:
+  ProductPrecision previous_;
+};
+
 // "float" / "bf16", and back (std::invalid_argument naming the accepted values).
 std::string ProductPrecisionName(ProductPrecision precision);
 ProductPrecision ParseProductPrecision(const std::string& name);

@@ -131,11 +131,7 @@ TEST_F(TrainCliTest, AModelTrainedWithBfloat16ProductsSaysSo) {
                 Root("bf16_2.tfs") + " --threads 2 --products bf16")
                 .exit_code,
             0);
-  auto bytes = [](const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    return std::string(std::istreambuf_iterator<char>(in), {});
-  };
-  EXPECT_EQ(bytes(Root("bf16_2.tfs")), bytes(Root("bf16.tfs")));
+  EXPECT_EQ(testing_util::Slurp(Root("bf16_2.tfs")), testing_util::Slurp(Root("bf16.tfs")));
   // recon renders in the precision the functaset was encoded with unless told otherwise,
   // and so reproduces the encode's PSNRs (the functaset holds its latents in float16,
   // hence the tolerance); fit and eval take the flag as well.

@@ -27,13 +27,6 @@ using testing_util::GemmCase;
 using testing_util::GemmShape;
 using testing_util::Numbers;
 
-// Sets a precision for one scope and puts float back at its end.
-class ScopedPrecision {
- public:
-  explicit ScopedPrecision(ProductPrecision p) { SetProductPrecision(p); }
-  ~ScopedPrecision() { SetProductPrecision(ProductPrecision::kFloat); }
-};
-
 // Round to nearest bfloat16, ties to even (finite values), written from the format's
 // definition: keep the top 16 bits of the float.
 double Bfloat16(float x) {
@@ -109,7 +102,7 @@ TEST(Bfloat16Products, LeaveShortProductsSuchAsTheCoordinatesOnesInFloat) {
   internal::Product(delta, coords.transpose(), grad_float, false);
   internal::Product(delta.leftCols(16), h.topRows(16), square_float, false);
   {
-    const ScopedPrecision bf16(ProductPrecision::kBfloat16);
+    const ScopedProductPrecision bf16(ProductPrecision::kBfloat16);
     internal::Product(w, coords, first_bf16, false);
     internal::Product(delta, coords.transpose(), grad_bf16, false);
     internal::Product(delta.leftCols(16), h.topRows(16), square_bf16, false);
@@ -126,7 +119,7 @@ TEST(Bfloat16Products, StartFromTheOffsetAndDifferFromFloatByBfloat16sError) {
   MatrixXf as_float(256, 128), as_bf16(256, 128), again(256, 128);
   internal::ProductPlusOffset(a, b, offset, as_float);
   {
-    const ScopedPrecision bf16(ProductPrecision::kBfloat16);
+    const ScopedProductPrecision bf16(ProductPrecision::kBfloat16);
     internal::ProductPlusOffset(a, b, offset, as_bf16);
     internal::ProductPlusOffset(a, b, offset, again);
   }
@@ -160,6 +153,14 @@ TEST(Bfloat16Products, ThePrecisionIsParsedNamedAndRefusedWhereTheCpuLacksIt) {
     SetProductPrecision(ProductPrecision::kBfloat16);
     EXPECT_EQ(GetProductPrecision(), ProductPrecision::kBfloat16);
     SetProductPrecision(ProductPrecision::kFloat);
+    {  // a scope puts back the precision before it, nested too
+      const ScopedProductPrecision outer(ProductPrecision::kBfloat16);
+      {
+        const ScopedProductPrecision inner(ProductPrecision::kFloat);
+        EXPECT_EQ(GetProductPrecision(), ProductPrecision::kFloat);
+      }
+      EXPECT_EQ(GetProductPrecision(), ProductPrecision::kBfloat16);
+    }
   } else {
     EXPECT_THROW(SetProductPrecision(ProductPrecision::kBfloat16), std::invalid_argument);
   }
@@ -183,7 +184,7 @@ TEST(Bfloat16Products, KeepATrunksLossAndLatentGradientWithinBfloat16sError) {
       siren.LossAndGradient<float>(coords, z, targets, weights, &g_float, &t_float);
   double loss_bf16 = 0;
   {
-    const ScopedPrecision bf16(ProductPrecision::kBfloat16);
+    const ScopedProductPrecision bf16(ProductPrecision::kBfloat16);
     loss_bf16 = siren.LossAndGradient<float>(coords, z, targets, weights, &g_bf16, &t_bf16);
   }
   EXPECT_NE(loss_bf16, loss_float);
@@ -211,7 +212,7 @@ TEST(Bfloat16Products, ATrunksPackedWeightsGiveTheBitsOfPackingThemPerProduct) {
       unpacked.parameters() + 0.01 * Numbers(unpacked.NumParameters(), 1, 9).cast<double>();
   LatentModulatedSiren unpacked_moved(options, /*seed=*/5);
   unpacked_moved.SetParameters(moved);
-  const ScopedPrecision bf16(ProductPrecision::kBfloat16);
+  const ScopedProductPrecision bf16(ProductPrecision::kBfloat16);
   LatentModulatedSiren packed(options, /*seed=*/5);
   const MatrixXf coords = LatentModulatedSiren::GridCoordinates(20, 33).cast<float>();
   const Eigen::VectorXf z = 0.5f * Numbers(options.latent_dim, 1, 6);
