@@ -61,6 +61,7 @@ struct TrainFlags {
   bool first_order = false;
   bool readout = false;
   bool skip_rest = false;
+  bool outer_clean = false;
   std::string working_size;  // "ROWSxCOLS", empty = the preset's
   std::string spatial_latent;  // "GHxGWxC", empty = one global latent
   bool resume = false;
@@ -140,6 +141,7 @@ TrunkTrainer::Options OptionsFor(const TrainFlags& flags, SensorKind sensor) {
     options.divergence_drop_db = flags.divergence_drop_db;
   }
   if (flags.skip_rest) options.skip_frames_at_rest = true;
+  if (flags.outer_clean) options.outer_loss_on_clean = true;
   if (!flags.spatial_latent.empty()) {
     int rows = 0, cols = 0, channels = 0;
     char x1 = 0, x2 = 0, extra = 0;
@@ -284,6 +286,7 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
       {!flags.spatial_latent.empty(), "--spatial-latent"},
       {flags.first_order, "--first-order"},
       {flags.skip_rest, "--skip-rest"},
+      {flags.outer_clean, "--outer-clean"},
       {flags.inner_steps_option->count() > 0, "--inner-steps"},
       {flags.alpha_init_option->count() > 0, "--alpha-init"},
       {flags.alpha_max_option->count() > 0, "--alpha-max"}};
@@ -839,6 +842,10 @@ void RegisterTrain(CLI::App& app, CommandBody* selected) {
                       "The readout branch's step size as a fraction of the trunk's, in [0, 1] "
                       "(default 0: kept at its PCA start)")
           ->check(CLI::Range(0.0, 1.0));
+  sub->add_flag("--outer-clean", flags->outer_clean,
+                "Meta-learn against the frames' noise-free copies (a dataset with them: synth "
+                "--clean): the inner fit sees the noisy frame, the outer loss the clean one, "
+                "so the trunk learns fits that leave the noise out (docs/REPRESENTATION.md)");
   sub->add_flag("--skip-rest", flags->skip_rest,
                 "Leave train-split frames at rest (no contact above the sensor's noise; "
                 "docs/REAL_DATA.md) out of training");

@@ -528,6 +528,9 @@ std::string TrunkTrainer::TrajectoryOptionsJson(SensorKind sensor,
     json["readout_pca_frames"] = o.readout_pca_frames;
     json["readout_learning_rate_scale"] = o.readout_learning_rate_scale;
   }
+  if (o.outer_loss_on_clean) {  // absent = the outer loss on the noisy frames
+    json["outer_loss_on_clean"] = true;
+  }
   if (o.skip_frames_at_rest) {  // absent = every train-split frame (older files)
     json["skip_frames_at_rest"] = true;
     json["contact.threshold"] = o.contact.threshold;
@@ -586,10 +589,25 @@ TrunkTrainer::Summary TrunkTrainer::Train(const Dataset& dataset, SensorKind sen
   }
   // Each frame decoded once: its targets and, with skip_frames_at_rest, its contact test.
   std::vector<TrunkTargets> frames(indices.size());
+  std::vector<TrunkTargets> clean_frames(options_.outer_loss_on_clean ? indices.size() : 0);
+  if (options_.outer_loss_on_clean) {
+    for (std::size_t index : indices) {
+      if (dataset.frames()[index].clean_path.empty()) {
+        throw std::runtime_error("TrunkTrainer: the outer loss on noise-free frames needs "
+                                 "every train-split frame's clean copy; frame '" +
+                                 dataset.frames()[index].id + "' of " + dataset.root() +
+                                 " has none (synth --clean writes them)");
+      }
+    }
+  }
   std::vector<char> contact(indices.size(), 1);
   internal::ParallelFor(static_cast<int>(indices.size()), options_.threads, [&](int i) {
     const Image frame = dataset.LoadFrame(indices[i]);
     frames[i] = DatasetFrameTargets(dataset, indices[i], frame, format);
+    if (options_.outer_loss_on_clean) {
+      clean_frames[i] =
+          DatasetFrameTargets(dataset, indices[i], dataset.LoadCleanFrame(indices[i]), format);
+    }
     if (options_.skip_frames_at_rest) {
       contact[i] = DetectFrameContact(dataset, indices[i], frame, options_.contact).contact;
     }
@@ -597,11 +615,12 @@ TrunkTrainer::Summary TrunkTrainer::Train(const Dataset& dataset, SensorKind sen
   int skipped = 0;
   if (options_.skip_frames_at_rest) {
     std::vector<std::size_t> kept;
-    std::vector<TrunkTargets> kept_frames;
+    std::vector<TrunkTargets> kept_frames, kept_clean;
     for (std::size_t i = 0; i < indices.size(); ++i) {
       if (!contact[i]) continue;
       kept.push_back(indices[i]);
       kept_frames.push_back(std::move(frames[i]));
+      if (options_.outer_loss_on_clean) kept_clean.push_back(std::move(clean_frames[i]));
     }
     skipped = static_cast<int>(indices.size() - kept.size());
     if (kept.empty()) {
@@ -612,6 +631,7 @@ TrunkTrainer::Summary TrunkTrainer::Train(const Dataset& dataset, SensorKind sen
     }
     indices = std::move(kept);
     frames = std::move(kept_frames);
+    clean_frames = std::move(kept_clean);
   }
   // FNV-1a over the frame ids: resuming on another training set is refused.
   std::uint64_t fingerprint = internal::Fnv1a(nullptr, 0);
@@ -620,7 +640,8 @@ TrunkTrainer::Summary TrunkTrainer::Train(const Dataset& dataset, SensorKind sen
     fingerprint = internal::Fnv1a(line.data(), line.size(), fingerprint);
   }
   const double load_seconds = SecondsSince(start);
-  Summary summary = Train(frames, sensor, format, fingerprint, trunk, callback);
+  Summary summary = Train(frames, sensor, format, fingerprint, trunk, callback,
+                          options_.outer_loss_on_clean ? &clean_frames : nullptr);
   summary.load_seconds = load_seconds;
   summary.num_frames_at_rest_skipped = skipped;
   return summary;
@@ -629,11 +650,25 @@ TrunkTrainer::Summary TrunkTrainer::Train(const Dataset& dataset, SensorKind sen
 TrunkTrainer::Summary TrunkTrainer::Train(const std::vector<TrunkTargets>& frames,
                                           SensorKind sensor, const FrameFormat& format,
                                           std::uint64_t fingerprint, SensorTrunk* trunk,
-                                          const StepCallback& callback) const {
+                                          const StepCallback& callback,
+                                          const std::vector<TrunkTargets>* clean_frames) const {
   const Options& o = options_;
   std::string error;
   if (!format.IsValid(&error)) throw std::invalid_argument("TrunkTrainer: " + error);
   if (frames.empty()) throw std::runtime_error("TrunkTrainer: no training frames");
+  if (o.outer_loss_on_clean) {
+    if (clean_frames == nullptr || clean_frames->size() != frames.size()) {
+      throw std::invalid_argument("TrunkTrainer: the outer loss on noise-free frames needs one "
+                                  "clean copy per training frame");
+    }
+    for (std::size_t i = 0; i < frames.size(); ++i) {
+      if ((*clean_frames)[i].values.rows() != frames[i].values.rows() ||
+          (*clean_frames)[i].values.cols() != frames[i].values.cols()) {
+        throw std::invalid_argument("TrunkTrainer: clean copy " + std::to_string(i) +
+                                    " differs in size from its training frame");
+      }
+    }
+  }
   const int num_pixels = format.rows * format.cols;
   const int channels = static_cast<int>(frames[0].values.cols());
   for (std::size_t i = 0; i < frames.size(); ++i) {
@@ -655,7 +690,12 @@ TrunkTrainer::Summary TrunkTrainer::Train(const std::vector<TrunkTargets>& frame
   siren_options.readout_rows = o.readout ? format.rows : 0;
   siren_options.readout_cols = o.readout ? format.cols : 0;
   LatentModulatedSiren siren(siren_options, StreamSeed(o.seed, kThetaStream));
-  if (o.readout) StartReadoutFromPca(frames, o.readout_pca_frames, &siren);
+  // With the outer loss on the noise-free copies the branch starts as their PCA: the
+  // basis of what the outer loss asks for, not of the sensor's noise.
+  if (o.readout) {
+    StartReadoutFromPca(o.outer_loss_on_clean ? *clean_frames : frames, o.readout_pca_frames,
+                        &siren);
+  }
   siren.set_readout_frozen(o.readout && o.readout_learning_rate_scale == 0);
   const MetaSgd meta(o.meta_sgd);
   const int d = siren.latent_dim();
@@ -764,21 +804,26 @@ TrunkTrainer::Summary TrunkTrainer::Train(const std::vector<TrunkTargets>& frame
     internal::ParallelFor(static_cast<int>(end_slot - first_slot), o.threads, [&](int i) {
       const int b = static_cast<int>(first_slot) + i;
       const TrunkTargets& t = frames[batch_frames[b]];
+      const Eigen::MatrixXf* clean =
+          o.outer_loss_on_clean ? &(*clean_frames)[batch_frames[b]].values : nullptr;
       if (!subset) {
-        results[b] = meta.OuterLossAndGradient<float>(siren, grid, t.values, t.weights, alpha);
+        results[b] =
+            meta.OuterLossAndGradient<float>(siren, grid, t.values, t.weights, alpha, clean);
         return;
       }
       const std::vector<int> pixels =
           Sample(num_pixels, o.pixels_per_frame, DeriveSeed(pixel_seed, b));
       const int n = static_cast<int>(pixels.size());
-      Eigen::MatrixXf coords(n, 2), targets(n, channels);
+      Eigen::MatrixXf coords(n, 2), targets(n, channels), outer(clean ? n : 0, channels);
       Eigen::VectorXf weights(n);
       for (int i = 0; i < n; ++i) {
         coords.row(i) = grid.row(pixels[i]);
         targets.row(i) = t.values.row(pixels[i]);
         weights[i] = t.weights[pixels[i]];
+        if (clean) outer.row(i) = clean->row(pixels[i]);
       }
-      results[b] = meta.OuterLossAndGradient<float>(siren, coords, targets, weights, alpha);
+      results[b] = meta.OuterLossAndGradient<float>(siren, coords, targets, weights, alpha,
+                                                    clean ? &outer : nullptr);
     });
     if (group.size() > 1) GatherSlots(group, num_parameters, d, &results);
     // Reduce in slot order (thread- and process-count independent), in double.

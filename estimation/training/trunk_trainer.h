@@ -105,6 +105,15 @@ class TrunkTrainer {
     double readout_learning_rate_scale = 0.0;
 
     // ---- Training frames ----------------------------------------------------------------
+    // The outer loss against each training frame's noise-free copy (a dataset with
+    // them: `synth --clean`) while the inner fit sees the noisy frame, as a fit does at
+    // test time: the trunk and the rates learn fits that land on the frame without its
+    // noise (meta-learned denoising). With `readout` the branch then starts as the PCA
+    // of the noise-free copies (the basis of what the outer loss asks for, not of the
+    // sensor's noise). Simulated data only: a recording has no noise-free copy. Default
+    // false: the outer loss on the noisy frame, as the paper trains. Measured on the Soft
+    // Bubble in docs/REPRESENTATION.md ("Training against the noise-free copies").
+    bool outer_loss_on_clean = false;
     // Leave the train split's frames at rest (no contact by DetectContact with `contact`,
     // estimation/data/contact.h) out of training: the trunk's capacity goes to contacts,
     // not to the sensor's noise. At least one contact frame must remain.
@@ -338,9 +347,12 @@ class TrunkTrainer {
   // The same on frames already preprocessed with `format` (e.g. by LoadTrunkTargets).
   // `fingerprint` identifies the training set in checkpoints (e.g. a hash of frame ids;
   // resuming with a different one is refused). Every frame must have format's size.
+  // With Options::outer_loss_on_clean, `clean_frames` holds each frame's noise-free
+  // copy (same order and size; required then, ignored otherwise).
   Summary Train(const std::vector<TrunkTargets>& frames, SensorKind sensor,
                 const FrameFormat& format, std::uint64_t fingerprint, SensorTrunk* trunk,
-                const StepCallback& callback = nullptr) const;
+                const StepCallback& callback = nullptr,
+                const std::vector<TrunkTargets>* clean_frames = nullptr) const;
 
   // The options that shape the trajectory, with the resolved format, as a flat JSON
   // object {"siren.width": 64, ..., "format.rows": 70, ...}: what a checkpoint must

@@ -14,6 +14,7 @@ bool MetaSgd::Options::IsValid(std::string* error) const {
     message << "inner_steps must be >= 0, found " << inner_steps;
   } else if (!(latent_l2_weight >= 0.0) || !std::isfinite(latent_l2_weight)) {
     message << "latent_l2_weight must be finite and >= 0, found " << latent_l2_weight;
+
   } else {
     return true;
   }
@@ -90,8 +91,16 @@ template <typename Scalar>
 MetaSgd::Result<Scalar> MetaSgd::OuterLossAndGradient(
     const LatentModulatedSiren& siren, const MatrixX<Scalar>& coords,
     const MatrixX<Scalar>& targets, const VectorX<Scalar>& weights,
-    const VectorX<Scalar>& alpha) const {
+    const VectorX<Scalar>& alpha, const MatrixX<Scalar>* outer_targets) const {
   CheckAlpha(siren, alpha);
+  if (outer_targets != nullptr && (outer_targets->rows() != targets.rows() ||
+                                   outer_targets->cols() != targets.cols())) {
+    throw std::invalid_argument(
+        "MetaSgd::OuterLossAndGradient: outer_targets must be " +
+        std::to_string(targets.rows()) + " x " + std::to_string(targets.cols()) +
+        " like targets, found " + std::to_string(outer_targets->rows()) + " x " +
+        std::to_string(outer_targets->cols()));
+  }
   const int steps = options_.inner_steps;
   const Scalar two_lambda = static_cast<Scalar>(2.0 * options_.latent_l2_weight);
   Result<Scalar> result;
@@ -117,8 +126,9 @@ MetaSgd::Result<Scalar> MetaSgd::OuterLossAndGradient(
 
   // Outer loss and its partial derivatives at z_K.
   VectorX<Scalar> v;  // dL_out / dz_k, running backwards
-  result.loss = siren.LossAndGradient<Scalar>(coords, z[steps], targets, weights, &v,
-                                              &result.dL_dtheta);
+  result.loss = siren.LossAndGradient<Scalar>(
+      coords, z[steps], outer_targets != nullptr ? *outer_targets : targets, weights, &v,
+      &result.dL_dtheta);
   if (steps == 0) result.loss_at_zero = result.loss;
   result.latent = z[steps];
   result.dL_dalpha = VectorX<Scalar>::Zero(siren.latent_dim());
@@ -138,7 +148,7 @@ MetaSgd::Result<Scalar> MetaSgd::OuterLossAndGradient(
 #define TACTFUNC_INSTANTIATE_META_SGD(S)                                 \
   template MetaSgd::Result<S> MetaSgd::OuterLossAndGradient<S>(          \
       const LatentModulatedSiren&, const MatrixX<S>&, const MatrixX<S>&, \
-      const VectorX<S>&, const VectorX<S>&) const;                       \
+      const VectorX<S>&, const VectorX<S>&, const MatrixX<S>*) const;    \
   template MetaSgd::VectorX<S> MetaSgd::FitLatent<S>(                    \
       const LatentModulatedSiren&, const MatrixX<S>&, const MatrixX<S>&, \
       const VectorX<S>&, const VectorX<S>&, S*) const;                  \

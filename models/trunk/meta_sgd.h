@@ -77,14 +77,18 @@ class MetaSgd {
 
   // The outer loss of one frame and its gradient w.r.t. theta and alpha (exact unless
   // first_order). coords N x 2, targets N x C, weights N or empty, alpha size d
-  // (per-dimension inner rates; any sign is accepted). Throws std::invalid_argument on
-  // wrong shapes. Scalar = float or double.
+  // (per-dimension inner rates; any sign is accepted). The inner loop fits `targets`;
+  // the outer loss compares z_K's output with `outer_targets` if given (N x C; e.g. the
+  // frame's noise-free copy, so that the trunk and rates learn fits that do not follow
+  // the noise), else with `targets`. Throws std::invalid_argument on wrong shapes.
+  // Scalar = float or double.
   template <typename Scalar>
   Result<Scalar> OuterLossAndGradient(const LatentModulatedSiren& siren,
                                       const MatrixX<Scalar>& coords,
                                       const MatrixX<Scalar>& targets,
                                       const VectorX<Scalar>& weights,
-                                      const VectorX<Scalar>& alpha) const;
+                                      const VectorX<Scalar>& alpha,
+                                      const MatrixX<Scalar>* outer_targets = nullptr) const;
 
   // Only z_K (the inner loop, as used to fit latents at test time), and optionally
   // the loss at z_K: InnerLoop from z = 0 with options().inner_steps steps.

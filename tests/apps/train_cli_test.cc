@@ -100,6 +100,32 @@ TEST_F(TrainCliTest, TheInnerLoopKnobsReachTheModelAndEncodeUsesIt) {
   EXPECT_EQ(encode.exit_code, 0) << encode.err;
 }
 
+// --outer-clean meta-learns against the noise-free copies: refused, naming a frame and
+// writing nothing, on data without them; recorded in the model's training options.
+TEST_F(TrainCliTest, TheOuterLossOnNoiseFreeCopiesNeedsThemAndIsRecorded) {
+  const Result noisy_only = Run("train --data " + Root("d") + " --out " + Root("oc0.tfm") +
+                                " --preset tiny --steps 3 --seed 2 --outer-clean");
+  EXPECT_NE(noisy_only.exit_code, 0);
+  EXPECT_THAT(noisy_only.err, HasSubstr("clean copy"));
+  EXPECT_THAT(noisy_only.err, HasSubstr("synth --clean"));
+  EXPECT_FALSE(fs::exists(Root("oc0.tfm")));
+  const Result synth = Run("synth --out " + Root("dc") + " --frames-per-tool 4 --tools rod,square" +
+                           " --sensors bubble --seed 3 --clean");
+  ASSERT_EQ(synth.exit_code, 0) << synth.err;
+  const Result train = Run("train --data " + Root("dc") + " --out " + Root("oc.tfm") +
+                           " --preset tiny --steps 3 --seed 2 --outer-clean");
+  ASSERT_EQ(train.exit_code, 0) << train.err;
+  const nlohmann::json info =
+      nlohmann::json::parse(FunctaModel::Load(Root("oc.tfm")).info_json());
+  EXPECT_TRUE(info["trunks"]["bubble"]["options"]["outer_loss_on_clean"].get<bool>());
+  const Result plain = Run("train --data " + Root("dc") + " --out " + Root("oc_plain.tfm") +
+                           " --preset tiny --steps 3 --seed 2");
+  ASSERT_EQ(plain.exit_code, 0) << plain.err;
+  const nlohmann::json plain_info =
+      nlohmann::json::parse(FunctaModel::Load(Root("oc_plain.tfm")).info_json());
+  EXPECT_FALSE(plain_info["trunks"]["bubble"]["options"].contains("outer_loss_on_clean"));
+}
+
 // --products bf16 (where the CPU has AVX512_BF16) trains and encodes with bfloat16
 // products, and the model says so: `info` names them, its JSON carries "products"
 // (a float model's reads "float"); its checkpoint resumes only in bfloat16; a

@@ -30,6 +30,7 @@ namespace tactfunc {
 namespace {
 
 using ::testing::HasSubstr;
+using ::testing::Not;
 using testing_util::TestDir;
 
 // 2 tools x 6 bubble contacts (all in the train split), written once per suite.
@@ -44,6 +45,7 @@ class TrunkTrainerTest : public ::testing::Test {
     plan.frames_per_tool = 6;
     plan.seed = 7;
     plan.test_fraction = 0.0;
+    plan.write_clean = true;  // noise-free copies, for the outer loss on them
     Synthesize(plan, ContactSimulator::Options());
     dataset_ = new Dataset(Dataset::Open(plan.out));
   }
@@ -323,6 +325,32 @@ TEST_F(TrunkTrainerTest, TheReadoutBranchStartsAsThePcaOfTheTrainingFrames) {
   EXPECT_LE((back.siren.parameters() - trunk.siren.parameters()).cwiseAbs().maxCoeff(), 1e-6);
 }
 
+TEST_F(TrunkTrainerTest, WithTheOuterLossOnNoiseFreeCopiesTheReadoutStartsAsTheirPca) {
+  TrunkTrainer::Options options = TrunkTrainer::Preset("tiny");
+  options.readout = true;
+  options.steps = 0;
+  options.threads = 2;
+  options.siren.latent_dim = 4;
+  options.outer_loss_on_clean = true;
+  SensorTrunk trunk;
+  Train(options, &trunk);
+  // The branch's mean is the mean of the clean copies, not of the noisy frames.
+  Eigen::MatrixXf clean_mean = Eigen::MatrixXf::Zero(trunk.format.rows * trunk.format.cols, 1);
+  Eigen::MatrixXf noisy_mean = clean_mean;
+  const std::size_t n = dataset_->frames().size();
+  for (std::size_t i = 0; i < n; ++i) {
+    clean_mean += LoadTrunkTargets(*dataset_, i, trunk.format, /*clean=*/true).values / n;
+    noisy_mean += LoadTrunkTargets(*dataset_, i, trunk.format, /*clean=*/false).values / n;
+  }
+  const Eigen::VectorXd theta = trunk.siren.parameters();
+  const ParameterBlock mean_block = trunk.siren.Block(ParameterGroup::kReadoutMean);
+  const Eigen::VectorXf branch_mean =
+      theta.segment(mean_block.offset, mean_block.size()).cast<float>();
+  const float scale = clean_mean.cwiseAbs().maxCoeff();
+  EXPECT_LE((branch_mean - clean_mean.col(0)).cwiseAbs().maxCoeff(), 1e-5f * scale);
+  EXPECT_GT((branch_mean - noisy_mean.col(0)).cwiseAbs().maxCoeff(), 1e-3f * scale);
+}
+
 TEST_F(TrunkTrainerTest, ResumingAReadoutRunIsBitIdentical) {
   TrunkTrainer::Options options = ShortOptions();
   options.readout = true;
@@ -532,6 +560,67 @@ TEST_F(TrunkTrainerTest, ExtendingAFinishedRunEqualsTrainingLongerAtOnce) {
   const TrunkTrainer::Summary summary = Train(options, &extended);
   EXPECT_EQ(summary.start_step, 12);
   EXPECT_TRUE(SameParameters(extended, at_once));
+}
+
+TEST_F(TrunkTrainerTest, TheOuterLossOnNoiseFreeCopiesIsWiredToTheCleanFrames) {
+  TrunkTrainer::Options options = ShortOptions();
+  options.checkpoint_every = 0;
+  const TrunkTrainer plain_trainer(options);
+  options.outer_loss_on_clean = true;
+  const TrunkTrainer clean_trainer(options);
+  const FrameFormat format = plain_trainer.ResolveFormat(
+      SensorKind::kSoftBubble, dataset_->sensor_info(SensorKind::kSoftBubble).normalization_scale);
+  const std::vector<std::size_t> indices =
+      dataset_->FrameIndices(SensorKind::kSoftBubble, Split::kTrain);
+  const std::vector<TrunkTargets> noisy =
+      LoadTrunkTargets(*dataset_, indices, format, /*clean=*/false, 2);
+  const std::vector<TrunkTargets> clean =
+      LoadTrunkTargets(*dataset_, indices, format, /*clean=*/true, 2);
+
+  // Outer targets equal to the inner ones: the plain run, bit for bit.
+  SensorTrunk plain, same, on_clean, from_dataset;
+  plain_trainer.Train(noisy, SensorKind::kSoftBubble, format, 1, &plain);
+  clean_trainer.Train(noisy, SensorKind::kSoftBubble, format, 1, &same, nullptr, &noisy);
+  EXPECT_TRUE(SameParameters(plain, same));
+  // The noise-free copies change the run; the dataset overload reads them itself.
+  clean_trainer.Train(noisy, SensorKind::kSoftBubble, format, 1, &on_clean, nullptr, &clean);
+  EXPECT_FALSE(SameParameters(plain, on_clean));
+  clean_trainer.Train(*dataset_, SensorKind::kSoftBubble, &from_dataset);
+  EXPECT_TRUE(SameParameters(on_clean, from_dataset));
+  // Without the copies, or with copies of another size, the run is refused.
+  EXPECT_THROW(clean_trainer.Train(noisy, SensorKind::kSoftBubble, format, 1, &same),
+               std::invalid_argument);
+  std::vector<TrunkTargets> short_copies(clean.begin(), clean.end() - 1);
+  EXPECT_THROW(
+      clean_trainer.Train(noisy, SensorKind::kSoftBubble, format, 1, &same, nullptr, &short_copies),
+      std::invalid_argument);
+  // It shapes the trajectory: a checkpoint of the plain run does not resume it.
+  EXPECT_THAT(clean_trainer.TrajectoryOptionsJson(SensorKind::kSoftBubble, format),
+              HasSubstr("\"outer_loss_on_clean\":true"));
+  EXPECT_THAT(plain_trainer.TrajectoryOptionsJson(SensorKind::kSoftBubble, format),
+              Not(HasSubstr("outer_loss_on_clean")));
+}
+
+TEST_F(TrunkTrainerTest, TheOuterLossOnNoiseFreeCopiesNamesAFrameWithoutOne) {
+  TestDir dir;
+  SynthesisPlan plan;
+  plan.out = dir.path() + "/noisy_only";
+  plan.tools = {"hemisphere"};
+  plan.sensors = {SensorKind::kSoftBubble};
+  plan.frames_per_tool = 2;
+  plan.test_fraction = 0.0;
+  Synthesize(plan, ContactSimulator::Options());
+  TrunkTrainer::Options options = ShortOptions();
+  options.outer_loss_on_clean = true;
+  SensorTrunk trunk;
+  try {
+    TrunkTrainer(options).Train(Dataset::Open(plan.out), SensorKind::kSoftBubble, &trunk);
+    FAIL() << "expected std::runtime_error";
+  } catch (const std::runtime_error& e) {
+    EXPECT_THAT(e.what(), HasSubstr("clean copy"));
+    EXPECT_THAT(e.what(), HasSubstr("noisy_only"));
+    EXPECT_THAT(e.what(), HasSubstr("synth --clean"));
+  }
 }
 
 TEST_F(TrunkTrainerTest, ResumeWithoutACheckpointStartsAtStepZero) {

@@ -6,6 +6,7 @@
 // bit), and the first-order variant is shown to differ from it measurably.
 #include "models/trunk/meta_sgd.h"
 
+#include <cmath>
 #include <functional>
 #include <stdexcept>
 #include <string>
@@ -146,6 +147,81 @@ TEST(MetaSgd, ExactMetaGradientMatchesFiniteDifferencesOfTheOuterLoss) {
 
 TEST(MetaSgd, ExactMetaGradientWithLatentL2MatchesFiniteDifferences) {
   CheckExactMetaGradient(2, 3, 0.05);
+}
+
+// The outer loss with other outer targets (a frame's noise-free copy), written out: the
+// inner loop fits p.targets from z_0 = 0, the outer loss is L(z_K; outer).
+double OuterLossWrittenOut(const MetaSgd& meta, const Siren& siren, const Problem& p,
+                           const VectorXd& alpha, const MatrixXd& outer) {
+  const VectorXd z = meta.InnerLoop<double>(siren, p.coords, p.targets, p.weights, alpha,
+                                            VectorXd::Zero(siren.latent_dim()),
+                                            meta.options().inner_steps);
+  return siren.Loss<double>(p.coords, z, outer, p.weights);
+}
+
+void CheckMetaGradientWithOuterTargets(bool first_order) {
+  const Siren siren = SmallSiren(2, 21);
+  const Problem p = MakeProblem(siren);
+  const MatrixXd outer = p.targets + 0.2 * Uniform(9, 2, 8);
+  MetaSgd::Options options;
+  options.inner_steps = 3;
+  options.first_order = first_order;
+  const MetaSgd meta(options);
+  const MetaSgd::Result<double> result =
+      meta.OuterLossAndGradient<double>(siren, p.coords, p.targets, p.weights, p.alpha, &outer);
+  const std::string what = "first_order " + std::to_string(first_order);
+  EXPECT_NEAR(result.loss, OuterLossWrittenOut(meta, siren, p, p.alpha, outer),
+              1e-12 * std::abs(result.loss))
+      << what;
+  // The noisy frame's own outer loss differs: the outer targets are used.
+  const MetaSgd::Result<double> plain =
+      meta.OuterLossAndGradient<double>(siren, p.coords, p.targets, p.weights, p.alpha);
+  EXPECT_GT(std::abs(result.loss - plain.loss), 1e-3 * result.loss) << what;
+  if (first_order) return;  // biased by design; only the exact gradient is checked
+
+  Siren probe = siren;
+  VectorXd numeric_theta(siren.NumParameters());
+  for (int i = 0; i < siren.NumParameters(); ++i) {
+    numeric_theta[i] = Derivative(
+        [&](double delta) {
+          VectorXd theta = siren.parameters();
+          theta[i] += delta;
+          probe.SetParameters(theta);
+          return OuterLossWrittenOut(meta, probe, p, p.alpha, outer);
+        },
+        kStep);
+  }
+  VectorXd numeric_alpha(siren.latent_dim());
+  for (int k = 0; k < siren.latent_dim(); ++k) {
+    numeric_alpha[k] = Derivative(
+        [&](double delta) {
+          VectorXd alpha = p.alpha;
+          alpha[k] += delta;
+          return OuterLossWrittenOut(meta, siren, p, alpha, outer);
+        },
+        kStep);
+  }
+  for (const ParameterBlock& block : siren.parameter_blocks()) {
+    ExpectClose(result.dL_dtheta.segment(block.offset, block.size()),
+                numeric_theta.segment(block.offset, block.size()), 1e-6, 1e-10,
+                what + " " + block.Name());
+  }
+  ExpectClose(result.dL_dalpha, numeric_alpha, 1e-6, 1e-10, what + " alpha");
+}
+
+TEST(MetaSgd, OuterTargetsHaveTheExactMetaGradient) {
+  CheckMetaGradientWithOuterTargets(false);
+  CheckMetaGradientWithOuterTargets(true);
+}
+
+TEST(MetaSgd, OuterTargetsOfAnotherShapeThrow) {
+  const Siren siren = SmallSiren(2, 22);
+  const Problem p = MakeProblem(siren);
+  const MatrixXd outer = Uniform(8, 2, 9);
+  const MetaSgd meta{MetaSgd::Options()};
+  EXPECT_THROW(
+      meta.OuterLossAndGradient<double>(siren, p.coords, p.targets, p.weights, p.alpha, &outer),
+      std::invalid_argument);
 }
 
 TEST(MetaSgd, ZeroInnerStepsIsThePlainLossAtZeroLatent) {
