@@ -253,7 +253,9 @@ def main():
                          "frames), each test frame coded by its best one")
     ap.add_argument("--basis-from-clean", action="store_true",
                     help="learn both bases from the NOISE-FREE train frames (a bound: what a "
-                         "basis free of the sensor noise would give; needs their export)")
+                         "basis free of the sensor noise would give; needs their export); "
+                         "with --basis-data, from that export's noise-free frames, eval's "
+                         "PCA staying on --eval's noisy ones")
     ap.add_argument("--basis-data",
                     help="learn the aligned basis from the train split of this `tactfunc "
                          "export` dir instead (more contacts than the evaluation set's train "
@@ -269,11 +271,10 @@ def main():
     ap.add_argument("--out", help="write the figures as JSON here")
     args = ap.parse_args()
 
-    if args.basis_data and (args.scale or args.refine or args.residual or args.clusters > 1
-                            or args.basis_from_clean):
+    if args.basis_data and (args.scale or args.refine or args.residual or args.clusters > 1):
         sys.exit("representation_aligned_pca.py: --basis-data goes with the translation or "
-                 "moment-angle alignment alone (not --scale, --refine, --residual, --clusters "
-                 "or --basis-from-clean)")
+                 "moment-angle alignment alone (not --scale, --refine, --residual or "
+                 "--clusters)")
     if args.clusters > 1 and args.shrink:
         sys.exit("representation_aligned_pca.py: --shrink does not go with --clusters")
     train = load(args.eval, f"{args.sensor}_train").astype(np.float64)
@@ -301,11 +302,12 @@ def main():
         train_pose[:, 3] = 1
         test_pose[:, 3] = 1
     test_pose16 = test_pose.astype(np.float16).astype(np.float64)
-    if args.basis_from_clean:
+    if args.basis_from_clean and not args.basis_data:
         train = load(args.eval, f"{args.sensor}_train_clean").astype(np.float64)
     basis_train, basis_pose = blur(train, args.blur), train_pose
     if args.basis_data:
-        more = load(args.basis_data, f"{args.sensor}_train").astype(np.float64)
+        more = load(args.basis_data, f"{args.sensor}_train"
+                    + ("_clean" if args.basis_from_clean else "")).astype(np.float64)
         mpath = os.path.join(args.basis_data, f"{args.sensor}_train_weights.npy")
         more_w = np.load(mpath) if os.path.exists(mpath) else np.ones(more.shape[:3], np.float32)
         basis_pose = moment_poses(more, more_w)

@@ -94,6 +94,42 @@ TEST(MetaSgdOptions, BadOptionsNameTheField) {
   EXPECT_NE(error.find("latent_l2_weight"), std::string::npos) << error;
 }
 
+// The meta-gradient of `result` against 4th-order central differences of
+// outer_loss(trunk, alpha), per parameter block and for alpha.
+void ExpectFiniteDifferenceGradients(
+    const MetaSgd::Result<double>& result, const Siren& siren, const VectorXd& alpha,
+    const std::function<double(const Siren&, const VectorXd&)>& outer_loss,
+    const std::string& what) {
+  Siren probe = siren;
+  VectorXd numeric_theta(siren.NumParameters());
+  for (int i = 0; i < siren.NumParameters(); ++i) {
+    numeric_theta[i] = Derivative(
+        [&](double delta) {
+          VectorXd theta = siren.parameters();
+          theta[i] += delta;
+          probe.SetParameters(theta);
+          return outer_loss(probe, alpha);
+        },
+        kStep);
+  }
+  VectorXd numeric_alpha(siren.latent_dim());
+  for (int k = 0; k < siren.latent_dim(); ++k) {
+    numeric_alpha[k] = Derivative(
+        [&](double delta) {
+          VectorXd moved = alpha;
+          moved[k] += delta;
+          return outer_loss(siren, moved);
+        },
+        kStep);
+  }
+  for (const ParameterBlock& block : siren.parameter_blocks()) {
+    ExpectClose(result.dL_dtheta.segment(block.offset, block.size()),
+                numeric_theta.segment(block.offset, block.size()), 1e-6, 1e-10,
+                what + " " + block.Name());
+  }
+  ExpectClose(result.dL_dalpha, numeric_alpha, 1e-6, 1e-10, what + " alpha");
+}
+
 void CheckExactMetaGradient(int layers, int steps, double l2) {
   const Siren siren = SmallSiren(layers, 10 + layers);
   const Problem p = MakeProblem(siren);
@@ -106,38 +142,14 @@ void CheckExactMetaGradient(int layers, int steps, double l2) {
   const std::string what = "L=" + std::to_string(layers) + " K=" + std::to_string(steps);
   EXPECT_GT(result.loss_at_zero - result.loss, 0.0) << what << ": inner loop must help";
 
-  Siren probe = siren;
-  VectorXd numeric_theta(siren.NumParameters());
-  for (int i = 0; i < siren.NumParameters(); ++i) {
-    numeric_theta[i] = Derivative(
-        [&](double delta) {
-          VectorXd theta = siren.parameters();
-          theta[i] += delta;
-          probe.SetParameters(theta);
-          double loss;
-          meta.FitLatent<double>(probe, p.coords, p.targets, p.weights, p.alpha, &loss);
-          return loss;
-        },
-        kStep);
-  }
-  VectorXd numeric_alpha(siren.latent_dim());
-  for (int k = 0; k < siren.latent_dim(); ++k) {
-    numeric_alpha[k] = Derivative(
-        [&](double delta) {
-          VectorXd alpha = p.alpha;
-          alpha[k] += delta;
-          double loss;
-          meta.FitLatent<double>(siren, p.coords, p.targets, p.weights, alpha, &loss);
-          return loss;
-        },
-        kStep);
-  }
-  for (const ParameterBlock& block : siren.parameter_blocks()) {
-    ExpectClose(result.dL_dtheta.segment(block.offset, block.size()),
-                numeric_theta.segment(block.offset, block.size()), 1e-6, 1e-10,
-                what + " " + block.Name());
-  }
-  ExpectClose(result.dL_dalpha, numeric_alpha, 1e-6, 1e-10, what + " alpha");
+  ExpectFiniteDifferenceGradients(
+      result, siren, p.alpha,
+      [&](const Siren& trunk, const VectorXd& alpha) {
+        double loss;
+        meta.FitLatent<double>(trunk, p.coords, p.targets, p.weights, alpha, &loss);
+        return loss;
+      },
+      what);
 }
 
 TEST(MetaSgd, ExactMetaGradientMatchesFiniteDifferencesOfTheOuterLoss) {
@@ -178,35 +190,12 @@ void CheckMetaGradientWithOuterTargets(bool first_order) {
       meta.OuterLossAndGradient<double>(siren, p.coords, p.targets, p.weights, p.alpha);
   EXPECT_GT(std::abs(result.loss - plain.loss), 1e-3 * result.loss) << what;
   if (first_order) return;  // biased by design; only the exact gradient is checked
-
-  Siren probe = siren;
-  VectorXd numeric_theta(siren.NumParameters());
-  for (int i = 0; i < siren.NumParameters(); ++i) {
-    numeric_theta[i] = Derivative(
-        [&](double delta) {
-          VectorXd theta = siren.parameters();
-          theta[i] += delta;
-          probe.SetParameters(theta);
-          return OuterLossWrittenOut(meta, probe, p, p.alpha, outer);
-        },
-        kStep);
-  }
-  VectorXd numeric_alpha(siren.latent_dim());
-  for (int k = 0; k < siren.latent_dim(); ++k) {
-    numeric_alpha[k] = Derivative(
-        [&](double delta) {
-          VectorXd alpha = p.alpha;
-          alpha[k] += delta;
-          return OuterLossWrittenOut(meta, siren, p, alpha, outer);
-        },
-        kStep);
-  }
-  for (const ParameterBlock& block : siren.parameter_blocks()) {
-    ExpectClose(result.dL_dtheta.segment(block.offset, block.size()),
-                numeric_theta.segment(block.offset, block.size()), 1e-6, 1e-10,
-                what + " " + block.Name());
-  }
-  ExpectClose(result.dL_dalpha, numeric_alpha, 1e-6, 1e-10, what + " alpha");
+  ExpectFiniteDifferenceGradients(
+      result, siren, p.alpha,
+      [&](const Siren& trunk, const VectorXd& alpha) {
+        return OuterLossWrittenOut(meta, trunk, p, alpha, outer);
+      },
+      what);
 }
 
 TEST(MetaSgd, OuterTargetsHaveTheExactMetaGradient) {
