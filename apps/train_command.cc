@@ -132,7 +132,13 @@ TrunkTrainer::Options OptionsFor(const TrainFlags& flags, SensorKind sensor) {
   if (flags.lr_final_fraction_option->count()) {
     options.learning_rate_final_fraction = flags.lr_final_fraction;
   }
-  if (flags.inner_steps_option->count()) options.meta_sgd.inner_steps = flags.inner_steps;
+  if (flags.inner_steps_option->count()) {
+    if (flags.inner_steps == 0 && !flags.readout) {
+      throw UsageError("--inner-steps 0 leaves every latent at its start, which is z = 0 "
+                       "without --readout (with it, the branch's projection of the frame)");
+    }
+    options.meta_sgd.inner_steps = flags.inner_steps;
+  }
   if (flags.alpha_max_option->count()) options.alpha_max = flags.alpha_max;
   if (flags.alpha_init_option->count()) {
     options.alpha_init_min = options.alpha_init_max = flags.alpha_init;
@@ -815,8 +821,9 @@ void RegisterTrain(CLI::App& app, CommandBody* selected) {
   flags->inner_steps_option =
       sub->add_option("--inner-steps", flags->inner_steps,
                       "Meta-SGD steps K from z = 0, in training and in every later encode "
-                      "(default 3, the paper's; cost grows linearly in K)")
-          ->check(CLI::Range(1, 1000));
+                      "(default 3, the paper's; cost grows linearly in K; 0, with --readout "
+                      "only: every fit is the readout branch's projection)")
+          ->check(CLI::Range(0, 1000));
   flags->alpha_init_option =
       sub->add_option("--alpha-init", flags->alpha_init,
                       "Initial meta-SGD rate of every latent dimension, in [0, alpha-max] "

@@ -453,7 +453,8 @@ FrameFormat TrunkTrainer::ResolveFormat(SensorKind sensor, double sensor_scale) 
 }
 
 void TrunkTrainer::StartReadoutFromPca(const std::vector<TrunkTargets>& frames, int max_frames,
-                                       LatentModulatedSiren* siren) {
+                                       LatentModulatedSiren* siren,
+                                       const std::vector<TrunkTargets>* noisy_frames) {
   const LatentModulatedSiren::Options& so = siren->options();
   const long channels = so.output_channels;
   const long nodes = static_cast<long>(so.readout_rows) * so.readout_cols;
@@ -464,21 +465,33 @@ void TrunkTrainer::StartReadoutFromPca(const std::vector<TrunkTargets>& frames, 
         std::to_string(so.readout_rows) + " x " + std::to_string(so.readout_cols) + " x " +
         std::to_string(channels) + ") must match the frames' pixels and channels");
   }
+  if (noisy_frames != nullptr && noisy_frames->size() != frames.size()) {
+    throw std::invalid_argument("TrunkTrainer::StartReadoutFromPca: " +
+                                std::to_string(noisy_frames->size()) + " noisy frames for " +
+                                std::to_string(frames.size()) + " noise-free copies");
+  }
   const long p = nodes * channels;
   const int total = static_cast<int>(frames.size());
   const int m = std::max(1, std::min(total, max_frames));
   // Frames M x P, pixel-major rows (entry j C + c = values(j, c), invalid pixels 0), centred.
-  Eigen::MatrixXd X(m, p);
-  for (int i = 0; i < m; ++i) {
-    const TrunkTargets& t = frames[static_cast<std::size_t>(
-        (static_cast<long long>(i) * total) / m)];
-    for (long j = 0; j < nodes; ++j) {
-      const bool valid = t.weights.size() == 0 || t.weights[j] > 0;
-      for (long c = 0; c < channels; ++c) {
-        X(i, j * channels + c) = valid ? static_cast<double>(t.values(j, c)) : 0.0;
+  auto stack = [&](const std::vector<TrunkTargets>& source) {
+    Eigen::MatrixXd out(m, p);
+    for (int i = 0; i < m; ++i) {
+      const TrunkTargets& t = source[static_cast<std::size_t>(
+          (static_cast<long long>(i) * total) / m)];
+      for (long j = 0; j < nodes; ++j) {
+        const bool valid = t.weights.size() == 0 || t.weights[j] > 0;
+        for (long c = 0; c < channels; ++c) {
+          out(i, j * channels + c) = valid ? static_cast<double>(t.values(j, c)) : 0.0;
+        }
       }
     }
-  }
+    return out;
+  };
+  Eigen::MatrixXd X = stack(frames);
+  // With noisy copies: the noise of each stacked frame, for the Wiener gains below.
+  const Eigen::MatrixXd noise =
+      noisy_frames != nullptr ? Eigen::MatrixXd(stack(*noisy_frames) - X) : Eigen::MatrixXd();
   const Eigen::RowVectorXd mean = X.colwise().mean();
   X.rowwise() -= mean;
   // PCA by the M x M Gram matrix: its eigenvectors v_k with eigenvalues lambda_k give
@@ -497,12 +510,23 @@ void TrunkTrainer::StartReadoutFromPca(const std::vector<TrunkTargets>& frames, 
   const double largest = std::max(eigen.eigenvalues()[m - 1], 0.0);
   // Centred frames span at most m - 1 directions; the Gram matrix squares the condition
   // number, so eigenvalues below 1e-9 of the largest are rounding, not directions.
+  // Wiener gains (with noisy copies; components not kept get 1): the variance of the
+  // copies along unit component u_k, lambda_k / M, against the noise's, the mean of
+  // (noise_i . u_k)^2 over the same frames.
+  Eigen::VectorXd gains = Eigen::VectorXd::Ones(d);
   for (int k = 0; k < d && k < m - 1; ++k) {
     const double lambda = eigen.eigenvalues()[m - 1 - k];  // ascending order
     if (!(lambda > 1e-9 * largest)) break;  // no more directions
-    R.row(k) = scale * (X.transpose() * eigen.eigenvectors().col(m - 1 - k)).transpose() /
-               std::sqrt(lambda);
+    const Eigen::VectorXd unit = X.transpose() * eigen.eigenvectors().col(m - 1 - k) /
+                                 std::sqrt(lambda);
+    R.row(k) = scale * unit.transpose();
+    if (noisy_frames != nullptr) {
+      const double signal = lambda / m;
+      const double noise_variance = (noise * unit).squaredNorm() / m;
+      gains[k] = signal / (signal + noise_variance);
+    }
   }
+  siren->set_start_gains(noisy_frames != nullptr ? gains : Eigen::VectorXd());
   LatentModulatedSiren::View(&theta, siren->Block(ParameterGroup::kOutputWeight)).setZero();
   LatentModulatedSiren::View(&theta, siren->Block(ParameterGroup::kOutputBias)).setZero();
   siren->SetParameters(theta);
@@ -690,11 +714,15 @@ TrunkTrainer::Summary TrunkTrainer::Train(const std::vector<TrunkTargets>& frame
   siren_options.readout_rows = o.readout ? format.rows : 0;
   siren_options.readout_cols = o.readout ? format.cols : 0;
   LatentModulatedSiren siren(siren_options, StreamSeed(o.seed, kThetaStream));
-  // With the outer loss on the noise-free copies the branch starts as their PCA: the
-  // basis of what the outer loss asks for, not of the sensor's noise.
+  // With the outer loss on the noise-free copies the branch starts as their PCA (the
+  // basis of what the outer loss asks for, not of the sensor's noise) and its
+  // projections are shrunk by their Wiener gains.
   if (o.readout) {
-    StartReadoutFromPca(o.outer_loss_on_clean ? *clean_frames : frames, o.readout_pca_frames,
-                        &siren);
+    if (o.outer_loss_on_clean) {
+      StartReadoutFromPca(*clean_frames, o.readout_pca_frames, &siren, &frames);
+    } else {
+      StartReadoutFromPca(frames, o.readout_pca_frames, &siren);
+    }
   }
   siren.set_readout_frozen(o.readout && o.readout_learning_rate_scale == 0);
   const MetaSgd meta(o.meta_sgd);

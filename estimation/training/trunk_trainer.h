@@ -110,9 +110,11 @@ class TrunkTrainer {
     // test time: the trunk and the rates learn fits that land on the frame without its
     // noise (meta-learned denoising). With `readout` the branch then starts as the PCA
     // of the noise-free copies (the basis of what the outer loss asks for, not of the
-    // sensor's noise). Simulated data only: a recording has no noise-free copy. Default
-    // false: the outer loss on the noisy frame, as the paper trains. Measured on the Soft
-    // Bubble in docs/REPRESENTATION.md ("Training against the noise-free copies").
+    // sensor's noise) and every fit from its projection shrunk by the components'
+    // Wiener gains (StartReadoutFromPca). Simulated data only: a recording has no
+    // noise-free copy. Default false: the outer loss on the noisy frame, as the paper
+    // trains. Measured on the Soft Bubble in docs/REPRESENTATION.md ("Training against the
+    // noise-free copies").
     bool outer_loss_on_clean = false;
     // Leave the train split's frames at rest (no contact by DetectContact with `contact`,
     // estimation/data/contact.h) out of training: the trunk's capacity goes to contacts,
@@ -361,10 +363,17 @@ class TrunkTrainer {
 
   // Starts `siren`'s readout branch (it must have one, with rows x cols nodes = the
   // frames' pixels) from the PCA of `frames` as Options::readout describes, and zeroes
-  // the SIREN's output layer. Uses at most `max_frames` frames, evenly spaced. Throws
-  // std::invalid_argument if the branch's grid does not match the frames.
+  // the SIREN's output layer. Uses at most `max_frames` frames, evenly spaced. With
+  // `noisy_frames` (the same frames with the sensor's noise; `frames` then are their
+  // noise-free copies) it also sets the trunk's start gains
+  // (LatentModulatedSiren::set_start_gains) to each component's Wiener gain
+  // lambda_k / (lambda_k + sigma_k^2), lambda_k the copies' variance along the component
+  // and sigma_k^2 the noise's, over the same frames; without them the trunk has none.
+  // Throws std::invalid_argument if the branch's grid does not match the frames or the
+  // noisy frames are not as many.
   static void StartReadoutFromPca(const std::vector<TrunkTargets>& frames, int max_frames,
-                                  LatentModulatedSiren* siren);
+                                  LatentModulatedSiren* siren,
+                                  const std::vector<TrunkTargets>* noisy_frames = nullptr);
 
  private:
   Options options_;

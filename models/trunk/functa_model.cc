@@ -231,6 +231,10 @@ std::string FunctaModel::Serialize() const {
     file.Add(name + "/theta", TensorFile::DType::kFloat32, {t.siren.NumParameters()},
              ToVector(t.siren.parameters()));
     file.Add(name + "/alpha", TensorFile::DType::kFloat32, {t.alpha.size()}, ToVector(t.alpha));
+    if (t.siren.start_gains().size() != 0) {
+      file.Add(name + "/start_gains", TensorFile::DType::kFloat32, {t.siren.start_gains().size()},
+               ToVector(t.siren.start_gains()));
+    }
   }
   meta["info"] = nlohmann::json::parse(info_json_);
   file.set_meta_json(meta.dump());
@@ -345,6 +349,16 @@ FunctaModel FunctaModel::FromTensorFile(const TensorFile& file, const std::strin
                                                                   theta.values.size()));
       const auto& alpha = file.Get(name + "/alpha", {options.latent_dim});
       trunk.alpha = Eigen::Map<const Eigen::VectorXd>(alpha.values.data(), alpha.values.size());
+      if (file.Has(name + "/start_gains")) {  // absent: no gains (files before them)
+        field = name + "/start_gains";
+        if (!trunk.siren.has_readout()) {
+          throw TensorFileError(source + ": tensor '" + field +
+                                "': start gains belong to a trunk with the readout branch");
+        }
+        const auto& gains = file.Get(field, {options.latent_dim});
+        trunk.siren.set_start_gains(
+            Eigen::Map<const Eigen::VectorXd>(gains.values.data(), gains.values.size()));
+      }
       if (entry.contains("photometric")) {  // absent for direct trunks
         field = name + ".photometric";
         const auto& p = entry.at("photometric");

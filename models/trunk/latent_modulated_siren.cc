@@ -1820,7 +1820,20 @@ LatentModulatedSiren::VectorX<Scalar> LatentModulatedSiren::StartLatent(
   }
   if (!(weight_sum > 0)) return z;
   z.noalias() = static_cast<Scalar>(2.0 / (channels * weight_sum)) * (readout.R * scatter);
+  if (start_gains_.size() != 0) z.array() *= start_gains_.cast<Scalar>().array();
   return z;
+}
+
+void LatentModulatedSiren::set_start_gains(const Eigen::VectorXd& gains) {
+  if (gains.size() != 0 && (!has_readout() || gains.size() != options_.latent_dim ||
+                            !gains.allFinite())) {
+    throw std::invalid_argument(
+        "LatentModulatedSiren::set_start_gains: expected no gains or latent_dim = " +
+        std::to_string(options_.latent_dim) + " finite ones for a trunk with the readout "
+        "branch, got " + std::to_string(gains.size()) +
+        (has_readout() ? std::string() : std::string(" for a trunk without the branch")));
+  }
+  start_gains_ = gains;
 }
 
 // ---- Explicit instantiations -------------------------------------------------------

@@ -252,6 +252,17 @@ class LatentModulatedSiren {
   void set_readout_frozen(bool frozen) { readout_frozen_ = frozen; }
   bool readout_frozen() const { return readout_frozen_; }
 
+  // Per-dimension gains of the readout branch's projection in StartLatent (empty, the
+  // default: none, i.e. all 1): z_0 = g (*) projection. The trainer sets them to the
+  // Wiener gains lambda_k / (lambda_k + sigma_k^2) of the branch's components when it has
+  // noise-free copies of its frames (lambda_k the copies' variance along component k,
+  // sigma_k^2 the noise's: estimation/training/trunk_trainer.h), so that a fit starts
+  // from the code of the frame without its noise rather than the noisy frame's. Not
+  // part of theta (no gradient). Throws std::invalid_argument unless the trunk has the
+  // readout branch and `gains` is empty or has latent_dim finite entries.
+  void set_start_gains(const Eigen::VectorXd& gains);
+  const Eigen::VectorXd& start_gains() const { return start_gains_; }
+
   // Bilinear weights of coordinate (x0, x1) on the readout grid: node[i] (row-major
   // grid index) with weight[i], i < 4, weights summing to 1 (coordinates outside the
   // grid are clamped to its edge nodes). Requires has_readout().
@@ -461,7 +472,8 @@ class LatentModulatedSiren {
   // one full-frame gradient step of the branch's own weighted MSE at rate 1 from z = 0,
   // which is exactly the PCA code when the branch holds a PCA basis scaled as the
   // trainer scales it (estimation/training/trunk_trainer.h, Options::readout) and every
-  // pixel is valid. Pixels with w_j = 0 are skipped (their targets may be NaN).
+  // pixel is valid, times start_gains() if set. Pixels with w_j = 0 are skipped (their
+  // targets may be NaN).
   template <typename Scalar>
   VectorX<Scalar> StartLatent(const MatrixX<Scalar>& coords, const MatrixX<Scalar>& targets,
                               const VectorX<Scalar>& weights) const;
@@ -539,6 +551,7 @@ class LatentModulatedSiren {
   // a Tape records it to know the parameters it was recorded with.
   std::uint64_t parameters_generation_ = 0;
   bool readout_frozen_ = false;
+  Eigen::VectorXd start_gains_;  // empty: none
 };
 
 // ---- Implementation of the one-pixel template ------------------------------------

@@ -101,7 +101,8 @@ TEST_F(TrainCliTest, TheInnerLoopKnobsReachTheModelAndEncodeUsesIt) {
 }
 
 // --outer-clean meta-learns against the noise-free copies: refused, naming a frame and
-// writing nothing, on data without them; recorded in the model's training options.
+// writing nothing, on data without them; recorded in the model's training options; a
+// readout trunk's start gains kept in its file.
 TEST_F(TrainCliTest, TheOuterLossOnNoiseFreeCopiesNeedsThemAndIsRecorded) {
   const Result noisy_only = Run("train --data " + Root("d") + " --out " + Root("oc0.tfm") +
                                 " --preset tiny --steps 3 --seed 2 --outer-clean");
@@ -124,6 +125,28 @@ TEST_F(TrainCliTest, TheOuterLossOnNoiseFreeCopiesNeedsThemAndIsRecorded) {
   const nlohmann::json plain_info =
       nlohmann::json::parse(FunctaModel::Load(Root("oc_plain.tfm")).info_json());
   EXPECT_FALSE(plain_info["trunks"]["bubble"]["options"].contains("outer_loss_on_clean"));
+  // A readout trunk trained so (here with no inner steps: every fit is the branch's
+  // projection) starts its fits from projections shrunk by the copies' Wiener gains,
+  // which its file keeps; encode then fits with its K = 0.
+  const Result readout = Run("train --data " + Root("dc") + " --out " + Root("oc_r.tfm") +
+                             " --preset tiny --steps 3 --seed 2 --outer-clean --readout" +
+                             " --inner-steps 0");
+  ASSERT_EQ(readout.exit_code, 0) << readout.err;
+  const SensorTrunk trunk = FunctaModel::Load(Root("oc_r.tfm")).Trunk(SensorKind::kSoftBubble);
+  EXPECT_EQ(trunk.meta_sgd.inner_steps, 0);
+  ASSERT_EQ(trunk.siren.start_gains().size(), trunk.siren.latent_dim());
+  EXPECT_LE(trunk.siren.start_gains().maxCoeff(), 1.0);
+  EXPECT_GT(trunk.siren.start_gains().minCoeff(), 0.0);
+  const Result encode = Run("encode --model " + Root("oc_r.tfm") + " --data " + Root("dc") +
+                            " --out " + Root("oc_r.tfs") + " --threads 1");
+  ASSERT_EQ(encode.exit_code, 0) << encode.err;
+  EXPECT_THAT(Run("info " + Root("oc_r.tfs")).out, HasSubstr("fit meta_sgd:0"));
+  // Without the branch no step would leave z = 0: refused before any data is read.
+  const Result no_branch = Run("train --data " + Root("dc") + " --out " + Root("oc_k0.tfm") +
+                               " --preset tiny --steps 3 --inner-steps 0");
+  EXPECT_EQ(no_branch.exit_code, 2);
+  EXPECT_THAT(no_branch.err, HasSubstr("--inner-steps 0"));
+  EXPECT_FALSE(fs::exists(Root("oc_k0.tfm")));
 }
 
 // --products bf16 (where the CPU has AVX512_BF16) trains and encodes with bfloat16

@@ -325,12 +325,12 @@ TEST_F(TrunkTrainerTest, TheReadoutBranchStartsAsThePcaOfTheTrainingFrames) {
   EXPECT_LE((back.siren.parameters() - trunk.siren.parameters()).cwiseAbs().maxCoeff(), 1e-6);
 }
 
-TEST_F(TrunkTrainerTest, WithTheOuterLossOnNoiseFreeCopiesTheReadoutStartsAsTheirPca) {
+TEST_F(TrunkTrainerTest, WithTheOuterLossOnNoiseFreeCopiesTheReadoutStartsAsTheirShrunkPca) {
   TrunkTrainer::Options options = TrunkTrainer::Preset("tiny");
   options.readout = true;
   options.steps = 0;
   options.threads = 2;
-  options.siren.latent_dim = 4;
+  options.siren.latent_dim = 10;  // up to the weakest of the 11 directions 12 frames span
   options.outer_loss_on_clean = true;
   SensorTrunk trunk;
   Train(options, &trunk);
@@ -349,6 +349,26 @@ TEST_F(TrunkTrainerTest, WithTheOuterLossOnNoiseFreeCopiesTheReadoutStartsAsThei
   const float scale = clean_mean.cwiseAbs().maxCoeff();
   EXPECT_LE((branch_mean - clean_mean.col(0)).cwiseAbs().maxCoeff(), 1e-5f * scale);
   EXPECT_GT((branch_mean - noisy_mean.col(0)).cwiseAbs().maxCoeff(), 1e-3f * scale);
+  // Its projections are shrunk by Wiener gains in (0, 1], the noisier components more;
+  // noisy frames equal to their copies (no noise) leave every gain at 1.
+  const Eigen::VectorXd& gains = trunk.siren.start_gains();
+  ASSERT_EQ(gains.size(), 10);
+  EXPECT_GT(gains.minCoeff(), 0.0);
+  EXPECT_LE(gains.maxCoeff(), 1.0);
+  EXPECT_LT(gains.minCoeff(), 0.99);
+  std::vector<TrunkTargets> clean;
+  for (std::size_t i = 0; i < n; ++i) {
+    clean.push_back(LoadTrunkTargets(*dataset_, i, trunk.format, /*clean=*/true));
+  }
+  LatentModulatedSiren no_noise = trunk.siren;
+  TrunkTrainer::StartReadoutFromPca(clean, 1500, &no_noise, &clean);
+  EXPECT_EQ(no_noise.start_gains(), Eigen::VectorXd::Ones(10));
+  // Without noisy frames the trunk has none; a wrong count is refused.
+  TrunkTrainer::StartReadoutFromPca(clean, 1500, &no_noise);
+  EXPECT_EQ(no_noise.start_gains().size(), 0);
+  const std::vector<TrunkTargets> fewer(clean.begin(), clean.end() - 1);
+  EXPECT_THROW(TrunkTrainer::StartReadoutFromPca(clean, 1500, &no_noise, &fewer),
+               std::invalid_argument);
 }
 
 TEST_F(TrunkTrainerTest, ResumingAReadoutRunIsBitIdentical) {

@@ -11,6 +11,7 @@ namespace tactfunc {
 namespace {
 
 using ::testing::HasSubstr;
+using ::testing::Not;
 
 SensorTrunk SmallTrunk(SensorKind sensor, std::uint64_t seed) {
   LatentModulatedSiren::Options options;
@@ -58,6 +59,26 @@ TEST(FunctaModel, RoundTripsEveryTrunkThroughItsFile) {
   }
   EXPECT_THAT(read.info_json(), HasSubstr("test"));
   EXPECT_EQ(read.ParameterBytes(), model.ParameterBytes());
+}
+
+TEST(FunctaModel, RoundTripsAReadoutTrunksStartGains) {
+  SensorTrunk trunk = SmallTrunk(SensorKind::kSoftBubble, 3);
+  LatentModulatedSiren::Options options = trunk.siren.options();
+  options.readout_rows = trunk.format.rows;
+  options.readout_cols = trunk.format.cols;
+  trunk.siren = LatentModulatedSiren(options, 3);
+  FunctaModel without;
+  without.SetTrunk(trunk);
+  const Eigen::VectorXd gains = (Eigen::VectorXd(4) << 1.0, 0.75, 0.5, 0.125).finished();
+  trunk.siren.set_start_gains(gains);
+  FunctaModel with;
+  with.SetTrunk(trunk);
+  const FunctaModel read = FunctaModel::Parse(with.Serialize(), "gains.tfm");
+  EXPECT_EQ(read.Trunk(SensorKind::kSoftBubble).siren.start_gains(), gains);
+  // A trunk without gains reads back without them, its file as before.
+  const FunctaModel read_without = FunctaModel::Parse(without.Serialize(), "plain.tfm");
+  EXPECT_EQ(read_without.Trunk(SensorKind::kSoftBubble).siren.start_gains().size(), 0);
+  EXPECT_THAT(without.Serialize(), Not(HasSubstr("start_gains")));
 }
 
 TEST(FunctaModel, RoundTripsASpatialLatentTrunkAndRecordsItsGrid) {

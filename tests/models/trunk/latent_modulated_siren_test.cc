@@ -438,6 +438,30 @@ TEST(LatentModulatedSiren, ReadoutAloneIsTheLinearMapOfItsBasis) {
   EXPECT_NE(error.find("readout_rows"), std::string::npos) << error;
 }
 
+TEST(LatentModulatedSiren, StartGainsScaleTheReadoutProjectionPerDimension) {
+  Siren siren = PerturbedSiren(ReadoutOptions(1), 14);
+  const MatrixXd grid = Siren::GridCoordinatesD(3, 4);
+  const MatrixXd targets = Uniform(12, 1, 15);
+  const VectorXd weights = 0.5 * (Uniform(12, 1, 16).array() + 1.0);
+  const VectorXd plain = siren.StartLatent<double>(grid, targets, weights);
+  ASSERT_GT(plain.cwiseAbs().minCoeff(), 0.0);
+  const VectorXd gains = (VectorXd(4) << 1.0, 0.5, 0.25, 0.0).finished();
+  siren.set_start_gains(gains);
+  EXPECT_EQ(siren.start_gains(), gains);
+  const VectorXd shrunk = siren.StartLatent<double>(grid, targets, weights);
+  for (int k = 0; k < 4; ++k) EXPECT_NEAR(shrunk[k], gains[k] * plain[k], 1e-15) << k;
+  // Copies keep them; empty gains are none.
+  const Siren copy = siren;
+  EXPECT_EQ(copy.start_gains(), gains);
+  siren.set_start_gains(VectorXd());
+  EXPECT_EQ(siren.StartLatent<double>(grid, targets, weights), plain);
+  // Refused: another size, a non-finite gain, a trunk without the branch.
+  EXPECT_THROW(siren.set_start_gains(VectorXd::Ones(3)), std::invalid_argument);
+  EXPECT_THROW(siren.set_start_gains(VectorXd::Constant(4, std::nan(""))), std::invalid_argument);
+  Siren plain_trunk(SmallOptions(), 1);
+  EXPECT_THROW(plain_trunk.set_start_gains(VectorXd::Ones(4)), std::invalid_argument);
+}
+
 TEST(LatentModulatedSiren, AtZeroLatentWithZeroModulationBiasTheTrunkIgnoresA) {
   Siren siren(SmallOptions(), 3);
   const MatrixXd coords = Uniform(5, 2, 2);
