@@ -56,6 +56,7 @@ struct TrainFlags {
   double alpha_init = 0, alpha_max = 0;
   double divergence_drop_db = 0;
   double readout_rate = 0;
+  int readout_pca_frames = 0;
   std::uint64_t seed = 0;
   int checkpoint_every = 0;
   bool first_order = false;
@@ -126,6 +127,10 @@ TrunkTrainer::Options OptionsFor(const TrainFlags& flags, SensorKind sensor) {
   if (flags.readout_rate_option->count()) {
     if (!flags.readout) throw UsageError("--readout-rate needs --readout");
     options.readout_learning_rate_scale = flags.readout_rate;
+  }
+  if (flags.readout_pca_frames > 0) {
+    if (!flags.readout) throw UsageError("--readout-pca-frames needs --readout");
+    options.readout_pca_frames = flags.readout_pca_frames;
   }
   if (flags.learning_rate_option->count()) options.learning_rate = flags.learning_rate;
   if (flags.omega_0_option->count()) options.siren.omega_0 = flags.omega_0;
@@ -844,6 +849,10 @@ void RegisterTrain(CLI::App& app, CommandBody* selected) {
   sub->add_flag("--readout", flags->readout,
                 "Add the linear readout branch: a per-pixel basis started from the training "
                 "frames' PCA, so the trunk contains PCA (docs/REPRESENTATION.md)");
+  sub->add_option("--readout-pca-frames", flags->readout_pca_frames,
+                  "Training frames (evenly spaced) the readout branch's PCA start is "
+                  "computed from (default 1500; the PCA's time grows as their cube)")
+      ->check(CLI::Range(1, 100000));
   flags->readout_rate_option =
       sub->add_option("--readout-rate", flags->readout_rate,
                       "The readout branch's step size as a fraction of the trunk's, in [0, 1] "

@@ -508,12 +508,12 @@ void TrunkTrainer::StartReadoutFromPca(const std::vector<TrunkTargets>& frames, 
   R.setZero();
   mean_block = mean.transpose();
   const double largest = std::max(eigen.eigenvalues()[m - 1], 0.0);
-  // Centred frames span at most m - 1 directions; the Gram matrix squares the condition
-  // number, so eigenvalues below 1e-9 of the largest are rounding, not directions.
   // Wiener gains (with noisy copies; components not kept get 1): the variance of the
   // copies along unit component u_k, lambda_k / M, against the noise's, the mean of
   // (noise_i . u_k)^2 over the same frames.
   Eigen::VectorXd gains = Eigen::VectorXd::Ones(d);
+  // Centred frames span at most m - 1 directions; the Gram matrix squares the condition
+  // number, so eigenvalues below 1e-9 of the largest are rounding, not directions.
   for (int k = 0; k < d && k < m - 1; ++k) {
     const double lambda = eigen.eigenvalues()[m - 1 - k];  // ascending order
     if (!(lambda > 1e-9 * largest)) break;  // no more directions

@@ -147,6 +147,18 @@ TEST_F(TrainCliTest, TheOuterLossOnNoiseFreeCopiesNeedsThemAndIsRecorded) {
   EXPECT_EQ(no_branch.exit_code, 2);
   EXPECT_THAT(no_branch.err, HasSubstr("--inner-steps 0"));
   EXPECT_FALSE(fs::exists(Root("oc_k0.tfm")));
+  const Result pca_frames = Run("train --data " + Root("dc") + " --out " + Root("oc_k0.tfm") +
+                                " --preset tiny --steps 3 --readout-pca-frames 5");
+  EXPECT_EQ(pca_frames.exit_code, 2);
+  EXPECT_THAT(pca_frames.err, HasSubstr("--readout-pca-frames needs --readout"));
+  const Result with_branch = Run("train --data " + Root("dc") + " --out " + Root("oc_p.tfm") +
+                                 " --preset tiny --steps 3 --readout --readout-pca-frames 5" +
+                                 " --divergence-drop-db 0");
+  ASSERT_EQ(with_branch.exit_code, 0) << with_branch.err;
+  EXPECT_EQ(nlohmann::json::parse(FunctaModel::Load(Root("oc_p.tfm")).info_json())["trunks"]
+                ["bubble"]["options"]["readout_pca_frames"]
+                    .get<int>(),
+            5);
 }
 
 // --products bf16 (where the CPU has AVX512_BF16) trains and encodes with bfloat16
