@@ -14,7 +14,6 @@ bool MetaSgd::Options::IsValid(std::string* error) const {
     message << "inner_steps must be >= 0, found " << inner_steps;
   } else if (!(latent_l2_weight >= 0.0) || !std::isfinite(latent_l2_weight)) {
     message << "latent_l2_weight must be finite and >= 0, found " << latent_l2_weight;
-
   } else {
     return true;
   }
