@@ -20,9 +20,10 @@
 // load as trunks without the branch. Its start gains, if any
 // (LatentModulatedSiren::set_start_gains), are the tensor "<sensor>/start_gains"
 // (float32, latent_dim); files without it load without gains. A trunk with spatial
-// latents records its grid as "siren": {..., "spatial": {"rows", "cols", "channels", "global_latent_dim", "layout"}}
-// (layout: how z and the modulation matrix split, one fixed string today); files without
-// the key load as trunks with one global latent. A trunk trained on described frames
+// latents records its grid as "siren": {..., "spatial": {"rows", "cols", "channels",
+// "global_latent_dim", "layout"}} (layout: how z and the modulation matrix split, one
+// fixed string today); files without the key load as trunks with one global latent. A
+// trunk trained on described frames
 // records the description as "sensor_description" (the file format of
 // models/core/sensor_description.h, "pixel_pitch_mm": 0 for an unknown pitch); files
 // without it load without one. A trunk with the photometric head records it as
