@@ -23,10 +23,9 @@
 // latents records its grid as "siren": {..., "spatial": {"rows", "cols", "channels",
 // "global_latent_dim", "layout"}} (layout: how z and the modulation matrix split, one
 // fixed string today); files without the key load as trunks with one global latent. A
-// trunk trained on described frames
-// records the description as "sensor_description" (the file format of
-// models/core/sensor_description.h, "pixel_pitch_mm": 0 for an unknown pitch); files
-// without it load without one. A trunk with the photometric head records it as
+// trunk trained on described frames records the description as "sensor_description"
+// (the file format of models/core/sensor_description.h, "pixel_pitch_mm": 0 for an
+// unknown pitch); files without it load without one. A trunk with the photometric head records it as
 // "photometric": {"latent_dim", "shading_width", "supersample", "reference": {"rows",
 // "cols", "channels"}} with the tensors "<sensor>/head" (float32, the head's parameters)
 // and "<sensor>/reference" (float32, the sensor-resolution reference, HWC); files
