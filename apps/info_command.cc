@@ -129,8 +129,14 @@ nlohmann::json DescribeModel(const std::string& bytes, const std::string& path) 
                   o.global_latent_dim());
     }
     if (o.has_readout()) {
-      std::printf("           linear readout branch on a %d x %d grid\n", o.readout_rows,
+      const Eigen::VectorXd& gains = t.siren.start_gains();
+      std::printf("           linear readout branch on a %d x %d grid", o.readout_rows,
                   o.readout_cols);
+      if (gains.size() != 0) {
+        std::printf(", every fit from its projection times gains in [%.3g, %.3g]",
+                    gains.minCoeff(), gains.maxCoeff());
+      }
+      std::printf("\n");
     }
     if (t.photometric != nullptr) {
       const PhotometricTrunk& p = *t.photometric;
@@ -181,7 +187,14 @@ nlohmann::json DescribeModel(const std::string& bytes, const std::string& path) 
                           {"channels", o.spatial_channels},
                           {"global_latent_dim", o.global_latent_dim()}};
     }
-    if (o.has_readout()) trunk["readout"] = {{"rows", o.readout_rows}, {"cols", o.readout_cols}};
+    if (o.has_readout()) {
+      trunk["readout"] = {{"rows", o.readout_rows}, {"cols", o.readout_cols}};
+      const Eigen::VectorXd& gains = t.siren.start_gains();
+      if (gains.size() != 0) {
+        trunk["readout"]["start_gains"] = std::vector<double>(gains.data(),
+                                                              gains.data() + gains.size());
+      }
+    }
     const SensorDescription described = TrunkSensorDescription(t);
     std::cout << "           sensor " << DescribeSensor(described)
               << (t.description ? "" : " (built in: the model records none)") << "\n";

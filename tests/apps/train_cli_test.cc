@@ -137,6 +137,11 @@ TEST_F(TrainCliTest, TheOuterLossOnNoiseFreeCopiesNeedsThemAndIsRecorded) {
   ASSERT_EQ(trunk.siren.start_gains().size(), trunk.siren.latent_dim());
   EXPECT_LE(trunk.siren.start_gains().maxCoeff(), 1.0);
   EXPECT_GT(trunk.siren.start_gains().minCoeff(), 0.0);
+  EXPECT_THAT(Run("info " + Root("oc_r.tfm")).out, HasSubstr("projection times gains in ["));
+  EXPECT_EQ(Run("info " + Root("oc_r.tfm") + " --json")
+                .LastJson()["model"]["trunks"]["bubble"]["readout"]["start_gains"]
+                .size(),
+            static_cast<std::size_t>(trunk.siren.latent_dim()));
   const Result encode = Run("encode --model " + Root("oc_r.tfm") + " --data " + Root("dc") +
                             " --out " + Root("oc_r.tfs") + " --threads 1");
   ASSERT_EQ(encode.exit_code, 0) << encode.err;
