@@ -360,6 +360,22 @@ TEST_F(TrunkTrainerTest, WithTheOuterLossOnNoiseFreeCopiesTheReadoutStartsAsThei
   for (std::size_t i = 0; i < n; ++i) {
     clean.push_back(LoadTrunkTargets(*dataset_, i, trunk.format, /*clean=*/true));
   }
+  // Each is lambda_k / (lambda_k + sigma_k^2) along the branch's unit component u_k:
+  // the copies' variance about their mean and the noise's mean square, over the frames.
+  const ParameterBlock basis_block = trunk.siren.Block(ParameterGroup::kReadoutBasis);
+  const Eigen::MatrixXd basis =
+      LatentModulatedSiren::View(theta, basis_block);  // d x pixels, rows scale u_k
+  for (int k = 0; k < 10; ++k) {
+    const Eigen::VectorXd unit = basis.row(k).transpose().normalized();
+    double lambda = 0, sigma2 = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      const TrunkTargets noisy = LoadTrunkTargets(*dataset_, i, trunk.format, /*clean=*/false);
+      const Eigen::VectorXd copy = clean[i].values.col(0).cast<double>();
+      lambda += std::pow((copy - clean_mean.col(0).cast<double>()).dot(unit), 2) / n;
+      sigma2 += std::pow((noisy.values.col(0).cast<double>() - copy).dot(unit), 2) / n;
+    }
+    EXPECT_NEAR(gains[k], lambda / (lambda + sigma2), 1e-4) << "component " << k;
+  }
   LatentModulatedSiren no_noise = trunk.siren;
   TrunkTrainer::StartReadoutFromPca(clean, 1500, &no_noise, &clean);
   EXPECT_EQ(no_noise.start_gains(), Eigen::VectorXd::Ones(10));
