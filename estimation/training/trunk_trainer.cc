@@ -680,18 +680,10 @@ TrunkTrainer::Summary TrunkTrainer::Train(const std::vector<TrunkTargets>& frame
   std::string error;
   if (!format.IsValid(&error)) throw std::invalid_argument("TrunkTrainer: " + error);
   if (frames.empty()) throw std::runtime_error("TrunkTrainer: no training frames");
-  if (o.outer_loss_on_clean) {
-    if (clean_frames == nullptr || clean_frames->size() != frames.size()) {
-      throw std::invalid_argument("TrunkTrainer: the outer loss on noise-free frames needs one "
-                                  "clean copy per training frame");
-    }
-    for (std::size_t i = 0; i < frames.size(); ++i) {
-      if ((*clean_frames)[i].values.rows() != frames[i].values.rows() ||
-          (*clean_frames)[i].values.cols() != frames[i].values.cols()) {
-        throw std::invalid_argument("TrunkTrainer: clean copy " + std::to_string(i) +
-                                    " differs in size from its training frame");
-      }
-    }
+  if (o.outer_loss_on_clean &&
+      (clean_frames == nullptr || clean_frames->size() != frames.size())) {
+    throw std::invalid_argument("TrunkTrainer: the outer loss on noise-free frames needs one "
+                                "clean copy per training frame");
   }
   const int num_pixels = format.rows * format.cols;
   const int channels = static_cast<int>(frames[0].values.cols());
@@ -704,6 +696,11 @@ TrunkTrainer::Summary TrunkTrainer::Train(const std::vector<TrunkTargets>& frame
                                   std::to_string(num_pixels) + " x " + std::to_string(channels) +
                                   " (" + std::to_string(format.rows) + " x " +
                                   std::to_string(format.cols) + " pixels)");
+    }
+    if (o.outer_loss_on_clean && ((*clean_frames)[i].values.rows() != num_pixels ||
+                                  (*clean_frames)[i].values.cols() != channels)) {
+      throw std::invalid_argument("TrunkTrainer: clean copy " + std::to_string(i) +
+                                  " differs in size from its training frame");
     }
   }
   const int num_frames = static_cast<int>(frames.size());

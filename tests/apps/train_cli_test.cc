@@ -104,6 +104,12 @@ TEST_F(TrainCliTest, TheInnerLoopKnobsReachTheModelAndEncodeUsesIt) {
 // writing nothing, on data without them; recorded in the model's training options; a
 // readout trunk's start gains kept in its file.
 TEST_F(TrainCliTest, TheOuterLossOnNoiseFreeCopiesNeedsThemAndIsRecorded) {
+  // The training options a model NAME records for its bubble trunk.
+  const auto options_of = [](const std::string& name) {
+    const nlohmann::json info =
+        nlohmann::json::parse(FunctaModel::Load(Root(name)).info_json());
+    return info["trunks"]["bubble"]["options"];
+  };
   const Result noisy_only = Run("train --data " + Root("d") + " --out " + Root("oc0.tfm") +
                                 " --preset tiny --steps 3 --seed 2 --outer-clean");
   EXPECT_NE(noisy_only.exit_code, 0);
@@ -116,15 +122,11 @@ TEST_F(TrainCliTest, TheOuterLossOnNoiseFreeCopiesNeedsThemAndIsRecorded) {
   const Result train = Run("train --data " + Root("dc") + " --out " + Root("oc.tfm") +
                            " --preset tiny --steps 3 --seed 2 --outer-clean");
   ASSERT_EQ(train.exit_code, 0) << train.err;
-  const nlohmann::json info =
-      nlohmann::json::parse(FunctaModel::Load(Root("oc.tfm")).info_json());
-  EXPECT_TRUE(info["trunks"]["bubble"]["options"]["outer_loss_on_clean"].get<bool>());
+  EXPECT_TRUE(options_of("oc.tfm")["outer_loss_on_clean"].get<bool>());
   const Result plain = Run("train --data " + Root("dc") + " --out " + Root("oc_plain.tfm") +
                            " --preset tiny --steps 3 --seed 2");
   ASSERT_EQ(plain.exit_code, 0) << plain.err;
-  const nlohmann::json plain_info =
-      nlohmann::json::parse(FunctaModel::Load(Root("oc_plain.tfm")).info_json());
-  EXPECT_FALSE(plain_info["trunks"]["bubble"]["options"].contains("outer_loss_on_clean"));
+  EXPECT_FALSE(options_of("oc_plain.tfm").contains("outer_loss_on_clean"));
   // A readout trunk trained so (here with no inner steps: every fit is the branch's
   // projection) starts its fits from projections shrunk by the copies' Wiener gains,
   // which its file keeps; encode then fits with its K = 0.
@@ -160,10 +162,7 @@ TEST_F(TrainCliTest, TheOuterLossOnNoiseFreeCopiesNeedsThemAndIsRecorded) {
                                  " --preset tiny --steps 3 --readout --readout-pca-frames 5" +
                                  " --divergence-drop-db 0");
   ASSERT_EQ(with_branch.exit_code, 0) << with_branch.err;
-  EXPECT_EQ(nlohmann::json::parse(FunctaModel::Load(Root("oc_p.tfm")).info_json())["trunks"]
-                ["bubble"]["options"]["readout_pca_frames"]
-                    .get<int>(),
-            5);
+  EXPECT_EQ(options_of("oc_p.tfm")["readout_pca_frames"].get<int>(), 5);
 }
 
 // --products bf16 (where the CPU has AVX512_BF16) trains and encodes with bfloat16

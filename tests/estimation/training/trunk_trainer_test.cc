@@ -335,12 +335,18 @@ TEST_F(TrunkTrainerTest, WithTheOuterLossOnNoiseFreeCopiesTheReadoutStartsAsThei
   SensorTrunk trunk;
   Train(options, &trunk);
   // The branch's mean is the mean of the clean copies, not of the noisy frames.
+  const std::vector<std::size_t> indices =
+      dataset_->FrameIndices(SensorKind::kSoftBubble, Split::kTrain);
+  const std::vector<TrunkTargets> clean =
+      LoadTrunkTargets(*dataset_, indices, trunk.format, /*clean=*/true, 2);
+  const std::vector<TrunkTargets> noisy =
+      LoadTrunkTargets(*dataset_, indices, trunk.format, /*clean=*/false, 2);
   Eigen::MatrixXf clean_mean = Eigen::MatrixXf::Zero(trunk.format.rows * trunk.format.cols, 1);
   Eigen::MatrixXf noisy_mean = clean_mean;
-  const std::size_t n = dataset_->frames().size();
+  const std::size_t n = indices.size();
   for (std::size_t i = 0; i < n; ++i) {
-    clean_mean += LoadTrunkTargets(*dataset_, i, trunk.format, /*clean=*/true).values / n;
-    noisy_mean += LoadTrunkTargets(*dataset_, i, trunk.format, /*clean=*/false).values / n;
+    clean_mean += clean[i].values / n;
+    noisy_mean += noisy[i].values / n;
   }
   const Eigen::VectorXd theta = trunk.siren.parameters();
   const ParameterBlock mean_block = trunk.siren.Block(ParameterGroup::kReadoutMean);
@@ -356,10 +362,6 @@ TEST_F(TrunkTrainerTest, WithTheOuterLossOnNoiseFreeCopiesTheReadoutStartsAsThei
   EXPECT_GT(gains.minCoeff(), 0.0);
   EXPECT_LE(gains.maxCoeff(), 1.0);
   EXPECT_LT(gains.minCoeff(), 0.99);
-  std::vector<TrunkTargets> clean;
-  for (std::size_t i = 0; i < n; ++i) {
-    clean.push_back(LoadTrunkTargets(*dataset_, i, trunk.format, /*clean=*/true));
-  }
   // Each is lambda_k / (lambda_k + sigma_k^2) along the branch's unit component u_k:
   // the copies' variance about their mean and the noise's mean square, over the frames.
   const ParameterBlock basis_block = trunk.siren.Block(ParameterGroup::kReadoutBasis);
@@ -369,10 +371,9 @@ TEST_F(TrunkTrainerTest, WithTheOuterLossOnNoiseFreeCopiesTheReadoutStartsAsThei
     const Eigen::VectorXd unit = basis.row(k).transpose().normalized();
     double lambda = 0, sigma2 = 0;
     for (std::size_t i = 0; i < n; ++i) {
-      const TrunkTargets noisy = LoadTrunkTargets(*dataset_, i, trunk.format, /*clean=*/false);
       const Eigen::VectorXd copy = clean[i].values.col(0).cast<double>();
       lambda += std::pow((copy - clean_mean.col(0).cast<double>()).dot(unit), 2) / n;
-      sigma2 += std::pow((noisy.values.col(0).cast<double>() - copy).dot(unit), 2) / n;
+      sigma2 += std::pow((noisy[i].values.col(0).cast<double>() - copy).dot(unit), 2) / n;
     }
     EXPECT_NEAR(gains[k], lambda / (lambda + sigma2), 1e-4) << "component " << k;
   }
