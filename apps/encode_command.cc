@@ -45,6 +45,7 @@ struct EncodeFlags {
   std::string sensors;
   std::string split;
   std::string latent_precision = "float16";
+  int latent_bytes = 0;  // > 0: allocated codes of this many bytes per frame
   std::string strategy;  // "" = each trunk's meta_sgd:K
   bool json = false;
   bool allow_other_frames = false;
@@ -64,6 +65,11 @@ std::string ResumeCommand(const EncodeFlags& flags) {
   if (flags.products != "float") command += " --products " + flags.products;
   if (flags.allow_other_frames) command += " --allow-other-frames";
   if (flags.share_rest) command += " --share-rest";
+  if (flags.latent_bytes > 0) {
+    command += " --latent-bytes " + std::to_string(flags.latent_bytes);
+  } else if (flags.latent_precision != "float16") {
+    command += " --latent-precision " + flags.latent_precision;
+  }
   if (!flags.dataset.sensor.empty()) command += " --sensor " + flags.dataset.sensor;
   if (!flags.dataset.reference.empty()) command += " --reference " + flags.dataset.reference;
   if (!flags.dataset.labels.empty()) command += " --labels " + flags.dataset.labels;
@@ -137,6 +143,10 @@ void RunEncode(const EncodeFlags& flags) {
     throw UsageError("--latent-precision: expected float32, float16, uint8, uint6 or uint4, got '" +
                      flags.latent_precision + "'");
   }
+  if (flags.latent_bytes > 0) {
+    options.latent_precision = Functaset::LatentPrecision::kAllocated;
+    options.latent_bytes = flags.latent_bytes;
+  }
   options.strategy = flags.strategy;
   options.share_rest_latent = flags.share_rest;
   if (std::string error; !options.IsValid(&error)) throw UsageError("--strategy: " + error);
@@ -171,6 +181,13 @@ void RunEncode(const EncodeFlags& flags) {
     if (!model.HasSensor(sensor) || !dataset.has_sensor(sensor)) continue;
     CheckModelMatchesData(model, flags.model, dataset, flags.data, sensor, "encode",
                           "--allow-other-frames", flags.allow_other_frames);
+    const int d = TrunkLatentDim(model.Trunk(sensor));
+    if (flags.latent_bytes > 2 * d) {
+      throw UsageError("--latent-bytes: " + std::to_string(flags.latent_bytes) + " bytes for " +
+                       ToString(sensor) + " latents of " + std::to_string(d) + " values in " +
+                       flags.model + ", expected at most " + std::to_string(2 * d) +
+                       " (16 bits per value)");
+    }
     const FrameFormat& format = model.Trunk(sensor).format;
     WarnIfStretched(dataset, flags.data, sensor, format.rows, format.cols, "encode");
   }
@@ -293,6 +310,14 @@ void RegisterEncode(CLI::App& app, CommandBody* selected) {
                   "between its min and max over the frames (ceil(d b / 8) bytes per frame plus "
                   "2 x d float32 per sensor; docs/FUNCTASET.md, \"Latent precision\")")
       ->check(CLI::IsMember({"float32", "float16", "uint8", "uint6", "uint4"}));
+  sub->add_option("--latent-bytes", flags->latent_bytes,
+                  "Store each frame's latent in exactly N bytes: the N x 8 bits go one at a time "
+                  "to the latent dimension whose squared error over the frames drops most, each "
+                  "dimension on its least-squares grid (0-16 bits; per sensor d bytes of bits "
+                  "and 2 x d float32; docs/FUNCTASET.md, \"Latent precision\"). Instead of "
+                  "--latent-precision")
+      ->check(CLI::Range(1, 1 << 20))
+      ->excludes("--latent-precision");
   sub->add_option("--strategy", flags->strategy,
                   "How each frame's latent is fitted: meta_sgd:K or ceres:N (default: the "
                   "trunk's own meta_sgd:K, what it was trained for; ceres:N fits the latent "

@@ -4,6 +4,7 @@
 // tools, bytes on disk; what a tactfunc file holds (any kind: its kind, version, size
 // and checksum; for a model, functaset, pose model or checkpoint also the figures of
 // its kind); or, with --tools, the simulator's twelve tools.
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -239,9 +240,21 @@ nlohmann::json DescribeFunctaset(const std::string& bytes, const std::string& pa
     const std::string strategy =
         functaset.fit_strategy(sensor).empty() ? "n/a" : functaset.fit_strategy(sensor);
     const std::string& products = functaset.products(sensor);
-    std::printf("  %-8s %zu latents of %d values, %s B each on disk (%d labelled), fit %s%s",
+    // Allocated codes: how the bytes were shared among the values.
+    const std::vector<int> bits = functaset.latent_precision() ==
+                                          Functaset::LatentPrecision::kAllocated
+                                      ? functaset.code_bits(sensor)
+                                      : std::vector<int>();
+    std::string shared;
+    if (!bits.empty()) {
+      const auto [fewest, most] = std::minmax_element(bits.begin(), bits.end());
+      shared = " (" + std::to_string(*most) + " to " + std::to_string(*fewest) +
+               " bits per value, " + std::to_string(std::count(bits.begin(), bits.end(), 0)) +
+               " values not stored)";
+    }
+    std::printf("  %-8s %zu latents of %d values, %s B each on disk%s (%d labelled), fit %s%s",
                 ToString(sensor), functaset.entries(sensor).size(), functaset.latent_dim(sensor),
-                FormatFixed(functaset.BytesPerFrame(sensor), 0).c_str(), labelled,
+                FormatFixed(functaset.BytesPerFrame(sensor), 0).c_str(), shared.c_str(), labelled,
                 strategy.c_str(),
                 products == "float" ? "" : (" with " + products + " products").c_str());
     nlohmann::json splits = nlohmann::json::object();
@@ -260,10 +273,14 @@ nlohmann::json DescribeFunctaset(const std::string& bytes, const std::string& pa
                                  {"count", functaset.entries(sensor).size()},
                                  {"labelled", labelled},
                                  {"splits", splits}};
+    if (!bits.empty()) sensors[ToString(sensor)]["latent_bits"] = bits;
   }
   return {{"model_checksum", functaset.model_checksum()},
           {"dataset", functaset.dataset()},
           {"latent_precision", ToString(functaset.latent_precision())},
+          {"latent_bytes", functaset.latent_precision() == Functaset::LatentPrecision::kAllocated
+                               ? nlohmann::json(functaset.latent_bytes())
+                               : nlohmann::json(nullptr)},
           {"complete", functaset.complete()},
           {"sensors", sensors}};
 }

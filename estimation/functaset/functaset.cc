@@ -23,45 +23,16 @@ constexpr const char* kFormat = "tactfunc-functaset";
 constexpr const char* kKind = "functaset";
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
+std::vector<int> BitsOf(const std::vector<LatentGrid>& grids) {
+  std::vector<int> bits;
+  for (const LatentGrid& g : grids) bits.push_back(g.bits);
+  return bits;
+}
+
 std::string Hex(std::uint32_t value) {
   char buffer[16];
   std::snprintf(buffer, sizeof(buffer), "0x%08" PRIx32, value);
   return buffer;
-}
-
-// Bytes of one frame's packed b-bit codes.
-std::int64_t CodeBytes(int d, int bits) { return (static_cast<std::int64_t>(d) * bits + 7) / 8; }
-
-// Packs codes (each < 2^bits) LSB-first into `out` (CodeBytes(codes.size(), bits) bytes,
-// zeroed by the caller).
-void PackCodes(const std::vector<std::uint32_t>& codes, int bits, double* out) {
-  std::vector<std::uint32_t> bytes(CodeBytes(static_cast<int>(codes.size()), bits), 0);
-  for (std::size_t k = 0; k < codes.size(); ++k) {
-    const std::size_t bit = k * bits;
-    const std::uint32_t shifted = codes[k] << (bit % 8);  // at most 8 + 7 bits
-    bytes[bit / 8] |= shifted & 0xff;
-    if (shifted > 0xff) bytes[bit / 8 + 1] |= shifted >> 8;
-  }
-  for (std::size_t j = 0; j < bytes.size(); ++j) out[j] = bytes[j];
-}
-
-std::uint32_t UnpackCode(const double* row, int k, int bits) {
-  const std::size_t bit = static_cast<std::size_t>(k) * bits;
-  std::uint32_t word = static_cast<std::uint32_t>(row[bit / 8]);
-  if (bit % 8 + bits > 8) word |= static_cast<std::uint32_t>(row[bit / 8 + 1]) << 8;
-  return (word >> (bit % 8)) & ((1u << bits) - 1);
-}
-
-// Code of z on the grid offset + q step with q in [0, levels].
-std::uint32_t Quantise(float z, float offset, float step, std::uint32_t levels) {
-  if (!(step > 0)) return 0;
-  const double q = std::round((static_cast<double>(z) - offset) / step);
-  if (!(q > 0)) return 0;  // also NaN
-  return static_cast<std::uint32_t>(std::clamp(q, 0.0, static_cast<double>(levels)));
-}
-
-float Dequantise(std::uint32_t q, float offset, float step) {
-  return static_cast<float>(offset + static_cast<double>(q) * step);
 }
 
 struct PrecisionInfo {
@@ -73,7 +44,8 @@ constexpr PrecisionInfo kPrecisions[] = {{Functaset::LatentPrecision::kFloat32, 
                                          {Functaset::LatentPrecision::kFloat16, "float16", 16},
                                          {Functaset::LatentPrecision::kUint8, "uint8", 8},
                                          {Functaset::LatentPrecision::kUint6, "uint6", 6},
-                                         {Functaset::LatentPrecision::kUint4, "uint4", 4}};
+                                         {Functaset::LatentPrecision::kUint4, "uint4", 4},
+                                         {Functaset::LatentPrecision::kAllocated, "allocated", 0}};
 
 const PrecisionInfo& Info(Functaset::LatentPrecision precision) {
   for (const PrecisionInfo& info : kPrecisions) {
@@ -98,22 +70,34 @@ bool LatentPrecisionFromString(const std::string& name, Functaset::LatentPrecisi
 
 int LatentBits(Functaset::LatentPrecision precision) { return Info(precision).bits; }
 
-bool IsQuantised(Functaset::LatentPrecision precision) { return LatentBits(precision) <= 8; }
+bool IsQuantised(Functaset::LatentPrecision precision) {
+  return precision == Functaset::LatentPrecision::kAllocated || LatentBits(precision) <= 8;
+}
 
 double Functaset::BytesPerFrame(SensorKind sensor) const {
   const int d = latent_dim(sensor);
   const int bits = LatentBits(latent_precision_);
-  return IsQuantised(latent_precision_) ? static_cast<double>(CodeBytes(d, bits))
-                                        : static_cast<double>(d) * bits / 8;
+  if (latent_precision_ == LatentPrecision::kAllocated) return latent_bytes_;
+  return IsQuantised(latent_precision_)
+             ? static_cast<double>(PackedBytes(std::vector<int>(d, bits)))
+             : static_cast<double>(d) * bits / 8;
 }
 
 std::uint64_t Functaset::SharedLatentBytes(SensorKind sensor) const {
   const std::uint64_t d = static_cast<std::uint64_t>(latent_dim(sensor));
-  return (IsQuantised(latent_precision_) ? 8 * d : 0) + (rest_latent(sensor) ? 4 * d : 0);
+  const std::uint64_t tables = !IsQuantised(latent_precision_) ? 0
+                               : latent_precision_ == LatentPrecision::kAllocated ? 9 * d
+                                                                                  : 8 * d;
+  return tables + (rest_latent(sensor) ? 4 * d : 0);
 }
 
 int Functaset::ToolSymmetryOrder(const std::string& tool, bool* known) const {
   return SymmetryOrderOfTool(tool, tool_symmetries_, known);
+}
+
+std::vector<int> Functaset::code_bits(SensorKind sensor) const {
+  const SensorBlock& block = Block(sensor);
+  return block.codes ? BitsOf(block.codes->grids) : std::vector<int>();
 }
 
 std::int64_t Functaset::NumStoredLatents(SensorKind sensor) const {
@@ -282,40 +266,38 @@ void Functaset::CheckModel(const FunctaModel& model, const std::string& model_na
   }
 }
 
-Functaset::CodeTable Functaset::Codes(const SensorBlock& block, int bits) {
-  const std::uint32_t levels = (1u << bits) - 1;
+Functaset::CodeTable Functaset::Codes(const SensorBlock& block) const {
   const int d = block.latent_dim;
-  // The grid the entries were read with, if every latent still lies on it.
-  if (block.codes && block.codes->bits == bits) {
-    const CodeTable& t = *block.codes;
+  // The grids the entries were read with, if every latent still lies on them.
+  if (block.codes && block.codes->precision == latent_precision_ &&
+      (latent_precision_ != LatentPrecision::kAllocated ||
+       PackedBytes(BitsOf(block.codes->grids)) <= latent_bytes_)) {
     bool on_grid = true;
     for (const FunctasetEntry& e : block.entries) {
       if (e.at_rest) continue;  // the rest latent is stored apart, as float32
       for (int k = 0; k < d && on_grid; ++k) {
-        const float z = e.latent[k];
-        on_grid = Dequantise(Quantise(z, t.offset[k], t.step[k], levels), t.offset[k],
-                             t.step[k]) == z;
+        const LatentGrid& grid = block.codes->grids[k];
+        on_grid = Dequantise(Quantise(e.latent[k], grid), grid) == e.latent[k];
       }
       if (!on_grid) break;
     }
-    if (on_grid) return t;
+    if (on_grid) return *block.codes;
+  }
+  std::vector<std::vector<float>> values(d);
+  for (const FunctasetEntry& e : block.entries) {
+    if (e.at_rest) continue;
+    for (int k = 0; k < d; ++k) values[k].push_back(e.latent[k]);
   }
   CodeTable table;
-  table.bits = bits;
-  table.offset = Eigen::VectorXf::Zero(d);
-  table.step = Eigen::VectorXf::Zero(d);
-  const auto first = std::find_if(block.entries.begin(), block.entries.end(),
-                                  [](const FunctasetEntry& e) { return !e.at_rest; });
-  for (int k = 0; k < d; ++k) {
-    if (first == block.entries.end()) break;
-    float lo = first->latent[k], hi = lo;
-    for (const FunctasetEntry& e : block.entries) {
-      if (e.at_rest) continue;
-      lo = std::min(lo, e.latent[k]);
-      hi = std::max(hi, e.latent[k]);
+  table.precision = latent_precision_;
+  table.grids.resize(d);
+  if (latent_precision_ == LatentPrecision::kAllocated) {
+    const std::vector<int> bits = AllocateBits(values, 8 * latent_bytes_);
+    for (int k = 0; k < d; ++k) table.grids[k] = LeastSquaresGrid(values[k], bits[k]);
+  } else {
+    for (int k = 0; k < d; ++k) {
+      table.grids[k] = RangeGrid(values[k], LatentBits(latent_precision_));
     }
-    table.offset[k] = lo;
-    table.step[k] = static_cast<float>((static_cast<double>(hi) - lo) / levels);
   }
   return table;
 }
@@ -376,28 +358,42 @@ std::string Functaset::Serialize() const {
                std::vector<double>(block.rest_latent->data(), block.rest_latent->data() + d));
     }
     if (IsQuantised(latent_precision_)) {
-      const int bits = LatentBits(latent_precision_);
-      meta["sensors"].back()["latent_bits"] = bits;
-      const CodeTable table = Codes(block, bits);
-      const std::uint32_t levels = (1u << bits) - 1;
-      const std::int64_t row_bytes = CodeBytes(block.latent_dim, bits);
+      const bool allocated = latent_precision_ == LatentPrecision::kAllocated;
+      if (allocated && (latent_bytes_ < 1 || latent_bytes_ > 2 * d)) {
+        throw std::invalid_argument("Functaset: " + std::to_string(latent_bytes_) +
+                                    " bytes per frame for " + name + " latents of " +
+                                    std::to_string(d) + " values, expected 1.." +
+                                    std::to_string(2 * d) + " (16 bits per value at most)");
+      }
+      if (allocated) {
+        meta["sensors"].back()["latent_bytes"] = latent_bytes_;
+      } else {
+        meta["sensors"].back()["latent_bits"] = LatentBits(latent_precision_);
+      }
+      const CodeTable table = Codes(block);
+      const std::vector<int> bits = BitsOf(table.grids);
+      const std::int64_t row_bytes = allocated ? latent_bytes_ : PackedBytes(bits);
       std::vector<double> codes(stored * row_bytes, 0.0);
       std::vector<std::uint32_t> q(d);
       std::int64_t row = 0;
       for (std::int64_t i = 0; i < m; ++i) {
         if (block.entries[i].at_rest) continue;
         for (std::int64_t k = 0; k < d; ++k) {
-          q[k] = Quantise(block.entries[i].latent[k], table.offset[k], table.step[k], levels);
+          q[k] = Quantise(block.entries[i].latent[k], table.grids[k]);
         }
         PackCodes(q, bits, codes.data() + row * row_bytes);
         ++row;
       }
+      std::vector<double> offset, step;
+      for (const LatentGrid& g : table.grids) offset.push_back(g.offset), step.push_back(g.step);
+      if (allocated) {
+        file.Add(name + "/latent_bits", TensorFile::DType::kUint8, {d},
+                 std::vector<double>(bits.begin(), bits.end()));
+      }
       file.Add(name + "/latent_codes", TensorFile::DType::kUint8, {stored, row_bytes},
                std::move(codes));
-      file.Add(name + "/latent_offset", TensorFile::DType::kFloat32, {d},
-               std::vector<double>(table.offset.data(), table.offset.data() + d));
-      file.Add(name + "/latent_step", TensorFile::DType::kFloat32, {d},
-               std::vector<double>(table.step.data(), table.step.data() + d));
+      file.Add(name + "/latent_offset", TensorFile::DType::kFloat32, {d}, std::move(offset));
+      file.Add(name + "/latent_step", TensorFile::DType::kFloat32, {d}, std::move(step));
     } else {
       file.Add(name + "/latents",
                latent_precision_ == LatentPrecision::kFloat16 ? TensorFile::DType::kFloat16
@@ -532,19 +528,54 @@ Functaset Functaset::Parse(const std::string& bytes, const std::string& source) 
         }
         if (latents->dtype == TensorFile::DType::kFloat16) precision = LatentPrecision::kFloat16;
       } else {
-        field = where + ".latent_bits";
         if (!file.Has(name + "/latent_codes")) {
+          field = where + ".latent_bits";
           throw fail("tensor '" + name + "/latents' (float latents) or '" + name +
                      "/latent_codes' (b-bit codes) is missing");
         }
-        table.bits = entry.at("latent_bits").get<int>();
-        if (table.bits != 8 && table.bits != 6 && table.bits != 4) {
-          throw fail("expected 8, 6 or 4, got " + std::to_string(table.bits));
+        std::vector<int> bits;
+        std::int64_t row_bytes = 0;
+        if (entry.contains("latent_bytes")) {
+          precision = LatentPrecision::kAllocated;
+          field = where + ".latent_bytes";
+          row_bytes = entry.at("latent_bytes").get<std::int64_t>();
+          if (row_bytes < 1 || row_bytes > 2 * d) {
+            throw fail("expected 1.." + std::to_string(2 * d) +
+                       " (16 bits per value at most), got " + std::to_string(row_bytes));
+          }
+          if (s > 0 && out.latent_precision_ == LatentPrecision::kAllocated &&
+              row_bytes != out.latent_bytes_) {
+            throw fail("expected the earlier sensor's " + std::to_string(out.latent_bytes_) +
+                       ", got " + std::to_string(row_bytes));
+          }
+          out.latent_bytes_ = static_cast<int>(row_bytes);
+          field = name + "/latent_bits";
+          const auto& bits_tensor = file.Get(name + "/latent_bits", {d});
+          if (bits_tensor.dtype != TensorFile::DType::kUint8) {
+            throw fail(std::string("expected uint8, got ") + ToString(bits_tensor.dtype));
+          }
+          for (double b : bits_tensor.values) {
+            if (b > 16) throw fail("expected bits in [0, 16], got " + std::to_string(b));
+            bits.push_back(static_cast<int>(b));
+          }
+          if (PackedBytes(bits) > row_bytes) {
+            throw fail("the bits add up to " + std::to_string(PackedBytes(bits)) +
+                       " bytes, more than latent_bytes = " + std::to_string(row_bytes));
+          }
+        } else {
+          field = where + ".latent_bits";
+          const int b = entry.at("latent_bits").get<int>();
+          if (b != 8 && b != 6 && b != 4) {
+            throw fail("expected 8, 6 or 4, got " + std::to_string(b));
+          }
+          precision = b == 8   ? LatentPrecision::kUint8
+                      : b == 6 ? LatentPrecision::kUint6
+                               : LatentPrecision::kUint4;
+          bits.assign(d, b);
+          row_bytes = PackedBytes(bits);
         }
-        precision = table.bits == 8   ? LatentPrecision::kUint8
-                    : table.bits == 6 ? LatentPrecision::kUint6
-                                      : LatentPrecision::kUint4;
-        codes = &file.Get(name + "/latent_codes", {stored, CodeBytes(d, table.bits)});
+        table.precision = precision;
+        codes = &file.Get(name + "/latent_codes", {stored, row_bytes});
         const auto& offset = file.Get(name + "/latent_offset", {d});
         const auto& step = file.Get(name + "/latent_step", {d});
         field = name + "/latent_*";
@@ -553,13 +584,11 @@ Functaset Functaset::Parse(const std::string& bytes, const std::string& source) 
             step.dtype != TensorFile::DType::kFloat32) {
           throw fail("expected latent_codes uint8, latent_offset and latent_step float32");
         }
-        table.offset.resize(d);
-        table.step.resize(d);
+        table.grids.resize(d);
         for (int k = 0; k < d; ++k) {
-          table.offset[k] = static_cast<float>(offset.values[k]);
-          table.step[k] = static_cast<float>(step.values[k]);
-          if (!std::isfinite(table.offset[k]) || !(table.step[k] >= 0) ||
-              !std::isfinite(table.step[k])) {
+          LatentGrid& g = table.grids[k];
+          g = {static_cast<float>(offset.values[k]), static_cast<float>(step.values[k]), bits[k]};
+          if (!std::isfinite(g.offset) || !(g.step >= 0) || !std::isfinite(g.step)) {
             field = name + "/latent_step[" + std::to_string(k) + "]";
             throw fail("expected a finite offset and a finite step >= 0");
           }
@@ -624,9 +653,11 @@ Functaset Functaset::Parse(const std::string& bytes, const std::string& source) 
             }
           } else {
             const double* codes_row = codes->values.data() + row * codes->shape[1];
+            std::int64_t position = 0;
             for (int k = 0; k < d; ++k) {
-              e.latent[k] =
-                  Dequantise(UnpackCode(codes_row, k, table.bits), table.offset[k], table.step[k]);
+              const LatentGrid& g = table.grids[k];
+              e.latent[k] = Dequantise(UnpackCode(codes_row, position, g.bits), g);
+              position += g.bits;
             }
           }
           ++row;

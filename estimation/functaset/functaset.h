@@ -38,10 +38,21 @@
 //   "<sensor>/latent_offset"  float32 [d]      lo_k = min_i z_ik
 //   "<sensor>/latent_step"    float32 [d]      step_k = (max_i z_ik - lo_k) / (2^b - 1)
 // and z_ik = lo_k + q_ik step_k, q_ik = round((z_ik - lo_k) / step_k) in [0, 2^b - 1]
-// (q = 0 and step 0 for a dimension constant over the entries). Readers tell the layouts
-// apart by the tensors present; the format version stays 1. The stored PSNR is that of
-// the unrounded fit at every precision. A partial file (below) written at b-bit
-// precision by the encoder holds float32 latents, so that resuming re-quantises nothing.
+// (q = 0 and step 0 for a dimension constant over the entries). With allocated codes
+// (kAllocated) the sensor's meta holds "latent_bytes": B instead of "latent_bits", and
+//   "<sensor>/latent_bits"    uint8   [d]      b_k in [0, 16], sum <= 8 B: dimension k's
+//                                               bits (0: the dimension is not stored,
+//                                               every entry reads lo_k)
+//   "<sensor>/latent_codes"   uint8   [M x B]  q_k of b_k bits each, packed LSB-first one
+//                                               after another, zero-padded to B bytes
+//   "<sensor>/latent_offset", "<sensor>/latent_step"   as above, but each dimension's
+//                                               grid is its least-squares grid
+//                                               (latent_codes.h): values beyond its ends
+//                                               read back as the nearest end
+// Readers tell the layouts apart by the tensors present; the format version stays 1.
+// The stored PSNR is that of the unrounded fit at every precision. A partial file
+// (below) written with codes by the encoder holds float32 latents, so that resuming
+// re-quantises nothing.
 // "complete": false marks a partial file written by an interrupted or running encoder
 // (estimation/functaset/latent_encoder.h), which `tactfunc encode --resume` continues.
 //
@@ -64,6 +75,7 @@
 #include <Eigen/Core>
 
 #include "estimation/data/dataset.h"
+#include "estimation/functaset/latent_codes.h"
 #include "models/trunk/functa_model.h"
 #include "models/core/sensor.h"
 
@@ -112,19 +124,32 @@ class Functaset {
   //                       PSNR cost is measured in docs/RESULTS_RECONSTRUCTION.md);
   //   kUint8/6/4          b-bit unsigned codes (b = 8, 6, 4) of a per-sensor, per-dimension
   //                       uniform grid over [min, max] of that dimension over the sensor's
-  //                       entries: absolute error <= step_k / 2, step_k = range_k / (2^b - 1).
+  //                       entries: absolute error <= step_k / 2, step_k = range_k / (2^b - 1);
+  //   kAllocated          latent_bytes() bytes per frame shared among the dimensions:
+  //                       AllocateBits (latent_codes.h) gives each dimension its bits
+  //                       (0-16) and LeastSquaresGrid its grid, both from the sensor's
+  //                       entries: the least squared error the budget buys, not a bound.
   // In memory latents stay float; Save rounds or quantises, Load reads any of them,
   // hands out the rounded / dequantised values and reports which precision it read.
-  enum class LatentPrecision { kFloat32, kFloat16, kUint8, kUint6, kUint4 };
+  enum class LatentPrecision { kFloat32, kFloat16, kUint8, kUint6, kUint4, kAllocated };
   LatentPrecision latent_precision() const { return latent_precision_; }
   void set_latent_precision(LatentPrecision precision) { latent_precision_ = precision; }
-  // Bytes one frame's latent of `sensor` takes on disk: 4 d, 2 d or ceil(d b / 8) (codes
-  // of a frame are padded to whole bytes). Throws like latent_dim().
+  // The bytes per frame of kAllocated codes (0 until set; Serialize of a kAllocated
+  // functaset throws std::invalid_argument while it is below 1 or above 2 d, what 16 bits
+  // per dimension fill, for any sensor's d).
+  int latent_bytes() const { return latent_bytes_; }
+  void set_latent_bytes(int bytes) { latent_bytes_ = bytes; }
+  // Bytes one frame's latent of `sensor` takes on disk: 4 d, 2 d, ceil(d b / 8) (codes
+  // of a frame are padded to whole bytes) or latent_bytes(). Throws like latent_dim().
   double BytesPerFrame(SensorKind sensor) const;
   // Bytes on disk shared by all of the sensor's frames for their latents: the b-bit
-  // codes' offset and step tables (2 x d float32, 0 for float latents) and the shared
+  // codes' offset and step tables (2 x d float32, 0 for float latents; allocated codes
+  // add d bytes of bits per dimension) and the shared
   // rest latent (d float32) if the sensor has one.
   std::uint64_t SharedLatentBytes(SensorKind sensor) const;
+  // Bits per latent dimension of the codes the sensor's latents were read with (Parse of
+  // a code file); empty for float latents and for latents not read from a file.
+  std::vector<int> code_bits(SensorKind sensor) const;
   // Entries whose latents are stored one per frame: those not at rest.
   std::int64_t NumStoredLatents(SensorKind sensor) const;
 
@@ -205,10 +230,11 @@ class Functaset {
   const std::string& source() const { return source_; }
 
  private:
-  // A sensor's b-bit grid: z_k = offset[k] + q_k * step[k] (float32 in the file).
+  // A sensor's grids, one per dimension: z_k = offset + q_k step (float32 in the file),
+  // q_k of grids[k].bits bits.
   struct CodeTable {
-    int bits = 0;
-    Eigen::VectorXf offset, step;
+    LatentPrecision precision = LatentPrecision::kUint8;
+    std::vector<LatentGrid> grids;
   };
   struct SensorBlock {
     int latent_dim = 0;
@@ -222,25 +248,26 @@ class Functaset {
     std::unordered_map<std::string, std::size_t> index;  // id -> entries position
   };
   const SensorBlock& Block(SensorKind sensor) const;
-  // The b-bit grid Serialize writes the block's latents on.
-  static CodeTable Codes(const SensorBlock& block, int bits);
+  // The grids Serialize writes the block's latents on at the functaset's precision.
+  CodeTable Codes(const SensorBlock& block) const;
 
   std::uint32_t model_checksum_ = 0;
   std::string dataset_;
   bool complete_ = true;
   LatentPrecision latent_precision_ = LatentPrecision::kFloat32;
+  int latent_bytes_ = 0;
   std::map<SensorKind, SensorBlock> blocks_;
   std::map<std::string, int> tool_symmetries_;
   std::string source_;
 };
 
-// "float32", "float16", "uint8", "uint6", "uint4".
+// "float32", "float16", "uint8", "uint6", "uint4", "allocated".
 const char* ToString(Functaset::LatentPrecision precision);
 // Parses ToString's names; false for anything else.
 bool LatentPrecisionFromString(const std::string& name, Functaset::LatentPrecision* precision);
-// Bits per stored latent value: 32, 16, 8, 6 or 4.
+// Bits per stored latent value: 32, 16, 8, 6 or 4; 0 for kAllocated (per dimension).
 int LatentBits(Functaset::LatentPrecision precision);
-// True for the b-bit code precisions (kUint8, kUint6, kUint4).
+// True for the code precisions (kUint8, kUint6, kUint4, kAllocated).
 bool IsQuantised(Functaset::LatentPrecision precision);
 
 }  // namespace tactfunc

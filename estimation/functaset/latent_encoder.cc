@@ -64,6 +64,8 @@ bool LatentEncoder::Options::IsValid(std::string* error) const {
     message << "checkpoint_every must be >= 0, found " << checkpoint_every;
   } else if (resume && checkpoint_path.empty()) {
     message << "resume needs a checkpoint_path, found \"\"";
+  } else if (latent_precision == Functaset::LatentPrecision::kAllocated && latent_bytes < 1) {
+    message << "allocated latents need latent_bytes >= 1, found " << latent_bytes;
   } else if (FitStrategy parsed; !strategy.empty() && !FitStrategy::Parse(strategy, &parsed, &why)) {
     message << "strategy: " << why;
   } else if (!strategy.empty() && parsed.knn &&
@@ -529,6 +531,7 @@ Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
     out.set_latent_precision(!complete && IsQuantised(options_.latent_precision)
                                  ? Functaset::LatentPrecision::kFloat32
                                  : options_.latent_precision);
+    out.set_latent_bytes(options_.latent_bytes);
     for (SensorKind sensor : sensors) {
       out.AddSensor(sensor, TrunkLatentDim(model_.Trunk(sensor)));
       out.set_fit_strategy(sensor, State(sensor).strategy.ToString());

@@ -119,6 +119,8 @@ class LatentEncoder {
     // (partial files) of b-bit runs hold float32 latents: the codes' grid spans all
     // of a sensor's entries, so only the complete file is quantised.
     Functaset::LatentPrecision latent_precision = Functaset::LatentPrecision::kFloat32;
+    // Bytes per frame of kAllocated latents (Functaset::set_latent_bytes); unused otherwise.
+    int latent_bytes = 0;
     // The fit of every frame, as LatentFitter names it: "" (default) = each trunk's own
     // meta_sgd:K, what it was meta-trained for; "meta_sgd:K" (K >= 0) or "ceres:N"
     // (N >= 1). The k-NN strategies are not offered: they need a second functaset to

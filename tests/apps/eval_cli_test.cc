@@ -197,6 +197,59 @@ TEST_F(EvalCliTest, WritesTheTableJsonAndTheRateDistortionPicture) {
   EXPECT_EQ(png.substr(1, 3), "PNG");
 }
 
+// Allocated codes: encode spends exactly the bytes asked for, info says how they were
+// shared, and eval holds PCA codes to the same bytes through the same allocation, with
+// the component count (d, d / 2, ...) that serves PCA best.
+TEST_F(EvalCliTest, AllocatedCodesAreComparedWithPcaCodesInTheSameBytes) {
+  const Result encode = Run("encode --model " + Root("m.tfm") + " --data " + Root("d") +
+                            " --out " + Root("a6.tfs") + " --threads 1 --latent-bytes 6");
+  ASSERT_EQ(encode.exit_code, 0) << encode.err;
+  const Result info = Run("info " + Root("a6.tfs") + " --json");
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  EXPECT_THAT(info.out, HasSubstr("latents allocated"));
+  EXPECT_THAT(info.out, HasSubstr("6 B each on disk ("));
+  const nlohmann::json f = info.LastJson()["functaset"];
+  EXPECT_EQ(f["latent_precision"], "allocated");
+  EXPECT_EQ(f["latent_bytes"], 6);
+  for (const auto& [sensor, d] : {std::pair<std::string, int>{"bubble", 8}, {"gelslim", 6}}) {
+    const nlohmann::json& bits = f["sensors"][sensor]["latent_bits"];
+    ASSERT_EQ(bits.size(), static_cast<std::size_t>(d)) << sensor;
+    int total = 0;
+    for (const nlohmann::json& b : bits) total += b.get<int>();
+    EXPECT_LE(total, 48) << sensor;
+    EXPECT_GT(total, 40) << sensor;  // the bytes are spent, not left empty
+  }
+  const Result r = Run("eval --data " + Root("d") + " --model " + Root("m.tfm") +
+                       " --functaset " + Root("a6.tfs") + " --out " + Root("table_a6") +
+                       " --threads 1 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json j = r.LastJson();
+  for (const nlohmann::json& row : j["rows"]) {
+    if (row["approach"] == "TactFunc") EXPECT_EQ(row["bytes_per_frame"], 6) << row.dump();
+  }
+  for (const auto& [sensor, d] : {std::pair<std::string, int>{"bubble", 8}, {"gelslim", 6}}) {
+    for (const char* key :
+         {"psnr_3db_above_pca_same_bits", "psnr_3db_above_pca_same_bits_clean"}) {
+      const nlohmann::json& t = j["targets"][sensor][key];
+      ASSERT_TRUE(t.is_object()) << sensor << " " << key;
+      EXPECT_EQ(t["bytes_per_frame"], 6) << t.dump();
+      // d or d / 2 components (d / 4 could not fill 6 bytes at 16 bits each).
+      const int n = t["pca_components"].get<int>();
+      EXPECT_TRUE(n == d || n == d / 2) << t.dump();
+      EXPECT_TRUE(t["pca_db"].is_number()) << t.dump();
+    }
+  }
+  // More bytes than 16 bits per value fill, or both storage flags: refused, nothing written.
+  for (const std::string& flags : {std::string("--latent-bytes 13 --sensors gelslim"),
+                                   std::string("--latent-bytes 6 --latent-precision uint8")}) {
+    const Result bad = Run("encode --model " + Root("m.tfm") + " --data " + Root("d") +
+                           " --out " + Root("bad.tfs") + " --threads 1 " + flags);
+    EXPECT_EQ(bad.exit_code, 2) << flags << ": " << bad.err;
+    EXPECT_THAT(bad.err, HasSubstr("--latent-bytes")) << flags;
+    EXPECT_FALSE(fs::exists(Root("bad.tfs"))) << flags;
+  }
+}
+
 TEST_F(EvalCliTest, WithoutAPoseModelTheTableHoldsTheReconstructionColumnsAlone) {
   const Result r = Run("eval --data " + Root("d") + " --model " + Root("m.tfm") +
                        " --functaset " + Root("f.tfs") + " --out " + Root("table_nopose") +

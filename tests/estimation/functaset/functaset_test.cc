@@ -7,6 +7,7 @@
 #include <functional>
 #include <initializer_list>
 #include <limits>
+#include <numeric>
 #include <string>
 
 #include "gmock/gmock.h"
@@ -97,6 +98,20 @@ std::string WithMeta(const Functaset& f, const std::function<void(nlohmann::json
   TensorFile edited("functaset");
   edited.set_meta_json(meta.dump());
   for (const TensorFile::Tensor& t : file.tensors()) edited.Add(t.name, t.dtype, t.shape, t.values);
+  return edited.Serialize();
+}
+
+// The file of `f` with tensor `name`'s values edited.
+std::string WithTensor(const Functaset& f, const std::string& name,
+                       const std::function<void(std::vector<double>&)>& edit) {
+  const TensorFile file = TensorFile::Parse(f.Serialize(), "original", "functaset");
+  TensorFile edited("functaset");
+  edited.set_meta_json(file.meta_json());
+  for (const TensorFile::Tensor& t : file.tensors()) {
+    std::vector<double> values = t.values;
+    if (t.name == name) edit(values);
+    edited.Add(t.name, t.dtype, t.shape, std::move(values));
+  }
   return edited.Serialize();
 }
 
@@ -408,6 +423,73 @@ TEST(Functaset, FloatLatentFilesStillParse) {
   }
 }
 
+// Sum over entries and dimensions of the squared difference of two functasets' latents.
+double SquaredDifference(const Functaset& a, const Functaset& b) {
+  return (a.Latents(SensorKind::kSoftBubble) - b.Latents(SensorKind::kSoftBubble))
+      .cast<double>()
+      .squaredNorm();
+}
+
+TEST(Functaset, AllocatedCodesShareTheBytesAmongTheDimensionsAndReproduceExactly) {
+  Functaset f = MakeCodeFunctaset(Functaset::LatentPrecision::kAllocated);
+  f.set_latent_bytes(4);  // as many bytes as 4-bit codes of the 7 values take
+  EXPECT_EQ(f.BytesPerFrame(SensorKind::kSoftBubble), 4.0);
+  EXPECT_EQ(f.SharedLatentBytes(SensorKind::kSoftBubble), 9u * 7);
+  const TensorFile file = TensorFile::Parse(f.Serialize(), "mem", "functaset");
+  const nlohmann::json meta = nlohmann::json::parse(file.meta_json());
+  EXPECT_EQ(meta["sensors"][0]["latent_bytes"], 4);
+  EXPECT_FALSE(meta["sensors"][0].contains("latent_bits"));
+  const TensorFile::Tensor& bits = file.Get("bubble/latent_bits", {7});
+  EXPECT_EQ(bits.dtype, TensorFile::DType::kUint8);
+  EXPECT_EQ(bits.values[2], 0);  // the constant dimension needs no bit
+  EXPECT_LE(std::accumulate(bits.values.begin(), bits.values.end(), 0.0), 32);
+  EXPECT_EQ(file.Get("bubble/latent_codes", {40, 4}).dtype, TensorFile::DType::kUint8);
+
+  const Functaset loaded = Functaset::Parse(file.Serialize(), "codes.tfs");
+  EXPECT_EQ(loaded.latent_precision(), Functaset::LatentPrecision::kAllocated);
+  EXPECT_EQ(loaded.latent_bytes(), 4);
+  EXPECT_EQ(loaded.code_bits(SensorKind::kSoftBubble),
+            std::vector<int>(bits.values.begin(), bits.values.end()));
+  for (const FunctasetEntry& e : loaded.entries(SensorKind::kSoftBubble)) {
+    EXPECT_EQ(e.latent[2], 0.375f);
+  }
+  // Less squared error than 4-bit codes in the same bytes per frame.
+  const Functaset uint4 = Functaset::Parse(
+      MakeCodeFunctaset(Functaset::LatentPrecision::kUint4).Serialize(), "uint4.tfs");
+  EXPECT_EQ(uint4.BytesPerFrame(SensorKind::kSoftBubble), 4.0);
+  EXPECT_LT(SquaredDifference(f, loaded), SquaredDifference(f, uint4));
+  // A second save writes the same codes and bits.
+  const std::string again = loaded.Serialize();
+  ExpectIdentical(loaded, Functaset::Parse(again, "again.tfs"));
+  EXPECT_EQ(Functaset::Parse(again, "again.tfs").Serialize(), again);
+  // A budget outside 1 .. 2 d bytes (16 bits per value) is refused.
+  for (int bytes : {0, 15}) {
+    f.set_latent_bytes(bytes);
+    EXPECT_THROW(f.Serialize(), std::invalid_argument) << bytes;
+  }
+}
+
+TEST(Functaset, BadAllocatedCodeFieldsAreRejectedNamingThem) {
+  Functaset f = MakeCodeFunctaset(Functaset::LatentPrecision::kAllocated);
+  f.set_latent_bytes(4);
+  ExpectFileError([&] { Functaset::Parse(WithMeta(f, [](nlohmann::json& m) {
+                                           m["sensors"][0]["latent_bytes"] = 15;
+                                         }), "bad.tfs"); },
+                  {"bad.tfs", "sensors[0].latent_bytes", "expected 1..14"});
+  ExpectFileError([&] { Functaset::Parse(WithMeta(f, [](nlohmann::json& m) {
+                                           m["sensors"][0]["latent_bytes"] = 3;
+                                         }), "bad.tfs"); },
+                  {"bad.tfs", "bubble/latent_"});
+  ExpectFileError([&] { Functaset::Parse(WithTensor(f, "bubble/latent_bits", [](auto& v) {
+                                           v[0] = 17;
+                                         }), "bad.tfs"); },
+                  {"bad.tfs", "bubble/latent_bits", "expected bits in [0, 16]"});
+  ExpectFileError([&] { Functaset::Parse(WithTensor(f, "bubble/latent_bits", [](auto& v) {
+                                           for (double& b : v) b = 16;
+                                         }), "bad.tfs"); },
+                  {"bad.tfs", "bubble/latent_bits", "more than latent_bytes = 4"});
+}
+
 TEST(Functaset, BadCodeFieldsAreRejectedNamingThem) {
   const Functaset f = MakeCodeFunctaset(Functaset::LatentPrecision::kUint6);
   ExpectFileError([&] { Functaset::Parse(WithMeta(f, [](nlohmann::json& m) {
@@ -425,10 +507,13 @@ TEST(Functaset, BadCodeFieldsAreRejectedNamingThem) {
 TEST(Functaset, FramesAtRestShareOneStoredLatentAtEveryPrecision) {
   for (Functaset::LatentPrecision precision :
        {Functaset::LatentPrecision::kFloat32, Functaset::LatentPrecision::kFloat16,
-        Functaset::LatentPrecision::kUint8, Functaset::LatentPrecision::kUint4}) {
+        Functaset::LatentPrecision::kUint8, Functaset::LatentPrecision::kUint4,
+        Functaset::LatentPrecision::kAllocated}) {
     SCOPED_TRACE(ToString(precision));
     Functaset all = MakeCodeFunctaset(precision);
     Functaset shared = MakeCodeFunctaset(precision);
+    all.set_latent_bytes(5);
+    shared.set_latent_bytes(5);
     const Eigen::VectorXf rest = Latent(7, 99) * 10.0f;  // outside the others' code range
     shared.set_rest_latent(SensorKind::kSoftBubble, rest);
     FunctasetEntry e;
@@ -503,7 +588,7 @@ TEST(Functaset, DeclaredToolSymmetriesRoundTripAndComeBeforeTheBuiltInOnes) {
 }
 
 TEST(Functaset, LatentPrecisionNamesRoundTrip) {
-  for (const char* name : {"float32", "float16", "uint8", "uint6", "uint4"}) {
+  for (const char* name : {"float32", "float16", "uint8", "uint6", "uint4", "allocated"}) {
     Functaset::LatentPrecision p;
     ASSERT_TRUE(LatentPrecisionFromString(name, &p)) << name;
     EXPECT_STREQ(ToString(p), name);
