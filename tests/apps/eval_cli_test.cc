@@ -225,7 +225,9 @@ TEST_F(EvalCliTest, AllocatedCodesAreComparedWithPcaCodesInTheSameBytes) {
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const nlohmann::json j = r.LastJson();
   for (const nlohmann::json& row : j["rows"]) {
-    if (row["approach"] == "TactFunc") EXPECT_EQ(row["bytes_per_frame"], 6) << row.dump();
+    if (row["approach"] == "TactFunc") {
+      EXPECT_EQ(row["bytes_per_frame"], 6) << row.dump();
+    }
   }
   for (const auto& [sensor, d] : {std::pair<std::string, int>{"bubble", 8}, {"gelslim", 6}}) {
     for (const char* key :
