@@ -744,14 +744,17 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
     // PCA codes stored as the latents are: d components through a functaset of the same
     // precision (Serialize and Parse, so float16 rounding and b-bit grids are the
     // product's own), decoded, scored. Allocated codes fix the bytes, not the number of
-    // values: PCA then keeps d, d / 2, d / 4 or d / 8 components (more components fit
-    // more of the noise), and each target takes the count that scores best on the test
-    // split, the baseline at its best.
+    // values: PCA then keeps d components or any count of the ladder 1, 2, 3, 4, 6, 8,
+    // 12, ... (powers of two and one and a half times them) up to 8 B for B bytes, what
+    // 1-bit codes fit in (more components follow more of the noise, fewer draw less of
+    // the frame; fewer than B / 2 take 2 n bytes, 16 bits each), and each target takes
+    // the count that scores best on the test split: the baseline at its best.
     {
       auto stored_psnrs = [&](int n, std::vector<double>* clean) {
         Functaset stored(0, "");
         stored.set_latent_precision(functaset.latent_precision());
-        stored.set_latent_bytes(functaset.latent_bytes());
+        // At most B bytes: 16-bit codes of fewer than B / 2 values take 2 n.
+        stored.set_latent_bytes(std::min(functaset.latent_bytes(), 2 * n));
         stored.AddSensor(sensor, n);
         const Eigen::MatrixXf codes = full_codes.leftCols(n);
         for (Eigen::Index i = 0; i < codes.rows(); ++i) {
@@ -768,15 +771,19 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
         return pca_psnrs(n, clean, &stored_codes);
       };
       const int most = std::min(d, pca_full.components());
-      std::vector<int> counts = {most};
+      std::set<int> counts = {most};
       if (functaset.latent_precision() == Functaset::LatentPrecision::kAllocated) {
-        for (int n = most / 2; n >= std::max(1, most / 8); n /= 2) {
-          // Counts whose 16-bit codes could not fill the bytes would leave bytes unspent.
-          if (2 * n >= functaset.latent_bytes()) counts.push_back(n);
+        const int bytes = functaset.latent_bytes();
+        for (int p = 1; p <= pca_full.components(); p *= 2) {
+          for (int n : {p, p + p / 2}) {
+            if (n <= 8 * bytes && n <= pca_full.components()) {
+              counts.insert(n);
+            }
+          }
         }
       }
       auto fill = [&](Targets::PsnrAbovePca* target, double tf, double pca_db, int n) {
-        if (n != counts.front() && !(pca_db > target->pca_db)) return;  // keep the best
+        if (n != most && !(pca_db > target->pca_db)) return;  // keep the best
         target->tactfunc_db = tf;
         target->pca_db = pca_db;
         target->margin_db = tf - pca_db;
@@ -785,7 +792,12 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
         target->bytes_per_frame = tf_frame_bytes;
         target->met = std::isfinite(tf) && std::isfinite(pca_db) && tf >= pca_db + 3;
       };
+      // The latent's own count first, so that the others replace it only when better.
+      std::vector<int> order = {most};
       for (int n : counts) {
+        if (n != most) order.push_back(n);
+      }
+      for (int n : order) {
         std::vector<double> clean;
         const std::vector<double> noisy = stored_psnrs(n, &clean);
         fill(&t.psnr_above_pca_same_bits, tf_test, MeanPsnr(Pick(noisy, s.test)), n);

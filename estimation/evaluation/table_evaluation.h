@@ -37,8 +37,9 @@
 //                           precision: float16 rounding or b-bit codes on the same kind
 //                           of per-dimension grid), so both spend the same bits the same
 //                           way: the fair baseline for a functaset with quantised latents
-//                           (allocated codes: the same bytes per frame, PCA keeping d,
-//                           d / 2, d / 4 or d / 8 components, whichever scores best)
+//                           (allocated codes: the same bytes per frame B, PCA keeping d
+//                           components or a count of the ladder 1, 2, 3, 4, 6, 8, 12, ...
+//                           up to 8 B, whichever scores best on the test split)
 //   psnr_above_jpeg         TactFunc above JPEG at matched bytes
 //   pose_beats_pca_codes    (pose sensor) pose MSE from latents below that from PCA codes
 //   pose_not_worse_than_raw (pose sensor) pose MSE from latents <= the best raw-pixel one
