@@ -110,13 +110,26 @@ nlohmann::json RdJson(const std::vector<RdPoint>& points) {
   for (const RdPoint& p : points) {
     out.push_back({{"label", p.label},
                    {"bytes_per_frame", p.bytes_per_frame},
-                   {"psnr_test", NumberOrNull(p.psnr)}});
+                   {"psnr_test", NumberOrNull(p.psnr)},
+                   {"psnr_test_clean", NumberOrNull(p.psnr_clean)}});
   }
   return out;
 }
 
-// The rate-distortion picture of one sensor: PSNR (test) vs bytes per frame (log).
-cv::Mat RateDistortionPlot(SensorKind sensor, const RdCurves& curves, const std::string& subtitle) {
+// True if some point has a PSNR against noise-free frames.
+bool HasCleanPoints(const RdCurves& curves) {
+  for (const auto* series : {&curves.tactfunc, &curves.pca, &curves.pca_same_storage}) {
+    for (const RdPoint& p : *series) {
+      if (std::isfinite(p.psnr_clean)) return true;
+    }
+  }
+  return false;
+}
+
+// The rate-distortion picture of one sensor: PSNR (test) vs bytes per frame (log),
+// against the frames or (clean) against their noise-free copies.
+cv::Mat RateDistortionPlot(SensorKind sensor, const RdCurves& curves, bool clean,
+                           const std::string& subtitle) {
   struct Series {
     const std::vector<RdPoint>* points;
     std::string name;
@@ -124,33 +137,39 @@ cv::Mat RateDistortionPlot(SensorKind sensor, const RdCurves& curves, const std:
   };
   const std::vector<Series> series = {
       {&curves.tactfunc, "TactFunc (latent sizes)", cv::Scalar(40, 140, 255)},
-      {&curves.pca, "PCA (component counts)", cv::Scalar(230, 160, 40)},
+      {&curves.pca, "PCA (float32 components)", cv::Scalar(230, 160, 40)},
+      {&curves.pca_same_storage, "PCA stored as the latents", cv::Scalar(150, 60, 150)},
       {&curves.jpeg, "JPEG (qualities)", cv::Scalar(90, 170, 60)}};
+  auto psnr = [clean](const RdPoint& p) { return clean ? p.psnr_clean : p.psnr; };
   double x_lo = std::numeric_limits<double>::infinity(), x_hi = 0, y_lo = x_lo, y_hi = -x_lo;
   for (const Series& s : series) {
     for (const RdPoint& p : *s.points) {
-      if (!(p.bytes_per_frame > 0) || !std::isfinite(p.psnr)) continue;
+      if (!(p.bytes_per_frame > 0) || !std::isfinite(psnr(p))) continue;
       x_lo = std::min(x_lo, p.bytes_per_frame);
       x_hi = std::max(x_hi, p.bytes_per_frame);
-      y_lo = std::min(y_lo, p.psnr);
-      y_hi = std::max(y_hi, p.psnr);
+      y_lo = std::min(y_lo, psnr(p));
+      y_hi = std::max(y_hi, psnr(p));
     }
   }
   LogXPlot::Layout layout;
   layout.height = 620;
   LogXPlot plot(layout, x_lo, x_hi, y_lo, y_hi);
-  plot.DrawFrame("bytes per frame (log scale)", "mean PSNR, test split, dB",
-                 std::string("Rate-distortion, ") + ToString(sensor), subtitle);
+  plot.DrawFrame("bytes per frame (log scale)",
+                 clean ? "mean PSNR against the noise-free frames, test split, dB"
+                       : "mean PSNR, test split, dB",
+                 std::string("Rate-distortion, ") + ToString(sensor) +
+                     (clean ? ", against the noise-free frames" : ""),
+                 subtitle);
   cv::Mat& canvas = plot.canvas();
   for (const Series& s : series) {
     std::vector<RdPoint> pts;
     for (const RdPoint& p : *s.points) {
-      if (p.bytes_per_frame > 0 && std::isfinite(p.psnr)) pts.push_back(p);
+      if (p.bytes_per_frame > 0 && std::isfinite(psnr(p))) pts.push_back(p);
     }
     std::sort(pts.begin(), pts.end(),
               [](const RdPoint& a, const RdPoint& b) { return a.bytes_per_frame < b.bytes_per_frame; });
     std::vector<cv::Point> line;
-    for (const RdPoint& p : pts) line.push_back({plot.X(p.bytes_per_frame), plot.Y(p.psnr)});
+    for (const RdPoint& p : pts) line.push_back({plot.X(p.bytes_per_frame), plot.Y(psnr(p))});
     if (line.size() > 1) cv::polylines(canvas, line, false, s.colour, 2, cv::LINE_AA);
     for (std::size_t k = 0; k < pts.size(); ++k) {
       cv::circle(canvas, line[k], 5, s.colour, cv::FILLED, cv::LINE_AA);
@@ -158,7 +177,7 @@ cv::Mat RateDistortionPlot(SensorKind sensor, const RdCurves& curves, const std:
     }
   }
   const int lx = plot.area().x + plot.area().width + 22, ly = plot.area().y + 14;
-  cv::rectangle(canvas, {lx - 8, ly - 12}, {layout.width - 8, ly + 20 * 4 + 14},
+  cv::rectangle(canvas, {lx - 8, ly - 12}, {layout.width - 8, ly + 20 * 5 + 14},
                 cv::Scalar(180, 180, 180), 1);
   for (std::size_t k = 0; k < series.size(); ++k) {
     const int y = ly + 20 * static_cast<int>(k);
@@ -166,8 +185,8 @@ cv::Mat RateDistortionPlot(SensorKind sensor, const RdCurves& curves, const std:
     cv::circle(canvas, {lx + 7, y}, 4, series[k].colour, cv::FILLED, cv::LINE_AA);
     PlainText(canvas, series[k].name, {lx + 20, y + 5}, 0.42);
   }
-  PlainText(canvas, "bytes: codes as stored; JPEG", {lx, ly + 20 * 3 + 5}, 0.38);
-  PlainText(canvas, "without its shared tables", {lx, ly + 20 * 3 + 21}, 0.38);
+  PlainText(canvas, "bytes: codes as stored; JPEG", {lx, ly + 20 * 4 + 5}, 0.38);
+  PlainText(canvas, "without its shared tables", {lx, ly + 20 * 4 + 21}, 0.38);
   return canvas;
 }
 
@@ -565,13 +584,29 @@ void RunEval(const EvalFlags& flags) {
   nlohmann::json rd = nlohmann::json::object();
   for (SensorKind sensor : sensors) {
     const RdCurves& c = curves[sensor];
-    panels.push_back(RateDistortionPlot(
-        sensor, c,
+    const std::string subtitle =
         std::string("test split; PSNR of estimation/data/trunk_targets.h at the working resolution; ") +
-            machine.value("cpu", std::string("?"))));
+        machine.value("cpu", std::string("?"));
+    panels.push_back(RateDistortionPlot(sensor, c, false, subtitle));
+    // Where the frames have noise-free copies, the same against them beside it.
+    if (HasCleanPoints(c)) {
+      cv::Mat both;
+      cv::hconcat(panels.back(), RateDistortionPlot(sensor, c, true, subtitle), both);
+      panels.back() = both;
+    }
     rd[ToString(sensor)] = {{"tactfunc", RdJson(c.tactfunc)},
                             {"pca", RdJson(c.pca)},
+                            {"pca_same_storage", RdJson(c.pca_same_storage)},
                             {"jpeg", RdJson(c.jpeg)}};
+  }
+  // Panels of one width (a sensor without noise-free copies has one plot, not two).
+  int width = 0;
+  for (const cv::Mat& panel : panels) width = std::max(width, panel.cols);
+  for (cv::Mat& panel : panels) {
+    if (panel.cols < width) {
+      cv::copyMakeBorder(panel, panel, 0, 0, 0, width - panel.cols, cv::BORDER_CONSTANT,
+                         cv::Scalar(255, 255, 255));
+    }
   }
   cv::Mat picture;
   cv::vconcat(panels, picture);

@@ -164,9 +164,14 @@ class TableEvaluation {
     double bytes_per_frame = 0;
     double psnr = std::numeric_limits<double>::quiet_NaN();
     std::string label;  // "d=64", "n=32", "q=20"
+    // Against the noise-free frames; NaN where the test frames have none (and for JPEG).
+    double psnr_clean = std::numeric_limits<double>::quiet_NaN();
   };
+  // pca: float32 components; pca_same_storage: PCA codes stored as each functaset (the
+  // main one, then each extra) stores its latents, at the component count that scores
+  // best (against the noise-free frames where there are some), at that functaset's bytes.
   struct RdCurves {
-    std::vector<RdPoint> tactfunc, pca, jpeg;
+    std::vector<RdPoint> tactfunc, pca, pca_same_storage, jpeg;
   };
 
   // The targets of one sensor (header comment), with the figures they compare.

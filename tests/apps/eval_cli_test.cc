@@ -8,6 +8,8 @@
 #include <set>
 #include <string>
 
+#include <opencv2/imgcodecs.hpp>
+
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "nlohmann/json.hpp"
@@ -219,11 +221,39 @@ TEST_F(EvalCliTest, AllocatedCodesAreComparedWithPcaCodesInTheSameBytes) {
     EXPECT_LE(total, 48) << sensor;
     EXPECT_GT(total, 40) << sensor;  // the bytes are spent, not left empty
   }
+  const Result encode3 = Run("encode --model " + Root("m.tfm") + " --data " + Root("d") +
+                             " --out " + Root("a3.tfs") + " --threads 1 --latent-bytes 3");
+  ASSERT_EQ(encode3.exit_code, 0) << encode3.err;
   const Result r = Run("eval --data " + Root("d") + " --model " + Root("m.tfm") +
                        " --functaset " + Root("a6.tfs") + " --out " + Root("table_a6") +
-                       " --threads 1 --json");
+                       " --extra-functaset " + Root("a3.tfs") + " --extra-model " +
+                       Root("m.tfm") + " --threads 1 --json");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const nlohmann::json j = r.LastJson();
+  // The picture's points: PCA stored as each functaset stores its latents, at its bytes,
+  // with PSNRs against the frames and (the fixture has them) the noise-free copies.
+  for (const char* sensor : {"bubble", "gelslim"}) {
+    const nlohmann::json& stored = j["rate_distortion"][sensor]["pca_same_storage"];
+    ASSERT_EQ(stored.size(), 2u) << stored.dump();
+    EXPECT_EQ(stored[0]["bytes_per_frame"], 6);
+    EXPECT_EQ(stored[1]["bytes_per_frame"], 3);
+    for (const nlohmann::json& p : stored) {
+      EXPECT_TRUE(p["psnr_test"].is_number()) << p.dump();
+      EXPECT_TRUE(p["psnr_test_clean"].is_number()) << p.dump();
+    }
+    // The main point is the clean target's PCA figure.
+    EXPECT_DOUBLE_EQ(stored[0]["psnr_test_clean"].get<double>(),
+                     j["targets"][sensor]["psnr_3db_above_pca_same_bits_clean"]["pca_db"]
+                         .get<double>());
+    for (const nlohmann::json& p : j["rate_distortion"][sensor]["tactfunc"]) {
+      EXPECT_TRUE(p["psnr_test_clean"].is_number()) << p.dump();
+    }
+  }
+  // Two panels per sensor side by side, against the frames and against the noise-free
+  // copies: twice the 1400-pixel width of a plot (LogXPlot's canvas, apps/pictures.h).
+  const cv::Mat picture = cv::imread(Root("table_a6/rate_distortion.png"));
+  ASSERT_FALSE(picture.empty());
+  EXPECT_EQ(picture.cols, 2 * 1400);
   for (const nlohmann::json& row : j["rows"]) {
     if (row["approach"] == "TactFunc") {
       EXPECT_EQ(row["bytes_per_frame"], 6) << row.dump();

@@ -1,0 +1,71 @@
+#!/usr/bin/env bash
+# The Soft Bubble readout trunk of docs/REPRESENTATION.md, "Sharing the bytes among the
+# latent's values": trained on whole frames against their noise-free copies, every fit
+# its projection shrunk by Wiener gains (--outer-clean --inner-steps 0), d = 256, then
+# encoded in allocated codes of B bytes per frame (`encode --latent-bytes B`) on fresh
+# sets no training used and scored by `eval` against PCA codes in the same bytes through
+# the same allocation (the component count that serves PCA best), noise-free frames.
+#
+#   bash scripts/representation_allocated_codes.sh [OUT_DIR] [FRAMES_PER_TOOL] [BYTES...]
+#
+# Defaults: /tmp/tactfunc_allocated, 1500 training contacts per tool (16,200 train frames;
+# 150 gives the 1,620 of a default dataset's split), B = 128 256. Training data: synth
+# seed 5151; fresh sets: seeds 4242, 777 and 2024, 150 contacts per tool each. Training
+# takes about 2 minutes on one core at 1500 contacts per tool (the basis from 5,000 of the
+# copies), 45 s at 150. Every figure printed comes from the eval table.json named on its
+# line. Last, the trade in a picture: the first fresh set at 32, 64, 128 and 256 B per
+# frame, against PCA codes in the same bytes (OUT/eval_rate_distortion/rate_distortion.png).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+out=${1:-/tmp/tactfunc_allocated}
+per_tool=${2:-1500}
+shift $(( $# < 2 ? $# : 2 ))
+bytes=("$@")
+[ ${#bytes[@]} -gt 0 ] || bytes=(128 256)
+bin=build/bin/tactfunc
+[ -x "$bin" ] || { echo "representation_allocated_codes: build first (bash scripts/build.sh)" >&2; exit 1; }
+mkdir -p "$out"
+synth() {  # synth DIR SEED PER_TOOL
+  [ -f "$1/dataset.json" ] ||
+    "$bin" synth --out "$1" --frames-per-tool "$3" --seed "$2" --clean --sensors bubble >/dev/null
+}
+synth "$out/train$per_tool" 5151 "$per_tool"
+model="$out/readout_d256_t$per_tool.tfm"
+if [ ! -f "$model" ]; then
+  pca_frames=()
+  [ "$per_tool" -le 150 ] || pca_frames=(--readout-pca-frames 5000)
+  "$bin" train --data "$out/train$per_tool" --out "$model" --preset small --readout \
+      "${pca_frames[@]}" --pixels 0 --batch 8 --steps 1000 --latent-dim 256 --seed 1 \
+      --sensors bubble --threads 1 --outer-clean --inner-steps 0 >&2
+fi
+for seed in 4242 777 2024; do
+  synth "$out/fresh$seed" "$seed" 150
+  for b in "${bytes[@]}"; do
+    name="t${per_tool}_s${seed}_b$b"
+    "$bin" encode --model "$model" --data "$out/fresh$seed" --out "$out/$name.tfs" \
+        --latent-bytes "$b" --sensors bubble --threads 1 >&2
+    "$bin" eval --model "$model" --data "$out/fresh$seed" --functaset "$out/$name.tfs" \
+        --out "$out/eval_$name" --threads 1 >/dev/null 2>&1
+    python3 - "$out/eval_$name/table.json" "$seed" "$b" <<'PY'
+import json, sys
+path, seed, b = sys.argv[1:]
+t = json.load(open(path))["targets"]["bubble"]["psnr_3db_above_pca_same_bits_clean"]
+print(f"seed {seed}, {b} B per frame: TactFunc {t['tactfunc_db']:.2f} dB, PCA codes in the same "
+      f"bytes {t['pca_db']:.2f} dB ({t['pca_components']} components), margin "
+      f"{t['margin_db']:+.2f} dB, {'met' if t['met'] else 'NOT met'}  ({path})")
+PY
+  done
+done
+name="t${per_tool}_s4242"
+for b in 32 64; do
+  [ -f "$out/${name}_b$b.tfs" ] ||
+    "$bin" encode --model "$model" --data "$out/fresh4242" --out "$out/${name}_b$b.tfs" \
+        --latent-bytes "$b" --sensors bubble --threads 1 >&2
+done
+extras=()
+for b in 32 64 256; do
+  extras+=(--extra-functaset "$out/${name}_b$b.tfs" --extra-model "$model")
+done
+"$bin" eval --model "$model" --data "$out/fresh4242" --functaset "$out/${name}_b128.tfs" \
+    "${extras[@]}" --out "$out/eval_rate_distortion" --threads 1 >/dev/null 2>&1
+echo "picture: $out/eval_rate_distortion/rate_distortion.png"
