@@ -176,7 +176,12 @@ std::string FunctaModel::Serialize() const {
                             {"output_channels", o.output_channels},
                             {"coordinates", ToString(o.coordinates)}};
     // Written only when present, so a trunk without the branch keeps the bytes it had.
-    if (o.has_readout()) siren["readout"] = {{"rows", o.readout_rows}, {"cols", o.readout_cols}};
+    // The readout basis is stored apart, in float16 ("basis": "float16"; theta then holds
+    // every other parameter): a PCA-like basis of unit-norm columns keeps 11 significant
+    // bits, and a d = 256 trunk's file halves (its basis is 96% of the parameters).
+    if (o.has_readout()) {
+      siren["readout"] = {{"rows", o.readout_rows}, {"cols", o.readout_cols}, {"basis", "float16"}};
+    }
     if (o.has_spatial()) {
       siren["spatial"] = {{"rows", o.spatial_rows},
                           {"cols", o.spatial_cols},
@@ -228,8 +233,20 @@ std::string FunctaModel::Serialize() const {
                  {w.latents.rows(), w.latents.cols()}, RowMajorValues(w.latents));
       }
     }
-    file.Add(name + "/theta", TensorFile::DType::kFloat32, {t.siren.NumParameters()},
-             ToVector(t.siren.parameters()));
+    if (o.has_readout()) {
+      const ParameterBlock& basis = t.siren.Block(ParameterGroup::kReadoutBasis);
+      const std::vector<double> all = ToVector(t.siren.parameters());
+      std::vector<double> rest(all.begin(), all.begin() + basis.offset);
+      rest.insert(rest.end(), all.begin() + basis.offset + basis.size(), all.end());
+      const auto rest_size = static_cast<std::int64_t>(rest.size());
+      file.Add(name + "/theta", TensorFile::DType::kFloat32, {rest_size}, std::move(rest));
+      file.Add(name + "/readout_basis", TensorFile::DType::kFloat16, {basis.size()},
+               std::vector<double>(all.begin() + basis.offset,
+                                   all.begin() + basis.offset + basis.size()));
+    } else {
+      file.Add(name + "/theta", TensorFile::DType::kFloat32, {t.siren.NumParameters()},
+               ToVector(t.siren.parameters()));
+    }
     file.Add(name + "/alpha", TensorFile::DType::kFloat32, {t.alpha.size()}, ToVector(t.alpha));
     if (t.siren.start_gains().size() != 0) {
       file.Add(name + "/start_gains", TensorFile::DType::kFloat32, {t.siren.start_gains().size()},
@@ -267,6 +284,7 @@ FunctaModel FunctaModel::FromTensorFile(const TensorFile& file, const std::strin
       field = name + ".siren";
       const auto& s = entry.at("siren");
       LatentModulatedSiren::Options options;
+      bool basis_apart = false;  // the readout basis in its own float16 tensor
       options.width = s.at("width").get<int>();
       options.num_hidden_layers = s.at("num_hidden_layers").get<int>();
       options.omega_0 = s.at("omega_0").get<double>();
@@ -280,6 +298,15 @@ FunctaModel FunctaModel::FromTensorFile(const TensorFile& file, const std::strin
         field = name + ".siren.readout";
         options.readout_rows = s.at("readout").at("rows").get<int>();
         options.readout_cols = s.at("readout").at("cols").get<int>();
+        if (s.at("readout").contains("basis")) {  // absent: the basis is in theta, float32
+          field = name + ".siren.readout.basis";
+          const std::string basis = s.at("readout").at("basis").get<std::string>();
+          if (basis != "float16") {
+            throw TensorFileError(source + ": field '" + field + "': expected \"float16\", got \"" +
+                                  basis + "\"");
+          }
+          basis_apart = true;
+        }
         field = name + ".siren";
       }
       if (s.contains("spatial")) {  // absent in files written before spatial latents
@@ -344,9 +371,27 @@ FunctaModel FunctaModel::FromTensorFile(const TensorFile& file, const std::strin
                                 " trunk, got " + SensorKindDescriptionName(trunk.description->kind));
         }
       }
-      const auto& theta = file.Get(name + "/theta", {trunk.siren.NumParameters()});
-      trunk.siren.SetParameters(Eigen::Map<const Eigen::VectorXd>(theta.values.data(),
-                                                                  theta.values.size()));
+      if (basis_apart) {
+        // theta without the basis block, and the basis from its own tensor.
+        const ParameterBlock& block = trunk.siren.Block(ParameterGroup::kReadoutBasis);
+        const auto& rest = file.Get(name + "/theta", {trunk.siren.NumParameters() - block.size()});
+        const auto& basis = file.Get(name + "/readout_basis", {block.size()});
+        if (basis.dtype != TensorFile::DType::kFloat16) {
+          throw TensorFileError(source + ": tensor '" + name +
+                                "/readout_basis': expected float16, got " + ToString(basis.dtype));
+        }
+        Eigen::VectorXd theta(trunk.siren.NumParameters());
+        const auto offset = static_cast<std::ptrdiff_t>(block.offset);
+        std::copy(rest.values.begin(), rest.values.begin() + offset, theta.data());
+        std::copy(basis.values.begin(), basis.values.end(), theta.data() + offset);
+        std::copy(rest.values.begin() + offset, rest.values.end(),
+                  theta.data() + offset + block.size());
+        trunk.siren.SetParameters(theta);
+      } else {
+        const auto& theta = file.Get(name + "/theta", {trunk.siren.NumParameters()});
+        trunk.siren.SetParameters(Eigen::Map<const Eigen::VectorXd>(theta.values.data(),
+                                                                    theta.values.size()));
+      }
       const auto& alpha = file.Get(name + "/alpha", {options.latent_dim});
       trunk.alpha = Eigen::Map<const Eigen::VectorXd>(alpha.values.data(), alpha.values.size());
       if (file.Has(name + "/start_gains")) {  // absent: no gains (files before them)

@@ -16,8 +16,11 @@
 // the tensors "<sensor>/theta" (float32, the trunk's flat parameters in
 // LatentModulatedSiren's layout) and "<sensor>/alpha" (float32, latent_dim). A trunk with
 // the linear readout branch records its grid as "siren": {..., "readout": {"rows",
-// "cols"}} (its theta then ends with the branch's basis and mean); files without the key
-// load as trunks without the branch. Its start gains, if any
+// "cols", "basis": "float16"}}: its basis is the tensor "<sensor>/readout_basis"
+// (float16, the basis block of theta in theta's order) and "<sensor>/theta" holds every
+// other parameter (the branch's mean last). Files whose "readout" has no "basis" hold the
+// whole flat vector, basis included, in theta as float32; files without "readout" load as
+// trunks without the branch. Its start gains, if any
 // (LatentModulatedSiren::set_start_gains), are the tensor "<sensor>/start_gains"
 // (float32, latent_dim); files without it load without gains. A trunk with spatial
 // latents records its grid as "siren": {..., "spatial": {"rows", "cols", "channels",

@@ -1,11 +1,13 @@
 // Copyright 2026 The tactfunc Authors.
 #include "models/trunk/functa_model.h"
 
+#include <cmath>
 #include <filesystem>
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "models/core/tensor_file.h"
+#include "nlohmann/json.hpp"
 
 namespace tactfunc {
 namespace {
@@ -79,6 +81,72 @@ TEST(FunctaModel, RoundTripsAReadoutTrunksStartGains) {
   const FunctaModel read_without = FunctaModel::Parse(without.Serialize(), "plain.tfm");
   EXPECT_EQ(read_without.Trunk(SensorKind::kSoftBubble).siren.start_gains().size(), 0);
   EXPECT_THAT(without.Serialize(), Not(HasSubstr("start_gains")));
+}
+
+// A readout trunk with a basis of varied values (the initial basis is zero).
+SensorTrunk ReadoutTrunk() {
+  SensorTrunk trunk = SmallTrunk(SensorKind::kSoftBubble, 3);
+  LatentModulatedSiren::Options options = trunk.siren.options();
+  options.readout_rows = trunk.format.rows;
+  options.readout_cols = trunk.format.cols;
+  trunk.siren = LatentModulatedSiren(options, 3);
+  Eigen::VectorXd theta = trunk.siren.parameters();
+  const ParameterBlock& basis = trunk.siren.Block(ParameterGroup::kReadoutBasis);
+  for (int i = 0; i < basis.size(); ++i) theta[basis.offset + i] = 0.1 * std::sin(0.37 * i + 1);
+  trunk.siren.SetParameters(theta);
+  return trunk;
+}
+
+TEST(FunctaModel, AReadoutTrunksBasisIsStoredInFloat16AndOlderFilesStillLoad) {
+  const SensorTrunk trunk = ReadoutTrunk();
+  FunctaModel model;
+  model.SetTrunk(trunk);
+  const TensorFile file = TensorFile::Parse(model.Serialize(), "r.tfm", "model");
+  const ParameterBlock& basis = trunk.siren.Block(ParameterGroup::kReadoutBasis);
+  const int n = trunk.siren.NumParameters();
+  EXPECT_EQ(file.Get("bubble/readout_basis", {basis.size()}).dtype,
+            TensorFile::DType::kFloat16);
+  EXPECT_EQ(file.Get("bubble/theta", {n - basis.size()}).dtype, TensorFile::DType::kFloat32);
+  EXPECT_THAT(file.meta_json(), HasSubstr("\"basis\":\"float16\""));
+  const Eigen::VectorXd& a = trunk.siren.parameters();
+  const FunctaModel read = FunctaModel::Parse(file.Serialize(), "r.tfm");
+  const Eigen::VectorXd& b = read.Trunk(SensorKind::kSoftBubble).siren.parameters();
+  ASSERT_EQ(b.size(), n);
+  for (int i = 0; i < n; ++i) {
+    if (i >= basis.offset && i < basis.offset + basis.size()) {
+      // float16: half a unit in the last of 11 bits, 2^-25 among its subnormals.
+      EXPECT_NEAR(b[i], a[i], std::abs(a[i]) * std::pow(2.0, -11) + std::pow(2.0, -25)) << i;
+    } else {
+      EXPECT_EQ(b[i], static_cast<float>(a[i])) << i;  // float32, in place
+    }
+  }
+  // The layout before: the whole flat vector in theta, no "basis" key.
+  nlohmann::json meta = nlohmann::json::parse(file.meta_json());
+  meta["trunks"][0]["siren"]["readout"].erase("basis");
+  TensorFile older("model");
+  older.set_meta_json(meta.dump());
+  for (const TensorFile::Tensor& t : file.tensors()) {
+    if (t.name == "bubble/theta") {
+      older.Add(t.name, t.dtype, {n}, std::vector<double>(a.data(), a.data() + n));
+    } else if (t.name != "bubble/readout_basis") {
+      older.Add(t.name, t.dtype, t.shape, t.values);
+    }
+  }
+  const FunctaModel read_older = FunctaModel::Parse(older.Serialize(), "old.tfm");
+  const Eigen::VectorXd& c = read_older.Trunk(SensorKind::kSoftBubble).siren.parameters();
+  for (int i = 0; i < n; ++i) EXPECT_EQ(c[i], static_cast<float>(a[i])) << i;
+  // Another storage is refused, naming the field.
+  meta["trunks"][0]["siren"]["readout"]["basis"] = "int8";
+  TensorFile other("model");
+  other.set_meta_json(meta.dump());
+  for (const TensorFile::Tensor& t : file.tensors()) other.Add(t.name, t.dtype, t.shape, t.values);
+  try {
+    FunctaModel::Parse(other.Serialize(), "int8.tfm");
+    ADD_FAILURE() << "expected TensorFileError";
+  } catch (const TensorFileError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("int8.tfm"));
+    EXPECT_THAT(e.what(), HasSubstr("readout.basis"));
+  }
 }
 
 TEST(FunctaModel, RoundTripsASpatialLatentTrunkAndRecordsItsGrid) {
