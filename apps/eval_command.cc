@@ -155,7 +155,7 @@ cv::Mat RateDistortionPlot(SensorKind sensor, const RdCurves& curves, bool clean
   layout.height = 620;
   LogXPlot plot(layout, x_lo, x_hi, y_lo, y_hi);
   plot.DrawFrame("bytes per frame (log scale)",
-                 clean ? "mean PSNR vs noise-free frames, test, dB"
+                 clean ? "mean PSNR vs noise-free frames, dB"
                        : "mean PSNR, test split, dB",
                  std::string("Rate-distortion, ") + ToString(sensor) +
                      (clean ? ", against the noise-free frames" : ""),

@@ -107,6 +107,10 @@ std::uint64_t TrunkParameterBytes(const SensorTrunk& trunk) {
               trunk.photometric->reference().size();
   }
   std::uint64_t bytes = 4ull * values;
+  if (trunk.siren.has_readout()) {  // the readout basis is stored in float16
+    bytes -= 2ull * static_cast<std::uint64_t>(
+                        trunk.siren.Block(ParameterGroup::kReadoutBasis).size());
+  }
   if (trunk.warm_start != nullptr) {  // float16
     bytes += 2ull * static_cast<std::uint64_t>(trunk.warm_start->descriptors.size() +
                                                trunk.warm_start->latents.size());

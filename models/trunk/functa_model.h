@@ -125,9 +125,9 @@ int TrunkOutputChannels(const SensorTrunk& trunk);
 // frame's own reference, PhotometricTrunk::MakeMarkers) if given, else its own.
 Eigen::MatrixXf TrunkDecode(const SensorTrunk& trunk, const Eigen::VectorXf& latent,
                             const PhotometricTrunk::Markers* markers = nullptr);
-// Bytes of the trunk as stored: its parameters and rates (float32), and with the
-// photometric head the head's parameters and its sensor-resolution reference (float32)
-// and its warm-start table (float16).
+// Bytes of the trunk as stored: its parameters and rates (float32; a readout branch's
+// basis float16), and with the photometric head the head's parameters and its
+// sensor-resolution reference (float32) and its warm-start table (float16).
 std::uint64_t TrunkParameterBytes(const SensorTrunk& trunk);
 
 // The trunk's description, or for a trunk without one the built-in description of its

@@ -108,6 +108,10 @@ TEST(FunctaModel, AReadoutTrunksBasisIsStoredInFloat16AndOlderFilesStillLoad) {
             TensorFile::DType::kFloat16);
   EXPECT_EQ(file.Get("bubble/theta", {n - basis.size()}).dtype, TensorFile::DType::kFloat32);
   EXPECT_THAT(file.meta_json(), HasSubstr("\"basis\":\"float16\""));
+  // The bytes as stored: the basis at 2 bytes a value, the rest at 4.
+  EXPECT_EQ(TrunkParameterBytes(trunk),
+            4u * static_cast<std::uint64_t>(n - basis.size() + trunk.alpha.size()) +
+                2u * static_cast<std::uint64_t>(basis.size()));
   const Eigen::VectorXd& a = trunk.siren.parameters();
   const FunctaModel read = FunctaModel::Parse(file.Serialize(), "r.tfm");
   const Eigen::VectorXd& b = read.Trunk(SensorKind::kSoftBubble).siren.parameters();
