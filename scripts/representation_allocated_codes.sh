@@ -15,6 +15,8 @@
 # copies), 45 s at 150. Every figure printed comes from the eval table.json named on its
 # line. Last, the trade in a picture: the first fresh set at 32, 64, 128 and 256 B per
 # frame, against PCA codes in the same bytes (OUT/eval_rate_distortion/rate_distortion.png).
+# MODEL=M scores the trunk M instead of training one (e.g. the committed
+# models/pretrained/bubble_readout.tfm; FRAMES_PER_TOOL then only names the outputs).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:-/tmp/tactfunc_allocated}
@@ -29,9 +31,12 @@ synth() {  # synth DIR SEED PER_TOOL
   [ -f "$1/dataset.json" ] ||
     "$bin" synth --out "$1" --frames-per-tool "$3" --seed "$2" --clean --sensors bubble >/dev/null
 }
-synth "$out/train$per_tool" 5151 "$per_tool"
-model="$out/readout_d256_t$per_tool.tfm"
+if [ -n "${MODEL:-}" ] && [ ! -f "$MODEL" ]; then
+  echo "representation_allocated_codes: MODEL=$MODEL: no such file" >&2; exit 1
+fi
+model=${MODEL:-$out/readout_d256_t$per_tool.tfm}
 if [ ! -f "$model" ]; then
+  synth "$out/train$per_tool" 5151 "$per_tool"
   pca_frames=()
   [ "$per_tool" -le 150 ] || pca_frames=(--readout-pca-frames 5000)
   "$bin" train --data "$out/train$per_tool" --out "$model" --preset small --readout \

@@ -1,14 +1,14 @@
 // Copyright 2026 The tactfunc Authors.
 //
-// The committed GelSlim trunk (models/pretrained/gelslim.tfm, scripts/
-// train_pretrained_gelslim.sh) as the README demo uses it: fresh GelSlim contacts (a synth
-// seed no training run used) encoded by it and by the direct GelSlim trunk of
-// models/pretrained/default.tfm, each with its default fit, at the same 128 B per frame.
-// The photometric trunk draws the markers and shading ridges the direct one blurs
-// (docs/RESULTS_RECONSTRUCTION.md, "The GelSlim's photometric trunk"); it must stay at
-// least 6.5 dB ahead on these frames (measured 6.96 dB: 33.65 against 26.68; the trunk
-// trained 3000 steps, committed until 2026-11-28, read 33.05, 6.36 ahead) and its
-// reconstructions must be written as recon draws them.
+// The committed trunks on fresh contacts. The GelSlim trunk (models/pretrained/
+// gelslim.tfm, scripts/train_pretrained_gelslim.sh) as the README demo uses it: fresh
+// GelSlim contacts (a synth seed no training run used) encoded by it and by the direct
+// GelSlim trunk of models/pretrained/default.tfm, each with its default fit, at the same
+// 128 B per frame. The photometric trunk draws the markers and shading ridges the direct
+// one blurs (docs/RESULTS_RECONSTRUCTION.md, "The GelSlim's photometric trunk"); it must
+// stay at least 6.5 dB ahead on these frames (measured 6.96 dB: 33.65 against 26.68; the
+// trunk trained 3000 steps, committed until 2026-11-28, read 33.05, 6.36 ahead) and its
+// reconstructions must be written as recon draws them. The Soft Bubble trunks: below.
 #include <filesystem>
 #include <string>
 
@@ -28,15 +28,16 @@ using testing_util::RunTactfunc;
 const std::string kPretrained = std::string(TACTFUNC_SOURCE_DIR) + "/models/pretrained/";
 
 // A fresh folder for one test, holding in d/ two fresh contacts per tool of `sensor` (a
-// synth seed no training run used).
-fs::path FreshContacts(const std::string& sensor) {
+// synth seed no training run used), with their noise-free copies if `clean`.
+fs::path FreshContacts(const std::string& sensor, bool clean = false) {
   const fs::path root = fs::path(::testing::TempDir()) /
                         ("tactfunc_pretrained_" + sensor + "_" + std::to_string(::getpid()));
   fs::remove_all(root);
   fs::create_directories(root);
   const CliResult synth =
       RunTactfunc(root, "synth --out " + (root / "d").string() + " --frames-per-tool 2 --sensors " +
-                            sensor + " --seed 20261128 --threads 1");
+                            sensor + " --seed 20261128 --threads 1" +
+                            (clean ? " --clean" : ""));
   EXPECT_EQ(synth.exit_code, 0) << synth.err;
   return root;
 }
@@ -111,6 +112,45 @@ TEST(PretrainedCliTest, TheCommittedSoftBubbleTrunkBeatsTheSmallOneAtTheSameByte
   const double psnr_small = small["psnr_mean"]["bubble"].get<double>();
   EXPECT_GE(psnr_large, psnr_small + 1.2)
       << "bubble.tfm " << psnr_large << " dB, default.tfm " << psnr_small << " dB";
+  fs::remove_all(root);
+}
+
+// The mean noise-free PSNR of `recon --json` over both splits of the fresh contacts.
+double CleanPsnr(const fs::path& root, const std::string& model, const std::string& functaset) {
+  const CliResult r =
+      RunTactfunc(root, "recon --model " + kPretrained + model + " --functaset " +
+                            (root / functaset).string() + " --data " + (root / "d").string() +
+                            " --out " + (root / (functaset + "_recon")).string() +
+                            " --examples 1 --threads 1 --json");
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  if (r.exit_code != 0) return 0;
+  const nlohmann::json j = r.LastJson();
+  return j["psnr_train_clean"]["bubble"].get<double>();
+}
+
+// The Soft Bubble storage trunk (models/pretrained/bubble_readout.tfm, scripts/
+// train_pretrained_bubble_readout.sh) in 128 allocated bytes per frame against the
+// committed Soft Bubble trunk in its 128 B of 8-bit codes, on fresh contacts: it must
+// draw the noise-free frames at least 6 dB closer (8.4 dB on the test split of a fresh
+// 1,800-frame set, docs/RESULTS_RECONSTRUCTION.md, "The Soft Bubble's storage trunk").
+TEST(PretrainedCliTest, TheStorageTrunkDrawsTheNoiseFreeFramesFarCloserAtTheSameBytes) {
+  const fs::path root = FreshContacts("bubble", /*clean=*/true);
+  ASSERT_TRUE(fs::exists(root / "d" / "dataset.json"));
+  const nlohmann::json storage =
+      EncodeFresh(root, "bubble_readout.tfm", "bubble", "r.tfs", "--latent-bytes 128");
+  const nlohmann::json committed =
+      EncodeFresh(root, "bubble.tfm", "bubble", "b.tfs", "--latent-precision uint8");
+  ASSERT_FALSE(storage.is_null());
+  ASSERT_FALSE(committed.is_null());
+  for (const char* functaset : {"r.tfs", "b.tfs"}) {
+    const CliResult info = RunTactfunc(root, "info " + (root / functaset).string());
+    ASSERT_EQ(info.exit_code, 0) << info.err;
+    EXPECT_THAT(info.out, HasSubstr("128 B each on disk")) << functaset;
+  }
+  const double psnr_storage = CleanPsnr(root, "bubble_readout.tfm", "r.tfs");
+  const double psnr_committed = CleanPsnr(root, "bubble.tfm", "b.tfs");
+  EXPECT_GE(psnr_storage, psnr_committed + 6)
+      << "bubble_readout.tfm " << psnr_storage << " dB, bubble.tfm " << psnr_committed << " dB";
   fs::remove_all(root);
 }
 
