@@ -271,7 +271,7 @@ Functaset::CodeTable Functaset::Codes(const SensorBlock& block) const {
   // The grids the entries were read with, if every latent still lies on them.
   if (block.codes && block.codes->precision == latent_precision_ &&
       (latent_precision_ != LatentPrecision::kAllocated ||
-       PackedBytes(BitsOf(block.codes->grids)) <= latent_bytes_)) {
+       block.codes->bytes == latent_bytes_)) {
     bool on_grid = true;
     for (const FunctasetEntry& e : block.entries) {
       if (e.at_rest) continue;  // the rest latent is stored apart, as float32
@@ -290,6 +290,7 @@ Functaset::CodeTable Functaset::Codes(const SensorBlock& block) const {
   }
   CodeTable table;
   table.precision = latent_precision_;
+  table.bytes = latent_bytes_;
   table.grids.resize(d);
   if (latent_precision_ == LatentPrecision::kAllocated) {
     const std::vector<int> bits = AllocateBits(values, 8 * latent_bytes_);
@@ -575,6 +576,7 @@ Functaset Functaset::Parse(const std::string& bytes, const std::string& source) 
           row_bytes = PackedBytes(bits);
         }
         table.precision = precision;
+        table.bytes = precision == LatentPrecision::kAllocated ? static_cast<int>(row_bytes) : 0;
         codes = &file.Get(name + "/latent_codes", {stored, row_bytes});
         const auto& offset = file.Get(name + "/latent_offset", {d});
         const auto& step = file.Get(name + "/latent_step", {d});

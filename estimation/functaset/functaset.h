@@ -234,6 +234,7 @@ class Functaset {
   // q_k of grids[k].bits bits.
   struct CodeTable {
     LatentPrecision precision = LatentPrecision::kUint8;
+    int bytes = 0;  // kAllocated: the bytes per frame the bits were allocated for
     std::vector<LatentGrid> grids;
   };
   struct SensorBlock {

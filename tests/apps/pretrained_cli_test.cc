@@ -11,6 +11,7 @@
 // reconstructions must be written as recon draws them. The Soft Bubble trunks: below.
 #include <filesystem>
 #include <string>
+#include <utility>
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
@@ -55,6 +56,28 @@ nlohmann::json EncodeFresh(const fs::path& root, const std::string& model,
   return r.exit_code == 0 ? r.LastJson() : nlohmann::json();
 }
 
+// A committed model, the functaset it writes and encode's flags.
+struct Encoding {
+  std::string model, out, flags;
+};
+
+// `encode --json` of the fresh Soft Bubble contacts in root/d by two committed models,
+// each functaset checked by `info` to take 128 B per frame; nulls (and failures) for runs
+// that did not go through.
+std::pair<nlohmann::json, nlohmann::json> EncodeBubbleAt128Bytes(const fs::path& root,
+                                                                 const Encoding& a,
+                                                                 const Encoding& b) {
+  std::pair<nlohmann::json, nlohmann::json> out = {
+      EncodeFresh(root, a.model, "bubble", a.out, a.flags),
+      EncodeFresh(root, b.model, "bubble", b.out, b.flags)};
+  for (const std::string& functaset : {a.out, b.out}) {
+    const CliResult info = RunTactfunc(root, "info " + (root / functaset).string());
+    EXPECT_EQ(info.exit_code, 0) << info.err;
+    EXPECT_THAT(info.out, HasSubstr("128 B each on disk")) << functaset;
+  }
+  return out;
+}
+
 TEST(PretrainedCliTest, TheCommittedGelSlimTrunkDrawsWhatTheDirectTrunkBlurs) {
   const fs::path root = FreshContacts("gelslim");
   const std::string data = (root / "d").string();
@@ -96,18 +119,12 @@ TEST(PretrainedCliTest, TheCommittedSoftBubbleTrunkBeatsTheSmallOneAtTheSameByte
   const fs::path root = FreshContacts("bubble");
   ASSERT_TRUE(fs::exists(root / "d" / "dataset.json"));
 
-  const nlohmann::json large =
-      EncodeFresh(root, "bubble.tfm", "bubble", "b.tfs", "--latent-precision uint8");
-  const nlohmann::json small =
-      EncodeFresh(root, "default.tfm", "bubble", "s.tfs", "--latent-precision float16");
+  const auto [large, small] =
+      EncodeBubbleAt128Bytes(root, {"bubble.tfm", "b.tfs", "--latent-precision uint8"},
+                             {"default.tfm", "s.tfs", "--latent-precision float16"});
   ASSERT_FALSE(large.is_null());
   ASSERT_FALSE(small.is_null());
   EXPECT_EQ(large["frames_encoded"], 24);
-  for (const char* functaset : {"b.tfs", "s.tfs"}) {
-    const CliResult info = RunTactfunc(root, "info " + (root / functaset).string());
-    ASSERT_EQ(info.exit_code, 0) << info.err;
-    EXPECT_THAT(info.out, HasSubstr("128 B each on disk")) << functaset;
-  }
   const double psnr_large = large["psnr_mean"]["bubble"].get<double>();
   const double psnr_small = small["psnr_mean"]["bubble"].get<double>();
   EXPECT_GE(psnr_large, psnr_small + 1.2)
@@ -136,17 +153,11 @@ double CleanPsnr(const fs::path& root, const std::string& model, const std::stri
 TEST(PretrainedCliTest, TheStorageTrunkDrawsTheNoiseFreeFramesFarCloserAtTheSameBytes) {
   const fs::path root = FreshContacts("bubble", /*clean=*/true);
   ASSERT_TRUE(fs::exists(root / "d" / "dataset.json"));
-  const nlohmann::json storage =
-      EncodeFresh(root, "bubble_readout.tfm", "bubble", "r.tfs", "--latent-bytes 128");
-  const nlohmann::json committed =
-      EncodeFresh(root, "bubble.tfm", "bubble", "b.tfs", "--latent-precision uint8");
+  const auto [storage, committed] =
+      EncodeBubbleAt128Bytes(root, {"bubble_readout.tfm", "r.tfs", "--latent-bytes 128"},
+                             {"bubble.tfm", "b.tfs", "--latent-precision uint8"});
   ASSERT_FALSE(storage.is_null());
   ASSERT_FALSE(committed.is_null());
-  for (const char* functaset : {"r.tfs", "b.tfs"}) {
-    const CliResult info = RunTactfunc(root, "info " + (root / functaset).string());
-    ASSERT_EQ(info.exit_code, 0) << info.err;
-    EXPECT_THAT(info.out, HasSubstr("128 B each on disk")) << functaset;
-  }
   const double psnr_storage = CleanPsnr(root, "bubble_readout.tfm", "r.tfs");
   const double psnr_committed = CleanPsnr(root, "bubble.tfm", "b.tfs");
   EXPECT_GE(psnr_storage, psnr_committed + 6)
