@@ -556,7 +556,9 @@ Functaset Functaset::Parse(const std::string& bytes, const std::string& source) 
             throw fail(std::string("expected uint8, got ") + ToString(bits_tensor.dtype));
           }
           for (double b : bits_tensor.values) {
-            if (b > 16) throw fail("expected bits in [0, 16], got " + std::to_string(b));
+            if (b > 16) {
+              throw fail("expected bits in [0, 16], got " + std::to_string(static_cast<int>(b)));
+            }
             bits.push_back(static_cast<int>(b));
           }
           if (PackedBytes(bits) > row_bytes) {
