@@ -18,8 +18,9 @@ mkdir -p "$WORK"
 run() { echo "+ $*"; "$@"; }
 run "$TF" synth --out "$WORK/data" --frames-per-tool 1500 --sensors bubble --seed 1 --clean \
   --overwrite
-run "$TF" train --data "$WORK/data" --out "$WORK/bubble_readout.tfm" --preset small --readout \
-  --readout-pca-frames 5000 --pixels 0 --batch 8 --steps 1000 --latent-dim 256 --outer-clean \
-  --inner-steps 0 --sensors bubble --seed 1 --threads 1 "$@"
+# --preset storage: small's SIREN, --readout --readout-pca-frames 5000 --pixels 0 --batch 8
+# --steps 1000 --latent-dim 256 --outer-clean --inner-steps 0 (docs/TRAINING.md, "Presets").
+run "$TF" train --data "$WORK/data" --out "$WORK/bubble_readout.tfm" --preset storage \
+  --sensors bubble --seed 1 --threads 1 "$@"
 cp "$WORK/bubble_readout.tfm" models/pretrained/bubble_readout.tfm
 echo "wrote models/pretrained/bubble_readout.tfm (data in $WORK)"

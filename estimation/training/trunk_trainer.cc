@@ -341,7 +341,9 @@ bool TrunkTrainer::Options::IsValid(std::string* error) const {
   return false;
 }
 
-std::vector<std::string> TrunkTrainer::PresetNames() { return {"tiny", "small", "default"}; }
+std::vector<std::string> TrunkTrainer::PresetNames() {
+  return {"tiny", "small", "default", "storage"};
+}
 
 TrunkTrainer::Options TrunkTrainer::Preset(const std::string& name, SensorKind sensor) {
   Options options;
@@ -372,6 +374,16 @@ TrunkTrainer::Options TrunkTrainer::Preset(const std::string& name, SensorKind s
   } else if (name == "default") {
     // Options() as constructed, with the GelSlim's shorter latent.
     if (sensor == SensorKind::kGelSlim) options.siren.latent_dim = 32;
+  } else if (name == "storage") {
+    options = Preset("small", sensor);
+    options.siren.latent_dim = 256;
+    options.batch_size = 8;
+    options.pixels_per_frame = 0;
+    options.steps = 1000;
+    options.readout = true;
+    options.readout_pca_frames = 5000;
+    options.meta_sgd.inner_steps = 0;
+    options.outer_loss_on_clean = true;
   } else {
     std::string names;
     for (const std::string& n : PresetNames()) names += (names.empty() ? "" : ", ") + n;

@@ -266,6 +266,13 @@ class TrunkTrainer {
   //            the raw frames. The Bubble's dents gain from a longer latent (a wider
   //            trunk gained nothing); the GelSlim's frames barely do, so its latent is
   //            cut to pay for the Bubble's. About 20 minutes for both on 2 cores.
+  //   storage: small's SIREN with the readout branch, d = 256, trained on whole frames
+  //            (batch 8) for 1000 steps against their noise-free copies, every fit the
+  //            frame's projection shrunk by Wiener gains (readout, readout_pca_frames
+  //            5000, meta_sgd.inner_steps 0, outer_loss_on_clean) -- the Soft Bubble's
+  //            storage trunk (models/pretrained/bubble_readout.tfm): 3 dB above PCA
+  //            codes in the same allocated bytes at 128 and 256 B per frame. Needs
+  //            noise-free copies (simulated data); about 3 minutes at 16,200 frames.
   // Options() as constructed is the default preset for the Bubble. Throws
   // std::invalid_argument listing the names for an unknown one.
   static Options Preset(const std::string& name, SensorKind sensor = SensorKind::kSoftBubble);

@@ -102,6 +102,23 @@ TEST(TrunkTrainerOptions, EveryPresetIsValid) {
   }
 }
 
+TEST(TrunkTrainerOptions, TheStoragePresetIsTheSmallSirenWithTheNoiseFreeReadoutRecipe) {
+  const TrunkTrainer::Options small = TrunkTrainer::Preset("small");
+  const TrunkTrainer::Options o = TrunkTrainer::Preset("storage");
+  EXPECT_EQ(o.siren.width, small.siren.width);
+  EXPECT_EQ(o.siren.num_hidden_layers, small.siren.num_hidden_layers);
+  EXPECT_EQ(o.learning_rate, small.learning_rate);
+  EXPECT_EQ(o.learning_rate_final_fraction, small.learning_rate_final_fraction);
+  EXPECT_EQ(o.siren.latent_dim, 256);
+  EXPECT_EQ(o.batch_size, 8);
+  EXPECT_EQ(o.pixels_per_frame, 0);
+  EXPECT_EQ(o.steps, 1000);
+  EXPECT_TRUE(o.readout);
+  EXPECT_EQ(o.readout_pca_frames, 5000);
+  EXPECT_EQ(o.meta_sgd.inner_steps, 0);
+  EXPECT_TRUE(o.outer_loss_on_clean);
+}
+
 TEST(TrunkTrainerOptions, DefaultPresetIsTheDefaultOptions) {
   const FrameFormat format{70, 88, false, false, 0.01};
   EXPECT_EQ(TrunkTrainer(TrunkTrainer::Preset("default"))
@@ -173,7 +190,7 @@ TEST(TrunkTrainerOptions, UnknownPresetIsRejectedListingTheNames) {
     FAIL() << "expected std::invalid_argument";
   } catch (const std::invalid_argument& e) {
     EXPECT_THAT(e.what(), HasSubstr("huge"));
-    EXPECT_THAT(e.what(), HasSubstr("tiny, small, default"));
+    EXPECT_THAT(e.what(), HasSubstr("tiny, small, default, storage"));
   }
 }
 
