@@ -314,7 +314,7 @@ void RegisterEncode(CLI::App& app, CommandBody* selected) {
                   "Store each frame's latent in exactly N bytes: the N x 8 bits go one at a time "
                   "to the latent dimension whose squared error over the frames drops most, each "
                   "dimension on its least-squares grid (0-16 bits; per sensor d bytes of bits "
-                  "and 2 x d float32; docs/FUNCTASET.md, \"Latent precision\"). Instead of "
+                  "and 2 x d float32; docs/FUNCTASET.md, \"Allocated codes\"). Instead of "
                   "--latent-precision")
       ->check(CLI::Range(1, 1 << 20))
       ->excludes("--latent-precision");

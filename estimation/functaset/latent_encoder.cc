@@ -384,6 +384,15 @@ Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
           std::to_string(info.channels) + "-channel frames give " + std::to_string(channels) +
           (trunk.format.grayscale ? " (grayscale)" : ""));
     }
+    // Allocated codes hold at most 16 bits per value: refused now, not after the frames.
+    const int d = TrunkLatentDim(trunk);
+    if (options_.latent_precision == Functaset::LatentPrecision::kAllocated &&
+        options_.latent_bytes > 2 * d) {
+      throw std::invalid_argument("LatentEncoder: " + std::to_string(options_.latent_bytes) +
+                                  " bytes per frame for " + ToString(sensor) + " latents of " +
+                                  std::to_string(d) + " values, expected at most " +
+                                  std::to_string(2 * d) + " (16 bits per value)");
+    }
   }
 
   // ---- The work list, in output order ------------------------------------------------

@@ -118,6 +118,10 @@ TEST(LatentEncoder, BadOptionsNameTheField) {
   EXPECT_FALSE(options.IsValid(&error));
   EXPECT_THAT(error, HasSubstr("resume"));
   options = LatentEncoder::Options();
+  options.latent_precision = Functaset::LatentPrecision::kAllocated;
+  EXPECT_FALSE(options.IsValid(&error));
+  EXPECT_THAT(error, HasSubstr("latent_bytes"));
+  options = LatentEncoder::Options();
   options.sensors = {SensorKind::kGelSlim, SensorKind::kGelSlim};
   EXPECT_FALSE(options.IsValid(&error));
   EXPECT_THAT(error, HasSubstr("sensors"));
@@ -557,54 +561,76 @@ TEST(LatentEncoder, InterruptedRunWritesAPartialFileThatResumesToTheFullFunctase
   ExpectSameFunctaset(full, resumed);
 }
 
-TEST(LatentEncoder, BitCodeRunsCheckpointFloatLatentsAndResumeToTheUninterruptedFile) {
+TEST(LatentEncoder, CodeRunsCheckpointFloatLatentsAndResumeToTheUninterruptedFile) {
+  for (const Functaset::LatentPrecision precision :
+       {Functaset::LatentPrecision::kUint6, Functaset::LatentPrecision::kAllocated}) {
+    SCOPED_TRACE(ToString(precision));
+    TestDir dir;
+    WriteTinyDataset(dir / "data", kFrames);
+    const Dataset dataset = Dataset::Open(dir / "data");
+    const FunctaModel model = MakeModel();
+    LatentEncoder::Options options;
+    options.latent_precision = precision;
+    options.latent_bytes = 3;
+    options.checkpoint_path = dir / "full.tfs";
+    LatentEncoder(model, options).Encode(dataset, nullptr);
+    EXPECT_EQ(Functaset::Load(dir / "full.tfs").latent_precision(), precision);
+
+    // A run interrupted before its first frame leaves a partial file of float32 latents
+    // (the codes' grid spans all of a sensor's entries, so only a complete file has codes).
+    options.checkpoint_path = dir / "set.tfs";
+    std::atomic<bool> interrupt{true};
+    LatentEncoder::Summary summary;
+    LatentEncoder(model, options).Encode(dataset, &summary, nullptr, &interrupt);
+    EXPECT_EQ(summary.termination, EncodeTermination::kInterrupted);
+    EXPECT_FALSE(Functaset::Load(dir / "set.tfs").complete());
+    EXPECT_EQ(Functaset::Load(dir / "set.tfs").latent_precision(),
+              Functaset::LatentPrecision::kFloat32);
+    // A partial file holding every third frame's float32 latent, as an interrupted run
+    // leaves one (built here so that the test does not depend on thread timing): resuming
+    // it writes the uninterrupted run's bytes.
+    LatentEncoder::Options float_options;
+    float_options.checkpoint_path = dir / "float.tfs";
+    const Functaset full = LatentEncoder(model, float_options).Encode(dataset, nullptr);
+    Functaset partial(full.model_checksum(), full.dataset());
+    partial.set_complete(false);
+    for (SensorKind sensor : full.sensors()) {
+      partial.AddSensor(sensor, full.latent_dim(sensor));
+      partial.set_fit_strategy(sensor, full.fit_strategy(sensor));
+      for (std::size_t i = 0; i < full.entries(sensor).size(); i += 3) {
+        partial.Add(sensor, full.entries(sensor)[i]);
+      }
+    }
+    partial.Save(dir / "set.tfs");
+    interrupt = false;
+    options.resume = true;
+    LatentEncoder(model, options).Encode(dataset, &summary, nullptr, &interrupt);
+    EXPECT_EQ(summary.termination, EncodeTermination::kComplete);
+    EXPECT_EQ(summary.frames_resumed, static_cast<std::int64_t>(partial.size()));
+    auto bytes = [](const std::string& path) {
+      std::ifstream in(path, std::ios::binary);
+      return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+    };
+    EXPECT_EQ(bytes(dir / "set.tfs"), bytes(dir / "full.tfs"));
+  }
+}
+
+TEST(LatentEncoder, AllocatedCodesBeyondSixteenBitsPerValueAreRefusedBeforeEncoding) {
   TestDir dir;
   WriteTinyDataset(dir / "data", kFrames);
   const Dataset dataset = Dataset::Open(dir / "data");
   const FunctaModel model = MakeModel();
   LatentEncoder::Options options;
-  options.latent_precision = Functaset::LatentPrecision::kUint6;
-  options.checkpoint_path = dir / "full.tfs";
-  LatentEncoder(model, options).Encode(dataset, nullptr);
-  EXPECT_EQ(Functaset::Load(dir / "full.tfs").latent_precision(),
-            Functaset::LatentPrecision::kUint6);
-
-  // A run interrupted before its first frame leaves a partial file of float32 latents
-  // (the codes' grid spans all of a sensor's entries, so only a complete file has codes).
+  options.latent_precision = Functaset::LatentPrecision::kAllocated;
+  options.latent_bytes = 1000;
   options.checkpoint_path = dir / "set.tfs";
-  std::atomic<bool> interrupt{true};
-  LatentEncoder::Summary summary;
-  LatentEncoder(model, options).Encode(dataset, &summary, nullptr, &interrupt);
-  EXPECT_EQ(summary.termination, EncodeTermination::kInterrupted);
-  EXPECT_FALSE(Functaset::Load(dir / "set.tfs").complete());
-  EXPECT_EQ(Functaset::Load(dir / "set.tfs").latent_precision(),
-            Functaset::LatentPrecision::kFloat32);
-  // A partial file holding every third frame's float32 latent, as an interrupted run
-  // leaves one (built here so that the test does not depend on thread timing): resuming
-  // it writes the uninterrupted run's bytes.
-  LatentEncoder::Options float_options;
-  float_options.checkpoint_path = dir / "float.tfs";
-  const Functaset full = LatentEncoder(model, float_options).Encode(dataset, nullptr);
-  Functaset partial(full.model_checksum(), full.dataset());
-  partial.set_complete(false);
-  for (SensorKind sensor : full.sensors()) {
-    partial.AddSensor(sensor, full.latent_dim(sensor));
-    partial.set_fit_strategy(sensor, full.fit_strategy(sensor));
-    for (std::size_t i = 0; i < full.entries(sensor).size(); i += 3) {
-      partial.Add(sensor, full.entries(sensor)[i]);
-    }
+  try {
+    LatentEncoder(model, options).Encode(dataset, nullptr);
+    ADD_FAILURE() << "expected std::invalid_argument";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_THAT(e.what(), HasSubstr("16 bits per value"));
   }
-  partial.Save(dir / "set.tfs");
-  interrupt = false;
-  options.resume = true;
-  LatentEncoder(model, options).Encode(dataset, &summary, nullptr, &interrupt);
-  EXPECT_EQ(summary.termination, EncodeTermination::kComplete);
-  EXPECT_EQ(summary.frames_resumed, static_cast<std::int64_t>(partial.size()));
-  auto bytes = [](const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-  };
-  EXPECT_EQ(bytes(dir / "set.tfs"), bytes(dir / "full.tfs"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "set.tfs"));
 }
 
 TEST(LatentEncoder, ResumeRefusesACheckpointOfAnotherModel) {
