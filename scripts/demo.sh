@@ -10,7 +10,10 @@
 # models/pretrained/default.tfm; scripts/train_pretrained_pose.sh, scripts/train_pretrained.sh)
 # and the pose fitted through the committed generator
 # (models/pretrained/pose_generator_bubble.tpg, scripts/train_pretrained_generator.sh)
-# rendering through the Soft Bubble trunk above (--generator-model).
+# rendering through the Soft Bubble trunk above (--generator-model). Step 4 also shows the
+# Soft Bubble's storage trunk (models/pretrained/bubble_readout.tfm,
+# scripts/train_pretrained_bubble_readout.sh) at the same 128 B per frame, its bytes shared
+# among its 256 values (encode --latent-bytes 128).
 # Everything lands in demo/.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -18,6 +21,7 @@ TF=build/bin/tactfunc
 OUT=demo
 BUBBLE_MODEL=models/pretrained/bubble.tfm
 GELSLIM_MODEL=models/pretrained/gelslim.tfm
+STORAGE_MODEL=models/pretrained/bubble_readout.tfm
 POSE_TRUNK=models/pretrained/default.tfm
 mkdir -p "$OUT"
 echo "== 1. synthesize 12 tools x 10 paired contacts (Soft Bubble + GelSlim, known SE(2) poses)"
@@ -35,6 +39,11 @@ echo "== 4. reconstruct from the latents: PSNR, size, pictures"
   --out "$OUT/recon/bubble" --examples 6
 "$TF" recon --model "$GELSLIM_MODEL" --functaset "$OUT/functaset_gelslim.tfs" \
   --data "$OUT/data" --out "$OUT/recon/gelslim" --examples 6
+echo "   the Soft Bubble storage trunk at the same 128 B per frame, its bytes shared among 256 values"
+"$TF" encode --model "$STORAGE_MODEL" --data "$OUT/data" --sensors bubble --latent-bytes 128 \
+  --out "$OUT/functaset_storage.tfs"
+"$TF" recon --model "$STORAGE_MODEL" --functaset "$OUT/functaset_storage.tfs" \
+  --data "$OUT/data" --out "$OUT/recon/bubble_storage" --examples 6
 echo "== 5. one frame in, pose posterior out: sgld samples through the pretrained pose MLP (latent"
 echo "      path), then the pose fitted through the pretrained generator and the trunk (generator path)"
 # A test-split frame of the rod (frames 000000.. are listed tool by tool; see labels.csv).
