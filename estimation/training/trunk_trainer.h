@@ -271,7 +271,8 @@ class TrunkTrainer {
   //            frame's projection shrunk by Wiener gains (readout, readout_pca_frames
   //            5000, meta_sgd.inner_steps 0, outer_loss_on_clean) -- the Soft Bubble's
   //            storage trunk (models/pretrained/bubble_readout.tfm): 3 dB above PCA
-  //            codes in the same allocated bytes at 128 and 256 B per frame. Needs
+  //            codes in the same allocated bytes at 256 B per frame (at 128 B on three
+  //            fresh sets of four, docs/RESULTS_RECONSTRUCTION.md). Needs
   //            noise-free copies (simulated data); about 3 minutes at 16,200 frames.
   // Options() as constructed is the default preset for the Bubble. Throws
   // std::invalid_argument listing the names for an unknown one.
