@@ -123,13 +123,14 @@ TrunkTrainer::Options OptionsFor(const TrainFlags& flags, SensorKind sensor) {
   if (flags.seed_option->count()) options.seed = flags.seed;
   if (flags.checkpoint_every_option->count()) options.checkpoint_every = flags.checkpoint_every;
   if (flags.first_order) options.meta_sgd.first_order = true;
+  // The branch from the flag or the preset (`storage`): the checks below ask the options.
   if (flags.readout) options.readout = true;
   if (flags.readout_rate_option->count()) {
-    if (!flags.readout) throw UsageError("--readout-rate needs --readout");
+    if (!options.readout) throw UsageError("--readout-rate needs --readout");
     options.readout_learning_rate_scale = flags.readout_rate;
   }
   if (flags.readout_pca_frames > 0) {
-    if (!flags.readout) throw UsageError("--readout-pca-frames needs --readout");
+    if (!options.readout) throw UsageError("--readout-pca-frames needs --readout");
     options.readout_pca_frames = flags.readout_pca_frames;
   }
   if (flags.learning_rate_option->count()) options.learning_rate = flags.learning_rate;
@@ -138,7 +139,7 @@ TrunkTrainer::Options OptionsFor(const TrainFlags& flags, SensorKind sensor) {
     options.learning_rate_final_fraction = flags.lr_final_fraction;
   }
   if (flags.inner_steps_option->count()) {
-    if (flags.inner_steps == 0 && !flags.readout) {
+    if (flags.inner_steps == 0 && !options.readout) {
       throw UsageError("--inner-steps 0 leaves every latent at its start, which is z = 0 "
                        "without --readout (with it, the branch's projection of the frame)");
     }

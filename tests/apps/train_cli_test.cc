@@ -163,6 +163,14 @@ TEST_F(TrainCliTest, TheOuterLossOnNoiseFreeCopiesNeedsThemAndIsRecorded) {
                                  " --divergence-drop-db 0");
   ASSERT_EQ(with_branch.exit_code, 0) << with_branch.err;
   EXPECT_EQ(options_of("oc_p.tfm")["readout_pca_frames"].get<int>(), 5);
+  // The storage preset brings its own branch: the readout flags apply to it as they are.
+  const Result storage = Run("train --data " + Root("dc") + " --out " + Root("oc_s.tfm") +
+                             " --preset storage --steps 2 --latent-dim 8 --readout-pca-frames 6" +
+                             " --readout-rate 0.5 --sensors bubble --divergence-drop-db 0");
+  ASSERT_EQ(storage.exit_code, 0) << storage.err;
+  EXPECT_EQ(options_of("oc_s.tfm")["readout_pca_frames"].get<int>(), 6);
+  EXPECT_EQ(options_of("oc_s.tfm")["readout_learning_rate_scale"].get<double>(), 0.5);
+  EXPECT_TRUE(options_of("oc_s.tfm")["outer_loss_on_clean"].get<bool>());
 }
 
 // --products bf16 (where the CPU has AVX512_BF16) trains and encodes with bfloat16
