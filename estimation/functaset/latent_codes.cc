@@ -52,15 +52,22 @@ double GridError(const std::vector<float>& values, const LatentGrid& grid) {
   return sum;
 }
 
-LatentGrid LeastSquaresGrid(std::vector<float> values, int bits) {
-  CheckBits(bits, "LeastSquaresGrid");
+namespace {
+
+// A grid and its squared error over the values it was fitted to.
+struct FittedGrid {
+  LatentGrid grid;
+  double error = 0;
+};
+
+// LeastSquaresGrid of values already sorted ascending (not empty), with its error.
+FittedGrid FitSorted(const std::vector<float>& values, int bits) {
   const std::size_t n = values.size();
-  if (n == 0) return {0, 0, bits};
-  std::sort(values.begin(), values.end());
   if (bits == 0 || values.front() == values.back()) {
     double mean = 0;
     for (float z : values) mean += z;
-    return {static_cast<float>(mean / static_cast<double>(n)), 0, bits};
+    const LatentGrid grid{static_cast<float>(mean / static_cast<double>(n)), 0, bits};
+    return {grid, GridError(values, grid)};
   }
   LatentGrid best = Between(values.front(), values.back(), bits);
   double best_error = GridError(values, best);
@@ -93,7 +100,16 @@ LatentGrid LeastSquaresGrid(std::vector<float> values, int bits) {
     if (!(error < best_error)) break;
     best = grid, best_error = error;
   }
-  return best;
+  return {best, best_error};
+}
+
+}  // namespace
+
+LatentGrid LeastSquaresGrid(std::vector<float> values, int bits) {
+  CheckBits(bits, "LeastSquaresGrid");
+  if (values.empty()) return {0, 0, bits};
+  std::sort(values.begin(), values.end());
+  return FitSorted(values, bits).grid;
 }
 
 std::vector<int> AllocateBits(const std::vector<std::vector<float>>& dims, int budget_bits,
@@ -115,8 +131,9 @@ std::vector<int> AllocateBits(const std::vector<std::vector<float>>& dims, int b
       sample[k][i] = sorted[i * (sorted.size() - 1) / (kMaxValues - 1)];
     }
   }
+  // Each sample is sorted and fitted once per bit count, its error kept from the fit.
   auto error = [&](std::size_t k, int bits) {
-    return GridError(sample[k], LeastSquaresGrid(sample[k], bits));
+    return sample[k].empty() ? 0.0 : FitSorted(sample[k], bits).error;
   };
   std::vector<int> bits(d, 0);
   std::vector<double> now(d), next(d);
