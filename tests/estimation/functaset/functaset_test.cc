@@ -91,28 +91,35 @@ void ExpectFileError(const std::function<void()>& body, std::initializer_list<st
 }
 
 // The functaset's file with its meta edited by `edit`, re-containered (valid CRC).
-std::string WithMeta(const Functaset& f, const std::function<void(nlohmann::json&)>& edit) {
+// The file of `f` rewritten: its meta through `edit_meta`, each tensor's values through
+// `edit_values` (given the tensor's name).
+std::string Rewritten(
+    const Functaset& f, const std::function<void(nlohmann::json&)>& edit_meta,
+    const std::function<void(const std::string&, std::vector<double>&)>& edit_values) {
   const TensorFile file = TensorFile::Parse(f.Serialize(), "original", "functaset");
   nlohmann::json meta = nlohmann::json::parse(file.meta_json());
-  edit(meta);
+  edit_meta(meta);
   TensorFile edited("functaset");
   edited.set_meta_json(meta.dump());
-  for (const TensorFile::Tensor& t : file.tensors()) edited.Add(t.name, t.dtype, t.shape, t.values);
+  for (const TensorFile::Tensor& t : file.tensors()) {
+    std::vector<double> values = t.values;
+    edit_values(t.name, values);
+    edited.Add(t.name, t.dtype, t.shape, std::move(values));
+  }
   return edited.Serialize();
+}
+
+std::string WithMeta(const Functaset& f, const std::function<void(nlohmann::json&)>& edit) {
+  return Rewritten(f, edit, [](const std::string&, std::vector<double>&) {});
 }
 
 // The file of `f` with tensor `name`'s values edited.
 std::string WithTensor(const Functaset& f, const std::string& name,
                        const std::function<void(std::vector<double>&)>& edit) {
-  const TensorFile file = TensorFile::Parse(f.Serialize(), "original", "functaset");
-  TensorFile edited("functaset");
-  edited.set_meta_json(file.meta_json());
-  for (const TensorFile::Tensor& t : file.tensors()) {
-    std::vector<double> values = t.values;
-    if (t.name == name) edit(values);
-    edited.Add(t.name, t.dtype, t.shape, std::move(values));
-  }
-  return edited.Serialize();
+  return Rewritten(f, [](nlohmann::json&) {},
+                   [&](const std::string& tensor, std::vector<double>& values) {
+                     if (tensor == name) edit(values);
+                   });
 }
 
 TEST(Functaset, FileRoundTripIsExact) {
