@@ -3,8 +3,9 @@
 // tactfunc export: a dataset's trunk targets under a model -- the frames exactly as the
 // model's trunks fit them (working resolution, grayscale, normalisation: the model's
 // FrameFormat, LoadTrunkTargets) -- as NumPy .npy files, with their validity weights,
-// optionally the noise-free frames, each sensor's reference in the same units, and an
-// export.json describing every array and frame (docs/CLI.md, "export").
+// optionally the noise-free frames and a functaset's reconstructions of them, each
+// sensor's reference in the same units, and an export.json describing every array and
+// frame (docs/CLI.md, "export").
 //
 // Every frame is loaded, checked and converted before anything is written; the arrays
 // are then written atomically one by one and export.json last, so a folder whose
@@ -28,8 +29,11 @@
 #include "apps/progress_bar.h"
 #include "estimation/data/dataset.h"
 #include "estimation/data/npy_writer.h"
+#include "estimation/data/photometric_markers.h"
 #include "estimation/data/preprocess.h"
 #include "estimation/data/trunk_targets.h"
+#include "estimation/evaluation/reconstruction.h"
+#include "estimation/functaset/functaset.h"
 #include "models/core/atomic_file.h"
 #include "models/trunk/functa_model.h"
 
@@ -41,6 +45,7 @@ namespace fs = std::filesystem;
 struct ExportFlags {
   std::string data;
   std::string model;
+  std::string functaset;  // "": no reconstructions
   std::string out;
   std::string sensors;
   std::string split = "all";
@@ -60,11 +65,12 @@ struct SensorExport {
   FrameFormat format;
   std::vector<std::size_t> indices;  // into Dataset::frames(), in file order
   int rows = 0, cols = 0, channels = 0;
-  std::vector<float> values, weights, clean;
+  std::vector<float> values, weights, clean, recon;
   nlohmann::json frames = nlohmann::json::array();
   std::optional<PreprocessedFrame> reference;
   nlohmann::json reference_json;
-  std::string values_file, weights_file, clean_file, reference_file;  // "" = not written
+  std::string values_file, weights_file, clean_file, recon_file,
+      reference_file;  // "" = not written
 };
 
 std::string JoinNames(const std::vector<std::string>& names) {
@@ -191,20 +197,51 @@ void MakeReference(const Dataset& dataset, SensorExport* e) {
   e->reference = reference;
 }
 
+// Copies a reconstruction (pixel j = row * cols + col, one column per channel) into frame
+// `n` of the N x rows x cols x C array.
+void StoreReconstruction(const Eigen::MatrixXf& recon, std::size_t n, SensorExport* e) {
+  const std::size_t pixels = static_cast<std::size_t>(e->rows) * e->cols;
+  float* v = e->recon.data() + n * pixels * e->channels;
+  for (std::size_t j = 0; j < pixels; ++j) {
+    for (int c = 0; c < e->channels; ++c) v[j * e->channels + c] = recon(j, c);
+  }
+}
+
 // Loads every selected frame (and its noise-free copy with --clean) as the model's trunk
-// targets, one frame decoded at a time.
-void LoadSensor(const Dataset& dataset, bool clean, ProgressBar* bar, SensorExport* e) {
+// targets, one frame decoded at a time; with a functaset, also each frame's
+// reconstruction from its stored latent (as `recon` draws it).
+void LoadSensor(const Dataset& dataset, bool clean, const SensorTrunk& trunk,
+                const Functaset* functaset, ProgressBar* bar, SensorExport* e) {
   const std::size_t n = e->indices.size();
   const std::size_t pixels = static_cast<std::size_t>(e->rows) * e->cols;
   e->values.assign(n * pixels * e->channels, 0.0f);
   e->weights.assign(n * pixels, 0.0f);
   if (clean) e->clean.assign(n * pixels * e->channels, 0.0f);
+  if (functaset != nullptr) e->recon.assign(n * pixels * e->channels, 0.0f);
+  // A photometric trunk draws each frame against its own reference (its clip's).
+  std::optional<DatasetMarkers> markers;
+  if (functaset != nullptr && trunk.photometric != nullptr) markers.emplace(dataset, trunk);
   for (std::size_t k = 0; k < n; ++k) {
     const std::size_t index = e->indices[k];
     const FrameRecord& record = dataset.frames()[index];
     const TrunkTargets targets = LoadTrunkTargets(dataset, index, e->format, /*clean=*/false);
     CheckShape(targets, *e, dataset, index);
     StoreTargets(targets, k, *e, &e->values, &e->weights);
+    if (functaset != nullptr) {
+      // Every frame's entry was checked to exist before anything was loaded.
+      const Eigen::VectorXf& latent =
+          functaset->entries(e->sensor)[*functaset->Find(e->sensor, record.id)].latent;
+      const Eigen::MatrixXf recon =
+          Reconstruct(trunk, latent, markers ? markers->Of(index) : nullptr);
+      if (recon.rows() != static_cast<Eigen::Index>(pixels) || recon.cols() != e->channels) {
+        throw std::logic_error("export: the " + std::string(ToString(e->sensor)) +
+                               " trunk drew " + std::to_string(recon.rows()) + "x" +
+                               std::to_string(recon.cols()) + " values for frame '" +
+                               record.id + "', the targets have " + std::to_string(pixels) +
+                               "x" + std::to_string(e->channels));
+      }
+      StoreReconstruction(recon, k, e);
+    }
     nlohmann::json frame = {{"index", index},
                             {"id", record.id},
                             {"split", ToString(record.split)},
@@ -231,6 +268,8 @@ nlohmann::json InputsJson(const ExportFlags& flags, const FunctaModel& model) {
   nlohmann::json j = {{"data", flags.data},
                       {"model", flags.model},
                       {"model_checksum", model.checksum()},
+                      {"functaset", flags.functaset.empty() ? nlohmann::json(nullptr)
+                                                            : nlohmann::json(flags.functaset)},
                       {"out", flags.out},
                       {"sensors", flags.sensors.empty() ? nlohmann::json(nullptr)
                                                         : nlohmann::json(flags.sensors)},
@@ -253,6 +292,8 @@ nlohmann::json SensorJson(const SensorExport& e) {
                           {"weights", e.weights_file},
                           {"clean", e.clean_file.empty() ? nlohmann::json(nullptr)
                                                          : nlohmann::json(e.clean_file)},
+                          {"recon", e.recon_file.empty() ? nlohmann::json(nullptr)
+                                                         : nlohmann::json(e.recon_file)},
                           {"reference", e.reference_file.empty()
                                             ? nlohmann::json(nullptr)
                                             : nlohmann::json(e.reference_file)}};
@@ -286,12 +327,21 @@ void RunExport(const ExportFlags& flags) {
   }
   std::vector<NamedPath> inputs = DatasetPathInputs("--data", flags.data, flags.dataset);
   inputs.push_back({"--model", flags.model});
+  if (!flags.functaset.empty()) inputs.push_back({"--functaset", flags.functaset});
   RefuseOutputsThatAreInputs({{"--out", flags.out}}, inputs);
   std::error_code ec;
   if (fs::exists(flags.out, ec) && !fs::is_directory(flags.out, ec)) {
     throw UsageError("--out '" + flags.out + "': expected a folder (new or existing), got a file");
   }
+  // The functaset first: its products' precision is set before the model is read, so
+  // that the reconstructions are recon's and encode's own.
+  std::optional<Functaset> functaset;
+  if (!flags.functaset.empty()) {
+    functaset.emplace(Functaset::Load(flags.functaset));
+    ApplyProductPrecision(ProductPrecisionFor("", *functaset, flags.functaset, "export"));
+  }
   const FunctaModel model = FunctaModel::Load(flags.model);
+  if (functaset) functaset->CheckModel(model, flags.model, flags.functaset);
   const Dataset dataset = OpenDataset(flags.data, flags.dataset);
   const std::vector<NamedPath> dataset_files = DatasetFileInputs("--data", dataset);
   RefuseOutputsThatAreInputs({{"--out", flags.out}}, dataset_files);
@@ -324,6 +374,16 @@ void RunExport(const ExportFlags& flags) {
         }
       }
     }
+    if (functaset) {
+      for (std::size_t index : e.indices) {
+        if (!functaset->Find(sensor, dataset.frames()[index].id)) {
+          throw UsageError("--functaset '" + flags.functaset + "' has no " + name +
+                           " latent for frame '" + dataset.frames()[index].id +
+                           "' of the dataset '" + flags.data +
+                           "' (encode it, or choose another --split or --sensors)");
+        }
+      }
+    }
     CheckModelMatchesData(model, flags.model, dataset, flags.data, sensor, "export",
                           "--allow-other-frames", flags.allow_other_frames);
     WarnIfStretched(dataset, flags.data, sensor, e.format.rows, e.format.cols, "export");
@@ -334,7 +394,9 @@ void RunExport(const ExportFlags& flags) {
     e.values_file = name + "_" + flags.split + ".npy";
     e.weights_file = name + "_" + flags.split + "_weights.npy";
     if (flags.clean) e.clean_file = name + "_" + flags.split + "_clean.npy";
-    for (const std::string* file : {&e.values_file, &e.weights_file, &e.clean_file}) {
+    if (functaset) e.recon_file = name + "_" + flags.split + "_recon.npy";
+    for (const std::string* file :
+         {&e.values_file, &e.weights_file, &e.clean_file, &e.recon_file}) {
       if (!file->empty()) names.push_back(*file);
     }
     if (!e.format.per_image_min_max) names.push_back(name + "_reference.npy");
@@ -355,7 +417,10 @@ void RunExport(const ExportFlags& flags) {
   }
 
   ProgressBar bar("export", total, "frames", ProgressBar::Lines::kWhenNotDrawn);
-  for (SensorExport& e : exports) LoadSensor(dataset, flags.clean, &bar, &e);
+  for (SensorExport& e : exports) {
+    LoadSensor(dataset, flags.clean, model.Trunk(e.sensor), functaset ? &*functaset : nullptr,
+               &bar, &e);
+  }
   bar.Finish();
 
   nlohmann::json description = {{"format", "tactfunc-export"},
@@ -383,6 +448,7 @@ void RunExport(const ExportFlags& flags) {
       write(e.values_file, {n, e.rows, e.cols, e.channels}, e.values);
       write(e.weights_file, {n, e.rows, e.cols}, e.weights);
       if (!e.clean_file.empty()) write(e.clean_file, {n, e.rows, e.cols, e.channels}, e.clean);
+      if (!e.recon_file.empty()) write(e.recon_file, {n, e.rows, e.cols, e.channels}, e.recon);
       if (e.reference) {
         write(e.reference_file, {e.rows, e.cols, e.channels}, e.reference->values.data);
       }
@@ -403,6 +469,7 @@ void RunExport(const ExportFlags& flags) {
               << flags.split << " frames of " << e.rows << "x" << e.cols << "x" << e.channels
               << " -> " << e.values_file << ", " << e.weights_file
               << (e.clean_file.empty() ? "" : ", " + e.clean_file)
+              << (e.recon_file.empty() ? "" : ", " + e.recon_file)
               << (e.reference_file.empty() ? " (no reference: per-image min-max format)"
                                            : ", " + e.reference_file)
               << "\n";
@@ -435,6 +502,10 @@ void RegisterExport(CLI::App& app, CommandBody* selected) {
   sub->add_option("--model", flags->model,
                   "Model file (.tfm): its trunks' frame formats define the targets")
       ->required();
+  sub->add_option("--functaset", flags->functaset,
+                  "Functaset (.tfs) encoded with --model: also write "
+                  "<sensor>_<split>_recon.npy, each frame drawn from its stored latent as "
+                  "`recon` draws it (every exported frame needs its latent)");
   sub->add_option("--out", flags->out,
                   "Folder to write <sensor>_<split>.npy, <sensor>_<split>_weights.npy, "
                   "<sensor>_reference.npy and export.json into (created if needed)")

@@ -2,16 +2,22 @@
 //
 // `tactfunc export` as a user runs it on a tiny hand-built model and dataset
 // (tests/apps/cli_test_util.h): the .npy files' headers, their values against
-// LoadTrunkTargets frame by frame, the noise-free and reference arrays, export.json, and
-// bad input that fails naming the flag with nothing written.
+// LoadTrunkTargets frame by frame, the noise-free and reference arrays, a functaset's
+// reconstructions against Reconstruct, export.json, and bad input that fails naming the
+// flag with nothing written.
+#include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "estimation/data/dataset.h"
 #include "estimation/data/preprocess.h"
 #include "estimation/data/trunk_targets.h"
+#include "estimation/evaluation/reconstruction.h"
+#include "estimation/functaset/functaset.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "models/trunk/functa_model.h"
@@ -324,6 +330,60 @@ TEST_F(ExportCliTest, BadSplitFailsNamingTheFlag) {
   EXPECT_NE(r.exit_code, 0);
   EXPECT_THAT(r.err, HasSubstr("--split: expected train, test or all, got 'validation'"));
   EXPECT_FALSE(fs::exists(Root("bad_split")));
+}
+
+TEST_F(ExportCliTest, FunctasetReconstructionsAreEachFrameDrawnFromItsStoredLatent) {
+  // Latents in allocated codes: the file must hold what the stored codes draw.
+  const Result encode = Run("encode --data " + Root("d") + " --model " + Root("m.tfm") +
+                            " --out " + Root("f.tfs") + " --latent-bytes 6");
+  ASSERT_EQ(encode.exit_code, 0) << encode.err;
+  const Result r = Run(Args("d", "with_recon") + " --split test --functaset " + Root("f.tfs"));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const FunctaModel model = FunctaModel::Load(Root("m.tfm"));
+  const Functaset functaset = Functaset::Load(Root("f.tfs"));
+  const Dataset dataset = Dataset::Open(Root("d"));
+  const nlohmann::json description = Description("with_recon");
+  EXPECT_EQ(description["inputs"]["functaset"], Root("f.tfs"));
+  for (SensorKind sensor : {SensorKind::kSoftBubble, SensorKind::kGelSlim}) {
+    const std::string name = ToString(sensor);
+    EXPECT_EQ(description["sensors"][name]["files"]["recon"], name + "_test_recon.npy");
+    const Npy recon = ReadNpy(Root("with_recon/" + name + "_test_recon.npy"));
+    ASSERT_EQ(recon.error, "") << name;
+    const FrameFormat& format = model.Trunk(sensor).format;
+    ASSERT_EQ(recon.shape, (std::vector<std::int64_t>{3, format.rows, format.cols, 1}));
+    const std::vector<std::size_t> indices = dataset.FrameIndices(sensor, Split::kTest);
+    const std::size_t pixels = static_cast<std::size_t>(format.rows) * format.cols;
+    double largest = 0;
+    for (std::size_t k = 0; k < indices.size(); ++k) {
+      const std::optional<std::size_t> entry =
+          functaset.Find(sensor, dataset.frames()[indices[k]].id);
+      ASSERT_TRUE(entry.has_value());
+      const Eigen::MatrixXf expected =
+          Reconstruct(model.Trunk(sensor), functaset.entries(sensor)[*entry].latent);
+      for (std::size_t j = 0; j < pixels; ++j) {
+        ASSERT_EQ(recon.values[k * pixels + j], expected(static_cast<Eigen::Index>(j), 0))
+            << name << " frame " << k << " pixel " << j;
+        largest = std::max<double>(largest, std::abs(expected(static_cast<Eigen::Index>(j), 0)));
+      }
+    }
+    EXPECT_GT(largest, 0.0) << name << ": every reconstruction is zero";
+  }
+}
+
+TEST_F(ExportCliTest, FunctasetWithoutAFramesLatentFailsNamingTheFrameAndWritesNothing) {
+  const Result encode = Run("encode --data " + Root("d") + " --model " + Root("m.tfm") +
+                            " --out " + Root("bubble_only.tfs") + " --sensors bubble");
+  ASSERT_EQ(encode.exit_code, 0) << encode.err;
+  const Result r = Run(Args("d", "missing") + " --functaset " + Root("bubble_only.tfs"));
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.err, HasSubstr("--functaset"));
+  EXPECT_THAT(r.err, HasSubstr("no gelslim latent for frame"));
+  EXPECT_FALSE(fs::exists(Root("missing")));
+  // The sensor it holds exports.
+  const Result ok =
+      Run(Args("d", "missing") + " --sensors bubble --functaset " + Root("bubble_only.tfs"));
+  EXPECT_EQ(ok.exit_code, 0) << ok.err;
+  EXPECT_TRUE(fs::exists(Root("missing/bubble_all_recon.npy")));
 }
 
 }  // namespace
