@@ -202,8 +202,8 @@ class LatentEncoder {
   const FitStrategy& StrategyOf(SensorKind sensor) const { return State(sensor).strategy; }
 
   // The default fit of a photometric trunk's frames with a latent of `latent_dim`
-  // values: knn+adam:N where the model holds the trunk's warm-start table (N = 20 per 64
-  // latent values, at least 20), adam:N without one.
+  // values: knn+adam:N where the model holds the trunk's warm-start table (N = 120 per 64
+  // latent values, at least 120), adam:N without one.
   static std::string DefaultPhotometricStrategy(bool warm_start_table, int latent_dim);
 
  private:

@@ -104,7 +104,7 @@ TEST(PretrainedCliTest, TheCommittedGelSlimTrunkDrawsWhatTheDirectTrunkBlurs) {
                             (root / "r").string() + " --examples 2");
   ASSERT_EQ(recon.exit_code, 0) << recon.err;
   EXPECT_TRUE(fs::exists(root / "r" / "recon_gelslim.png"));
-  EXPECT_THAT(recon.out, HasSubstr("knn+adam:20"));
+  EXPECT_THAT(recon.out, HasSubstr("knn+adam:120"));
   fs::remove_all(root);
 }
 

@@ -217,12 +217,12 @@ TEST(LatentEncoder, StrategiesAreValidatedByName) {
 }
 
 TEST(LatentEncoder, APhotometricTrunksDefaultStepsGrowWithItsLatent) {
-  // 20 Adam steps per 64 latent values from the warm-start table, never fewer than 20;
-  // without a table the cold fit's 200.
-  EXPECT_EQ(LatentEncoder::DefaultPhotometricStrategy(true, 64), "knn+adam:20");
-  EXPECT_EQ(LatentEncoder::DefaultPhotometricStrategy(true, 128), "knn+adam:40");
-  EXPECT_EQ(LatentEncoder::DefaultPhotometricStrategy(true, 96), "knn+adam:30");
-  EXPECT_EQ(LatentEncoder::DefaultPhotometricStrategy(true, 16), "knn+adam:20");
+  // 120 Adam steps per 64 latent values from the warm-start table, never fewer than
+  // 120; without a table the cold fit's 200.
+  EXPECT_EQ(LatentEncoder::DefaultPhotometricStrategy(true, 64), "knn+adam:120");
+  EXPECT_EQ(LatentEncoder::DefaultPhotometricStrategy(true, 128), "knn+adam:240");
+  EXPECT_EQ(LatentEncoder::DefaultPhotometricStrategy(true, 96), "knn+adam:180");
+  EXPECT_EQ(LatentEncoder::DefaultPhotometricStrategy(true, 16), "knn+adam:120");
   EXPECT_EQ(LatentEncoder::DefaultPhotometricStrategy(false, 128), "adam:200");
 }
 
