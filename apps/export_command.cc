@@ -508,7 +508,8 @@ void RegisterExport(CLI::App& app, CommandBody* selected) {
                   "`recon` draws it (every exported frame needs its latent)");
   sub->add_option("--out", flags->out,
                   "Folder to write <sensor>_<split>.npy, <sensor>_<split>_weights.npy, "
-                  "<sensor>_reference.npy and export.json into (created if needed)")
+                  "<sensor>_reference.npy (and with --clean / --functaset the noise-free "
+                  "frames / the reconstructions) and export.json into (created if needed)")
       ->required();
   sub->add_option("--sensors", flags->sensors,
                   "Comma-separated sensors to export (default: every sensor of the dataset "

@@ -55,7 +55,8 @@ by = {}
 for line in open(rates):
     n, r = line.split()
     by.setdefault(int(n), []).append(float(r))
-print("| fit | frames/s on 2 threads, median (range) | test PSNR noisy | noise-free | paper's convention |")
+print("| fit | frames/s on 2 threads, median (range) | test PSNR noisy | noise-free "
+      "| paper's convention |")
 print("|---|---:|---:|---:|---:|")
 for n in steps:
     r = by[n]
