@@ -213,6 +213,15 @@ nlohmann::json TargetsJson(const TableEvaluation::Targets& targets, bool has_pos
   t["psnr_3db_above_pca_same_bits_clean"] =
       targets.has_clean ? above_pca(targets.psnr_above_pca_same_bits_clean)
                         : nlohmann::json(nullptr);
+  // Against PCA codes in the same bytes shared among their values (PCA's strongest
+  // codec; reported, not counted in all_targets_met); null below one byte per frame.
+  t["psnr_3db_above_pca_shared_bytes"] = targets.has_shared_bytes
+                                             ? above_pca(targets.psnr_above_pca_shared_bytes)
+                                             : nlohmann::json(nullptr);
+  t["psnr_3db_above_pca_shared_bytes_clean"] =
+      targets.has_shared_bytes && targets.has_clean
+          ? above_pca(targets.psnr_above_pca_shared_bytes_clean)
+          : nlohmann::json(nullptr);
   const auto& b = targets.psnr_above_jpeg;
   t["psnr_above_jpeg"] = {{"met", b.met},
                           {"tactfunc_db", NumberOrNull(b.tactfunc_db)},
@@ -523,13 +532,19 @@ void RunEval(const EvalFlags& flags) {
                  << yes(c) << " (" << num(c["tactfunc_db"], 2) << " vs " << num(c["pca_db"], 2)
                  << " dB, margin " << num(c["margin_db"], 2) << " dB)\n";
     }
-    for (const char* key : {"psnr_3db_above_pca_same_bits", "psnr_3db_above_pca_same_bits_clean"}) {
-      if (t[key].is_null()) continue;
+    for (const char* key : {"psnr_3db_above_pca_same_bits", "psnr_3db_above_pca_same_bits_clean",
+                            "psnr_3db_above_pca_shared_bytes",
+                            "psnr_3db_above_pca_shared_bytes_clean"}) {
+      if (!t.contains(key) || t[key].is_null()) continue;
       const nlohmann::json& c = t[key];
-      targets_md << "- " << sensor << ": TactFunc >= 3 dB above PCA codes stored as the latents are"
+      const bool shared = std::string(key).find("shared") != std::string::npos;
+      targets_md << "- " << sensor << ": TactFunc >= 3 dB above PCA codes "
+                 << (shared ? "in the same bytes shared among their values"
+                            : "stored as the latents are")
                  << (std::string(key).find("clean") != std::string::npos ? ", noise-free frames"
                                                                           : "")
-                 << " (test): " << yes(c) << " (" << num(c["tactfunc_db"], 2) << " vs "
+                 << (shared ? " (test; reported, not counted in all targets): " : " (test): ")
+                 << yes(c) << " (" << num(c["tactfunc_db"], 2) << " vs "
                  << num(c["pca_db"], 2) << " dB with " << c["pca_components"]
                  << " components, margin " << num(c["margin_db"], 2) << " dB)\n";
     }

@@ -147,6 +147,35 @@ TEST_F(EvalCliTest, TargetsSayPlainlyWhetherEachIsMetWithTheNumbers) {
   EXPECT_THAT(r.out, HasSubstr("Targets:"));
 }
 
+TEST_F(EvalCliTest, PcaCodesInTheSameBytesSharedAmongTheirValuesAreReportedBesideTheTargets) {
+  // The fixture's functaset stores float16 latents (2 d bytes per frame): the strongest
+  // PCA baseline takes those bytes through the allocation of `encode --latent-bytes`.
+  const Result& r = *eval_;
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json j = r.LastJson();
+  const std::set<int> ladder = {1, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48};
+  for (const auto& [sensor, d] : {std::pair<std::string, int>{"bubble", 8}, {"gelslim", 6}}) {
+    for (const char* key :
+         {"psnr_3db_above_pca_shared_bytes", "psnr_3db_above_pca_shared_bytes_clean"}) {
+      const nlohmann::json& t = j["targets"][sensor][key];
+      ASSERT_TRUE(t.is_object()) << sensor << " " << key << ": " << j["targets"].dump();
+      EXPECT_EQ(t["bytes_per_frame"], 2 * d) << t.dump();
+      const int n = t["pca_components"].get<int>();
+      EXPECT_TRUE(n == d || ladder.count(n)) << t.dump();
+      EXPECT_LE(n, 8 * 2 * d) << t.dump();
+      EXPECT_DOUBLE_EQ(t["margin_db"].get<double>(),
+                       t["tactfunc_db"].get<double>() - t["pca_db"].get<double>());
+      EXPECT_EQ(t["met"].get<bool>(), t["margin_db"].get<double>() >= 3) << t.dump();
+    }
+    // The same TactFunc figure as the same-bits target's, against another PCA.
+    EXPECT_DOUBLE_EQ(
+        j["targets"][sensor]["psnr_3db_above_pca_shared_bytes_clean"]["tactfunc_db"].get<double>(),
+        j["targets"][sensor]["psnr_3db_above_pca_same_bits_clean"]["tactfunc_db"].get<double>());
+  }
+  EXPECT_THAT(r.out, HasSubstr("PCA codes in the same bytes shared among their values, "
+                               "noise-free frames (test; reported, not counted in all targets)"));
+}
+
 TEST_F(EvalCliTest, PoseRowsReadLatentsOfThePoseModelsOwnMap) {
   // The fixture's pose model was trained on the functaset's own latents: used as stored.
   const nlohmann::json j = eval_->LastJson();
@@ -272,6 +301,11 @@ TEST_F(EvalCliTest, AllocatedCodesAreComparedWithPcaCodesInTheSameBytes) {
       EXPECT_TRUE(n == d || ladder.count(n)) << t.dump();
       EXPECT_TRUE(t["pca_db"].is_number()) << t.dump();
       EXPECT_LE(n, 4 * d) << t.dump();
+      // For allocated codes the shared-bytes baseline is the same-bits one.
+      const std::string shared = std::string(key).find("clean") != std::string::npos
+                                     ? "psnr_3db_above_pca_shared_bytes_clean"
+                                     : "psnr_3db_above_pca_shared_bytes";
+      EXPECT_EQ(j["targets"][sensor][shared], t) << sensor << " " << key;
     }
   }
   // More bytes than 16 bits per value fill, or both storage flags: refused, nothing written.
