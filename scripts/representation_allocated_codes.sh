@@ -17,6 +17,7 @@
 # frame, against PCA codes in the same bytes (OUT/eval_rate_distortion/rate_distortion.png).
 # MODEL=M scores the trunk M instead of training one (e.g. the committed
 # models/pretrained/bubble_readout.tfm; FRAMES_PER_TOOL then only names the outputs).
+# SEEDS="S1 S2 ..." scores other fresh sets (the picture is of the first).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:-/tmp/tactfunc_allocated}
@@ -43,7 +44,8 @@ if [ ! -f "$model" ]; then
       "${pca_frames[@]}" --pixels 0 --batch 8 --steps 1000 --latent-dim 256 --seed 1 \
       --sensors bubble --threads 1 --outer-clean --inner-steps 0 >&2
 fi
-for seed in 4242 777 2024 31337; do
+read -r -a seeds <<< "${SEEDS:-4242 777 2024 31337}"
+for seed in "${seeds[@]}"; do
   synth "$out/fresh$seed" "$seed" 150
   for b in "${bytes[@]}"; do
     name="t${per_tool}_s${seed}_b$b"
@@ -61,16 +63,17 @@ print(f"seed {seed}, {b} B per frame: TactFunc {t['tactfunc_db']:.2f} dB, PCA co
 PY
   done
 done
-name="t${per_tool}_s4242"
-for b in 32 64; do
+first=${seeds[0]}
+name="t${per_tool}_s$first"
+for b in 32 64 128 256; do
   [ -f "$out/${name}_b$b.tfs" ] ||
-    "$bin" encode --model "$model" --data "$out/fresh4242" --out "$out/${name}_b$b.tfs" \
+    "$bin" encode --model "$model" --data "$out/fresh$first" --out "$out/${name}_b$b.tfs" \
         --latent-bytes "$b" --sensors bubble --threads 1 >&2
 done
 extras=()
 for b in 32 64 256; do
   extras+=(--extra-functaset "$out/${name}_b$b.tfs" --extra-model "$model")
 done
-"$bin" eval --model "$model" --data "$out/fresh4242" --functaset "$out/${name}_b128.tfs" \
+"$bin" eval --model "$model" --data "$out/fresh$first" --functaset "$out/${name}_b128.tfs" \
     "${extras[@]}" --out "$out/eval_rate_distortion" --threads 1 >/dev/null 2>&1
 echo "picture: $out/eval_rate_distortion/rate_distortion.png"
