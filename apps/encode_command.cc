@@ -26,6 +26,7 @@
 #include "apps/progress_bar.h"
 #include "estimation/data/dataset.h"
 #include "estimation/functaset/functaset.h"
+#include "estimation/functaset/latent_codes.h"
 #include "estimation/functaset/latent_encoder.h"
 #include "models/trunk/functa_model.h"
 #include "models/core/atomic_file.h"
@@ -182,11 +183,11 @@ void RunEncode(const EncodeFlags& flags) {
     CheckModelMatchesData(model, flags.model, dataset, flags.data, sensor, "encode",
                           "--allow-other-frames", flags.allow_other_frames);
     const int d = TrunkLatentDim(model.Trunk(sensor));
-    if (flags.latent_bytes > 2 * d) {
+    if (flags.latent_bytes > MaxCodeBytes(d)) {
       throw UsageError("--latent-bytes: " + std::to_string(flags.latent_bytes) + " bytes for " +
                        ToString(sensor) + " latents of " + std::to_string(d) + " values in " +
-                       flags.model + ", expected at most " + std::to_string(2 * d) +
-                       " (16 bits per value)");
+                       flags.model + ", expected at most " + std::to_string(MaxCodeBytes(d)) +
+                       " (" + std::to_string(kMaxCodeBits) + " bits per value)");
     }
     const FrameFormat& format = model.Trunk(sensor).format;
     WarnIfStretched(dataset, flags.data, sensor, format.rows, format.cols, "encode");

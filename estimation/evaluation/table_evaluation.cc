@@ -16,6 +16,7 @@
 #include "estimation/data/trunk_targets.h"
 #include "estimation/evaluation/reconstruction.h"
 #include "estimation/fitting/latent_fitter.h"
+#include "estimation/functaset/latent_codes.h"
 #include "estimation/posterior/pose_posterior.h"
 #include "models/core/parallel_for.h"
 #include "models/pose/pose_model_provenance.h"
@@ -479,7 +480,7 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
       for (int n : order) {
         Functaset stored(0, "");
         stored.set_latent_precision(like.latent_precision());
-        stored.set_latent_bytes(std::min(like.latent_bytes(), 2 * n));
+        stored.set_latent_bytes(std::min(like.latent_bytes(), MaxCodeBytes(n)));
         stored.AddSensor(sensor, n);
         const Eigen::MatrixXf codes = full_codes.leftCols(n);
         for (Eigen::Index i = 0; i < codes.rows(); ++i) {

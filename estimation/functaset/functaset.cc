@@ -360,11 +360,12 @@ std::string Functaset::Serialize() const {
     }
     if (IsQuantised(latent_precision_)) {
       const bool allocated = latent_precision_ == LatentPrecision::kAllocated;
-      if (allocated && (latent_bytes_ < 1 || latent_bytes_ > 2 * d)) {
+      if (allocated && (latent_bytes_ < 1 || latent_bytes_ > MaxCodeBytes(d))) {
         throw std::invalid_argument("Functaset: " + std::to_string(latent_bytes_) +
                                     " bytes per frame for " + name + " latents of " +
                                     std::to_string(d) + " values, expected 1.." +
-                                    std::to_string(2 * d) + " (16 bits per value at most)");
+                                    std::to_string(MaxCodeBytes(d)) + " (" +
+                                    std::to_string(kMaxCodeBits) + " bits per value at most)");
       }
       if (allocated) {
         meta["sensors"].back()["latent_bytes"] = latent_bytes_;
@@ -540,9 +541,10 @@ Functaset Functaset::Parse(const std::string& bytes, const std::string& source) 
           precision = LatentPrecision::kAllocated;
           field = where + ".latent_bytes";
           row_bytes = entry.at("latent_bytes").get<std::int64_t>();
-          if (row_bytes < 1 || row_bytes > 2 * d) {
-            throw fail("expected 1.." + std::to_string(2 * d) +
-                       " (16 bits per value at most), got " + std::to_string(row_bytes));
+          if (row_bytes < 1 || row_bytes > MaxCodeBytes(d)) {
+            throw fail("expected 1.." + std::to_string(MaxCodeBytes(d)) + " (" +
+                       std::to_string(kMaxCodeBits) + " bits per value at most), got " +
+                       std::to_string(row_bytes));
           }
           if (s > 0 && out.latent_precision_ == LatentPrecision::kAllocated &&
               row_bytes != out.latent_bytes_) {
@@ -556,8 +558,9 @@ Functaset Functaset::Parse(const std::string& bytes, const std::string& source) 
             throw fail(std::string("expected uint8, got ") + ToString(bits_tensor.dtype));
           }
           for (double b : bits_tensor.values) {
-            if (b > 16) {
-              throw fail("expected bits in [0, 16], got " + std::to_string(static_cast<int>(b)));
+            if (b > kMaxCodeBits) {
+              throw fail("expected bits in [0, " + std::to_string(kMaxCodeBits) + "], got " +
+                         std::to_string(static_cast<int>(b)));
             }
             bits.push_back(static_cast<int>(b));
           }

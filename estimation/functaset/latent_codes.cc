@@ -12,9 +12,9 @@ namespace {
 std::uint32_t Levels(int bits) { return (1u << bits) - 1; }
 
 void CheckBits(int bits, const char* where) {
-  if (bits < 0 || bits > 16) {
+  if (bits < 0 || bits > kMaxCodeBits) {
     throw std::invalid_argument(std::string(where) + ": bits " + std::to_string(bits) +
-                                " outside [0, 16]");
+                                " outside [0, " + std::to_string(kMaxCodeBits) + "]");
   }
 }
 

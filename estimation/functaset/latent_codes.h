@@ -9,6 +9,12 @@
 
 namespace tactfunc {
 
+// The widest code one latent dimension gets, in bits; a latent of d values therefore
+// fills at most MaxCodeBytes(d) = 2 d bytes per frame, the largest byte budget allocated
+// codes take.
+constexpr int kMaxCodeBits = 16;
+constexpr int MaxCodeBytes(int latent_dim) { return latent_dim * kMaxCodeBits / 8; }
+
 // The values offset + q step, q in [0, 2^bits - 1], one latent dimension's code book.
 // bits = 0 (or step = 0) stores nothing per frame: every value reads back as offset.
 struct LatentGrid {
@@ -49,11 +55,11 @@ double GridError(const std::vector<float>& values, const LatentGrid& grid);
 // spaced in sorted order), so the allocation costs about budget_bits grids of that size.
 // Bits that lower no dimension's error stay unspent.
 std::vector<int> AllocateBits(const std::vector<std::vector<float>>& dims, int budget_bits,
-                              int max_bits = 16);
+                              int max_bits = kMaxCodeBits);
 
 // Bytes of one frame's codes of the given widths, packed LSB-first and padded to a byte.
 std::int64_t PackedBytes(const std::vector<int>& bits);
-// Packs codes[k] (< 2^bits[k], bits[k] <= 16) LSB-first, one after another, into `out`
+// Packs codes[k] (< 2^bits[k], bits[k] <= kMaxCodeBits) LSB-first, one after another, into `out`
 // (PackedBytes(bits) values, zeroed by the caller, each a byte 0..255; doubles because
 // tensor files hold their values so).
 void PackCodes(const std::vector<std::uint32_t>& codes, const std::vector<int>& bits,

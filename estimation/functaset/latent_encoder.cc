@@ -18,6 +18,7 @@
 
 #include "estimation/data/photometric_markers.h"
 #include "estimation/fitting/photometric_ceres_fit.h"
+#include "estimation/functaset/latent_codes.h"
 #include "estimation/training/photometric_trainer.h"
 #include "models/trunk/product_precision.h"
 
@@ -389,11 +390,12 @@ Functaset LatentEncoder::Encode(const Dataset& dataset, Summary* summary,
     // Allocated codes hold at most 16 bits per value: refused now, not after the frames.
     const int d = TrunkLatentDim(trunk);
     if (options_.latent_precision == Functaset::LatentPrecision::kAllocated &&
-        options_.latent_bytes > 2 * d) {
+        options_.latent_bytes > MaxCodeBytes(d)) {
       throw std::invalid_argument("LatentEncoder: " + std::to_string(options_.latent_bytes) +
                                   " bytes per frame for " + ToString(sensor) + " latents of " +
                                   std::to_string(d) + " values, expected at most " +
-                                  std::to_string(2 * d) + " (16 bits per value)");
+                                  std::to_string(MaxCodeBytes(d)) + " (" +
+                                  std::to_string(kMaxCodeBits) + " bits per value)");
     }
   }
 
