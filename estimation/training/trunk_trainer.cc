@@ -506,10 +506,16 @@ void TrunkTrainer::StartReadoutFromPca(const std::vector<TrunkTargets>& frames, 
       noisy_frames != nullptr ? Eigen::MatrixXd(stack(*noisy_frames) - X) : Eigen::MatrixXd();
   const Eigen::RowVectorXd mean = X.colwise().mean();
   X.rowwise() -= mean;
-  // PCA by the M x M Gram matrix: its eigenvectors v_k with eigenvalues lambda_k give
-  // the unit principal directions u_k = X^T v_k / sqrt(lambda_k).
-  const Eigen::MatrixXd gram = X * X.transpose();
-  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(gram);
+  // PCA by the smaller of the M x M Gram matrix X X^T and the P x P scatter X^T X: they
+  // share their nonzero eigenvalues lambda_k; the scatter's unit eigenvectors are the
+  // principal directions u_k, the Gram matrix's v_k give them as X^T v_k / sqrt(lambda_k).
+  // (The eigensolver costs the cube of its size: 16,200 frames of 6,160 pixels take
+  // minutes through the scatter and far longer through the Gram matrix.)
+  const bool by_gram = m <= p;
+  const Eigen::MatrixXd product =
+      by_gram ? Eigen::MatrixXd(X * X.transpose()) : Eigen::MatrixXd(X.transpose() * X);
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(product);
+  const long n = product.rows();
   const int d = so.latent_dim;
   // Scale sqrt(P / 2): the weighted MSE's latent Hessian of the branch is then
   // (2 / P) R R^T = I over a full frame (header comment of Options::readout).
@@ -519,18 +525,20 @@ void TrunkTrainer::StartReadoutFromPca(const std::vector<TrunkTargets>& frames, 
   auto mean_block = LatentModulatedSiren::View(&theta, siren->Block(ParameterGroup::kReadoutMean));
   R.setZero();
   mean_block = mean.transpose();
-  const double largest = std::max(eigen.eigenvalues()[m - 1], 0.0);
+  const double largest = std::max(eigen.eigenvalues()[n - 1], 0.0);
   // Wiener gains (with noisy copies; components not kept get 1): the variance of the
   // copies along unit component u_k, lambda_k / M, against the noise's, the mean of
   // (noise_i . u_k)^2 over the same frames.
   Eigen::VectorXd gains = Eigen::VectorXd::Ones(d);
-  // Centred frames span at most m - 1 directions; the Gram matrix squares the condition
+  // Centred frames span at most m - 1 directions; either product squares the condition
   // number, so eigenvalues below 1e-9 of the largest are rounding, not directions.
   for (int k = 0; k < d && k < m - 1; ++k) {
-    const double lambda = eigen.eigenvalues()[m - 1 - k];  // ascending order
+    const double lambda = eigen.eigenvalues()[n - 1 - k];  // ascending order
     if (!(lambda > 1e-9 * largest)) break;  // no more directions
-    const Eigen::VectorXd unit = X.transpose() * eigen.eigenvectors().col(m - 1 - k) /
-                                 std::sqrt(lambda);
+    const Eigen::VectorXd unit =
+        by_gram ? Eigen::VectorXd(X.transpose() * eigen.eigenvectors().col(n - 1 - k) /
+                                  std::sqrt(lambda))
+                : Eigen::VectorXd(eigen.eigenvectors().col(n - 1 - k));
     R.row(k) = scale * unit.transpose();
     if (noisy_frames != nullptr) {
       const double signal = lambda / m;

@@ -13,9 +13,11 @@
 #include <fstream>
 #include <iterator>
 #include <memory>
+#include <random>
 #include <stdexcept>
 #include <string>
 
+#include "Eigen/SVD"
 #include "estimation/data/dataset.h"
 #include "estimation/data/synthetic_dataset.h"
 #include "estimation/data/trunk_targets.h"
@@ -414,6 +416,59 @@ TEST_F(TrunkTrainerTest, WithTheOuterLossOnNoiseFreeCopiesTheReadoutStartsAsThei
   const std::vector<TrunkTargets> fewer(clean.begin(), clean.end() - 1);
   EXPECT_THROW(TrunkTrainer::StartReadoutFromPca(clean, 1500, &no_noise, &fewer),
                std::invalid_argument);
+}
+
+// The branch's PCA takes the Gram matrix when the frames are fewer than their values and
+// the scatter matrix when they are more; either way its rows are the principal directions
+// of the centred frames (their right singular vectors, up to sign) scaled by sqrt(P / 2),
+// and the Wiener gains read the noise along them.
+TEST(TrunkTrainerReadoutPca, FewerAndMoreFramesThanPixelsGiveTheSameDirectionsAsAnSvd) {
+  LatentModulatedSiren::Options so;
+  so.width = 8;
+  so.num_hidden_layers = 1;
+  so.latent_dim = 4;
+  so.readout_rows = 3;
+  so.readout_cols = 4;  // P = 12 values a frame
+  const long p = 12;
+  std::mt19937 random(7);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  // Frames along 4 fixed directions with distinct spreads, and noisy copies of them.
+  Eigen::MatrixXd directions(4, p);
+  for (long i = 0; i < directions.size(); ++i) directions.data()[i] = normal(random);
+  for (int frames : {8, 60}) {
+    SCOPED_TRACE(std::to_string(frames) + " frames");
+    std::vector<TrunkTargets> clean(frames), noisy(frames);
+    for (int i = 0; i < frames; ++i) {
+      Eigen::VectorXd x = Eigen::VectorXd::Constant(p, 0.5);
+      for (int k = 0; k < 4; ++k) x += (4.0 - k) * normal(random) * directions.row(k).transpose();
+      clean[i].values = x.cast<float>();
+      clean[i].weights = Eigen::VectorXf::Ones(p);
+      noisy[i] = clean[i];
+      for (long j = 0; j < p; ++j) noisy[i].values(j, 0) += 0.1f * normal(random);
+    }
+    LatentModulatedSiren siren(so, 1);
+    TrunkTrainer::StartReadoutFromPca(clean, 1000, &siren, &noisy);
+    Eigen::MatrixXd X(frames, p);
+    for (int i = 0; i < frames; ++i) X.row(i) = clean[i].values.col(0).cast<double>().transpose();
+    X.rowwise() -= X.colwise().mean();
+    const Eigen::JacobiSVD<Eigen::MatrixXd> svd(X, Eigen::ComputeThinV);
+    const Eigen::MatrixXd basis = LatentModulatedSiren::View(
+        siren.parameters(), siren.Block(ParameterGroup::kReadoutBasis));
+    const Eigen::VectorXd& gains = siren.start_gains();
+    ASSERT_EQ(gains.size(), 4);
+    for (int k = 0; k < 4; ++k) {
+      const Eigen::VectorXd unit = svd.matrixV().col(k);
+      const Eigen::VectorXd row = basis.row(k).transpose() / std::sqrt(p / 2.0);
+      EXPECT_NEAR(std::abs(row.dot(unit)), 1.0, 1e-9) << "component " << k;
+      EXPECT_NEAR(row.norm(), 1.0, 1e-9) << "component " << k;
+      double noise = 0;
+      for (int i = 0; i < frames; ++i) {
+        noise += std::pow((noisy[i].values - clean[i].values).col(0).cast<double>().dot(unit), 2);
+      }
+      const double signal = std::pow(svd.singularValues()[k], 2);
+      EXPECT_NEAR(gains[k], signal / (signal + noise), 1e-9) << "component " << k;
+    }
+  }
 }
 
 TEST_F(TrunkTrainerTest, ResumingAReadoutRunIsBitIdentical) {
