@@ -602,6 +602,10 @@ void RunTrain(const TrainFlags& flags) {
                             std::to_string(o.siren.spatial_channels) + " + " +
                             std::to_string(o.siren.global_latent_dim()) + " global"
                       : std::string())
+              << (o.readout
+                      ? "; first the readout branch's basis, a PCA of up to " +
+                            std::to_string(o.readout_pca_frames) + " training frames"
+                      : std::string())
               << "; a time estimate follows the first steps" << std::endl;
   }
 
@@ -852,7 +856,8 @@ void RegisterTrain(CLI::App& app, CommandBody* selected) {
                 "frames' PCA, so the trunk contains PCA (docs/REPRESENTATION.md)");
   sub->add_option("--readout-pca-frames", flags->readout_pca_frames,
                   "Training frames (evenly spaced) the readout branch's PCA start is "
-                  "computed from (default 1500; the PCA's time grows as their cube)")
+                  "computed from (default 1500; the PCA's time grows as the cube of the "
+                  "smaller of their count and their values)")
       ->check(CLI::Range(1, 100000));
   flags->readout_rate_option =
       sub->add_option("--readout-rate", flags->readout_rate,

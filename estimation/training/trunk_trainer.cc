@@ -381,7 +381,7 @@ TrunkTrainer::Options TrunkTrainer::Preset(const std::string& name, SensorKind s
     options.pixels_per_frame = 0;
     options.steps = 1000;
     options.readout = true;
-    options.readout_pca_frames = 5000;
+    options.readout_pca_frames = 20000;
     options.meta_sgd.inner_steps = 0;
     options.outer_loss_on_clean = true;
   } else {

@@ -96,8 +96,10 @@ class TrunkTrainer {
     // what a linear basis cannot. Default false (the trunk of the paper).
     bool readout = false;
     // Training frames the readout's PCA start is computed from (evenly spaced over the
-    // split; fewer if it is smaller). >= 1. The PCA is one Gram matrix of that many
-    // frames: 1500 frames of 6160 pixels take about a second.
+    // split; fewer if it is smaller). >= 1. The PCA is one eigendecomposition of the
+    // smaller of the frames' Gram matrix and their values' scatter matrix: 1500 frames
+    // of 6160 pixels take about a second, 16,200 about two minutes on one core, and the
+    // frames are held in double twice (noisy and noise-free): 16 bytes per value.
     int readout_pca_frames = 1500;
     // The readout branch's Adam step size as a fraction of the trunk's (the schedule
     // applies to both). In [0, 1]; 0 keeps the branch at its PCA start (the SIREN then
@@ -269,11 +271,11 @@ class TrunkTrainer {
   //   storage: small's SIREN with the readout branch, d = 256, trained on whole frames
   //            (batch 8) for 1000 steps against their noise-free copies, every fit the
   //            frame's projection shrunk by Wiener gains (readout, readout_pca_frames
-  //            5000, meta_sgd.inner_steps 0, outer_loss_on_clean) -- the Soft Bubble's
+  //            20000, meta_sgd.inner_steps 0, outer_loss_on_clean) -- the Soft Bubble's
   //            storage trunk (models/pretrained/bubble_readout.tfm): 3 dB above PCA
-  //            codes in the same allocated bytes at 256 B per frame (at 128 B on three
-  //            fresh sets of four, docs/RESULTS_RECONSTRUCTION.md). Needs
-  //            noise-free copies (simulated data); about 3 minutes at 16,200 frames.
+  //            codes in the same allocated bytes at 128 and 256 B per frame on six
+  //            fresh sets (docs/RESULTS_RECONSTRUCTION.md). Needs noise-free copies
+  //            (simulated data); about 4 minutes on one core at 16,200 frames.
   // Options() as constructed is the default preset for the Bubble. Throws
   // std::invalid_argument listing the names for an unknown one.
   static Options Preset(const std::string& name, SensorKind sensor = SensorKind::kSoftBubble);

@@ -116,7 +116,7 @@ TEST(TrunkTrainerOptions, TheStoragePresetIsTheSmallSirenWithTheNoiseFreeReadout
   EXPECT_EQ(o.pixels_per_frame, 0);
   EXPECT_EQ(o.steps, 1000);
   EXPECT_TRUE(o.readout);
-  EXPECT_EQ(o.readout_pca_frames, 5000);
+  EXPECT_EQ(o.readout_pca_frames, 20000);
   EXPECT_EQ(o.meta_sgd.inner_steps, 0);
   EXPECT_TRUE(o.outer_loss_on_clean);
 }
