@@ -182,6 +182,12 @@ nlohmann::json DescribeModel(const std::string& bytes, const std::string& path) 
                                                       ? t.warm_start->latents.rows()
                                                       : Eigen::Index{0}}};
     }
+    if (!t.default_fit.empty()) {
+      std::printf("           default fit %s (recorded by train --default-fit; encode "
+                  "--strategy S asks for another)\n",
+                  t.default_fit.c_str());
+      trunk["default_fit"] = t.default_fit;
+    }
     if (o.has_spatial()) {
       trunk["spatial"] = {{"rows", o.spatial_rows},
                           {"cols", o.spatial_cols},

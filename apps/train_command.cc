@@ -30,6 +30,8 @@
 #include "apps/pictures.h"
 #include "apps/progress_bar.h"
 #include "estimation/data/dataset.h"
+#include "estimation/fitting/latent_fitter.h"
+#include "estimation/functaset/latent_encoder.h"
 #include "estimation/training/photometric_trainer.h"
 #include "estimation/training/photometric_warm_start.h"
 #include "estimation/training/trunk_trainer.h"
@@ -71,6 +73,7 @@ struct TrainFlags {
   int marker_warmup = 1000;
   double contact_share = PhotometricTrainer::Options().contact_share;
   bool no_warm_start = false;
+  std::string default_fit;  // "": the encoder's rule
   // Set after parsing: which overrides were given.
   CLI::Option *latent_dim_option = nullptr, *width_option = nullptr, *layers_option = nullptr,
               *steps_option = nullptr, *batch_option = nullptr, *pixels_option = nullptr,
@@ -476,6 +479,7 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
                          {"steps", result.summary.steps},
                          {"train_frames", frames.size()},
                          {"final_loss", result.summary.final_loss}};
+    trunk.default_fit = flags.default_fit;
     model.SetTrunk(std::move(trunk));
   }
   model.set_info_json(nlohmann::json({{"trainer", "tactfunc train --head photometric"},
@@ -504,6 +508,16 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
 void RunTrain(const TrainFlags& flags) {
   for (SensorKind sensor : {SensorKind::kSoftBubble, SensorKind::kGelSlim}) {
     OptionsFor(flags, sensor);  // bad flags fail before the dataset is read
+  }
+  if (!flags.default_fit.empty()) {  // checked as encode will check it, before training
+    FitStrategy strategy;
+    std::string error;
+    if (!FitStrategy::Parse(flags.default_fit, &strategy, &error)) {
+      throw UsageError("--default-fit: " + error);
+    }
+    error = LatentEncoder::StrategyRefusal(strategy, flags.head == "photometric",
+                                           !flags.no_warm_start);
+    if (!error.empty()) throw UsageError("--default-fit: the trained trunk " + error);
   }
   ApplyProductPrecision(flags.products);
 
@@ -698,6 +712,7 @@ void RunTrain(const TrainFlags& flags) {
       throw std::runtime_error(std::string("training ") + name + " failed: " + summary.message +
                                hint.str());
     }
+    trunk.default_fit = flags.default_fit;
     model.SetTrunk(std::move(trunk));
     sensor_figures[name] = {{"steps", summary.steps_done},
                             {"seconds", summary.total_train_seconds},
@@ -909,6 +924,10 @@ void RegisterTrain(CLI::App& app, CommandBody* selected) {
   sub->add_flag("--no-warm-start", flags->no_warm_start,
                 "--head photometric: leave the training latents' warm-start table out of the "
                 "model (a smaller file; encode then fits with adam:N only)");
+  sub->add_option("--default-fit", flags->default_fit,
+                  "The fit encode and fit use for the trained trunk(s) when no --strategy is "
+                  "given, recorded in the model (e.g. knn+adam:400; default: the encoder's "
+                  "rule, docs/FUNCTASET.md)");
   sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
   sub->callback([flags, selected]() { *selected = [flags]() { RunTrain(*flags); }; });
 }

@@ -135,6 +135,27 @@ std::string LatentEncoder::DefaultPhotometricStrategy(bool warm_start_table, int
                           : "adam:" + std::to_string(kPhotometricFitSteps);
 }
 
+std::string LatentEncoder::StrategyRefusal(const FitStrategy& strategy, bool photometric,
+                                           bool warm_start_table) {
+  const bool adam = strategy.refinement == FitStrategy::Refinement::kAdam;
+  const bool knn_alone = strategy.knn && strategy.refinement == FitStrategy::Refinement::kNone;
+  const bool ceres = strategy.refinement == FitStrategy::Refinement::kCeres;
+  if (photometric ? !(adam || knn_alone || (ceres && strategy.knn)) : (adam || strategy.knn)) {
+    return std::string("is ") +
+           (photometric ? "photometric: its latents are fitted with adam:N, knn+adam:N, "
+                          "knn+ceres:N or knn, not "
+                        : "direct: its latents are fitted with meta_sgd:K or ceres:N (the k-NN "
+                          "strategies need a functaset to search), not ") +
+           strategy.ToString();
+  }
+  if (photometric && strategy.knn && !warm_start_table) {
+    return "has no warm-start table for " + strategy.ToString() +
+           " (it was trained before train --head photometric stored one, or with "
+           "--no-warm-start); use adam:N or retrain";
+  }
+  return "";
+}
+
 LatentEncoder::LatentEncoder(const FunctaModel& model, const Options& options)
     : model_(model), options_(options) {
   std::string error;
@@ -150,34 +171,29 @@ LatentEncoder::LatentEncoder(const FunctaModel& model, const Options& options)
     state.alpha = trunk.alpha.cast<float>();
     state.meta_sgd = MetaSgd(trunk.meta_sgd);
     const bool photometric = trunk.photometric != nullptr;
-    state.strategy =
-        options_.strategy.empty()
-            ? FitStrategy::FromString(
-                  !photometric ? "meta_sgd:" + std::to_string(trunk.meta_sgd.inner_steps)
-                               : DefaultPhotometricStrategy(trunk.warm_start != nullptr,
-                                                            trunk.photometric->latent_dim()))
-            : FitStrategy::FromString(options_.strategy);
-    const bool adam = state.strategy.refinement == FitStrategy::Refinement::kAdam;
-    const bool knn_alone =
-        state.strategy.knn && state.strategy.refinement == FitStrategy::Refinement::kNone;
+    // The trunk's recorded default, checked here as an asked-for fit is (the model layer
+    // only knows it as a name).
+    const bool recorded = options_.strategy.empty() && !trunk.default_fit.empty();
+    const std::string whose =
+        recorded ? " (the fit the model records as its default, train --default-fit)" : "";
+    std::string error;
+    if (!FitStrategy::Parse(!options_.strategy.empty() ? options_.strategy
+                            : recorded                 ? trunk.default_fit
+                            : !photometric ? "meta_sgd:" + std::to_string(trunk.meta_sgd.inner_steps)
+                                           : DefaultPhotometricStrategy(trunk.warm_start != nullptr,
+                                                                        trunk.photometric->latent_dim()),
+                            &state.strategy, &error)) {
+      throw std::invalid_argument(std::string("LatentEncoder: the ") + ToString(sensor) +
+                                  " trunk's fit" + whose + ": " + error);
+    }
     const bool ceres = state.strategy.refinement == FitStrategy::Refinement::kCeres;
-    if (photometric ? !(adam || knn_alone || (ceres && state.strategy.knn))
-                    : (adam || state.strategy.knn)) {
-      throw std::invalid_argument(
-          std::string("LatentEncoder: the ") + ToString(sensor) + " trunk is " +
-          (photometric ? "photometric: its latents are fitted with adam:N, knn+adam:N, "
-                         "knn+ceres:N or knn, not "
-                       : "direct: its latents are fitted with meta_sgd:K or ceres:N (the k-NN "
-                         "strategies need a functaset to search), not ") +
-          state.strategy.ToString());
+    const std::string refusal =
+        StrategyRefusal(state.strategy, photometric, trunk.warm_start != nullptr);
+    if (!refusal.empty()) {
+      throw std::invalid_argument(std::string("LatentEncoder: the ") + ToString(sensor) +
+                                  " trunk " + refusal + whose);
     }
     if (photometric && state.strategy.knn) {
-      if (trunk.warm_start == nullptr) {
-        throw std::invalid_argument(
-            std::string("LatentEncoder: the ") + ToString(sensor) + " trunk has no warm-start "
-            "table for " + state.strategy.ToString() + " (it was trained before train --head "
-            "photometric stored one); use adam:N or retrain");
-      }
       state.warm_start =
           std::make_shared<const PhotometricWarmStart>(*trunk.photometric, trunk.warm_start);
     }

@@ -18,11 +18,13 @@
 // Levenberg-Marquardt iterations on the frame's LatentProblem, estimation/fitting/
 // latent_problem.h, from z = 0, with Options::problem's sigma, sigma_z and robust loss).
 // A photometric trunk (models/trunk/photometric_trunk.h) is fitted by FitPhotometricLatent
-// instead: knn+adam:N (the default where the model holds a warm-start table, N = 40: the
-// best of 4 neighbours among the training latents, then N Adam steps from 1e-2 on 64
-// pixels a step, estimation/training/photometric_warm_start.h), knn (that neighbour as it is) or adam:N
-// (N steps from the moment pose and its turn by pi; the default without a table, N = 200).
-// The functaset records the strategy of each sensor (Functaset::fit_strategy).
+// instead: knn+adam:N (the default where the model holds a warm-start table, N = 120 per
+// 64 latent values: the best of 4 neighbours among the training latents, then N Adam
+// steps from 1e-2 on 64 pixels a step, estimation/training/photometric_warm_start.h), knn
+// (that neighbour as it is), knn+ceres:N or adam:N (N steps from the moment pose and its
+// turn by pi; the default without a table, N = 200). A trunk that records its own default
+// fit (SensorTrunk::default_fit, `train --default-fit`) gets that one instead of these
+// rules. The functaset records the strategy of each sensor (Functaset::fit_strategy).
 //
 // Parallelism and determinism. Frames are independent; `threads` workers take them
 // from a shared counter. Each frame is computed by one thread with the same code, so
@@ -198,13 +200,20 @@ class LatentEncoder {
                              const PhotometricTrunk::Markers* markers = nullptr) const;
 
   // The fit a sensor's frames get (Options::strategy, or the trunk's default when it is
-  // ""). Throws std::invalid_argument if the model has no trunk for the sensor.
+  // "": its recorded default_fit, else the rules of the header comment). Throws
+  // std::invalid_argument if the model has no trunk for the sensor.
   const FitStrategy& StrategyOf(SensorKind sensor) const { return State(sensor).strategy; }
 
   // The default fit of a photometric trunk's frames with a latent of `latent_dim`
   // values: knn+adam:N where the model holds the trunk's warm-start table (N = 120 per 64
   // latent values, at least 120), adam:N without one.
   static std::string DefaultPhotometricStrategy(bool warm_start_table, int latent_dim);
+
+  // Why `strategy` cannot fit the latents of a photometric (or direct) trunk, with or
+  // without a warm-start table; "" when it can. Photometric: adam:N, knn+adam:N,
+  // knn+ceres:N or knn, the k-NN ones with a table; direct: meta_sgd:K or ceres:N.
+  static std::string StrategyRefusal(const FitStrategy& strategy, bool photometric,
+                                     bool warm_start_table);
 
  private:
   struct SensorState {

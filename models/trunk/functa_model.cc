@@ -208,6 +208,7 @@ std::string FunctaModel::Serialize() const {
            {"first_order", t.meta_sgd.first_order}}},
          {"residual_sigma", t.residual_sigma}});
     // Written only when present, so a trunk without one keeps the bytes it had.
+    if (!t.default_fit.empty()) meta["trunks"].back()["default_fit"] = t.default_fit;
     if (t.description) {
       meta["trunks"].back()["sensor_description"] =
           nlohmann::json::parse(SensorDescriptionToJson(*t.description));
@@ -360,6 +361,23 @@ FunctaModel FunctaModel::FromTensorFile(const TensorFile& file, const std::strin
       if (!trunk.meta_sgd.IsValid(&error)) throw TensorFileError(source + ": " + field + ": " + error);
       field = name + ".residual_sigma";
       trunk.residual_sigma = entry.at("residual_sigma").get<double>();
+      if (entry.contains("default_fit")) {  // absent: the encoder's rule
+        field = name + ".default_fit";
+        trunk.default_fit = entry.at("default_fit").get<std::string>();
+        // Its meaning is the fitting layer's (checked where a fit is built); here only
+        // that it can be a strategy's name.
+        const bool name_like =
+            !trunk.default_fit.empty() && trunk.default_fit.size() <= 64 &&
+            std::all_of(trunk.default_fit.begin(), trunk.default_fit.end(), [](char c) {
+              return (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '+' || c == ':' ||
+                     c == '_';
+            });
+        if (!name_like) {
+          throw TensorFileError(source + ": field '" + field + "': expected a fitting "
+                                "strategy's name such as knn+adam:400, got '" +
+                                trunk.default_fit + "'");
+        }
+      }
       if (entry.contains("sensor_description")) {  // absent in files written before
         field = name + ".sensor_description";
         try {

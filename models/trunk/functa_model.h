@@ -112,6 +112,12 @@ struct SensorTrunk {
   // With the photometric head: the table its fits can start from (null: none; files
   // written before tables, and trunks trained without one).
   std::shared_ptr<const WarmStartTable> warm_start;
+  // The fit `encode` and `fit` use for this trunk when none is asked for (a strategy's
+  // name, estimation/fitting/latent_fitter.h, e.g. "knn+adam:400"), recorded by `train
+  // --default-fit` for a trunk whose documented quality needs more than the encoder's
+  // rule gives. Empty (the default, and files written before it): the encoder's rule
+  // (LatentEncoder). Checked against the trunk's kind where it is used.
+  std::string default_fit;
 };
 
 // The values of one frame's latent under `trunk`: the photometric head's d, else the

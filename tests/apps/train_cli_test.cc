@@ -480,6 +480,31 @@ TEST_F(TrainCliTest, ThePhotometricHeadCheckpointsAndResumes) {
   ASSERT_EQ(again.exit_code, 0) << again.err;
   EXPECT_THAT(again.out, HasSubstr("resuming from " + Root("again.tfm.gelslim.ckpt")));
   EXPECT_EQ(testing_util::Slurp(Root("again.tfm")), testing_util::Slurp(Root("whole.tfm")));
+
+  // --default-fit records the fit encode then uses without --strategy (here on resuming the
+  // finished run: the same trunk, the fit recorded); info shows it.
+  fs::copy_file(Root("whole.tfm.gelslim.ckpt"), Root("fit.tfm.gelslim.ckpt"));
+  const Result fit = Run(args + " --steps 6 --out " + Root("fit.tfm") +
+                         " --resume --default-fit knn+adam:3");
+  ASSERT_EQ(fit.exit_code, 0) << fit.err;
+  EXPECT_EQ(FunctaModel::Load(Root("fit.tfm")).Trunk(SensorKind::kGelSlim).default_fit,
+            "knn+adam:3");
+  EXPECT_EQ(FunctaModel::Load(Root("whole.tfm")).Trunk(SensorKind::kGelSlim).default_fit, "");
+  EXPECT_THAT(Run("info " + Root("fit.tfm")).out, HasSubstr("default fit knn+adam:3"));
+  const Result encode = Run("encode --model " + Root("fit.tfm") + " --data " + Root("gr") +
+                            " --out " + Root("fit.tfs") + " --threads 1");
+  ASSERT_EQ(encode.exit_code, 0) << encode.err;
+  EXPECT_EQ(Functaset::Load(Root("fit.tfs")).fit_strategy(SensorKind::kGelSlim), "knn+adam:3");
+  // A fit the trunk could not use is refused before training, naming the flag.
+  for (const std::string& bad : {std::string(" --default-fit meta_sgd:3"),
+                                 std::string(" --default-fit knn --no-warm-start"),
+                                 std::string(" --default-fit lbfgs:2")}) {
+    const Result refused = Run(args + " --steps 2 --out " + Root("bad.tfm") + bad);
+    EXPECT_NE(refused.exit_code, 0) << bad;
+    EXPECT_THAT(refused.err, HasSubstr("--default-fit")) << bad;
+    EXPECT_FALSE(fs::exists(Root("bad.tfm"))) << bad;
+    EXPECT_FALSE(fs::exists(Root("bad.tfm.gelslim.ckpt"))) << bad;
+  }
 }
 
 TEST_F(TrainCliTest, ReconWritesOneCsvRowPerFrameThatAgreesWithItsSummary) {

@@ -849,5 +849,48 @@ TEST(LatentEncoder, APhotometricFrameIsFittedAgainstTheMarkersItIsGiven) {
   }
 }
 
+TEST(LatentEncoder, ATrunksRecordedDefaultFitIsUsedUnlessAnotherIsAskedFor) {
+  const Image reference = testing_util::MarkerReference(24, 32);
+  FunctaModel model = PhotometricModel(reference, reference);
+  EXPECT_EQ(LatentEncoder(model, {}).StrategyOf(SensorKind::kGelSlim).ToString(),
+            LatentEncoder::DefaultPhotometricStrategy(true, 8));
+  model.MutableTrunk(SensorKind::kGelSlim).default_fit = "knn+adam:7";
+  EXPECT_EQ(LatentEncoder(model, {}).StrategyOf(SensorKind::kGelSlim).ToString(), "knn+adam:7");
+  LatentEncoder::Options asked;
+  asked.strategy = "adam:5";
+  EXPECT_EQ(LatentEncoder(model, asked).StrategyOf(SensorKind::kGelSlim).ToString(), "adam:5");
+  // The recorded fit encodes as the same fit asked for by name, bit for bit.
+  asked.strategy = "knn+adam:7";
+  Eigen::VectorXf z(8);
+  for (int k = 0; k < 8; ++k) z[k] = static_cast<float>(0.2 * std::sin(0.8 * k + 0.3));
+  const PhotometricTrunk& trunk = *model.Trunk(SensorKind::kGelSlim).photometric;
+  const TrunkTargets frame =
+      testing_util::WholeFrameTargets(trunk.Forward<float>(trunk.AllPixels(), z), 12, 16);
+  const LatentEncoder::EncodedFrame recorded =
+      LatentEncoder(model, {}).EncodeTargets(SensorKind::kGelSlim, frame);
+  const LatentEncoder::EncodedFrame named =
+      LatentEncoder(model, asked).EncodeTargets(SensorKind::kGelSlim, frame);
+  EXPECT_TRUE((recorded.latent.array() == named.latent.array()).all());
+  // A recorded fit the trunk cannot use, or no strategy at all, is refused naming it.
+  for (const char* bad : {"meta_sgd:3", "lbfgs:3"}) {
+    model.MutableTrunk(SensorKind::kGelSlim).default_fit = bad;
+    try {
+      LatentEncoder encoder(model, {});
+      ADD_FAILURE() << "accepted " << bad;
+    } catch (const std::invalid_argument& e) {
+      EXPECT_THAT(e.what(), HasSubstr("gelslim trunk")) << e.what();
+      EXPECT_THAT(e.what(), HasSubstr("train --default-fit")) << e.what();
+    }
+  }
+  // Without the warm-start table the k-NN fits are refused, recorded or asked for.
+  model.MutableTrunk(SensorKind::kGelSlim).default_fit = "knn+adam:7";
+  model.MutableTrunk(SensorKind::kGelSlim).warm_start = nullptr;
+  EXPECT_THROW(LatentEncoder(model, {}), std::invalid_argument);
+  EXPECT_EQ(LatentEncoder::StrategyRefusal(FitStrategy::FromString("knn+adam:7"), true, false)
+                .find("has no warm-start table"),
+            0u);
+  EXPECT_EQ(LatentEncoder::StrategyRefusal(FitStrategy::FromString("ceres:5"), false, false), "");
+}
+
 }  // namespace
 }  // namespace tactfunc

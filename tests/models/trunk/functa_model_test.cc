@@ -430,5 +430,31 @@ TEST(FunctaModel, ADescriptionOfAnotherKindIsRefusedNamingTheField) {
   }
 }
 
+TEST(FunctaModel, RecordsATrunksDefaultFitAndRefusesOneThatIsNoStrategysName) {
+  FunctaModel model = TwoSensorModel();
+  const std::string without = model.Serialize();
+  EXPECT_EQ(without.find("default_fit"), std::string::npos);  // absent: the encoder's rule
+  EXPECT_EQ(FunctaModel::Parse(without, "m.tfm").Trunk(SensorKind::kGelSlim).default_fit, "");
+  model.MutableTrunk(SensorKind::kGelSlim).default_fit = "knn+adam:400";
+  const std::string bytes = model.Serialize();
+  const FunctaModel read = FunctaModel::Parse(bytes, "m.tfm");
+  EXPECT_EQ(read.Trunk(SensorKind::kGelSlim).default_fit, "knn+adam:400");
+  EXPECT_EQ(read.Trunk(SensorKind::kSoftBubble).default_fit, "");
+  EXPECT_EQ(read.Serialize(), bytes);
+  for (const std::string& bad : {std::string("\"\""), std::string("\"knn adam\""),
+                                 std::string("400")}) {
+    const std::string edited =
+        WithMetaEdited(bytes, "\"default_fit\":\"knn+adam:400\"", "\"default_fit\":" + bad);
+    ASSERT_FALSE(edited.empty());
+    try {
+      FunctaModel::Parse(edited, "m.tfm");
+      ADD_FAILURE() << "accepted " << bad;
+    } catch (const TensorFileError& e) {
+      EXPECT_THAT(e.what(), HasSubstr("m.tfm")) << e.what();
+      EXPECT_THAT(e.what(), HasSubstr("gelslim.default_fit")) << e.what();
+    }
+  }
+}
+
 }  // namespace
 }  // namespace tactfunc
