@@ -176,13 +176,15 @@ LatentEncoder::LatentEncoder(const FunctaModel& model, const Options& options)
     const bool recorded = options_.strategy.empty() && !trunk.default_fit.empty();
     const std::string whose =
         recorded ? " (the fit the model records as its default, train --default-fit)" : "";
+    std::string chosen = options_.strategy;
+    if (chosen.empty()) {
+      chosen = recorded       ? trunk.default_fit
+               : photometric ? DefaultPhotometricStrategy(trunk.warm_start != nullptr,
+                                                          trunk.photometric->latent_dim())
+                             : "meta_sgd:" + std::to_string(trunk.meta_sgd.inner_steps);
+    }
     std::string error;
-    if (!FitStrategy::Parse(!options_.strategy.empty() ? options_.strategy
-                            : recorded                 ? trunk.default_fit
-                            : !photometric ? "meta_sgd:" + std::to_string(trunk.meta_sgd.inner_steps)
-                                           : DefaultPhotometricStrategy(trunk.warm_start != nullptr,
-                                                                        trunk.photometric->latent_dim()),
-                            &state.strategy, &error)) {
+    if (!FitStrategy::Parse(chosen, &state.strategy, &error)) {
       throw std::invalid_argument(std::string("LatentEncoder: the ") + ToString(sensor) +
                                   " trunk's fit" + whose + ": " + error);
     }
