@@ -201,7 +201,9 @@ LatentFitter::Summary FitPhotometric(const FunctaModel& model, SensorKind sensor
   try {
     encoder.emplace(model, options);
   } catch (const std::invalid_argument& e) {
-    throw UsageError("--strategy " + flags.strategy + ": " + e.what());
+    throw UsageError((flags.strategy.empty() ? std::string("the model's default fit")
+                                             : "--strategy " + flags.strategy) +
+                     ": " + e.what());
   }
   EncodedFrameFit fitted = EncodeFrame(*encoder, sensor, targets, &markers);
   LatentFitter::Summary summary;

@@ -510,13 +510,17 @@ void RunTrain(const TrainFlags& flags) {
     OptionsFor(flags, sensor);  // bad flags fail before the dataset is read
   }
   if (!flags.default_fit.empty()) {  // checked as encode will check it, before training
+    // Only the photometric head's: `fit` fits a direct trunk with its own default
+    // (ceres:10), not encode's, so a recorded fit would mean two things there.
+    if (flags.head != "photometric") {
+      throw UsageError("--default-fit applies to --head photometric");
+    }
     FitStrategy strategy;
     std::string error;
     if (!FitStrategy::Parse(flags.default_fit, &strategy, &error)) {
       throw UsageError("--default-fit: " + error);
     }
-    error = LatentEncoder::StrategyRefusal(strategy, flags.head == "photometric",
-                                           !flags.no_warm_start);
+    error = LatentEncoder::StrategyRefusal(strategy, /*photometric=*/true, !flags.no_warm_start);
     if (!error.empty()) throw UsageError("--default-fit: the trained trunk " + error);
   }
   ApplyProductPrecision(flags.products);
@@ -925,9 +929,9 @@ void RegisterTrain(CLI::App& app, CommandBody* selected) {
                 "--head photometric: leave the training latents' warm-start table out of the "
                 "model (a smaller file; encode then fits with adam:N only)");
   sub->add_option("--default-fit", flags->default_fit,
-                  "The fit encode and fit use for the trained trunk(s) when no --strategy is "
-                  "given, recorded in the model (e.g. knn+adam:400; default: the encoder's "
-                  "rule, docs/FUNCTASET.md)");
+                  "--head photometric: the fit encode and fit use for the trained trunk(s) "
+                  "when no --strategy is given, recorded in the model (e.g. knn+adam:400; "
+                  "default: encode's rule, docs/CLI.md)");
   sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
   sub->callback([flags, selected]() { *selected = [flags]() { RunTrain(*flags); }; });
 }

@@ -505,6 +505,12 @@ TEST_F(TrainCliTest, ThePhotometricHeadCheckpointsAndResumes) {
     EXPECT_FALSE(fs::exists(Root("bad.tfm"))) << bad;
     EXPECT_FALSE(fs::exists(Root("bad.tfm.gelslim.ckpt"))) << bad;
   }
+  // A direct trunk has no recorded fit (`fit` has its own default for it).
+  const Result direct = Run("train --data " + Root("gr") + " --out " + Root("bad.tfm") +
+                            " --preset tiny --steps 2 --default-fit meta_sgd:3");
+  EXPECT_NE(direct.exit_code, 0);
+  EXPECT_THAT(direct.err, HasSubstr("--default-fit applies to --head photometric"));
+  EXPECT_FALSE(fs::exists(Root("bad.tfm")));
 }
 
 TEST_F(TrainCliTest, ReconWritesOneCsvRowPerFrameThatAgreesWithItsSummary) {
