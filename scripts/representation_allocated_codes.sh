@@ -17,7 +17,12 @@
 # frame, against PCA codes in the same bytes (OUT/eval_rate_distortion/rate_distortion.png).
 # MODEL=M scores the trunk M instead of training one (e.g. the committed
 # models/pretrained/bubble_readout.tfm; FRAMES_PER_TOOL then only names the outputs).
-# SEEDS="S1 S2 ..." scores other fresh sets (the picture is of the first).
+# SEEDS="S1 S2 ..." scores other fresh sets (the picture is of the first). SENSOR=gelslim
+# scores a GelSlim trunk instead (MODEL required; fresh sets of that sensor), and MODEL_B=M
+# scores budget B with the trunk M (e.g. the GelSlim's two committed trunks:
+# SENSOR=gelslim MODEL=models/pretrained/gelslim.tfm
+# MODEL_256=models/pretrained/gelslim_256.tfm). THREADS=T encodes and scores on T threads
+# (default 1).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:-/tmp/tactfunc_allocated}
@@ -26,16 +31,27 @@ shift $(( $# < 2 ? $# : 2 ))
 bytes=("$@")
 [ ${#bytes[@]} -gt 0 ] || bytes=(128 256)
 bin=build/bin/tactfunc
+sensor=${SENSOR:-bubble}
+threads=${THREADS:-1}
 [ -x "$bin" ] || { echo "representation_allocated_codes: build first (bash scripts/build.sh)" >&2; exit 1; }
 mkdir -p "$out"
 synth() {  # synth DIR SEED PER_TOOL
   [ -f "$1/dataset.json" ] ||
-    "$bin" synth --out "$1" --frames-per-tool "$3" --seed "$2" --clean --sensors bubble >/dev/null
+    "$bin" synth --out "$1" --frames-per-tool "$3" --seed "$2" --clean --sensors "$sensor" \
+        >/dev/null
 }
 if [ -n "${MODEL:-}" ] && [ ! -f "$MODEL" ]; then
   echo "representation_allocated_codes: MODEL=$MODEL: no such file" >&2; exit 1
 fi
+if [ "$sensor" != bubble ] && [ -z "${MODEL:-}" ]; then
+  echo "representation_allocated_codes: SENSOR=$sensor needs MODEL=M (it trains the Soft" \
+       "Bubble's trunk only)" >&2; exit 1
+fi
 model=${MODEL:-$out/readout_d256_t$per_tool.tfm}
+model_for() {  # the trunk that scores budget $1: MODEL_$1 if set, else the model
+  local name="MODEL_$1"
+  echo "${!name:-$model}"
+}
 if [ ! -f "$model" ]; then
   synth "$out/train$per_tool" 5151 "$per_tool"
   pca_frames=()
@@ -49,14 +65,15 @@ for seed in "${seeds[@]}"; do
   synth "$out/fresh$seed" "$seed" 150
   for b in "${bytes[@]}"; do
     name="t${per_tool}_s${seed}_b$b"
-    "$bin" encode --model "$model" --data "$out/fresh$seed" --out "$out/$name.tfs" \
-        --latent-bytes "$b" --sensors bubble --threads 1 >&2
-    "$bin" eval --model "$model" --data "$out/fresh$seed" --functaset "$out/$name.tfs" \
-        --out "$out/eval_$name" --threads 1 >/dev/null 2>&1
-    python3 - "$out/eval_$name/table.json" "$seed" "$b" <<'PY'
+    m=$(model_for "$b")
+    "$bin" encode --model "$m" --data "$out/fresh$seed" --out "$out/$name.tfs" \
+        --latent-bytes "$b" --sensors "$sensor" --threads "$threads" >&2
+    "$bin" eval --model "$m" --data "$out/fresh$seed" --functaset "$out/$name.tfs" \
+        --out "$out/eval_$name" --threads "$threads" >/dev/null 2>&1
+    python3 - "$out/eval_$name/table.json" "$seed" "$b" "$sensor" <<'PY'
 import json, sys
-path, seed, b = sys.argv[1:]
-t = json.load(open(path))["targets"]["bubble"]["psnr_3db_above_pca_same_bits_clean"]
+path, seed, b, sensor = sys.argv[1:]
+t = json.load(open(path))["targets"][sensor]["psnr_3db_above_pca_same_bits_clean"]
 print(f"seed {seed}, {b} B per frame: TactFunc {t['tactfunc_db']:.2f} dB, PCA codes in the same "
       f"bytes {t['pca_db']:.2f} dB ({t['pca_components']} components), margin "
       f"{t['margin_db']:+.2f} dB, {'met' if t['met'] else 'NOT met'}  ({path})")
@@ -67,13 +84,15 @@ first=${seeds[0]}
 name="t${per_tool}_s$first"
 for b in 32 64 128 256; do
   [ -f "$out/${name}_b$b.tfs" ] ||
-    "$bin" encode --model "$model" --data "$out/fresh$first" --out "$out/${name}_b$b.tfs" \
-        --latent-bytes "$b" --sensors bubble --threads 1 >&2
+    "$bin" encode --model "$(model_for "$b")" --data "$out/fresh$first" \
+        --out "$out/${name}_b$b.tfs" --latent-bytes "$b" --sensors "$sensor" \
+        --threads "$threads" >&2
 done
 extras=()
 for b in 32 64 256; do
-  extras+=(--extra-functaset "$out/${name}_b$b.tfs" --extra-model "$model")
+  extras+=(--extra-functaset "$out/${name}_b$b.tfs" --extra-model "$(model_for "$b")")
 done
-"$bin" eval --model "$model" --data "$out/fresh$first" --functaset "$out/${name}_b128.tfs" \
-    "${extras[@]}" --out "$out/eval_rate_distortion" --threads 1 >/dev/null 2>&1
+"$bin" eval --model "$(model_for 128)" --data "$out/fresh$first" \
+    --functaset "$out/${name}_b128.tfs" "${extras[@]}" --out "$out/eval_rate_distortion" \
+    --threads "$threads" >/dev/null 2>&1
 echo "picture: $out/eval_rate_distortion/rate_distortion.png"

@@ -420,6 +420,24 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
     }
     PcaCodec::Options pca_options;
     pca_options.components = *sweep.rbegin();
+    // PCA codes in allocated bytes B may keep any count of stored_pca's ladder up to 8 B
+    // (below), for the main functaset and every extra one: the fit keeps that many too, as
+    // many as the train frames allow, so that no budget's baseline is cut at the sweep's
+    // top (a 256 B functaset scored beside a 128 B one would otherwise be held to PCA of
+    // at most 4 x 64 components).
+    int ladder_top = 0;
+    auto note_ladder = [&](const Functaset& f) {
+      if (f.latent_precision() == Functaset::LatentPrecision::kAllocated) {
+        ladder_top = std::max(ladder_top, 8 * f.latent_bytes());
+      }
+    };
+    note_ladder(functaset);
+    for (const Extra& e : in.extras) {
+      if (e.functaset->has_sensor(sensor)) note_ladder(*e.functaset);
+    }
+    pca_options.components =
+        std::max(pca_options.components,
+                 std::min(ladder_top, static_cast<int>(baseline_train.size())));
     PcaCodec::Summary pca_summary;
     message("eval: fitting PCA on " + std::to_string(baseline_train.size()) + " frames of " +
             std::to_string(train_matrix.cols()) + " floats...\n");
