@@ -716,7 +716,6 @@ void RunTrain(const TrainFlags& flags) {
       throw std::runtime_error(std::string("training ") + name + " failed: " + summary.message +
                                hint.str());
     }
-    trunk.default_fit = flags.default_fit;
     model.SetTrunk(std::move(trunk));
     sensor_figures[name] = {{"steps", summary.steps_done},
                             {"seconds", summary.total_train_seconds},

@@ -25,6 +25,10 @@
 namespace tactfunc {
 namespace {
 
+// The most components PCA codes in B allocated bytes per frame may keep: 8 B, each at one
+// bit (the top of eval's ladder of component counts).
+int LadderTop(int bytes) { return 8 * bytes; }
+
 using Observer = TableEvaluation::Observer;
 using Row = TableEvaluation::Row;
 using RdCurves = TableEvaluation::RdCurves;
@@ -420,20 +424,24 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
     }
     PcaCodec::Options pca_options;
     pca_options.components = *sweep.rbegin();
-    // PCA codes in allocated bytes B may keep any count of stored_pca's ladder up to 8 B
-    // (below), for the main functaset and every extra one: the fit keeps that many too, as
-    // many as the train frames allow, so that no budget's baseline is cut at the sweep's
-    // top (a 256 B functaset scored beside a 128 B one would otherwise be held to PCA of
-    // at most 4 x 64 components).
-    int ladder_top = 0;
-    auto note_ladder = [&](const Functaset& f) {
-      if (f.latent_precision() == Functaset::LatentPrecision::kAllocated) {
-        ladder_top = std::max(ladder_top, 8 * f.latent_bytes());
-      }
-    };
-    note_ladder(functaset);
+    // PCA codes in allocated bytes B may keep any count of stored_pca's ladder up to
+    // LadderTop (below): the main functaset's shared-bytes baseline at its bytes per frame,
+    // and every allocated functaset, main or extra, at its own. The fit keeps that many
+    // components too, as many as the train frames allow, so that no budget's baseline is
+    // cut at the sweep's top (a 256 B functaset scored beside a 128 B one would otherwise
+    // be held to PCA of at most 4 x 64 components).
+    // The main functaset's bytes per frame as allocated codes share them: its own budget,
+    // or its bytes per frame rounded down (0 below one byte: no shared-bytes baseline).
+    const int shared_bytes =
+        functaset.latent_precision() == Functaset::LatentPrecision::kAllocated
+            ? functaset.latent_bytes()
+            : (tf_frame_bytes >= 1 ? static_cast<int>(std::floor(tf_frame_bytes)) : 0);
+    int ladder_top = LadderTop(shared_bytes);
     for (const Extra& e : in.extras) {
-      if (e.functaset->has_sensor(sensor)) note_ladder(*e.functaset);
+      if (e.functaset->has_sensor(sensor) &&
+          e.functaset->latent_precision() == Functaset::LatentPrecision::kAllocated) {
+        ladder_top = std::max(ladder_top, LadderTop(e.functaset->latent_bytes()));
+      }
     }
     pca_options.components =
         std::max(pca_options.components,
@@ -487,7 +495,7 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
       if (like.latent_precision() == Functaset::LatentPrecision::kAllocated) {
         for (int p = 1; p <= pca_full.components(); p *= 2) {
           for (int n : {p, p + p / 2}) {
-            if (n <= 8 * like.latent_bytes() && n <= pca_full.components() &&
+            if (n <= LadderTop(like.latent_bytes()) && n <= pca_full.components() &&
                 std::find(order.begin(), order.end(), n) == order.end()) {
               order.push_back(n);
             }
@@ -537,10 +545,10 @@ TableEvaluation::Result TableEvaluation::Evaluate(const Inputs& in, const Option
     std::vector<StoredPca> shared_pca;
     if (functaset.latent_precision() == Functaset::LatentPrecision::kAllocated) {
       shared_pca = main_stored_pca;
-    } else if (tf_frame_bytes >= 1) {
+    } else if (shared_bytes >= 1) {
       Functaset like(0, "");
       like.set_latent_precision(Functaset::LatentPrecision::kAllocated);
-      like.set_latent_bytes(static_cast<int>(std::floor(tf_frame_bytes)));
+      like.set_latent_bytes(shared_bytes);
       shared_pca = stored_pca(like, d);
     }
     std::string pca_note;
