@@ -253,10 +253,13 @@ TEST_F(EvalCliTest, AllocatedCodesAreComparedWithPcaCodesInTheSameBytes) {
   const Result encode3 = Run("encode --model " + Root("m.tfm") + " --data " + Root("d") +
                              " --out " + Root("a3.tfs") + " --threads 1 --latent-bytes 3");
   ASSERT_EQ(encode3.exit_code, 0) << encode3.err;
-  const Result r = Run("eval --data " + Root("d") + " --model " + Root("m.tfm") +
-                       " --functaset " + Root("a6.tfs") + " --out " + Root("table_a6") +
-                       " --extra-functaset " + Root("a3.tfs") + " --extra-model " +
-                       Root("m.tfm") + " --threads 1 --json");
+  // eval of one allocated functaset with the other beside it, into table_<main>.
+  const auto eval_led_by = [&](const std::string& main, const std::string& extra) {
+    return Run("eval --data " + Root("d") + " --model " + Root("m.tfm") + " --functaset " +
+               Root(main + ".tfs") + " --out " + Root("table_" + main) + " --extra-functaset " +
+               Root(extra + ".tfs") + " --extra-model " + Root("m.tfm") + " --threads 1 --json");
+  };
+  const Result r = eval_led_by("a6", "a3");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const nlohmann::json j = r.LastJson();
   // The picture's points: PCA stored as each functaset stores its latents, at its bytes,
@@ -310,10 +313,7 @@ TEST_F(EvalCliTest, AllocatedCodesAreComparedWithPcaCodesInTheSameBytes) {
   }
   // A budget's PCA baseline does not depend on which functaset is the main one: the 6 B
   // point of a run led by the 3 B functaset is the 6 B run's own.
-  const Result swapped = Run("eval --data " + Root("d") + " --model " + Root("m.tfm") +
-                             " --functaset " + Root("a3.tfs") + " --out " + Root("table_a3") +
-                             " --extra-functaset " + Root("a6.tfs") + " --extra-model " +
-                             Root("m.tfm") + " --threads 1 --json");
+  const Result swapped = eval_led_by("a3", "a6");
   ASSERT_EQ(swapped.exit_code, 0) << swapped.err;
   const nlohmann::json led_by_3 = swapped.LastJson();
   for (const char* sensor : {"bubble", "gelslim"}) {
