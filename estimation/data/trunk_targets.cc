@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <numeric>
 #include <stdexcept>
 #include <string>
 
@@ -186,6 +187,35 @@ std::vector<double> ContactDrawProbabilities(const TrunkTargets& targets,
     p[i] = (1 - share) / static_cast<double>(n) + (share > 0 ? share * energy[i] / total : 0);
   }
   return p;
+}
+
+ContactDraw::ContactDraw(const TrunkTargets& targets, double share, bool with_guide) {
+  std::vector<int> all(targets.values.rows());
+  std::iota(all.begin(), all.end(), 0);
+  cdf = ContactDrawProbabilities(targets, all, share);
+  std::partial_sum(cdf.begin(), cdf.end(), cdf.begin());
+  if (!cdf.empty()) cdf.back() = 1.0;
+  if (!with_guide) return;
+  const int n = static_cast<int>(cdf.size());
+  guide.resize(n);
+  for (int b = 0, j = 0; b < n; ++b) {
+    const double lower = static_cast<double>(b) / n;
+    while (j < n - 1 && cdf[j] <= lower) ++j;
+    guide[b] = j;
+  }
+}
+
+int ContactDraw::Pixel(double u) const {
+  const int n = static_cast<int>(cdf.size());
+  if (guide.empty()) {
+    return std::min<int>(
+        n - 1, static_cast<int>(std::upper_bound(cdf.begin(), cdf.end(), u) - cdf.begin()));
+  }
+  // The guide's bucket of u; the two walks make the answer exact whatever u n rounds to.
+  int j = guide[std::min(n - 1, static_cast<int>(u * n))];
+  while (j > 0 && cdf[j - 1] > u) --j;
+  while (j < n - 1 && cdf[j] <= u) ++j;
+  return j;
 }
 
 void ContactSample(const TrunkTargets& targets, int m, double share, std::vector<int>* pixels,

@@ -99,6 +99,19 @@ std::vector<int> ValidPixels(const TrunkTargets& targets);
 // sum to 0 or to no finite number. share in [0, 1].
 std::vector<double> ContactDrawProbabilities(const TrunkTargets& targets,
                                              const std::vector<int>& pixels, double share);
+// Draws of one pixel among all of a frame's by ContactDrawProbabilities(targets, every
+// pixel, share): Pixel(u) for a uniform u in [0, 1) is the first pixel whose cumulative
+// probability exceeds u (the last pixel if none does). With the guide (a table of n
+// entries, the first pixel past b / n for each b) a draw takes a step or two instead of a
+// binary search over every pixel, and returns the same pixel.
+struct ContactDraw {
+  ContactDraw() = default;
+  ContactDraw(const TrunkTargets& targets, double share, bool with_guide);
+  int Pixel(double u) const;
+  std::vector<double> cdf;  // cumulative probabilities in pixel order, the last 1
+  std::vector<int> guide;   // empty without the guide
+};
+
 // Systematic sampling of m draws by those probabilities, at the positions (k + 1/2) / m
 // of their cumulative sum in pixel order: *pixels keeps each pixel drawn (c_i times) once,
 // in order, and *weight_factor gets c_i / (n p_i) for it, so that a weighted sum over the

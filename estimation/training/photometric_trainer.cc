@@ -62,30 +62,18 @@ void DrawPixels(const TrunkTargets& frame, int count, boost::random::mt19937_64*
   }
 }
 
-// The cumulative distribution of PhotometricFitOptions::contact_share's draw over all of
-// the frame's pixels (its last entry 1).
-std::vector<double> ContactDrawCdf(const TrunkTargets& frame, double share) {
-  std::vector<int> all(frame.values.rows());
-  std::iota(all.begin(), all.end(), 0);
-  std::vector<double> cdf = ContactDrawProbabilities(frame, all, share);
-  std::partial_sum(cdf.begin(), cdf.end(), cdf.begin());
-  cdf.back() = 1.0;
-  return cdf;
-}
-
-// DrawPixels by the distribution `cdf` (ContactDrawCdf): pixel j weighs w_j / (N p_j).
-void DrawPixelsBy(const TrunkTargets& frame, const std::vector<double>& cdf, int count,
+// DrawPixels by the distribution `draw`: pixel j weighs w_j / (N p_j).
+void DrawPixelsBy(const TrunkTargets& frame, const ContactDraw& draw, int count,
                   boost::random::mt19937_64* rng, std::vector<int>* pixels,
                   Eigen::MatrixXf* targets, Eigen::VectorXf* weights) {
+  const std::vector<double>& cdf = draw.cdf;
   const int n = static_cast<int>(cdf.size());
   boost::random::uniform_real_distribution<double> uniform(0.0, 1.0);
   pixels->resize(count);
   targets->resize(count, frame.values.cols());
   weights->resize(count);
   for (int i = 0; i < count; ++i) {
-    const int j = std::min<int>(
-        n - 1, static_cast<int>(std::upper_bound(cdf.begin(), cdf.end(), uniform(*rng)) -
-                                cdf.begin()));
+    const int j = draw.Pixel(uniform(*rng));
     const double p = cdf[j] - (j > 0 ? cdf[j - 1] : 0.0);
     (*pixels)[i] = j;
     targets->row(i) = frame.values.row(j);
@@ -404,7 +392,9 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
         // The frame's distribution is made anew each time it is drawn: kept for every
         // training frame it would take 8 bytes per pixel (110 MB at 1620 GelSlim frames)
         // to save about 1.4% of a step (perf of `train --head photometric`, 2026-11-28).
-        DrawPixelsBy(frames[slot.frame], ContactDrawCdf(frames[slot.frame], o.contact_share),
+        // No guide: building it costs more than the step's few draws save.
+        DrawPixelsBy(frames[slot.frame],
+                     ContactDraw(frames[slot.frame], o.contact_share, /*with_guide=*/false),
                      o.batch_pixels, &rng, &pixels, &targets, &weights);
       } else {
         DrawPixels(frames[slot.frame], o.batch_pixels, &rng, &pixels, &targets, &weights);
@@ -498,16 +488,17 @@ PhotometricFit FitPhotometricLatent(const PhotometricTrunk& trunk, const TrunkTa
   std::vector<int> pixels;
   Eigen::MatrixXf targets;
   Eigen::VectorXf weights, dz;
-  const std::vector<double> contact_cdf = options.contact_share > 0
-                                              ? ContactDrawCdf(frame, options.contact_share)
-                                              : std::vector<double>();
+  // A fit draws its frame's pixels over many steps: worth the guide.
+  const ContactDraw contact = options.contact_share > 0
+                                  ? ContactDraw(frame, options.contact_share, /*with_guide=*/true)
+                                  : ContactDraw();
   auto advance = [&](Start* s, int last_step) {
     for (int step = s->step + 1; step <= last_step; ++step) {
-      if (contact_cdf.empty()) {
+      if (contact.cdf.empty()) {
         DrawPixelBlocks(frame, options.batch_pixels, options.pixel_block, &s->rng, &pixels,
                         &targets, &weights);
       } else {
-        DrawPixelsBy(frame, contact_cdf, options.batch_pixels, &s->rng, &pixels, &targets,
+        DrawPixelsBy(frame, contact, options.batch_pixels, &s->rng, &pixels, &targets,
                      &weights);
       }
       trunk.LossAndGradient<float>(pixels, s->z.cast<float>(), targets, weights, &dz, nullptr,

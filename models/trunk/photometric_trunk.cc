@@ -454,7 +454,12 @@ void PhotometricTrunk::RunForward(const std::vector<int>& pixels, const VectorX<
     // separate rows would have contributed; with no position shared the pass is the
     // plain one, row for row. A shared position takes the coordinate of its first use.
     const int cols = options_.cols, ec = cols + 2;
-    std::vector<int> slot_of(static_cast<std::size_t>(options_.rows + 2) * ec, -1);
+    // The slot of each extended-grid position, -1 where none: kept per thread and reset
+    // where this pass wrote, not allocated and filled for each pass (a fit's step of 64
+    // pixels touches about 300 of the GelSlim's 8,938 positions).
+    thread_local std::vector<int> slot_of;
+    const std::size_t positions = static_cast<std::size_t>(options_.rows + 2) * ec;
+    if (slot_of.size() < positions) slot_of.assign(positions, -1);
     pass.slot.resize(static_cast<std::size_t>(kSets) * n);
     std::vector<int> first_use;  // the set row of each slot's first use
     const int shift[kSets][2] = {{0, 0}, {0, 1}, {0, -1}, {1, 0}, {-1, 0}};
@@ -470,6 +475,11 @@ void PhotometricTrunk::RunForward(const std::vector<int>& pixels, const VectorX<
       }
     }
     const int distinct = static_cast<int>(first_use.size());
+    for (int u = 0; u < distinct; ++u) {
+      const int k = first_use[u] / n, i = first_use[u] % n;
+      slot_of[(pixels[i] / cols + 1 + shift[k][0]) * ec + pixels[i] % cols + 1 + shift[k][1]] =
+          -1;
+    }
     if (distinct == kSets * n) pass.slot.clear();
     pass.coords.resize(distinct, 2);
     for (int u = 0; u < distinct; ++u) {

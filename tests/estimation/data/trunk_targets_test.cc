@@ -292,5 +292,39 @@ TEST(ContactSample, ItsWeightedEnergyEstimatesTheFramesWithoutBias) {
   for (int j : pixels) EXPECT_GT(t.values(j, 0), 0.0f) << "pixel " << j;
 }
 
+TEST(ContactDraw, TheGuideDrawsThePixelTheBinarySearchDraws) {
+  // A draw with zero-probability pixels (share 1), pixels that hold most of the mass,
+  // and the uniforms that land on the cumulative sums themselves, just beside them, and
+  // at the ends.
+  TrunkTargets t = Targets({0, 0, 3, 0.2f, 0, 1, 0, 0.5f, 0, 0, 2, 0, 0, 0, 0.01f, 0});
+  for (double share : {0.0, 0.5, 1.0}) {
+    const ContactDraw plain(t, share, /*with_guide=*/false);
+    const ContactDraw guided(t, share, /*with_guide=*/true);
+    ASSERT_EQ(guided.guide.size(), 16u);
+    ASSERT_EQ(plain.cdf, guided.cdf);
+    EXPECT_EQ(guided.cdf.back(), 1.0);
+    std::vector<double> us{0.0, std::nextafter(1.0, 0.0)};
+    for (double c : guided.cdf) {
+      us.insert(us.end(), {c, std::nextafter(c, 0.0), std::nextafter(c, 1.0)});
+    }
+    for (int b = 0; b <= 16; ++b) us.push_back(b / 16.0);
+    for (int i = 0; i < 1000; ++i) us.push_back((i + 0.5) / 1000);
+    for (double u : us) {
+      if (!(u >= 0 && u < 1)) continue;
+      const int j = plain.Pixel(u);
+      EXPECT_EQ(guided.Pixel(u), j) << "share " << share << ", u " << u;
+      // The first pixel whose cumulative probability exceeds u.
+      EXPECT_GT(guided.cdf[j], u);
+      if (j > 0) {
+        EXPECT_LE(guided.cdf[j - 1], u);
+      }
+    }
+    // Share 1: a pixel without energy is never drawn.
+    if (share == 1.0) {
+      for (int i = 0; i < 1000; ++i) EXPECT_GT(t.values(guided.Pixel((i + 0.5) / 1000), 0), 0);
+    }
+  }
+}
+
 }  // namespace
 }  // namespace tactfunc
