@@ -929,7 +929,7 @@ void RegisterTrain(CLI::App& app, CommandBody* selected) {
                 "model (a smaller file; encode then fits with adam:N only)");
   sub->add_option("--default-fit", flags->default_fit,
                   "--head photometric: the fit encode and fit use for the trained trunk(s) "
-                  "when no --strategy is given, recorded in the model (e.g. knn+adam:400; "
+                  "when no --strategy is given, recorded in the model (e.g. knn+adam:480; "
                   "default: encode's rule, docs/CLI.md)");
   sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
   sub->callback([flags, selected]() { *selected = [flags]() { RunTrain(*flags); }; });

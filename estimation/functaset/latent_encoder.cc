@@ -34,17 +34,17 @@ constexpr std::uint64_t kPhotometricFitSeed = 0x70686f746f;
 // knn+adam:N: the neighbours scored per frame, the fit's first step size from the start,
 // its pixels per step, the share of them drawn towards the contact, and the default N
 // for a trunk with a warm-start table per 64 latent values: at d = 64 the most steps
-// that keep encoding at 100 frames/s on 2 threads with a tenth to spare on this shared
-// machine kind (120: 112 frames/s at the median of three runs, 140: 99.5;
-// docs/REPRESENTATION.md, "The warm-started fit's steps re-picked"); a longer latent
-// starts further from its neighbour and has more values to move, and d = 128 needed
-// twice the steps for the same margin over same-bits PCA (docs/REPRESENTATION.md,
-// "Pixels drawn towards the contact").
+// whose rounds keep encoding above 100 frames/s on 2 threads on this shared machine kind
+// (140: 107.1-109.5 frames/s at the medians of three runs of three rounds, 104.2-110.3
+// over the rounds; 160: 98.5; docs/REPRESENTATION.md, "Cheaper draws, 140 steps"); a
+// longer latent starts further from its neighbour and has more values to move, and
+// d = 128 needed twice the steps for the same margin over same-bits PCA
+// (docs/REPRESENTATION.md, "Pixels drawn towards the contact").
 constexpr int kWarmStartCandidates = 4;
 constexpr double kWarmStartRate = 1e-2;
 constexpr int kWarmStartBatchPixels = 64;
 constexpr double kWarmStartContactShare = 0.5;
-constexpr int kWarmStartFitStepsPer64Values = 120;
+constexpr int kWarmStartFitStepsPer64Values = 140;
 
 }  // namespace
 

@@ -398,7 +398,7 @@ TEST_F(TrainCliTest, ThePhotometricHeadTrainsEncodesAndReconstructsAnOpticalSens
     ASSERT_EQ(pose.exit_code, 0) << sampler << ": " << pose.err;
     EXPECT_EQ(pose.LastJson()["sampler"], sampler);
     // The pose MLP saw the functaset's knn+adam:3 latents, so the frame is fitted so,
-    // not with encode's default knn+adam:120.
+    // not with encode's default knn+adam:140.
     EXPECT_THAT(pose.out, HasSubstr("the latent fitted as encode fits it (knn+adam:3,"))
         << sampler;
   }

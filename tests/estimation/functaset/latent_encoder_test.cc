@@ -217,12 +217,12 @@ TEST(LatentEncoder, StrategiesAreValidatedByName) {
 }
 
 TEST(LatentEncoder, APhotometricTrunksDefaultStepsGrowWithItsLatent) {
-  // 120 Adam steps per 64 latent values from the warm-start table, never fewer than
-  // 120; without a table the cold fit's 200.
-  EXPECT_EQ(LatentEncoder::DefaultPhotometricStrategy(true, 64), "knn+adam:120");
-  EXPECT_EQ(LatentEncoder::DefaultPhotometricStrategy(true, 128), "knn+adam:240");
-  EXPECT_EQ(LatentEncoder::DefaultPhotometricStrategy(true, 96), "knn+adam:180");
-  EXPECT_EQ(LatentEncoder::DefaultPhotometricStrategy(true, 16), "knn+adam:120");
+  // 140 Adam steps per 64 latent values from the warm-start table, never fewer than
+  // 140; without a table the cold fit's 200.
+  EXPECT_EQ(LatentEncoder::DefaultPhotometricStrategy(true, 64), "knn+adam:140");
+  EXPECT_EQ(LatentEncoder::DefaultPhotometricStrategy(true, 128), "knn+adam:280");
+  EXPECT_EQ(LatentEncoder::DefaultPhotometricStrategy(true, 96), "knn+adam:210");
+  EXPECT_EQ(LatentEncoder::DefaultPhotometricStrategy(true, 16), "knn+adam:140");
   EXPECT_EQ(LatentEncoder::DefaultPhotometricStrategy(false, 128), "adam:200");
 }
 
