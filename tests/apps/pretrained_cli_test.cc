@@ -115,7 +115,7 @@ TEST(PretrainedCliTest, TheCommittedGelSlimTrunkDrawsWhatTheDirectTrunkBlurs) {
 // the fit it records as its default (knn+adam:480), against the 128 B trunk above with
 // its default fit, on the same fresh contacts: twice the bytes must draw them at least
 // 1.4 dB closer
-// (measured 1.88 dB on these 24 frames: 36.75 against 34.87; 1.87 dB on the test split of
+// (measured 1.88 dB on these 24 frames: 36.75 against 34.87; 1.90 dB on the test split of
 // a fresh 1,800-frame set, docs/RESULTS_RECONSTRUCTION.md, "The GelSlim at 256 B per
 // frame").
 TEST(PretrainedCliTest, TheGelSlimTrunkFor256BytesDrawsFreshContactsCloser) {
