@@ -456,7 +456,8 @@ void PhotometricTrunk::RunForward(const std::vector<int>& pixels, const VectorX<
     const int cols = options_.cols, ec = cols + 2;
     // The slot of each extended-grid position, -1 where none: kept per thread and reset
     // where this pass wrote, not allocated and filled for each pass (a fit's step of 64
-    // pixels touches about 300 of the GelSlim's 8,938 positions).
+    // pixels touches about 300 of the GelSlim's 8,938 positions). It holds (rows + 2) x
+    // (cols + 2) ints of the largest grid the thread has met (36 kB for the GelSlim).
     thread_local std::vector<int> slot_of;
     const std::size_t positions = static_cast<std::size_t>(options_.rows + 2) * ec;
     if (slot_of.size() < positions) slot_of.assign(positions, -1);
