@@ -9,14 +9,17 @@ Why: at 256 B per frame a d = 64 latent already holds 16 bits per value, while P
 gaining from more bytes; a residual code is the simplest way to spend more bytes on a
 trunk. The script prints, per k, the test split's mean PSNR against the noise-free frames
 (and the noisy ones), the residual's RMS against the sensor noise's, and the residual
-spectrum's first singular values (flat = each coefficient buys little).
+spectrum's first singular values (flat = each coefficient buys little). The row "mean"
+adds the train residuals' mean alone: a fixed per-pixel background stored once, no bytes
+per frame (what a trunk that draws in the contact's frame cannot draw when the sensor's
+background differs from its reference, as on real sensors).
 
   tactfunc export --data D --model M --functaset F --split all --clean --out X
   python3 scripts/representation_residual_pca.py --export X --sensor gelslim
 
-Input: `tactfunc export --split all --clean --functaset F` (docs/CLI.md, "export"): the
-frames, their noise-free copies and their reconstructions from F. NumPy only.
-Deterministic.
+Input: `tactfunc export --split all --functaset F` (docs/CLI.md, "export"): the frames,
+their reconstructions from F and, with --clean, their noise-free copies (without them,
+for real frames, the PSNR is against the frames alone). NumPy only. Deterministic.
 """
 import argparse
 import json
@@ -32,8 +35,10 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from representation_common import psnr_per_frame  # noqa: E402
 
 
-def load(directory, name):
+def load(directory, name, optional=False):
     path = os.path.join(directory, name)
+    if optional and not os.path.exists(path):
+        return None
     if not os.path.exists(path):
         sys.exit(f"representation_residual_pca.py: {path} is missing (run `tactfunc export "
                  f"--split all --clean --functaset F`)")
@@ -49,7 +54,7 @@ def main():
     args = parser.parse_args()
     s = args.sensor
     x = load(args.export, f"{s}_all.npy")
-    clean = load(args.export, f"{s}_all_clean.npy")
+    clean = load(args.export, f"{s}_all_clean.npy", optional=True)
     recon = load(args.export, f"{s}_all_recon.npy")
     weights = load(args.export, f"{s}_all_weights.npy")
     with open(os.path.join(args.export, "export.json")) as f:
@@ -65,22 +70,29 @@ def main():
     mean = residual[train].mean(0)
     _, singular, basis = np.linalg.svd(residual[train] - mean, full_matrices=False)
     spread = singular / np.sqrt(train.sum())
-    noise = np.sqrt(np.mean((x[test] - clean[test]) ** 2))
+    noise = (f"against the noise's {np.sqrt(np.mean((x[test] - clean[test]) ** 2)):.4g}"
+             if clean is not None else "(no noise-free copies)")
     print(f"{s}: {train.sum()} train / {test.sum()} test frames; test residual RMS "
-          f"{np.sqrt(np.mean(residual[test] ** 2)):.4g} against the noise's {noise:.4g}; "
+          f"{np.sqrt(np.mean(residual[test] ** 2)):.4g} {noise}; "
           f"residual spectrum (RMS per component) {', '.join(f'{v:.3f}' for v in spread[:8])}")
-    print("| residual components | test PSNR noise-free | gain | test PSNR noisy |")
+    # The reference the gains are read against: the noise-free frames where there are.
+    truth = clean if clean is not None else x
+    print(f"| residual components | test PSNR {'noise-free' if clean is not None else 'noisy'} "
+          f"| gain | test PSNR noisy |")
     print("|---:|---:|---:|---:|")
     base = None
-    for k in args.components:
+    rows = [(k, False) for k in args.components]
+    rows.insert(1 if rows and rows[0][0] == 0 else 0, (0, True))
+    for k, mean_only in rows:
         k = min(k, len(basis))
         code = (residual[test] - mean) @ basis[:k].T
-        pred = recon[test] + (mean + code @ basis[:k]).reshape(recon[test].shape) if k else \
-            recon[test]
-        clean_db = psnr_per_frame(pred, clean[test], weights[test]).mean()
+        pred = recon[test] + (mean + code @ basis[:k]).reshape(recon[test].shape) \
+            if k or mean_only else recon[test]
+        truth_db = psnr_per_frame(pred, truth[test], weights[test]).mean()
         noisy_db = psnr_per_frame(pred, x[test], weights[test]).mean()
-        base = clean_db if base is None else base
-        print(f"| {k} | {clean_db:.2f} | {clean_db - base:+.2f} | {noisy_db:.2f} |")
+        base = truth_db if base is None else base
+        print(f"| {'mean' if mean_only else k} | {truth_db:.2f} | {truth_db - base:+.2f} | "
+              f"{noisy_db:.2f} |")
 
 
 if __name__ == "__main__":
