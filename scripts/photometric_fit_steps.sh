@@ -9,10 +9,11 @@
 #
 #   bash scripts/photometric_fit_steps.sh [OUT_DIR] [ROUNDS] [N...]
 #
-# Defaults: /tmp/tactfunc_fit_steps, 3 rounds, N = 20 80 100 120 140. The selection set is
-# `synth --frames-per-tool 150 --sensors gelslim --seed 777 --clean` (1,800 frames; the
-# evaluation set of the docs is seed 4242). MODEL=M scores another photometric trunk.
-# Takes about 6 minutes on 2 cores with the defaults. Run it on an otherwise idle machine:
+# Defaults: /tmp/tactfunc_fit_steps, 3 rounds, N = 20 80 100 120 140 160 (the default,
+# 140, and the count above it). The selection set is `synth --frames-per-tool 150
+# --sensors gelslim --seed 777 --clean` (1,800 frames; the evaluation set of the docs is
+# seed 4242). MODEL=M scores another photometric trunk. Takes about 7 minutes on 2 cores
+# with the defaults. Run it on an otherwise idle machine:
 # a second job halves the rates.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -20,7 +21,7 @@ out=${1:-/tmp/tactfunc_fit_steps}
 rounds=${2:-3}
 shift $(( $# < 2 ? $# : 2 ))
 steps=("$@")
-[ ${#steps[@]} -gt 0 ] || steps=(20 80 100 120 140)
+[ ${#steps[@]} -gt 0 ] || steps=(20 80 100 120 140 160)
 bin=build/bin/tactfunc
 model=${MODEL:-models/pretrained/gelslim.tfm}
 [ -x "$bin" ] || { echo "photometric_fit_steps: build first (bash scripts/build.sh)" >&2; exit 1; }

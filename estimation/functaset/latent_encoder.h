@@ -18,7 +18,7 @@
 // Levenberg-Marquardt iterations on the frame's LatentProblem, estimation/fitting/
 // latent_problem.h, from z = 0, with Options::problem's sigma, sigma_z and robust loss).
 // A photometric trunk (models/trunk/photometric_trunk.h) is fitted by FitPhotometricLatent
-// instead: knn+adam:N (the default where the model holds a warm-start table, N = 120 per
+// instead: knn+adam:N (the default where the model holds a warm-start table, N = 140 per
 // 64 latent values: the best of 4 neighbours among the training latents, then N Adam
 // steps from 1e-2 on 64 pixels a step, estimation/training/photometric_warm_start.h), knn
 // (that neighbour as it is), knn+ceres:N or adam:N (N steps from the moment pose and its
@@ -205,8 +205,8 @@ class LatentEncoder {
   const FitStrategy& StrategyOf(SensorKind sensor) const { return State(sensor).strategy; }
 
   // The default fit of a photometric trunk's frames with a latent of `latent_dim`
-  // values: knn+adam:N where the model holds the trunk's warm-start table (N = 120 per 64
-  // latent values, at least 120), adam:N without one.
+  // values: knn+adam:N where the model holds the trunk's warm-start table (N = 140 per 64
+  // latent values, at least 140), adam:N without one.
   static std::string DefaultPhotometricStrategy(bool warm_start_table, int latent_dim);
 
   // Why `strategy` cannot fit the latents of a photometric (or direct) trunk, with or

@@ -205,7 +205,7 @@ FitStrategy LatentMapOfPoseModel(const PoseMlp& pose_model, const SensorTrunk& t
 
 // The fit a photometric trunk's frame gets for `pose_model`: the strategy of the
 // functaset it was trained on, which train-pose records as its "latent_map" (e.g.
-// "knn+adam:120"), or "" -- the encoder's default -- for a model that records
+// "knn+adam:140"), or "" -- the encoder's default -- for a model that records
 // "functaset" (written before train-pose recorded the functaset's strategy). Read as
 // PoseModelProvenance; throws std::invalid_argument as it does.
 std::string PhotometricLatentMapOfPoseModel(const PoseMlp& pose_model);
