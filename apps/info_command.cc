@@ -148,6 +148,12 @@ nlohmann::json DescribeModel(const std::string& bytes, const std::string& path) 
                   p.latent_dim(), p.latent_dim() - PhotometricTrunk::kPoseValues,
                   p.options().shading_width, p.reference().rows, p.reference().cols,
                   p.options().supersample, p.options().supersample, p.marker_scale());
+      if (!p.background().empty()) {
+        std::printf("           background: %dx%dx%d values (RMS %.4g) added to every frame "
+                    "drawn, no latent bytes\n",
+                    p.background().rows, p.background().cols, p.background().channels,
+                    p.BackgroundRms());
+      }
       if (t.warm_start != nullptr) {
         const WarmStartTable& w = *t.warm_start;
         std::printf("           warm-start table: %lld training latents, descriptors of %d x "

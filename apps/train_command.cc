@@ -73,6 +73,7 @@ struct TrainFlags {
   int marker_warmup = 1000;
   double contact_share = PhotometricTrainer::Options().contact_share;
   bool no_warm_start = false;
+  bool background = false;  // --head photometric: estimate the sensor's background table
   std::string default_fit;  // "": the encoder's rule
   // Set after parsing: which overrides were given.
   CLI::Option *latent_dim_option = nullptr, *width_option = nullptr, *layers_option = nullptr,
@@ -418,18 +419,32 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
                                ". No model was written. This run's --learning-rate was " +
                                std::to_string(o.trunk_learning_rate));
     }
+    std::vector<std::shared_ptr<const PhotometricTrunk::Markers>> markers;
+    std::vector<const PhotometricTrunk::Markers*> marker_of_reference;
+    for (const Image& reference : references) {
+      markers.push_back(result.trunk.MakeMarkers(reference));
+      marker_of_reference.push_back(markers.back().get());
+    }
+    auto photometric = std::make_shared<PhotometricTrunk>(result.trunk);
+    if (flags.background) {
+      // What every training frame shares and the contact cannot draw, with the training
+      // latents held (PhotometricTrainer::MeanResidual): up to kBackgroundFrames frames.
+      constexpr int kBackgroundFrames = 8192;
+      photometric->SetBackground(PhotometricTrainer::MeanResidual(
+          *photometric, frames, result.latents, marker_of_reference, frame_reference,
+          kBackgroundFrames, o.threads));
+      std::cout << "train " << name << ": background from "
+                << std::min<std::size_t>(frames.size(), kBackgroundFrames)
+                << " training frames, RMS " << photometric->BackgroundRms() << std::endl;
+    }
     // The likelihood scale of the samplers: the RMS residual of the training latents over
     // up to 64 evenly spaced training frames, whole frames.
     const int checked = std::min<int>(64, static_cast<int>(frames.size()));
-    std::vector<std::shared_ptr<const PhotometricTrunk::Markers>> markers;
-    for (const Image& reference : references) {
-      markers.push_back(result.trunk.MakeMarkers(reference));
-    }
     std::vector<double> mse(checked);
     internal::ParallelFor(checked, o.threads, [&](int k) {
       const std::size_t i = static_cast<std::size_t>(k) * frames.size() / checked;
-      mse[k] = result.trunk.LossAndGradient<float>(
-          result.trunk.AllPixels(), result.latents.row(i).transpose().cast<float>(),
+      mse[k] = photometric->LossAndGradient<float>(
+          photometric->AllPixels(), result.latents.row(i).transpose().cast<float>(),
           frames[i].values, frames[i].weights, nullptr, nullptr, nullptr, nullptr,
           markers[frame_reference[i]].get());
     });
@@ -440,7 +455,7 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
     trunk.format = format;
     trunk.siren = result.trunk.siren();
     trunk.alpha = Eigen::VectorXd::Zero(trunk.siren.latent_dim());
-    trunk.photometric = std::make_shared<PhotometricTrunk>(result.trunk);
+    trunk.photometric = photometric;
     // The fits' warm starts (encode --strategy knn+adam:N): the training latents, looked
     // up by each frame's descriptor in its moment frame.
     if (!flags.no_warm_start) {
@@ -462,6 +477,7 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
                      {"residual_sigma", trunk.residual_sigma},
                      {"train_frames", frames.size()},
                      {"marker_scale", result.trunk.marker_scale()}};
+    if (flags.background) figures[name]["background_rms"] = photometric->BackgroundRms();
     info_trunks[name] = {{"data_frames", DataFramesJson(info)},
                          {"head", "photometric"},
                          {"options",
@@ -475,6 +491,7 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
                            {"latent_learning_rate", o.latent_learning_rate},
                            {"marker_warmup_steps", o.marker_warmup_steps},
                            {"contact_share", o.contact_share},
+                           {"background", flags.background},
                            {"seed", o.seed}}},
                          {"steps", result.summary.steps},
                          {"train_frames", frames.size()},
@@ -589,6 +606,7 @@ void RunTrain(const TrainFlags& flags) {
     throw UsageError("--contact-share applies to --head photometric");
   }
   if (flags.no_warm_start) throw UsageError("--no-warm-start applies to --head photometric");
+  if (flags.background) throw UsageError("--background applies to --head photometric");
   if (flags.resume) {
     // Every process reads the checkpoints (rank 0 writes them): they must see the same.
     for (SensorKind s : sensors) RefuseUnsharedFile(processes, CheckpointPath(flags.out, s));
@@ -927,6 +945,11 @@ void RegisterTrain(CLI::App& app, CommandBody* selected) {
   sub->add_flag("--no-warm-start", flags->no_warm_start,
                 "--head photometric: leave the training latents' warm-start table out of the "
                 "model (a smaller file; encode then fits with adam:N only)");
+  sub->add_flag("--background", flags->background,
+                "--head photometric: also store the sensor's background, what the training "
+                "frames share that the contact does not draw (their mean residual per pixel; "
+                "no latent bytes), which every reconstruction adds: for real gels that drift "
+                "from their reference (docs/REAL_DATA.md)");
   sub->add_option("--default-fit", flags->default_fit,
                   "--head photometric: the fit encode and fit use for the trained trunk(s) "
                   "when no --strategy is given, recorded in the model (e.g. knn+adam:480; "

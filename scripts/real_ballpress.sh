@@ -6,7 +6,8 @@
 #   usage: scripts/real_ballpress.sh OUT [LATENT_DIM] [STEPS] [STRATEGY] [HEAD]
 # Defaults: d = 16, 2000 steps, meta_sgd:3, HEAD direct (trunk: --preset small --readout).
 # HEAD photometric trains `--head photometric --preset small` instead (the SIREN draws
-# the contact, a head shades it; fit it with STRATEGY adam:N, the default adam:200).
+# the contact, a head shades it; fit it with STRATEGY adam:N, the default adam:200);
+# HEAD photometric-background also stores the sensor's background (`train --background`).
 set -euo pipefail
 export LC_ALL=C
 cd "$(dirname "$0")/.."
@@ -18,7 +19,9 @@ head=${5:-direct}
 case "$head" in
   direct) trunk_flags=(--preset small --readout) ;;
   photometric) trunk_flags=(--head photometric --preset small) ;;
-  *) echo "$0: HEAD must be direct or photometric, got '$head'" >&2; exit 2 ;;
+  photometric-background) trunk_flags=(--head photometric --preset small --background) ;;
+  *) echo "$0: HEAD must be direct, photometric or photometric-background, got '$head'" >&2
+     exit 2 ;;
 esac
 bin=build/bin/tactfunc
 data=tests/data/taxim_ballpress

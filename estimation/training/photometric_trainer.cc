@@ -535,4 +535,63 @@ PhotometricFit FitPhotometricLatent(const PhotometricTrunk& trunk, const TrunkTa
   return best;
 }
 
+Image PhotometricTrainer::MeanResidual(
+    const PhotometricTrunk& trunk, const std::vector<TrunkTargets>& frames,
+    const Eigen::MatrixXd& latents, const std::vector<const PhotometricTrunk::Markers*>& markers,
+    const std::vector<int>& frame_reference, int max_frames, int threads) {
+  const int m = static_cast<int>(frames.size());
+  if (m < 1 || latents.rows() != m || latents.cols() != trunk.latent_dim() ||
+      static_cast<int>(frame_reference.size()) != m || max_frames < 1) {
+    throw std::invalid_argument(
+        "PhotometricTrainer::MeanResidual: expected one latent of " +
+        std::to_string(trunk.latent_dim()) + " values and one reference index per frame, and "
+        "max_frames >= 1; found " + std::to_string(m) + " frames, " +
+        std::to_string(latents.rows()) + " x " + std::to_string(latents.cols()) + " latents, " +
+        std::to_string(frame_reference.size()) + " indices");
+  }
+  const int rows = trunk.options().rows, cols = trunk.options().cols, c = trunk.channels();
+  const int n = rows * cols;
+  const int used = std::min(m, max_frames);
+  for (int k = 0; k < used; ++k) {
+    const std::size_t i = static_cast<std::size_t>(k) * m / used;
+    const int r = frame_reference[i];
+    if (frames[i].values.rows() != n || frames[i].values.cols() != c ||
+        frames[i].weights.size() != n || r < 0 || r >= static_cast<int>(markers.size())) {
+      throw std::invalid_argument("PhotometricTrainer::MeanResidual: frame " +
+                                  std::to_string(i) + " is not " + std::to_string(rows) + "x" +
+                                  std::to_string(cols) + "x" + std::to_string(c) +
+                                  " or names no reference");
+    }
+  }
+  // Per-thread sums (threads own contiguous ranges of the frames), added in thread order
+  // so that the table does not depend on the scheduling.
+  const int parts = std::max(1, std::min(threads, used));
+  std::vector<Eigen::MatrixXd> sums(parts, Eigen::MatrixXd::Zero(n, c));
+  std::vector<Eigen::VectorXd> weights(parts, Eigen::VectorXd::Zero(n));
+  const std::vector<int> pixels = trunk.AllPixels();
+  internal::ParallelFor(parts, parts, [&](int part) {
+    for (int k = part * used / parts; k < (part + 1) * used / parts; ++k) {
+      const std::size_t i = static_cast<std::size_t>(k) * m / used;
+      const Eigen::MatrixXf y = trunk.Forward<float>(
+          pixels, latents.row(i).transpose().cast<float>(), markers[frame_reference[i]]);
+      const Eigen::VectorXd w = frames[i].weights.cast<double>();
+      sums[part] += w.asDiagonal() * (frames[i].values - y).cast<double>();
+      weights[part] += w;
+    }
+  });
+  for (int part = 1; part < parts; ++part) {
+    sums[0] += sums[part];
+    weights[0] += weights[part];
+  }
+  Image mean(rows, cols, c);
+  for (int j = 0; j < n; ++j) {
+    if (!(weights[0][j] > 0)) continue;
+    for (int ch = 0; ch < c; ++ch) {
+      mean.data[static_cast<std::size_t>(j) * c + ch] =
+          static_cast<float>(sums[0](j, ch) / weights[0][j]);
+    }
+  }
+  return mean;
+}
+
 }  // namespace tactfunc

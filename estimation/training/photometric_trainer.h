@@ -140,6 +140,19 @@ class PhotometricTrainer {
   Result Train(const std::vector<TrunkTargets>& frames, const std::vector<Image>& references,
                const std::vector<int>& frame_reference, const Callback& callback = {}) const;
 
+  // What the frames share that the trunk does not draw: per pixel of the working grid
+  // (rows x cols x C), the weighted mean over the frames of target - f(z_i), each frame
+  // drawn at latents.row(i) against markers[frame_reference[i]] (null: the trunk's own)
+  // over all of its pixels, a pixel no frame weighs left 0. Added to the trunk's
+  // background (PhotometricTrunk::SetBackground), it is the background minimising the
+  // frames' weighted squared error with the latents and the trunk held: one
+  // alternating step over a table that costs no latent bytes. Up to max_frames frames,
+  // evenly spaced, are used (>= 1). Throws std::invalid_argument for mismatched sizes.
+  static Image MeanResidual(
+      const PhotometricTrunk& trunk, const std::vector<TrunkTargets>& frames,
+      const Eigen::MatrixXd& latents, const std::vector<const PhotometricTrunk::Markers*>& markers,
+      const std::vector<int>& frame_reference, int max_frames, int threads);
+
  private:
   Options options_;
 };

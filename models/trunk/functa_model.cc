@@ -104,7 +104,7 @@ std::uint64_t TrunkParameterBytes(const SensorTrunk& trunk) {
                          static_cast<std::uint64_t>(trunk.alpha.size());
   if (trunk.photometric != nullptr) {
     values += static_cast<std::uint64_t>(trunk.photometric->NumHeadParameters()) +
-              trunk.photometric->reference().size();
+              trunk.photometric->reference().size() + trunk.photometric->background().size();
   }
   std::uint64_t bytes = 4ull * values;
   if (trunk.siren.has_readout()) {  // the readout basis is stored in float16
@@ -226,6 +226,14 @@ std::string FunctaModel::Serialize() const {
       file.Add(name + "/reference", TensorFile::DType::kFloat32,
                {static_cast<std::int64_t>(ref.size())},
                std::vector<double>(ref.data.begin(), ref.data.end()));
+      // Written only when present, so a trunk without one keeps the bytes it had.
+      if (!p.background().empty()) {
+        const Image& b = p.background();
+        meta["trunks"].back()["photometric"]["background"] = true;
+        file.Add(name + "/background", TensorFile::DType::kFloat32,
+                 {static_cast<std::int64_t>(b.size())},
+                 std::vector<double>(b.data.begin(), b.data.end()));
+      }
       if (t.warm_start != nullptr) {
         const WarmStartTable& w = *t.warm_start;
         meta["trunks"].back()["photometric"]["warm_start"] = {{"rows", w.descriptors.rows()},
@@ -470,6 +478,25 @@ FunctaModel FunctaModel::FromTensorFile(const TensorFile& file, const std::strin
         photometric->mutable_siren().SetParameters(trunk.siren.parameters());
         photometric->SetHeadParameters(
             Eigen::Map<const Eigen::VectorXd>(head.values.data(), head.values.size()));
+        if (p.contains("background")) {
+          field = name + ".photometric.background";
+          if (!p.at("background").is_boolean()) {
+            throw TensorFileError(source + ": field '" + field + "': expected true or false");
+          }
+          if (p.at("background").get<bool>()) {
+            const auto& b = file.Get(name + "/background",
+                                     {static_cast<std::int64_t>(po.rows) * po.cols * po.channels});
+            Image background(po.rows, po.cols, po.channels);
+            for (std::size_t i = 0; i < background.size(); ++i) {
+              background.data[i] = static_cast<float>(b.values[i]);
+              if (!std::isfinite(background.data[i])) {
+                throw TensorFileError(source + ": tensor '" + name +
+                                      "/background': expected finite values");
+              }
+            }
+            photometric->SetBackground(background);
+          }
+        }
         if (p.contains("warm_start")) {
           field = name + ".photometric.warm_start";
           const auto& w = p.at("warm_start");

@@ -305,6 +305,34 @@ void PhotometricTrunk::SetHeadParameters(const Eigen::VectorXd& head) {
   at_rest_shading_ = std::make_shared<AtRestShading>();
 }
 
+void PhotometricTrunk::SetBackground(const Image& background) {
+  if (background.empty()) {
+    background_ = Image();
+    return;
+  }
+  if (background.rows != options_.rows || background.cols != options_.cols ||
+      background.channels != options_.channels) {
+    throw std::invalid_argument("PhotometricTrunk::SetBackground: expected " +
+                                std::to_string(options_.rows) + "x" +
+                                std::to_string(options_.cols) + "x" +
+                                std::to_string(options_.channels) + ", found " +
+                                background.ShapeString());
+  }
+  for (float v : background.data) {
+    if (!std::isfinite(v)) {
+      throw std::invalid_argument("PhotometricTrunk::SetBackground: a value is not finite");
+    }
+  }
+  background_ = background;
+}
+
+double PhotometricTrunk::BackgroundRms() const {
+  if (background_.empty()) return 0;
+  double sum = 0;
+  for (float v : background_.data) sum += static_cast<double>(v) * v;
+  return std::sqrt(sum / static_cast<double>(background_.size()));
+}
+
 Eigen::Vector2d PhotometricTrunk::PixelCoordinate(int pixel) const {
   const int r = pixel / options_.cols;
   const int c = pixel % options_.cols;
@@ -558,6 +586,11 @@ void PhotometricTrunk::RunForward(const std::vector<int>& pixels, const VectorX<
       (*outputs)(i, ch) = shade(ch, i) - (*shade0)(ch, i) +
                           static_cast<Scalar>(value[ch] - markers.at_rest.at(r, col, ch)) +
                           s(i, 1 + ch);
+    }
+    if (!background_.empty()) {
+      for (int ch = 0; ch < c; ++ch) {
+        (*outputs)(i, ch) += static_cast<Scalar>(background_.at(r, col, ch));
+      }
     }
   }
 }

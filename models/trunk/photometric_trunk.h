@@ -23,7 +23,13 @@
 //             coordinate k: five evaluations of the SIREN's batched passes, no
 //             second-order pass; measured level with the exact slope)
 //   u(p)   = m g(p)                          (how far the skin moves, working pixels)
-//   y_c(p) = S_c(g, w, p) - S_c(0, 0, p) + M_c(p - u) - M_c(p) + s_c(p)
+//   y_c(p) = S_c(g, w, p) - S_c(0, 0, p) + M_c(p - u) - M_c(p) + s_c(p) + B_c(p)
+//
+// B is the sensor's background (optional, zero when absent): a fixed per-pixel table on
+// the working grid of what every frame shares and the contact cannot draw, since the
+// SIREN draws in the contact's frame (a real gel's drift from its reference: lighting,
+// the gel's own settling). It has no latent values; PhotometricTrainer::MeanResidual
+// estimates it from the training frames (`train --background`, docs/REAL_DATA.md).
 //
 // S is a small shading network (5 -> H -> H -> C, SiLU) of the slope, the depth and the
 // position (so it can learn the sensor's vignetting and lighting), and M the reference's
@@ -162,6 +168,14 @@ class PhotometricTrunk {
   // m, the last head parameter (working pixels of skin motion per unit of slope).
   double marker_scale() const { return head_[num_head_parameters_ - 1]; }
 
+  // The background B (header comment): rows x cols x C, or empty (none, the default).
+  const Image& background() const { return background_; }
+  // Throws std::invalid_argument for a table of another shape or a non-finite value; an
+  // empty image removes it.
+  void SetBackground(const Image& background);
+  // Root mean square of the background's values, 0 without one.
+  double BackgroundRms() const;
+
   MarkerSampling marker_sampling() const { return marker_sampling_; }
   void set_marker_sampling(MarkerSampling sampling) { marker_sampling_ = sampling; }
 
@@ -260,6 +274,7 @@ class PhotometricTrunk {
   MarkerSampling marker_sampling_ = MarkerSampling::kSensorResolution;
   int num_head_parameters_ = 0;
   Eigen::VectorXd head_;
+  Image background_;
   std::shared_ptr<AtRestShading> at_rest_shading_;
 };
 

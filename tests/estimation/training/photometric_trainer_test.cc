@@ -131,6 +131,68 @@ TEST(PhotometricTrainerTest, EachFrameIsDrawnAgainstItsOwnClipsReference) {
   }
 }
 
+// Frames the teacher drew plus a pattern every frame shares: the mean residual at the
+// teacher's latents is that pattern (a pixel no frame weighs is left 0), whatever the
+// thread count; with it as the background the frames are drawn exactly, and a second
+// step finds nothing left. Frames of a clip are drawn against their own markers.
+TEST(PhotometricTrainerTest, TheMeanResidualIsWhatEveryFrameSharesBesidesItsContact) {
+  Teacher teacher = MakeTeacher(5);
+  const PhotometricTrunk::Options o = SmallTrunk();
+  Image pattern(o.rows, o.cols, 1);
+  for (int r = 0; r < o.rows; ++r) {
+    for (int c = 0; c < o.cols; ++c) {
+      pattern.at(r, c) = 0.01f * static_cast<float>((r * 7 + c * 3) % 5 - 2);
+    }
+  }
+  const int unweighed = 17;
+  Eigen::MatrixXd latents(5, o.latent_dim);
+  for (int i = 0; i < 5; ++i) {
+    latents.row(i) = teacher.latents[i].transpose();
+    TrunkTargets& t = teacher.frames[i];
+    for (int j = 0; j < o.rows * o.cols; ++j) t.values(j, 0) += pattern.data[j];
+    t.weights[unweighed] = 0;
+  }
+  const std::vector<const PhotometricTrunk::Markers*> own = {nullptr};
+  const std::vector<int> first(5, 0);
+  const Image mean =
+      PhotometricTrainer::MeanResidual(teacher.trunk, teacher.frames, latents, own, first, 100, 1);
+  const Image mean2 =
+      PhotometricTrainer::MeanResidual(teacher.trunk, teacher.frames, latents, own, first, 100, 2);
+  EXPECT_EQ(mean.data, mean2.data);
+  ASSERT_TRUE(mean.SameShape(pattern));
+  for (int j = 0; j < o.rows * o.cols; ++j) {
+    ASSERT_NEAR(mean.data[j], j == unweighed ? 0.0f : pattern.data[j], 1e-6) << j;
+  }
+  PhotometricTrunk with = teacher.trunk;
+  with.SetBackground(mean);
+  const Image rest =
+      PhotometricTrainer::MeanResidual(with, teacher.frames, latents, own, first, 100, 2);
+  for (float v : rest.data) ASSERT_LT(std::abs(v), 1e-6);
+  // max_frames takes evenly spaced frames: with 0.1 more in the last frame's pixel 0,
+  // five frames average it in, the first alone does not.
+  std::vector<TrunkTargets> moved = teacher.frames;
+  moved[4].values(0, 0) += 0.1f;
+  EXPECT_NEAR(PhotometricTrainer::MeanResidual(teacher.trunk, moved, latents, own, first, 5, 1)
+                  .data[0],
+              pattern.data[0] + 0.02f, 1e-6);
+  EXPECT_NEAR(PhotometricTrainer::MeanResidual(teacher.trunk, moved, latents, own, first, 1, 1)
+                  .data[0],
+              pattern.data[0], 1e-6);
+  // A frame against another clip's markers: its residual is taken against those.
+  const auto other = teacher.trunk.MakeMarkers(Image(teacher.trunk.reference().rows,
+                                                     teacher.trunk.reference().cols, 1, 0.3f));
+  const Image against_other = PhotometricTrainer::MeanResidual(
+      teacher.trunk, teacher.frames, latents, {nullptr, other.get()}, {0, 0, 1, 0, 0}, 100, 1);
+  EXPECT_NE(against_other.data, mean.data);
+  // Sizes that do not match are refused.
+  EXPECT_THROW(PhotometricTrainer::MeanResidual(teacher.trunk, teacher.frames,
+                                                latents.topRows(4), own, first, 100, 1),
+               std::invalid_argument);
+  EXPECT_THROW(PhotometricTrainer::MeanResidual(teacher.trunk, teacher.frames, latents, own,
+                                                {0, 0, 1, 0, 0}, 100, 1),
+               std::invalid_argument);
+}
+
 TEST(PhotometricTrainerTest, TheCallbackStopsTraining) {
   const Teacher teacher = MakeTeacher(4);
   const PhotometricTrainer::Result result = PhotometricTrainer(QuickOptions(1)).Train(

@@ -272,6 +272,49 @@ TEST(FunctaModel, RoundTripsAPhotometricTrunkWithItsHeadAndReference) {
   }
 }
 
+// The background is written only when the trunk has one, read back exactly (float32), and
+// drawn by the loaded trunk; a file that claims one without its tensor is refused.
+TEST(FunctaModel, RoundTripsAPhotometricBackgroundOnlyWhenThereIsOne) {
+  FunctaModel without;
+  without.SetTrunk(PhotometricSensorTrunk());
+  EXPECT_THAT(TensorFile::Parse(without.Serialize(), "m.tfm", "model").meta_json(),
+              ::testing::Not(HasSubstr("background")));
+  EXPECT_TRUE(FunctaModel::Parse(without.Serialize(), "m.tfm")
+                  .Trunk(SensorKind::kGelSlim)
+                  .photometric->background()
+                  .empty());
+  SensorTrunk trunk = PhotometricSensorTrunk();
+  auto photometric = std::make_shared<PhotometricTrunk>(*trunk.photometric);
+  Image background(10, 12, 1);
+  for (std::size_t i = 0; i < background.size(); ++i) background.data[i] = 0.001f * (i % 11);
+  photometric->SetBackground(background);
+  trunk.photometric = photometric;
+  FunctaModel model;
+  model.SetTrunk(trunk);
+  const std::string bytes = model.Serialize();
+  const FunctaModel read = FunctaModel::Parse(bytes, "m.tfm");
+  const PhotometricTrunk& b = *read.Trunk(SensorKind::kGelSlim).photometric;
+  EXPECT_EQ(b.background().data, background.data);
+  EXPECT_EQ(TrunkParameterBytes(read.Trunk(SensorKind::kGelSlim)),
+            TrunkParameterBytes(without.Trunk(SensorKind::kGelSlim)) + 4 * background.size());
+  const Eigen::VectorXf z = Eigen::VectorXf::LinSpaced(7, -0.3f, 0.4f);
+  const Eigen::MatrixXf y = b.Forward<float>(b.AllPixels(), z);
+  const PhotometricTrunk& plain = *without.Trunk(SensorKind::kGelSlim).photometric;
+  const Eigen::MatrixXf y0 = plain.Forward<float>(plain.AllPixels(), z);
+  EXPECT_NEAR(y(13, 0) - y0(13, 0), background.data[13], 1e-4);
+  // A file that claims a background it does not hold.
+  const std::string claimed = WithMetaEdited(without.Serialize(), "\"latent_dim\":7",
+                                             "\"background\":true,\"latent_dim\":7");
+  ASSERT_FALSE(claimed.empty());
+  try {
+    FunctaModel::Parse(claimed, "claimed.tfm");
+    FAIL() << "a missing background accepted";
+  } catch (const TensorFileError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("background")) << e.what();
+    EXPECT_THAT(e.what(), HasSubstr("claimed.tfm")) << e.what();
+  }
+}
+
 TEST(FunctaModel, RoundTripsAWarmStartTableInFloat16AndRefusesABadOne) {
   FunctaModel model;
   SensorTrunk trunk = PhotometricSensorTrunk();

@@ -312,6 +312,58 @@ TEST(PhotometricTrunkTest, ASirenThatDrawsNothingGivesAnEmptyDifference) {
   EXPECT_LT(y.cwiseAbs().maxCoeff(), 1e-6);
 }
 
+// The background is added to every output, whatever the pass, and nothing else changes:
+// the loss and gradients against targets + B equal those without it against the targets.
+TEST(PhotometricTrunkTest, TheBackgroundIsAddedToEveryPixelAndChangesNoGradient) {
+  const PhotometricTrunk plain = MovingTrunk(PhotometricTrunk::MarkerSampling::kSensorResolution, 2);
+  PhotometricTrunk with = plain;
+  Image background(plain.options().rows, plain.options().cols, 2);
+  unsigned state = 3;
+  for (float& v : background.data) v = static_cast<float>(0.05 * Uniform(&state));
+  with.SetBackground(background);
+  const Problem p = MakeProblem(plain);
+  MatrixXd shifted = p.targets;
+  for (std::size_t i = 0; i < p.pixels.size(); ++i) {
+    const int r = p.pixels[i] / plain.options().cols, c = p.pixels[i] % plain.options().cols;
+    for (int ch = 0; ch < 2; ++ch) shifted(i, ch) += background.at(r, c, ch);
+  }
+  MatrixXd y_plain, y_with;
+  VectorXd dz_plain, dz_with, dsiren_plain, dsiren_with, dhead_plain, dhead_with;
+  const double l_plain = plain.LossAndGradient<double>(p.pixels, p.z, p.targets, p.weights,
+                                                       &dz_plain, &dsiren_plain, &dhead_plain,
+                                                       &y_plain);
+  const double l_with = with.LossAndGradient<double>(p.pixels, p.z, shifted, p.weights,
+                                                     &dz_with, &dsiren_with, &dhead_with, &y_with);
+  EXPECT_NEAR(l_with, l_plain, 1e-12 + 1e-9 * l_plain);
+  EXPECT_LT((dz_with - dz_plain).norm(), 1e-9 * dz_plain.norm());
+  EXPECT_LT((dsiren_with - dsiren_plain).norm(), 1e-9 * dsiren_plain.norm());
+  EXPECT_LT((dhead_with - dhead_plain).norm(), 1e-9 * dhead_plain.norm());
+  EXPECT_LT((y_with - y_plain - (shifted - p.targets)).cwiseAbs().maxCoeff(), 1e-7);
+  // Forward and the Jacobian's outputs over the whole grid add it too.
+  const std::vector<int> all = plain.AllPixels();
+  const MatrixXf f_plain = plain.Forward<float>(all, p.z.cast<float>());
+  const MatrixXf f_with = with.Forward<float>(all, p.z.cast<float>());
+  MatrixXd j_plain, j_with, o_plain, o_with;
+  plain.ForwardAndLatentJacobian<double>(p.pixels, p.z, &o_plain, &j_plain);
+  with.ForwardAndLatentJacobian<double>(p.pixels, p.z, &o_with, &j_with);
+  EXPECT_EQ(j_with, j_plain);
+  EXPECT_LT((o_with - o_plain - (shifted - p.targets)).cwiseAbs().maxCoeff(), 1e-7);
+  for (int j = 0; j < static_cast<int>(all.size()); ++j) {
+    for (int ch = 0; ch < 2; ++ch) {
+      ASSERT_NEAR(f_with(j, ch) - f_plain(j, ch), background.data[j * 2 + ch], 1e-6) << j;
+    }
+  }
+  // A table of another shape or with a non-finite value is refused; an empty one removes it.
+  EXPECT_THROW(with.SetBackground(Image(plain.options().rows, plain.options().cols, 1)),
+               std::invalid_argument);
+  Image bad = background;
+  bad.data[5] = std::nanf("");
+  EXPECT_THROW(with.SetBackground(bad), std::invalid_argument);
+  with.SetBackground(Image());
+  EXPECT_TRUE(with.background().empty());
+  EXPECT_EQ(with.Forward<float>(all, p.z.cast<float>()), f_plain);
+}
+
 TEST(PhotometricTrunkTest, FloatAgreesWithDouble) {
   const PhotometricTrunk trunk =
       MovingTrunk(PhotometricTrunk::MarkerSampling::kSensorResolution);
