@@ -315,7 +315,8 @@ TEST(PhotometricTrunkTest, ASirenThatDrawsNothingGivesAnEmptyDifference) {
 // The background is added to every output, whatever the pass, and nothing else changes:
 // the loss and gradients against targets + B equal those without it against the targets.
 TEST(PhotometricTrunkTest, TheBackgroundIsAddedToEveryPixelAndChangesNoGradient) {
-  const PhotometricTrunk plain = MovingTrunk(PhotometricTrunk::MarkerSampling::kSensorResolution, 2);
+  const PhotometricTrunk plain =
+      MovingTrunk(PhotometricTrunk::MarkerSampling::kSensorResolution, 2);
   PhotometricTrunk with = plain;
   Image background(plain.options().rows, plain.options().cols, 2);
   unsigned state = 3;
