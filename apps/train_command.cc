@@ -345,6 +345,7 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
     o.trunk_learning_rate = flags.learning_rate_option->count() ? flags.learning_rate : 2e-4;
     o.marker_warmup_steps = flags.marker_warmup;
     o.contact_share = flags.contact_share;
+    o.learn_background = flags.background;
     o.seed = base.seed;
     o.threads = base.threads;
     o.checkpoint_path = CheckpointPath(flags.out, sensor);
@@ -420,22 +421,13 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
                                std::to_string(o.trunk_learning_rate));
     }
     std::vector<std::shared_ptr<const PhotometricTrunk::Markers>> markers;
-    std::vector<const PhotometricTrunk::Markers*> marker_of_reference;
     for (const Image& reference : references) {
       markers.push_back(result.trunk.MakeMarkers(reference));
-      marker_of_reference.push_back(markers.back().get());
     }
     auto photometric = std::make_shared<PhotometricTrunk>(result.trunk);
     if (flags.background) {
-      // What every training frame shares and the contact cannot draw, with the training
-      // latents held (PhotometricTrainer::MeanResidual): up to kBackgroundFrames frames.
-      constexpr int kBackgroundFrames = 8192;
-      photometric->SetBackground(PhotometricTrainer::MeanResidual(
-          *photometric, frames, result.latents, marker_of_reference, frame_reference,
-          kBackgroundFrames, o.threads));
-      std::cout << "train " << name << ": background from "
-                << std::min<std::size_t>(frames.size(), kBackgroundFrames)
-                << " training frames, RMS " << photometric->BackgroundRms() << std::endl;
+      std::cout << "train " << name << ": background learned along, RMS "
+                << photometric->BackgroundRms() << std::endl;
     }
     // The likelihood scale of the samplers: the RMS residual of the training latents over
     // up to 64 evenly spaced training frames, whole frames.
@@ -946,10 +938,10 @@ void RegisterTrain(CLI::App& app, CommandBody* selected) {
                 "--head photometric: leave the training latents' warm-start table out of the "
                 "model (a smaller file; encode then fits with adam:N only)");
   sub->add_flag("--background", flags->background,
-                "--head photometric: also store the sensor's background, what the training "
-                "frames share that the contact does not draw (their mean residual per pixel; "
-                "no latent bytes), which every reconstruction adds: for real gels that drift "
-                "from their reference (docs/REAL_DATA.md)");
+                "--head photometric: also learn the sensor's background, what every frame "
+                "shares that the contact does not draw (a value per pixel, no latent bytes), "
+                "which every reconstruction adds: for real gels that drift from their "
+                "reference; it costs on simulated frames (docs/REAL_DATA.md)");
   sub->add_option("--default-fit", flags->default_fit,
                   "--head photometric: the fit encode and fit use for the trained trunk(s) "
                   "when no --strategy is given, recorded in the model (e.g. knn+adam:480; "

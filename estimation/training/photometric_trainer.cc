@@ -28,6 +28,9 @@ const char* kCheckpointFormat = "tactfunc-photometric-checkpoint";
 constexpr int kCheckpointVersion = 1;
 
 // Adam with bias correction on one flat vector (double moments).
+// Frames the finished background's last correction averages over (evenly spaced).
+constexpr int kBackgroundFrames = 8192;
+
 struct Adam {
   Eigen::VectorXd m, v;
   explicit Adam(Eigen::Index size) : m(Eigen::VectorXd::Zero(size)), v(Eigen::VectorXd::Zero(size)) {}
@@ -174,6 +177,7 @@ std::string PhotometricTrainer::Options::TrajectoryOptionsJson() const {
   // Only where it draws towards the contact, so that the checkpoints of runs that drew
   // every pixel alike still resume.
   if (contact_share > 0) json["contact_share"] = contact_share;
+  if (learn_background) json["learn_background"] = true;  // absent: older runs resume
   return json.dump();
 }
 
@@ -282,6 +286,16 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
   Eigen::VectorXd siren_theta = trunk.siren().parameters();
   Eigen::VectorXd head = trunk.head_parameters();
   Adam adam_siren(siren_theta.size()), adam_head(head.size()), adam_latents(latents.size());
+  // The background's values, pixel-major with channels interleaved (Image's layout).
+  const int grid_values = trunk_options.rows * trunk_options.cols * trunk_options.channels;
+  Eigen::VectorXd background = Eigen::VectorXd::Zero(o.learn_background ? grid_values : 0);
+  Adam adam_background(background.size());
+  const auto set_background = [&]() {
+    if (!o.learn_background) return;
+    Image b(trunk_options.rows, trunk_options.cols, trunk_options.channels);
+    for (int i = 0; i < grid_values; ++i) b.data[i] = static_cast<float>(background[i]);
+    trunk.SetBackground(b);
+  };
   Summary summary;
   summary.loss.reserve(o.steps);
 
@@ -331,6 +345,12 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
     adam_head.v = internal::CheckpointVector(file, "adam/head_v", h);
     adam_latents.m = internal::CheckpointVector(file, "adam/latents_m", l);
     adam_latents.v = internal::CheckpointVector(file, "adam/latents_v", l);
+    if (o.learn_background) {
+      background = internal::CheckpointVector(file, "background", grid_values);
+      adam_background.m = internal::CheckpointVector(file, "adam/background_m", grid_values);
+      adam_background.v = internal::CheckpointVector(file, "adam/background_v", grid_values);
+      set_background();
+    }
     const Eigen::VectorXd loss = internal::CheckpointVector(file, "loss", done);
     summary.loss.assign(loss.data(), loss.data() + loss.size());
     trunk.mutable_siren().SetParameters(siren_theta);
@@ -361,6 +381,11 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
     file.Add("adam/head_v", D::kFloat64, {h}, ToStdVector(adam_head.v));
     file.Add("adam/latents_m", D::kFloat64, {l}, ToStdVector(adam_latents.m));
     file.Add("adam/latents_v", D::kFloat64, {l}, ToStdVector(adam_latents.v));
+    if (o.learn_background) {
+      file.Add("background", D::kFloat64, {grid_values}, ToStdVector(background));
+      file.Add("adam/background_m", D::kFloat64, {grid_values}, ToStdVector(adam_background.m));
+      file.Add("adam/background_v", D::kFloat64, {grid_values}, ToStdVector(adam_background.v));
+    }
     file.Add("loss", D::kFloat64, {static_cast<std::int64_t>(summary.loss.size())},
              summary.loss);
     file.Write(o.checkpoint_path);
@@ -370,6 +395,9 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
     int frame = 0;
     double loss = 0;
     Eigen::VectorXf dz, dsiren, dhead;
+    // With learn_background: the drawn pixels and dL/dY there (the loss is linear in B).
+    std::vector<int> pixels;
+    Eigen::MatrixXf dY;
   };
   std::vector<Slot> slots(o.batch_frames);
   for (int step = first_step; step <= o.steps; ++step) {
@@ -400,20 +428,37 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
         DrawPixels(frames[slot.frame], o.batch_pixels, &rng, &pixels, &targets, &weights);
       }
       const Eigen::VectorXf z = latents.col(slot.frame).cast<float>();
+      Eigen::MatrixXf y;
       slot.loss = trunk.LossAndGradient<float>(pixels, z, targets, weights, &slot.dz,
-                                               &slot.dsiren, &slot.dhead, nullptr,
+                                               &slot.dsiren, &slot.dhead,
+                                               o.learn_background ? &y : nullptr,
                                                markers[frame_reference[slot.frame]].get());
+      if (o.learn_background) {
+        // dL/dB at a pixel is dL/dY there: 2 w (y - t) times the loss's normaliser.
+        float unused = 0;
+        const double norm = LatentModulatedSiren::MseNormaliser<float>(
+            weights, static_cast<int>(pixels.size()), static_cast<int>(targets.cols()), &unused);
+        slot.dY = (2.0 * norm) * (weights.asDiagonal() * (y - targets));
+        slot.pixels = std::move(pixels);
+      }
     });
     Eigen::VectorXd g_siren = Eigen::VectorXd::Zero(siren_theta.size());
     Eigen::VectorXd g_head = Eigen::VectorXd::Zero(head.size());
     Eigen::MatrixXd g_latents = Eigen::MatrixXd::Zero(d, num_frames);
     double loss = 0;
     const double scale = 1.0 / o.batch_frames;
+    Eigen::VectorXd g_background = Eigen::VectorXd::Zero(background.size());
+    const int channels = trunk_options.channels;
     for (const Slot& slot : slots) {
       loss += scale * slot.loss;
       g_siren += scale * slot.dsiren.cast<double>();
       g_head += scale * slot.dhead.cast<double>();
       g_latents.col(slot.frame) += scale * slot.dz.cast<double>();
+      for (std::size_t i = 0; i < slot.pixels.size(); ++i) {
+        for (int ch = 0; ch < channels; ++ch) {
+          g_background[slot.pixels[i] * channels + ch] += scale * slot.dY(i, ch);
+        }
+      }
     }
     const double factor =
         o.cosine_schedule ? 0.1 + 0.45 * (1 + std::cos(kPi * (step - 1) / o.steps)) : 1.0;
@@ -425,6 +470,10 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
     adam_latents.Step(step, factor * o.latent_learning_rate,
                       Eigen::Map<const Eigen::VectorXd>(g_latents.data(), g_latents.size()),
                       latents.data());
+    if (o.learn_background) {
+      adam_background.Step(step, head_rate, g_background, background.data());
+      set_background();
+    }
     trunk.mutable_siren().SetParameters(siren_theta);
     trunk.SetHeadParameters(head);
     summary.steps = step;
@@ -440,6 +489,18 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
   // At the end or on a stop; a diverged run keeps its last finite checkpoint.
   if (std::isfinite(summary.final_loss)) checkpoint();
   trunk.set_marker_sampling(PhotometricTrunk::MarkerSampling::kSensorResolution);
+  if (o.learn_background && !summary.stopped && std::isfinite(summary.final_loss)) {
+    // Adam leaves each value within about its step of where the noisy batches put it:
+    // the finished background is the learned one plus what the frames still share at
+    // their final latents (MeanResidual), the exact minimiser with the rest held. The
+    // checkpoint keeps the learned one, so a finished run resumed ends the same.
+    std::vector<const PhotometricTrunk::Markers*> marker_of(markers.size());
+    for (std::size_t k = 0; k < markers.size(); ++k) marker_of[k] = markers[k].get();
+    const Image rest = MeanResidual(trunk, frames, latents.transpose(), marker_of,
+                                    frame_reference, kBackgroundFrames, o.threads);
+    for (int i = 0; i < grid_values; ++i) background[i] += rest.data[i];
+    set_background();
+  }
   summary.seconds = seconds();
   return Result{std::move(trunk), latents.transpose(), std::move(summary)};
 }

@@ -90,6 +90,11 @@ class PhotometricTrainer {
     // Steps with working-resolution markers before switching to the sensor's. >= 0.
     int marker_warmup_steps = 1000;
     std::uint64_t seed = 1;
+    // Learn the sensor's background B (PhotometricTrunk::SetBackground) along with the
+    // trunk: a value per working pixel and channel, from zero, Adam at the trunk's step
+    // size on the step's gradient; a finished run then adds the frames' MeanResidual at
+    // their final latents (over up to 8192 of them). The result's trunk holds it.
+    bool learn_background = false;
     // Worker threads over a step's frames. >= 1.
     int threads = 1;
     // Checkpoints (header comment): written atomically to this path ("" = none; the

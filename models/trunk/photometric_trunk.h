@@ -28,8 +28,9 @@
 // B is the sensor's background (optional, zero when absent): a fixed per-pixel table on
 // the working grid of what every frame shares and the contact cannot draw, since the
 // SIREN draws in the contact's frame (a real gel's drift from its reference: lighting,
-// the gel's own settling). It has no latent values; PhotometricTrainer::MeanResidual
-// estimates it from the training frames (`train --background`, docs/REAL_DATA.md).
+// the gel's own settling). It has no latent values and no gradient here (the outputs
+// are linear in it); PhotometricTrainer learns it with the trunk (Options::
+// learn_background, `train --background`, docs/REAL_DATA.md).
 //
 // S is a small shading network (5 -> H -> H -> C, SiLU) of the slope, the depth and the
 // position (so it can learn the sensor's vignetting and lighting), and M the reference's

@@ -318,7 +318,7 @@ TEST_F(TrainCliTest, ThePhotometricBackgroundDrawsWhatEveryFrameShares) {
                             "--threads 2 --seed 1 --json --out ";
   const Result with = Run(train + Root("bg_with.tfm") + " --background");
   ASSERT_EQ(with.exit_code, 0) << with.err;
-  EXPECT_THAT(with.out, HasSubstr("background from"));
+  EXPECT_THAT(with.out, HasSubstr("background learned along"));
   EXPECT_GT(with.LastJson()["sensors"]["gelslim"]["background_rms"].get<double>(), 0.01);
   const Result without = Run(train + Root("bg_without.tfm"));
   ASSERT_EQ(without.exit_code, 0) << without.err;
