@@ -12,7 +12,10 @@ trunk. The script prints, per k, the test split's mean PSNR against the noise-fr
 spectrum's first singular values (flat = each coefficient buys little). The row "mean"
 adds the train residuals' mean alone: a fixed per-pixel background stored once, no bytes
 per frame (what a trunk that draws in the contact's frame cannot draw when the sensor's
-background differs from its reference, as on real sensors).
+background differs from its reference, as on real sensors). The row "plane" adds instead
+each test frame's own least-squares plane of its residual over the sensor's pixels,
+a + b col + c row per channel (3 values per channel and frame, unquantised): a bound on
+what a per-frame lighting term in the sensor's coordinates would add.
 
   tactfunc export --data D --model M --functaset F --split all --clean --out X
   python3 scripts/representation_residual_pca.py --export X --sensor gelslim
@@ -93,6 +96,27 @@ def main():
         base = truth_db if base is None else base
         print(f"| {'mean' if mean_only else k} | {truth_db:.2f} | {truth_db - base:+.2f} | "
               f"{noisy_db:.2f} |")
+        if mean_only:
+            pred = recon[test] + plane_fit(residual[test], weights[test], recon[test].shape)
+            truth_db = psnr_per_frame(pred, truth[test], weights[test]).mean()
+            noisy_db = psnr_per_frame(pred, x[test], weights[test]).mean()
+            print(f"| plane | {truth_db:.2f} | {truth_db - base:+.2f} | {noisy_db:.2f} |")
+
+
+def plane_fit(residual, weights, shape):
+    """Each frame's weighted least-squares plane a + b col + c row of its residual, per
+    channel, drawn over the frame (shape: frames x rows x cols [x channels])."""
+    rows, cols = shape[1], shape[2]
+    r, c = np.meshgrid(np.arange(rows) / rows, np.arange(cols) / cols, indexing="ij")
+    design = np.stack([np.ones(rows * cols), c.ravel(), r.ravel()], axis=1)
+    out = np.zeros((shape[0], rows * cols, int(np.prod(shape[3:]))))
+    res = residual.reshape(shape[0], rows * cols, -1)
+    w = np.asarray(weights, dtype=np.float64).reshape(shape[0], rows * cols, -1)[:, :, 0]
+    for i in range(shape[0]):
+        a = design * np.sqrt(w[i])[:, None]
+        coef, *_ = np.linalg.lstsq(a, res[i] * np.sqrt(w[i])[:, None], rcond=None)
+        out[i] = design @ coef
+    return out.reshape(shape)
 
 
 if __name__ == "__main__":
