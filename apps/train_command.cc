@@ -73,7 +73,7 @@ struct TrainFlags {
   int marker_warmup = 1000;
   double contact_share = PhotometricTrainer::Options().contact_share;
   bool no_warm_start = false;
-  bool background = false;  // --head photometric: estimate the sensor's background table
+  bool background = false;  // --head photometric: learn the sensor's background table
   std::string default_fit;  // "": the encoder's rule
   // Set after parsing: which overrides were given.
   CLI::Option *latent_dim_option = nullptr, *width_option = nullptr, *layers_option = nullptr,

@@ -27,10 +27,10 @@ constexpr double kPi = 3.14159265358979323846;
 const char* kCheckpointFormat = "tactfunc-photometric-checkpoint";
 constexpr int kCheckpointVersion = 1;
 
-// Adam with bias correction on one flat vector (double moments).
 // Frames the finished background's last correction averages over (evenly spaced).
 constexpr int kBackgroundFrames = 8192;
 
+// Adam with bias correction on one flat vector (double moments).
 struct Adam {
   Eigen::VectorXd m, v;
   explicit Adam(Eigen::Index size) : m(Eigen::VectorXd::Zero(size)), v(Eigen::VectorXd::Zero(size)) {}
