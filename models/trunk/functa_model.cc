@@ -489,12 +489,12 @@ FunctaModel FunctaModel::FromTensorFile(const TensorFile& file, const std::strin
             Image background(po.rows, po.cols, po.channels);
             for (std::size_t i = 0; i < background.size(); ++i) {
               background.data[i] = static_cast<float>(b.values[i]);
-              if (!std::isfinite(background.data[i])) {
-                throw TensorFileError(source + ": tensor '" + name +
-                                      "/background': expected finite values");
-              }
             }
-            photometric->SetBackground(background);
+            try {  // the trunk's own check (finite values), named after the file
+              photometric->SetBackground(background);
+            } catch (const std::invalid_argument& e) {
+              throw TensorFileError(source + ": tensor '" + name + "/background': " + e.what());
+            }
           }
         }
         if (p.contains("warm_start")) {

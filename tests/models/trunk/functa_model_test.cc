@@ -313,6 +313,23 @@ TEST(FunctaModel, RoundTripsAPhotometricBackgroundOnlyWhenThereIsOne) {
     EXPECT_THAT(e.what(), HasSubstr("background")) << e.what();
     EXPECT_THAT(e.what(), HasSubstr("claimed.tfm")) << e.what();
   }
+  // A background value that is not finite is refused naming the file and the tensor.
+  const TensorFile parsed = TensorFile::Parse(bytes, "m.tfm", "model");
+  TensorFile poisoned("model");
+  poisoned.set_meta_json(parsed.meta_json());
+  for (const TensorFile::Tensor& t : parsed.tensors()) {
+    std::vector<double> values = t.values;
+    if (t.name == "gelslim/background") values[7] = std::nan("");
+    poisoned.Add(t.name, t.dtype, t.shape, values);
+  }
+  try {
+    FunctaModel::Parse(poisoned.Serialize(), "poisoned.tfm");
+    FAIL() << "a non-finite background accepted";
+  } catch (const TensorFileError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("poisoned.tfm")) << e.what();
+    EXPECT_THAT(e.what(), HasSubstr("gelslim/background")) << e.what();
+    EXPECT_THAT(e.what(), HasSubstr("not finite")) << e.what();
+  }
 }
 
 TEST(FunctaModel, RoundTripsAWarmStartTableInFloat16AndRefusesABadOne) {
