@@ -145,7 +145,7 @@ nlohmann::json DescribeModel(const std::string& bytes, const std::string& path) 
                   "network of %d, markers moved at the sensor's %dx%d (%d x %d samples a "
                   "pixel), %.3f px per unit slope; fitted with adam:N, knn+adam:N or "
                   "knn+ceres:N\n",
-                  p.latent_dim(), p.latent_dim() - PhotometricTrunk::kPoseValues,
+                  p.latent_dim(), p.CodeValues(),
                   p.options().shading_width, p.reference().rows, p.reference().cols,
                   p.options().supersample, p.options().supersample, p.marker_scale());
       if (!p.background().empty()) {
@@ -153,6 +153,13 @@ nlohmann::json DescribeModel(const std::string& bytes, const std::string& path) 
                     "drawn, no latent bytes\n",
                     p.background().rows, p.background().cols, p.background().channels,
                     p.BackgroundRms());
+      }
+      if (p.lighting_components() > 0) {
+        std::printf("           lighting: %d images of %dx%dx%d values (RMS %.4g), weighed by "
+                    "the latent's last %d values\n",
+                    p.lighting_components(), p.options().rows, p.options().cols, p.channels(),
+                    p.LightingRms(),
+                    p.lighting_components());
       }
       if (t.warm_start != nullptr) {
         const WarmStartTable& w = *t.warm_start;

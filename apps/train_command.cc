@@ -74,6 +74,7 @@ struct TrainFlags {
   double contact_share = PhotometricTrainer::Options().contact_share;
   bool no_warm_start = false;
   bool background = false;  // --head photometric: learn the sensor's background table
+  int lighting = 0;  // --head photometric: lighting images weighed by each frame's latent
   std::string default_fit;  // "": the encoder's rule
   // Set after parsing: which overrides were given.
   CLI::Option *latent_dim_option = nullptr, *width_option = nullptr, *layers_option = nullptr,
@@ -345,16 +346,19 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
     o.trunk_learning_rate = flags.learning_rate_option->count() ? flags.learning_rate : 2e-4;
     o.marker_warmup_steps = flags.marker_warmup;
     o.contact_share = flags.contact_share;
-    o.learn_background = flags.background;
+    o.learn_background = flags.background || flags.lighting > 0;  // lighting needs it
+    o.trunk.lighting_components = flags.lighting;
     o.seed = base.seed;
     o.threads = base.threads;
     o.checkpoint_path = CheckpointPath(flags.out, sensor);
     o.checkpoint_every = base.checkpoint_every;
     o.resume = flags.resume;
-    if (o.trunk.latent_dim <= PhotometricTrunk::kPoseValues) {
+    if (o.trunk.latent_dim <= PhotometricTrunk::kPoseValues + flags.lighting) {
       throw UsageError("--latent-dim: the photometric trunk's latent holds a rigid motion (3 "
-                       "values) and a code: expected at least 4, got " +
-                       std::to_string(o.trunk.latent_dim));
+                       "values), " + std::to_string(flags.lighting) +
+                       " lighting value(s) (--lighting) and a code: expected at least " +
+                       std::to_string(PhotometricTrunk::kPoseValues + flags.lighting + 1) +
+                       ", got " + std::to_string(o.trunk.latent_dim));
     }
     const PhotometricTrainer trainer(o);  // bad values fail before the frames are read
     std::cout << "train " << name << ": photometric head, " << o.steps << " steps ("
@@ -425,9 +429,13 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
       markers.push_back(result.trunk.MakeMarkers(reference));
     }
     auto photometric = std::make_shared<PhotometricTrunk>(result.trunk);
-    if (flags.background) {
+    if (o.learn_background) {
       std::cout << "train " << name << ": background learned along, RMS "
                 << photometric->BackgroundRms() << std::endl;
+    }
+    if (flags.lighting > 0) {
+      std::cout << "train " << name << ": " << flags.lighting << " lighting images learned, RMS "
+                << photometric->LightingRms() << std::endl;
     }
     // The likelihood scale of the samplers: the RMS residual of the training latents over
     // up to 64 evenly spaced training frames, whole frames.
@@ -469,7 +477,8 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
                      {"residual_sigma", trunk.residual_sigma},
                      {"train_frames", frames.size()},
                      {"marker_scale", result.trunk.marker_scale()}};
-    if (flags.background) figures[name]["background_rms"] = photometric->BackgroundRms();
+    if (o.learn_background) figures[name]["background_rms"] = photometric->BackgroundRms();
+    if (flags.lighting > 0) figures[name]["lighting_rms"] = photometric->LightingRms();
     info_trunks[name] = {{"data_frames", DataFramesJson(info)},
                          {"head", "photometric"},
                          {"options",
@@ -483,7 +492,8 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
                            {"latent_learning_rate", o.latent_learning_rate},
                            {"marker_warmup_steps", o.marker_warmup_steps},
                            {"contact_share", o.contact_share},
-                           {"background", flags.background},
+                           {"background", o.learn_background},
+                           {"lighting", flags.lighting},
                            {"seed", o.seed}}},
                          {"steps", result.summary.steps},
                          {"train_frames", frames.size()},
@@ -599,6 +609,7 @@ void RunTrain(const TrainFlags& flags) {
   }
   if (flags.no_warm_start) throw UsageError("--no-warm-start applies to --head photometric");
   if (flags.background) throw UsageError("--background applies to --head photometric");
+  if (flags.lighting > 0) throw UsageError("--lighting applies to --head photometric");
   if (flags.resume) {
     // Every process reads the checkpoints (rank 0 writes them): they must see the same.
     for (SensorKind s : sensors) RefuseUnsharedFile(processes, CheckpointPath(flags.out, s));
@@ -942,6 +953,12 @@ void RegisterTrain(CLI::App& app, CommandBody* selected) {
                 "shares that the contact does not draw (a value per pixel, no latent bytes), "
                 "which every reconstruction adds: for real gels that drift from their "
                 "reference; it costs on simulated frames (docs/REAL_DATA.md)");
+  sub->add_option("--lighting", flags->lighting,
+                  "--head photometric: K lighting images, each weighed by one of the latent's "
+                  "last K values: how a real gel's lighting varies from frame to frame over "
+                  "the whole gel, a few of the latent's values instead of the contact's code; "
+                  "implies --background (default 0; docs/REAL_DATA.md)")
+      ->check(CLI::Range(0, 64));
   sub->add_option("--default-fit", flags->default_fit,
                   "--head photometric: the fit encode and fit use for the trained trunk(s) "
                   "when no --strategy is given, recorded in the model (e.g. knn+adam:480; "

@@ -11,6 +11,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "Eigen/Cholesky"
 #include "boost/random/mersenne_twister.hpp"
 #include "boost/random/uniform_int_distribution.hpp"
 #include "boost/random/uniform_real_distribution.hpp"
@@ -29,6 +30,10 @@ constexpr int kCheckpointVersion = 1;
 
 // Frames the finished background's last correction averages over (evenly spaced).
 constexpr int kBackgroundFrames = 8192;
+// The lighting images' starting values are drawn within +-kLightingStart, about the
+// background's RMS on real and simulated frames (docs/REAL_DATA.md): small beside what
+// the contact draws, large enough for the frames' lighting values to get a gradient.
+constexpr double kLightingStart = 1e-3;
 
 // Adam with bias correction on one flat vector (double moments).
 struct Adam {
@@ -140,6 +145,9 @@ bool PhotometricTrainer::Options::IsValid(std::string* error) const {
     message << "contact_share must be in [0, 1), found " << contact_share;
   } else if (marker_warmup_steps < 0) {
     message << "marker_warmup_steps must be >= 0, found " << marker_warmup_steps;
+  } else if (trunk.lighting_components > 0 && !learn_background) {
+    message << "trunk.lighting_components (" << trunk.lighting_components
+            << ") needs learn_background: the lighting images vary about the background";
   } else if (threads < 1) {
     message << "threads must be >= 1, found " << threads;
   } else if (checkpoint_every < 0) {
@@ -161,6 +169,8 @@ std::string PhotometricTrainer::Options::TrajectoryOptionsJson() const {
   json["trunk.shading_width"] = trunk.shading_width;
   json["trunk.supersample"] = trunk.supersample;
   json["trunk.wide_biases"] = trunk.wide_biases;
+  // Absent without lighting images, so that older runs resume.
+  if (trunk.lighting_components > 0) json["trunk.lighting_components"] = trunk.lighting_components;
   // As TrunkTrainer's: absent = float products (older files).
   if (GetProductPrecision() != ProductPrecision::kFloat) {
     json["products"] = ProductPrecisionName(GetProductPrecision());
@@ -296,6 +306,22 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
     for (int i = 0; i < grid_values; ++i) b.data[i] = static_cast<float>(background[i]);
     trunk.SetBackground(b);
   };
+  // The lighting images, (grid values) x K column-major. They start at small random
+  // values (Boost.Random from the seed) and the frames' lighting values at zero: with
+  // both at zero neither would get a gradient.
+  const int k_light = trunk_options.lighting_components;
+  const bool learn_lighting = k_light > 0;
+  Eigen::MatrixXd lighting = Eigen::MatrixXd::Zero(grid_values, k_light);
+  {
+    boost::random::mt19937_64 rng(DeriveSeed(o.seed, 7));
+    boost::random::uniform_real_distribution<double> uniform(-kLightingStart, kLightingStart);
+    for (Eigen::Index i = 0; i < lighting.size(); ++i) lighting.data()[i] = uniform(rng);
+  }
+  Adam adam_lighting(lighting.size());
+  const auto set_lighting = [&]() {
+    if (learn_lighting) trunk.SetLighting(lighting.cast<float>());
+  };
+  set_lighting();
   Summary summary;
   summary.loss.reserve(o.steps);
 
@@ -351,6 +377,14 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
       adam_background.v = internal::CheckpointVector(file, "adam/background_v", grid_values);
       set_background();
     }
+    if (learn_lighting) {
+      const auto size = static_cast<std::int64_t>(lighting.size());
+      lighting = Eigen::Map<const Eigen::MatrixXd>(
+          internal::CheckpointVector(file, "lighting", size).data(), grid_values, k_light);
+      adam_lighting.m = internal::CheckpointVector(file, "adam/lighting_m", size);
+      adam_lighting.v = internal::CheckpointVector(file, "adam/lighting_v", size);
+      set_lighting();
+    }
     const Eigen::VectorXd loss = internal::CheckpointVector(file, "loss", done);
     summary.loss.assign(loss.data(), loss.data() + loss.size());
     trunk.mutable_siren().SetParameters(siren_theta);
@@ -386,6 +420,13 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
       file.Add("adam/background_m", D::kFloat64, {grid_values}, ToStdVector(adam_background.m));
       file.Add("adam/background_v", D::kFloat64, {grid_values}, ToStdVector(adam_background.v));
     }
+    if (learn_lighting) {
+      const auto size = static_cast<std::int64_t>(lighting.size());
+      file.Add("lighting", D::kFloat64, {size},
+               std::vector<double>(lighting.data(), lighting.data() + size));
+      file.Add("adam/lighting_m", D::kFloat64, {size}, ToStdVector(adam_lighting.m));
+      file.Add("adam/lighting_v", D::kFloat64, {size}, ToStdVector(adam_lighting.v));
+    }
     file.Add("loss", D::kFloat64, {static_cast<std::int64_t>(summary.loss.size())},
              summary.loss);
     file.Write(o.checkpoint_path);
@@ -395,11 +436,13 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
     int frame = 0;
     double loss = 0;
     Eigen::VectorXf dz, dsiren, dhead;
-    // With learn_background: the drawn pixels and dL/dY there (the loss is linear in B).
+    // With a background or lighting images to learn: the drawn pixels and dL/dY there
+    // (the outputs are linear in B and in L).
     std::vector<int> pixels;
     Eigen::MatrixXf dY;
   };
   std::vector<Slot> slots(o.batch_frames);
+  const bool learn_tables = o.learn_background || learn_lighting;
   for (int step = first_step; step <= o.steps; ++step) {
     trunk.set_marker_sampling(step <= o.marker_warmup_steps
                                   ? PhotometricTrunk::MarkerSampling::kWorkingResolution
@@ -431,9 +474,9 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
       Eigen::MatrixXf y;
       slot.loss = trunk.LossAndGradient<float>(pixels, z, targets, weights, &slot.dz,
                                                &slot.dsiren, &slot.dhead,
-                                               o.learn_background ? &y : nullptr,
+                                               learn_tables ? &y : nullptr,
                                                markers[frame_reference[slot.frame]].get());
-      if (o.learn_background) {
+      if (learn_tables) {
         // dL/dB at a pixel is dL/dY there: 2 w (y - t) times the loss's normaliser.
         float unused = 0;
         const double norm = LatentModulatedSiren::MseNormaliser<float>(
@@ -448,6 +491,7 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
     double loss = 0;
     const double scale = 1.0 / o.batch_frames;
     Eigen::VectorXd g_background = Eigen::VectorXd::Zero(background.size());
+    Eigen::MatrixXd g_lighting = Eigen::MatrixXd::Zero(grid_values, k_light);
     const int channels = trunk_options.channels;
     for (const Slot& slot : slots) {
       loss += scale * slot.loss;
@@ -456,7 +500,14 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
       g_latents.col(slot.frame) += scale * slot.dz.cast<double>();
       for (std::size_t i = 0; i < slot.pixels.size(); ++i) {
         for (int ch = 0; ch < channels; ++ch) {
-          g_background[slot.pixels[i] * channels + ch] += scale * slot.dY(i, ch);
+          if (o.learn_background) {
+            g_background[slot.pixels[i] * channels + ch] += scale * slot.dY(i, ch);
+          }
+          if (learn_lighting) {
+            // dL/dL_k at a pixel is dL/dY there times the frame's k-th lighting value.
+            g_lighting.row(slot.pixels[i] * channels + ch) +=
+                (scale * slot.dY(i, ch)) * latents.col(slot.frame).tail(k_light).transpose();
+          }
         }
       }
     }
@@ -473,6 +524,12 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
     if (o.learn_background) {
       adam_background.Step(step, head_rate, g_background, background.data());
       set_background();
+    }
+    if (learn_lighting) {
+      adam_lighting.Step(step, head_rate,
+                         Eigen::Map<const Eigen::VectorXd>(g_lighting.data(), g_lighting.size()),
+                         lighting.data());
+      set_lighting();
     }
     trunk.mutable_siren().SetParameters(siren_theta);
     trunk.SetHeadParameters(head);
@@ -496,10 +553,30 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
     // checkpoint keeps the learned one, so a finished run resumed ends the same.
     std::vector<const PhotometricTrunk::Markers*> marker_of(markers.size());
     for (std::size_t k = 0; k < markers.size(); ++k) marker_of[k] = markers[k].get();
-    const Image rest = MeanResidual(trunk, frames, latents.transpose(), marker_of,
-                                    frame_reference, kBackgroundFrames, o.threads);
-    for (int i = 0; i < grid_values; ++i) background[i] += rest.data[i];
+    if (learn_lighting) {
+      // Each lighting value and its image are known only up to a shared scale and an
+      // offset the background takes. Adam moves the latents' values about a hundred
+      // times faster than the images', so they end large; a fit of a new frame starts
+      // its lighting values at zero and moves them by its step size. Each is set to mean
+      // zero and unit RMS over the training frames (the correction below then redraws
+      // the same frames exactly as before: the regressors 1, a_1..a_K span the same).
+      for (int k = 0; k < k_light; ++k) {
+        auto values = latents.row(d - k_light + k);
+        const double mean = values.mean();
+        const double rms = std::sqrt((values.array() - mean).square().mean());
+        values.array() -= mean;
+        if (rms > 0) values /= rms;
+      }
+    }
+    const Tables rest = TableCorrection(trunk, frames, latents.transpose(), marker_of,
+                                        frame_reference, kBackgroundFrames, o.threads,
+                                        learn_lighting);
+    for (int i = 0; i < grid_values; ++i) background[i] += rest.background.data[i];
     set_background();
+    if (learn_lighting) {
+      lighting += rest.lighting.cast<double>();
+      set_lighting();
+    }
   }
   summary.seconds = seconds();
   return Result{std::move(trunk), latents.transpose(), std::move(summary)};
@@ -600,6 +677,15 @@ Image PhotometricTrainer::MeanResidual(
     const PhotometricTrunk& trunk, const std::vector<TrunkTargets>& frames,
     const Eigen::MatrixXd& latents, const std::vector<const PhotometricTrunk::Markers*>& markers,
     const std::vector<int>& frame_reference, int max_frames, int threads) {
+  return TableCorrection(trunk, frames, latents, markers, frame_reference, max_frames, threads,
+                         /*lighting=*/false)
+      .background;
+}
+
+PhotometricTrainer::Tables PhotometricTrainer::TableCorrection(
+    const PhotometricTrunk& trunk, const std::vector<TrunkTargets>& frames,
+    const Eigen::MatrixXd& latents, const std::vector<const PhotometricTrunk::Markers*>& markers,
+    const std::vector<int>& frame_reference, int max_frames, int threads, bool lighting) {
   const int m = static_cast<int>(frames.size());
   if (m < 1 || latents.rows() != m || latents.cols() != trunk.latent_dim() ||
       static_cast<int>(frame_reference.size()) != m || max_frames < 1) {
@@ -624,35 +710,74 @@ Image PhotometricTrainer::MeanResidual(
                                   " or names no reference");
     }
   }
+  // The regressors of frame i: 1 (the background), then its K lighting values. Per
+  // pixel the normal equations' matrix sum_i w_i x_i x_i^T (q x q, one row of q q values
+  // of `grams`) and right-hand side sum_i w_i r_i x_i^T (C rows of `sums`).
+  const int k_light = lighting ? trunk.lighting_components() : 0;
+  const int q = 1 + k_light;
   // Per-thread sums (threads own contiguous ranges of the frames), added in thread order
-  // so that the table does not depend on the scheduling.
+  // so that the tables do not depend on the scheduling.
   const int parts = std::max(1, std::min(threads, used));
-  std::vector<Eigen::MatrixXd> sums(parts, Eigen::MatrixXd::Zero(n, c));
-  std::vector<Eigen::VectorXd> weights(parts, Eigen::VectorXd::Zero(n));
+  const auto values = static_cast<Eigen::Index>(n) * c;
+  std::vector<Eigen::MatrixXd> sums(parts, Eigen::MatrixXd::Zero(values, q));
+  std::vector<Eigen::MatrixXd> grams(parts, Eigen::MatrixXd::Zero(n, q * q));
   const std::vector<int> pixels = trunk.AllPixels();
   internal::ParallelFor(parts, parts, [&](int part) {
+    Eigen::VectorXd x(q);
     for (int k = part * used / parts; k < (part + 1) * used / parts; ++k) {
       const std::size_t i = static_cast<std::size_t>(k) * m / used;
       const Eigen::MatrixXf y = trunk.Forward<float>(
           pixels, latents.row(i).transpose().cast<float>(), markers[frame_reference[i]]);
-      const Eigen::VectorXd w = frames[i].weights.cast<double>();
-      sums[part] += w.asDiagonal() * (frames[i].values - y).cast<double>();
-      weights[part] += w;
+      x[0] = 1.0;
+      x.tail(k_light) = latents.row(i).tail(k_light).transpose();
+      const Eigen::MatrixXd xx = x * x.transpose();
+      for (int j = 0; j < n; ++j) {
+        const double w = static_cast<double>(frames[i].weights[j]);
+        if (w == 0.0) continue;
+        grams[part].row(j) += w * Eigen::Map<const Eigen::RowVectorXd>(xx.data(), q * q);
+        for (int ch = 0; ch < c; ++ch) {
+          const double r = static_cast<double>(frames[i].values(j, ch) - y(j, ch));
+          sums[part].row(static_cast<Eigen::Index>(j) * c + ch) += (w * r) * x.transpose();
+        }
+      }
     }
   });
   for (int part = 1; part < parts; ++part) {
     sums[0] += sums[part];
-    weights[0] += weights[part];
+    grams[0] += grams[part];
   }
-  Image mean(rows, cols, c);
+  Tables tables;
+  tables.background = Image(rows, cols, c);
+  tables.lighting = Eigen::MatrixXf::Zero(static_cast<Eigen::Index>(n) * c, k_light);
   for (int j = 0; j < n; ++j) {
-    if (!(weights[0][j] > 0)) continue;
+    const double weight = grams[0](j, 0);  // sum_i w_i
+    if (!(weight > 0)) continue;  // no frame weighs the pixel
+    Eigen::MatrixXd solution(q, c);
+    if (q == 1) {
+      for (int ch = 0; ch < c; ++ch) {
+        solution(0, ch) = sums[0](static_cast<Eigen::Index>(j) * c + ch, 0) / weight;
+      }
+    } else {
+      // A ridge of 1e-9 of the mean diagonal keeps a pixel whose frames' lighting values
+      // span fewer than K directions solvable (its tables then the least-norm-like
+      // solution).
+      const Eigen::RowVectorXd flat = grams[0].row(j);
+      Eigen::MatrixXd gram = Eigen::Map<const Eigen::MatrixXd>(flat.data(), q, q);
+      gram.diagonal().array() += 1e-9 * gram.diagonal().mean();
+      const Eigen::MatrixXd rhs =
+          sums[0].middleRows(static_cast<Eigen::Index>(j) * c, c).transpose();  // q x C
+      solution = gram.ldlt().solve(rhs);
+    }
     for (int ch = 0; ch < c; ++ch) {
-      mean.data[static_cast<std::size_t>(j) * c + ch] =
-          static_cast<float>(sums[0](j, ch) / weights[0][j]);
+      tables.background.data[static_cast<std::size_t>(j) * c + ch] =
+          static_cast<float>(solution(0, ch));
+      for (int k = 0; k < k_light; ++k) {
+        tables.lighting(static_cast<Eigen::Index>(j) * c + ch, k) =
+            static_cast<float>(solution(1 + k, ch));
+      }
     }
   }
-  return mean;
+  return tables;
 }
 
 }  // namespace tactfunc

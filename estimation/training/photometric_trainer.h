@@ -98,6 +98,11 @@ class PhotometricTrainer {
     // size on the step's gradient; a finished run then adds the frames' MeanResidual at
     // their final latents (over up to 8192 of them). The result's trunk holds it.
     bool learn_background = false;
+    // With trunk.lighting_components K > 0 (which needs learn_background) the trunk's K
+    // lighting images (PhotometricTrunk::SetLighting) are learned too: from small random
+    // values, Adam at the trunk's step size, the frames' lighting values among their
+    // latents; a finished run then takes the background's and the lighting images'
+    // exact least-squares correction at the final latents (TableCorrection).
     // Worker threads over a step's frames. >= 1.
     int threads = 1;
     // Checkpoints (header comment): written atomically to this path ("" = none; the
@@ -160,6 +165,21 @@ class PhotometricTrainer {
       const PhotometricTrunk& trunk, const std::vector<TrunkTargets>& frames,
       const Eigen::MatrixXd& latents, const std::vector<const PhotometricTrunk::Markers*>& markers,
       const std::vector<int>& frame_reference, int max_frames, int threads);
+
+  // The same least squares with the lighting images too (lighting = true): per pixel
+  // and channel, the background's and the K lighting images' corrections (dB, dL_1..
+  // dL_K) minimising sum_i w_i (r_i - dB - sum_k a_ik dL_k)^2, r_i = target - f(z_i)
+  // and a_i the frame's lighting values (its latent's last K). Added to the trunk's
+  // tables they are their exact minimiser with the latents and the rest of the trunk
+  // held. lighting = false gives MeanResidual's background and no lighting columns.
+  struct Tables {
+    Image background;          // rows x cols x C
+    Eigen::MatrixXf lighting;  // (rows cols C) x K, as PhotometricTrunk::lighting()
+  };
+  static Tables TableCorrection(
+      const PhotometricTrunk& trunk, const std::vector<TrunkTargets>& frames,
+      const Eigen::MatrixXd& latents, const std::vector<const PhotometricTrunk::Markers*>& markers,
+      const std::vector<int>& frame_reference, int max_frames, int threads, bool lighting);
 
  private:
   Options options_;

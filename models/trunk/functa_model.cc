@@ -104,7 +104,8 @@ std::uint64_t TrunkParameterBytes(const SensorTrunk& trunk) {
                          static_cast<std::uint64_t>(trunk.alpha.size());
   if (trunk.photometric != nullptr) {
     values += static_cast<std::uint64_t>(trunk.photometric->NumHeadParameters()) +
-              trunk.photometric->reference().size() + trunk.photometric->background().size();
+              trunk.photometric->reference().size() + trunk.photometric->background().size() +
+              static_cast<std::uint64_t>(trunk.photometric->lighting().size());
   }
   std::uint64_t bytes = 4ull * values;
   if (trunk.siren.has_readout()) {  // the readout basis is stored in float16
@@ -233,6 +234,14 @@ std::string FunctaModel::Serialize() const {
         file.Add(name + "/background", TensorFile::DType::kFloat32,
                  {static_cast<std::int64_t>(b.size())},
                  std::vector<double>(b.data.begin(), b.data.end()));
+      }
+      // Likewise the lighting images: their count, then (rows cols C) x K values.
+      if (p.lighting_components() > 0) {
+        const Eigen::MatrixXf& l = p.lighting();
+        meta["trunks"].back()["photometric"]["lighting_components"] = p.lighting_components();
+        file.Add(name + "/lighting", TensorFile::DType::kFloat32,
+                 {static_cast<std::int64_t>(l.cols()), static_cast<std::int64_t>(l.rows())},
+                 std::vector<double>(l.data(), l.data() + l.size()));
       }
       if (t.warm_start != nullptr) {
         const WarmStartTable& w = *t.warm_start;
@@ -447,12 +456,23 @@ FunctaModel FunctaModel::FromTensorFile(const TensorFile& file, const std::strin
         po.latent_dim = p.at("latent_dim").get<int>();
         po.shading_width = p.at("shading_width").get<int>();
         po.supersample = p.at("supersample").get<int>();
-        if (!po.IsValid(&error) ||
-            po.latent_dim - PhotometricTrunk::kPoseValues != options.latent_dim) {
-          throw TensorFileError(source + ": " + field + ": " +
-                                (error.empty() ? "latent_dim must be the SIREN's + " +
-                                                     std::to_string(PhotometricTrunk::kPoseValues)
-                                               : error));
+        if (p.contains("lighting_components")) {
+          field = name + ".photometric.lighting_components";
+          if (!p.at("lighting_components").is_number_integer()) {
+            throw TensorFileError(source + ": field '" + field + "': expected an integer");
+          }
+          po.lighting_components = p.at("lighting_components").get<int>();
+          field = name + ".photometric";
+        }
+        if (!po.IsValid(&error) || po.latent_dim - PhotometricTrunk::kPoseValues -
+                                           po.lighting_components !=
+                                       options.latent_dim) {
+          throw TensorFileError(
+              source + ": " + field + ": " +
+              (error.empty() ? "latent_dim must be the SIREN's + " +
+                                   std::to_string(PhotometricTrunk::kPoseValues) +
+                                   " + lighting_components"
+                             : error));
         }
         field = name + ".photometric.reference";
         const auto& r = p.at("reference");
@@ -495,6 +515,21 @@ FunctaModel FunctaModel::FromTensorFile(const TensorFile& file, const std::strin
             } catch (const std::invalid_argument& e) {
               throw TensorFileError(source + ": tensor '" + name + "/background': " + e.what());
             }
+          }
+        }
+        if (po.lighting_components > 0) {
+          const auto& l = file.Get(name + "/lighting",
+                                   {static_cast<std::int64_t>(po.lighting_components),
+                                    static_cast<std::int64_t>(po.rows) * po.cols * po.channels});
+          Eigen::MatrixXf lighting(static_cast<Eigen::Index>(po.rows) * po.cols * po.channels,
+                                   po.lighting_components);
+          for (Eigen::Index i = 0; i < lighting.size(); ++i) {
+            lighting.data()[i] = static_cast<float>(l.values[static_cast<std::size_t>(i)]);
+          }
+          try {  // the trunk's own check (finite values), named after the file
+            photometric->SetLighting(lighting);
+          } catch (const std::invalid_argument& e) {
+            throw TensorFileError(source + ": tensor '" + name + "/lighting': " + e.what());
           }
         }
         if (p.contains("warm_start")) {

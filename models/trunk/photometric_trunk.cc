@@ -27,7 +27,7 @@ LatentModulatedSiren::Options SirenOptions(const PhotometricTrunk::Options& o) {
   s.width = o.width;
   s.num_hidden_layers = o.num_hidden_layers;
   s.omega_0 = o.omega_0;
-  s.latent_dim = o.latent_dim - PhotometricTrunk::kPoseValues;
+  s.latent_dim = o.latent_dim - PhotometricTrunk::kPoseValues - o.lighting_components;
   s.output_channels = 1 + o.channels;
   return s;
 }
@@ -140,9 +140,12 @@ bool PhotometricTrunk::Options::IsValid(std::string* error) const {
             << num_hidden_layers;
   } else if (!(std::isfinite(omega_0) && omega_0 > 0)) {
     message << "omega_0 must be finite and > 0, found " << omega_0;
-  } else if (latent_dim <= kPoseValues) {
-    message << "latent_dim must be > " << kPoseValues << " (the pose values), found "
-            << latent_dim;
+  } else if (lighting_components < 0 || lighting_components > 64) {
+    message << "lighting_components must be in [0, 64], found " << lighting_components;
+  } else if (latent_dim <= kPoseValues + lighting_components) {
+    message << "latent_dim must be > " << kPoseValues + lighting_components
+            << " (the pose values and " << lighting_components
+            << " lighting values; the SIREN needs a code value), found " << latent_dim;
   } else if (shading_width < 1 || shading_width > 4096) {
     message << "shading_width must be in [1, 4096], found " << shading_width;
   } else if (supersample < 1 || supersample > 32) {
@@ -222,7 +225,7 @@ PhotometricTrunk::PhotometricTrunk(const Options& options, const Image& referenc
       } else if (block.group == ParameterGroup::kOutputBias) {
         bound = 1.0 / std::sqrt(static_cast<double>(options.width));
       } else if (block.group == ParameterGroup::kModulationMatrix) {
-        bound = 0.1 / std::sqrt(static_cast<double>(options.latent_dim - kPoseValues));
+        bound = 0.1 / std::sqrt(static_cast<double>(CodeValues()));
       } else {
         continue;
       }
@@ -231,6 +234,9 @@ PhotometricTrunk::PhotometricTrunk(const Options& options, const Image& referenc
     }
     siren_.SetParameters(theta);
   }
+  lighting_ = Eigen::MatrixXf::Zero(
+      static_cast<Eigen::Index>(options.rows) * options.cols * options.channels,
+      options.lighting_components);
   markers_ = MakeMarkers(reference);
 }
 
@@ -324,6 +330,26 @@ void PhotometricTrunk::SetBackground(const Image& background) {
     }
   }
   background_ = background;
+}
+
+void PhotometricTrunk::SetLighting(const Eigen::MatrixXf& lighting) {
+  if (lighting.rows() != lighting_.rows() || lighting.cols() != lighting_.cols()) {
+    throw std::invalid_argument(
+        "PhotometricTrunk::SetLighting: expected " + std::to_string(lighting_.rows()) + " x " +
+        std::to_string(lighting_.cols()) + " values (rows cols channels x lighting "
+        "components), found " + std::to_string(lighting.rows()) + " x " +
+        std::to_string(lighting.cols()));
+  }
+  if (!lighting.allFinite()) {
+    throw std::invalid_argument("PhotometricTrunk::SetLighting: the lighting images hold a "
+                                "non-finite value");
+  }
+  lighting_ = lighting;
+}
+
+double PhotometricTrunk::LightingRms() const {
+  if (lighting_.size() == 0) return 0;
+  return std::sqrt(lighting_.cast<double>().squaredNorm() / static_cast<double>(lighting_.size()));
 }
 
 double PhotometricTrunk::BackgroundRms() const {
@@ -442,7 +468,9 @@ void PhotometricTrunk::RunForward(const std::vector<int>& pixels, const VectorX<
   const double offsets[kSets][2] = {{0, 0}, {step, 0}, {-step, 0}, {0, step}, {0, -step}};
   std::vector<Eigen::Vector2d> p(n);
   for (int i = 0; i < n; ++i) p[i] = PixelCoordinate(pixels[i]);
-  const VectorX<Scalar> code = z.tail(options_.latent_dim - kPoseValues);
+  const VectorX<Scalar> code = z.segment(kPoseValues, CodeValues());
+  const int lighting_components = options_.lighting_components;
+  const VectorX<Scalar> lighting_values = z.tail(lighting_components);
   // The whole grid in order, with no reverse pass to follow: the four neighbours of a
   // pixel are pixels too, so the SIREN runs once per pixel of the grid and its one-pixel
   // border ((rows + 2) x (cols + 2) coordinates instead of 5 rows cols) and the five
@@ -592,6 +620,13 @@ void PhotometricTrunk::RunForward(const std::vector<int>& pixels, const VectorX<
         (*outputs)(i, ch) += static_cast<Scalar>(background_.at(r, col, ch));
       }
     }
+    if (lighting_components > 0) {
+      for (int ch = 0; ch < c; ++ch) {
+        (*outputs)(i, ch) +=
+            lighting_.row(static_cast<Eigen::Index>(pixels[i]) * c + ch).cast<Scalar>().dot(
+                lighting_values);
+      }
+    }
   }
 }
 
@@ -706,7 +741,16 @@ void PhotometricTrunk::RunBackward(const Pass& pass_holder, const std::vector<in
     (*dL_dz)[0] = static_cast<Scalar>(dt[0]);
     (*dL_dz)[1] = static_cast<Scalar>(dt[1]);
     (*dL_dz)[2] = static_cast<Scalar>(dphi);
-    dL_dz->tail(options_.latent_dim - kPoseValues) = dcode;
+    dL_dz->segment(kPoseValues, CodeValues()) = dcode;
+    // The lighting values: the outputs are linear in them.
+    const int k_light = options_.lighting_components;
+    dL_dz->tail(k_light).setZero();
+    for (int i = 0; i < n && k_light > 0; ++i) {
+      for (int ch = 0; ch < c; ++ch) {
+        const auto row = static_cast<Eigen::Index>(pixels[i]) * c + ch;
+        dL_dz->tail(k_light) += dL_dY(i, ch) * lighting_.row(row).cast<Scalar>().transpose();
+      }
+    }
   }
   if (dL_dsiren != nullptr) *dL_dsiren = std::move(dtheta);
 }
@@ -766,7 +810,8 @@ void PhotometricTrunk::ForwardAndLatentJacobian(const std::vector<int>& pixels,
   const double sn = std::sin(static_cast<double>(z[2]));
   // Transposed, so that each position's row is a contiguous column: d x (positions outs).
   MatrixX<Scalar> J_posT(d, positions * outs);
-  J_posT.bottomRows(d - kPoseValues) = J_code;
+  J_posT.middleRows(kPoseValues, CodeValues()) = J_code;
+  J_posT.bottomRows(options_.lighting_components).setZero();
   for (long u = 0; u < positions; ++u) {
     const double q0 = static_cast<double>(pass.coords(u, 0));
     const double q1 = static_cast<double>(pass.coords(u, 1));
@@ -810,6 +855,11 @@ void PhotometricTrunk::ForwardAndLatentJacobian(const std::vector<int>& pixels,
       col = dinput(2, i) * position(i, 0) + position(i, 1 + ch) +
             (dg0 / Scalar(2)) * (position(n + i, 0) - position(2 * n + i, 0)) +
             (dg1 / Scalar(2)) * (position(3 * n + i, 0) - position(4 * n + i, 0));
+      // The lighting values' columns: the lighting images at the pixel (zero above).
+      if (options_.lighting_components > 0) {
+        const auto row = static_cast<Eigen::Index>(pixels[i]) * c + ch;
+        col.tail(options_.lighting_components) = lighting_.row(row).cast<Scalar>().transpose();
+      }
     }
   }
   if (jacobian_layout == JacobianLayout::kOutputColumns) {

@@ -8,8 +8,9 @@
 // head reproduces both from a smooth indentation field.
 //
 // The latent. z has d values: a rigid motion of the contact (t_0, t_1, phi) in the
-// trunk's isotropic coordinates (below), then the SIREN's code (d - 3 values). The SIREN
-// (models/trunk/latent_modulated_siren.h, latent_dim d - 3, 1 + C outputs) draws the
+// trunk's isotropic coordinates (below), then the SIREN's code (d - 3 - K values), then
+// K lighting values a_1..a_K (K = Options::lighting_components, 0 by default). The SIREN
+// (models/trunk/latent_modulated_siren.h, latent_dim d - 3 - K, 1 + C outputs) draws the
 // contact in its own frame:
 //
 //   s(p) = SIREN(R(phi)^T (p - t); code),     s_0 = w (the indentation), s_1..s_C
@@ -24,6 +25,7 @@
 //             second-order pass; measured level with the exact slope)
 //   u(p)   = m g(p)                          (how far the skin moves, working pixels)
 //   y_c(p) = S_c(g, w, p) - S_c(0, 0, p) + M_c(p - u) - M_c(p) + s_c(p) + B_c(p)
+//            + sum_k a_k L_kc(p)
 //
 // B is the sensor's background (optional, zero when absent): a fixed per-pixel table on
 // the working grid of what every frame shares and the contact cannot draw, since the
@@ -31,6 +33,13 @@
 // the gel's own settling). It has no latent values and no gradient here (the outputs
 // are linear in it); PhotometricTrainer learns it with the trunk (Options::
 // learn_background, `train --background`, docs/REAL_DATA.md).
+//
+// L_1..L_K are the sensor's lighting images (optional, K = 0 by default): what varies
+// from frame to frame over the whole gel in the SENSOR's frame (a real gel's lighting
+// and exposure drifting between frames), a few numbers a frame that the SIREN, drawing
+// in the contact's frame, could only spend its code on. Each frame weighs them by its
+// own K lighting values; the outputs are linear in both. They start at zero until
+// SetLighting; PhotometricTrainer learns them with the trunk (`train --lighting K`).
 //
 // S is a small shading network (5 -> H -> H -> C, SiLU) of the slope, the depth and the
 // position (so it can learn the sensor's vignetting and lighting), and M the reference's
@@ -103,8 +112,11 @@ class PhotometricTrunk {
     int width = 64;
     int num_hidden_layers = 3;
     double omega_0 = 30.0;
-    // d, the pose values included. > kPoseValues.
+    // d, the pose and lighting values included. > kPoseValues + lighting_components.
     int latent_dim = 64;
+    // K, the lighting images and the latent's last K values that weigh them (header
+    // comment). In [0, 64].
+    int lighting_components = 0;
     // H, units of each of the shading network's two hidden layers. In [1, 4096].
     int shading_width = 64;
     // K of the sensor-resolution marker sampling. In [1, 32].
@@ -176,6 +188,19 @@ class PhotometricTrunk {
   void SetBackground(const Image& background);
   // Root mean square of the background's values, 0 without one.
   double BackgroundRms() const;
+
+  // The lighting images L (header comment): (rows cols C) x K, row j C + c holding pixel
+  // j's channel c (Image's layout), one column per lighting value; zero until set.
+  const Eigen::MatrixXf& lighting() const { return lighting_; }
+  // Throws std::invalid_argument for a matrix of another shape or a non-finite value.
+  void SetLighting(const Eigen::MatrixXf& lighting);
+  int lighting_components() const { return options_.lighting_components; }
+  // Root mean square of the lighting images' values, 0 without any.
+  double LightingRms() const;
+  // The SIREN's code values, d - 3 - K; the code is z.segment(kPoseValues, CodeValues()).
+  int CodeValues() const {
+    return options_.latent_dim - kPoseValues - options_.lighting_components;
+  }
 
   MarkerSampling marker_sampling() const { return marker_sampling_; }
   void set_marker_sampling(MarkerSampling sampling) { marker_sampling_ = sampling; }
@@ -276,6 +301,7 @@ class PhotometricTrunk {
   int num_head_parameters_ = 0;
   Eigen::VectorXd head_;
   Image background_;
+  Eigen::MatrixXf lighting_;
   std::shared_ptr<AtRestShading> at_rest_shading_;
 };
 

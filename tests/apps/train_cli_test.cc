@@ -339,6 +339,58 @@ TEST_F(TrainCliTest, ThePhotometricBackgroundDrawsWhatEveryFrameShares) {
   EXPECT_THAT(direct.err, HasSubstr("--background applies to --head photometric"));
 }
 
+// Frames whose band brightens by a different amount in each frame: lighting images drawn
+// by each frame's own value encode them better than the background alone.
+TEST_F(TrainCliTest, PhotometricLightingImagesDrawWhatChangesFromFrameToFrame) {
+  ASSERT_EQ(Run("synth --out " + Root("lit") + " --frames-per-tool 3 --tools rod,square "
+                "--sensors gelslim --seed 6").exit_code, 0);
+  int frame = 0;
+  for (const auto& entry : fs::directory_iterator(Root("lit/gelslim"))) {
+    const std::string name = entry.path().filename().string();
+    if (entry.path().extension() != ".png" || name.rfind("reference", 0) == 0) continue;
+    cv::Mat image = cv::imread(entry.path().string(), cv::IMREAD_UNCHANGED);
+    ASSERT_FALSE(image.empty()) << name;
+    cv::Mat band = image.rowRange(image.rows / 3, image.rows / 2);
+    band += cv::Scalar::all(12 * (frame++ % 6));
+    ASSERT_TRUE(cv::imwrite(entry.path().string(), image));
+  }
+  const std::string train = "train --data " + Root("lit") + " --head photometric --steps 200 "
+                            "--marker-warmup 10 --latent-dim 8 --width 8 --layers 2 "
+                            "--threads 2 --seed 1 --json --background --out ";
+  const Result with = Run(train + Root("lit_with.tfm") + " --lighting 1");
+  ASSERT_EQ(with.exit_code, 0) << with.err;
+  EXPECT_THAT(with.out, HasSubstr("1 lighting images learned"));
+  EXPECT_GT(with.LastJson()["sensors"]["gelslim"]["lighting_rms"].get<double>(), 0.0);
+  ASSERT_EQ(Run(train + Root("lit_without.tfm")).exit_code, 0);
+  EXPECT_THAT(Run("info " + Root("lit_with.tfm")).out,
+              HasSubstr("lighting: 1 images of 80x107x1"));
+  EXPECT_EQ(FunctaModel::Load(Root("lit_with.tfm")).Trunk(SensorKind::kGelSlim).siren.latent_dim(),
+            4);  // 8 = pose 3 + code 4 + lighting 1
+  double psnr[2];
+  for (int k = 0; k < 2; ++k) {
+    const std::string m = Root(k == 0 ? "lit_with" : "lit_without");
+    const Result encode = Run("encode --model " + m + ".tfm --data " + Root("lit") + " --out " +
+                              m + ".tfs --strategy adam:30 --threads 2 --json");
+    ASSERT_EQ(encode.exit_code, 0) << encode.err;
+    psnr[k] = encode.LastJson()["psnr_mean"]["gelslim"].get<double>();
+  }
+  EXPECT_GT(psnr[0], psnr[1] + 1.0) << "with " << psnr[0] << " dB, without " << psnr[1];
+  // The Levenberg-Marquardt fit takes the lighting values' Jacobian columns too.
+  const Result ceres = Run("encode --model " + Root("lit_with.tfm") + " --data " + Root("lit") +
+                           " --out " + Root("lit_ceres.tfs") + " --strategy knn+ceres:3 --json");
+  ASSERT_EQ(ceres.exit_code, 0) << ceres.err;
+  EXPECT_GT(ceres.LastJson()["psnr_mean"]["gelslim"].get<double>(), psnr[1]);
+  // Refused: a latent with no code value left, and the direct head.
+  const Result small = Run("train --data " + Root("lit") + " --out " + Root("s.tfm") +
+                           " --head photometric --steps 2 --latent-dim 5 --lighting 2");
+  EXPECT_NE(small.exit_code, 0);
+  EXPECT_THAT(small.err, HasSubstr("expected at least 6"));
+  const Result direct = Run("train --data " + Root("lit") + " --out " + Root("d.tfm") +
+                            " --preset small --steps 2 --lighting 2");
+  EXPECT_NE(direct.exit_code, 0);
+  EXPECT_THAT(direct.err, HasSubstr("--lighting applies to --head photometric"));
+}
+
 TEST_F(TrainCliTest, ThePhotometricHeadTrainsEncodesAndReconstructsAnOpticalSensor) {
   ASSERT_EQ(Run("synth --out " + Root("g") + " --frames-per-tool 2 --tools rod,square "
                 "--sensors gelslim --seed 4").exit_code, 0);

@@ -15,6 +15,7 @@
 #include <utility>
 #include <vector>
 
+#include "Eigen/QR"
 #include "gtest/gtest.h"
 #include "tests/support/photometric_test_util.h"
 
@@ -250,6 +251,143 @@ TEST(PhotometricTrainerTest, ALearnedBackgroundDrawsWhatTheFramesShare) {
   o.learn_background = false;
   EXPECT_THROW(PhotometricTrainer(o).Train(teacher.frames, reference), std::runtime_error);
   std::filesystem::remove(path);
+}
+
+// Frames of a trunk with lighting_components 2 and its images at zero, plus a shared
+// pattern and each frame's own weighing (its latent's last two values) of two images.
+struct LitFrames {
+  PhotometricTrunk trunk;
+  Eigen::MatrixXd latents;  // one row per frame
+  std::vector<TrunkTargets> frames;
+  Eigen::VectorXd pattern;  // the background drawn in
+  Eigen::MatrixXd images;   // rows cols x 2, the lighting drawn in
+};
+
+LitFrames MakeLitFrames(int count, int components, bool contact = true) {
+  PhotometricTrunk::Options o = SmallTrunk();
+  o.lighting_components = components;
+  LitFrames f{PhotometricTrunk(o, MarkerReference(2 * o.rows, 2 * o.cols), 42), {}, {}, {}, {}};
+  const int n = o.rows * o.cols;
+  f.pattern.resize(n);
+  f.images.resize(n, components);
+  for (int j = 0; j < n; ++j) {
+    f.pattern[j] = 0.03 * std::sin(0.7 * j);
+    for (int k = 0; k < components; ++k) {
+      // Smooth over the grid, as a gel's lighting: gradients along the two axes.
+      f.images(j, k) = 0.2 * (k == 0 ? (j % o.cols) / double(o.cols) - 0.5
+                                      : (j / o.cols) / double(o.rows) - 0.5);
+    }
+  }
+  unsigned state = 11;
+  auto uniform = [&state] {
+    state = state * 1664525u + 1013904223u;
+    return 2.0 * (state >> 8) / double(1u << 24) - 1.0;
+  };
+  f.latents.resize(count, o.latent_dim);
+  for (int i = 0; i < count; ++i) {
+    Eigen::VectorXd z(o.latent_dim);
+    for (int k = 0; k < z.size(); ++k) z[k] = 0.5 * uniform();
+    z.tail(components) *= 4.0;  // lighting values within +-2
+    f.latents.row(i) = z.transpose();
+    Eigen::MatrixXf y = contact ? f.trunk.Forward<float>(f.trunk.AllPixels(), z.cast<float>())
+                                : Eigen::MatrixXf::Zero(n, 1);
+    y.col(0) += (f.pattern + f.images * z.tail(components)).cast<float>();
+    f.frames.push_back(WholeFrameTargets(y, o.rows, o.cols));
+  }
+  return f;
+}
+
+TEST(PhotometricTrainerTest, TheTableCorrectionRecoversTheBackgroundAndTheLightingImages) {
+  const LitFrames f = MakeLitFrames(6, 2);
+  const std::vector<const PhotometricTrunk::Markers*> own = {nullptr};
+  const std::vector<int> first(6, 0);
+  const PhotometricTrainer::Tables tables = PhotometricTrainer::TableCorrection(
+      f.trunk, f.frames, f.latents, own, first, 100, 1, /*lighting=*/true);
+  const int n = static_cast<int>(f.pattern.size());
+  ASSERT_EQ(tables.lighting.rows(), n);
+  ASSERT_EQ(tables.lighting.cols(), 2);
+  for (int j = 0; j < n; ++j) {
+    ASSERT_NEAR(tables.background.data[j], f.pattern[j], 2e-5) << j;
+    ASSERT_NEAR(tables.lighting(j, 0), f.images(j, 0), 2e-5) << j;
+    ASSERT_NEAR(tables.lighting(j, 1), f.images(j, 1), 2e-5) << j;
+  }
+  // The same with two threads, and without lighting the background alone (MeanResidual).
+  const PhotometricTrainer::Tables two = PhotometricTrainer::TableCorrection(
+      f.trunk, f.frames, f.latents, own, first, 100, 2, /*lighting=*/true);
+  EXPECT_EQ(two.background.data, tables.background.data);
+  EXPECT_EQ(two.lighting, tables.lighting);
+  const PhotometricTrainer::Tables alone = PhotometricTrainer::TableCorrection(
+      f.trunk, f.frames, f.latents, own, first, 100, 1, /*lighting=*/false);
+  EXPECT_EQ(alone.lighting.cols(), 0);
+  EXPECT_EQ(alone.background.data,
+            PhotometricTrainer::MeanResidual(f.trunk, f.frames, f.latents, own, first, 100, 1)
+                .data);
+  // Set in the trunk, the frames are drawn exactly.
+  PhotometricTrunk lit = f.trunk;
+  lit.SetBackground(tables.background);
+  lit.SetLighting(tables.lighting);
+  for (int i = 0; i < 6; ++i) {
+    const Eigen::MatrixXf y =
+        lit.Forward<float>(lit.AllPixels(), f.latents.row(i).transpose().cast<float>());
+    EXPECT_LT((y - f.frames[i].values).cwiseAbs().maxCoeff(), 1e-4) << i;
+  }
+}
+
+// Frames without a contact whose lighting over the whole grid varies from frame to
+// frame: a trunk with two lighting images draws them closer than one with the
+// background alone (whose SIREN must draw it in a contact's frame), its images span the
+// lighting drawn in, and the run is the same for any thread count and when resumed.
+TEST(PhotometricTrainerTest, LearnedLightingImagesDrawWhatVariesOverTheWholeGrid) {
+  const LitFrames f = MakeLitFrames(12, 2, /*contact=*/false);
+  const Image reference = f.trunk.reference();
+  PhotometricTrainer::Options o = QuickOptions(1);
+  o.steps = 300;
+  o.learn_background = true;
+  o.trunk.latent_dim = 10;  // the same code (5 values) with and without the two images
+  const PhotometricTrainer::Result without = PhotometricTrainer(o).Train(f.frames, reference);
+  o.trunk.lighting_components = 2;
+  o.trunk.latent_dim = 10;
+  const PhotometricTrainer::Result with = PhotometricTrainer(o).Train(f.frames, reference);
+  ASSERT_EQ(with.trunk.lighting().cols(), 2);
+  double mse_with = 0, mse_without = 0;
+  for (int i = 0; i < 12; ++i) {
+    const TrunkTargets& t = f.frames[i];
+    const auto mse = [&](const PhotometricTrainer::Result& r) {
+      return r.trunk.LossAndGradient<float>(r.trunk.AllPixels(),
+                                            r.latents.row(i).transpose().cast<float>(), t.values,
+                                            t.weights, nullptr, nullptr, nullptr);
+    };
+    mse_with += mse(with);
+    mse_without += mse(without);
+  }
+  EXPECT_LT(mse_with, 0.2 * mse_without);
+  // The images drawn in lie near the span of the learned ones (within a quarter of their
+  // norm: the SIREN draws a part of the lighting too).
+  const Eigen::MatrixXd learned = with.trunk.lighting().cast<double>();
+  const Eigen::MatrixXd projected =
+      learned * learned.colPivHouseholderQr().solve(f.images);
+  EXPECT_LT((projected - f.images).norm(), 0.25 * f.images.norm());
+  o.threads = 2;
+  EXPECT_EQ(PhotometricTrainer(o).Train(f.frames, reference).trunk.lighting(),
+            with.trunk.lighting());
+  // Stopped at step 130 and resumed: the images and their Adam moments carry over.
+  const std::string path = ::testing::TempDir() + "/photometric_lighting.ckpt";
+  std::filesystem::remove(path);
+  o.checkpoint_path = path;
+  o.checkpoint_every = 100;
+  o.resume = true;
+  ASSERT_TRUE(PhotometricTrainer(o)
+                  .Train(f.frames, reference, [](int step, double) { return step < 130; })
+                  .summary.stopped);
+  const PhotometricTrainer::Result rest = PhotometricTrainer(o).Train(f.frames, reference);
+  EXPECT_EQ(rest.trunk.lighting(), with.trunk.lighting());
+  EXPECT_EQ(rest.latents, with.latents);
+  // A checkpoint of another count is another run; lighting needs a background.
+  o.trunk.lighting_components = 1;
+  EXPECT_THROW(PhotometricTrainer(o).Train(f.frames, reference), std::runtime_error);
+  std::filesystem::remove(path);
+  o.learn_background = false;
+  EXPECT_THROW(PhotometricTrainer{o}, std::invalid_argument);
 }
 
 TEST(PhotometricTrainerTest, TheCallbackStopsTraining) {

@@ -217,8 +217,9 @@ std::string WithMetaEdited(const std::string& bytes, const std::string& from,
 }
 
 // A GelSlim trunk with the photometric head: 10 x 12 working frames, a 20 x 24 reference.
-SensorTrunk PhotometricSensorTrunk() {
+SensorTrunk PhotometricSensorTrunk(int lighting_components = 0) {
   PhotometricTrunk::Options o;
+  o.lighting_components = lighting_components;
   o.rows = 10;
   o.cols = 12;
   o.width = 8;
@@ -234,6 +235,7 @@ SensorTrunk PhotometricSensorTrunk() {
   photometric->SetHeadParameters(head);
   SensorTrunk trunk = SmallTrunk(SensorKind::kGelSlim, 2);
   trunk.siren = photometric->siren();
+  trunk.alpha = Eigen::VectorXd::Zero(trunk.siren.latent_dim());  // as `train` writes it
   trunk.photometric = photometric;
   return trunk;
 }
@@ -329,6 +331,78 @@ TEST(FunctaModel, RoundTripsAPhotometricBackgroundOnlyWhenThereIsOne) {
     EXPECT_THAT(e.what(), HasSubstr("poisoned.tfm")) << e.what();
     EXPECT_THAT(e.what(), HasSubstr("gelslim/background")) << e.what();
     EXPECT_THAT(e.what(), HasSubstr("not finite")) << e.what();
+  }
+}
+
+// Lighting images: their count and values round-trip (float32) and the loaded trunk
+// draws them; a trunk without them writes neither; a count without its tensor, or with
+// a non-finite value, is refused naming the file.
+TEST(FunctaModel, RoundTripsPhotometricLightingImages) {
+  EXPECT_THAT(TensorFile::Parse([] {
+                FunctaModel m;
+                m.SetTrunk(PhotometricSensorTrunk());
+                return m.Serialize();
+              }(), "m.tfm", "model").meta_json(),
+              ::testing::Not(HasSubstr("lighting")));
+  SensorTrunk trunk = PhotometricSensorTrunk(2);
+  auto photometric = std::make_shared<PhotometricTrunk>(*trunk.photometric);
+  Eigen::MatrixXf lighting(10 * 12, 2);
+  for (Eigen::Index i = 0; i < lighting.size(); ++i) {
+    lighting.data()[i] = 0.002f * static_cast<float>(i % 13) - 0.01f;
+  }
+  photometric->SetLighting(lighting);
+  trunk.photometric = photometric;
+  FunctaModel model;
+  model.SetTrunk(trunk);
+  const std::string bytes = model.Serialize();
+  const FunctaModel read = FunctaModel::Parse(bytes, "m.tfm");
+  const SensorTrunk& loaded = read.Trunk(SensorKind::kGelSlim);
+  const PhotometricTrunk& b = *loaded.photometric;
+  EXPECT_EQ(TrunkLatentDim(loaded), 7);
+  EXPECT_EQ(b.lighting_components(), 2);
+  EXPECT_EQ(b.siren().options().latent_dim, 2);  // 7 = pose 3 + code 2 + lighting 2
+  EXPECT_EQ(b.lighting(), lighting);
+  // float32 each: the SIREN, alpha, the head, the reference and the lighting images.
+  EXPECT_EQ(TrunkParameterBytes(loaded),
+            4u * static_cast<std::uint64_t>(loaded.siren.NumParameters() + loaded.alpha.size() +
+                                            b.NumHeadParameters() + b.reference().size() +
+                                            lighting.size()));
+  const Eigen::VectorXf z = Eigen::VectorXf::LinSpaced(7, -0.3f, 0.4f);
+  EXPECT_LT((b.Forward<float>(b.AllPixels(), z) -
+             photometric->Forward<float>(photometric->AllPixels(), z))
+                .cwiseAbs()
+                .maxCoeff(),
+            1e-4);
+  // A count without its tensor (a trunk of 2 lighting images written without them).
+  FunctaModel unlit;
+  unlit.SetTrunk(PhotometricSensorTrunk(2));
+  const TensorFile parsed = TensorFile::Parse(unlit.Serialize(), "m.tfm", "model");
+  TensorFile dropped("model");
+  dropped.set_meta_json(parsed.meta_json());
+  for (const TensorFile::Tensor& t : parsed.tensors()) {
+    if (t.name != "gelslim/lighting") dropped.Add(t.name, t.dtype, t.shape, t.values);
+  }
+  try {
+    FunctaModel::Parse(dropped.Serialize(), "dropped.tfm");
+    FAIL() << "missing lighting images accepted";
+  } catch (const TensorFileError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("lighting")) << e.what();
+    EXPECT_THAT(e.what(), HasSubstr("dropped.tfm")) << e.what();
+  }
+  const TensorFile full = TensorFile::Parse(bytes, "m.tfm", "model");
+  TensorFile poisoned("model");
+  poisoned.set_meta_json(full.meta_json());
+  for (const TensorFile::Tensor& t : full.tensors()) {
+    std::vector<double> values = t.values;
+    if (t.name == "gelslim/lighting") values[3] = std::nan("");
+    poisoned.Add(t.name, t.dtype, t.shape, values);
+  }
+  try {
+    FunctaModel::Parse(poisoned.Serialize(), "poisoned.tfm");
+    FAIL() << "a non-finite lighting image accepted";
+  } catch (const TensorFileError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("poisoned.tfm")) << e.what();
+    EXPECT_THAT(e.what(), HasSubstr("gelslim/lighting")) << e.what();
   }
 }
 

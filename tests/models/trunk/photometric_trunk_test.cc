@@ -11,6 +11,7 @@
 #include <cmath>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "gtest/gtest.h"
@@ -91,6 +92,24 @@ PhotometricTrunk MovingTrunk(PhotometricTrunk::MarkerSampling sampling, int chan
   return trunk;
 }
 
+// MovingTrunk with K lighting images of random values: the latent's last K values
+// weigh them (latent_dim 9: pose 3, code 9 - 3 - K).
+PhotometricTrunk LitTrunk(PhotometricTrunk::MarkerSampling sampling, int channels, int k) {
+  PhotometricTrunk::Options o = SmallOptions();
+  o.channels = channels;
+  o.lighting_components = k;
+  PhotometricTrunk trunk(o, DottedReference(2 * o.rows, 2 * o.cols, channels), 5);
+  VectorXd head = trunk.head_parameters();
+  head[head.size() - 1] = 1.5;
+  trunk.SetHeadParameters(head);
+  trunk.set_marker_sampling(sampling);
+  MatrixXf lighting(o.rows * o.cols * channels, k);
+  unsigned state = 17;
+  for (int i = 0; i < lighting.size(); ++i) lighting.data()[i] = 0.3f * Uniform(&state);
+  trunk.SetLighting(lighting);
+  return trunk;
+}
+
 void ExpectGradientsMatchDifferences(PhotometricTrunk trunk) {
   const Problem p = MakeProblem(trunk);
   VectorXd dz, dsiren, dhead;
@@ -159,6 +178,51 @@ TEST(PhotometricTrunkTest, GradientsMatchCentralDifferencesWithWorkingResolution
 TEST(PhotometricTrunkTest, GradientsMatchCentralDifferencesWithThreeChannels) {
   ExpectGradientsMatchDifferences(
       MovingTrunk(PhotometricTrunk::MarkerSampling::kSensorResolution, 3));
+}
+
+TEST(PhotometricTrunkTest, GradientsMatchCentralDifferencesWithLightingImages) {
+  // The lighting values' gradients (the latent's last two) and every other one.
+  ExpectGradientsMatchDifferences(
+      LitTrunk(PhotometricTrunk::MarkerSampling::kSensorResolution, 3, 2));
+}
+
+TEST(PhotometricTrunkTest, EachLightingValueAddsItsImageToEveryPixel) {
+  const PhotometricTrunk lit = LitTrunk(PhotometricTrunk::MarkerSampling::kSensorResolution, 2, 2);
+  EXPECT_EQ(lit.CodeValues(), 9 - 3 - 2);
+  EXPECT_EQ(lit.siren().options().latent_dim, lit.CodeValues());
+  const std::vector<int> all = lit.AllPixels();
+  VectorXf z = MakeProblem(lit).z.cast<float>();
+  const MatrixXf base = lit.Forward<float>(all, z);
+  // The code drives the SIREN only, the lighting values the images only: moving the
+  // second lighting value by 0.5 adds half its image, whatever the code.
+  VectorXf moved = z;
+  moved[8] += 0.5f;
+  const MatrixXf with = lit.Forward<float>(all, moved);
+  for (int j = 0; j < static_cast<int>(all.size()); ++j) {
+    for (int ch = 0; ch < 2; ++ch) {
+      ASSERT_NEAR(with(j, ch) - base(j, ch), 0.5f * lit.lighting()(j * 2 + ch, 1), 1e-5) << j;
+    }
+  }
+  // With the images at zero the trunk draws what a trunk without them draws.
+  PhotometricTrunk dark = lit;
+  dark.SetLighting(MatrixXf::Zero(lit.lighting().rows(), 2));
+  const MatrixXf dark_y = dark.Forward<float>(all, z);
+  moved = z;
+  moved.tail(2) << 3.0f, -2.0f;
+  EXPECT_EQ(dark.Forward<float>(all, moved), dark_y);
+  // Refused: another shape, a non-finite value; options whose code would be empty.
+  EXPECT_THROW(dark.SetLighting(MatrixXf::Zero(lit.lighting().rows(), 3)), std::invalid_argument);
+  MatrixXf bad = lit.lighting();
+  bad(4, 1) = std::nanf("");
+  EXPECT_THROW(dark.SetLighting(bad), std::invalid_argument);
+  PhotometricTrunk::Options o = SmallOptions();
+  o.lighting_components = 6;  // 3 + 6 = latent_dim 9: no code value left
+  try {
+    PhotometricTrunk trunk(o, DottedReference(16, 20, 1));
+    FAIL() << "a latent without code values accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("lighting"), std::string::npos) << e.what();
+  }
 }
 
 TEST(PhotometricTrunkTest, MarkersMoveTheOutput) {
@@ -466,9 +530,13 @@ TEST(PhotometricTrunkTest, TheLatentJacobianHasTheReversePassesRows) {
   // contact, pixels whose neighbours are other pixels of the set (shared positions) and
   // the grid's corner. The pose's columns come from the SIREN's coordinate Jacobian and
   // the code's from its shifts, so a wrong sign or a missed neighbour fails.
-  for (const auto sampling : {PhotometricTrunk::MarkerSampling::kSensorResolution,
-                              PhotometricTrunk::MarkerSampling::kWorkingResolution}) {
-    const PhotometricTrunk trunk = MovingTrunk(sampling, 3);
+  // The lit trunk's last two columns are its lighting images at the pixels.
+  for (const auto& [sampling, lighting] :
+       {std::pair{PhotometricTrunk::MarkerSampling::kSensorResolution, 0},
+        std::pair{PhotometricTrunk::MarkerSampling::kWorkingResolution, 0},
+        std::pair{PhotometricTrunk::MarkerSampling::kSensorResolution, 2}}) {
+    const PhotometricTrunk trunk =
+        lighting > 0 ? LitTrunk(sampling, 3, lighting) : MovingTrunk(sampling, 3);
     const Problem p = MakeProblem(trunk);
     const int cols = trunk.options().cols, c = trunk.channels();
     std::vector<int> pixels = p.pixels;
