@@ -30,9 +30,10 @@ constexpr int kCheckpointVersion = 1;
 
 // Frames the finished background's last correction averages over (evenly spaced).
 constexpr int kBackgroundFrames = 8192;
-// The lighting images' starting values are drawn within +-kLightingStart, about the
-// background's RMS on real and simulated frames (docs/REAL_DATA.md): small beside what
-// the contact draws, large enough for the frames' lighting values to get a gradient.
+// The lighting images' starting values are drawn within +-kLightingStart, a tenth of the
+// background's RMS on real and simulated frames (docs/REAL_DATA.md): small beside the
+// lighting they learn to draw, large enough for the frames' lighting values to get a
+// gradient.
 constexpr double kLightingStart = 1e-3;
 
 // Adam with bias correction on one flat vector (double moments).
@@ -471,19 +472,12 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
         DrawPixels(frames[slot.frame], o.batch_pixels, &rng, &pixels, &targets, &weights);
       }
       const Eigen::VectorXf z = latents.col(slot.frame).cast<float>();
-      Eigen::MatrixXf y;
+      // dL/dB at a pixel is dL/dY there, and dL/dL_k is dL/dY times a_k.
       slot.loss = trunk.LossAndGradient<float>(pixels, z, targets, weights, &slot.dz,
-                                               &slot.dsiren, &slot.dhead,
-                                               learn_tables ? &y : nullptr,
-                                               markers[frame_reference[slot.frame]].get());
-      if (learn_tables) {
-        // dL/dB at a pixel is dL/dY there: 2 w (y - t) times the loss's normaliser.
-        float unused = 0;
-        const double norm = LatentModulatedSiren::MseNormaliser<float>(
-            weights, static_cast<int>(pixels.size()), static_cast<int>(targets.cols()), &unused);
-        slot.dY = (2.0 * norm) * (weights.asDiagonal() * (y - targets));
-        slot.pixels = std::move(pixels);
-      }
+                                               &slot.dsiren, &slot.dhead, nullptr,
+                                               markers[frame_reference[slot.frame]].get(),
+                                               learn_tables ? &slot.dY : nullptr);
+      if (learn_tables) slot.pixels = std::move(pixels);
     });
     Eigen::VectorXd g_siren = Eigen::VectorXd::Zero(siren_theta.size());
     Eigen::VectorXd g_head = Eigen::VectorXd::Zero(head.size());
@@ -548,9 +542,10 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
   trunk.set_marker_sampling(PhotometricTrunk::MarkerSampling::kSensorResolution);
   if (o.learn_background && !summary.stopped && std::isfinite(summary.final_loss)) {
     // Adam leaves each value within about its step of where the noisy batches put it:
-    // the finished background is the learned one plus what the frames still share at
-    // their final latents (MeanResidual), the exact minimiser with the rest held. The
-    // checkpoint keeps the learned one, so a finished run resumed ends the same.
+    // the finished background (and lighting images) are the learned ones plus their
+    // exact least-squares correction at the frames' final latents (TableCorrection; the
+    // background alone: what the frames still share, MeanResidual). The checkpoint
+    // keeps the learned ones, so a finished run resumed ends the same.
     std::vector<const PhotometricTrunk::Markers*> marker_of(markers.size());
     for (std::size_t k = 0; k < markers.size(); ++k) marker_of[k] = markers[k].get();
     if (learn_lighting) {
@@ -690,7 +685,7 @@ PhotometricTrainer::Tables PhotometricTrainer::TableCorrection(
   if (m < 1 || latents.rows() != m || latents.cols() != trunk.latent_dim() ||
       static_cast<int>(frame_reference.size()) != m || max_frames < 1) {
     throw std::invalid_argument(
-        "PhotometricTrainer::MeanResidual: expected one latent of " +
+        "PhotometricTrainer::TableCorrection: expected one latent of " +
         std::to_string(trunk.latent_dim()) + " values and one reference index per frame, and "
         "max_frames >= 1; found " + std::to_string(m) + " frames, " +
         std::to_string(latents.rows()) + " x " + std::to_string(latents.cols()) + " latents, " +
@@ -704,7 +699,7 @@ PhotometricTrainer::Tables PhotometricTrainer::TableCorrection(
     const int r = frame_reference[i];
     if (frames[i].values.rows() != n || frames[i].values.cols() != c ||
         frames[i].weights.size() != n || r < 0 || r >= static_cast<int>(markers.size())) {
-      throw std::invalid_argument("PhotometricTrainer::MeanResidual: frame " +
+      throw std::invalid_argument("PhotometricTrainer::TableCorrection: frame " +
                                   std::to_string(i) + " is not " + std::to_string(rows) + "x" +
                                   std::to_string(cols) + "x" + std::to_string(c) +
                                   " or names no reference");

@@ -877,7 +877,8 @@ Scalar PhotometricTrunk::LossAndGradient(const std::vector<int>& pixels,
                                          VectorX<Scalar>* dL_dz, VectorX<Scalar>* dL_dsiren,
                                          VectorX<Scalar>* dL_dhead,
                                          MatrixX<Scalar>* outputs,
-                                         const Markers* markers) const {
+                                         const Markers* markers,
+                                         MatrixX<Scalar>* dL_dY) const {
   const int n = static_cast<int>(pixels.size());
   const int c = options_.channels;
   if (targets.rows() != n || targets.cols() != c ||
@@ -913,6 +914,7 @@ Scalar PhotometricTrunk::LossAndGradient(const std::vector<int>& pixels,
     RunBackward<Scalar>(pass, pixels, z, dY, dL_dz, dL_dsiren, dL_dhead);
   }
   if (outputs != nullptr) *outputs = std::move(y);
+  if (dL_dY != nullptr) *dL_dY = std::move(dY);
   return static_cast<Scalar>(loss);
 }
 
@@ -928,7 +930,7 @@ Scalar PhotometricTrunk::LossAndGradient(const std::vector<int>& pixels,
       const Markers*, JacobianLayout) const;                                              \
   template S PhotometricTrunk::LossAndGradient<S>(                                        \
       const std::vector<int>&, const VectorX<S>&, const MatrixX<S>&, const VectorX<S>&,   \
-      VectorX<S>*, VectorX<S>*, VectorX<S>*, MatrixX<S>*, const Markers*) const;
+      VectorX<S>*, VectorX<S>*, VectorX<S>*, MatrixX<S>*, const Markers*, MatrixX<S>*) const;
 TACTFUNC_INSTANTIATE(float)
 TACTFUNC_INSTANTIATE(double)
 #undef TACTFUNC_INSTANTIATE

@@ -229,13 +229,15 @@ class PhotometricTrunk {
   // The weighted MSE against targets (N x C) with weights (N, or empty for all ones),
   // and its gradients w.r.t. z (d values, the pose first), the SIREN's flat parameters
   // and the head's parameters; each output may be null. outputs (may be null) receives
-  // the N x C outputs of the same pass.
+  // the N x C outputs of the same pass, dL_dY (may be null) the loss's gradient w.r.t.
+  // them (N x C), which is the gradient w.r.t. the background at those pixels.
   template <typename Scalar>
   Scalar LossAndGradient(const std::vector<int>& pixels, const VectorX<Scalar>& z,
                          const MatrixX<Scalar>& targets, const VectorX<Scalar>& weights,
                          VectorX<Scalar>* dL_dz, VectorX<Scalar>* dL_dsiren,
                          VectorX<Scalar>* dL_dhead, MatrixX<Scalar>* outputs = nullptr,
-                         const Markers* markers = nullptr) const;
+                         const Markers* markers = nullptr,
+                         MatrixX<Scalar>* dL_dY = nullptr) const;
 
   // Outputs (N x C, may be null) and the Jacobian of every output w.r.t. z, J: (N*C) x d
   // with row i*C + c holding d y_ic / d z (pixel-major, channels interleaved, as

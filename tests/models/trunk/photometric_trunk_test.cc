@@ -429,6 +429,40 @@ TEST(PhotometricTrunkTest, TheBackgroundIsAddedToEveryPixelAndChangesNoGradient)
   EXPECT_EQ(with.Forward<float>(all, p.z.cast<float>()), f_plain);
 }
 
+TEST(PhotometricTrunkTest, TheLossGradientWithRespectToTheOutputsMatchesDifferences) {
+  // dL/dY (the background's and the lighting images' gradient at the pixels) against
+  // central differences of the loss in the targets (L depends on y - t), and the same
+  // pass's other gradients unchanged by asking for it.
+  const PhotometricTrunk trunk =
+      MovingTrunk(PhotometricTrunk::MarkerSampling::kSensorResolution, 2);
+  const Problem p = MakeProblem(trunk);
+  MatrixXd dY;
+  VectorXd dz, dz_alone;
+  trunk.LossAndGradient<double>(p.pixels, p.z, p.targets, p.weights, &dz, nullptr, nullptr,
+                                nullptr, nullptr, &dY);
+  trunk.LossAndGradient<double>(p.pixels, p.z, p.targets, p.weights, &dz_alone, nullptr,
+                                nullptr);
+  EXPECT_EQ(dz, dz_alone);
+  ASSERT_EQ(dY.rows(), static_cast<Eigen::Index>(p.pixels.size()));
+  ASSERT_EQ(dY.cols(), 2);
+  const double eps = 1e-6;
+  for (Eigen::Index i = 0; i < dY.rows(); ++i) {
+    for (int ch = 0; ch < 2; ++ch) {
+      MatrixXd up = p.targets, down = p.targets;
+      up(i, ch) += eps;
+      down(i, ch) -= eps;
+      const double numeric =
+          (trunk.LossAndGradient<double>(p.pixels, p.z, down, p.weights, nullptr, nullptr,
+                                         nullptr) -
+           trunk.LossAndGradient<double>(p.pixels, p.z, up, p.weights, nullptr, nullptr,
+                                         nullptr)) /
+          (2 * eps);
+      EXPECT_NEAR(dY(i, ch), numeric, 1e-8 + 1e-5 * std::abs(numeric)) << i << " " << ch;
+    }
+  }
+  EXPECT_EQ(dY.row(4).norm(), 0.0);  // the pixel of weight 0
+}
+
 TEST(PhotometricTrunkTest, FloatAgreesWithDouble) {
   const PhotometricTrunk trunk =
       MovingTrunk(PhotometricTrunk::MarkerSampling::kSensorResolution);
