@@ -80,33 +80,25 @@ Problem MakeProblem(const PhotometricTrunk& trunk) {
 }
 
 // A trunk whose markers move visibly (m = 1.5 working pixels per unit of slope) and
-// whose SIREN draws a slope of O(1) per pixel.
-PhotometricTrunk MovingTrunk(PhotometricTrunk::MarkerSampling sampling, int channels = 1) {
+// whose SIREN draws a slope of O(1) per pixel; with lighting_components K > 0, K
+// lighting images of random values weighed by the latent's last K values (latent_dim 9:
+// pose 3, code 9 - 3 - K).
+PhotometricTrunk MovingTrunk(PhotometricTrunk::MarkerSampling sampling, int channels = 1,
+                             int lighting_components = 0) {
   PhotometricTrunk::Options o = SmallOptions();
   o.channels = channels;
+  o.lighting_components = lighting_components;
   PhotometricTrunk trunk(o, DottedReference(2 * o.rows, 2 * o.cols, channels), 5);
   VectorXd head = trunk.head_parameters();
   head[head.size() - 1] = 1.5;
   trunk.SetHeadParameters(head);
   trunk.set_marker_sampling(sampling);
-  return trunk;
-}
-
-// MovingTrunk with K lighting images of random values: the latent's last K values
-// weigh them (latent_dim 9: pose 3, code 9 - 3 - K).
-PhotometricTrunk LitTrunk(PhotometricTrunk::MarkerSampling sampling, int channels, int k) {
-  PhotometricTrunk::Options o = SmallOptions();
-  o.channels = channels;
-  o.lighting_components = k;
-  PhotometricTrunk trunk(o, DottedReference(2 * o.rows, 2 * o.cols, channels), 5);
-  VectorXd head = trunk.head_parameters();
-  head[head.size() - 1] = 1.5;
-  trunk.SetHeadParameters(head);
-  trunk.set_marker_sampling(sampling);
-  MatrixXf lighting(o.rows * o.cols * channels, k);
-  unsigned state = 17;
-  for (int i = 0; i < lighting.size(); ++i) lighting.data()[i] = 0.3f * Uniform(&state);
-  trunk.SetLighting(lighting);
+  if (lighting_components > 0) {
+    MatrixXf lighting(o.rows * o.cols * channels, lighting_components);
+    unsigned state = 17;
+    for (int i = 0; i < lighting.size(); ++i) lighting.data()[i] = 0.3f * Uniform(&state);
+    trunk.SetLighting(lighting);
+  }
   return trunk;
 }
 
@@ -183,11 +175,12 @@ TEST(PhotometricTrunkTest, GradientsMatchCentralDifferencesWithThreeChannels) {
 TEST(PhotometricTrunkTest, GradientsMatchCentralDifferencesWithLightingImages) {
   // The lighting values' gradients (the latent's last two) and every other one.
   ExpectGradientsMatchDifferences(
-      LitTrunk(PhotometricTrunk::MarkerSampling::kSensorResolution, 3, 2));
+      MovingTrunk(PhotometricTrunk::MarkerSampling::kSensorResolution, 3, 2));
 }
 
 TEST(PhotometricTrunkTest, EachLightingValueAddsItsImageToEveryPixel) {
-  const PhotometricTrunk lit = LitTrunk(PhotometricTrunk::MarkerSampling::kSensorResolution, 2, 2);
+  const PhotometricTrunk lit =
+      MovingTrunk(PhotometricTrunk::MarkerSampling::kSensorResolution, 2, 2);
   EXPECT_EQ(lit.CodeValues(), 9 - 3 - 2);
   EXPECT_EQ(lit.siren().options().latent_dim, lit.CodeValues());
   const std::vector<int> all = lit.AllPixels();
@@ -569,8 +562,7 @@ TEST(PhotometricTrunkTest, TheLatentJacobianHasTheReversePassesRows) {
        {std::pair{PhotometricTrunk::MarkerSampling::kSensorResolution, 0},
         std::pair{PhotometricTrunk::MarkerSampling::kWorkingResolution, 0},
         std::pair{PhotometricTrunk::MarkerSampling::kSensorResolution, 2}}) {
-    const PhotometricTrunk trunk =
-        lighting > 0 ? LitTrunk(sampling, 3, lighting) : MovingTrunk(sampling, 3);
+    const PhotometricTrunk trunk = MovingTrunk(sampling, 3, lighting);
     const Problem p = MakeProblem(trunk);
     const int cols = trunk.options().cols, c = trunk.channels();
     std::vector<int> pixels = p.pixels;
