@@ -68,6 +68,36 @@ class TrainCliTest : public ::testing::Test {
     ASSERT_EQ(encode.exit_code, 0) << encode.err;
   }
 
+  // GelSlim frames of `synth --seed 6` in folder NAME (3 frames of a rod and of a
+  // square) whose band of rows 1/3 to 1/2 is brightened by brighten(k) grey levels in
+  // the k-th frame (directory order), a change of the gel's image the contact does not
+  // draw.
+  static void BandedGelSlimFrames(const std::string& name, int (*brighten)(int)) {
+    ASSERT_EQ(Run("synth --out " + Root(name) + " --frames-per-tool 3 --tools rod,square "
+                  "--sensors gelslim --seed 6").exit_code, 0);
+    int frame = 0;
+    for (const auto& entry : fs::directory_iterator(Root(name + "/gelslim"))) {
+      const std::string file = entry.path().filename().string();
+      if (entry.path().extension() != ".png" || file.rfind("reference", 0) == 0) continue;
+      cv::Mat image = cv::imread(entry.path().string(), cv::IMREAD_UNCHANGED);
+      ASSERT_FALSE(image.empty()) << file;
+      cv::Mat band = image.rowRange(image.rows / 3, image.rows / 2);
+      band += cv::Scalar::all(brighten(frame++));
+      ASSERT_TRUE(cv::imwrite(entry.path().string(), image));
+    }
+  }
+  // The mean PSNR of `encode --strategy adam:30` of folder DATA with model MODEL.tfm
+  // (written to MODEL.tfs); NaN, with a test failure, if encode fails.
+  static double EncodedPsnr(const std::string& model, const std::string& data) {
+    const Result encode = Run("encode --model " + model + ".tfm --data " + data + " --out " +
+                              model + ".tfs --strategy adam:30 --threads 2 --json");
+    if (encode.exit_code != 0) {
+      ADD_FAILURE() << encode.err;
+      return std::nan("");
+    }
+    return encode.LastJson()["psnr_mean"]["gelslim"].get<double>();
+  }
+
   static fs::path* root_;
 };
 
@@ -302,17 +332,7 @@ TEST_F(TrainCliTest, ThePhotometricHeadDrawsEachClipAgainstItsOwnReference) {
 // stores it in the model, `info` shows it, and the frames the trunk was trained on
 // reconstruct better with it than the same training without. The direct head refuses it.
 TEST_F(TrainCliTest, ThePhotometricBackgroundDrawsWhatEveryFrameShares) {
-  ASSERT_EQ(Run("synth --out " + Root("bg") + " --frames-per-tool 3 --tools rod,square "
-                "--sensors gelslim --seed 6").exit_code, 0);
-  for (const auto& entry : fs::directory_iterator(Root("bg/gelslim"))) {
-    const std::string name = entry.path().filename().string();
-    if (entry.path().extension() != ".png" || name.rfind("reference", 0) == 0) continue;
-    cv::Mat image = cv::imread(entry.path().string(), cv::IMREAD_UNCHANGED);
-    ASSERT_FALSE(image.empty()) << name;
-    cv::Mat band = image.rowRange(image.rows / 3, image.rows / 2);
-    band += cv::Scalar::all(24);
-    ASSERT_TRUE(cv::imwrite(entry.path().string(), image));
-  }
+  ASSERT_NO_FATAL_FAILURE(BandedGelSlimFrames("bg", [](int) { return 24; }));
   const std::string train = "train --data " + Root("bg") + " --head photometric --steps 30 "
                             "--marker-warmup 10 --latent-dim 8 --width 8 --layers 2 "
                             "--threads 2 --seed 1 --json --out ";
@@ -324,14 +344,8 @@ TEST_F(TrainCliTest, ThePhotometricBackgroundDrawsWhatEveryFrameShares) {
   ASSERT_EQ(without.exit_code, 0) << without.err;
   EXPECT_THAT(Run("info " + Root("bg_with.tfm")).out, HasSubstr("background: 80x107x1"));
   EXPECT_THAT(Run("info " + Root("bg_without.tfm")).out, ::testing::Not(HasSubstr("background")));
-  double psnr[2];
-  for (int k = 0; k < 2; ++k) {
-    const std::string m = Root(k == 0 ? "bg_with" : "bg_without");
-    const Result encode = Run("encode --model " + m + ".tfm --data " + Root("bg") + " --out " +
-                              m + ".tfs --strategy adam:30 --threads 2 --json");
-    ASSERT_EQ(encode.exit_code, 0) << encode.err;
-    psnr[k] = encode.LastJson()["psnr_mean"]["gelslim"].get<double>();
-  }
+  const double psnr[2] = {EncodedPsnr(Root("bg_with"), Root("bg")),
+                          EncodedPsnr(Root("bg_without"), Root("bg"))};
   EXPECT_GT(psnr[0], psnr[1] + 1.0) << "with " << psnr[0] << " dB, without " << psnr[1];
   const Result direct = Run("train --data " + Root("bg") + " --out " + Root("d.tfm") +
                             " --preset small --steps 2 --background");
@@ -342,18 +356,7 @@ TEST_F(TrainCliTest, ThePhotometricBackgroundDrawsWhatEveryFrameShares) {
 // Frames whose band brightens by a different amount in each frame: lighting images drawn
 // by each frame's own value encode them better than the background alone.
 TEST_F(TrainCliTest, PhotometricLightingImagesDrawWhatChangesFromFrameToFrame) {
-  ASSERT_EQ(Run("synth --out " + Root("lit") + " --frames-per-tool 3 --tools rod,square "
-                "--sensors gelslim --seed 6").exit_code, 0);
-  int frame = 0;
-  for (const auto& entry : fs::directory_iterator(Root("lit/gelslim"))) {
-    const std::string name = entry.path().filename().string();
-    if (entry.path().extension() != ".png" || name.rfind("reference", 0) == 0) continue;
-    cv::Mat image = cv::imread(entry.path().string(), cv::IMREAD_UNCHANGED);
-    ASSERT_FALSE(image.empty()) << name;
-    cv::Mat band = image.rowRange(image.rows / 3, image.rows / 2);
-    band += cv::Scalar::all(12 * (frame++ % 6));
-    ASSERT_TRUE(cv::imwrite(entry.path().string(), image));
-  }
+  ASSERT_NO_FATAL_FAILURE(BandedGelSlimFrames("lit", [](int k) { return 12 * (k % 6); }));
   const std::string train = "train --data " + Root("lit") + " --head photometric --steps 200 "
                             "--marker-warmup 10 --latent-dim 8 --width 8 --layers 2 "
                             "--threads 2 --seed 1 --json --background --out ";
@@ -366,14 +369,8 @@ TEST_F(TrainCliTest, PhotometricLightingImagesDrawWhatChangesFromFrameToFrame) {
               HasSubstr("lighting: 1 images of 80x107x1"));
   EXPECT_EQ(FunctaModel::Load(Root("lit_with.tfm")).Trunk(SensorKind::kGelSlim).siren.latent_dim(),
             4);  // 8 = pose 3 + code 4 + lighting 1
-  double psnr[2];
-  for (int k = 0; k < 2; ++k) {
-    const std::string m = Root(k == 0 ? "lit_with" : "lit_without");
-    const Result encode = Run("encode --model " + m + ".tfm --data " + Root("lit") + " --out " +
-                              m + ".tfs --strategy adam:30 --threads 2 --json");
-    ASSERT_EQ(encode.exit_code, 0) << encode.err;
-    psnr[k] = encode.LastJson()["psnr_mean"]["gelslim"].get<double>();
-  }
+  const double psnr[2] = {EncodedPsnr(Root("lit_with"), Root("lit")),
+                          EncodedPsnr(Root("lit_without"), Root("lit"))};
   EXPECT_GT(psnr[0], psnr[1] + 1.0) << "with " << psnr[0] << " dB, without " << psnr[1];
   // The Levenberg-Marquardt fit takes the lighting values' Jacobian columns too.
   const Result ceres = Run("encode --model " + Root("lit_with.tfm") + " --data " + Root("lit") +
