@@ -13,6 +13,7 @@
 #include <iostream>
 #include <limits>
 #include <map>
+#include <string>
 #include <vector>
 
 #include "CLI/CLI.hpp"
@@ -141,11 +142,15 @@ nlohmann::json DescribeModel(const std::string& bytes, const std::string& path) 
     }
     if (t.photometric != nullptr) {
       const PhotometricTrunk& p = *t.photometric;
-      std::printf("           photometric head: latent %d = rigid motion 3 + code %d, shading "
+      const std::string lighting_values =
+          p.lighting_components() > 0
+              ? " + lighting " + std::to_string(p.lighting_components())
+              : std::string();
+      std::printf("           photometric head: latent %d = rigid motion 3 + code %d%s, shading "
                   "network of %d, markers moved at the sensor's %dx%d (%d x %d samples a "
                   "pixel), %.3f px per unit slope; fitted with adam:N, knn+adam:N or "
                   "knn+ceres:N\n",
-                  p.latent_dim(), p.CodeValues(),
+                  p.latent_dim(), p.CodeValues(), lighting_values.c_str(),
                   p.options().shading_width, p.reference().rows, p.reference().cols,
                   p.options().supersample, p.options().supersample, p.marker_scale());
       if (!p.background().empty()) {
@@ -158,8 +163,7 @@ nlohmann::json DescribeModel(const std::string& bytes, const std::string& path) 
         std::printf("           lighting: %d images of %dx%dx%d values (RMS %.4g), weighed by "
                     "the latent's last %d values\n",
                     p.lighting_components(), p.options().rows, p.options().cols, p.channels(),
-                    p.LightingRms(),
-                    p.lighting_components());
+                    p.LightingRms(), p.lighting_components());
       }
       if (t.warm_start != nullptr) {
         const WarmStartTable& w = *t.warm_start;

@@ -365,8 +365,9 @@ TEST_F(TrainCliTest, PhotometricLightingImagesDrawWhatChangesFromFrameToFrame) {
   EXPECT_THAT(with.out, HasSubstr("1 lighting images learned"));
   EXPECT_GT(with.LastJson()["sensors"]["gelslim"]["lighting_rms"].get<double>(), 0.0);
   ASSERT_EQ(Run(train + Root("lit_without.tfm")).exit_code, 0);
-  EXPECT_THAT(Run("info " + Root("lit_with.tfm")).out,
-              HasSubstr("lighting: 1 images of 80x107x1"));
+  const std::string info = Run("info " + Root("lit_with.tfm")).out;
+  EXPECT_THAT(info, HasSubstr("latent 8 = rigid motion 3 + code 4 + lighting 1,"));
+  EXPECT_THAT(info, HasSubstr("lighting: 1 images of 80x107x1"));
   EXPECT_EQ(FunctaModel::Load(Root("lit_with.tfm")).Trunk(SensorKind::kGelSlim).siren.latent_dim(),
             4);  // 8 = pose 3 + code 4 + lighting 1
   const double psnr[2] = {EncodedPsnr(Root("lit_with"), Root("lit")),
