@@ -37,15 +37,17 @@
 // bit-identical to one that never stopped.
 //
 // With Options::learn_background the sensor's background (PhotometricTrunk::
-// SetBackground) is a fourth set of parameters, learned from zero with the others.
+// SetBackground) is a fourth set of parameters, learned from zero with the others, and
+// with trunk.lighting_components the lighting images (PhotometricTrunk::SetLighting) a
+// fifth.
 //
 // Checkpoints: a TensorFile of kind "checkpoint" (format "tactfunc-photometric-
 // checkpoint", estimation/training/internal/checkpoint.h) holding the SIREN's and the
-// head's parameters (and the background), the training latents, the Adam moments, the
-// step, every step's batch loss and the seconds spent, with the trajectory options and a
-// fingerprint of the training frames and the reference. Resuming refuses, naming the
-// field, a checkpoint of other options (steps included: the cosine schedule depends on
-// them) or other frames.
+// head's parameters (and the background and lighting images), the training latents, the
+// Adam moments, the step, every step's batch loss and the seconds spent, with the
+// trajectory options and a fingerprint of the training frames and the reference.
+// Resuming refuses, naming the field, a checkpoint of other options (steps included: the
+// cosine schedule depends on them) or other frames.
 //
 // Errors: invalid options throw std::invalid_argument naming the field; frames of
 // another shape than the trunk's working grid throw std::invalid_argument quoting both.

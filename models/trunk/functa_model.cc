@@ -498,6 +498,16 @@ FunctaModel FunctaModel::FromTensorFile(const TensorFile& file, const std::strin
         photometric->mutable_siren().SetParameters(trunk.siren.parameters());
         photometric->SetHeadParameters(
             Eigen::Map<const Eigen::VectorXd>(head.values.data(), head.values.size()));
+        // The trunk's own checks of a table (finite values), their errors named after the
+        // file and the tensor.
+        const auto set_table = [&](const std::string& tensor, const auto& set) {
+          try {
+            set();
+          } catch (const std::invalid_argument& e) {
+            throw TensorFileError(source + ": tensor '" + name + "/" + tensor + "': " +
+                                  e.what());
+          }
+        };
         if (p.contains("background")) {
           field = name + ".photometric.background";
           if (!p.at("background").is_boolean()) {
@@ -510,11 +520,7 @@ FunctaModel FunctaModel::FromTensorFile(const TensorFile& file, const std::strin
             for (std::size_t i = 0; i < background.size(); ++i) {
               background.data[i] = static_cast<float>(b.values[i]);
             }
-            try {  // the trunk's own check (finite values), named after the file
-              photometric->SetBackground(background);
-            } catch (const std::invalid_argument& e) {
-              throw TensorFileError(source + ": tensor '" + name + "/background': " + e.what());
-            }
+            set_table("background", [&] { photometric->SetBackground(background); });
           }
         }
         if (po.lighting_components > 0) {
@@ -526,11 +532,7 @@ FunctaModel FunctaModel::FromTensorFile(const TensorFile& file, const std::strin
           for (Eigen::Index i = 0; i < lighting.size(); ++i) {
             lighting.data()[i] = static_cast<float>(l.values[static_cast<std::size_t>(i)]);
           }
-          try {  // the trunk's own check (finite values), named after the file
-            photometric->SetLighting(lighting);
-          } catch (const std::invalid_argument& e) {
-            throw TensorFileError(source + ": tensor '" + name + "/lighting': " + e.what());
-          }
+          set_table("lighting", [&] { photometric->SetLighting(lighting); });
         }
         if (p.contains("warm_start")) {
           field = name + ".photometric.warm_start";

@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <functional>
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
@@ -202,6 +203,21 @@ TEST(FunctaModel, RoundTripsASpatialLatentTrunkAndRecordsItsGrid) {
   }
 }
 
+// The model file `bytes` with each tensor's values passed through edit(name, &values),
+// which returns false to leave the tensor out; the meta JSON unchanged.
+std::string WithTensorsEdited(
+    const std::string& bytes,
+    const std::function<bool(const std::string&, std::vector<double>*)>& edit) {
+  const TensorFile file = TensorFile::Parse(bytes, "m.tfm", "model");
+  TensorFile edited("model");
+  edited.set_meta_json(file.meta_json());
+  for (const TensorFile::Tensor& t : file.tensors()) {
+    std::vector<double> values = t.values;
+    if (edit(t.name, &values)) edited.Add(t.name, t.dtype, t.shape, values);
+  }
+  return edited.Serialize();
+}
+
 // The model file `bytes` with the first `from` of its meta JSON replaced by `to`, its
 // tensors unchanged ("" if the meta has no `from`).
 std::string WithMetaEdited(const std::string& bytes, const std::string& from,
@@ -316,16 +332,13 @@ TEST(FunctaModel, RoundTripsAPhotometricBackgroundOnlyWhenThereIsOne) {
     EXPECT_THAT(e.what(), HasSubstr("claimed.tfm")) << e.what();
   }
   // A background value that is not finite is refused naming the file and the tensor.
-  const TensorFile parsed = TensorFile::Parse(bytes, "m.tfm", "model");
-  TensorFile poisoned("model");
-  poisoned.set_meta_json(parsed.meta_json());
-  for (const TensorFile::Tensor& t : parsed.tensors()) {
-    std::vector<double> values = t.values;
-    if (t.name == "gelslim/background") values[7] = std::nan("");
-    poisoned.Add(t.name, t.dtype, t.shape, values);
-  }
+  const std::string poisoned =
+      WithTensorsEdited(bytes, [](const std::string& name, std::vector<double>* values) {
+        if (name == "gelslim/background") (*values)[7] = std::nan("");
+        return true;
+      });
   try {
-    FunctaModel::Parse(poisoned.Serialize(), "poisoned.tfm");
+    FunctaModel::Parse(poisoned, "poisoned.tfm");
     FAIL() << "a non-finite background accepted";
   } catch (const TensorFileError& e) {
     EXPECT_THAT(e.what(), HasSubstr("poisoned.tfm")) << e.what();
@@ -376,29 +389,23 @@ TEST(FunctaModel, RoundTripsPhotometricLightingImages) {
   // A count without its tensor (a trunk of 2 lighting images written without them).
   FunctaModel unlit;
   unlit.SetTrunk(PhotometricSensorTrunk(2));
-  const TensorFile parsed = TensorFile::Parse(unlit.Serialize(), "m.tfm", "model");
-  TensorFile dropped("model");
-  dropped.set_meta_json(parsed.meta_json());
-  for (const TensorFile::Tensor& t : parsed.tensors()) {
-    if (t.name != "gelslim/lighting") dropped.Add(t.name, t.dtype, t.shape, t.values);
-  }
+  const std::string dropped = WithTensorsEdited(
+      unlit.Serialize(),
+      [](const std::string& name, std::vector<double>*) { return name != "gelslim/lighting"; });
   try {
-    FunctaModel::Parse(dropped.Serialize(), "dropped.tfm");
+    FunctaModel::Parse(dropped, "dropped.tfm");
     FAIL() << "missing lighting images accepted";
   } catch (const TensorFileError& e) {
     EXPECT_THAT(e.what(), HasSubstr("lighting")) << e.what();
     EXPECT_THAT(e.what(), HasSubstr("dropped.tfm")) << e.what();
   }
-  const TensorFile full = TensorFile::Parse(bytes, "m.tfm", "model");
-  TensorFile poisoned("model");
-  poisoned.set_meta_json(full.meta_json());
-  for (const TensorFile::Tensor& t : full.tensors()) {
-    std::vector<double> values = t.values;
-    if (t.name == "gelslim/lighting") values[3] = std::nan("");
-    poisoned.Add(t.name, t.dtype, t.shape, values);
-  }
+  const std::string poisoned =
+      WithTensorsEdited(bytes, [](const std::string& name, std::vector<double>* values) {
+        if (name == "gelslim/lighting") (*values)[3] = std::nan("");
+        return true;
+      });
   try {
-    FunctaModel::Parse(poisoned.Serialize(), "poisoned.tfm");
+    FunctaModel::Parse(poisoned, "poisoned.tfm");
     FAIL() << "a non-finite lighting image accepted";
   } catch (const TensorFileError& e) {
     EXPECT_THAT(e.what(), HasSubstr("poisoned.tfm")) << e.what();
