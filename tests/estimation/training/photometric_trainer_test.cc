@@ -136,6 +136,22 @@ TEST(PhotometricTrainerTest, EachFrameIsDrawnAgainstItsOwnClipsReference) {
 // teacher's latents is that pattern (a pixel no frame weighs is left 0), whatever the
 // thread count; with it as the background the frames are drawn exactly, and a second
 // step finds nothing left. Frames of a clip are drawn against their own markers.
+// A run of *o checkpointed to `path` (every 100 steps, resumed), stopped by its callback
+// at step 130, then resumed to its end: the resumed run's result. *o keeps the
+// checkpoint settings for the caller's further runs.
+PhotometricTrainer::Result StoppedAndResumed(PhotometricTrainer::Options* o,
+                                             const std::vector<TrunkTargets>& frames,
+                                             const Image& reference, const std::string& path) {
+  std::filesystem::remove(path);
+  o->checkpoint_path = path;
+  o->checkpoint_every = 100;
+  o->resume = true;
+  EXPECT_TRUE(PhotometricTrainer(*o)
+                  .Train(frames, reference, [](int step, double) { return step < 130; })
+                  .summary.stopped);
+  return PhotometricTrainer(*o).Train(frames, reference);
+}
+
 // The loss of every training frame at its training latent, whole frames, summed.
 double SummedLoss(const PhotometricTrainer::Result& r, const std::vector<TrunkTargets>& frames) {
   double sum = 0;
@@ -238,14 +254,7 @@ TEST(PhotometricTrainerTest, ALearnedBackgroundDrawsWhatTheFramesShare) {
             b.data);
   // Stopped at step 130 and resumed: the background and its Adam moments carry over.
   const std::string path = ::testing::TempDir() + "/photometric_background.ckpt";
-  std::filesystem::remove(path);
-  o.checkpoint_path = path;
-  o.checkpoint_every = 100;
-  o.resume = true;
-  ASSERT_TRUE(PhotometricTrainer(o)
-                  .Train(teacher.frames, reference, [](int step, double) { return step < 130; })
-                  .summary.stopped);
-  const PhotometricTrainer::Result rest = PhotometricTrainer(o).Train(teacher.frames, reference);
+  const PhotometricTrainer::Result rest = StoppedAndResumed(&o, teacher.frames, reference, path);
   EXPECT_EQ(rest.trunk.background().data, b.data);
   EXPECT_EQ(rest.latents, with.latents);
   // A checkpoint without a background is another run.
@@ -361,14 +370,7 @@ TEST(PhotometricTrainerTest, LearnedLightingImagesDrawWhatVariesOverTheWholeGrid
             with.trunk.lighting());
   // Stopped at step 130 and resumed: the images and their Adam moments carry over.
   const std::string path = ::testing::TempDir() + "/photometric_lighting.ckpt";
-  std::filesystem::remove(path);
-  o.checkpoint_path = path;
-  o.checkpoint_every = 100;
-  o.resume = true;
-  ASSERT_TRUE(PhotometricTrainer(o)
-                  .Train(f.frames, reference, [](int step, double) { return step < 130; })
-                  .summary.stopped);
-  const PhotometricTrainer::Result rest = PhotometricTrainer(o).Train(f.frames, reference);
+  const PhotometricTrainer::Result rest = StoppedAndResumed(&o, f.frames, reference, path);
   EXPECT_EQ(rest.trunk.lighting(), with.trunk.lighting());
   EXPECT_EQ(rest.latents, with.latents);
   // A checkpoint of another count is another run; lighting needs a background.
