@@ -75,6 +75,7 @@ struct TrainFlags {
   bool no_warm_start = false;
   bool background = false;  // --head photometric: learn the sensor's background table
   int lighting = 0;  // --head photometric: lighting images weighed by each frame's latent
+  double latent_noise = 0;  // --head photometric: noise on the training latents' code values
   std::string default_fit;  // "": the encoder's rule
   // Set after parsing: which overrides were given.
   CLI::Option *latent_dim_option = nullptr, *width_option = nullptr, *layers_option = nullptr,
@@ -348,6 +349,7 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
     o.contact_share = flags.contact_share;
     o.learn_background = flags.background || flags.lighting > 0;  // lighting needs it
     o.trunk.lighting_components = flags.lighting;
+    o.latent_noise = flags.latent_noise;
     o.seed = base.seed;
     o.threads = base.threads;
     o.checkpoint_path = CheckpointPath(flags.out, sensor);
@@ -367,7 +369,9 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
               << format.rows << "x" << format.cols << ", " << o.batch_frames << " frames x "
               << o.batch_pixels << " pixels a step (a share of " << o.contact_share
               << " drawn towards the contact) on " << o.threads << " thread(s), latent "
-              << o.trunk.latent_dim << std::endl;
+              << o.trunk.latent_dim;
+    if (o.latent_noise > 0) std::cout << ", noise " << o.latent_noise << " on its code values";
+    std::cout << std::endl;
     if (flags.resume) {
       std::cout << "train " << name << ": "
                 << (std::filesystem::exists(o.checkpoint_path)
@@ -494,6 +498,7 @@ void TrainPhotometric(const TrainFlags& flags, const Dataset& dataset,
                            {"contact_share", o.contact_share},
                            {"background", o.learn_background},
                            {"lighting", flags.lighting},
+                           {"latent_noise", o.latent_noise},
                            {"seed", o.seed}}},
                          {"steps", result.summary.steps},
                          {"train_frames", frames.size()},
@@ -610,6 +615,9 @@ void RunTrain(const TrainFlags& flags) {
   if (flags.no_warm_start) throw UsageError("--no-warm-start applies to --head photometric");
   if (flags.background) throw UsageError("--background applies to --head photometric");
   if (flags.lighting > 0) throw UsageError("--lighting applies to --head photometric");
+  if (flags.latent_noise > 0) {
+    throw UsageError("--latent-noise applies to --head photometric");
+  }
   if (flags.resume) {
     // Every process reads the checkpoints (rank 0 writes them): they must see the same.
     for (SensorKind s : sensors) RefuseUnsharedFile(processes, CheckpointPath(flags.out, s));
@@ -959,6 +967,12 @@ void RegisterTrain(CLI::App& app, CommandBody* selected) {
                   "the whole gel, a few of the latent's values instead of the contact's code; "
                   "implies --background (default 0; docs/REAL_DATA.md)")
       ->check(CLI::Range(0, 64));
+  sub->add_option("--latent-noise", flags->latent_noise,
+                  "--head photometric: standard deviation of the noise added to each training "
+                  "frame's code values whenever a step draws it, so that the trunk draws the "
+                  "frames from near their latents too: for a few real frames, whose unseen "
+                  "frames it then draws closer (default 0, none; docs/REAL_DATA.md)")
+      ->check(CLI::Range(0.0, 100.0));
   sub->add_option("--default-fit", flags->default_fit,
                   "--head photometric: the fit encode and fit use for the trained trunk(s) "
                   "when no --strategy is given, recorded in the model (e.g. knn+adam:480; "

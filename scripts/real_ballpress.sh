@@ -4,24 +4,27 @@
 # how far the contact centres of the raw frames and of the reconstructions fall from the
 # hand-placed ones (median and 90th percentile, pixels).
 #   usage: scripts/real_ballpress.sh OUT [LATENT_DIM] [STEPS] [STRATEGY] [HEAD] [LIGHTING]
-#                                     [LATENT_BYTES]
+#                                     [LATENT_BYTES] [LATENT_NOISE]
 # Defaults: d = 16, 2000 steps, meta_sgd:3, HEAD direct (trunk: --preset small --readout).
 # HEAD photometric trains `--head photometric --preset small` instead (the SIREN draws
 # the contact, a head shades it; fit it with STRATEGY adam:N, the default adam:200);
 # HEAD photometric-background also stores the sensor's background (`train --background`).
 # LIGHTING K > 0 adds K lighting images (`train --lighting K`, photometric heads only).
 # LATENT_BYTES B stores each latent in B bytes (`encode --latent-bytes B`; default: float16,
-# 2 d bytes).
+# 2 d bytes). LATENT_NOISE S > 0 trains with noise S on the latents' code values
+# (`train --latent-noise S`, photometric heads only). The environment's SEED (default 1)
+# seeds the training.
 set -euo pipefail
 export LC_ALL=C
 cd "$(dirname "$0")/.."
-out=${1:?usage: $0 OUT [LATENT_DIM] [STEPS] [STRATEGY] [HEAD]}
+out=${1:?usage: $0 OUT [LATENT_DIM] [STEPS] [STRATEGY] [HEAD] [LIGHTING] [LATENT_BYTES] [LATENT_NOISE]}
 dim=${2:-16}
 steps=${3:-2000}
 strategy=${4:-meta_sgd:3}
 head=${5:-direct}
 lighting=${6:-0}
 latent_bytes=${7:-}
+latent_noise=${8:-0}
 case "$head" in
   direct) trunk_flags=(--preset small --readout) ;;
   photometric) trunk_flags=(--head photometric --preset small) ;;
@@ -35,6 +38,12 @@ if [ "$lighting" != 0 ]; then
     *) echo "$0: LIGHTING needs a photometric HEAD" >&2; exit 2 ;;
   esac
 fi
+if [ "$latent_noise" != 0 ]; then
+  case "$head" in
+    photometric*) trunk_flags+=(--latent-noise "$latent_noise") ;;
+    *) echo "$0: LATENT_NOISE needs a photometric HEAD" >&2; exit 2 ;;
+  esac
+fi
 encode_flags=()
 [ -n "$latent_bytes" ] && encode_flags=(--latent-bytes "$latent_bytes")
 bin=build/bin/tactfunc
@@ -42,7 +51,7 @@ data=tests/data/taxim_ballpress
 rm -rf "$out"
 mkdir -p "$out"
 $bin train --data "$data" --out "$out/m.tfm" "${trunk_flags[@]}" --latent-dim "$dim" \
-  --steps "$steps" --seed 1 >"$out/train.log" 2>&1 || { cat "$out/train.log"; exit 1; }
+  --steps "$steps" --seed "${SEED:-1}" >"$out/train.log" 2>&1 || { cat "$out/train.log"; exit 1; }
 $bin encode --data "$data" --model "$out/m.tfm" --out "$out/f.tfs" --strategy "$strategy" \
   "${encode_flags[@]}" >"$out/encode.log" 2>&1 || { cat "$out/encode.log"; exit 1; }
 $bin recon --data "$data" --model "$out/m.tfm" --functaset "$out/f.tfs" --out "$out/recon" \
@@ -50,7 +59,8 @@ $bin recon --data "$data" --model "$out/m.tfm" --functaset "$out/f.tfs" --out "$
 $bin eval --data "$data" --model "$out/m.tfm" --functaset "$out/f.tfs" --out "$out/eval" \
   --json >"$out/eval.log" 2>&1
 echo "real GelSight presses: $head trunk, d = $dim, $steps steps, $strategy," \
-  "$lighting lighting images, ${latent_bytes:-float16 (2 d)} bytes a latent"
+  "$lighting lighting images, ${latent_bytes:-float16 (2 d)} bytes a latent," \
+  "latent noise $latent_noise, seed ${SEED:-1}"
 grep -A3 '^sensor   split   contact' "$out/recon.log"
 # Centre errors: frames.csv columns 15-18 (contact_row/col, recon_contact_row/col) against
 # contacts.csv (x = column, y = row), per split.

@@ -13,6 +13,7 @@
 
 #include "Eigen/Cholesky"
 #include "boost/random/mersenne_twister.hpp"
+#include "boost/random/normal_distribution.hpp"
 #include "boost/random/uniform_int_distribution.hpp"
 #include "boost/random/uniform_real_distribution.hpp"
 #include "estimation/training/internal/checkpoint.h"
@@ -149,6 +150,8 @@ bool PhotometricTrainer::Options::IsValid(std::string* error) const {
   } else if (trunk.lighting_components > 0 && !learn_background) {
     message << "trunk.lighting_components (" << trunk.lighting_components
             << ") needs learn_background: the lighting images vary about the background";
+  } else if (!(latent_noise >= 0 && std::isfinite(latent_noise))) {
+    message << "latent_noise must be finite and >= 0, found " << latent_noise;
   } else if (threads < 1) {
     message << "threads must be >= 1, found " << threads;
   } else if (checkpoint_every < 0) {
@@ -189,6 +192,7 @@ std::string PhotometricTrainer::Options::TrajectoryOptionsJson() const {
   // every pixel alike still resume.
   if (contact_share > 0) json["contact_share"] = contact_share;
   if (learn_background) json["learn_background"] = true;  // absent: older runs resume
+  if (latent_noise > 0) json["latent_noise"] = latent_noise;  // likewise
   return json.dump();
 }
 
@@ -471,7 +475,13 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
       } else {
         DrawPixels(frames[slot.frame], o.batch_pixels, &rng, &pixels, &targets, &weights);
       }
-      const Eigen::VectorXf z = latents.col(slot.frame).cast<float>();
+      Eigen::VectorXf z = latents.col(slot.frame).cast<float>();
+      if (o.latent_noise > 0) {
+        boost::random::normal_distribution<double> noise(0.0, o.latent_noise);
+        for (int j = PhotometricTrunk::kPoseValues; j < d - k_light; ++j) {
+          z[j] += static_cast<float>(noise(rng));
+        }
+      }
       // dL/dB at a pixel is dL/dY there, and dL/dL_k is dL/dY times a_k.
       slot.loss = trunk.LossAndGradient<float>(pixels, z, targets, weights, &slot.dz,
                                                &slot.dsiren, &slot.dhead, nullptr,

@@ -389,6 +389,39 @@ TEST_F(TrainCliTest, PhotometricLightingImagesDrawWhatChangesFromFrameToFrame) {
   EXPECT_THAT(direct.err, HasSubstr("--lighting applies to --head photometric"));
 }
 
+// --latent-noise reaches the trainer (a run with it differs from one without, the same
+// run twice is the same model) and is recorded; the direct head and a negative value
+// are refused.
+TEST_F(TrainCliTest, LatentNoiseIsAPhotometricTrainingOptionRecordedInTheModel) {
+  ASSERT_NO_FATAL_FAILURE(BandedGelSlimFrames("noise", [](int) { return 24; }));
+  const std::string train = "train --data " + Root("noise") + " --head photometric --steps 4 "
+                            "--marker-warmup 2 --latent-dim 8 --width 8 --layers 2 "
+                            "--threads 2 --seed 1 --json --out ";
+  const Result noisy = Run(train + Root("noisy.tfm") + " --latent-noise 0.5");
+  ASSERT_EQ(noisy.exit_code, 0) << noisy.err;
+  EXPECT_THAT(noisy.out, HasSubstr(", noise 0.5 on its code values"));
+  EXPECT_EQ(nlohmann::json::parse(FunctaModel::Load(Root("noisy.tfm")).info_json())
+                ["trunks"]["gelslim"]["options"]["latent_noise"]
+                    .get<double>(),
+            0.5);
+  ASSERT_EQ(Run(train + Root("noisy_again.tfm") + " --latent-noise 0.5").exit_code, 0);
+  const Result plain = Run(train + Root("plain.tfm"));
+  ASSERT_EQ(plain.exit_code, 0) << plain.err;
+  EXPECT_THAT(plain.out, ::testing::Not(HasSubstr("noise")));
+  const auto weights = [&](const std::string& file) {
+    return FunctaModel::Load(Root(file)).Trunk(SensorKind::kGelSlim).siren.parameters();
+  };
+  EXPECT_EQ(weights("noisy.tfm"), weights("noisy_again.tfm"));
+  EXPECT_NE(weights("noisy.tfm"), weights("plain.tfm"));
+  const Result direct = Run("train --data " + Root("noise") + " --out " + Root("d.tfm") +
+                            " --preset small --steps 2 --latent-noise 0.5");
+  EXPECT_NE(direct.exit_code, 0);
+  EXPECT_THAT(direct.err, HasSubstr("--latent-noise applies to --head photometric"));
+  const Result negative = Run(train + Root("n.tfm") + " --latent-noise -1");
+  EXPECT_NE(negative.exit_code, 0);
+  EXPECT_THAT(negative.err, HasSubstr("--latent-noise"));
+}
+
 TEST_F(TrainCliTest, ThePhotometricHeadTrainsEncodesAndReconstructsAnOpticalSensor) {
   ASSERT_EQ(Run("synth --out " + Root("g") + " --frames-per-tool 2 --tools rod,square "
                 "--sensors gelslim --seed 4").exit_code, 0);
