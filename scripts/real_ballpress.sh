@@ -17,7 +17,7 @@
 set -euo pipefail
 export LC_ALL=C
 cd "$(dirname "$0")/.."
-out=${1:?usage: $0 OUT [LATENT_DIM] [STEPS] [STRATEGY] [HEAD] [LIGHTING] [LATENT_BYTES] [LATENT_NOISE]}
+out=${1:?usage: $0 OUT [LATENT_DIM] [STEPS] [STRATEGY] [HEAD] [LIGHTING] [LATENT_BYTES] [NOISE]}
 dim=${2:-16}
 steps=${3:-2000}
 strategy=${4:-meta_sgd:3}
