@@ -13,7 +13,10 @@
 # LATENT_BYTES B stores each latent in B bytes (`encode --latent-bytes B`; default: float16,
 # 2 d bytes). LATENT_NOISE S > 0 trains with noise S on the latents' code values
 # (`train --latent-noise S`, photometric heads only). The environment's SEED (default 1)
-# seeds the training.
+# seeds the training. With VALIDATION=1 in the environment the 12 test presses are left
+# out and every fifth training press (7 of 37) is held out as the test split instead
+# (a copy of the fixture under OUT/validation_data): for choosing settings without
+# looking at the test presses.
 set -euo pipefail
 export LC_ALL=C
 cd "$(dirname "$0")/.."
@@ -50,6 +53,18 @@ bin=build/bin/tactfunc
 data=tests/data/taxim_ballpress
 rm -rf "$out"
 mkdir -p "$out"
+if [ "${VALIDATION:-0}" = 1 ]; then
+  held="$out/validation_data"
+  mkdir -p "$held"
+  cp "$data"/{LICENSE,README.md,contacts.csv,reference.png} "$held/"
+  awk -F, 'NR == 1 { print; next }
+           $8 == "train" { if (++n % 5 == 0) sub(/train$/, "test"); print }' \
+    "$data/labels.csv" >"$held/labels.csv"
+  for frame in $(awk -F, 'NR > 1 { print $1 }' "$held/labels.csv"); do
+    cp "$data/$frame.png" "$held/"
+  done
+  data=$held
+fi
 $bin train --data "$data" --out "$out/m.tfm" "${trunk_flags[@]}" --latent-dim "$dim" \
   --steps "$steps" --seed "${SEED:-1}" >"$out/train.log" 2>&1 || { cat "$out/train.log"; exit 1; }
 $bin encode --data "$data" --model "$out/m.tfm" --out "$out/f.tfs" --strategy "$strategy" \
@@ -60,7 +75,8 @@ $bin eval --data "$data" --model "$out/m.tfm" --functaset "$out/f.tfs" --out "$o
   --json >"$out/eval.log" 2>&1
 echo "real GelSight presses: $head trunk, d = $dim, $steps steps, $strategy," \
   "$lighting lighting images, ${latent_bytes:-float16 (2 d)} bytes a latent," \
-  "latent noise $latent_noise, seed ${SEED:-1}"
+  "latent noise $latent_noise, seed ${SEED:-1}$([ "${VALIDATION:-0}" = 1 ] &&
+  echo ", validation split: 30 training presses, 7 held out as test")"
 grep -A3 '^sensor   split   contact' "$out/recon.log"
 # Centre errors: frames.csv columns 15-18 (contact_row/col, recon_contact_row/col) against
 # contacts.csv (x = column, y = row), per split.
