@@ -86,6 +86,15 @@ class TrainCliTest : public ::testing::Test {
       ASSERT_TRUE(cv::imwrite(entry.path().string(), image));
     }
   }
+  // `train` of a tiny photometric trunk (d 8, width 8, 2 layers, seed 1, JSON) on folder
+  // DATA for STEPS steps, MARKER_WARMUP of them with working-resolution markers; the
+  // caller appends its flags and `--out FILE` last.
+  static std::string TinyPhotometricTrain(const std::string& data, int steps,
+                                          int marker_warmup) {
+    return "train --data " + data + " --head photometric --steps " + std::to_string(steps) +
+           " --marker-warmup " + std::to_string(marker_warmup) +
+           " --latent-dim 8 --width 8 --layers 2 --threads 2 --seed 1 --json ";
+  }
   // The mean PSNR of `encode --strategy adam:30` of folder DATA with model MODEL.tfm
   // (written to MODEL.tfs); NaN, with a test failure, if encode fails.
   static double EncodedPsnr(const std::string& model, const std::string& data) {
@@ -333,9 +342,7 @@ TEST_F(TrainCliTest, ThePhotometricHeadDrawsEachClipAgainstItsOwnReference) {
 // reconstruct better with it than the same training without. The direct head refuses it.
 TEST_F(TrainCliTest, ThePhotometricBackgroundDrawsWhatEveryFrameShares) {
   ASSERT_NO_FATAL_FAILURE(BandedGelSlimFrames("bg", [](int) { return 24; }));
-  const std::string train = "train --data " + Root("bg") + " --head photometric --steps 30 "
-                            "--marker-warmup 10 --latent-dim 8 --width 8 --layers 2 "
-                            "--threads 2 --seed 1 --json --out ";
+  const std::string train = TinyPhotometricTrain(Root("bg"), 30, 10) + "--out ";
   const Result with = Run(train + Root("bg_with.tfm") + " --background");
   ASSERT_EQ(with.exit_code, 0) << with.err;
   EXPECT_THAT(with.out, HasSubstr("background learned along"));
@@ -357,9 +364,7 @@ TEST_F(TrainCliTest, ThePhotometricBackgroundDrawsWhatEveryFrameShares) {
 // by each frame's own value encode them better than the background alone.
 TEST_F(TrainCliTest, PhotometricLightingImagesDrawWhatChangesFromFrameToFrame) {
   ASSERT_NO_FATAL_FAILURE(BandedGelSlimFrames("lit", [](int k) { return 12 * (k % 6); }));
-  const std::string train = "train --data " + Root("lit") + " --head photometric --steps 200 "
-                            "--marker-warmup 10 --latent-dim 8 --width 8 --layers 2 "
-                            "--threads 2 --seed 1 --json --background --out ";
+  const std::string train = TinyPhotometricTrain(Root("lit"), 200, 10) + "--background --out ";
   const Result with = Run(train + Root("lit_with.tfm") + " --lighting 1");
   ASSERT_EQ(with.exit_code, 0) << with.err;
   EXPECT_THAT(with.out, HasSubstr("1 lighting images learned"));
@@ -394,9 +399,7 @@ TEST_F(TrainCliTest, PhotometricLightingImagesDrawWhatChangesFromFrameToFrame) {
 // are refused.
 TEST_F(TrainCliTest, LatentNoiseIsAPhotometricTrainingOptionRecordedInTheModel) {
   ASSERT_NO_FATAL_FAILURE(BandedGelSlimFrames("noise", [](int) { return 24; }));
-  const std::string train = "train --data " + Root("noise") + " --head photometric --steps 4 "
-                            "--marker-warmup 2 --latent-dim 8 --width 8 --layers 2 "
-                            "--threads 2 --seed 1 --json --out ";
+  const std::string train = TinyPhotometricTrain(Root("noise"), 4, 2) + "--out ";
   const Result noisy = Run(train + Root("noisy.tfm") + " --latent-noise 0.5");
   ASSERT_EQ(noisy.exit_code, 0) << noisy.err;
   EXPECT_THAT(noisy.out, HasSubstr(", noise 0.5 on its code values"));
