@@ -105,11 +105,12 @@ class PhotometricTrainer {
     // values, Adam at the trunk's step size, the frames' lighting values among their
     // latents; a finished run then takes the background's and the lighting images'
     // exact least-squares correction at the final latents (TableCorrection).
+    //
     // Standard deviation of Gaussian noise added to a drawn frame's code values (not its
     // rigid motion or lighting values) each time a step draws it; the gradient taken
     // there moves the frame's latent. 0 = none. The trunk then learns to draw the frames
     // from anywhere near their latents, not only at them, which a few training frames do
-    // not teach otherwise: on real GelSight presses 0.5 drew unseen presses about 1.5 dB
+    // not teach otherwise: on real GelSight presses 0.5 drew unseen presses 1.5 to 2.2 dB
     // closer (docs/REAL_DATA.md, "Noise on the training latents"). Finite, >= 0.
     double latent_noise = 0;
     // Worker threads over a step's frames. >= 1.
