@@ -478,8 +478,8 @@ PhotometricTrainer::Result PhotometricTrainer::Train(const std::vector<TrunkTarg
       Eigen::VectorXf z = latents.col(slot.frame).cast<float>();
       if (o.latent_noise > 0) {
         boost::random::normal_distribution<double> noise(0.0, o.latent_noise);
-        for (int j = PhotometricTrunk::kPoseValues; j < d - k_light; ++j) {
-          z[j] += static_cast<float>(noise(rng));
+        for (float& value : z.segment(PhotometricTrunk::kPoseValues, trunk.CodeValues())) {
+          value += static_cast<float>(noise(rng));
         }
       }
       // dL/dB at a pixel is dL/dY there, and dL/dL_k is dL/dY times a_k.

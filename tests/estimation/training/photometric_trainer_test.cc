@@ -387,13 +387,12 @@ TEST(PhotometricTrainerTest, LearnedLightingImagesDrawWhatVariesOverTheWholeGrid
 double SummedLossNearTheLatents(const PhotometricTrainer::Result& r,
                                 const std::vector<TrunkTargets>& frames, double size) {
   PhotometricTrainer::Result moved = r;
-  const int lighting = r.trunk.lighting_components();
   unsigned state = 11;
   for (Eigen::Index i = 0; i < moved.latents.rows(); ++i) {
-    for (Eigen::Index j = PhotometricTrunk::kPoseValues; j < moved.latents.cols() - lighting;
-         ++j) {
+    for (double& value :
+         moved.latents.row(i).segment(PhotometricTrunk::kPoseValues, r.trunk.CodeValues())) {
       state = state * 1664525u + 1013904223u;
-      moved.latents(i, j) += ((state >> 31) ? size : -size);
+      value += ((state >> 31) ? size : -size);
     }
   }
   return SummedLoss(moved, frames);
