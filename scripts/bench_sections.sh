@@ -4,35 +4,38 @@
 # (`bench synth`), the latent-fitting strategies (`bench fit`, table and targets), the
 # fitting kernels (`bench kernels`, Google Benchmark, on the committed small trunk and on
 # the default-preset trunk), the FLANN indexes (`bench knn` on the functaset's two
-# sensors, on 30,000 synthetic vectors and on a 30,000-frame Soft Bubble functaset) and
-# eval's PCA (`bench pca`). Each section's output goes to OUT/<section>.txt (tables as the
-# docs quote them; the JSON line last) and is echoed. The PyTorch comparison has its own
-# script (scripts/bench_peer.sh).
+# sensors, on 30,000 synthetic vectors and on a 30,000-frame Soft Bubble functaset),
+# eval's PCA (`bench pca`), and the pose posteriors of docs/SAMPLERS.md (`bench
+# posterior` with the committed small trunk and pose model). Each section's output goes
+# to OUT/<section>.txt (tables as the docs quote them; the JSON line last) and is echoed.
+# The PyTorch comparison has its own script (scripts/bench_peer.sh).
 #
 # Usage: scripts/bench_sections.sh OUT [SECTION ...]
-#   SECTION: synth fit kernels knn knn30k pca (default: all of them)
+#   SECTION: synth fit kernels knn knn30k pca posterior (default: all of them)
 # Data (made once in OUT and reused): OUT/data = `synth --frames-per-tool 150 --seed 1
 # --clean` (both sensors; 1,620 train and 180 test frames each), encoded with the
 # committed models/pretrained/default.tfm into OUT/f.tfs; for knn30k, OUT/data30k =
-# `synth --frames-per-tool 2500 --seed 3 --sensors bubble` encoded into OUT/f30k.tfs.
-# About 11 minutes on 2 idle cores, of which knn30k's data takes 2.5 and pca 1.
+# `synth --frames-per-tool 2500 --seed 3 --sensors bubble` encoded into OUT/f30k.tfs; for
+# posterior, OUT/pfresh = `synth --frames-per-tool 200 --sensors bubble --seed 11`
+# encoded into OUT/pfresh.tfs.
+# About 12 minutes on 2 idle cores, of which knn30k's data takes 2.5, pca 1 and posterior 1.
 # TACTFUNC picks the binary (default build/bin/tactfunc, built if missing).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 if [ $# -lt 1 ]; then
-  sed -n '2,19p' "$0" | sed 's/^# \{0,1\}//'
+  sed -n '2,22p' "$0" | sed 's/^# \{0,1\}//'
   exit 2
 fi
 out=$1
 shift
 sections=("$@")
-[ ${#sections[@]} -gt 0 ] || sections=(synth fit kernels knn knn30k pca)
+[ ${#sections[@]} -gt 0 ] || sections=(synth fit kernels knn knn30k pca posterior)
 for s in "${sections[@]}"; do
   case "$s" in
-    synth | fit | kernels | knn | knn30k | pca) ;;
+    synth | fit | kernels | knn | knn30k | pca | posterior) ;;
     *)
       echo "bench_sections.sh: unknown section '$s'" \
-        "(expected synth, fit, kernels, knn, knn30k or pca)" >&2
+        "(expected synth, fit, kernels, knn, knn30k, pca or posterior)" >&2
       exit 2
       ;;
   esac
@@ -65,6 +68,21 @@ data30k() {
     run "$TF" encode --model "$model" --data "$out/data30k" --sensors bubble --out "$out/f30k.tfs"
   fi
 }
+pfresh() {
+  if [ ! -f "$out/pfresh.tfs" ]; then
+    run "$TF" synth --out "$out/pfresh" --frames-per-tool 200 --sensors bubble --seed 11 \
+      --overwrite
+    run "$TF" encode --model "$model" --data "$out/pfresh" --out "$out/pfresh.tfs"
+  fi
+}
+
+pfresh() {
+  if [ ! -f "$out/pfresh.tfs" ]; then
+    run "$TF" synth --out "$out/pfresh" --frames-per-tool 200 --sensors bubble --seed 11 \
+      --overwrite
+    run "$TF" encode --model "$model" --data "$out/pfresh" --out "$out/pfresh.tfs"
+  fi
+}
 
 for s in "${sections[@]}"; do
   case "$s" in
@@ -89,6 +107,12 @@ for s in "${sections[@]}"; do
       section knn30k "$TF" bench knn --functaset "$out/f30k.tfs" --sensor bubble --json
       ;;
     pca) section pca "$TF" bench pca --reference --exact ;;
+    posterior)
+      pfresh
+      section posterior "$TF" bench posterior --model "$model" \
+        --pose-model models/pretrained/pose_bubble.tpm --functaset "$out/pfresh.tfs" \
+        --data "$out/pfresh" --frames 60 --samplers laplace,sgld,knn --json
+      ;;
   esac
 done
 echo "bench_sections.sh: outputs in $out"
