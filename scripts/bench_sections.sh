@@ -13,17 +13,16 @@
 # Usage: scripts/bench_sections.sh OUT [SECTION ...]
 #   SECTION: synth fit kernels knn knn30k pca posterior (default: all of them)
 # Data (made once in OUT and reused): OUT/data = `synth --frames-per-tool 150 --seed 1
-# --clean` (both sensors; 1,620 train and 180 test frames each), encoded with the
-# committed models/pretrained/default.tfm into OUT/f.tfs; for knn30k, OUT/data30k =
-# `synth --frames-per-tool 2500 --seed 3 --sensors bubble` encoded into OUT/f30k.tfs; for
-# posterior, OUT/pfresh = `synth --frames-per-tool 200 --sensors bubble --seed 11`
-# encoded into OUT/pfresh.tfs.
+# --clean` (both sensors; 1,620 train and 180 test frames each), for knn30k OUT/data30k =
+# `synth --frames-per-tool 2500 --seed 3 --sensors bubble`, for posterior OUT/pfresh =
+# `synth --frames-per-tool 200 --sensors bubble --seed 11`, each encoded with the
+# committed models/pretrained/default.tfm into OUT/<name>.tfs.
 # About 12 minutes on 2 idle cores, of which knn30k's data takes 2.5, pca 1 and posterior 1.
 # TACTFUNC picks the binary (default build/bin/tactfunc, built if missing).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 if [ $# -lt 1 ]; then
-  sed -n '2,22p' "$0" | sed 's/^# \{0,1\}//'
+  sed -n '2,21p' "$0" | sed 's/^# \{0,1\}//'
   exit 2
 fi
 out=$1
@@ -55,32 +54,12 @@ section() {  # section NAME COMMAND...: runs it, its output to OUT/NAME.txt and 
   echo "== $name ($when, load average $load)" | tee "$out/$name.txt"
   "$@" 2>&1 | tee -a "$out/$name.txt"
 }
-data() {
-  if [ ! -f "$out/f.tfs" ]; then
-    run "$TF" synth --out "$out/data" --frames-per-tool 150 --seed 1 --clean --overwrite
-    run "$TF" encode --model "$model" --data "$out/data" --out "$out/f.tfs"
-  fi
-}
-data30k() {
-  if [ ! -f "$out/f30k.tfs" ]; then
-    run "$TF" synth --out "$out/data30k" --frames-per-tool 2500 --seed 3 --sensors bubble \
-      --overwrite
-    run "$TF" encode --model "$model" --data "$out/data30k" --sensors bubble --out "$out/f30k.tfs"
-  fi
-}
-pfresh() {
-  if [ ! -f "$out/pfresh.tfs" ]; then
-    run "$TF" synth --out "$out/pfresh" --frames-per-tool 200 --sensors bubble --seed 11 \
-      --overwrite
-    run "$TF" encode --model "$model" --data "$out/pfresh" --out "$out/pfresh.tfs"
-  fi
-}
-
-pfresh() {
-  if [ ! -f "$out/pfresh.tfs" ]; then
-    run "$TF" synth --out "$out/pfresh" --frames-per-tool 200 --sensors bubble --seed 11 \
-      --overwrite
-    run "$TF" encode --model "$model" --data "$out/pfresh" --out "$out/pfresh.tfs"
+encoded() {  # encoded NAME SYNTH_FLAGS...: OUT/NAME synthesised and encoded, once
+  local name=$1
+  shift
+  if [ ! -f "$out/$name.tfs" ]; then
+    run "$TF" synth --out "$out/$name" "$@" --overwrite
+    run "$TF" encode --model "$model" --data "$out/$name" --out "$out/$name.tfs"
   fi
 }
 
@@ -88,8 +67,8 @@ for s in "${sections[@]}"; do
   case "$s" in
     synth) section synth "$TF" bench synth --json ;;
     fit)
-      data
-      section fit "$TF" bench fit --model "$model" --functaset "$out/f.tfs" --data "$out/data" \
+      encoded data --frames-per-tool 150 --seed 1 --clean
+      section fit "$TF" bench fit --model "$model" --functaset "$out/data.tfs" --data "$out/data" \
         --threads 1 --frames 20 --plot "$out/bench_fit_pareto.png" --json
       ;;
     kernels)
@@ -97,18 +76,18 @@ for s in "${sections[@]}"; do
       section kernels_default "$TF" bench kernels --json
       ;;
     knn)
-      data
-      section knn_bubble "$TF" bench knn --functaset "$out/f.tfs" --sensor bubble --json
-      section knn_gelslim "$TF" bench knn --functaset "$out/f.tfs" --sensor gelslim --json
+      encoded data --frames-per-tool 150 --seed 1 --clean
+      section knn_bubble "$TF" bench knn --functaset "$out/data.tfs" --sensor bubble --json
+      section knn_gelslim "$TF" bench knn --functaset "$out/data.tfs" --sensor gelslim --json
       section knn_synthetic "$TF" bench knn --synthetic 30000 --json
       ;;
     knn30k)
-      data30k
-      section knn30k "$TF" bench knn --functaset "$out/f30k.tfs" --sensor bubble --json
+      encoded data30k --frames-per-tool 2500 --seed 3 --sensors bubble
+      section knn30k "$TF" bench knn --functaset "$out/data30k.tfs" --sensor bubble --json
       ;;
     pca) section pca "$TF" bench pca --reference --exact ;;
     posterior)
-      pfresh
+      encoded pfresh --frames-per-tool 200 --sensors bubble --seed 11
       section posterior "$TF" bench posterior --model "$model" \
         --pose-model models/pretrained/pose_bubble.tpm --functaset "$out/pfresh.tfs" \
         --data "$out/pfresh" --frames 60 --samplers laplace,sgld,knn --json
