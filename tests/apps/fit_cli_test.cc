@@ -231,6 +231,16 @@ TEST_F(FitCliTest, BenchFitRunsOnTinyDataAndReportsEveryStrategy) {
   EXPECT_TRUE(j["converged_psnr"].contains("bubble"));
   EXPECT_TRUE(j["converged_psnr"].contains("gelslim"));
   EXPECT_GT(j["autodiff_over_analytic"].get<double>(), 0.0);
+  // The fixed costs are timed against the steps as the fit runs them: meta_sgd:1's one
+  // step from the pass at z = 0 is a matrix-vector product, far below the fit around it
+  // (building the problem, the closing pass), whose share is then well above 0 (timed
+  // against a full pass instead, it read below 0).
+  for (const nlohmann::json& s : j["strategies"]) {
+    if (s["name"] != "meta_sgd:1") continue;
+    ASSERT_TRUE(s["fixed_cost_share"].is_number()) << s.dump();
+    EXPECT_LT(s["steps_ms_median"].get<double>(), s["ms_median"].get<double>());
+    EXPECT_GT(s["fixed_cost_share"].get<double>(), 0.5);
+  }
   EXPECT_TRUE(fs::exists(Root("pareto.png")));
   EXPECT_THAT(Slurp(Root("table.md")), HasSubstr("| bubble | `knn+ceres:5` |"));
 }
