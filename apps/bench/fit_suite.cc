@@ -207,24 +207,14 @@ void RunFitBench(const FitBenchFlags& flags) {
       if (!options.strategy.knn &&
           options.strategy.refinement == FitStrategy::Refinement::kMetaSgd) {
         // The same frames' K steps alone, after their fits (caches as warm as the fit's),
-        // as the fit runs them: a float fit from z = 0 takes its first step from the
-        // trunk's pass at z = 0 (StartPass, made once per frame size and not timed here,
-        // as the fitter keeps its own), so the share below is the rest of the fit alone.
-        std::unique_ptr<const StartPass> start_pass;
-        {
-          const LatentProblem first(*s.trunk, s.targets[0], problem_options);
-          if (StartPass::Applies(*s.trunk) && v.precision == LatentProblem::Precision::kFloat &&
-              first.StartLatent().isZero(0.0)) {
-            start_pass = std::make_unique<const StartPass>(*s.trunk, first.targets().rows,
-                                                           first.targets().cols);
-          }
-        }
+        // as the fit runs them: a fit from z = 0 takes its first step from the fitter's
+        // pass at z = 0 (StartPassFor: made once per frame size, by the warm-up fit, and
+        // not timed here), so the share below is the rest of the fit alone.
         std::vector<double> steps_ms(m), share(m);
         for (int i = 0; i < m; ++i) {
           const LatentProblem problem(*s.trunk, s.targets[i], problem_options);
           const Eigen::VectorXd start = problem.StartLatent();
-          const StartPass* pass =
-              start_pass != nullptr && problem.CanUse(*start_pass) ? start_pass.get() : nullptr;
+          const StartPass* pass = start.isZero(0.0) ? fitter.StartPassFor(problem) : nullptr;
           const Clock::time_point began = Clock::now();
           const Eigen::VectorXd z =
               problem.MetaSgdSteps(start, options.strategy.steps, nullptr, nullptr, pass);

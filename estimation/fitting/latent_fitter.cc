@@ -255,7 +255,8 @@ struct LatentFitter::StartPasses {
 const StartPass* LatentFitter::StartPassFor(const LatentProblem& problem) const {
   // Only the fitter's own trunk, which outlives it unchanged: a pass of another trunk
   // object could outlive that object.
-  if (&problem.trunk() != trunk_ || !StartPass::Applies(problem.trunk()) ||
+  if (&problem.trunk() != trunk_ || options_.jacobian != JacobianMode::kAnalytic ||
+      !StartPass::Applies(problem.trunk()) ||
       problem.options().precision != LatentProblem::Precision::kFloat) {
     return nullptr;
   }
@@ -365,9 +366,7 @@ LatentFitter::Summary LatentFitter::FitImpl(const LatentProblem& problem,
   // fit its start's cost and first Jacobian, meta-SGD steps (alone, or as the knn query)
   // their first step.
   const StartPass* start_pass =
-      initial == nullptr && options_.jacobian == JacobianMode::kAnalytic && z.isZero(0.0)
-          ? StartPassFor(problem)
-          : nullptr;
+      initial == nullptr && z.isZero(0.0) ? StartPassFor(problem) : nullptr;
   const StartPass* ceres_start_pass =
       !options_.strategy.knn && options_.strategy.refinement == FitStrategy::Refinement::kCeres
           ? start_pass

@@ -217,12 +217,15 @@ class LatentFitter {
   Summary Fit(const LatentProblem& problem, const Eigen::VectorXd& initial_latent,
               Eigen::VectorXd* latent) const;
 
+  // The trunk's pass at z = 0 over the problem's frame size that a fit of `problem` from
+  // z = 0 takes its start from (made on first use, kept for a few sizes), or null if
+  // such a fit cannot use one (another trunk, double precision, the autodiff Jacobian, a
+  // frame too large to keep its Jacobian). E.g. for timing a fit's steps as it runs them.
+  const StartPass* StartPassFor(const LatentProblem& problem) const;
+
  private:
   Summary FitImpl(const LatentProblem& problem, const Eigen::VectorXd* initial,
                   Eigen::VectorXd* latent) const;
-  // The trunk's pass at z = 0 over the problem's frame size (made on first use, kept for
-  // a few sizes), or null if the problem cannot use one.
-  const StartPass* StartPassFor(const LatentProblem& problem) const;
 
   struct StartPasses;  // the cache behind StartPassFor, shared by copies of the fitter
   std::shared_ptr<StartPasses> start_passes_;
