@@ -62,12 +62,13 @@ encoded() {  # encoded NAME SYNTH_FLAGS...: OUT/NAME synthesised and encoded, on
     run "$TF" encode --model "$model" --data "$out/$name" --out "$out/$name.tfs"
   fi
 }
+shared_data() { encoded data --frames-per-tool 150 --seed 1 --clean; }  # fit's and knn's
 
 for s in "${sections[@]}"; do
   case "$s" in
     synth) section synth "$TF" bench synth --json ;;
     fit)
-      encoded data --frames-per-tool 150 --seed 1 --clean
+      shared_data
       section fit "$TF" bench fit --model "$model" --functaset "$out/data.tfs" --data "$out/data" \
         --threads 1 --frames 20 --plot "$out/bench_fit_pareto.png" --json
       ;;
@@ -76,7 +77,7 @@ for s in "${sections[@]}"; do
       section kernels_default "$TF" bench kernels --json
       ;;
     knn)
-      encoded data --frames-per-tool 150 --seed 1 --clean
+      shared_data
       section knn_bubble "$TF" bench knn --functaset "$out/data.tfs" --sensor bubble --json
       section knn_gelslim "$TF" bench knn --functaset "$out/data.tfs" --sensor gelslim --json
       section knn_synthetic "$TF" bench knn --synthetic 30000 --json
