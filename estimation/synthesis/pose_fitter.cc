@@ -147,17 +147,77 @@ ceres::Solver::Options SolverOptions(int iterations) {
   solver.function_tolerance = 1e-7;
   solver.gradient_tolerance = 1e-10;
   solver.parameter_tolerance = 1e-8;
+  // The depth's bounds make the problem bound-constrained, and Ceres' trust-region
+  // minimizer then runs a line search along each projected step by default, evaluating
+  // the Jacobian at every trial point on top of the candidate's cost and the Jacobian at
+  // the accepted point: about twice the trunk passes per iteration. Without it a step is
+  // projected onto the bounds (Plus clamps the depth) and accepted or rejected by its gain
+  // ratio as any Levenberg-Marquardt step; the modes and posteriors are the same to the
+  // figures docs/POSES.md prints (its "line search" paragraph), at about 30 % less time.
+  solver.max_num_line_search_step_size_iterations = 0;
   return solver;
 }
 
-// Levenberg-Marquardt from (pose, depth) in place; returns the iterations run.
-int Refine(const LatentProblem& problem, const PoseGenerator& generator, int tool_index,
-           const PoseFitOptions& options, int iterations, double pose[3], double* depth) {
+// GeneratorPoseCost that keeps its last evaluation with a Jacobian. Ceres' minimizer
+// evaluates the Jacobian at every point it accepts, the last of them the point it
+// returns, so the residuals and Jacobian a mode's Laplace approximation needs are already
+// computed when its fit ends. Not for concurrent use (one per Refine).
+class RecordingPoseCost final : public GeneratorPoseCost {
+ public:
+  using GeneratorPoseCost::GeneratorPoseCost;
+
+  bool Evaluate(double const* const* parameters, double* residuals,
+                double** jacobians) const override {
+    const bool ok = GeneratorPoseCost::Evaluate(parameters, residuals, jacobians);
+    if (jacobians == nullptr || jacobians[0] == nullptr || jacobians[1] == nullptr) return ok;
+    recorded_ = ok;
+    if (!ok) return ok;
+    const int m = num_residuals();
+    std::copy(parameters[0], parameters[0] + 3, pose_);
+    depth_ = parameters[1][0];
+    r_ = Eigen::Map<const Eigen::VectorXd>(residuals, m);
+    J0_ = Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>(
+        jacobians[0], m, 3);
+    J1_ = Eigen::Map<const Eigen::VectorXd>(jacobians[1], m);
+    return ok;
+  }
+
+  // The residuals and the Jacobian blocks (x, y, yaw) and (depth) at exactly (pose, depth):
+  // the recorded evaluation if it was there, else a new one. False if it failed.
+  bool EvaluateAt(const double pose[3], double depth, Eigen::VectorXd* r,
+                  Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>* J0,
+                  Eigen::VectorXd* J1) const {
+    if (recorded_ && std::equal(pose, pose + 3, pose_) && depth == depth_) {
+      *r = r_;
+      *J0 = J0_;
+      *J1 = J1_;
+      return true;
+    }
+    const int m = num_residuals();
+    r->resize(m);
+    J0->resize(m, 3);
+    J1->resize(m);
+    const double* params[2] = {pose, &depth};
+    double* jac[2] = {J0->data(), J1->data()};
+    return GeneratorPoseCost::Evaluate(params, r->data(), jac);
+  }
+
+ private:
+  mutable bool recorded_ = false;
+  mutable double pose_[3] = {0, 0, 0};
+  mutable double depth_ = 0;
+  mutable Eigen::VectorXd r_, J1_;
+  mutable Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> J0_;
+};
+
+// Levenberg-Marquardt on `cost` (not owned) from (pose, depth) in place; returns the iterations run.
+int Refine(GeneratorPoseCost* cost, const PoseFitOptions& options, int iterations,
+           double pose[3], double* depth) {
   ceres::Problem::Options po;
-  po.cost_function_ownership = ceres::TAKE_OWNERSHIP;
+  po.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   po.manifold_ownership = ceres::TAKE_OWNERSHIP;
   ceres::Problem cp(po);
-  cp.AddResidualBlock(new GeneratorPoseCost(problem, generator, tool_index), nullptr, pose, depth);
+  cp.AddResidualBlock(cost, nullptr, pose, depth);
   cp.SetManifold(pose, new SE2Manifold);
   cp.SetParameterLowerBound(depth, 0, options.depth_min_m);
   cp.SetParameterUpperBound(depth, 0, options.depth_max_m);
@@ -220,7 +280,8 @@ std::vector<PoseFit> FitPoseModes(const LatentProblem& problem, const PoseGenera
       double pose[3] = {starts[i].sensor_T_object.x(), starts[i].sensor_T_object.y(),
                         starts[i].sensor_T_object.yaw()};
       double depth = starts[i].depth_m;
-      Refine(*coarse, generator, tool_index, options, options.coarse_iterations, pose, &depth);
+      GeneratorPoseCost cost(*coarse, generator, tool_index);
+      Refine(&cost, options, options.coarse_iterations, pose, &depth);
       refined.push_back({SE2d::FromXYYaw(pose[0], pose[1], pose[2]), depth, starts[i].source});
     }
     starts = std::move(refined);
@@ -233,20 +294,16 @@ std::vector<PoseFit> FitPoseModes(const LatentProblem& problem, const PoseGenera
                       starts[i].sensor_T_object.yaw()};
     double depth = starts[i].depth_m;
     PoseFit fit;
-    fit.iterations = Refine(problem, generator, tool_index, options, options.max_iterations, pose,
-                            &depth);
-    const GeneratorPoseCost cost(problem, generator, tool_index);
+    RecordingPoseCost cost(problem, generator, tool_index);
+    fit.iterations = Refine(&cost, options, options.max_iterations, pose, &depth);
     fit.sensor_T_object = SE2d::FromXYYaw(pose[0], pose[1], pose[2]);
     fit.depth_m = depth;
     fit.start = starts[i].source;
     // Residuals and the tangent J^T J at the mode.
     const int m = problem.num_residuals();
-    Eigen::VectorXd r(m);
-    Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> J0(m, 3);
-    Eigen::VectorXd J1(m);
-    const double* params[2] = {pose, &depth};
-    double* jac[2] = {J0.data(), J1.data()};
-    if (!cost.Evaluate(params, r.data(), jac)) continue;
+    Eigen::VectorXd r, J1;
+    Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> J0;
+    if (!cost.EvaluateAt(pose, depth, &r, &J0, &J1)) continue;
     Eigen::Matrix<double, Eigen::Dynamic, 4> J(m, 4);
     J.leftCols<3>() = J0 * PoseCoordinatesFromTangent(fit.sensor_T_object);
     J.col(3) = J1;

@@ -197,6 +197,74 @@ TEST(FitPoseModes, RecoversTheRenderedPoseFromNearbyStartsAndKeepsDistinctModes)
   EXPECT_LE(bounded[0].depth_m, options.depth_max_m);
 }
 
+TEST(FitPoseModes, StepsPastADepthBoundEndOnTheBound) {
+  // The frame is rendered deeper than the depth may go: the minimizer's steps are
+  // projected onto the bounds (no line search), so the fit ends on the bound, with the
+  // pose still recovered about as well as the depth allows.
+  const SensorTrunk trunk = Trunk();
+  const PoseGenerator g = Generator();
+  const SE2d truth = SE2d::FromXYYaw(0.5e-3, 0.3e-3, -0.4);
+  const TrunkTargets targets = Render(trunk, g, 0, truth, 0.012);
+  LatentProblem::Options po;
+  po.sigma = 0.01;
+  const LatentProblem problem(trunk, targets, po);
+  PoseFitOptions options;
+  options.max_iterations = 50;
+  options.depth_max_m = 0.010;
+  const std::vector<PoseFit> modes = FitPoseModes(
+      problem, g, 0, {{SE2d::FromXYYaw(0.6e-3, 0.2e-3, -0.3), 0.008, "shallow"}}, options);
+  ASSERT_FALSE(modes.empty());
+  EXPECT_LE(modes[0].depth_m, options.depth_max_m);
+  EXPECT_NEAR(modes[0].depth_m, options.depth_max_m, 1e-6);
+  // Inside the bounds the same frame is fitted exactly, from the same start.
+  options.depth_max_m = 0.0175;
+  const std::vector<PoseFit> free = FitPoseModes(
+      problem, g, 0, {{SE2d::FromXYYaw(0.6e-3, 0.2e-3, -0.3), 0.008, "shallow"}}, options);
+  ASSERT_FALSE(free.empty());
+  EXPECT_NEAR(free[0].depth_m, 0.012, 2e-5);
+  EXPECT_LT(free[0].cost, modes[0].cost);
+}
+
+TEST(FitPoseModes, AModesCostAndJtJAreThoseOfAnEvaluationAtIt) {
+  // The fit takes them from the minimizer's last Jacobian evaluation; they must be the
+  // ones a new evaluation at the returned pose and depth gives, on both stages.
+  const SensorTrunk trunk = Trunk();
+  const PoseGenerator g = Generator();
+  const TrunkTargets targets = Render(trunk, g, 0, SE2d::FromXYYaw(-0.4e-3, 0.9e-3, 1.1), 0.009,
+                                      0.02);
+  LatentProblem::Options po;
+  po.sigma = 0.01;
+  const LatentProblem problem(trunk, targets, po);
+  po.max_pixels = 40;
+  const LatentProblem coarse(trunk, targets, po);
+  PoseFitOptions options;
+  options.max_iterations = 3;  // stopped before convergence, too
+  const std::vector<PoseStart> starts = {{SE2d::FromXYYaw(-0.2e-3, 0.7e-3, 0.9), 0.0080, "a"},
+                                         {SE2d::FromXYYaw(0.5e-3, -0.5e-3, -2.0), 0.0110, "b"}};
+  for (const LatentProblem* c : {static_cast<const LatentProblem*>(nullptr), &coarse}) {
+    const std::vector<PoseFit> modes = FitPoseModes(problem, g, 0, starts, options, c);
+    ASSERT_FALSE(modes.empty());
+    const GeneratorPoseCost cost(problem, g, 0);
+    for (const PoseFit& f : modes) {
+      const int m = problem.num_residuals();
+      const double pose[3] = {f.sensor_T_object.x(), f.sensor_T_object.y(),
+                              f.sensor_T_object.yaw()};
+      const double depth = f.depth_m;
+      Eigen::VectorXd r(m), J1(m);
+      Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> J0(m, 3);
+      const double* params[2] = {pose, &depth};
+      double* jac[2] = {J0.data(), J1.data()};
+      ASSERT_TRUE(cost.Evaluate(params, r.data(), jac));
+      Eigen::Matrix<double, Eigen::Dynamic, 4> J(m, 4);
+      J.leftCols<3>() = J0 * PoseCoordinatesFromTangent(f.sensor_T_object);
+      J.col(3) = J1;
+      const Eigen::Matrix4d JtJ = J.transpose() * J;
+      EXPECT_NEAR(f.cost, 0.5 * r.squaredNorm(), 1e-9 * (1 + f.cost));
+      EXPECT_LE((f.JtJ - JtJ).norm(), 1e-9 * JtJ.norm()) << f.JtJ << "\n\n" << JtJ;
+    }
+  }
+}
+
 LaplaceComponent Component(const std::string& tool, int n, double weight, const SE2d& mean) {
   LaplaceComponent c;
   c.tool = tool;
