@@ -210,7 +210,8 @@ class RecordingPoseCost final : public GeneratorPoseCost {
   mutable Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> J0_;
 };
 
-// Levenberg-Marquardt on `cost` (not owned) from (pose, depth) in place; returns the iterations run.
+// Levenberg-Marquardt on `cost` (not owned) from (pose, depth) in place; returns the
+// iterations run.
 int Refine(GeneratorPoseCost* cost, const PoseFitOptions& options, int iterations,
            double pose[3], double* depth) {
   ceres::Problem::Options po;
