@@ -197,32 +197,36 @@ TEST(FitPoseModes, RecoversTheRenderedPoseFromNearbyStartsAndKeepsDistinctModes)
   EXPECT_LE(bounded[0].depth_m, options.depth_max_m);
 }
 
-TEST(FitPoseModes, StepsPastADepthBoundEndOnTheBound) {
-  // The frame is rendered deeper than the depth may go: the minimizer's steps are
-  // projected onto the bounds (no line search), so the fit ends on the bound, with the
-  // pose still recovered about as well as the depth allows.
+// The modes of tool 0 fitted to the noise-free frame it renders at (truth, depth), from one
+// start.
+std::vector<PoseFit> FitRendered(const SE2d& truth, double depth, const PoseStart& start,
+                                 const PoseFitOptions& options) {
   const SensorTrunk trunk = Trunk();
   const PoseGenerator g = Generator();
-  const SE2d truth = SE2d::FromXYYaw(0.5e-3, 0.3e-3, -0.4);
-  const TrunkTargets targets = Render(trunk, g, 0, truth, 0.012);
   LatentProblem::Options po;
   po.sigma = 0.01;
-  const LatentProblem problem(trunk, targets, po);
+  const LatentProblem problem(trunk, Render(trunk, g, 0, truth, depth), po);
+  return FitPoseModes(problem, g, 0, {start}, options);
+}
+
+TEST(FitPoseModes, StepsPastADepthBoundEndOnTheBound) {
+  // The frame is rendered deeper than the depth may go: the minimizer's steps are
+  // projected onto the bounds (no line search), so the fit ends on the bound.
+  const SE2d truth = SE2d::FromXYYaw(0.5e-3, 0.3e-3, -0.4);
+  const PoseStart start{SE2d::FromXYYaw(0.6e-3, 0.2e-3, -0.3), 0.008, "shallow"};
   PoseFitOptions options;
   options.max_iterations = 50;
   options.depth_max_m = 0.010;
-  const std::vector<PoseFit> modes = FitPoseModes(
-      problem, g, 0, {{SE2d::FromXYYaw(0.6e-3, 0.2e-3, -0.3), 0.008, "shallow"}}, options);
-  ASSERT_FALSE(modes.empty());
-  EXPECT_LE(modes[0].depth_m, options.depth_max_m);
-  EXPECT_NEAR(modes[0].depth_m, options.depth_max_m, 1e-6);
+  const std::vector<PoseFit> bounded = FitRendered(truth, 0.012, start, options);
+  ASSERT_FALSE(bounded.empty());
+  EXPECT_LE(bounded[0].depth_m, options.depth_max_m);
+  EXPECT_NEAR(bounded[0].depth_m, options.depth_max_m, 1e-6);
   // Inside the bounds the same frame is fitted exactly, from the same start.
   options.depth_max_m = 0.0175;
-  const std::vector<PoseFit> free = FitPoseModes(
-      problem, g, 0, {{SE2d::FromXYYaw(0.6e-3, 0.2e-3, -0.3), 0.008, "shallow"}}, options);
+  const std::vector<PoseFit> free = FitRendered(truth, 0.012, start, options);
   ASSERT_FALSE(free.empty());
   EXPECT_NEAR(free[0].depth_m, 0.012, 2e-5);
-  EXPECT_LT(free[0].cost, modes[0].cost);
+  EXPECT_LT(free[0].cost, bounded[0].cost);
 }
 
 TEST(FitPoseModes, AModesCostAndJtJAreThoseOfAnEvaluationAtIt) {
