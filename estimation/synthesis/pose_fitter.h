@@ -8,7 +8,8 @@
 //
 // minimised by Ceres' Levenberg-Marquardt over T = sensor_T_object on SE2Manifold (the
 // project's SE2 with RIGHT perturbations T Exp(delta), models/core/se2.h) and the depth in
-// bounds. Jacobian: analytic, J_r_z (LatentProblem::ResidualsAndJacobian, the trunk's
+// bounds (each step projected onto them, without Ceres' line search for bounded problems;
+// a mode's J^T J is the minimizer's last Jacobian, at the point it returns). Jacobian: analytic, J_r_z (LatentProblem::ResidualsAndJacobian, the trunk's
 // latent Jacobian) times J_z_pose (PoseGenerator::Generate), d r / d(x, y, yaw, depth) in
 // coordinates; Ceres composes it with the manifold's PlusJacobian.
 //
