@@ -9,9 +9,10 @@
 // minimised by Ceres' Levenberg-Marquardt over T = sensor_T_object on SE2Manifold (the
 // project's SE2 with RIGHT perturbations T Exp(delta), models/core/se2.h) and the depth in
 // bounds (each step projected onto them, without Ceres' line search for bounded problems;
-// a mode's J^T J is the minimizer's last Jacobian, at the point it returns). Jacobian: analytic, J_r_z (LatentProblem::ResidualsAndJacobian, the trunk's
-// latent Jacobian) times J_z_pose (PoseGenerator::Generate), d r / d(x, y, yaw, depth) in
-// coordinates; Ceres composes it with the manifold's PlusJacobian.
+// a mode's J^T J is the minimizer's last Jacobian, at the point it returns). Jacobian:
+// analytic, J_r_z (LatentProblem::ResidualsAndJacobian, the trunk's latent Jacobian) times
+// J_z_pose (PoseGenerator::Generate), d r / d(x, y, yaw, depth) in coordinates; Ceres
+// composes it with the manifold's PlusJacobian.
 //
 // Multi-start: every start is scored by one forward pass, the best distinct
 // max_refined_starts are refined, and every distinct converged mode is kept (two modes are
