@@ -9,11 +9,13 @@
 //   inline function built with -ffast-math can be merged into the rest of the program
 //   (ODR).
 // - Float (fast_sincos_float.cc), sine and cosine together (the passes that keep the
-//   cosines for a reverse pass): each argument reduced once, by pi/2 in three parts
-//   (Cody-Waite), and both minimax polynomials evaluated on the reduced argument
-//   (Cephes' sinf/cosf coefficients): 1.3-2.4x as fast as libmvec's sinf and cosf
-//   called one after the other (docs/BUILD.md), within two float ulps of the exact
-//   values, as libmvec's are.
+//   cosines for a reverse pass): each argument reduced once. Where the compiler targets
+//   AVX-512, by pi/16 in three parts (Cody-Waite), sin and cos of k pi/16 read from a
+//   table of 32 held in two registers and combined with short Taylor polynomials of the
+//   remainder (|r| <= pi/32); elsewhere by pi/2, with Cephes' sinf/cosf minimax
+//   polynomials and a quadrant swap. Both within two float ulps of 1 of the exact
+//   values, as libmvec's sinf and cosf are, and faster than those called one after the
+//   other (docs/BUILD.md).
 // - Float sine alone (forward-only passes): reduced by pi in three parts, one odd
 //   polynomial of degree 9 over [-pi/2, pi/2]; within 1.5e-7 (about a float ulp of 1)
 //   of the exact sine, as libmvec's sinf, and faster (docs/BUILD.md).
