@@ -50,42 +50,6 @@ inline float FromBits(std::uint32_t b) {
   return f;
 }
 
-// y = k pi/2 + r, |r| <= pi/4; the low two bits of *quadrant are k mod 4.
-inline float Reduce(float y, std::uint32_t* quadrant) {
-  const float shifted = y * kTwoOverPi + kRoundShift;
-  const float k = shifted - kRoundShift;
-  *quadrant = Bits(shifted);
-  // Plain products and differences, not std::fma: without FMA instructions (a portable
-  // build) std::fma is a library call; where they exist the compiler contracts these.
-  return ((y - k * kPio2A) - k * kPio2B) - k * kPio2C;
-}
-
-// sin and cos of r in [-pi/4, pi/4], z = r^2 (Cephes' minimax coefficients).
-inline float SinOfReduced(float r, float z) {
-  return ((-1.9515295891e-4f * z + 8.3321608736e-3f) * z - 1.6666654611e-1f) * z * r + r;
-}
-inline float CosOfReduced(float z) {
-  return ((2.443315711809948e-5f * z - 1.388731625493765e-3f) * z + 4.166664568298827e-2f) *
-             z * z -
-         0.5f * z + 1.0f;
-}
-
-// (sin, cos) of k pi/2 + r from (sin r, cos r): swapped for odd k, then sin negated for
-// k mod 4 in {2, 3} and cos for k mod 4 in {1, 2}.
-inline void Rotate(std::uint32_t quadrant, float s, float c, float* sin_out, float* cos_out) {
-  const std::uint32_t odd = 0u - (quadrant & 1u);
-  const std::uint32_t sb = Bits(s), cb = Bits(c);
-  *sin_out = FromBits(((cb & odd) | (sb & ~odd)) ^ ((quadrant & 2u) << 30));
-  *cos_out = FromBits(((sb & odd) | (cb & ~odd)) ^ (((quadrant + 1u) & 2u) << 30));
-}
-
-inline void SinCosOf(float y, float* sin_out, float* cos_out) {
-  std::uint32_t quadrant;
-  const float r = Reduce(y, &quadrant);
-  const float z = r * r;
-  Rotate(quadrant, SinOfReduced(r, z), CosOfReduced(z), sin_out, cos_out);
-}
-
 // sin y alone: y = k pi + r, |r| <= pi/2, sin y = (-1)^k sin r, with one odd polynomial
 // of degree 9 over [-pi/2, pi/2] (minimax in relative error, 6e-9;
 // scripts/fit_sine_polynomial.py). One polynomial instead of SinCosOf's two and its
@@ -175,7 +139,44 @@ void TableSinCos(long n, float scale, const float* x, float* sin_out, float* cos
   for (; i + 16 <= n; i += 16) vector(i, 0xffff, true);
   if (i < n) vector(i, static_cast<__mmask16>((1u << (n - i)) - 1), false);
 }
-#endif
+#else
+// Without AVX-512: sine and cosine from one reduction by pi/2 and two polynomials.
+// y = k pi/2 + r, |r| <= pi/4; the low two bits of *quadrant are k mod 4.
+inline float Reduce(float y, std::uint32_t* quadrant) {
+  const float shifted = y * kTwoOverPi + kRoundShift;
+  const float k = shifted - kRoundShift;
+  *quadrant = Bits(shifted);
+  // Plain products and differences, not std::fma: without FMA instructions (a portable
+  // build) std::fma is a library call; where they exist the compiler contracts these.
+  return ((y - k * kPio2A) - k * kPio2B) - k * kPio2C;
+}
+
+// sin and cos of r in [-pi/4, pi/4], z = r^2 (Cephes' minimax coefficients).
+inline float SinOfReduced(float r, float z) {
+  return ((-1.9515295891e-4f * z + 8.3321608736e-3f) * z - 1.6666654611e-1f) * z * r + r;
+}
+inline float CosOfReduced(float z) {
+  return ((2.443315711809948e-5f * z - 1.388731625493765e-3f) * z + 4.166664568298827e-2f) *
+             z * z -
+         0.5f * z + 1.0f;
+}
+
+// (sin, cos) of k pi/2 + r from (sin r, cos r): swapped for odd k, then sin negated for
+// k mod 4 in {2, 3} and cos for k mod 4 in {1, 2}.
+inline void Rotate(std::uint32_t quadrant, float s, float c, float* sin_out, float* cos_out) {
+  const std::uint32_t odd = 0u - (quadrant & 1u);
+  const std::uint32_t sb = Bits(s), cb = Bits(c);
+  *sin_out = FromBits(((cb & odd) | (sb & ~odd)) ^ ((quadrant & 2u) << 30));
+  *cos_out = FromBits(((sb & odd) | (cb & ~odd)) ^ (((quadrant + 1u) & 2u) << 30));
+}
+
+inline void SinCosOf(float y, float* sin_out, float* cos_out) {
+  std::uint32_t quadrant;
+  const float r = Reduce(y, &quadrant);
+  const float z = r * r;
+  Rotate(quadrant, SinOfReduced(r, z), CosOfReduced(z), sin_out, cos_out);
+}
+#endif  // defined(__AVX512F__)
 
 // True if every |scale * x[i]| <= kLargestReduced (false for NaN).
 bool InRange(long n, float scale, const float* x) {
