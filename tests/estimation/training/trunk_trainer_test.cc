@@ -291,6 +291,25 @@ TEST_F(TrunkTrainerTest, AFarTooLargeLearningRateStopsAsDivergedAtTheFirstMonito
   EXPECT_LT(unchecked.train_psnr, summary.history.front().psnr - drop);
 }
 
+TEST_F(TrunkTrainerTest, ANonFiniteGradientStopsTheRunKeepingTheLastFiniteParameters) {
+  TrunkTrainer::Options options = ShortOptions();
+  options.checkpoint_every = 0;
+  options.monitor_every = 1000;  // no monitor point before the gradient breaks
+  options.learning_rate = 1e30;  // Adam moves theta by about this much: the trunk overflows
+  SensorTrunk trunk;
+  const TrunkTrainer::Summary summary = Train(options, &trunk);
+  ASSERT_EQ(summary.termination_type, TrunkTrainer::TerminationType::kNonFinite)
+      << summary.FullReport();
+  EXPECT_GE(summary.steps_done, 1);
+  EXPECT_LT(summary.steps_done, options.steps);
+  EXPECT_THAT(summary.message, HasSubstr("non-finite"));
+  EXPECT_THAT(summary.message, HasSubstr("learning_rate"));
+  EXPECT_THAT(summary.message,
+              HasSubstr("kept the parameters of step " + std::to_string(summary.steps_done)));
+  EXPECT_TRUE(trunk.siren.parameters().allFinite());
+  EXPECT_TRUE(trunk.alpha.allFinite());
+}
+
 TEST_F(TrunkTrainerTest, TheReadoutBranchStartsAsThePcaOfTheTrainingFrames) {
   // Zero steps: the trunk is its start. One full-frame meta-SGD step at alpha = 1 from
   // z = 0 must then reconstruct every training frame as PCA with d components does.
