@@ -64,8 +64,8 @@ void AddProductPrecisionFlag(CLI::App* sub, std::string* value, bool as_functase
                         "one the functaset was encoded with, where this CPU runs it; "
                         "docs/BUILD.md)"
                       : "Precision of the trunk's matrix products: float (default) or bf16 "
-                        "(operands rounded to bfloat16, sums in float; about twice the "
-                        "multiply-adds per second on a CPU with AVX512_BF16, at a small cost in "
+                        "(operands rounded to bfloat16, sums in float; needs AVX512_BF16; faster "
+                        "than float on some such CPUs, slower on others, at a small cost in "
                         "accuracy: docs/BUILD.md)")
       ->check(CLI::IsMember({"float", "bf16"}));
 }
