@@ -295,6 +295,16 @@ void RunForward(const Net<S>& net, double omega_0, const Eigen::MatrixBase<Coord
   y.colwise() += net.b_out.col(0);
 }
 
+// dL/dpre_l = dL/dh_{l+1} (*) omega_0 cos(omega_0 pre_l) (element-wise) into *out: the one
+// expression of it, so that the reverse pass and the Hessian-vector product, which
+// recomputes it from a kept dL/dh_{l+1}, round alike.
+template <typename S, typename GradH, typename Cosine, typename Out>
+void PreActivationGradient(const Eigen::MatrixBase<GradH>& g,
+                           const Eigen::MatrixBase<Cosine>& cosine, S omega,
+                           Eigen::MatrixBase<Out>* out) {
+  out->array() = g.array() * (omega * cosine.array());
+}
+
 // The element-wise passes below each go once over a block's values, column by column
 // (the blocks are column-major, one pixel per column), where Eigen expressions would
 // take two passes: a Hessian-vector product's block keeps a dozen width x block
@@ -303,10 +313,6 @@ void RunForward(const Net<S>& net, double omega_0, const Eigen::MatrixBase<Coord
 // Each works on one column of `rows` values. GCC vectorises these loops only with
 // their pointers __restrict parameters of a function (as locals in the callers' loops
 // it kept them scalar, and the meta-training step took 8-22 % longer).
-//
-// dL/dpre_l = dL/dh_{l+1} (*) omega_0 cos(omega_0 pre_l) is written g * (omega * cos)
-// wherever it is formed, so that the reverse pass and the Hessian-vector product, which
-// recomputes it from a kept dL/dh_{l+1}, round alike.
 template <typename S>
 void ColumnPreActivationGradientAndSum(long rows, S omega, const S* __restrict g,
                                        const S* __restrict cosine, S* __restrict delta,
@@ -340,24 +346,7 @@ void ColumnTangentPreActivationGradientAndSum(long rows, S omega, const S* __res
   }
 }
 
-// The same, and delta = g .* (omega cos), in one pass (the Hessian-vector product needs
-// both above the bottom layer).
-template <typename S>
-void ColumnTangentPreActivationGradientSumAndDelta(long rows, S omega, const S* __restrict g_dot,
-                                                   const S* __restrict g,
-                                                   const S* __restrict cosine,
-                                                   const S* __restrict sine,
-                                                   const S* __restrict s_dot, S* __restrict dd,
-                                                   S* __restrict sum, S* __restrict delta) {
-  for (long i = 0; i < rows; ++i) {
-    const S v = omega * (g_dot[i] * cosine[i] - g[i] * sine[i] * s_dot[i]);
-    dd[i] = v;
-    sum[i] += v;
-    delta[i] = g[i] * (omega * cosine[i]);
-  }
-}
-
-// delta = g .* (omega cos) and row_sum[i] += sum_j delta(i, j)
+// delta = g .* (omega cos), as PreActivationGradient, and row_sum[i] += sum_j delta(i, j)
 // (the block's share of dL/dgamma) in the same pass.
 template <typename S, typename GradH, typename Cosine, typename Out>
 void PreActivationGradientAndRowSum(const Eigen::MatrixBase<GradH>& g,
@@ -817,26 +806,19 @@ struct TangentPass {
       const auto gm = record.g[l].leftCols(m);
       const auto cosine = trace.cosine[l].leftCols(m);
       // d/dpre cos(omega pre) = -omega sin(omega pre); s_dot already holds omega pre'.
-      // ddm = omega (g' .* cos - g .* sin .* s'), its row sums added to ddgamma_l, and
-      // above the bottom layer dm = g .* (omega cos), in one pass.
-      S* ddgamma_l = ddgamma.data() + l * width;
+      // ddm = omega (g' .* cos - g .* sin .* s'), its row sums added to ddgamma_l, in one
+      // pass.
       for (long j = 0; j < m; ++j) {
-        if (l > 0) {
-          ColumnTangentPreActivationGradientSumAndDelta(
-              width, omega, gdm.col(j).data(), gm.col(j).data(), cosine.col(j).data(),
-              trace.h[l + 1].col(j).data(), s_dot[l].col(j).data(), ddmm.col(j).data(),
-              ddgamma_l, dmm.col(j).data());
-        } else {
-          ColumnTangentPreActivationGradientAndSum(
-              width, omega, gdm.col(j).data(), gm.col(j).data(), cosine.col(j).data(),
-              trace.h[l + 1].col(j).data(), s_dot[l].col(j).data(), ddmm.col(j).data(),
-              ddgamma_l);
-        }
+        ColumnTangentPreActivationGradientAndSum(width, omega, gdm.col(j).data(), gm.col(j).data(),
+                                                 cosine.col(j).data(), trace.h[l + 1].col(j).data(),
+                                                 s_dot[l].col(j).data(), ddmm.col(j).data(),
+                                                 ddgamma.data() + l * width);
       }
       if (c.spatial) c.spatial->Scatter(ddmm, l * width, &ddP);
       const auto h_below = trace.h[l].leftCols(m);
       internal::Product(ddmm, h_below.transpose(), hv_block(2 * l), /*accumulate=*/true);
       if (l == 0) break;  // h_dot[0] = 0, and nothing lies below
+      PreActivationGradient(gm, cosine, omega, &dmm);
       internal::Product(dmm, h_dot[l].leftCols(m).transpose(), hv_block(2 * l),
                         /*accumulate=*/true);
       internal::Product(net.W_t[l], ddmm, gdm, /*accumulate=*/false, net.PackedT(l));
