@@ -1,10 +1,10 @@
 // Copyright 2026 The tactfunc Authors.
 //
 // What SmallGemm's float and bfloat16 kernels share (small_gemm.cc, small_gemm_bf16.cc):
-// how C is cut into tiles, and how a tile's sums start and end. Included only by those
-// two files, each compiled for AVX-512 (the float one by -march, the bfloat16 one by
-// function attribute: these functions carry the attribute themselves, so that both can
-// inline them).
+// how C is cut into tiles, and how an AVX-512 tile's sums start and end. Included only
+// by those two files; the AVX-512 kernels are compiled for it by -march (float) or by
+// function attribute (bfloat16): these functions carry the attribute themselves, so that
+// both can inline them.
 #ifndef TACTFUNC_MODELS_TRUNK_INTERNAL_SMALL_GEMM_TILE_H_
 #define TACTFUNC_MODELS_TRUNK_INTERNAL_SMALL_GEMM_TILE_H_
 
@@ -19,27 +19,39 @@ namespace small_gemm_tile {
 constexpr int kTileColumns = 6;  // 4 x 6 accumulators + 4 columns of A + a broadcast
 constexpr long kStripRows = 64;  // 4 registers of 16 floats
 
-// Calls tile(r0, registers, last, j0, width) for every tile of a rows x cols C: strips
-// of kStripRows rows (`registers` of 16, the last masked by `last`), and in each the
-// columns in as few tiles of at most kTileColumns as possible, their widths differing by
-// at most one: a block of 128 pixels as 18 tiles of 6 and 4 of 5, not 21 of 6 and one of
-// 2 (whose 8 multiply-adds per 6 loads showed as 1.5 % of a width-256 meta-training
-// step's profile; the step's time did not move measurably, 1355 / 1362 ms).
-template <typename Tile>
-inline void ForEachTile(long rows, long cols, Tile&& tile) {
-  for (long r0 = 0; r0 < rows; r0 += kStripRows) {
-    const long strip = std::min(kStripRows, rows - r0);
-    const int registers = static_cast<int>((strip + 15) / 16);
-    const int tail = static_cast<int>(strip % 16);
-    const __mmask16 last = tail == 0 ? __mmask16(0xFFFF) : __mmask16((1u << tail) - 1);
-    const long num_tiles = (cols + kTileColumns - 1) / kTileColumns;
+// Calls tile(r0, registers, tail, j0, width) for every tile of a rows x cols C: strips of
+// kRegisters x kLanes rows (`registers` vector registers, the last holding `tail` rows,
+// 1..kLanes), and in each the columns in as few tiles of at most kColumns as possible,
+// their widths differing by at most one: a block of 128 pixels as 18 tiles of 6 and 4 of
+// 5, not 21 of 6 and one of 2 (whose 8 multiply-adds per 6 loads showed as 1.5 % of a
+// width-256 meta-training step's profile; the step's time did not move measurably, 1355 /
+// 1362 ms). Shared by the AVX-512 kernels and the AVX2 one (small_gemm.cc).
+template <int kLanes, int kRegisters, int kColumns, typename Tile>
+inline void ForEachTileOf(long rows, long cols, Tile&& tile) {
+  constexpr long kStrip = static_cast<long>(kLanes) * kRegisters;
+  for (long r0 = 0; r0 < rows; r0 += kStrip) {
+    const long strip = std::min(kStrip, rows - r0);
+    const int registers = static_cast<int>((strip + kLanes - 1) / kLanes);
+    const int tail = static_cast<int>(strip - static_cast<long>(registers - 1) * kLanes);
+    const long num_tiles = (cols + kColumns - 1) / kColumns;
     const long base = cols / num_tiles, wider = cols % num_tiles;  // `wider` tiles of base + 1
     for (long t = 0, j0 = 0; t < num_tiles; ++t) {
       const int width = static_cast<int>(base + (t < wider ? 1 : 0));
-      tile(r0, registers, last, j0, width);
+      tile(r0, registers, tail, j0, width);
       j0 += width;
     }
   }
+}
+
+// The AVX-512 kernels' tiles: strips of kStripRows rows in registers of 16 floats, the
+// last masked by `last`.
+template <typename Tile>
+inline void ForEachTile(long rows, long cols, Tile&& tile) {
+  ForEachTileOf<16, kStripRows / 16, kTileColumns>(
+      rows, cols, [&](long r0, int registers, int tail, long j0, int width) {
+        const __mmask16 last = tail == 16 ? __mmask16(0xFFFF) : __mmask16((1u << tail) - 1);
+        tile(r0, registers, last, j0, width);
+      });
 }
 
 // A tile's sums start from C (accumulate), from `offset` (not null: the same rows in

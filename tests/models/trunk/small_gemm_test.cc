@@ -132,8 +132,8 @@ TEST(SmallGemm, IsDeterministic) {
   EXPECT_EQ(c1, c2);
 }
 
-TEST(SmallGemm, HasItsKernelInAnAvx512Build) {
-#if defined(__AVX512F__)
+TEST(SmallGemm, HasItsKernelInAnAvx512OrAvx2Build) {
+#if defined(__AVX512F__) || (defined(__AVX2__) && defined(__FMA__))
   EXPECT_TRUE(internal::HaveSmallGemm());
 #else
   EXPECT_FALSE(internal::HaveSmallGemm());
