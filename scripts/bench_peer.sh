@@ -154,6 +154,13 @@ if [[ -d "$openblas_dir" && -n "$core" && "$core" != "SkylakeX" &&
   fi
 fi
 echo "bench_peer: OpenBLAS kernels: $core"
+# The machine's single-thread float GEMM rate by a standard BLAS, beside the reference
+# product `bench trunk` times with tactfunc's own kernels (gemm_gflops in its JSON): the
+# shares of the GEMM rate can be read against either.
+if [[ -d "$openblas_dir" && -n "$core" ]]; then
+  rate="$(gemm_rate "$core" || echo n/a)"
+  echo "bench_peer: OpenBLAS float GEMM 4096x256x256, one thread, best of 20: $rate GFLOP/s"
+fi
 
 tactfunc="${TACTFUNC:-build/bin/tactfunc}"
 if [[ ! -x "$tactfunc" ]]; then

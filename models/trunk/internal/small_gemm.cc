@@ -36,7 +36,9 @@ const float* ColumnMajor(long rows, long depth, const float* a, long a_row_strid
     for (long k0 = 0; k0 < depth; k0 += kSide) {
       const long k1 = std::min(depth, k0 + kSide);
       for (long i = i0; i < i1; ++i) {
-        for (long k = k0; k < k1; ++k) packed[k * rows + i] = a[i * a_row_stride + k * a_col_stride];
+        for (long k = k0; k < k1; ++k) {
+          packed[k * rows + i] = a[i * a_row_stride + k * a_col_stride];
+        }
       }
     }
   }

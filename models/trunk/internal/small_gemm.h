@@ -11,8 +11,8 @@
 // so nothing is packed unless A is transposed (then A is copied once per call, a
 // width^2 copy against width^2 x 256 multiply-adds; the passes keep W^T instead). On a
 // CPU with AVX2 and FMA but not AVX-512 the same scheme runs in 16 registers of 8 floats:
-// 16 rows x 6 columns in 12. docs/BUILD.md, "The passes' GEMM kernel", and docs/BENCHMARKS.md, "Against PyTorch on
-// the CPU", have the measurements.
+// 16 rows x 6 columns in 12. docs/BUILD.md, "The passes' GEMM kernel", and
+// docs/BENCHMARKS.md, "Against PyTorch on the CPU", have the measurements.
 //
 // The sums run over the inner dimension in order, one rounding per multiply-add, so a
 // product's values can differ from Eigen's by float rounding (a few ulps); they are the
@@ -35,8 +35,9 @@ namespace internal {
 // b[k * b_row_stride + j * b_col_stride]; without accumulate and with row_offset not null,
 // C = A B + row_offset 1^T (row_offset: rows values, added to every column as the sums'
 // start). C must not overlap A, B or row_offset. Returns false and leaves C untouched
-// when this build has no kernel (compiled for neither AVX-512 nor AVX2 with FMA) or B is neither column- nor
-// row-major (neither stride 1); the caller then computes the product itself.
+// when this build has no kernel (compiled for neither AVX-512 nor AVX2 with FMA) or B
+// is neither column- nor row-major (neither stride 1); the caller then computes the
+// product itself.
 bool SmallGemm(long rows, long depth, long cols, const float* a, long a_row_stride,
                long a_col_stride, const float* b, long b_row_stride, long b_col_stride, float* c,
                long c_col_stride, bool accumulate, const float* row_offset = nullptr);

@@ -1,8 +1,9 @@
 // Copyright 2026 The tactfunc Authors.
 //
 // SmallGemm against a double-precision product over the shapes the SIREN's passes use and
-// their edges: strips of 64 rows with a masked tail, tiles of 6 columns with a remainder,
-// an empty inner dimension, transposed operands, blocks of larger matrices, "=" and "+=".
+// their edges: strips of 64 rows (AVX-512) or 16 (AVX2) with a masked tail, tiles of 6
+// columns with a remainder, an empty inner dimension, transposed operands, blocks of
+// larger matrices, "=" and "+=".
 #include "models/trunk/internal/small_gemm.h"
 
 #include <cmath>
