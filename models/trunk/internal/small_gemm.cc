@@ -108,21 +108,11 @@ constexpr TileTable Tiles() {
 // [B row-major][RZ - 1][NC - 1].
 constexpr TileTable kTiles[2] = {Tiles<false>(), Tiles<true>()};
 
-}  // namespace
-
-bool HaveSmallGemm() { return true; }
-
-bool SmallGemm(long rows, long depth, long cols, const float* a, long a_row_stride,
-               long a_col_stride, const float* b, long b_row_stride, long b_col_stride, float* c,
-               long c_col_stride, bool accumulate, const float* row_offset) {
-  if (b_row_stride != 1 && b_col_stride != 1) return false;  // neither layout: Eigen's
-  if (rows <= 0 || cols <= 0) return true;
-  if (accumulate) row_offset = nullptr;
-  long lda = 0;
-  a = ColumnMajor(rows, depth, a, a_row_stride, a_col_stride, &lda);
-  // B column-major (b_row_stride 1) or row-major (b_col_stride 1), read as it is.
-  const bool b_rows = b_row_stride != 1;
-  const long ldb = b_rows ? b_row_stride : b_col_stride;
+// C = A B (+ row_offset) or C += A B by tiles, A column-major (lda), B column-major or,
+// with b_rows, row-major (ldb its stride): SmallGemm's work once the operands are checked.
+void RunTiles(long rows, long depth, long cols, const float* a, long lda, const float* b,
+              bool b_rows, long ldb, float* c, long c_col_stride, bool accumulate,
+              const float* row_offset) {
   const TileTable& tiles = kTiles[b_rows ? 1 : 0];
   small_gemm_tile::ForEachTile(
       rows, cols, [&](long r0, int registers, __mmask16 last, long j0, int width) {
@@ -132,8 +122,9 @@ bool SmallGemm(long rows, long depth, long cols, const float* a, long a_row_stri
                                         accumulate,
                                         row_offset == nullptr ? nullptr : row_offset + r0);
       });
-  return true;
 }
+
+}  // namespace
 
 #elif defined(__AVX2__) && defined(__FMA__)
 namespace {
@@ -218,8 +209,24 @@ constexpr TileTable kTiles[2][2] = {
     {Tiles<false, false>(kRegisterCounts), Tiles<false, true>(kRegisterCounts)},
     {Tiles<true, false>(kRegisterCounts), Tiles<true, true>(kRegisterCounts)}};
 
-}  // namespace
+// As the AVX-512 RunTiles.
+void RunTiles(long rows, long depth, long cols, const float* a, long lda, const float* b,
+              bool b_rows, long ldb, float* c, long c_col_stride, bool accumulate,
+              const float* row_offset) {
+  small_gemm_tile::ForEachTileOf<kLanes, kRegisters, kColumns>(
+      rows, cols, [&](long r0, int registers, int tail, long j0, int width) {
+        const float* b_tile = b_rows ? b + j0 : b + j0 * ldb;
+        const bool masked = tail != kLanes;
+        kTiles[b_rows ? 1 : 0][masked ? 1 : 0][registers - 1][width - 1](
+            depth, a + r0, lda, b_tile, ldb, c + r0 + j0 * c_col_stride, c_col_stride,
+            tail, accumulate, row_offset == nullptr ? nullptr : row_offset + r0);
+      });
+}
 
+}  // namespace
+#endif
+
+#if defined(__AVX512F__) || (defined(__AVX2__) && defined(__FMA__))
 bool HaveSmallGemm() { return true; }
 
 bool SmallGemm(long rows, long depth, long cols, const float* a, long a_row_stride,
@@ -230,16 +237,10 @@ bool SmallGemm(long rows, long depth, long cols, const float* a, long a_row_stri
   if (accumulate) row_offset = nullptr;
   long lda = 0;
   a = ColumnMajor(rows, depth, a, a_row_stride, a_col_stride, &lda);
+  // B column-major (b_row_stride 1) or row-major (b_col_stride 1), read as it is.
   const bool b_rows = b_row_stride != 1;
   const long ldb = b_rows ? b_row_stride : b_col_stride;
-  small_gemm_tile::ForEachTileOf<kLanes, kRegisters, kColumns>(
-      rows, cols, [&](long r0, int registers, int tail, long j0, int width) {
-        const float* b_tile = b_rows ? b + j0 : b + j0 * ldb;
-        const bool masked = tail != kLanes;
-        kTiles[b_rows ? 1 : 0][masked ? 1 : 0][registers - 1][width - 1](
-            depth, a + r0, lda, b_tile, ldb, c + r0 + j0 * c_col_stride, c_col_stride,
-            tail, accumulate, row_offset == nullptr ? nullptr : row_offset + r0);
-      });
+  RunTiles(rows, depth, cols, a, lda, b, b_rows, ldb, c, c_col_stride, accumulate, row_offset);
   return true;
 }
 
