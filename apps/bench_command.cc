@@ -114,18 +114,15 @@ nlohmann::json MachineDescription() {
     }
   }
 #if defined(__AVX512F__)
-  const bool avx512 = true;
-  const char* gemm_kernel = "avx512";  // internal::SmallGemm's kernel in this build
+  const std::string gemm_kernel = "avx512";  // internal::SmallGemm's kernel in this build
 #elif defined(__AVX2__) && defined(__FMA__)
-  const bool avx512 = false;
-  const char* gemm_kernel = "avx2";
+  const std::string gemm_kernel = "avx2";
 #else
-  const bool avx512 = false;
-  const char* gemm_kernel = "eigen";
+  const std::string gemm_kernel = "eigen";
 #endif
   return {{"cpu", cpu},
           {"cores", std::thread::hardware_concurrency()},
-          {"avx512_compiled", avx512},
+          {"avx512_compiled", gemm_kernel == "avx512"},
           {"gemm_kernel", gemm_kernel}};
 }
 

@@ -140,6 +140,7 @@ for _ in range(20):
 print(f"{best:.1f}")
 PY
 }
+rate=""  # OpenBLAS's rate with the kernels the peer runs with, once measured
 if [[ -d "$openblas_dir" && -n "$core" && "$core" != "SkylakeX" &&
       "$core" != "Cooperlake" && "$core" != "SapphireRapids" ]]; then
   flags="$(grep -m1 '^flags' /proc/cpuinfo 2>/dev/null || true)"
@@ -147,9 +148,11 @@ if [[ -d "$openblas_dir" && -n "$core" && "$core" != "SkylakeX" &&
     own_rate="$(gemm_rate "$core" || true)"
     avx512_rate="$(gemm_rate SkylakeX || true)"
     echo "bench_peer: OpenBLAS float GEMM 4096x256x256, one thread: $core kernels $own_rate, SkylakeX (AVX-512) kernels $avx512_rate GFLOP/s"
+    rate="$own_rate"
     if awk -v a="$avx512_rate" -v b="$own_rate" 'BEGIN { exit !(a > b) }'; then
       export OPENBLAS_CORETYPE=SkylakeX
       core="$(openblas_core || true)"
+      rate="$avx512_rate"
     fi
   fi
 fi
@@ -158,7 +161,7 @@ echo "bench_peer: OpenBLAS kernels: $core"
 # product `bench trunk` times with tactfunc's own kernels (gemm_gflops in its JSON): the
 # shares of the GEMM rate can be read against either.
 if [[ -d "$openblas_dir" && -n "$core" ]]; then
-  rate="$(gemm_rate "$core" || echo n/a)"
+  [[ -n "$rate" ]] || rate="$(gemm_rate "$core" || echo n/a)"
   echo "bench_peer: OpenBLAS float GEMM 4096x256x256, one thread, best of 20: $rate GFLOP/s"
 fi
 

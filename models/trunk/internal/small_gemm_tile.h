@@ -49,7 +49,7 @@ template <typename Tile>
 inline void ForEachTile(long rows, long cols, Tile&& tile) {
   ForEachTileOf<16, kStripRows / 16, kTileColumns>(
       rows, cols, [&](long r0, int registers, int tail, long j0, int width) {
-        const __mmask16 last = tail == 16 ? __mmask16(0xFFFF) : __mmask16((1u << tail) - 1);
+        const __mmask16 last = __mmask16((1u << tail) - 1);  // tail in [1, 16]
         tile(r0, registers, last, j0, width);
       });
 }
