@@ -131,7 +131,11 @@ namespace {
 
 // The AVX2 kernel: the AVX-512 one's scheme in 16 registers of 8 floats. A tile of
 // kRegisters x 8 rows x up to kColumns columns keeps its kRegisters x kColumns sums in
-// registers, beside kRegisters columns of A and a broadcast.
+// registers, beside kRegisters columns of A and a broadcast. Its Tile is its own, not one
+// template over both instruction sets: the AVX-512 tile's start and end
+// (small_gemm_tile.h) are shared with the bfloat16 kernel, which every x86-64 build
+// compiles for AVX-512 by function attribute, and a template over a class of intrinsics
+// cannot carry that attribute where the build itself targets AVX2 only.
 constexpr int kLanes = 8;
 constexpr int kRegisters = 2;
 constexpr int kColumns = 6;
