@@ -137,7 +137,9 @@ struct Net {
 // meta-training step 225 -> 219 ms at width 128 and 1447 -> 1389 ms at width 256, the
 // fit 19.6 -> 18.7 ms at width 128, the same at width 64 (40.6 / 40.0 ms, 4.8 ms): a
 // Hessian-vector product's block keeps a dozen width x block matrices, which at 256
-// pixels outgrow L2 at width 128.
+// pixels outgrow L2 at width 128. Blocks of 64, so that more of a layer's matrices fit
+// L1 at width 64, were slower there in each of three alternated runs (the fit's steps and
+// the meta-training step, AVX-512 AMD EPYC, 2026-12-02).
 constexpr long kPixelBlock = 128;
 
 // What the forward pass keeps for the reverse passes, for one block of pixels. Every
@@ -312,7 +314,9 @@ void PreActivationGradient(const Eigen::MatrixBase<GradH>& g,
 //
 // Each works on one column of `rows` values. GCC vectorises these loops only with
 // their pointers __restrict parameters of a function (as locals in the callers' loops
-// it kept them scalar, and the meta-training step took 8-22 % longer).
+// it kept them scalar, and the meta-training step took 8-22 % longer). Where a pass keeps
+// no per-row sum, one call over a block's columns (contiguous) was no faster than one
+// call per column (ColumnScaleAndModulate in the tangent pass, width 64, 2026-12-02).
 template <typename S>
 void ColumnPreActivationGradientAndSum(long rows, S omega, const S* __restrict g,
                                        const S* __restrict cosine, S* __restrict delta,
