@@ -316,7 +316,11 @@ void PreActivationGradient(const Eigen::MatrixBase<GradH>& g,
 // their pointers __restrict parameters of a function (as locals in the callers' loops
 // it kept them scalar, and the meta-training step took 8-22 % longer). Where a pass keeps
 // no per-row sum, one call over a block's columns (contiguous) was no faster than one
-// call per column (ColumnScaleAndModulate in the tangent pass, width 64, 2026-12-02).
+// call per column (ColumnScaleAndModulate in the tangent pass, width 64, 2026-12-02); and
+// keeping the row sums of 64 rows in registers across a block's columns, instead of
+// loading and storing them per column, took about a tenth off these passes' share of a
+// width-64 meta-training step's samples, too little to time on this machine, so the
+// simpler form stays.
 template <typename S>
 void ColumnPreActivationGradientAndSum(long rows, S omega, const S* __restrict g,
                                        const S* __restrict cosine, S* __restrict delta,
