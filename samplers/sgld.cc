@@ -16,16 +16,14 @@
 #include <boost/random/normal_distribution.hpp>
 #include <boost/random/uniform_int_distribution.hpp>
 
+#include "models/core/internal/elapsed.h"
 #include "models/core/parallel_for.h"
 #include "models/core/seed.h"
 
 namespace tactfunc {
 namespace {
 
-double MsSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-      .count();
-}
+using internal::MsSince;
 
 bool AllFinite(const Eigen::VectorXd& v) { return v.allFinite(); }
 

@@ -17,15 +17,14 @@
 #include "ceres/problem.h"
 #include "estimation/fitting/latent_costs.h"
 #include "estimation/fitting/square_root_cost.h"
+#include "models/core/internal/elapsed.h"
 
 namespace tactfunc {
 namespace {
 
 using Clock = std::chrono::steady_clock;
 
-double MsSince(Clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-}
+using internal::MsSince;
 
 const char* kStrategyForms =
     "expected one of knn, meta_sgd:K, ceres:N, knn+meta_sgd:K, knn+ceres:N, adam:N, "

@@ -14,25 +14,18 @@
 #include <vector>
 
 #include "Eigen/Eigenvalues"
+#include "models/core/internal/checks.h"
 
 namespace tactfunc {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
+using internal::Check;
+using internal::kPi;
+using internal::Num;
 // Eigenvalues of a covariance at or below this are zero-variance directions (standard
 // deviation 1e-10 m or rad), along which displacements up to kPointMassSlack are free.
 constexpr double kZeroVariance = 1e-20;
 constexpr double kPointMassSlack = 1e-10;
-
-std::string Num(double value) {
-  char buffer[32];
-  std::snprintf(buffer, sizeof(buffer), "%.6g", value);
-  return buffer;
-}
-
-void Check(bool ok, const std::string& message) {
-  if (!ok) throw std::invalid_argument(message);
-}
 
 void CheckProbability(double p) {
   Check(std::isfinite(p) && p > 0 && p <= 1,

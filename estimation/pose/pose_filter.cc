@@ -12,6 +12,8 @@
 
 #include "Eigen/Cholesky"
 #include "Eigen/Eigenvalues"
+#include "models/core/internal/checks.h"
+#include "models/core/internal/elapsed.h"
 #include "models/core/internal/log_sum_exp.h"
 #include "models/core/seed.h"
 #include "models/simulator/tool.h"
@@ -19,16 +21,12 @@
 namespace tactfunc {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
+using internal::Check;
+using internal::kPi;
+using internal::Num;
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
 using internal::LogSumExp;
-
-std::string Num(double value) {
-  char buffer[32];
-  std::snprintf(buffer, sizeof(buffer), "%.6g", value);
-  return buffer;
-}
 
 std::string MatrixText(const Eigen::Matrix3d& m) {
   std::string s = "[";
@@ -37,10 +35,6 @@ std::string MatrixText(const Eigen::Matrix3d& m) {
     s += r < 2 ? "; " : "]";
   }
   return s;
-}
-
-void Check(bool ok, const std::string& message) {
-  if (!ok) throw std::invalid_argument(message);
 }
 
 // "" if `m` is a finite symmetric matrix whose eigenvalues are >= 0 (positive_definite:
@@ -79,9 +73,7 @@ SE2d Representative(const SE2d& particle, const SE2d& sample, int n) {
 }
 
 using Clock = std::chrono::steady_clock;
-double MsSince(Clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-}
+using internal::MsSince;
 
 }  // namespace
 

@@ -15,6 +15,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "models/core/internal/elapsed.h"
 #include "models/core/seed.h"
 #include "samplers/photometric_potential.h"
 #include "models/pose/pose_model_provenance.h"
@@ -27,10 +28,7 @@ namespace {
 // which are seeded with options.seed directly).
 constexpr std::uint64_t kModelErrorStream = 0x6d6f64656c457272ull;  // "modelErr"
 
-double MsSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-      .count();
-}
+using internal::MsSince;
 
 LatentFitter::Options FitOptions(const PosePosterior::Options& options) {
   std::string error;

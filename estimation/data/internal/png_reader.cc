@@ -10,6 +10,8 @@
 #include <memory>
 #include <vector>
 
+#include "estimation/data/internal/png_callbacks.h"
+
 namespace tactfunc::internal {
 namespace {
 
@@ -25,13 +27,6 @@ void ReadBytes(png_structp png, png_bytep out, png_size_t n) {
   std::memcpy(out, source->data + source->offset, n);
   source->offset += n;
 }
-
-void OnError(png_structp png, png_const_charp message) {
-  *static_cast<std::string*>(png_get_error_ptr(png)) = message;
-  png_longjmp(png, 1);
-}
-
-void OnWarning(png_structp, png_const_charp) {}
 
 std::uint32_t BigEndian32(const std::uint8_t* p) {
   return (std::uint32_t{p[0]} << 24) | (std::uint32_t{p[1]} << 16) | (std::uint32_t{p[2]} << 8) |
@@ -195,7 +190,8 @@ cv::Mat DecodePngSamples(const std::uint8_t* data, std::size_t size, std::string
   }
   image = DecodeCommonPng(data, size);
   if (!image.empty()) return image;
-  png_structp png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &reason, OnError, OnWarning);
+  png_structp png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &reason, PngKeepErrorAndJump,
+                                           PngIgnoreWarning);
   if (png == nullptr) {
     if (error != nullptr) *error = "out of memory";
     return image;

@@ -8,6 +8,8 @@
 #include <stdexcept>
 #include <vector>
 
+#include "estimation/data/internal/png_callbacks.h"
+
 namespace tactfunc::internal {
 namespace {
 
@@ -17,14 +19,6 @@ void AppendBytes(png_structp png, png_bytep data, png_size_t size) {
 }
 
 void Flush(png_structp) {}
-
-void OnError(png_structp png, png_const_charp message) {
-  auto* text = static_cast<std::string*>(png_get_error_ptr(png));
-  *text = message;
-  png_longjmp(png, 1);
-}
-
-void OnWarning(png_structp, png_const_charp) {}
 
 }  // namespace
 
@@ -37,7 +31,8 @@ std::string EncodePngSamples(const void* samples, int rows, int cols, int channe
                              std::to_string(bit_depth) + " bits");
   }
   std::string error;
-  png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, &error, OnError, OnWarning);
+  png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, &error, PngKeepErrorAndJump,
+                                            PngIgnoreWarning);
   if (png == nullptr) throw std::runtime_error("PNG writer: out of memory");
   png_infop info = png_create_info_struct(png);
   std::string out;

@@ -25,9 +25,9 @@ using Eigen::MatrixXd;
 using Eigen::VectorXd;
 using RowMajor = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 
-constexpr int kRows = 6, kCols = 7;
+constexpr int kProblemRows = 6, kProblemCols = 7;
 
-SensorTrunk Trunk() { return testing_util::MakeTinyTrunk(kRows, kCols, 16, 2, 4, 3); }
+SensorTrunk Trunk() { return testing_util::MakeTinyTrunk(kProblemRows, kProblemCols, 16, 2, 4, 3); }
 const Eigen::Vector4d kTrue(0.3, -0.2, 0.1, 0.4);
 
 LatentProblem::Options DoubleOptions() {
@@ -100,16 +100,17 @@ TEST(LatentProblem, PotentialIsTheWeightedSumOfSquaresPlusPrior) {
   options.sigma_z = 2.0;
   const LatentProblem problem(trunk, targets, options);
   const VectorXd z = Eigen::Vector4d(0.1, 0.1, -0.1, 0.0);
-  const MatrixXd y = trunk.siren.Forward<double>(trunk.siren.Grid<double>(kRows, kCols), z);
+  const MatrixXd y =
+      trunk.siren.Forward<double>(trunk.siren.Grid<double>(kProblemRows, kProblemCols), z);
   double expected = z.squaredNorm() / (2 * 4.0);
-  for (int j = 0; j < kRows * kCols; ++j) {
+  for (int j = 0; j < kProblemRows * kProblemCols; ++j) {
     if (targets.weights[j] > 0) {
       expected += targets.weights[j] * std::pow(y(j, 0) - targets.values(j, 0), 2) / (2 * 0.01);
     }
   }
   EXPECT_NEAR(problem.Evaluate(z), expected, 1e-9 * expected);
-  EXPECT_EQ(problem.num_valid_pixels(), kRows * kCols - 1);
-  EXPECT_EQ(problem.num_pixels(), kRows * kCols - 1);
+  EXPECT_EQ(problem.num_valid_pixels(), kProblemRows * kProblemCols - 1);
+  EXPECT_EQ(problem.num_pixels(), kProblemRows * kProblemCols - 1);
 }
 
 // What Ceres minimises (1/2 ||r'||^2 + 1/2 ||z / sigma_z||^2) is the U the samplers see,
@@ -117,7 +118,8 @@ TEST(LatentProblem, PotentialIsTheWeightedSumOfSquaresPlusPrior) {
 TEST(LatentProblem, CeresViewAndSamplerViewAreTheSameFunction) {
   const SensorTrunk trunk = Trunk();
   TrunkTargets targets = testing_util::MakeTargets(trunk, kTrue, 0.05, 2);
-  for (int j = 0; j < kRows * kCols; j += 5) targets.values(j, 0) += 1.0f;  // outliers
+  // outliers
+  for (int j = 0; j < kProblemRows * kProblemCols; j += 5) targets.values(j, 0) += 1.0f;
   for (auto loss : {LatentProblem::RobustLoss::kNone, LatentProblem::RobustLoss::kHuber,
                     LatentProblem::RobustLoss::kCauchy}) {
     LatentProblem::Options options = DoubleOptions();
@@ -168,9 +170,9 @@ TEST(LatentProblem, TheStartPassGivesTheResidualsJacobianAndCostAtZero) {
   TrunkTargets targets = testing_util::MakeTargets(trunk, kTrue, 0.05, 3);
   targets.weights[4] = 0;
   targets.weights[9] = 0.3f;
-  const StartPass pass(trunk, kRows, kCols);
+  const StartPass pass(trunk, kProblemRows, kProblemCols);
   ASSERT_EQ(pass.jacobian.rows(), 4);
-  ASSERT_EQ(pass.jacobian.cols(), kRows * kCols * trunk.siren.output_channels());
+  ASSERT_EQ(pass.jacobian.cols(), kProblemRows * kProblemCols * trunk.siren.output_channels());
   const VectorXd zero = VectorXd::Zero(4);
   for (const auto loss : {LatentProblem::RobustLoss::kNone, LatentProblem::RobustLoss::kCauchy}) {
     for (const int stride : {1, 2}) {
@@ -205,7 +207,7 @@ TEST(LatentProblem, MetaSgdStepsThroughTheStartPassAreTheTrunksSteps) {
   TrunkTargets targets = testing_util::MakeTargets(trunk, kTrue, 0.05, 4);
   targets.weights[3] = 0;
   targets.weights[8] = 0.5f;
-  const StartPass pass(trunk, kRows, kCols);
+  const StartPass pass(trunk, kProblemRows, kProblemCols);
   for (const int stride : {1, 2}) {
     SCOPED_TRACE(stride);
     LatentProblem::Options options;
@@ -236,18 +238,20 @@ TEST(LatentProblem, AStartPassOfAnotherSizeTrunkOrPrecisionIsNotUsed) {
   const SensorTrunk trunk = Trunk(), other = Trunk();
   const TrunkTargets targets = testing_util::MakeTargets(trunk, kTrue, 0.0, 1);
   const LatentProblem problem(trunk, targets, {});
-  EXPECT_TRUE(problem.CanUse(StartPass(trunk, kRows, kCols)));
-  EXPECT_FALSE(problem.CanUse(StartPass(trunk, kRows + 1, kCols)));
-  EXPECT_FALSE(problem.CanUse(StartPass(other, kRows, kCols)));
+  EXPECT_TRUE(problem.CanUse(StartPass(trunk, kProblemRows, kProblemCols)));
+  EXPECT_FALSE(problem.CanUse(StartPass(trunk, kProblemRows + 1, kProblemCols)));
+  EXPECT_FALSE(problem.CanUse(StartPass(other, kProblemRows, kProblemCols)));
   EXPECT_FALSE(
-      LatentProblem(trunk, targets, DoubleOptions()).CanUse(StartPass(trunk, kRows, kCols)));
-  EXPECT_THROW(StartPass(trunk, 0, kCols), std::invalid_argument);
+      LatentProblem(trunk, targets, DoubleOptions())
+          .CanUse(StartPass(trunk, kProblemRows, kProblemCols)));
+  EXPECT_THROW(StartPass(trunk, 0, kProblemCols), std::invalid_argument);
 }
 
 TEST(LatentProblem, GradientMatchesCentralDifferencesWithAndWithoutRobustLoss) {
   const SensorTrunk trunk = Trunk();
   TrunkTargets targets = testing_util::MakeTargets(trunk, kTrue, 0.05, 1);
-  for (int j = 0; j < kRows * kCols; j += 6) targets.values(j, 0) -= 0.8f;  // outliers
+  // outliers
+  for (int j = 0; j < kProblemRows * kProblemCols; j += 6) targets.values(j, 0) -= 0.8f;
   for (auto loss : {LatentProblem::RobustLoss::kNone, LatentProblem::RobustLoss::kHuber,
                     LatentProblem::RobustLoss::kCauchy}) {
     LatentProblem::Options options = DoubleOptions();
@@ -269,7 +273,7 @@ TEST(LatentProblem, GradientMatchesCentralDifferencesWithAndWithoutRobustLoss) {
 TEST(LatentProblem, RobustJacobianMatchesCentralDifferencesOfTheResiduals) {
   const SensorTrunk trunk = Trunk();
   TrunkTargets targets = testing_util::MakeTargets(trunk, kTrue, 0.05, 4);
-  for (int j = 0; j < kRows * kCols; j += 4) targets.values(j, 0) += 0.5f;
+  for (int j = 0; j < kProblemRows * kProblemCols; j += 4) targets.values(j, 0) += 0.5f;
   LatentProblem::Options options = DoubleOptions();
   options.robust_loss = LatentProblem::RobustLoss::kCauchy;
   options.robust_loss_scale = 2.385;
@@ -295,7 +299,7 @@ TEST(LatentProblem, RobustJacobianMatchesCentralDifferencesOfTheResiduals) {
 TEST(LatentProblem, TheJacobianAlongDirectionsIsTheRobustJacobianTimesThem) {
   const SensorTrunk trunk = Trunk();
   TrunkTargets targets = testing_util::MakeTargets(trunk, kTrue, 0.05, 4);
-  for (int j = 0; j < kRows * kCols; j += 4) targets.values(j, 0) += 0.5f;
+  for (int j = 0; j < kProblemRows * kProblemCols; j += 4) targets.values(j, 0) += 0.5f;
   for (const auto precision : {LatentProblem::Precision::kDouble, LatentProblem::Precision::kFloat}) {
     LatentProblem::Options options;
     options.precision = precision;
@@ -339,7 +343,7 @@ TEST(LatentProblem, MinibatchesOfAPartitionAverageToTheFullGradient) {
     double u_sum = 0;
     for (int part = 0; part < 6; ++part) {  // 6 batches of 7 of the 42 pixels
       std::vector<int> batch;
-      for (int i = part; i < kRows * kCols; i += 6) batch.push_back(i);
+      for (int i = part; i < kProblemRows * kProblemCols; i += 6) batch.push_back(i);
       u_sum += problem.EvaluateMinibatch(z, batch, &g) / 6;
       sum += g / 6;
     }
@@ -422,7 +426,7 @@ TEST(LatentProblem, MetaSgdStepsAreTheTrunksInnerLoopFromAnyStart) {
   const SensorTrunk trunk = Trunk();
   const TrunkTargets targets = testing_util::MakeTargets(trunk, kTrue, 0.02, 5);
   const LatentProblem problem(trunk, targets, DoubleOptions());
-  const MatrixXd grid = trunk.siren.Grid<double>(kRows, kCols);
+  const MatrixXd grid = trunk.siren.Grid<double>(kProblemRows, kProblemCols);
   const VectorXd expected = MetaSgd(trunk.meta_sgd).FitLatent<double>(
       trunk.siren, grid, targets.values.cast<double>(), targets.weights.cast<double>(),
       trunk.alpha);
@@ -465,7 +469,7 @@ TEST(LatentProblem, ContactShareDrawsTowardsTheContactAndKeepsTheWeightedSumsSca
   targets.weights[5] = 0.5f;
   std::vector<int> blob;
   for (int r = 2; r < 4; ++r) {
-    for (int c = 3; c < 5; ++c) blob.push_back(r * kCols + c);
+    for (int c = 3; c < 5; ++c) blob.push_back(r * kProblemCols + c);
   }
   for (int j : blob) targets.values.row(j) *= 20.0f;
   LatentProblem::Options options;

@@ -23,6 +23,7 @@
 #include "Eigen/Cholesky"
 #include "Eigen/LU"
 #include "gtest/gtest.h"
+#include "models/core/internal/checks.h"
 #include "models/simulator/tool.h"
 
 namespace tactfunc {
@@ -30,7 +31,7 @@ namespace {
 
 using Eigen::Matrix3d;
 using Eigen::Vector3d;
-constexpr double kPi = M_PI;
+using internal::kPi;
 
 // Draws mu * Exp(L z), z ~ N(0, I) (or a multivariate Student-t when dof > 0).
 class TangentGaussian {

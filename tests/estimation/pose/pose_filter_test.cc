@@ -35,6 +35,7 @@
 #include "Eigen/Cholesky"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "models/core/internal/checks.h"
 #include "models/simulator/tool.h"
 
 namespace tactfunc {
@@ -43,7 +44,7 @@ namespace {
 using Eigen::Matrix3d;
 using Eigen::Vector3d;
 using ::testing::HasSubstr;
-constexpr double kPi = 3.14159265358979323846;
+using internal::kPi;
 constexpr double kDeg = kPi / 180;
 constexpr double kMm = 1e-3;
 

@@ -14,7 +14,7 @@ namespace {
 
 constexpr int kDim = 4;
 
-struct Fixture {
+struct PosteriorFixture {
   SensorTrunk trunk = testing_util::MakeTinyTrunk(8, 9, 16, 2, kDim, 5);
   PoseMlp mlp{[] {
                 PoseMlp::Options o;
@@ -43,7 +43,7 @@ TEST(PosePosterior, BadOptionsNameTheField) {
   options.sgld.burn_in = -1;
   EXPECT_FALSE(options.IsValid(&error));
   EXPECT_NE(error.find("sgld: Sgld::Options::burn_in"), std::string::npos) << error;
-  Fixture f;
+  PosteriorFixture f;
   EXPECT_THROW(PosePosterior(f.trunk, f.mlp, options), std::invalid_argument);
   options = PosePosterior::Options();
   options.sampler = PosteriorSampler::kKnn;
@@ -61,7 +61,7 @@ TEST(PosePosterior, SamplerNamesRoundTrip) {
 }
 
 TEST(PosePosterior, SgldAndLaplaceGiveFiniteDistributions) {
-  Fixture f;
+  PosteriorFixture f;
   for (auto sampler : {PosteriorSampler::kSgld, PosteriorSampler::kLaplace}) {
     SCOPED_TRACE(ToString(sampler));
     PosePosterior::Options options;
@@ -93,7 +93,7 @@ TEST(PosePosterior, SgldAndLaplaceGiveFiniteDistributions) {
 }
 
 TEST(PosePosterior, FoldsBySymmetryOrder) {
-  Fixture f;
+  PosteriorFixture f;
   PosePosterior::Options options;
   options.sampler = PosteriorSampler::kLaplace;
   const PosePosterior estimator(f.trunk, f.mlp, options);
@@ -108,7 +108,7 @@ TEST(PosePosterior, FoldsBySymmetryOrder) {
 }
 
 TEST(PosePosterior, KnnReturnsTheNeighboursPoses) {
-  Fixture f;
+  PosteriorFixture f;
   BruteForceKnnIndex index(kDim);
   std::vector<std::optional<SE2d>> poses;
   std::vector<float> data;
@@ -133,7 +133,7 @@ TEST(PosePosterior, KnnReturnsTheNeighboursPoses) {
 }
 
 TEST(PosePosterior, CalibrationResidualsOfTheModelsOwnPredictionsAreZeroModuloSymmetry) {
-  Fixture f;
+  PosteriorFixture f;
   Eigen::MatrixXf inputs = Eigen::MatrixXf::Random(6, kDim);
   PoseTargets targets;
   targets.poses.resize(6, 3);
@@ -157,7 +157,7 @@ TEST(PosePosterior, CalibrationResidualsOfTheModelsOwnPredictionsAreZeroModuloSy
 }
 
 TEST(PosePosterior, ModelErrorComposesEverySampleWithAStoredResidual) {
-  Fixture f;
+  PosteriorFixture f;
   PosePosterior::Options options;
   options.sampler = PosteriorSampler::kLaplace;
   options.num_samples = 50;
@@ -185,7 +185,7 @@ TEST(PosePosterior, ModelErrorComposesEverySampleWithAStoredResidual) {
 }
 
 TEST(PosePosterior, PoseModelsCarryTheirLatentMapAndPosteriorSigma) {
-  Fixture f;
+  PosteriorFixture f;
   PoseMlp mlp = f.mlp;
   // No info: the functaset's map, K meta-SGD steps of the trunk.
   EXPECT_EQ(LatentMapOfPoseModel(mlp, f.trunk).ToString(),

@@ -18,22 +18,22 @@ namespace {
 
 namespace fs = std::filesystem;
 
-constexpr int kRows = 8, kCols = 9, kLatent = 5;
+constexpr int kGenRows = 8, kGenCols = 9, kGenLatent = 5;
 
-PoseGenerator Generator() { return testing_util::MakeTinyGenerator(kLatent, 10, 7); }
+PoseGenerator TinyGenerator() { return testing_util::MakeTinyGenerator(kGenLatent, 10, 7); }
 
 // Labelled samples whose latents and frames a fixed generator renders through a tiny trunk.
 struct Data {
-  SensorTrunk trunk = testing_util::MakeTinyTrunk(kRows, kCols, 12, 2, kLatent, 3);
+  SensorTrunk trunk = testing_util::MakeTinyTrunk(kGenRows, kGenCols, 12, 2, kGenLatent, 3);
   std::vector<GeneratorSample> samples;
   Eigen::MatrixXd latents;
   std::vector<TrunkTargets> frames;
   Data() {
-    PoseGenerator truth = Generator();
-    truth.SetLatentStandardization(Eigen::VectorXd::Zero(kLatent),
-                                   Eigen::VectorXd::Constant(kLatent, 0.5));
+    PoseGenerator truth = TinyGenerator();
+    truth.SetLatentStandardization(Eigen::VectorXd::Zero(kGenLatent),
+                                   Eigen::VectorXd::Constant(kGenLatent, 0.5));
     const int m = 24;
-    latents.resize(m, kLatent);
+    latents.resize(m, kGenLatent);
     for (int i = 0; i < m; ++i) {
       const GeneratorSample s{i % 2, SE2d::FromXYYaw(1e-3 * (i % 5 - 2), 1e-3 * (i % 3 - 1), 0.4 * i),
                               0.004 + 0.0005 * (i % 7)};
@@ -67,19 +67,19 @@ class GeneratorTrainingCheckpoint : public ::testing::Test {
 std::pair<Eigen::VectorXd, Eigen::VectorXd> StraightAndResumed(const Data& d,
                                                                 const std::string& dir,
                                                                 int stop_after) {
-  PoseGenerator straight = Generator();
+  PoseGenerator straight = TinyGenerator();
   GeneratorTrainingOptions o = Options("");
   TrainGeneratorOnLatents(&straight, d.samples, d.latents, o);
   o.standardize_outputs = false;
   TrainGeneratorOnPixels(&straight, d.trunk, d.samples, d.frames, o);
 
-  PoseGenerator resumed = Generator();
+  PoseGenerator resumed = TinyGenerator();
   auto stop = [stop_after](int epoch, double) { return epoch + 1 < stop_after; };
   GeneratorTrainingOptions r = Options(dir + "/regression.ckpt");
   GeneratorTrainingSummary s = TrainGeneratorOnLatents(&resumed, d.samples, d.latents, r, stop);
   EXPECT_EQ(s.epochs_completed, stop_after);
   r.resume = true;
-  PoseGenerator again = Generator();  // a fresh process: only the checkpoint carries over
+  PoseGenerator again = TinyGenerator();  // a fresh process: only the checkpoint carries over
   s = TrainGeneratorOnLatents(&again, d.samples, d.latents, r);
   EXPECT_EQ(s.epochs_resumed, stop_after);
   EXPECT_EQ(s.epochs_completed, r.epochs);
@@ -111,7 +111,7 @@ TEST_F(GeneratorTrainingCheckpoint, ResumeWithoutACheckpointStartsAnewAndOthersA
   const Data d;
   GeneratorTrainingOptions o = Options(Path("regression.ckpt"));
   o.resume = true;  // no file yet: starts at epoch 0
-  PoseGenerator g = Generator();
+  PoseGenerator g = TinyGenerator();
   GeneratorTrainingSummary s = TrainGeneratorOnLatents(&g, d.samples, d.latents, o);
   EXPECT_EQ(s.epochs_resumed, 0);
   EXPECT_EQ(s.epochs_completed, o.epochs);
@@ -120,7 +120,7 @@ TEST_F(GeneratorTrainingCheckpoint, ResumeWithoutACheckpointStartsAnewAndOthersA
   // Another trajectory option: refused, naming it.
   GeneratorTrainingOptions other = o;
   other.learning_rate *= 2;
-  PoseGenerator h = Generator();
+  PoseGenerator h = TinyGenerator();
   try {
     TrainGeneratorOnLatents(&h, d.samples, d.latents, other);
     FAIL() << "expected a refusal";
@@ -149,20 +149,20 @@ TEST_F(GeneratorTrainingCheckpoint, ResumeWithoutACheckpointStartsAnewAndOthersA
 // moves, a trunk trained along can come closer.
 TEST(GeneratorTrainingTunedTrunk, TrainingTheTrunkAlongFitsFramesTheFrozenOneCannot) {
   const Data d;
-  const SensorTrunk other = testing_util::MakeTinyTrunk(kRows, kCols, 12, 2, kLatent, 4);
+  const SensorTrunk other = testing_util::MakeTinyTrunk(kGenRows, kGenCols, 12, 2, kGenLatent, 4);
   GeneratorTrainingOptions o = Options("");
   o.epochs = 40;
   o.standardize_outputs = false;
-  PoseGenerator frozen = Generator();
+  PoseGenerator frozen = TinyGenerator();
   const GeneratorTrainingSummary f = TrainGeneratorOnPixels(&frozen, other, d.samples, d.frames, o);
   LatentModulatedSiren untouched = other.siren;  // fraction 0: the argument is not written
-  PoseGenerator frozen_again = Generator();
+  PoseGenerator frozen_again = TinyGenerator();
   TrainGeneratorOnPixels(&frozen_again, other, d.samples, d.frames, o, {}, &untouched);
   EXPECT_EQ(untouched.parameters(), other.siren.parameters());
   EXPECT_EQ(frozen_again.parameters(), frozen.parameters());
 
   o.trunk_step_fraction = 1;
-  PoseGenerator joint = Generator();
+  PoseGenerator joint = TinyGenerator();
   LatentModulatedSiren tuned = other.siren;
   const SensorTrunk before = other;
   const GeneratorTrainingSummary j =
@@ -183,19 +183,19 @@ TEST_F(GeneratorTrainingCheckpoint, ATunedTrunkResumesBitForBit) {
   GeneratorTrainingOptions o = Options("");
   o.standardize_outputs = false;
   o.trunk_step_fraction = 0.5;
-  PoseGenerator straight = Generator();
+  PoseGenerator straight = TinyGenerator();
   LatentModulatedSiren straight_siren = d.trunk.siren;
   TrainGeneratorOnPixels(&straight, d.trunk, d.samples, d.frames, o, {}, &straight_siren);
 
   o.checkpoint_path = Path("pixels.ckpt");
-  PoseGenerator stopped = Generator();
+  PoseGenerator stopped = TinyGenerator();
   LatentModulatedSiren siren = d.trunk.siren;
   auto stop = [](int epoch, double) { return epoch + 1 < 3; };
   EXPECT_EQ(TrainGeneratorOnPixels(&stopped, d.trunk, d.samples, d.frames, o, stop, &siren)
                 .epochs_completed,
             3);
   o.resume = true;
-  PoseGenerator resumed = Generator();  // a fresh process: only the checkpoint carries over
+  PoseGenerator resumed = TinyGenerator();  // a fresh process: only the checkpoint carries over
   LatentModulatedSiren resumed_siren = d.trunk.siren;
   EXPECT_EQ(TrainGeneratorOnPixels(&resumed, d.trunk, d.samples, d.frames, o, {}, &resumed_siren)
                 .epochs_resumed,
@@ -204,7 +204,7 @@ TEST_F(GeneratorTrainingCheckpoint, ATunedTrunkResumesBitForBit) {
   EXPECT_EQ(resumed_siren.parameters(), straight_siren.parameters());
   // The tuned run's checkpoint is another run than a frozen trunk's: refused.
   o.trunk_step_fraction = 0;
-  PoseGenerator g = Generator();
+  PoseGenerator g = TinyGenerator();
   try {
     TrainGeneratorOnPixels(&g, d.trunk, d.samples, d.frames, o);
     FAIL() << "expected a refusal";
@@ -217,7 +217,7 @@ TEST(GeneratorTrainingTunedTrunk, MisuseIsRefused) {
   const Data d;
   GeneratorTrainingOptions o = Options("");
   o.trunk_step_fraction = 0.1;
-  PoseGenerator g = Generator();
+  PoseGenerator g = TinyGenerator();
   // Nowhere to write the tuned trunk.
   EXPECT_THROW(TrainGeneratorOnPixels(&g, d.trunk, d.samples, d.frames, o), std::invalid_argument);
   // Regression has no trunk to tune.

@@ -36,15 +36,15 @@ namespace {
 
 using testing_util::AsStoredDepth;
 
-const std::string kPretrained = std::string(TACTFUNC_SOURCE_DIR) + "/models/pretrained/";
+const std::string kPretrainedDir = std::string(TACTFUNC_SOURCE_DIR) + "/models/pretrained/";
 
 struct Models {
-  FunctaModel model = FunctaModel::Load(kPretrained + "bubble.tfm");  // the generator's trunk
+  FunctaModel model = FunctaModel::Load(kPretrainedDir + "bubble.tfm");  // the generator's trunk
   const SensorTrunk& trunk = model.Trunk(SensorKind::kSoftBubble);
-  FunctaModel mlp_model = FunctaModel::Load(kPretrained + "default.tfm");  // the pose MLP's
+  FunctaModel mlp_model = FunctaModel::Load(kPretrainedDir + "default.tfm");  // the pose MLP's
   const SensorTrunk& mlp_trunk = mlp_model.Trunk(SensorKind::kSoftBubble);
-  PoseGenerator generator = PoseGenerator::Load(kPretrained + "pose_generator_bubble.tpg");
-  PoseMlp mlp = PoseMlp::Load(kPretrained + "pose_bubble.tpm");
+  PoseGenerator generator = PoseGenerator::Load(kPretrainedDir + "pose_generator_bubble.tpg");
+  PoseMlp mlp = PoseMlp::Load(kPretrainedDir + "pose_bubble.tpm");
   GeneratorPosterior posterior{trunk, generator, GeneratorPosterior::Options(), nullptr, &mlp,
                                &mlp_trunk};
   ContactSimulator simulator;
@@ -107,8 +107,8 @@ class PoseSamplerTest : public ::testing::Test {
   void SetUp() override {
     for (const char* file :
          {"bubble.tfm", "default.tfm", "pose_generator_bubble.tpg", "pose_bubble.tpm"}) {
-      ASSERT_TRUE(std::filesystem::is_regular_file(kPretrained + file))
-          << kPretrained + file << " is committed with the repository";
+      ASSERT_TRUE(std::filesystem::is_regular_file(kPretrainedDir + file))
+          << kPretrainedDir + file << " is committed with the repository";
     }
   }
 };

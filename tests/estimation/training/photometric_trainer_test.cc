@@ -18,12 +18,13 @@
 
 #include "Eigen/QR"
 #include "gtest/gtest.h"
+#include "models/core/internal/checks.h"
 #include "tests/support/photometric_test_util.h"
 
 namespace tactfunc {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
+using internal::kPi;
 
 PhotometricTrunk::Options SmallTrunk() { return testing_util::SmallPhotometricOptions(12, 16); }
 

@@ -16,15 +16,16 @@
 
 #include "estimation/training/photometric_trainer.h"
 #include "gtest/gtest.h"
+#include "models/core/internal/checks.h"
 #include "models/core/se2.h"
 #include "tests/support/photometric_test_util.h"
 
 namespace tactfunc {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
+using internal::kPi;
 
-PhotometricTrunk::Options SmallTrunk() { return testing_util::SmallPhotometricOptions(24, 32); }
+PhotometricTrunk::Options WarmStartTrunk() { return testing_util::SmallPhotometricOptions(24, 32); }
 
 using testing_util::MarkerReference;
 using testing_util::WholeFrameTargets;
@@ -53,7 +54,7 @@ TrunkTargets TurnedByPi(const TrunkTargets& frame) {
 }
 
 TEST(PhotometricWarmStartTest, TheDescriptorFollowsTheContactAcrossTheGrid) {
-  const PhotometricTrunk::Options o = SmallTrunk();
+  const PhotometricTrunk::Options o = WarmStartTrunk();
   const PhotometricTrunk trunk(o, MarkerReference(2 * o.rows, 2 * o.cols), 1);
   PhotometricWarmStart::Options options;
   options.grid = 8;
@@ -85,7 +86,7 @@ struct Table {
 };
 
 Table MakeTable() {
-  const PhotometricTrunk::Options o = SmallTrunk();
+  const PhotometricTrunk::Options o = WarmStartTrunk();
   Table t{PhotometricTrunk(o, MarkerReference(2 * o.rows, 2 * o.cols), 7), {}, {}};
   const int n = 6;
   t.latents.resize(n, o.latent_dim);
@@ -134,7 +135,7 @@ TEST(PhotometricWarmStartTest, BestStartPicksTheCandidateWithTheLowerLoss) {
   // Frames drawn by the trunk itself from known latents: the table's own latent draws
   // the frame exactly, so among the candidates it has the lowest loss even where another
   // frame's descriptor were nearer.
-  const PhotometricTrunk::Options o = SmallTrunk();
+  const PhotometricTrunk::Options o = WarmStartTrunk();
   PhotometricTrunk trunk(o, MarkerReference(2 * o.rows, 2 * o.cols), 3);
   std::vector<TrunkTargets> frames;
   Eigen::MatrixXd latents(5, o.latent_dim);

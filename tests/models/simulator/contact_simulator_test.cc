@@ -9,13 +9,14 @@
 #include <thread>
 
 #include "gtest/gtest.h"
+#include "models/core/internal/checks.h"
 #include "models/simulator/internal/membrane.h"
 #include "tests/support/simulator_test_util.h"
 
 namespace tactfunc {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
+using internal::kPi;
 
 using testing_util::MakeContact;
 using testing_util::Simulator;

@@ -10,11 +10,12 @@
 #include <boost/random/uniform_real_distribution.hpp>
 
 #include "gtest/gtest.h"
+#include "models/core/internal/checks.h"
 
 namespace tactfunc {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
+using internal::kPi;
 
 // The largest |h(p) - h(R(angle) p)| over `samples` random points of the footprint.
 double LargestChangeUnderRotation(const Tool& tool, double angle, int samples,

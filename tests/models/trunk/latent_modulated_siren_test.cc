@@ -28,6 +28,7 @@
 #include "ceres/jet.h"
 #include "gtest/gtest.h"
 #include "models/trunk/internal/fast_sincos.h"
+#include "tests/support/derivative_checks.h"
 #include "tests/support/uniform_numbers.h"
 
 namespace tactfunc {
@@ -137,15 +138,7 @@ std::vector<Frame> Frames(const Siren& siren) {
   };
 }
 
-// max |a - b| <= rel * max |b| + floor, reported with the block's name.
-void ExpectClose(const VectorXd& actual, const VectorXd& expected, double rel,
-                 double floor, const std::string& what) {
-  ASSERT_EQ(actual.size(), expected.size()) << what;
-  const double error = (actual - expected).cwiseAbs().maxCoeff();
-  const double scale = expected.cwiseAbs().maxCoeff();
-  EXPECT_LE(error, rel * scale + floor)
-      << what << ": max error " << error << ", max |expected| " << scale;
-}
+using testing_util::ExpectClose;
 
 void ExpectBlocksClose(const Siren& siren, const VectorXd& actual,
                        const VectorXd& expected, double rel, double floor,
@@ -157,10 +150,7 @@ void ExpectBlocksClose(const Siren& siren, const VectorXd& actual,
   }
 }
 
-// 4th-order central difference of f at 0.
-double Derivative(const std::function<double(double)>& f, double h) {
-  return (-f(2 * h) + 8 * f(h) - 8 * f(-h) + f(-2 * h)) / (12 * h);
-}
+using testing_util::Derivative;
 
 VectorXd NumericGradientTheta(const Siren& siren, const Frame& frame) {
   VectorXd gradient(siren.NumParameters());

@@ -14,6 +14,7 @@
 
 #include "gtest/gtest.h"
 #include "models/trunk/latent_modulated_siren.h"
+#include "tests/support/derivative_checks.h"
 #include "tests/support/uniform_numbers.h"
 
 namespace tactfunc {
@@ -63,18 +64,8 @@ Problem MakeProblem(const Siren& siren) {
 // then costs ~ 1e-16 |L| / h ~ 1e-12.
 constexpr double kStep = 1e-5;
 
-double Derivative(const std::function<double(double)>& f, double h) {
-  return (-f(2 * h) + 8 * f(h) - 8 * f(-h) + f(-2 * h)) / (12 * h);
-}
-
-void ExpectClose(const VectorXd& actual, const VectorXd& expected, double rel,
-                 double floor, const std::string& what) {
-  ASSERT_EQ(actual.size(), expected.size()) << what;
-  const double error = (actual - expected).cwiseAbs().maxCoeff();
-  const double scale = expected.cwiseAbs().maxCoeff();
-  EXPECT_LE(error, rel * scale + floor)
-      << what << ": max error " << error << ", max |expected| " << scale;
-}
+using testing_util::Derivative;
+using testing_util::ExpectClose;
 
 TEST(MetaSgdOptions, DefaultOptionsAreValid) {
   std::string error;

@@ -29,7 +29,7 @@ double Uniform(unsigned* state) {
   return 2.0 * (*state >> 8) / double(1u << 24) - 1.0;
 }
 
-PhotometricTrunk::Options SmallOptions() {
+PhotometricTrunk::Options SmallPhotometricTrunk() {
   PhotometricTrunk::Options o;
   o.rows = 8;
   o.cols = 10;
@@ -57,15 +57,15 @@ Image DottedReference(int rows, int cols, int channels) {
   return image;
 }
 
-struct Problem {
+struct PhotometricProblem {
   std::vector<int> pixels;
   VectorXd z;
   MatrixXd targets;
   VectorXd weights;
 };
 
-Problem MakeProblem(const PhotometricTrunk& trunk) {
-  Problem p;
+PhotometricProblem MakePhotometricProblem(const PhotometricTrunk& trunk) {
+  PhotometricProblem p;
   unsigned state = 99;
   // Interior pixels and a few on the border (the marker sampling clamps there).
   p.pixels = {0, 3, 11, 14, 25, 33, 38, 42, 47, 56, 61, 79};
@@ -85,7 +85,7 @@ Problem MakeProblem(const PhotometricTrunk& trunk) {
 // pose 3, code 9 - 3 - K).
 PhotometricTrunk MovingTrunk(PhotometricTrunk::MarkerSampling sampling, int channels = 1,
                              int lighting_components = 0) {
-  PhotometricTrunk::Options o = SmallOptions();
+  PhotometricTrunk::Options o = SmallPhotometricTrunk();
   o.channels = channels;
   o.lighting_components = lighting_components;
   PhotometricTrunk trunk(o, DottedReference(2 * o.rows, 2 * o.cols, channels), 5);
@@ -103,7 +103,7 @@ PhotometricTrunk MovingTrunk(PhotometricTrunk::MarkerSampling sampling, int chan
 }
 
 void ExpectGradientsMatchDifferences(PhotometricTrunk trunk) {
-  const Problem p = MakeProblem(trunk);
+  const PhotometricProblem p = MakePhotometricProblem(trunk);
   VectorXd dz, dsiren, dhead;
   trunk.LossAndGradient<double>(p.pixels, p.z, p.targets, p.weights, &dz, &dsiren, &dhead);
   const double eps = 1e-6;
@@ -184,7 +184,7 @@ TEST(PhotometricTrunkTest, EachLightingValueAddsItsImageToEveryPixel) {
   EXPECT_EQ(lit.CodeValues(), 9 - 3 - 2);
   EXPECT_EQ(lit.siren().options().latent_dim, lit.CodeValues());
   const std::vector<int> all = lit.AllPixels();
-  VectorXf z = MakeProblem(lit).z.cast<float>();
+  VectorXf z = MakePhotometricProblem(lit).z.cast<float>();
   const MatrixXf base = lit.Forward<float>(all, z);
   // The code drives the SIREN only, the lighting values the images only: moving the
   // second lighting value by 0.5 adds half its image, whatever the code.
@@ -208,7 +208,7 @@ TEST(PhotometricTrunkTest, EachLightingValueAddsItsImageToEveryPixel) {
   MatrixXf bad = lit.lighting();
   bad(4, 1) = std::nanf("");
   EXPECT_THROW(dark.SetLighting(bad), std::invalid_argument);
-  PhotometricTrunk::Options o = SmallOptions();
+  PhotometricTrunk::Options o = SmallPhotometricTrunk();
   o.lighting_components = 6;  // 3 + 6 = latent_dim 9: no code value left
   try {
     PhotometricTrunk trunk(o, DottedReference(16, 20, 1));
@@ -226,7 +226,7 @@ TEST(PhotometricTrunkTest, MarkersMoveTheOutput) {
   VectorXd head = still.head_parameters();
   head[head.size() - 1] = 0.0;
   still.SetHeadParameters(head);
-  const Problem p = MakeProblem(moving);
+  const PhotometricProblem p = MakePhotometricProblem(moving);
   const MatrixXd a = moving.Forward<double>(moving.AllPixels(), p.z);
   const MatrixXd b = still.Forward<double>(still.AllPixels(), p.z);
   EXPECT_GT((a - b).cwiseAbs().maxCoeff(), 1e-3);
@@ -249,7 +249,7 @@ TEST(PhotometricTrunkTest, AFramesOwnMarkersDrawItAsATrunkOfThatReference) {
     built.SetHeadParameters(trunk.head_parameters());
     built.set_marker_sampling(sampling);
     const auto markers = trunk.MakeMarkers(other);
-    const Problem p = MakeProblem(trunk);
+    const PhotometricProblem p = MakePhotometricProblem(trunk);
     const MatrixXd a = trunk.Forward<double>(trunk.AllPixels(), p.z, markers.get());
     EXPECT_EQ(a, built.Forward<double>(built.AllPixels(), p.z));
     // The frame's own markers matter: its own reference draws another frame.
@@ -277,7 +277,7 @@ TEST(PhotometricTrunkTest, RowSummedMarkersEqualTheirSamplesTakenOneByOne) {
   // pixel reads K sums of K reference rows instead of K^2 samples, away from the
   // borders. Against the same markers without the sums, every pass agrees to float
   // rounding of the sums, the border pixels included.
-  PhotometricTrunk::Options o = SmallOptions();
+  PhotometricTrunk::Options o = SmallPhotometricTrunk();
   o.supersample = 3;
   const Image reference = DottedReference(3 * o.rows, 3 * o.cols + 1, 1);
   PhotometricTrunk trunk(o, reference, 5);
@@ -289,7 +289,7 @@ TEST(PhotometricTrunkTest, RowSummedMarkersEqualTheirSamplesTakenOneByOne) {
   EXPECT_EQ(summed->row_sums.rows, 3 * o.rows - 2);  // sums of 3 rows, 1 row apart
   PhotometricTrunk::Markers one_by_one = *summed;
   one_by_one.row_sums = Image();
-  const Problem p = MakeProblem(trunk);
+  const PhotometricProblem p = MakePhotometricProblem(trunk);
   const MatrixXd a = trunk.Forward<double>(trunk.AllPixels(), p.z, summed.get());
   const MatrixXd b = trunk.Forward<double>(trunk.AllPixels(), p.z, &one_by_one);
   EXPECT_LT((a - b).cwiseAbs().maxCoeff(), 1e-6);
@@ -316,7 +316,7 @@ TEST(PhotometricTrunkTest, RowSummedMarkersEqualTheirSamplesTakenOneByOne) {
 }
 
 TEST(PhotometricTrunkTest, GradientsMatchCentralDifferencesWithRowSummedMarkers) {
-  PhotometricTrunk::Options o = SmallOptions();
+  PhotometricTrunk::Options o = SmallPhotometricTrunk();
   o.supersample = 2;  // twice the working rows: the sums of 2 rows, one row apart
   PhotometricTrunk trunk(o, DottedReference(2 * o.rows, 2 * o.cols + 1, 1), 5);
   ASSERT_FALSE(trunk.markers().row_sums.empty());
@@ -332,7 +332,7 @@ TEST(PhotometricTrunkTest, MarkersOfAnotherGridOrChannelsAreRefused) {
   o.cols += 1;
   const PhotometricTrunk wider(o, trunk.reference());
   const auto foreign = wider.MakeMarkers(trunk.reference());
-  const Problem p = MakeProblem(trunk);
+  const PhotometricProblem p = MakePhotometricProblem(trunk);
   EXPECT_THROW(trunk.Forward<double>(p.pixels, p.z, foreign.get()), std::invalid_argument);
   EXPECT_THROW(trunk.MakeMarkers(DottedReference(4, 4, 3)), std::invalid_argument);
   EXPECT_THROW(trunk.MakeMarkers(Image()), std::invalid_argument);
@@ -341,7 +341,7 @@ TEST(PhotometricTrunkTest, MarkersOfAnotherGridOrChannelsAreRefused) {
 TEST(PhotometricTrunkTest, AtRestMarkersAreTheAreaResizedReference) {
   // K = 2 at a 2x reference samples each sensor pixel's centre exactly: the at-rest
   // table is the 2 x 2 block mean.
-  PhotometricTrunk::Options o = SmallOptions();
+  PhotometricTrunk::Options o = SmallPhotometricTrunk();
   o.supersample = 2;
   const Image reference = DottedReference(2 * o.rows, 2 * o.cols, 1);
   const PhotometricTrunk trunk(o, reference);
@@ -362,7 +362,7 @@ TEST(PhotometricTrunkTest, ASirenThatDrawsNothingGivesAnEmptyDifference) {
     LatentModulatedSiren::View<double>(&theta, trunk.siren().Block(group)).setZero();
   }
   trunk.mutable_siren().SetParameters(theta);
-  const Problem p = MakeProblem(trunk);
+  const PhotometricProblem p = MakePhotometricProblem(trunk);
   const MatrixXd y = trunk.Forward<double>(trunk.AllPixels(), p.z);
   EXPECT_EQ(y.rows(), 80);
   // The at-rest table is stored in float: the markers cancel to its rounding.
@@ -379,7 +379,7 @@ TEST(PhotometricTrunkTest, TheBackgroundIsAddedToEveryPixelAndChangesNoGradient)
   unsigned state = 3;
   for (float& v : background.data) v = static_cast<float>(0.05 * Uniform(&state));
   with.SetBackground(background);
-  const Problem p = MakeProblem(plain);
+  const PhotometricProblem p = MakePhotometricProblem(plain);
   MatrixXd shifted = p.targets;
   for (std::size_t i = 0; i < p.pixels.size(); ++i) {
     const int r = p.pixels[i] / plain.options().cols, c = p.pixels[i] % plain.options().cols;
@@ -428,7 +428,7 @@ TEST(PhotometricTrunkTest, TheLossGradientWithRespectToTheOutputsMatchesDifferen
   // pass's other gradients unchanged by asking for it.
   const PhotometricTrunk trunk =
       MovingTrunk(PhotometricTrunk::MarkerSampling::kSensorResolution, 2);
-  const Problem p = MakeProblem(trunk);
+  const PhotometricProblem p = MakePhotometricProblem(trunk);
   MatrixXd dY;
   VectorXd dz, dz_alone;
   trunk.LossAndGradient<double>(p.pixels, p.z, p.targets, p.weights, &dz, nullptr, nullptr,
@@ -459,7 +459,7 @@ TEST(PhotometricTrunkTest, TheLossGradientWithRespectToTheOutputsMatchesDifferen
 TEST(PhotometricTrunkTest, FloatAgreesWithDouble) {
   const PhotometricTrunk trunk =
       MovingTrunk(PhotometricTrunk::MarkerSampling::kSensorResolution);
-  const Problem p = MakeProblem(trunk);
+  const PhotometricProblem p = MakePhotometricProblem(trunk);
   VectorXd dz;
   VectorXf dzf;
   const double loss =
@@ -479,7 +479,7 @@ TEST(PhotometricTrunkTest, TheWholeGridSharesNeighboursAndAgreesWithThePerPixelP
   for (int channels : {1, 3}) {
     const PhotometricTrunk trunk =
         MovingTrunk(PhotometricTrunk::MarkerSampling::kSensorResolution, channels);
-    const Problem p = MakeProblem(trunk);
+    const PhotometricProblem p = MakePhotometricProblem(trunk);
     const std::vector<int> all = trunk.AllPixels();
     std::vector<int> reversed(all.rbegin(), all.rend());
     const MatrixXd dense = trunk.Forward<double>(all, p.z);
@@ -518,7 +518,7 @@ TEST(PhotometricTrunkTest, NeighbouringAndRepeatedPixelsShareEvaluationsWithTheS
   // single-pixel passes and the gradients with their sums (the loss is a sum over pixels).
   const PhotometricTrunk trunk =
       MovingTrunk(PhotometricTrunk::MarkerSampling::kSensorResolution, 1);
-  const Problem p = MakeProblem(trunk);
+  const PhotometricProblem p = MakePhotometricProblem(trunk);
   const int cols = trunk.options().cols;
   std::vector<int> pixels;
   for (int r = 4; r < 7; ++r) {
@@ -563,7 +563,7 @@ TEST(PhotometricTrunkTest, TheLatentJacobianHasTheReversePassesRows) {
         std::pair{PhotometricTrunk::MarkerSampling::kWorkingResolution, 0},
         std::pair{PhotometricTrunk::MarkerSampling::kSensorResolution, 2}}) {
     const PhotometricTrunk trunk = MovingTrunk(sampling, 3, lighting);
-    const Problem p = MakeProblem(trunk);
+    const PhotometricProblem p = MakePhotometricProblem(trunk);
     const int cols = trunk.options().cols, c = trunk.channels();
     std::vector<int> pixels = p.pixels;
     for (int r = 4; r < 6; ++r) {
@@ -599,7 +599,7 @@ TEST(PhotometricTrunkTest, TheLatentJacobianHasTheReversePassesRows) {
   // Without a Jacobian asked for it is Forward's pass.
   const PhotometricTrunk trunk =
       MovingTrunk(PhotometricTrunk::MarkerSampling::kSensorResolution, 1);
-  const Problem p = MakeProblem(trunk);
+  const PhotometricProblem p = MakePhotometricProblem(trunk);
   MatrixXd y;
   trunk.ForwardAndLatentJacobian<double>(p.pixels, p.z, &y, nullptr);
   EXPECT_LT((y - trunk.Forward<double>(p.pixels, p.z)).cwiseAbs().maxCoeff(), 1e-12);
@@ -608,7 +608,7 @@ TEST(PhotometricTrunkTest, TheLatentJacobianHasTheReversePassesRows) {
 }
 
 TEST(PhotometricTrunkTest, RefusesBadOptionsAndReferences) {
-  PhotometricTrunk::Options o = SmallOptions();
+  PhotometricTrunk::Options o = SmallPhotometricTrunk();
   o.latent_dim = 3;
   try {
     PhotometricTrunk trunk(o, DottedReference(16, 20, 1));
@@ -617,12 +617,12 @@ TEST(PhotometricTrunkTest, RefusesBadOptionsAndReferences) {
     EXPECT_NE(std::string(e.what()).find("latent_dim"), std::string::npos) << e.what();
   }
   try {
-    PhotometricTrunk trunk(SmallOptions(), DottedReference(16, 20, 3));
+    PhotometricTrunk trunk(SmallPhotometricTrunk(), DottedReference(16, 20, 3));
     FAIL() << "a 3-channel reference accepted for 1 channel";
   } catch (const std::invalid_argument& e) {
     EXPECT_NE(std::string(e.what()).find("16x20x3"), std::string::npos) << e.what();
   }
-  const PhotometricTrunk trunk(SmallOptions(), DottedReference(16, 20, 1));
+  const PhotometricTrunk trunk(SmallPhotometricTrunk(), DottedReference(16, 20, 1));
   EXPECT_THROW(trunk.Forward<double>({80}, VectorXd::Zero(9)), std::invalid_argument);
   EXPECT_THROW(trunk.Forward<double>({0}, VectorXd::Zero(8)), std::invalid_argument);
 }
