@@ -13,6 +13,7 @@
 #include <boost/random/normal_distribution.hpp>
 #include <boost/random/uniform_01.hpp>
 
+#include "models/core/internal/checks.h"
 #include "models/core/internal/log_sum_exp.h"
 #include "models/core/seed.h"
 #include "samplers/sgld.h"
@@ -20,7 +21,7 @@
 namespace tactfunc {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
+using internal::kPi;
 
 double WrapAngle(double a) {
   if (a > -kPi && a <= kPi) return a;

@@ -9,10 +9,6 @@
 
 namespace tactfunc::apps::bench {
 
-double MsSince(Clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-}
-
 // q-quantile (nearest rank) of a sample; NaN if empty.
 double Quantile(std::vector<double> values, double q) {
   if (values.empty()) return std::numeric_limits<double>::quiet_NaN();

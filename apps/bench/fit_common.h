@@ -38,6 +38,7 @@
 
 #include "apps/command.h"
 #include "estimation/data/trunk_targets.h"
+#include "models/core/internal/elapsed.h"
 #include "models/core/sensor.h"
 #include "models/trunk/latent_modulated_siren.h"
 #include "nlohmann/json.hpp"
@@ -46,8 +47,7 @@ namespace tactfunc::apps::bench {
 
 using Clock = std::chrono::steady_clock;
 
-// Milliseconds since `start`.
-double MsSince(Clock::time_point start);
+using internal::MsSince;  // milliseconds since a Clock::time_point
 // q-quantile (nearest rank) of a sample; NaN if empty.
 double Quantile(std::vector<double> values, double q);
 // Median; NaN if empty.

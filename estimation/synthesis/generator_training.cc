@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "estimation/training/internal/checkpoint.h"
+#include "models/core/internal/checks.h"
 #include "models/core/seed.h"
 #include "models/core/sensor.h"
 #include "models/core/tensor_file.h"
@@ -22,9 +23,7 @@
 namespace tactfunc {
 namespace {
 
-void Check(bool ok, const std::string& message) {
-  if (!ok) throw std::invalid_argument(message);
-}
+using internal::Check;
 
 // Adam over one flat vector.
 class Adam {

@@ -17,6 +17,7 @@
 #include "boost/random/uniform_int_distribution.hpp"
 #include "boost/random/uniform_real_distribution.hpp"
 #include "estimation/training/internal/checkpoint.h"
+#include "models/core/internal/checks.h"
 #include "models/core/parallel_for.h"
 #include "models/core/seed.h"
 #include "models/trunk/product_precision.h"
@@ -25,7 +26,7 @@
 namespace tactfunc {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
+using internal::kPi;
 const char* kCheckpointFormat = "tactfunc-photometric-checkpoint";
 constexpr int kCheckpointVersion = 1;
 

@@ -9,13 +9,14 @@
 #include <utility>
 
 #include "estimation/knn/knn_index.h"
+#include "models/core/internal/checks.h"
 #include "models/core/parallel_for.h"
 #include "models/core/se2.h"
 
 namespace tactfunc {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
+using internal::kPi;
 
 PhotometricWarmStart::Options TableOptions(const WarmStartTable& table) {
   PhotometricWarmStart::Options options;

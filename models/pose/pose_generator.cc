@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "models/core/atomic_file.h"
+#include "models/core/internal/checks.h"
 #include "models/core/tensor_file.h"
 #include "nlohmann/json.hpp"
 
@@ -31,9 +32,7 @@ constexpr char kKind[] = "pose_generator";
 constexpr char kFormat[] = "tactfunc-pose-generator";
 constexpr int kVersion = 1;
 
-void Check(bool ok, const std::string& message) {
-  if (!ok) throw std::invalid_argument(message);
-}
+using internal::Check;
 
 std::vector<double> ToVector(const Eigen::VectorXd& v) {
   return std::vector<double>(v.data(), v.data() + v.size());

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "models/core/atomic_file.h"
+#include "models/core/internal/checks.h"
 #include "models/core/tensor_file.h"
 #include "nlohmann/json.hpp"
 
@@ -26,18 +27,11 @@ constexpr const char* kFormat = "tactfunc-pose-model";
 constexpr int kVersion = 1;
 constexpr const char* kKind = "pose_model";
 
-std::string Num(double value) {
-  char buffer[32];
-  std::snprintf(buffer, sizeof(buffer), "%.6g", value);
-  return buffer;
-}
+using internal::Check;
+using internal::Num;
 
 std::string Shape(long rows, long cols) {
   return std::to_string(rows) + " x " + std::to_string(cols);
-}
-
-void Check(bool ok, const std::string& message) {
-  if (!ok) throw std::invalid_argument(message);
 }
 
 std::vector<double> ToVector(const Eigen::VectorXf& v) {

@@ -10,6 +10,7 @@
 #include <boost/random/mersenne_twister.hpp>
 #include <boost/random/uniform_real_distribution.hpp>
 
+#include "models/core/internal/checks.h"
 #include "models/simulator/internal/membrane.h"
 #include "models/simulator/internal/noise_stream.h"
 #include "models/core/seed.h"
@@ -17,7 +18,7 @@
 namespace tactfunc {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
+using internal::kPi;
 // Largest depth a 16-bit micrometre PNG can store.
 constexpr double kMaxStorableDepthM = 65.535e-3;
 // The surface is solved on the contact's bounding box grown by this many decay

@@ -6,10 +6,12 @@
 #include <stdexcept>
 #include <utility>
 
+#include "models/core/internal/checks.h"
+
 namespace tactfunc {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
+using internal::kPi;
 constexpr double kDeg = kPi / 180.0;
 
 // Ridges: 1.5 mm wide walls, 3 mm high, with a half-cylinder top of 0.75 mm radius,
