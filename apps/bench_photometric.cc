@@ -7,7 +7,7 @@
 //
 //   tactfunc bench photometric --data D [--train-data T] [--sensor gelslim]
 //       [--steps 3000] [--warmup 1000] [--latent-dim 64] [--width 64] [--layers 3]
-//       [--fit-steps 400] [--marker-rate 2e-3] [--narrow-biases] [--seed 1] [--threads 1]
+//       [--fit-steps 200] [--marker-rate 2e-3] [--narrow-biases] [--seed 1] [--threads 1]
 //       [--picture F.png] [--json]
 //
 // The trunk is trained on the train split of T (default D); PCA is fitted on D's train

@@ -1,10 +1,11 @@
 // Copyright 2026 The tactfunc Authors.
 //
-// From one image file to a pose posterior, in library calls (docs/ARCHITECTURE.md, "The
-// data path"): a Soft Bubble depth frame and its no-contact reference are read from PNG
-// files, turned into trunk targets with the pretrained model's frame format, and the
-// frame's latent problem is fitted and sampled (Laplace, 100 samples) and pushed through
-// the pose model into a distribution over sensor_T_object.
+// From one image file to a pose posterior, in library calls (docs/ARCHITECTURE.md, "From
+// an image file to a pose posterior"): a Soft Bubble depth frame and its no-contact
+// reference are read from PNG files, turned into trunk targets with the pretrained
+// model's frame format, and the frame's latent problem is fitted and sampled (Laplace,
+// 100 samples) and pushed through the pose model into a distribution over
+// sensor_T_object.
 //
 // So that it needs no data, the example first writes the two files itself: one contact
 // of the `triangle` tool rendered by the simulator (its pose is the truth printed at the end).

@@ -197,7 +197,7 @@ Eigen::MatrixXd CalibrationResiduals(const PoseMlp& model, const Eigen::MatrixXf
 // "latent_map" (written by train-pose: "functaset" = the trunk's K meta-SGD steps, what
 // `encode` stores; else a strategy such as "ceres:10" from --refit), or the older
 // "latents" field ("functaset" / "refit <strategy>"). Posteriors centre on this map so
-// that the MLP sees the kind of latent it was trained on (docs/POSES.md, "Latent maps").
+// that the MLP sees the kind of latent it was trained on (docs/CLI.md, "Latent maps").
 // A model without either field gives the trunk's meta_sgd:K. The info is read as
 // PoseModelProvenance (models/pose/pose_model_provenance.h), which throws
 // std::invalid_argument naming a field of the wrong type.
