@@ -36,7 +36,9 @@
 //     posterior mode's position RMSE (mm) and yaw RMSE (deg, modulo symmetry, hemisphere
 //     left out), the coverage of the 50% and 90% highest-density regions, the time per
 //     frame (fit + Laplace; wall clock and the thread's CPU time), and with --unknown-tool
-//     the tool identification rate. --diagnose: for every contact whose mode is > 5 deg or
+//     the tool identification rate; and how often the heaviest mode holds the truth
+//     (within 10 deg and 1 mm) against its weight, over the contacts with two or more
+//     modes (MixtureWeightReliability). --diagnose: for every contact whose mode is > 5 deg or
 //     > 1 mm off, the objective at the mode, the truth and the truth refined (a lower
 //     refined truth = a search failure, else a model failure), and over the whole frame
 //     at the mode, the truth and the trunk's own best latent (Ceres to convergence: how
@@ -49,7 +51,7 @@
 //     whether the frame itself prefers the truth's basin (JudgeWrongMode), and whether the
 //     trunk keeps that preference (TrunkLogLikelihoodRatio). --contacts-csv: one row
 //     per usable contact (truth, mode, posterior mean, errors, the mode's Laplace standard
-//     deviations, with --information the bound's, the frame's and the trunk's verdict, with
+//     deviations, the mode's weight among the true tool's modes, with --information the bound's, the frame's and the trunk's verdict, with
 //     --diagnose a wrong mode's whole-frame objectives), written atomically; --picture FILE
 //     (with --information): each contact's error against its bound.
 #include <algorithm>
@@ -560,6 +562,62 @@ TrunkWholeFrame JudgeAgainstTheTrunk(const SensorTrunk& trunk, const TrunkTarget
   return out;
 }
 
+// How well the mixture's weights say which mode holds the truth: over the contacts whose
+// true tool has two or more modes, the heaviest mode's weight among them, binned (below
+// 0.5, then 0.5-0.6, ..., 0.9-1), against how often that mode holds the truth (its
+// position within 1 mm, its yaw within 10 deg modulo the tool's symmetry). A calibrated
+// mixture's heaviest mode holds the truth about as often as its weight says; region
+// coverage cannot show this, since a region takes most of its mass from the heaviest mode.
+class MixtureWeightReliability {
+ public:
+  static constexpr int kBins = 6;
+  static constexpr double kHeldYawDeg = 10, kHeldPositionMm = 1;
+  void Add(double weight, bool held) {
+    const int b = Bin(weight);
+    ++contacts_[b];
+    held_[b] += held;
+    weight_sum_[b] += weight;
+  }
+  // [lower, upper) of bin b (the last one closed).
+  static double Lower(int b) { return b == 0 ? 0 : 0.4 + 0.1 * b; }
+  static double Upper(int b) { return b == kBins - 1 ? 1 : 0.5 + 0.1 * b; }
+  std::string Text() const {
+    std::ostringstream out;
+    for (int b = 0; b < kBins; ++b) {
+      if (contacts_[b] == 0) continue;
+      out << (out.tellp() > 0 ? ", " : "") << (b == 0 ? std::string("below 0.5") : Range(b))
+          << ": " << held_[b] << " of " << contacts_[b];
+    }
+    return out.tellp() > 0 ? out.str() : std::string("no contact with two or more modes");
+  }
+  nlohmann::json Json() const {
+    nlohmann::json bins = nlohmann::json::array();
+    for (int b = 0; b < kBins; ++b) {
+      if (contacts_[b] == 0) continue;
+      bins.push_back({{"from", Lower(b)},
+                      {"to", Upper(b)},
+                      {"contacts", contacts_[b]},
+                      {"held_truth", held_[b]},
+                      {"mean_weight", weight_sum_[b] / contacts_[b]}});
+    }
+    return bins;
+  }
+
+ private:
+  static int Bin(double weight) {
+    if (!(weight >= 0.5)) return 0;
+    return std::min(kBins - 1, 1 + static_cast<int>((weight - 0.5) * 10));
+  }
+  static std::string Range(int b) {
+    char text[32];
+    std::snprintf(text, sizeof(text), "%.1f-%.1f", Lower(b), Upper(b));
+    return text;
+  }
+  int contacts_[kBins] = {};
+  int held_[kBins] = {};
+  double weight_sum_[kBins] = {};
+};
+
 // One wrong mode on --diagnose-picture.
 struct WrongModeView {
   int contact = 0;
@@ -768,6 +826,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
   double mean_pos_sq = 0, mean_yaw_sq = 0;  // of the posterior mean
   std::vector<double> mean_yaw_errors;
   int wrong = 0, search_failures = 0, model_failures = 0;
+  MixtureWeightReliability weight_reliability;
   // --diagnose-picture: the first kPictureRows wrong modes.
   constexpr std::size_t kPictureRows = 6;
   std::vector<WrongModeView> wrong_views;
@@ -782,7 +841,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
          "position_error_mm,yaw_error_deg,modes,tool_probability,mode_sd_x_mm,mode_sd_y_mm,"
          "mode_sd_yaw_deg,bound_sd_along_mm,bound_sd_across_mm,bound_sd_yaw_deg,"
          "bound_sd_depth_mm,frame_llr_truth_over_mode,trunk_llr_truth_over_mode,"
-         "whole_frame_truth_cost,whole_frame_mode_cost,whole_frame_trunk_best_cost\n";
+         "whole_frame_truth_cost,whole_frame_mode_cost,whole_frame_trunk_best_cost,mode_weight\n";
   std::vector<double> times, cpu_times;
   std::map<std::string, std::pair<double, int>> per_tool_pos;
   // --information, by true depth (below 6 mm, 6-10 mm, from 10 mm): the mode's summed
@@ -900,6 +959,22 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
       mean_yaw_sq += e * e;
       mean_yaw_errors.push_back(e);
     }
+    // The true tool's modes, and the heaviest one's weight among them.
+    int modes = 0;
+    double tool_weight = 0;
+    for (const LaplaceComponent& c : mixture.components()) {
+      if (c.tool != tools[t]) continue;
+      ++modes;
+      tool_weight += c.weight;
+    }
+    const double mode_weight =
+        true_mode != nullptr && tool_weight > 0 ? true_mode->weight / tool_weight : std::nan("");
+    if (modes >= 2 && std::isfinite(mode_weight)) {
+      weight_reliability.Add(
+          mode_weight,
+          (n == 0 || kDeg * mode_yaw_error <= MixtureWeightReliability::kHeldYawDeg) &&
+              1e3 * std::sqrt(dp) <= MixtureWeightReliability::kHeldPositionMm);
+    }
     // Wrong: the mode's yaw more than 5 degrees or its position more than 1 mm off.
     const bool wrong_mode = (n != 0 && kDeg * mode_yaw_error > 5) || std::sqrt(dp) > 1e-3;
     PoseInformation information;
@@ -982,8 +1057,6 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
     }
     if (!flags.contacts_csv.empty()) {
       const double mode_depth = true_mode != nullptr ? true_mode->depth_m : std::nan("");
-      int modes = 0;
-      for (const LaplaceComponent& c : mixture.components()) modes += c.tool == tools[t];
       // The mode's Laplace standard deviations in its tangent space: x and y along and
       // across the object's own axes (right perturbation), and the yaw.
       Eigen::Vector3d sd = Eigen::Vector3d::Constant(std::nan(""));
@@ -1002,7 +1075,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
       std::snprintf(
           row, sizeof(row),
           "%d,%s,%d,%.4f,%.4f,%.3f,%.4f,%.4f,%.4f,%.3f,%.4f,%.4f,%.4f,%.3f,%.4f,%.3f,%d,"
-          "%.4f,%.4f,%.4f,%.3f,%.4f,%.4f,%.3f,%.4f,%.2f,%.2f,%.2f,%.2f,%.2f\n",
+          "%.4f,%.4f,%.4f,%.3f,%.4f,%.4f,%.3f,%.4f,%.2f,%.2f,%.2f,%.2f,%.2f,%.4f\n",
           k, tools[t].c_str(), n, 1e3 * truth.x(), 1e3 * truth.y(), kDeg * truth.yaw(),
           1e3 * contact.depth_m, 1e3 * mode.x(), 1e3 * mode.y(), kDeg * mode.yaw(),
           1e3 * mode_depth, 1e3 * mean.x(), 1e3 * mean.y(), kDeg * mean.yaw(),
@@ -1010,7 +1083,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
           s.tool_probabilities.count(tools[t]) ? s.tool_probabilities.at(tools[t]) : 0.0,
           1e3 * sd[0], 1e3 * sd[1], kDeg * sd[2], 1e3 * bound_sd[0], 1e3 * bound_sd[1],
           kDeg * bound_sd[2], 1e3 * bound_sd[3], frame_llr, trunk_llr, whole.truth_cost,
-          whole.mode_cost, whole.trunk_cost);
+          whole.mode_cost, whole.trunk_cost, mode_weight);
       csv << row;
     }
     per_tool_pos[tools[t]].first += dp;
@@ -1066,6 +1139,10 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
               mean_rmse_mm, mean_rmse_deg, mean_yaw_median);
   std::printf("  coverage 50%%: %.3f, 90%%: %.3f\n", static_cast<double>(c50) / std::max(1, ok),
               static_cast<double>(c90) / std::max(1, ok));
+  std::printf("  the heaviest of two or more modes holds the truth (within %.0f deg and %.0f mm), "
+              "by its weight: %s\n",
+              MixtureWeightReliability::kHeldYawDeg, MixtureWeightReliability::kHeldPositionMm,
+              weight_reliability.Text().c_str());
   std::sort(cpu_times.begin(), cpu_times.end());
   const double cpu_median = cpu_times.empty() ? 0 : cpu_times[cpu_times.size() / 2];
   std::printf("  time per frame (fit + Laplace, one thread): median %.1f ms, mean %.1f ms; "
@@ -1198,6 +1275,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
               {"yaw_within_5deg", yaw_within5},
               {"coverage_50", static_cast<double>(c50) / std::max(1, ok)},
               {"coverage_90", static_cast<double>(c90) / std::max(1, ok)},
+              {"mode_weight_reliability", weight_reliability.Json()},
               {"median_ms", median},
               {"mean_ms", mean_ms},
               {"cpu_median_ms", cpu_median},
@@ -1381,8 +1459,8 @@ void RegisterEvalGenerator(CLI::App& app, CommandBody* selected) {
                   "the mode and their errors, written atomically")
       ->needs("--diagnose");
   sub->add_option("--contacts-csv", flags->contacts_csv,
-                  "Write one CSV row per contact (truth, mode, posterior mean, errors; mm and "
-                  "degrees) to this file (atomically)");
+                  "Write one CSV row per contact (truth, mode, posterior mean, errors, the "
+                  "mode's weight; mm and degrees) to this file (atomically)");
   sub->add_flag("--json", flags->json, "Print the figures as one JSON line");
   sub->callback([flags, selected, per_tool]() {
     flags->contacts_per_tool_given = per_tool->count() > 0;

@@ -440,14 +440,15 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
   EXPECT_THAT(line, HasSubstr("mode_sd_x_mm,mode_sd_y_mm,mode_sd_yaw_deg"));
   EXPECT_THAT(line, HasSubstr("bound_sd_along_mm,bound_sd_across_mm,bound_sd_yaw_deg"));
   EXPECT_THAT(line, HasSubstr("frame_llr_truth_over_mode,trunk_llr_truth_over_mode"));
-  int count = 0, judged = 0;
+  EXPECT_THAT(line, HasSubstr(",mode_weight"));
+  int count = 0, judged = 0, several_modes = 0, several_held = 0;
   double sum_sq = 0, bound_sq = 0;
   while (std::getline(rows, line)) {
     std::vector<double> v;
     std::istringstream cells(line);
     std::string cell;
     while (std::getline(cells, cell, ',')) v.push_back(std::atof(cell.c_str()));
-    ASSERT_EQ(v.size(), 30u) << line;
+    ASSERT_EQ(v.size(), 31u) << line;
     // position_error_mm is the distance between the truth's and the mode's positions.
     EXPECT_NEAR(v[14], std::hypot(v[7] - v[3], v[8] - v[4]), 2e-4) << line;
     // The mode's Laplace sd along, across and in yaw (none for a C_inf tool, n = v[2] = 0).
@@ -476,11 +477,34 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
     if (wrong) {
       EXPECT_LE(v[29], v[27] + 0.01) << line;
     }
+    // The mode's weight among the true tool's modes (v[16] of them): all of it when it is
+    // the only one, and the heaviest share otherwise.
+    if (v[16] == 1) {
+      EXPECT_NEAR(v[30], 1.0, 1e-4) << line;
+    } else {
+      EXPECT_GE(v[30], 1.0 / v[16] - 1e-4) << line;
+      EXPECT_LE(v[30], 1.0) << line;
+      ++several_modes;
+      several_held += (v[2] == 0 || v[15] <= 10) && v[14] <= 1;
+    }
     judged += wrong;
     sum_sq += v[14] * v[14];
     bound_sq += v[21] * v[21] + v[22] * v[22];
     ++count;
   }
+  // The weights' reliability counts the contacts with two or more modes, and whether
+  // their heaviest holds the truth, as the rows do.
+  int reliability_contacts = 0, reliability_held = 0;
+  for (const auto& bin : eval["mode_weight_reliability"]) {
+    EXPECT_LT(bin["from"].get<double>(), bin["to"].get<double>());
+    EXPECT_GE(bin["mean_weight"].get<double>(), bin["from"].get<double>());
+    EXPECT_LE(bin["mean_weight"].get<double>(), bin["to"].get<double>());
+    reliability_contacts += bin["contacts"].get<int>();
+    reliability_held += bin["held_truth"].get<int>();
+  }
+  EXPECT_EQ(reliability_contacts, several_modes);
+  EXPECT_GT(several_modes, 0) << "the small test generator leaves contacts with several modes";
+  EXPECT_EQ(reliability_held, several_held);
   // The printed bound is the contacts' RMS; every wrong mode gets a verdict.
   const nlohmann::json& information = eval["information"];
   EXPECT_NEAR(std::sqrt(bound_sq / count), information["bound_rmse_mm"].get<double>(),
