@@ -38,8 +38,8 @@
 //     frame (fit + Laplace; wall clock and the thread's CPU time), and with --unknown-tool
 //     the tool identification rate; and how often the heaviest mode holds the truth
 //     (within 10 deg and 1 mm) against its weight, over the contacts with two or more
-//     modes (MixtureWeightReliability). --diagnose: for every contact whose mode is > 5 deg or
-//     > 1 mm off, the objective at the mode, the truth and the truth refined (a lower
+//     modes (MixtureWeightReliability). --diagnose: for every contact whose mode is > 5
+//     deg or > 1 mm off, the objective at the mode, the truth and the truth refined (a lower
 //     refined truth = a search failure, else a model failure), and over the whole frame
 //     at the mode, the truth and the trunk's own best latent (Ceres to convergence: how
 //     well any generator could render the frame through this trunk); --diagnose-picture:
@@ -51,8 +51,9 @@
 //     whether the frame itself prefers the truth's basin (JudgeWrongMode), and whether the
 //     trunk keeps that preference (TrunkLogLikelihoodRatio). --contacts-csv: one row
 //     per usable contact (truth, mode, posterior mean, errors, the mode's Laplace standard
-//     deviations, the mode's weight among the true tool's modes, with --information the bound's, the frame's and the trunk's verdict, with
-//     --diagnose a wrong mode's whole-frame objectives), written atomically; --picture FILE
+//     deviations, the mode's weight among the true tool's modes, with --information the
+//     bound's, the frame's and the trunk's verdict, with --diagnose a wrong mode's
+//     whole-frame objectives), written atomically; --picture FILE
 //     (with --information): each contact's error against its bound.
 #include <algorithm>
 #include <chrono>
