@@ -11,6 +11,7 @@
 
 #include "apps/command.h"
 #include "estimation/data/image_io.h"
+#include "models/core/internal/elapsed.h"
 #include "models/simulator/tool.h"
 #include "estimation/posterior/pose_posterior.h"
 #include "models/pose/pose_model_provenance.h"
@@ -127,8 +128,7 @@ EncodedFrameFit EncodeFrame(const LatentEncoder& encoder, SensorKind sensor,
   const auto start = std::chrono::steady_clock::now();
   const LatentEncoder::EncodedFrame fitted = encoder.EncodeTargets(sensor, targets, markers);
   EncodedFrameFit out;
-  out.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-               .count();
+  out.ms = internal::MsSince(start);
   out.latent = fitted.latent.cast<double>();
   out.psnr = fitted.psnr;
   return out;

@@ -14,6 +14,7 @@
 #include <boost/random/uniform_01.hpp>
 
 #include "models/core/internal/checks.h"
+#include "models/core/internal/elapsed.h"
 #include "models/core/internal/log_sum_exp.h"
 #include "models/core/seed.h"
 #include "samplers/sgld.h"
@@ -360,8 +361,7 @@ MetropolisResult SampleMetropolis(const LogDensityFunction& log_density, const E
     result.effective_sample_size[k] = EffectiveSampleSize(series);
     result.split_rhat[k] = SplitRhat(series);
   }
-  result.time_ms =
-      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  result.time_ms = internal::MsSince(t0);
   return result;
 }
 

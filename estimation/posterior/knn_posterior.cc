@@ -6,6 +6,8 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "models/core/internal/elapsed.h"
+
 namespace tactfunc {
 
 const char* ToString(KnnPosteriorTermination termination) {
@@ -116,8 +118,7 @@ KnnPosterior::Summary KnnPosterior::Posterior(const Eigen::VectorXd& query,
                           ? "the k-NN index is empty"
                           : "none of the " + std::to_string(search_k) +
                                 " nearest entries has a pose label (or the query is not finite)";
-    summary.total_time_ms =
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    summary.total_time_ms = internal::MsSince(start);
     return summary;
   }
   std::vector<double> w(n);
@@ -143,8 +144,7 @@ KnnPosterior::Summary KnnPosterior::Posterior(const Eigen::VectorXd& query,
   summary.termination_type = KnnPosteriorTermination::kSuccess;
   summary.message = std::to_string(n) + " labelled neighbours, " + ToString(options_.weighting) +
                     " weights";
-  summary.total_time_ms =
-      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  summary.total_time_ms = internal::MsSince(start);
   return summary;
 }
 
