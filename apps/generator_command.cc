@@ -429,6 +429,7 @@ struct EvalGeneratorFlags {
   int knn_k = GeneratorPosterior::Options().knn_k;
   int yaw_grid = GeneratorPosterior::Options().yaw_grid;
   int coarse_pixels = GeneratorPosterior::Options().coarse_pixels;
+  double tool_prune_ratio = GeneratorPosterior::Options().tool_prune_ratio;
   int final_pixels = GeneratorPosterior::Options().final_pixels;
   double position_grid_mm = 1e3 * GeneratorPosterior::Options().position_grid_m;
   int position_rings = GeneratorPosterior::Options().position_grid_rings;
@@ -804,6 +805,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
   options.knn_k = flags.knn_k;
   options.yaw_grid = flags.yaw_grid;
   options.coarse_pixels = flags.coarse_pixels;
+  options.tool_prune_ratio = flags.tool_prune_ratio;
   options.final_pixels = flags.final_pixels;
   options.position_grid_m = 1e-3 * flags.position_grid_mm;
   options.position_grid_rings = flags.position_rings;
@@ -823,6 +825,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
                           "eval-generator", "--allow-other-frames", flags.allow_other_frames);
   }
   int contacts = 0, failures = 0, c50 = 0, c90 = 0, yaw_count = 0, identified = 0;
+  long tools_refined = 0;
   double pos_sq = 0, yaw_sq = 0;
   double mean_pos_sq = 0, mean_yaw_sq = 0;  // of the posterior mean
   std::vector<double> mean_yaw_errors;
@@ -934,6 +937,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
     times.push_back(s.total_time_ms);
     cpu_times.push_back(s.cpu_time_ms);
     identified += s.tool == tools[t];
+    tools_refined += s.tools_refined;
     const int n = generator.SymmetryOrder(static_cast<int>(t));
     const SE2d& truth = contact.sensor_T_object;
     // Score the mode of the true tool's components (the tool-conditional posterior):
@@ -952,8 +956,10 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
     const double dp = std::pow(mode.x() - truth.x(), 2) + std::pow(mode.y() - truth.y(), 2);
     pos_sq += dp;
     position_errors.push_back(std::sqrt(dp));
-    // And the posterior mean of the true tool's components (PoseMixture::Mean).
-    const SE2d mean = mixture.Mean(tools[t]);
+    // And the posterior mean of the true tool's components (PoseMixture::Mean); that of
+    // the most probable tool if the true one has none (its fits failed, or the tool
+    // unknown, it was pruned after the coarse stage), as the mode above.
+    const SE2d mean = true_mode != nullptr ? mixture.Mean(tools[t]) : mixture.Mean();
     mean_pos_sq += std::pow(mean.x() - truth.x(), 2) + std::pow(mean.y() - truth.y(), 2);
     if (n != 0) {
       const double e = YawErrorModuloSymmetry(mean.yaw(), truth.yaw(), n);
@@ -1257,7 +1263,9 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
     }
   }
   if (flags.unknown_tool) {
-    std::printf("  tool identified: %.3f\n", static_cast<double>(identified) / std::max(1, ok));
+    std::printf("  tool identified: %.3f; tools refined past the coarse stage: %.2f per frame\n",
+                static_cast<double>(identified) / std::max(1, ok),
+                static_cast<double>(tools_refined) / std::max(1, ok));
   }
   for (const auto& [tool, v] : per_tool_pos) {
     std::printf("  %-11s position RMSE %.3f mm\n", tool.c_str(), 1e3 * std::sqrt(v.first / v.second));
@@ -1283,7 +1291,11 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
               {"information", information_json},
               {"tool_identified",
                flags.unknown_tool ? NumberOrNull(static_cast<double>(identified) / std::max(1, ok))
-                                  : nlohmann::json()}});
+                                  : nlohmann::json()},
+              {"tools_refined_per_frame",
+               flags.unknown_tool
+                   ? NumberOrNull(static_cast<double>(tools_refined) / std::max(1, ok))
+                   : nlohmann::json()}});
   }
 }
 
@@ -1415,6 +1427,18 @@ void RegisterEvalGenerator(CLI::App& app, CommandBody* selected) {
                   "Pixels of the coarse stage (start scoring and first refinement; default " +
                       std::to_string(flags->coarse_pixels) + ", 0 = none)")
       ->check(CLI::Range(0, 1 << 20));
+  sub->add_option("--tool-prune-ratio", flags->tool_prune_ratio,
+                  "With --unknown-tool: tools whose best cost after the coarse stage exceeds R "
+                  "times the best tool's are not refined further (default " +
+                      FormatFixed(flags->tool_prune_ratio, 1) +
+                      "; 0 = every tool refined, else >= 1)")
+      ->check(CLI::Range(0.0, 1e12))
+      ->check([](const std::string& v) {
+        char* end = nullptr;
+        const double r = std::strtod(v.c_str(), &end);
+        const bool ok = end != v.c_str() && (r == 0 || r >= 1);
+        return ok ? std::string() : "the ratio must be 0 (off) or >= 1, got " + v;
+      });
   sub->add_option("--final-pixels", flags->final_pixels,
                   "Pixels of a final stage that refines every distinct mode again and takes its "
                   "Laplace approximation there (all valid pixels when the frame has fewer; 0 = "

@@ -297,6 +297,9 @@ bool GeneratorPosterior::Options::IsValid(std::string* error) const {
   if (knn_k < 0) return fail("knn_k must be >= 0");
   if (yaw_grid < 1) return fail("yaw_grid must be >= 1");
   if (coarse_pixels < 0) return fail("coarse_pixels must be >= 0");
+  if (!(tool_prune_ratio == 0 || tool_prune_ratio >= 1)) {
+    return fail("tool_prune_ratio must be 0 (off) or >= 1");
+  }
   if (final_pixels < -1) return fail("final_pixels must be >= 0, or -1 for the generator's");
   if (position_grid_rings < 0) return fail("position_grid_rings must be >= 0");
   if (!(position_grid_m >= 0) || !std::isfinite(position_grid_m)) {
@@ -490,22 +493,45 @@ GeneratorPosterior::Summary GeneratorPosterior::Estimate(const TrunkTargets& tar
   };
   std::vector<ToolModes> all;
   double best_msr = std::numeric_limits<double>::infinity();
-  for (int t : candidates) {
-    const std::vector<PoseStart> starts =
-        Starts(problem, query, t, pose_mlp_ != nullptr ? &mlp_query : nullptr);
-    summary.num_starts += static_cast<int>(starts.size());
-    ToolModes tm{t, FitPoseModes(problem, *generator_, t, starts, options_.fit,
-                                          coarse ? &*coarse : nullptr)};
+  // The search's modes of tool t, refined once more on the final problem (step 2b).
+  auto keep = [&](int t, std::vector<PoseFit> modes) {
+    ++summary.tools_refined;
+    ToolModes tm{t, std::move(modes)};
     if (final_problem) {
       // Step 2b: each distinct mode refined again, as a start of its own.
-      std::vector<PoseStart> modes;
-      for (const PoseFit& f : tm.modes) modes.push_back({f.sensor_T_object, f.depth_m, f.start});
+      std::vector<PoseStart> starts;
+      for (const PoseFit& f : tm.modes) starts.push_back({f.sensor_T_object, f.depth_m, f.start});
       PoseFitOptions fo = options_.fit;
-      fo.max_refined_starts = std::max(1, static_cast<int>(modes.size()));
-      tm.modes = FitPoseModes(*final_problem, *generator_, t, modes, fo, nullptr);
+      fo.max_refined_starts = std::max(1, static_cast<int>(starts.size()));
+      tm.modes = FitPoseModes(*final_problem, *generator_, t, starts, fo, nullptr);
     }
     for (const PoseFit& f : tm.modes) best_msr = std::min(best_msr, f.mean_squared_residual);
     all.push_back(std::move(tm));
+  };
+  auto starts_of = [&](int t) {
+    std::vector<PoseStart> starts =
+        Starts(problem, query, t, pose_mlp_ != nullptr ? &mlp_query : nullptr);
+    summary.num_starts += static_cast<int>(starts.size());
+    return starts;
+  };
+  if (coarse) {
+    // The coarse stage for every candidate first, so that tools can be compared after it.
+    std::vector<CoarseStarts> first;
+    double lowest = std::numeric_limits<double>::infinity();
+    for (int t : candidates) {
+      first.push_back(CoarsePoseStarts(*coarse, *generator_, t, starts_of(t), options_.fit));
+      lowest = std::min(lowest, first.back().BestCost());
+    }
+    const bool prune = candidates.size() > 1 && options_.tool_prune_ratio > 0;
+    for (std::size_t i = 0; i < candidates.size(); ++i) {
+      if (prune && !(first[i].BestCost() <= options_.tool_prune_ratio * lowest)) continue;
+      keep(candidates[i],
+           FitPoseModesFromCoarse(problem, *generator_, candidates[i], first[i], options_.fit));
+    }
+  } else {
+    for (int t : candidates) {
+      keep(t, FitPoseModes(problem, *generator_, t, starts_of(t), options_.fit, nullptr));
+    }
   }
   const auto t1 = std::chrono::steady_clock::now();
   summary.fit_time_ms = Ms(t0, t1);

@@ -15,7 +15,11 @@
 //      every start position is also tried at a grid of yaws (Options::yaw_grid);
 //   2. modes: FitPoseModes (estimation/synthesis/pose_fitter.h) in Ceres on SE(2), the
 //      starts scored and first refined on Options::coarse_pixels pixels of the frame (both
-//      stages draw their pixels partly towards the contact, Options::problem);
+//      stages draw their pixels partly towards the contact, Options::problem); with the
+//      tool unknown, the coarse stage of every tool runs first, and a tool whose lowest
+//      coarse cost exceeds Options::tool_prune_ratio times the lowest of any tool goes no
+//      further (no modes, probability 0; docs/POSES.md, "Pruning tools when the tool is
+//      unknown", measures what it changes);
 //   2b. optionally (Options::final_pixels > 0), every distinct mode refined again on a
 //      problem of that many pixels (all valid pixels when the frame has no more), where
 //      its cost and Jacobian for step 3 are then taken: the few pixels of the search can
@@ -192,6 +196,11 @@ class GeneratorPosterior {
     // Pixels of the coarse stage (scoring the starts, their first refinement,
     // pose_fitter.h); 0 = no coarse stage (the starts are scored on the full problem).
     int coarse_pixels = 128;
+    // Tool pruning, with two or more candidate tools (the tool unknown) and a coarse
+    // stage: a tool whose lowest cost after the coarse stage exceeds this ratio times the
+    // lowest of any tool is not refined further and gets no weight; 0 = every tool refined,
+    // else >= 1.
+    double tool_prune_ratio = 2;
     // Pixels of the final stage (step 2b; drawn as Options::problem draws, all valid
     // pixels evenly when it holds as many); 0 = none, the modes as the search left them;
     // -1 = the generator's (the stage its kappa and tau were calibrated with,
@@ -230,6 +239,7 @@ class GeneratorPosterior {
     double pixel_factor = 1;  // sqrt(N / min(768, valid pixels)) (header comment)
     double rms_residual = 0;  // of the best mode (normalised units)
     int num_starts = 0, num_modes = 0;
+    int tools_refined = 0;  // tools past the coarse stage (Options::tool_prune_ratio)
     double fit_time_ms = 0, total_time_ms = 0;  // wall clock
     double cpu_time_ms = 0;  // the calling thread's CPU time over the whole estimate
     std::string BriefReport() const;

@@ -5,6 +5,8 @@
 #include <cmath>
 #include <limits>
 #include <stdexcept>
+#include <string>
+#include <utility>
 #include <vector>
 
 #include "ceres/problem.h"
@@ -252,44 +254,36 @@ std::vector<int> BestDistinct(const std::vector<std::pair<double, int>>& scored,
 
 }  // namespace
 
-std::vector<PoseFit> FitPoseModes(const LatentProblem& problem, const PoseGenerator& generator,
-                                  int tool_index, const std::vector<PoseStart>& starts_in,
-                                  const PoseFitOptions& options, const LatentProblem* coarse) {
+namespace {
+
+// (cost, index) of every start, lowest cost first (ties in index order).
+std::vector<std::pair<double, int>> Sorted(const std::vector<double>& costs) {
+  std::vector<std::pair<double, int>> scored;
+  for (std::size_t i = 0; i < costs.size(); ++i) scored.emplace_back(costs[i], static_cast<int>(i));
+  std::stable_sort(scored.begin(), scored.end(),
+                   [](const auto& a, const auto& b) { return a.first < b.first; });
+  return scored;
+}
+
+std::vector<PoseStart> Clamped(std::vector<PoseStart> starts, const PoseFitOptions& options) {
+  for (PoseStart& s : starts) {
+    s.depth_m = std::clamp(s.depth_m, options.depth_min_m, options.depth_max_m);
+  }
+  return starts;
+}
+
+void CheckSearch(const PoseFitOptions& options, bool have_starts, const char* who) {
   std::string error;
   if (!options.IsValid(&error)) throw std::invalid_argument(error);
-  if (starts_in.empty()) throw std::invalid_argument("FitPoseModes: no starts");
-  const int n = generator.SymmetryOrder(tool_index);
-  const LatentProblem& scoring = coarse != nullptr ? *coarse : problem;
-  std::vector<PoseStart> starts = starts_in;
-  for (PoseStart& s : starts) s.depth_m = std::clamp(s.depth_m, options.depth_min_m, options.depth_max_m);
-  // Score every start (one forward pass each); sort by cost.
-  auto score = [&](const std::vector<PoseStart>& list) {
-    const std::vector<double> costs = PoseCosts(scoring, generator, tool_index, list);
-    std::vector<std::pair<double, int>> scored;
-    for (std::size_t i = 0; i < list.size(); ++i) scored.emplace_back(costs[i], static_cast<int>(i));
-    std::stable_sort(scored.begin(), scored.end(),
-                     [](const auto& a, const auto& b) { return a.first < b.first; });
-    return scored;
-  };
-  std::vector<int> chosen;
-  if (coarse != nullptr) {
-    // Stage 1: refine the best distinct starts on the coarse problem, re-score.
-    const std::vector<int> first =
-        BestDistinct(score(starts), starts, n, options.coarse_refined_starts, options,
-                     /*yaw_only=*/true);
-    std::vector<PoseStart> refined;
-    for (int i : first) {
-      double pose[3] = {starts[i].sensor_T_object.x(), starts[i].sensor_T_object.y(),
-                        starts[i].sensor_T_object.yaw()};
-      double depth = starts[i].depth_m;
-      GeneratorPoseCost cost(*coarse, generator, tool_index);
-      Refine(&cost, options, options.coarse_iterations, pose, &depth);
-      refined.push_back({SE2d::FromXYYaw(pose[0], pose[1], pose[2]), depth, starts[i].source});
-    }
-    starts = std::move(refined);
-  }
-  chosen = BestDistinct(score(starts), starts, n, options.max_refined_starts, options);
+  if (!have_starts) throw std::invalid_argument(std::string(who) + ": no starts");
+}
 
+// The search's last stage: starts[chosen] refined on the full problem, the distinct usable
+// modes kept, lowest cost first.
+std::vector<PoseFit> RefineModes(const LatentProblem& problem, const PoseGenerator& generator,
+                                 int tool_index, const std::vector<PoseStart>& starts,
+                                 const std::vector<int>& chosen, const PoseFitOptions& options) {
+  const int n = generator.SymmetryOrder(tool_index);
   std::vector<PoseFit> modes;
   for (int i : chosen) {
     double pose[3] = {starts[i].sensor_T_object.x(), starts[i].sensor_T_object.y(),
@@ -326,6 +320,69 @@ std::vector<PoseFit> FitPoseModes(const LatentProblem& problem, const PoseGenera
   std::sort(modes.begin(), modes.end(),
             [](const PoseFit& a, const PoseFit& b) { return a.cost < b.cost; });
   return modes;
+}
+
+}  // namespace
+
+double CoarseStarts::BestCost() const {
+  double best = std::numeric_limits<double>::infinity();
+  for (double c : costs) best = std::min(best, c);
+  return best;
+}
+
+CoarseStarts CoarsePoseStarts(const LatentProblem& coarse, const PoseGenerator& generator,
+                              int tool_index, const std::vector<PoseStart>& starts_in,
+                              const PoseFitOptions& options) {
+  CheckSearch(options, !starts_in.empty(), "CoarsePoseStarts");
+  const int n = generator.SymmetryOrder(tool_index);
+  const std::vector<PoseStart> starts = Clamped(starts_in, options);
+  // Stage 1: refine the best distinct starts on the coarse problem, re-score.
+  const std::vector<int> first =
+      BestDistinct(Sorted(PoseCosts(coarse, generator, tool_index, starts)), starts, n,
+                   options.coarse_refined_starts, options, /*yaw_only=*/true);
+  CoarseStarts out;
+  for (int i : first) {
+    double pose[3] = {starts[i].sensor_T_object.x(), starts[i].sensor_T_object.y(),
+                      starts[i].sensor_T_object.yaw()};
+    double depth = starts[i].depth_m;
+    GeneratorPoseCost cost(coarse, generator, tool_index);
+    Refine(&cost, options, options.coarse_iterations, pose, &depth);
+    out.starts.push_back({SE2d::FromXYYaw(pose[0], pose[1], pose[2]), depth, starts[i].source});
+  }
+  out.costs = PoseCosts(coarse, generator, tool_index, out.starts);
+  return out;
+}
+
+std::vector<PoseFit> FitPoseModesFromCoarse(const LatentProblem& problem,
+                                            const PoseGenerator& generator, int tool_index,
+                                            const CoarseStarts& coarse_starts,
+                                            const PoseFitOptions& options) {
+  CheckSearch(options, true, "FitPoseModesFromCoarse");
+  if (coarse_starts.costs.size() != coarse_starts.starts.size()) {
+    throw std::invalid_argument("FitPoseModesFromCoarse: " +
+                                std::to_string(coarse_starts.costs.size()) + " costs for " +
+                                std::to_string(coarse_starts.starts.size()) + " starts");
+  }
+  const std::vector<int> chosen =
+      BestDistinct(Sorted(coarse_starts.costs), coarse_starts.starts,
+                   generator.SymmetryOrder(tool_index), options.max_refined_starts, options);
+  return RefineModes(problem, generator, tool_index, coarse_starts.starts, chosen, options);
+}
+
+std::vector<PoseFit> FitPoseModes(const LatentProblem& problem, const PoseGenerator& generator,
+                                  int tool_index, const std::vector<PoseStart>& starts_in,
+                                  const PoseFitOptions& options, const LatentProblem* coarse) {
+  CheckSearch(options, !starts_in.empty(), "FitPoseModes");
+  if (coarse != nullptr) {
+    return FitPoseModesFromCoarse(
+        problem, generator, tool_index,
+        CoarsePoseStarts(*coarse, generator, tool_index, starts_in, options), options);
+  }
+  const std::vector<PoseStart> starts = Clamped(starts_in, options);
+  const std::vector<int> chosen =
+      BestDistinct(Sorted(PoseCosts(problem, generator, tool_index, starts)), starts,
+                   generator.SymmetryOrder(tool_index), options.max_refined_starts, options);
+  return RefineModes(problem, generator, tool_index, starts, chosen, options);
 }
 
 }  // namespace tactfunc

@@ -113,6 +113,26 @@ std::vector<PoseFit> FitPoseModes(const LatentProblem& problem, const PoseGenera
                                   const PoseFitOptions& options,
                                   const LatentProblem* coarse = nullptr);
 
+// FitPoseModes with a coarse problem, in its two stages, for a caller that compares tools
+// between them (GeneratorPosterior's tool pruning). CoarsePoseStarts is the first: the
+// starts scored on `coarse`, the best of its distinct yaws refined there; the refined
+// starts come back with their costs on `coarse`. FitPoseModesFromCoarse is the rest:
+// FitPoseModes(problem, ..., starts, options, &coarse) returns exactly
+// FitPoseModesFromCoarse(problem, ..., CoarsePoseStarts(coarse, ..., starts, options),
+// options).
+struct CoarseStarts {
+  std::vector<PoseStart> starts;
+  std::vector<double> costs;  // 1/2 ||r||^2 on the coarse problem, one per start
+  double BestCost() const;    // +inf if there is none
+};
+CoarseStarts CoarsePoseStarts(const LatentProblem& coarse, const PoseGenerator& generator,
+                              int tool_index, const std::vector<PoseStart>& starts,
+                              const PoseFitOptions& options);
+std::vector<PoseFit> FitPoseModesFromCoarse(const LatentProblem& problem,
+                                            const PoseGenerator& generator, int tool_index,
+                                            const CoarseStarts& coarse_starts,
+                                            const PoseFitOptions& options);
+
 // 1/2 ||r||^2 (problem sigma) at one pose, one forward pass; +inf if not finite.
 double PoseCost(const LatentProblem& problem, const PoseGenerator& generator, int tool_index,
                 const SE2d& sensor_T_object, double depth_m);

@@ -639,6 +639,22 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
           " --contacts-per-tool 1 --tools spoon");
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_THAT(r.err, HasSubstr("--tools: 'spoon'"));
+  // The tool unknown: how many tools went past the coarse stage, all of them without
+  // pruning; a ratio between 0 and 1 is refused.
+  const std::string unknown_eval = "eval-generator --model " + Root("m.tfm") + " --generator " +
+                              Root("g.tpg") + " --contacts-per-tool 1 --tools rod,square " +
+                              "--unknown-tool --json";
+  r = Run(unknown_eval + " --tool-prune-ratio 0");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("tools refined past the coarse stage"));
+  EXPECT_DOUBLE_EQ(r.LastJson()["tools_refined_per_frame"].get<double>(), 12.0);
+  r = Run(unknown_eval + " --tool-prune-ratio 1");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_GE(r.LastJson()["tools_refined_per_frame"].get<double>(), 1.0);
+  EXPECT_LT(r.LastJson()["tools_refined_per_frame"].get<double>(), 12.0);
+  r = Run(unknown_eval + " --tool-prune-ratio 0.5");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("must be 0 (off) or >= 1, got 0.5"));
   EXPECT_EQ(count, eval["contacts"].get<int>() - eval["failures"].get<int>());  // usable ones
   EXPECT_GT(count, 0);
   EXPECT_NEAR(std::sqrt(sum_sq / count), eval["rmse_mm"].get<double>(),

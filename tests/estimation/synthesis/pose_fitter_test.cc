@@ -4,11 +4,13 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <memory>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "ceres/autodiff_cost_function.h"
@@ -229,18 +231,32 @@ TEST(FitPoseModes, StepsPastADepthBoundEndOnTheBound) {
   EXPECT_LT(free[0].cost, bounded[0].cost);
 }
 
+// A frame's problem (every pixel, sigma 0.01) and a coarse one on 40 of its pixels; it
+// holds the frame, which the problems refer to.
+struct TwoProblems {
+  TwoProblems(const SensorTrunk& trunk, TrunkTargets frame)
+      : targets(std::move(frame)),
+        problem(trunk, targets, Options(0)),
+        coarse(trunk, targets, Options(40)) {}
+  static LatentProblem::Options Options(int max_pixels) {
+    LatentProblem::Options po;
+    po.sigma = 0.01;
+    po.max_pixels = max_pixels;
+    return po;
+  }
+  TrunkTargets targets;
+  LatentProblem problem, coarse;
+};
+
 TEST(FitPoseModes, AModesCostAndJtJAreThoseOfAnEvaluationAtIt) {
   // The fit takes them from the minimizer's last Jacobian evaluation; they must be the
   // ones a new evaluation at the returned pose and depth gives, on both stages.
   const SensorTrunk trunk = Trunk();
   const PoseGenerator g = Generator();
-  const TrunkTargets targets = Render(trunk, g, 0, SE2d::FromXYYaw(-0.4e-3, 0.9e-3, 1.1), 0.009,
-                                      0.02);
-  LatentProblem::Options po;
-  po.sigma = 0.01;
-  const LatentProblem problem(trunk, targets, po);
-  po.max_pixels = 40;
-  const LatentProblem coarse(trunk, targets, po);
+  const TwoProblems two(trunk, Render(trunk, g, 0, SE2d::FromXYYaw(-0.4e-3, 0.9e-3, 1.1), 0.009,
+                                      0.02));
+  const LatentProblem& problem = two.problem;
+  const LatentProblem& coarse = two.coarse;
   PoseFitOptions options;
   options.max_iterations = 3;  // stopped before convergence, too
   const std::vector<PoseStart> starts = {{SE2d::FromXYYaw(-0.2e-3, 0.7e-3, 0.9), 0.0080, "a"},
@@ -267,6 +283,50 @@ TEST(FitPoseModes, AModesCostAndJtJAreThoseOfAnEvaluationAtIt) {
       EXPECT_LE((f.JtJ - JtJ).norm(), 1e-9 * JtJ.norm()) << f.JtJ << "\n\n" << JtJ;
     }
   }
+}
+
+TEST(FitPoseModes, ItsTwoStagesRunApartGiveTheSameModes) {
+  // GeneratorPosterior's tool pruning runs the coarse stage of every tool before the rest
+  // of any; the modes must be those of the search run in one go.
+  const SensorTrunk trunk = Trunk();
+  const PoseGenerator g = Generator();
+  const TwoProblems two(trunk, Render(trunk, g, 1, SE2d::FromXYYaw(0.6e-3, -0.3e-3, 0.4), 0.010,
+                                      0.02));
+  const LatentProblem& problem = two.problem;
+  const LatentProblem& coarse = two.coarse;
+  PoseFitOptions options;
+  options.coarse_refined_starts = 3;
+  options.max_refined_starts = 2;
+  std::vector<PoseStart> starts;
+  for (int k = 0; k < 6; ++k) {
+    starts.push_back({SE2d::FromXYYaw(0.2e-3 * k, -0.1e-3 * k, -3.0 + k), 0.004 + 0.002 * k,
+                      "s" + std::to_string(k)});
+  }
+  starts.push_back({SE2d::FromXYYaw(0, 0, 0), 0.03, "deep"});  // clamped to the bound
+  const CoarseStarts first = CoarsePoseStarts(coarse, g, 1, starts, options);
+  ASSERT_EQ(first.starts.size(), 3u);
+  ASSERT_EQ(first.costs.size(), 3u);
+  EXPECT_EQ(first.BestCost(), *std::min_element(first.costs.begin(), first.costs.end()));
+  for (std::size_t i = 0; i < first.starts.size(); ++i) {
+    EXPECT_EQ(first.costs[i], PoseCost(coarse, g, 1, first.starts[i].sensor_T_object,
+                                       first.starts[i].depth_m));
+  }
+  const std::vector<PoseFit> apart = FitPoseModesFromCoarse(problem, g, 1, first, options);
+  const std::vector<PoseFit> together = FitPoseModes(problem, g, 1, starts, options, &coarse);
+  ASSERT_FALSE(together.empty());
+  ASSERT_EQ(apart.size(), together.size());
+  for (std::size_t i = 0; i < apart.size(); ++i) {
+    EXPECT_EQ(apart[i].sensor_T_object.x(), together[i].sensor_T_object.x());
+    EXPECT_EQ(apart[i].sensor_T_object.yaw(), together[i].sensor_T_object.yaw());
+    EXPECT_EQ(apart[i].depth_m, together[i].depth_m);
+    EXPECT_EQ(apart[i].cost, together[i].cost);
+    EXPECT_EQ(apart[i].start, together[i].start);
+  }
+  EXPECT_THROW(CoarsePoseStarts(coarse, g, 1, {}, options), std::invalid_argument);
+  CoarseStarts broken = first;
+  broken.costs.pop_back();
+  EXPECT_THROW(FitPoseModesFromCoarse(problem, g, 1, broken, options), std::invalid_argument);
+  EXPECT_EQ(CoarseStarts().BestCost(), std::numeric_limits<double>::infinity());
 }
 
 LaplaceComponent Component(const std::string& tool, int n, double weight, const SE2d& mean) {
@@ -318,11 +378,18 @@ TEST(PoseMixture, MeanGivesTheYawNearestTheHeaviestModeNotAnotherRepresentative)
   EXPECT_NEAR(std::abs(l.Mean().yaw()), M_PI, 1e-9);
 }
 
+// An l_shape frame (the generator's tool 0) with a little noise, the tool the two
+// GeneratorPosterior tests below ask to be found among both.
+const SE2d kLShapeTruth = SE2d::FromXYYaw(-0.7e-3, 0.4e-3, -1.0);
+TrunkTargets LShapeFrame(const SensorTrunk& trunk, const PoseGenerator& g) {
+  return Render(trunk, g, 0, kLShapeTruth, 0.010, 0.002);
+}
+
 TEST(GeneratorPosterior, LaplaceCoversTheTruthAndPrefersTheRenderingTool) {
   const SensorTrunk trunk = Trunk();
   const PoseGenerator g = Generator();
-  const SE2d truth = SE2d::FromXYYaw(-0.7e-3, 0.4e-3, -1.0);
-  const TrunkTargets targets = Render(trunk, g, 0, truth, 0.010, 0.002);
+  const SE2d& truth = kLShapeTruth;
+  const TrunkTargets targets = LShapeFrame(trunk, g);
   GeneratorPosterior::Options options;
   options.sigma_inflation = 1;
   options.fit.max_iterations = 50;
@@ -346,6 +413,57 @@ TEST(GeneratorPosterior, LaplaceCoversTheTruthAndPrefersTheRenderingTool) {
   PoseMixture again;
   posterior.Estimate(targets, "", &again);
   EXPECT_EQ(again.Mode().x(), posterior.Estimate(targets, "", &mixture).mean.x());
+}
+
+TEST(GeneratorPosterior, ToolPruningRefinesOnlyTheToolsNearTheBestAndKeepsTheirModes) {
+  const SensorTrunk trunk = Trunk();
+  const PoseGenerator g = Generator();
+  const TrunkTargets targets = LShapeFrame(trunk, g);
+  GeneratorPosterior::Options options;
+  options.sigma_inflation = 1;
+  EXPECT_EQ(options.tool_prune_ratio, 2);  // the default: on
+  options.tool_prune_ratio = 1;
+  {
+    // Without a coarse stage (the frame has no more pixels than it) nothing is pruned.
+    PoseMixture m;
+    EXPECT_EQ(GeneratorPosterior(trunk, g, options).Estimate(targets, "", &m).tools_refined, 2);
+  }
+  options.coarse_pixels = 40;  // tools are compared after it
+  options.tool_prune_ratio = 0;
+  PoseMixture every, pruned;
+  const GeneratorPosterior::Summary all =
+      GeneratorPosterior(trunk, g, options).Estimate(targets, "", &every);
+  ASSERT_TRUE(all.usable) << all.message;
+  EXPECT_EQ(all.tools_refined, 2);
+  ASSERT_EQ(all.tool, "l_shape");
+  // At ratio 1 only the tool of the lowest coarse cost goes on: the rendering one.
+  options.tool_prune_ratio = 1;
+  const GeneratorPosterior::Summary one =
+      GeneratorPosterior(trunk, g, options).Estimate(targets, "", &pruned);
+  ASSERT_TRUE(one.usable) << one.message;
+  EXPECT_EQ(one.tools_refined, 1);
+  EXPECT_EQ(one.tool, "l_shape");
+  EXPECT_EQ(one.tool_probabilities.at("rod"), 0);  // listed, with no weight
+  EXPECT_EQ(one.tool_probabilities.at("l_shape"), 1);
+  // The kept tool's modes are the ones the unpruned search found, to the bit.
+  std::vector<const LaplaceComponent*> kept;
+  for (const LaplaceComponent& c : every.components()) {
+    if (c.tool == "l_shape") kept.push_back(&c);
+  }
+  ASSERT_EQ(pruned.components().size(), kept.size());
+  for (std::size_t i = 0; i < kept.size(); ++i) {
+    EXPECT_EQ(pruned.components()[i].tool, "l_shape");
+    EXPECT_EQ(pruned.components()[i].mean.x(), kept[i]->mean.x());
+    EXPECT_EQ(pruned.components()[i].mean.yaw(), kept[i]->mean.yaw());
+    EXPECT_EQ(pruned.components()[i].log_likelihood, kept[i]->log_likelihood);
+  }
+  // A named tool is the only candidate: nothing to prune.
+  EXPECT_EQ(GeneratorPosterior(trunk, g, options).Estimate(targets, "rod", &pruned).tools_refined,
+            1);
+  options.tool_prune_ratio = 0.5;
+  std::string error;
+  EXPECT_FALSE(options.IsValid(&error));
+  EXPECT_THAT(error, ::testing::HasSubstr("tool_prune_ratio"));
 }
 
 // The final stage refines each mode again on more pixels and takes the Laplace
