@@ -252,10 +252,6 @@ std::vector<int> BestDistinct(const std::vector<std::pair<double, int>>& scored,
   return chosen;
 }
 
-}  // namespace
-
-namespace {
-
 // (cost, index) of every start, lowest cost first (ties in index order).
 std::vector<std::pair<double, int>> Sorted(const std::vector<double>& costs) {
   std::vector<std::pair<double, int>> scored;
@@ -378,11 +374,10 @@ std::vector<PoseFit> FitPoseModes(const LatentProblem& problem, const PoseGenera
         problem, generator, tool_index,
         CoarsePoseStarts(*coarse, generator, tool_index, starts_in, options), options);
   }
-  const std::vector<PoseStart> starts = Clamped(starts_in, options);
-  const std::vector<int> chosen =
-      BestDistinct(Sorted(PoseCosts(problem, generator, tool_index, starts)), starts,
-                   generator.SymmetryOrder(tool_index), options.max_refined_starts, options);
-  return RefineModes(problem, generator, tool_index, starts, chosen, options);
+  // One stage: the starts as they are, scored on the full problem.
+  CoarseStarts scored{Clamped(starts_in, options), {}};
+  scored.costs = PoseCosts(problem, generator, tool_index, scored.starts);
+  return FitPoseModesFromCoarse(problem, generator, tool_index, scored, options);
 }
 
 }  // namespace tactfunc
