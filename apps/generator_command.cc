@@ -430,6 +430,7 @@ struct EvalGeneratorFlags {
   int yaw_grid = GeneratorPosterior::Options().yaw_grid;
   int coarse_pixels = GeneratorPosterior::Options().coarse_pixels;
   double tool_prune_ratio = GeneratorPosterior::Options().tool_prune_ratio;
+  bool tool_screen = GeneratorPosterior::Options().tool_screen;
   int final_pixels = GeneratorPosterior::Options().final_pixels;
   double position_grid_mm = 1e3 * GeneratorPosterior::Options().position_grid_m;
   int position_rings = GeneratorPosterior::Options().position_grid_rings;
@@ -806,6 +807,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
   options.yaw_grid = flags.yaw_grid;
   options.coarse_pixels = flags.coarse_pixels;
   options.tool_prune_ratio = flags.tool_prune_ratio;
+  options.tool_screen = flags.tool_screen;
   options.final_pixels = flags.final_pixels;
   options.position_grid_m = 1e-3 * flags.position_grid_mm;
   options.position_grid_rings = flags.position_rings;
@@ -825,7 +827,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
                           "eval-generator", "--allow-other-frames", flags.allow_other_frames);
   }
   int contacts = 0, failures = 0, c50 = 0, c90 = 0, yaw_count = 0, identified = 0;
-  long tools_refined = 0;
+  long tools_refined = 0, tools_screened_in = 0;
   double pos_sq = 0, yaw_sq = 0;
   double mean_pos_sq = 0, mean_yaw_sq = 0;  // of the posterior mean
   std::vector<double> mean_yaw_errors;
@@ -938,6 +940,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
     cpu_times.push_back(s.cpu_time_ms);
     identified += s.tool == tools[t];
     tools_refined += s.tools_refined;
+    tools_screened_in += s.tools_screened_in;
     const int n = generator.SymmetryOrder(static_cast<int>(t));
     const SE2d& truth = contact.sensor_T_object;
     // Score the mode of the true tool's components (the tool-conditional posterior):
@@ -1263,9 +1266,12 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
     }
   }
   if (flags.unknown_tool) {
-    std::printf("  tool identified: %.3f; tools refined past the coarse stage: %.2f per frame\n",
-                static_cast<double>(identified) / std::max(1, ok),
-                static_cast<double>(tools_refined) / std::max(1, ok));
+    std::printf(
+        "  tool identified: %.3f; tools per frame: %.2f past the screening, %.2f refined past "
+        "the coarse stage\n",
+        static_cast<double>(identified) / std::max(1, ok),
+        static_cast<double>(tools_screened_in) / std::max(1, ok),
+        static_cast<double>(tools_refined) / std::max(1, ok));
   }
   for (const auto& [tool, v] : per_tool_pos) {
     std::printf("  %-11s position RMSE %.3f mm\n", tool.c_str(), 1e3 * std::sqrt(v.first / v.second));
@@ -1292,6 +1298,10 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
               {"tool_identified",
                flags.unknown_tool ? NumberOrNull(static_cast<double>(identified) / std::max(1, ok))
                                   : nlohmann::json()},
+              {"tools_screened_in_per_frame",
+               flags.unknown_tool
+                   ? NumberOrNull(static_cast<double>(tools_screened_in) / std::max(1, ok))
+                   : nlohmann::json()},
               {"tools_refined_per_frame",
                flags.unknown_tool
                    ? NumberOrNull(static_cast<double>(tools_refined) / std::max(1, ok))
@@ -1427,6 +1437,10 @@ void RegisterEvalGenerator(CLI::App& app, CommandBody* selected) {
                   "Pixels of the coarse stage (start scoring and first refinement; default " +
                       std::to_string(flags->coarse_pixels) + ", 0 = none)")
       ->check(CLI::Range(0, 1 << 20));
+  sub->add_option("--tool-screen", flags->tool_screen,
+                  "With --unknown-tool and pruning: screen the tools first by a coarse stage "
+                  "without the position and yaw grids, pruned by the same ratio (default " +
+                      std::string(flags->tool_screen ? "true" : "false") + ")");
   sub->add_option("--tool-prune-ratio", flags->tool_prune_ratio,
                   "With --unknown-tool: tools whose best cost after the coarse stage exceeds R "
                   "times the best tool's are not refined further (default " +

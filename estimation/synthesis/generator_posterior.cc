@@ -378,7 +378,8 @@ GeneratorPosterior::GeneratorPosterior(const SensorTrunk& trunk, const PoseGener
 
 std::vector<PoseStart> GeneratorPosterior::Starts(const LatentProblem& problem,
                                                   const Eigen::VectorXf& query, int tool_index,
-                                                  const Eigen::VectorXf* mlp_query) const {
+                                                  const Eigen::VectorXf* mlp_query,
+                                                  bool grids) const {
   const std::string& tool = generator_->options().tools[tool_index];
   const int n = generator_->SymmetryOrder(tool_index);
   std::vector<PoseStart> starts;
@@ -396,10 +397,11 @@ std::vector<PoseStart> GeneratorPosterior::Starts(const LatentProblem& problem,
       starts.push_back({SE2d::FromXYYaw(0, 0, yaw), 0.009, "grid"});
     }
   }
-  if (options_.flip_starts && n == 1 && !yaw_grid_active(n)) {
+  const bool yaw_grid = grids && yaw_grid_active(n);
+  if (options_.flip_starts && n == 1 && !yaw_grid) {
     AppendTurnedStarts({M_PI}, "+pi", &starts);
   }
-  if (options_.position_grid_m > 0 && !starts.empty()) {
+  if (grids && options_.position_grid_m > 0 && !starts.empty()) {
     const PoseStart first = starts.front();
     const double h = options_.position_grid_m;
     const int rings = options_.position_grid_rings;
@@ -412,7 +414,7 @@ std::vector<PoseStart> GeneratorPosterior::Starts(const LatentProblem& problem,
       }
     }
   }
-  if (yaw_grid_active(n)) {
+  if (yaw_grid) {
     // Every start position at the grid's yaws (those inside one symmetry period).
     const int grid = options_.yaw_grid;
     const double period = 2 * M_PI / n;
@@ -508,23 +510,45 @@ GeneratorPosterior::Summary GeneratorPosterior::Estimate(const TrunkTargets& tar
     for (const PoseFit& f : tm.modes) best_msr = std::min(best_msr, f.mean_squared_residual);
     all.push_back(std::move(tm));
   };
-  auto starts_of = [&](int t) {
+  auto starts_of = [&](int t, bool grids = true) {
     std::vector<PoseStart> starts =
-        Starts(problem, query, t, pose_mlp_ != nullptr ? &mlp_query : nullptr);
+        Starts(problem, query, t, pose_mlp_ != nullptr ? &mlp_query : nullptr, grids);
     summary.num_starts += static_cast<int>(starts.size());
     return starts;
   };
   if (coarse) {
-    // The coarse stage for every candidate first, so that tools can be compared after it.
-    std::vector<CoarseStarts> first;
-    double lowest = std::numeric_limits<double>::infinity();
-    for (int t : candidates) {
-      first.push_back(CoarsePoseStarts(*coarse, *generator_, t, starts_of(t), options_.fit));
-      lowest = std::min(lowest, first.back().BestCost());
-    }
     const bool prune = candidates.size() > 1 && options_.tool_prune_ratio > 0;
+    // The tools that go on: a screening coarse stage without the grids first, if asked.
+    std::vector<char> goes_on(candidates.size(), 1);
+    auto prune_by = [&](const std::vector<double>& costs) {
+      const double lowest = *std::min_element(costs.begin(), costs.end());
+      for (std::size_t i = 0; i < candidates.size(); ++i) {
+        if (!(costs[i] <= options_.tool_prune_ratio * lowest)) goes_on[i] = 0;
+      }
+    };
+    if (prune && options_.tool_screen) {
+      std::vector<double> costs;
+      for (int t : candidates) {
+        costs.push_back(
+            CoarsePoseStarts(*coarse, *generator_, t, starts_of(t, false), options_.fit)
+                .BestCost());
+      }
+      prune_by(costs);
+    }
+    // The coarse stage for every candidate left first, so that tools can be compared after
+    // it.
+    std::vector<CoarseStarts> first(candidates.size());
+    std::vector<double> costs(candidates.size(), std::numeric_limits<double>::infinity());
     for (std::size_t i = 0; i < candidates.size(); ++i) {
-      if (prune && !(first[i].BestCost() <= options_.tool_prune_ratio * lowest)) continue;
+      if (!goes_on[i]) continue;
+      ++summary.tools_screened_in;
+      first[i] = CoarsePoseStarts(*coarse, *generator_, candidates[i], starts_of(candidates[i]),
+                                  options_.fit);
+      costs[i] = first[i].BestCost();
+    }
+    if (prune) prune_by(costs);
+    for (std::size_t i = 0; i < candidates.size(); ++i) {
+      if (!goes_on[i]) continue;
       keep(candidates[i],
            FitPoseModesFromCoarse(problem, *generator_, candidates[i], first[i], options_.fit));
     }

@@ -201,6 +201,11 @@ class GeneratorPosterior {
     // lowest of any tool is not refined further and gets no weight; 0 = every tool refined,
     // else >= 1.
     double tool_prune_ratio = 2;
+    // Tool screening, with pruning on (tool_prune_ratio > 0) and two or more candidate
+    // tools: before the coarse stage, each tool's coarse stage runs from its starts without
+    // the position and yaw grids, and a tool whose lowest cost there exceeds
+    // tool_prune_ratio times the lowest of any tool goes no further.
+    bool tool_screen = true;
     // Pixels of the final stage (step 2b; drawn as Options::problem draws, all valid
     // pixels evenly when it holds as many); 0 = none, the modes as the search left them;
     // -1 = the generator's (the stage its kappa and tau were calibrated with,
@@ -239,7 +244,9 @@ class GeneratorPosterior {
     double pixel_factor = 1;  // sqrt(N / min(768, valid pixels)) (header comment)
     double rms_residual = 0;  // of the best mode (normalised units)
     int num_starts = 0, num_modes = 0;
-    int tools_refined = 0;  // tools past the coarse stage (Options::tool_prune_ratio)
+    // Tools past the screening (Options::tool_screen) and past the coarse stage
+    // (Options::tool_prune_ratio).
+    int tools_screened_in = 0, tools_refined = 0;
     double fit_time_ms = 0, total_time_ms = 0;  // wall clock
     double cpu_time_ms = 0;  // the calling thread's CPU time over the whole estimate
     std::string BriefReport() const;
@@ -270,8 +277,10 @@ class GeneratorPosterior {
   // pose MLP's own trunk); else a yaw grid at the centre; then the flipped yaws, the position
   // grid around the first start and the yaw grid at every start position, as Options
   // says). Estimate scores and refines them (FitPoseModes).
+  // grids = false leaves out the position and yaw grids (the screening of tools).
   std::vector<PoseStart> Starts(const LatentProblem& problem, const Eigen::VectorXf& query,
-                                int tool_index, const Eigen::VectorXf* mlp_query = nullptr) const;
+                                int tool_index, const Eigen::VectorXf* mlp_query = nullptr,
+                                bool grids = true) const;
 
  private:
   bool yaw_grid_active(int symmetry_order) const {

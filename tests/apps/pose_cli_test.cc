@@ -639,19 +639,28 @@ TEST_F(PoseCliTest, PoseWithTheGeneratorMethodPrintsTheModeAndToolProbabilities)
           " --contacts-per-tool 1 --tools spoon");
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_THAT(r.err, HasSubstr("--tools: 'spoon'"));
-  // The tool unknown: how many tools went past the coarse stage, all of them without
-  // pruning; a ratio between 0 and 1 is refused.
+  // The tool unknown: how many tools went past the screening and the coarse stage, all of
+  // them without pruning; a ratio between 0 and 1 is refused.
   const std::string unknown_eval = "eval-generator --model " + Root("m.tfm") + " --generator " +
                               Root("g.tpg") + " --contacts-per-tool 1 --tools rod,square " +
                               "--unknown-tool --json";
   r = Run(unknown_eval + " --tool-prune-ratio 0");
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  EXPECT_THAT(r.out, HasSubstr("tools refined past the coarse stage"));
+  EXPECT_THAT(r.out, HasSubstr("12.00 past the screening, 12.00 refined past the coarse stage"));
+  EXPECT_DOUBLE_EQ(r.LastJson()["tools_screened_in_per_frame"].get<double>(), 12.0);
   EXPECT_DOUBLE_EQ(r.LastJson()["tools_refined_per_frame"].get<double>(), 12.0);
-  r = Run(unknown_eval + " --tool-prune-ratio 1");
+  r = Run(unknown_eval + " --tool-prune-ratio 1 --tool-screen false");
   ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_DOUBLE_EQ(r.LastJson()["tools_screened_in_per_frame"].get<double>(), 12.0);
+  const double refined_unscreened = r.LastJson()["tools_refined_per_frame"].get<double>();
+  EXPECT_GE(refined_unscreened, 1.0);
+  EXPECT_LT(refined_unscreened, 12.0);
+  r = Run(unknown_eval + " --tool-prune-ratio 1");  // screened, the default
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const double screened_in = r.LastJson()["tools_screened_in_per_frame"].get<double>();
+  EXPECT_LT(screened_in, 12.0);
+  EXPECT_GE(screened_in, r.LastJson()["tools_refined_per_frame"].get<double>());
   EXPECT_GE(r.LastJson()["tools_refined_per_frame"].get<double>(), 1.0);
-  EXPECT_LT(r.LastJson()["tools_refined_per_frame"].get<double>(), 12.0);
   r = Run(unknown_eval + " --tool-prune-ratio 0.5");
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_THAT(r.err, HasSubstr("must be 0 (off) or >= 1, got 0.5"));

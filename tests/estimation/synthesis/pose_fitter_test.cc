@@ -466,6 +466,71 @@ TEST(GeneratorPosterior, ToolPruningRefinesOnlyTheToolsNearTheBestAndKeepsTheirM
   EXPECT_THAT(error, ::testing::HasSubstr("tool_prune_ratio"));
 }
 
+// Screening runs each tool's coarse stage from its starts without the grids first; a tool
+// it prunes never reaches the full coarse stage, and a tool it keeps gets the modes the
+// search without screening finds, to the bit.
+TEST(GeneratorPosterior, ToolScreeningKeepsTheBestToolAndItsModes) {
+  const SensorTrunk trunk = Trunk();
+  const PoseGenerator g = Generator();
+  const TrunkTargets targets = LShapeFrame(trunk, g);
+  GeneratorPosterior::Options options;
+  options.sigma_inflation = 1;
+  EXPECT_TRUE(options.tool_screen);  // the default: on
+  options.coarse_pixels = 40;
+  options.tool_prune_ratio = 1;
+  options.tool_screen = false;
+  PoseMixture unscreened, screened;
+  const GeneratorPosterior::Summary without =
+      GeneratorPosterior(trunk, g, options).Estimate(targets, "", &unscreened);
+  ASSERT_TRUE(without.usable) << without.message;
+  EXPECT_EQ(without.tools_screened_in, 2);  // no screening: every tool's coarse stage runs
+  EXPECT_EQ(without.tools_refined, 1);
+  options.tool_screen = true;
+  const GeneratorPosterior::Summary with =
+      GeneratorPosterior(trunk, g, options).Estimate(targets, "", &screened);
+  ASSERT_TRUE(with.usable) << with.message;
+  EXPECT_EQ(with.tools_screened_in, 1);
+  EXPECT_EQ(with.tools_refined, 1);
+  EXPECT_EQ(with.tool, "l_shape");
+  EXPECT_EQ(with.tool_probabilities.at("rod"), 0);
+  ASSERT_EQ(screened.components().size(), unscreened.components().size());
+  for (std::size_t i = 0; i < screened.components().size(); ++i) {
+    EXPECT_EQ(screened.components()[i].tool, unscreened.components()[i].tool);
+    EXPECT_EQ(screened.components()[i].mean.x(), unscreened.components()[i].mean.x());
+    EXPECT_EQ(screened.components()[i].mean.yaw(), unscreened.components()[i].mean.yaw());
+    EXPECT_EQ(screened.components()[i].log_likelihood, unscreened.components()[i].log_likelihood);
+  }
+  // A named tool is never screened.
+  EXPECT_EQ(GeneratorPosterior(trunk, g, options).Estimate(targets, "rod", &screened)
+                .tools_screened_in,
+            1);
+}
+
+// The screening's starts: the k-NN and pose MLP starts (or the centre's few yaws) and
+// their flips, without the position and yaw grids.
+TEST(GeneratorPosterior, StartsWithoutGridsLeaveOutThePositionAndYawGrids) {
+  const SensorTrunk trunk = Trunk();
+  const PoseGenerator g = Generator();
+  const TrunkTargets targets = LShapeFrame(trunk, g);
+  GeneratorPosterior::Options options;
+  const GeneratorPosterior posterior(trunk, g, options);
+  const LatentProblem problem(trunk, targets, options.problem);
+  const Eigen::VectorXf query = Eigen::VectorXf::Zero(trunk.siren.latent_dim());
+  const int l_shape = g.ToolIndex("l_shape");
+  const std::vector<PoseStart> full = posterior.Starts(problem, query, l_shape);
+  const std::vector<PoseStart> bare =
+      posterior.Starts(problem, query, l_shape, nullptr, /*grids=*/false);
+  ASSERT_FALSE(bare.empty());
+  EXPECT_LT(bare.size(), full.size());
+  for (const PoseStart& s : bare) {
+    EXPECT_EQ(s.source.find("+shift"), std::string::npos) << s.source;
+    EXPECT_EQ(s.source.find("+grid"), std::string::npos) << s.source;
+  }
+  int shifted = 0;
+  for (const PoseStart& s : full) shifted += s.source.find("+shift") != std::string::npos;
+  EXPECT_GT(shifted, 0);
+}
+
 // The final stage refines each mode again on more pixels and takes the Laplace
 // approximation there: the summary's pixels are the final problem's, and the best mode's
 // objective on that problem is lower than where the search on few pixels left it.
