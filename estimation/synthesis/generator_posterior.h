@@ -19,7 +19,9 @@
 //      tool unknown, the coarse stage of every tool runs first, and a tool whose lowest
 //      coarse cost exceeds Options::tool_prune_ratio times the lowest of any tool goes no
 //      further (no modes, probability 0; docs/POSES.md, "Pruning tools when the tool is
-//      unknown", measures what it changes);
+//      unknown", measures what it changes); before it, a screening coarse stage from
+//      each tool's starts without the position and yaw grids prunes by the same ratio
+//      (Options::tool_screen; "Screening the tools first");
 //   2b. optionally (Options::final_pixels > 0), every distinct mode refined again on a
 //      problem of that many pixels (all valid pixels when the frame has no more), where
 //      its cost and Jacobian for step 3 are then taken: the few pixels of the search can
