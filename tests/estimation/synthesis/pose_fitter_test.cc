@@ -415,6 +415,18 @@ TEST(GeneratorPosterior, LaplaceCoversTheTruthAndPrefersTheRenderingTool) {
   EXPECT_EQ(again.Mode().x(), posterior.Estimate(targets, "", &mixture).mean.x());
 }
 
+// Each mode of `actual` is `expected`'s, in order: its tool, pose and likelihood to the bit.
+void ExpectSameModes(const std::vector<LaplaceComponent>& expected,
+                     const std::vector<LaplaceComponent>& actual) {
+  ASSERT_EQ(actual.size(), expected.size());
+  for (std::size_t i = 0; i < expected.size(); ++i) {
+    EXPECT_EQ(actual[i].tool, expected[i].tool);
+    EXPECT_EQ(actual[i].mean.x(), expected[i].mean.x());
+    EXPECT_EQ(actual[i].mean.yaw(), expected[i].mean.yaw());
+    EXPECT_EQ(actual[i].log_likelihood, expected[i].log_likelihood);
+  }
+}
+
 TEST(GeneratorPosterior, ToolPruningRefinesOnlyTheToolsNearTheBestAndKeepsTheirModes) {
   const SensorTrunk trunk = Trunk();
   const PoseGenerator g = Generator();
@@ -446,17 +458,11 @@ TEST(GeneratorPosterior, ToolPruningRefinesOnlyTheToolsNearTheBestAndKeepsTheirM
   EXPECT_EQ(one.tool_probabilities.at("rod"), 0);  // listed, with no weight
   EXPECT_EQ(one.tool_probabilities.at("l_shape"), 1);
   // The kept tool's modes are the ones the unpruned search found, to the bit.
-  std::vector<const LaplaceComponent*> kept;
+  std::vector<LaplaceComponent> kept;
   for (const LaplaceComponent& c : every.components()) {
-    if (c.tool == "l_shape") kept.push_back(&c);
+    if (c.tool == "l_shape") kept.push_back(c);
   }
-  ASSERT_EQ(pruned.components().size(), kept.size());
-  for (std::size_t i = 0; i < kept.size(); ++i) {
-    EXPECT_EQ(pruned.components()[i].tool, "l_shape");
-    EXPECT_EQ(pruned.components()[i].mean.x(), kept[i]->mean.x());
-    EXPECT_EQ(pruned.components()[i].mean.yaw(), kept[i]->mean.yaw());
-    EXPECT_EQ(pruned.components()[i].log_likelihood, kept[i]->log_likelihood);
-  }
+  ExpectSameModes(kept, pruned.components());
   // A named tool is the only candidate: nothing to prune.
   EXPECT_EQ(GeneratorPosterior(trunk, g, options).Estimate(targets, "rod", &pruned).tools_refined,
             1);
@@ -493,13 +499,7 @@ TEST(GeneratorPosterior, ToolScreeningKeepsTheBestToolAndItsModes) {
   EXPECT_EQ(with.tools_refined, 1);
   EXPECT_EQ(with.tool, "l_shape");
   EXPECT_EQ(with.tool_probabilities.at("rod"), 0);
-  ASSERT_EQ(screened.components().size(), unscreened.components().size());
-  for (std::size_t i = 0; i < screened.components().size(); ++i) {
-    EXPECT_EQ(screened.components()[i].tool, unscreened.components()[i].tool);
-    EXPECT_EQ(screened.components()[i].mean.x(), unscreened.components()[i].mean.x());
-    EXPECT_EQ(screened.components()[i].mean.yaw(), unscreened.components()[i].mean.yaw());
-    EXPECT_EQ(screened.components()[i].log_likelihood, unscreened.components()[i].log_likelihood);
-  }
+  ExpectSameModes(unscreened.components(), screened.components());
   // A named tool is never screened.
   EXPECT_EQ(GeneratorPosterior(trunk, g, options).Estimate(targets, "rod", &screened)
                 .tools_screened_in,
