@@ -553,6 +553,7 @@ GeneratorPosterior::Summary GeneratorPosterior::Estimate(const TrunkTargets& tar
            FitPoseModesFromCoarse(problem, *generator_, candidates[i], first[i], options_.fit));
     }
   } else {
+    summary.tools_screened_in = static_cast<int>(candidates.size());  // no screening
     for (int t : candidates) {
       keep(t, FitPoseModes(problem, *generator_, t, starts_of(t), options_.fit, nullptr));
     }

@@ -245,7 +245,7 @@ class GeneratorPosterior {
     int num_pixels = 0;     // N, the pixels of the frame's problem
     double pixel_factor = 1;  // sqrt(N / min(768, valid pixels)) (header comment)
     double rms_residual = 0;  // of the best mode (normalised units)
-    int num_starts = 0, num_modes = 0;
+    int num_starts = 0, num_modes = 0;  // starts: every one scored, the screening's too
     // Tools past the screening (Options::tool_screen) and past the coarse stage
     // (Options::tool_prune_ratio).
     int tools_screened_in = 0, tools_refined = 0;

@@ -436,9 +436,13 @@ TEST(GeneratorPosterior, ToolPruningRefinesOnlyTheToolsNearTheBestAndKeepsTheirM
   EXPECT_EQ(options.tool_prune_ratio, 2);  // the default: on
   options.tool_prune_ratio = 1;
   {
-    // Without a coarse stage (the frame has no more pixels than it) nothing is pruned.
+    // Without a coarse stage (the frame has no more pixels than it) nothing is screened
+    // out or pruned.
     PoseMixture m;
-    EXPECT_EQ(GeneratorPosterior(trunk, g, options).Estimate(targets, "", &m).tools_refined, 2);
+    const GeneratorPosterior::Summary s =
+        GeneratorPosterior(trunk, g, options).Estimate(targets, "", &m);
+    EXPECT_EQ(s.tools_screened_in, 2);
+    EXPECT_EQ(s.tools_refined, 2);
   }
   options.coarse_pixels = 40;  // tools are compared after it
   options.tool_prune_ratio = 0;
