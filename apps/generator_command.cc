@@ -961,7 +961,7 @@ void RunEvalGenerator(const EvalGeneratorFlags& flags) {
     position_errors.push_back(std::sqrt(dp));
     // And the posterior mean of the true tool's components (PoseMixture::Mean); that of
     // the most probable tool if the true one has none (its fits failed, or the tool
-    // unknown, it was pruned after the coarse stage), as the mode above.
+    // unknown, it was screened out or pruned), as the mode above.
     const SE2d mean = true_mode != nullptr ? mixture.Mean(tools[t]) : mixture.Mean();
     mean_pos_sq += std::pow(mean.x() - truth.x(), 2) + std::pow(mean.y() - truth.y(), 2);
     if (n != 0) {
