@@ -380,6 +380,13 @@ std::vector<PoseStart> GeneratorPosterior::Starts(const LatentProblem& problem,
                                                   const Eigen::VectorXf& query, int tool_index,
                                                   const Eigen::VectorXf* mlp_query,
                                                   bool grids) const {
+  (void)problem;
+  return ExpandStarts(BaseStarts(query, tool_index, mlp_query), tool_index, grids);
+}
+
+std::vector<PoseStart> GeneratorPosterior::BaseStarts(const Eigen::VectorXf& query,
+                                                      int tool_index,
+                                                      const Eigen::VectorXf* mlp_query) const {
   const std::string& tool = generator_->options().tools[tool_index];
   const int n = generator_->SymmetryOrder(tool_index);
   std::vector<PoseStart> starts;
@@ -397,6 +404,12 @@ std::vector<PoseStart> GeneratorPosterior::Starts(const LatentProblem& problem,
       starts.push_back({SE2d::FromXYYaw(0, 0, yaw), 0.009, "grid"});
     }
   }
+  return starts;
+}
+
+std::vector<PoseStart> GeneratorPosterior::ExpandStarts(std::vector<PoseStart> starts,
+                                                        int tool_index, bool grids) const {
+  const int n = generator_->SymmetryOrder(tool_index);
   const bool yaw_grid = grids && yaw_grid_active(n);
   if (options_.flip_starts && n == 1 && !yaw_grid) {
     AppendTurnedStarts({M_PI}, "+pi", &starts);
@@ -426,7 +439,6 @@ std::vector<PoseStart> GeneratorPosterior::Starts(const LatentProblem& problem,
     }
     AppendTurnedStarts(offsets, "+grid", &starts);
   }
-  (void)problem;
   return starts;
 }
 
@@ -510,9 +522,16 @@ GeneratorPosterior::Summary GeneratorPosterior::Estimate(const TrunkTargets& tar
     for (const PoseFit& f : tm.modes) best_msr = std::min(best_msr, f.mean_squared_residual);
     all.push_back(std::move(tm));
   };
+  // Each tool's k-NN and pose MLP starts, made once for the screening and the coarse stage.
+  std::map<int, std::vector<PoseStart>> base_starts;
   auto starts_of = [&](int t, bool grids = true) {
-    std::vector<PoseStart> starts =
-        Starts(problem, query, t, pose_mlp_ != nullptr ? &mlp_query : nullptr, grids);
+    auto it = base_starts.find(t);
+    if (it == base_starts.end()) {
+      it = base_starts
+               .emplace(t, BaseStarts(query, t, pose_mlp_ != nullptr ? &mlp_query : nullptr))
+               .first;
+    }
+    std::vector<PoseStart> starts = ExpandStarts(it->second, t, grids);
     summary.num_starts += static_cast<int>(starts.size());
     return starts;
   };

@@ -285,6 +285,12 @@ class GeneratorPosterior {
                                 bool grids = true) const;
 
  private:
+  // Starts' two parts: the k-NN, pose MLP (or centre grid) starts, and those extended by
+  // the flips and, if grids, the position and yaw grids.
+  std::vector<PoseStart> BaseStarts(const Eigen::VectorXf& query, int tool_index,
+                                    const Eigen::VectorXf* mlp_query) const;
+  std::vector<PoseStart> ExpandStarts(std::vector<PoseStart> starts, int tool_index,
+                                      bool grids) const;
   bool yaw_grid_active(int symmetry_order) const {
     return options_.yaw_grid > 1 && symmetry_order > 0 && 2 * symmetry_order <= options_.yaw_grid;
   }
