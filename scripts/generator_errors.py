@@ -11,8 +11,12 @@ miss. With `eval-generator --information` it also prints the Cramer-Rao bound in
 splits (the floor any unbiased estimator has on those frames). docs/POSES.md quotes its
 output.
 
-Usage: python3 scripts/generator_errors.py CONTACTS.csv [--flip-deg 30]
+Usage: python3 scripts/generator_errors.py CONTACTS.csv [MORE.csv ...] [--flip-deg 30]
        [--depth-edges-mm 6,10] [--radius-edges-mm 1.5,3]
+
+Several CSVs (e.g. the runs of several seeds) are pooled into one set of contacts. When
+the CSV has the posterior mean's columns it also prints the mean's position and yaw RMSE
+(yaw modulo the tool's symmetry), the figures eval-generator prints for one run.
 
 Pure Python (no third-party modules). Yaw statistics leave out tools of symmetry order 0
 (the hemisphere), as eval-generator does.
@@ -49,9 +53,44 @@ def bins(rows, key, cuts):
         yield label, chosen
 
 
+def folded_deg(delta_deg, n):
+    """A yaw difference modulo the symmetry period 360 / n, in [-period/2, period/2)."""
+    period = 360.0 / n
+    return (delta_deg + period / 2) % period - period / 2
+
+
+def optional(r, key):
+    return float(r[key]) if r.get(key) not in (None, "", "nan") else float("nan")
+
+
+def parse_row(r, index):
+    row = {
+        "id": index, "tool": r["tool"], "n": int(r["symmetry_order"]),
+        "tx": float(r["truth_x_mm"]), "ty": float(r["truth_y_mm"]),
+        "depth": float(r["truth_depth_mm"]),
+        "tyaw": math.radians(float(r["truth_yaw_deg"])),
+        "ex": float(r["mode_x_mm"]) - float(r["truth_x_mm"]),
+        "ey": float(r["mode_y_mm"]) - float(r["truth_y_mm"]),
+        "pos": float(r["position_error_mm"]),
+        "yaw": optional(r, "yaw_error_deg"),
+        "sdx": optional(r, "mode_sd_x_mm"), "sdy": optional(r, "mode_sd_y_mm"),
+        "bx": optional(r, "bound_sd_along_mm"), "by": optional(r, "bound_sd_across_mm"),
+        "byaw": optional(r, "bound_sd_yaw_deg"),
+        "mpos": float("nan"), "myaw": float("nan"),
+    }
+    if all(r.get(k) not in (None, "", "nan") for k in ("mean_x_mm", "mean_y_mm")):
+        row["mpos"] = math.hypot(float(r["mean_x_mm"]) - row["tx"],
+                                 float(r["mean_y_mm"]) - row["ty"])
+    if row["n"] != 0 and r.get("mean_yaw_deg") not in (None, "", "nan"):
+        row["myaw"] = abs(folded_deg(float(r["mean_yaw_deg"]) - float(r["truth_yaw_deg"]),
+                                     row["n"]))
+    return row
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("contacts", help="eval-generator --contacts-csv output")
+    parser.add_argument("contacts", nargs="+",
+                        help="eval-generator --contacts-csv output (several are pooled)")
     parser.add_argument("--flip-deg", type=float, default=30.0,
                         help="yaw errors at least this large count as flips (default 30)")
     parser.add_argument("--depth-edges-mm", type=edges, default=[6.0, 10.0])
@@ -60,38 +99,25 @@ def main():
     required = ["tool", "symmetry_order", "truth_x_mm", "truth_y_mm", "truth_yaw_deg",
                 "truth_depth_mm",
                 "mode_x_mm", "mode_y_mm", "position_error_mm", "yaw_error_deg"]
-    try:
-        with open(args.contacts, newline="") as f:
-            reader = csv.DictReader(f)
-            missing = [k for k in required if k not in (reader.fieldnames or [])]
-            if missing:
-                sys.exit(f"generator_errors: {args.contacts}: missing column(s) "
-                         f"{', '.join(missing)} (expected eval-generator --contacts-csv output)")
-            rows = []
-            for line, r in enumerate(reader, start=2):
-                try:
-                    rows.append({
-                        "id": len(rows), "tool": r["tool"], "n": int(r["symmetry_order"]),
-                        "tx": float(r["truth_x_mm"]), "ty": float(r["truth_y_mm"]),
-                        "depth": float(r["truth_depth_mm"]),
-                        "tyaw": math.radians(float(r["truth_yaw_deg"])),
-                        "ex": float(r["mode_x_mm"]) - float(r["truth_x_mm"]),
-                        "ey": float(r["mode_y_mm"]) - float(r["truth_y_mm"]),
-                        "pos": float(r["position_error_mm"]),
-                        "yaw": float(r["yaw_error_deg"]) if r["yaw_error_deg"] not in ("", "nan")
-                        else float("nan"),
-                        "sdx": float(r.get("mode_sd_x_mm") or "nan"),
-                        "sdy": float(r.get("mode_sd_y_mm") or "nan"),
-                        "bx": float(r.get("bound_sd_along_mm") or "nan"),
-                        "by": float(r.get("bound_sd_across_mm") or "nan"),
-                        "byaw": float(r.get("bound_sd_yaw_deg") or "nan"),
-                    })
-                except ValueError as e:
-                    sys.exit(f"generator_errors: {args.contacts}, line {line}: {e}")
-    except OSError as e:
-        sys.exit(f"generator_errors: cannot read {args.contacts}: {e.strerror}")
+    rows = []
+    for path in args.contacts:
+        try:
+            with open(path, newline="") as f:
+                reader = csv.DictReader(f)
+                missing = [k for k in required if k not in (reader.fieldnames or [])]
+                if missing:
+                    sys.exit(f"generator_errors: {path}: missing column(s) "
+                             f"{', '.join(missing)} (expected eval-generator --contacts-csv "
+                             "output)")
+                for line, r in enumerate(reader, start=2):
+                    try:
+                        rows.append(parse_row(r, len(rows)))
+                    except ValueError as e:
+                        sys.exit(f"generator_errors: {path}, line {line}: {e}")
+        except OSError as e:
+            sys.exit(f"generator_errors: cannot read {path}: {e.strerror}")
     if not rows:
-        sys.exit(f"generator_errors: {args.contacts} has no contacts")
+        sys.exit(f"generator_errors: {', '.join(args.contacts)}: no contacts")
 
     with_bound = all(not math.isnan(r["bx"]) for r in rows)
 
@@ -115,6 +141,12 @@ def main():
           + bound_text(rows, yawed))
     print(f"mean error vector (bias): x {sum(r['ex'] for r in rows) / len(rows):+.3f} mm, "
           f"y {sum(r['ey'] for r in rows) / len(rows):+.3f} mm")
+    means = [r for r in rows if not math.isnan(r["mpos"])]
+    if means:
+        mean_yawed = [r for r in means if not math.isnan(r["myaw"])]
+        print(f"posterior mean: position RMSE {rms([r['mpos'] for r in means]):.3f} mm over "
+              f"{len(means)} contacts, yaw RMSE {rms([r['myaw'] for r in mean_yawed]):.2f} deg "
+              f"over {len(mean_yawed)}")
     kept = [r for r in yawed if r["yaw"] < args.flip_deg]
     flip_ids = {r["id"] for r in flips}
     kept_ids = {r["id"] for r in kept}
