@@ -76,14 +76,12 @@ def parse_row(r, index):
         "sdx": optional(r, "mode_sd_x_mm"), "sdy": optional(r, "mode_sd_y_mm"),
         "bx": optional(r, "bound_sd_along_mm"), "by": optional(r, "bound_sd_across_mm"),
         "byaw": optional(r, "bound_sd_yaw_deg"),
-        "mpos": float("nan"), "myaw": float("nan"),
     }
-    if all(r.get(k) not in (None, "", "nan") for k in ("mean_x_mm", "mean_y_mm")):
-        row["mpos"] = math.hypot(float(r["mean_x_mm"]) - row["tx"],
-                                 float(r["mean_y_mm"]) - row["ty"])
-    if row["n"] != 0 and r.get("mean_yaw_deg") not in (None, "", "nan"):
-        row["myaw"] = abs(folded_deg(float(r["mean_yaw_deg"]) - float(r["truth_yaw_deg"]),
-                                     row["n"]))
+    # The posterior mean's errors; NaN (absent, or no yaw for symmetry order 0) propagates.
+    row["mpos"] = math.hypot(optional(r, "mean_x_mm") - row["tx"],
+                             optional(r, "mean_y_mm") - row["ty"])
+    row["myaw"] = (abs(folded_deg(optional(r, "mean_yaw_deg") - float(r["truth_yaw_deg"]),
+                                  row["n"])) if row["n"] != 0 else float("nan"))
     return row
 
 
